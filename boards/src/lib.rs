@@ -1,0 +1,571 @@
+//! Board definitions for the SAW tactile display.
+//!
+//! Pure data and `const fn`s: no embassy, no PAC, no chip crates, so `cargo test -p saw-boards`
+//! runs on the host and the firmware (`firmware/`) builds its embassy RCC/timer configuration
+//! from these numbers. Every clock figure is checked twice: by `const` assertions in the board
+//! modules (a wrong plan does not compile) and by the unit tests below.
+//!
+//! The one hard requirement: the SAW carrier is **exactly** 15 MHz, i.e. the carrier timer's
+//! kernel clock is an integer multiple of 15 MHz and the timer divides by that integer.
+#![no_std]
+#![forbid(unsafe_code)]
+
+pub mod nucleo_f446re;
+pub mod nucleo_g474re;
+
+pub use nucleo_f446re::NUCLEO_F446RE;
+pub use nucleo_g474re::NUCLEO_G474RE;
+
+/// SAW carrier frequency (Hz). Fixed by the interdigital transducer on the LiNbO3 substrate.
+pub const CARRIER_HZ: u32 = 15_000_000;
+/// Position sample rate delivered to the control core (Hz).
+pub const SAMPLE_RATE_HZ: u32 = 10_000;
+/// ADC conversions summed into one 16-bit position sample (16 × 12-bit = 0..=65 520).
+pub const ADC_OVERSAMPLE: u32 = 16;
+/// Highest burst frequency the textures use (Hz).
+pub const MAX_BURST_HZ: u32 = 2_000;
+/// Lowest burst frequency the textures use (Hz).
+pub const MIN_BURST_HZ: u32 = 1;
+
+/// Every board the firmware supports.
+pub const ALL: &[BoardDef] = &[NUCLEO_F446RE, NUCLEO_G474RE];
+
+/// Look a board up by its [`BoardDef::name`].
+pub fn by_name(name: &str) -> Option<&'static BoardDef> {
+    ALL.iter().find(|b| eq(b.name, name))
+}
+
+const fn eq(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut i = 0;
+    while i < a.len() {
+        if a[i] != b[i] {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
+
+/// Chip family: decides the PLL limits and which PLL output drives SYSCLK.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Family {
+    /// STM32F4 (F446): SYSCLK = PLL "P" output.
+    Stm32F4,
+    /// STM32G4 (G474): SYSCLK = PLL "R" output.
+    Stm32G4,
+}
+
+/// Oscillator feeding the PLL.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OscSource {
+    /// HSE in bypass mode: an external clock on OSC_IN (the ST-LINK's MCO on Nucleo-64 boards).
+    HseBypass,
+    /// HSE with a crystal on OSC_IN/OSC_OUT.
+    HseCrystal,
+    /// Internal 16 MHz RC oscillator.
+    Hsi,
+}
+
+/// Which PLL output is SYSCLK.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PllOut {
+    P,
+    R,
+}
+
+/// Datasheet limits of a PLL (all Hz, inclusive).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PllLimits {
+    pub m_min: u32,
+    pub m_max: u32,
+    pub n_min: u32,
+    pub n_max: u32,
+    /// Allowed dividers of the output that drives SYSCLK.
+    pub out_divs: &'static [u32],
+    pub vco_in_min_hz: u32,
+    pub vco_in_max_hz: u32,
+    pub vco_out_min_hz: u32,
+    pub vco_out_max_hz: u32,
+    pub sysclk_max_hz: u32,
+    pub hclk_max_hz: u32,
+    pub pclk1_max_hz: u32,
+    pub pclk2_max_hz: u32,
+}
+
+/// A complete clock tree: oscillator → PLL → SYSCLK → AHB → APB1/APB2 (+ timer clocks).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ClockPlan {
+    pub source: OscSource,
+    pub osc_hz: u32,
+    /// PLL input divider (PLLM).
+    pub pll_m: u32,
+    /// PLL multiplier (PLLN).
+    pub pll_n: u32,
+    /// Divider of the PLL output that drives SYSCLK (PLLP on F4, PLLR on G4).
+    pub pll_out: PllOut,
+    pub pll_out_div: u32,
+    /// Stated SYSCLK — checked against the PLL chain.
+    pub sysclk_hz: u32,
+    pub ahb_div: u32,
+    pub apb1_div: u32,
+    pub apb2_div: u32,
+    pub limits: PllLimits,
+}
+
+impl ClockPlan {
+    /// PLL input (VCO input) frequency.
+    pub const fn vco_in_hz(&self) -> u32 {
+        self.osc_hz / self.pll_m
+    }
+    /// VCO output frequency.
+    pub const fn vco_out_hz(&self) -> u32 {
+        self.vco_in_hz() * self.pll_n
+    }
+    /// SYSCLK as computed from the PLL chain.
+    pub const fn pll_sysclk_hz(&self) -> u32 {
+        self.vco_out_hz() / self.pll_out_div
+    }
+    pub const fn hclk_hz(&self) -> u32 {
+        self.sysclk_hz / self.ahb_div
+    }
+    pub const fn pclk1_hz(&self) -> u32 {
+        self.hclk_hz() / self.apb1_div
+    }
+    pub const fn pclk2_hz(&self) -> u32 {
+        self.hclk_hz() / self.apb2_div
+    }
+    /// Kernel clock of timers on APB1 (TIM2..7): ×2 when the APB1 prescaler is not 1 (RM: "if the
+    /// APB prescaler is 1 the timer clock is PCLK, otherwise 2 × PCLK"; TIMPRE = 0 on F4).
+    pub const fn apb1_timer_hz(&self) -> u32 {
+        if self.apb1_div == 1 {
+            self.pclk1_hz()
+        } else {
+            2 * self.pclk1_hz()
+        }
+    }
+    /// Kernel clock of timers on APB2 (TIM1, TIM8, TIM15..17, TIM20).
+    pub const fn apb2_timer_hz(&self) -> u32 {
+        if self.apb2_div == 1 {
+            self.pclk2_hz()
+        } else {
+            2 * self.pclk2_hz()
+        }
+    }
+    pub const fn timer_clk_hz(&self, bus: Bus) -> u32 {
+        match bus {
+            Bus::Apb1 => self.apb1_timer_hz(),
+            Bus::Apb2 => self.apb2_timer_hz(),
+        }
+    }
+
+    /// True when every divider is in range, every intermediate frequency is within the chip's
+    /// limits and the PLL chain yields exactly the stated SYSCLK (no remainder anywhere).
+    pub const fn is_valid(&self) -> bool {
+        let l = &self.limits;
+        let mut out_div_ok = false;
+        let mut i = 0;
+        while i < l.out_divs.len() {
+            if l.out_divs[i] == self.pll_out_div {
+                out_div_ok = true;
+            }
+            i += 1;
+        }
+        out_div_ok
+            && self.pll_m >= l.m_min
+            && self.pll_m <= l.m_max
+            && self.pll_n >= l.n_min
+            && self.pll_n <= l.n_max
+            && self.osc_hz % self.pll_m == 0
+            && self.vco_in_hz() >= l.vco_in_min_hz
+            && self.vco_in_hz() <= l.vco_in_max_hz
+            && self.vco_out_hz() >= l.vco_out_min_hz
+            && self.vco_out_hz() <= l.vco_out_max_hz
+            && self.vco_out_hz() % self.pll_out_div == 0
+            && self.pll_sysclk_hz() == self.sysclk_hz
+            && self.sysclk_hz <= l.sysclk_max_hz
+            && is_pow2_le(self.ahb_div, 512)
+            && is_pow2_le(self.apb1_div, 16)
+            && is_pow2_le(self.apb2_div, 16)
+            && self.sysclk_hz % self.ahb_div == 0
+            && self.hclk_hz() <= l.hclk_max_hz
+            && self.hclk_hz() % self.apb1_div == 0
+            && self.hclk_hz() % self.apb2_div == 0
+            && self.pclk1_hz() <= l.pclk1_max_hz
+            && self.pclk2_hz() <= l.pclk2_max_hz
+    }
+}
+
+const fn is_pow2_le(x: u32, max: u32) -> bool {
+    x != 0 && x <= max && x.is_power_of_two()
+}
+
+/// Peripheral bus a timer hangs off (decides its kernel clock).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Bus {
+    Apb1,
+    Apb2,
+}
+
+/// A GPIO pin with the alternate function used, and where it is on the Nucleo-64.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Pin {
+    /// Port letter, e.g. `'A'`.
+    pub port: char,
+    pub pin: u8,
+    /// Alternate function number (AFx) or `None` for GPIO/analog use.
+    pub af: Option<u8>,
+    /// Connector position on the Nucleo-64 (Arduino name and morpho pin).
+    pub header: &'static str,
+}
+
+impl Pin {
+    pub const fn is(&self, port: char, pin: u8) -> bool {
+        self.port == port && self.pin == pin
+    }
+}
+
+/// A timer used for a PWM output.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PwmTimer {
+    /// e.g. `"TIM1"`.
+    pub name: &'static str,
+    pub bus: Bus,
+    /// Kernel clock (Hz) — must equal `clocks.timer_clk_hz(bus)`.
+    pub clk_hz: u32,
+    /// Counter width (16 or 32 bits).
+    pub counter_bits: u8,
+    /// Output channel 1..=4.
+    pub channel: u8,
+    pub pin: Pin,
+}
+
+/// How the 16 conversions per sample are obtained.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Oversampling {
+    /// 16 conversions summed in software (F446: no hardware oversampler; the 16 come from a
+    /// 16-rank regular sequence or from 16 back-to-back single conversions).
+    Software { conversions: u32 },
+    /// ADC hardware oversampler (G474): `ratio` conversions accumulated, right shift `shift`
+    /// (shift 0 keeps the full 16-bit sum).
+    Hardware { ratio: u32, shift: u32 },
+}
+
+impl Oversampling {
+    pub const fn conversions(&self) -> u32 {
+        match *self {
+            Oversampling::Software { conversions } => conversions,
+            Oversampling::Hardware { ratio, .. } => ratio,
+        }
+    }
+}
+
+/// The rheostat (slider position) acquisition.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AdcDef {
+    /// e.g. `"ADC1"`.
+    pub adc: &'static str,
+    /// ADC input channel number of the wiper pin.
+    pub channel: u8,
+    pub pin: Pin,
+    pub oversampling: Oversampling,
+    /// Timer whose TRGO triggers the conversions (hardware trigger plan).
+    pub trigger_timer: &'static str,
+    pub trigger_bus: Bus,
+    pub trigger_timer_clk_hz: u32,
+    /// EXTSEL code of `trigger_timer` TRGO for this ADC (reference manual).
+    pub trigger_extsel: u8,
+    /// Trigger events per output sample. 1 on both boards: on the F446 one trigger runs a
+    /// 16-rank regular sequence (the same channel in every rank, summed in software), on the
+    /// G474 one trigger runs the 16× hardware oversampler.
+    pub triggers_per_sample: u32,
+}
+
+/// One board: chip, clocks, timers, pins, memory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BoardDef {
+    /// Board name, also the cargo feature and the `boards/<name>/memory.x` directory.
+    pub name: &'static str,
+    /// probe-rs `--chip` name.
+    pub probe_rs_chip: &'static str,
+    /// embassy-stm32 chip feature.
+    pub embassy_chip: &'static str,
+    pub family: Family,
+    pub clocks: ClockPlan,
+    /// = `clocks.sysclk_hz` (flattened for convenience).
+    pub sysclk_hz: u32,
+
+    /// Free-running carrier timer (PWM, 50 %).
+    pub carrier: PwmTimer,
+    /// = `carrier.clk_hz`.
+    pub carrier_timer_clk_hz: u32,
+    /// carrier_timer_clk_hz / carrier_divider = 15 MHz exactly (ARR = divider − 1).
+    pub carrier_divider: u32,
+
+    /// Burst timer: PWM mode 1 on the RF-enable pin.
+    pub burst: PwmTimer,
+    /// = `burst.clk_hz`.
+    pub burst_timer_clk_hz: u32,
+    /// = `burst.counter_bits`.
+    pub burst_timer_bits: u8,
+    pub max_burst_hz: u32,
+
+    /// Rheostat ADC acquisition.
+    pub adc: AdcDef,
+    pub sample_rate_hz: u32,
+    pub adc_oversample: u32,
+
+    /// Plain GPIO "RF arm" output (amplifier supply/enable interlock), low = RF impossible.
+    pub rf_arm_pin: Pin,
+    /// Timer reserved for embassy-time (the `time-driver-timX` feature).
+    pub time_driver_timer: &'static str,
+
+    pub flash_origin: u32,
+    pub flash_bytes: u32,
+    pub ram_origin: u32,
+    /// RAM the firmware links into (see `boards/<name>/memory.x`).
+    pub ram_bytes: u32,
+}
+
+impl BoardDef {
+    /// Carrier frequency produced by this board (must be [`CARRIER_HZ`]).
+    pub const fn carrier_hz(&self) -> u32 {
+        self.carrier_timer_clk_hz / self.carrier_divider
+    }
+    /// Carrier timer ARR (PSC = 0).
+    pub const fn carrier_arr(&self) -> u32 {
+        self.carrier_divider - 1
+    }
+    /// Carrier timer CCR for 50 % duty in PWM mode 1 (high for CCR counts of `divider`).
+    pub const fn carrier_ccr(&self) -> u32 {
+        self.carrier_divider / 2
+    }
+    /// Largest counter value of the burst timer.
+    pub const fn burst_counter_max(&self) -> u64 {
+        (1u64 << self.burst_timer_bits) - 1
+    }
+    /// Burst timer ticks per period at the slowest burst ([`MIN_BURST_HZ`]) with PSC = 0.
+    pub const fn burst_ticks_at_min_hz(&self) -> u64 {
+        self.burst_timer_clk_hz as u64 / MIN_BURST_HZ as u64
+    }
+    /// ADC trigger timer: prescaler and auto-reload for the trigger rate
+    /// (`sample_rate_hz * adc.triggers_per_sample`), as (PSC, ARR).
+    pub const fn adc_trigger_psc_arr(&self) -> (u32, u32) {
+        let rate = self.sample_rate_hz * self.adc.triggers_per_sample;
+        let ticks = self.adc.trigger_timer_clk_hz / rate;
+        // Smallest prescaler that fits the 16-bit counter.
+        let psc = (ticks - 1) / 65_536;
+        let arr = ticks / (psc + 1) - 1;
+        (psc, arr)
+    }
+    /// The exact trigger rate produced by [`Self::adc_trigger_psc_arr`].
+    pub const fn adc_trigger_hz(&self) -> u32 {
+        let (psc, arr) = self.adc_trigger_psc_arr();
+        self.adc.trigger_timer_clk_hz / ((psc + 1) * (arr + 1))
+    }
+
+    /// Every consistency rule; used by the const assertions and the tests.
+    pub const fn is_consistent(&self) -> bool {
+        let c = &self.clocks;
+        c.is_valid()
+            && self.sysclk_hz == c.sysclk_hz
+            // Carrier: exact 15 MHz, integer division, 50 % duty representable.
+            && self.carrier_timer_clk_hz == self.carrier.clk_hz
+            && self.carrier.clk_hz == c.timer_clk_hz(self.carrier.bus)
+            && self.carrier_divider >= 2
+            && self.carrier_timer_clk_hz % CARRIER_HZ == 0
+            && self.carrier_timer_clk_hz / self.carrier_divider == CARRIER_HZ
+            && self.carrier_divider % 2 == 0
+            // Burst timer: 32-bit, kernel clock from the bus, slowest burst fits with PSC = 0.
+            && self.burst_timer_clk_hz == self.burst.clk_hz
+            && self.burst.clk_hz == c.timer_clk_hz(self.burst.bus)
+            && self.burst_timer_bits == self.burst.counter_bits
+            && self.burst_timer_bits == 32
+            && self.burst_ticks_at_min_hz() <= self.burst_counter_max()
+            && self.max_burst_hz == MAX_BURST_HZ
+            // ADC: 10 kHz, 16 conversions, trigger rate exactly reachable.
+            && self.sample_rate_hz == SAMPLE_RATE_HZ
+            && self.adc_oversample == ADC_OVERSAMPLE
+            && self.adc.oversampling.conversions() == ADC_OVERSAMPLE
+            && self.adc.trigger_timer_clk_hz == c.timer_clk_hz(self.adc.trigger_bus)
+            && self.adc_trigger_hz() == self.sample_rate_hz * self.adc.triggers_per_sample
+            && self.adc.trigger_timer_clk_hz
+                % (self.sample_rate_hz * self.adc.triggers_per_sample)
+                == 0
+            // Pins: none of the reserved Nucleo-64 pins, all distinct.
+            && !is_reserved(&self.carrier.pin)
+            && !is_reserved(&self.burst.pin)
+            && !is_reserved(&self.adc.pin)
+            && !is_reserved(&self.rf_arm_pin)
+            && !same(&self.carrier.pin, &self.burst.pin)
+            && !same(&self.carrier.pin, &self.adc.pin)
+            && !same(&self.carrier.pin, &self.rf_arm_pin)
+            && !same(&self.burst.pin, &self.adc.pin)
+            && !same(&self.burst.pin, &self.rf_arm_pin)
+            && !same(&self.adc.pin, &self.rf_arm_pin)
+            // Timers: carrier, burst, ADC trigger and time driver are four different timers.
+            && !eq(self.carrier.name, self.burst.name)
+            && !eq(self.carrier.name, self.adc.trigger_timer)
+            && !eq(self.carrier.name, self.time_driver_timer)
+            && !eq(self.burst.name, self.adc.trigger_timer)
+            && !eq(self.burst.name, self.time_driver_timer)
+            && !eq(self.adc.trigger_timer, self.time_driver_timer)
+            && self.carrier.channel >= 1
+            && self.carrier.channel <= 4
+            && self.burst.channel >= 1
+            && self.burst.channel <= 4
+    }
+}
+
+const fn same(a: &Pin, b: &Pin) -> bool {
+    a.port == b.port && a.pin == b.pin
+}
+
+/// Pins the Nucleo-64 boards use for something else: PA2/PA3 (ST-LINK virtual COM port),
+/// PA5 (user LED LD2), PA13/PA14 (SWD), PC13 (user button), PH0/PH1 (HSE / MCO input),
+/// PC14/PC15 (LSE crystal). PA15 is additionally avoided for outputs because it comes out of
+/// reset as JTDI *with pull-up* (an RF enable there would be high during boot).
+pub const fn is_reserved(p: &Pin) -> bool {
+    p.is('A', 2)
+        || p.is('A', 3)
+        || p.is('A', 5)
+        || p.is('A', 13)
+        || p.is('A', 14)
+        || p.is('A', 15)
+        || p.is('C', 13)
+        || p.is('C', 14)
+        || p.is('C', 15)
+        || p.port == 'H'
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn all_boards_consistent() {
+        assert_eq!(ALL.len(), 2);
+        for b in ALL {
+            assert!(b.is_consistent(), "{} inconsistent", b.name);
+            assert!(b.clocks.is_valid(), "{} clock plan invalid", b.name);
+        }
+    }
+
+    #[test]
+    fn pll_chain_gives_stated_sysclk_within_limits() {
+        for b in ALL {
+            let c = &b.clocks;
+            let l = &c.limits;
+            assert_eq!(c.osc_hz % c.pll_m, 0, "{}: PLLM does not divide the oscillator", b.name);
+            let vin = c.osc_hz / c.pll_m;
+            assert!((l.vco_in_min_hz..=l.vco_in_max_hz).contains(&vin), "{}: VCO in {vin}", b.name);
+            let vco = vin * c.pll_n;
+            assert!((l.vco_out_min_hz..=l.vco_out_max_hz).contains(&vco), "{}: VCO {vco}", b.name);
+            assert_eq!(vco % c.pll_out_div, 0);
+            assert_eq!(vco / c.pll_out_div, c.sysclk_hz, "{}: PLL chain != SYSCLK", b.name);
+            assert_eq!(b.sysclk_hz, c.sysclk_hz);
+            assert!(c.sysclk_hz <= l.sysclk_max_hz);
+            assert!(c.pclk1_hz() <= l.pclk1_max_hz && c.pclk2_hz() <= l.pclk2_max_hz);
+        }
+    }
+
+    #[test]
+    fn carrier_is_exactly_15_mhz() {
+        for b in ALL {
+            assert_eq!(b.carrier_timer_clk_hz % CARRIER_HZ, 0, "{}", b.name);
+            assert_eq!(b.carrier_timer_clk_hz % b.carrier_divider, 0, "{}", b.name);
+            assert_eq!(b.carrier_hz(), 15_000_000, "{}", b.name);
+            assert_eq!(b.carrier_arr() + 1, b.carrier_divider);
+            // 50 % duty: high for CCR of `divider` counts.
+            assert_eq!(2 * b.carrier_ccr(), b.carrier_divider);
+            assert_eq!(b.carrier.clk_hz, b.clocks.timer_clk_hz(b.carrier.bus));
+        }
+    }
+
+    #[test]
+    fn f446_plan() {
+        let b = &NUCLEO_F446RE;
+        assert_eq!(b.probe_rs_chip, "STM32F446RETx");
+        assert_eq!(b.embassy_chip, "stm32f446re");
+        assert_eq!(b.clocks.osc_hz, 8_000_000);
+        assert_eq!(b.clocks.source, OscSource::HseBypass);
+        assert_eq!(b.sysclk_hz, 180_000_000);
+        assert_eq!(b.carrier_timer_clk_hz, 180_000_000);
+        assert_eq!(b.carrier_divider, 12);
+        assert_eq!((b.carrier_arr(), b.carrier_ccr()), (11, 6));
+        assert_eq!(b.burst_timer_clk_hz, 90_000_000);
+        assert_eq!(b.clocks.pclk1_hz(), 45_000_000);
+        assert_eq!(b.clocks.pclk2_hz(), 90_000_000);
+        // TIM3 at 90 MHz → one 10 kHz trigger runs a 16-rank regular sequence of the same channel.
+        assert_eq!(b.adc_trigger_hz(), 10_000);
+        assert_eq!(b.adc_trigger_psc_arr(), (0, 8_999));
+    }
+
+    #[test]
+    fn g474_plan() {
+        let b = &NUCLEO_G474RE;
+        assert_eq!(b.probe_rs_chip, "STM32G474RETx");
+        assert_eq!(b.embassy_chip, "stm32g474re");
+        assert_eq!(b.clocks.osc_hz, 24_000_000);
+        assert_eq!(b.clocks.source, OscSource::HseCrystal);
+        assert!(b.sysclk_hz <= 170_000_000);
+        assert_eq!(b.sysclk_hz, 150_000_000);
+        assert_eq!(b.carrier_divider, 10);
+        assert_eq!((b.carrier_arr(), b.carrier_ccr()), (9, 5));
+        assert_eq!(b.burst_timer_clk_hz, 150_000_000);
+        assert_eq!(b.adc_trigger_hz(), 10_000);
+        assert_eq!(b.adc_trigger_psc_arr(), (0, 14_999));
+    }
+
+    #[test]
+    fn burst_range_fits_32_bit_timer() {
+        for b in ALL {
+            // 1 Hz with PSC = 0 needs clk ticks: fits a 32-bit counter.
+            assert!(b.burst_ticks_at_min_hz() <= b.burst_counter_max());
+            // 2 kHz still has fine duty resolution.
+            assert!(b.burst_timer_clk_hz / b.max_burst_hz >= 10_000);
+        }
+    }
+
+    #[test]
+    fn pins_avoid_nucleo_reserved() {
+        let reserved = [('A', 2), ('A', 3), ('A', 5), ('A', 13), ('A', 14)];
+        for b in ALL {
+            for p in [b.carrier.pin, b.burst.pin, b.adc.pin, b.rf_arm_pin] {
+                assert!(!reserved.iter().any(|&(port, pin)| p.is(port, pin)), "{}: {:?}", b.name, p);
+            }
+        }
+    }
+
+    #[test]
+    fn lookup_by_name() {
+        assert_eq!(by_name("nucleo-f446re"), Some(&NUCLEO_F446RE));
+        assert_eq!(by_name("nucleo-g474re"), Some(&NUCLEO_G474RE));
+        assert_eq!(by_name("nope"), None);
+    }
+
+    #[test]
+    fn invalid_plans_are_rejected() {
+        // VCO input too high on the F446 (M = 2 → 4 MHz > 2.1 MHz).
+        let mut c = NUCLEO_F446RE.clocks;
+        c.pll_m = 2;
+        c.pll_n = 90;
+        assert!(!c.is_valid());
+        // SYSCLK mismatch.
+        let mut c = NUCLEO_F446RE.clocks;
+        c.sysclk_hz = 168_000_000;
+        assert!(!c.is_valid());
+        // G474 above 170 MHz.
+        let mut c = NUCLEO_G474RE.clocks;
+        c.pll_n = 90; // 360 MHz VCO (> 344) and 180 MHz SYSCLK
+        c.sysclk_hz = 180_000_000;
+        assert!(!c.is_valid());
+        // A carrier divider that does not give 15 MHz.
+        let mut b = NUCLEO_G474RE;
+        b.carrier_divider = 12;
+        assert!(!b.is_consistent());
+    }
+}

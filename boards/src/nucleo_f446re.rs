@@ -1,0 +1,110 @@
+//! NUCLEO-F446RE (STM32F446RET6, Cortex-M4F, 180 MHz max).
+//!
+//! Clock plan: HSE 8 MHz in **bypass** (the ST-LINK's MCO drives OSC_IN, solder bridge SB50 on,
+//! the Nucleo default) → PLLM 4 → 2 MHz VCO input → PLLN 180 → 360 MHz VCO → PLLP 2 →
+//! SYSCLK 180 MHz (needs voltage scale 1 + over-drive, set by embassy for > 168 MHz).
+//! AHB /1 = 180 MHz, APB1 /4 = 45 MHz (APB1 timers 90 MHz), APB2 /2 = 90 MHz (APB2 timers
+//! 180 MHz). Carrier: TIM1 (APB2) at 180 MHz, ARR 11 → 180 / 12 = 15 MHz exactly, CCR 6 = 50 %.
+use crate::*;
+
+/// STM32F446 PLL and bus limits (DS10693: PLL input 0.95–2.1 MHz, VCO 100–432 MHz;
+/// RM0390: PLLM 2..=63, PLLN 50..=432, PLLP ∈ {2,4,6,8}; SYSCLK/HCLK 180 MHz with over-drive,
+/// PCLK1 ≤ 45 MHz, PCLK2 ≤ 90 MHz).
+pub const F446_LIMITS: PllLimits = PllLimits {
+    m_min: 2,
+    m_max: 63,
+    n_min: 50,
+    n_max: 432,
+    out_divs: &[2, 4, 6, 8],
+    vco_in_min_hz: 950_000,
+    vco_in_max_hz: 2_100_000,
+    vco_out_min_hz: 100_000_000,
+    vco_out_max_hz: 432_000_000,
+    sysclk_max_hz: 180_000_000,
+    hclk_max_hz: 180_000_000,
+    pclk1_max_hz: 45_000_000,
+    pclk2_max_hz: 90_000_000,
+};
+
+pub const CLOCKS: ClockPlan = ClockPlan {
+    source: OscSource::HseBypass,
+    osc_hz: 8_000_000,
+    pll_m: 4,
+    pll_n: 180,
+    pll_out: PllOut::P,
+    pll_out_div: 2,
+    sysclk_hz: 180_000_000,
+    ahb_div: 1,
+    apb1_div: 4,
+    apb2_div: 2,
+    limits: F446_LIMITS,
+};
+
+pub const NUCLEO_F446RE: BoardDef = BoardDef {
+    name: "nucleo-f446re",
+    probe_rs_chip: "STM32F446RETx",
+    embassy_chip: "stm32f446re",
+    family: Family::Stm32F4,
+    clocks: CLOCKS,
+    sysclk_hz: CLOCKS.sysclk_hz,
+
+    // TIM1_CH1 = PA8 AF1 (Arduino D7).
+    carrier: PwmTimer {
+        name: "TIM1",
+        bus: Bus::Apb2,
+        clk_hz: CLOCKS.apb2_timer_hz(),
+        counter_bits: 16,
+        channel: 1,
+        pin: Pin { port: 'A', pin: 8, af: Some(1), header: "D7 (CN9-8), morpho CN10-23" },
+    },
+    carrier_timer_clk_hz: CLOCKS.apb2_timer_hz(),
+    carrier_divider: 12,
+
+    // TIM2_CH1 = PA0 AF1 (Arduino A0). TIM2 is 32-bit on the F446.
+    burst: PwmTimer {
+        name: "TIM2",
+        bus: Bus::Apb1,
+        clk_hz: CLOCKS.apb1_timer_hz(),
+        counter_bits: 32,
+        channel: 1,
+        pin: Pin { port: 'A', pin: 0, af: Some(1), header: "A0 (CN8-1), morpho CN7-28" },
+    },
+    burst_timer_clk_hz: CLOCKS.apb1_timer_hz(),
+    burst_timer_bits: 32,
+    max_burst_hz: MAX_BURST_HZ,
+
+    // Rheostat wiper on PA1 = ADC123_IN1 (Arduino A1). ADC1 EXTSEL 0b1000 = TIM3_TRGO.
+    adc: AdcDef {
+        adc: "ADC1",
+        channel: 1,
+        pin: Pin { port: 'A', pin: 1, af: None, header: "A1 (CN8-2), morpho CN7-30" },
+        oversampling: Oversampling::Software { conversions: ADC_OVERSAMPLE },
+        trigger_timer: "TIM3",
+        trigger_bus: Bus::Apb1,
+        trigger_timer_clk_hz: CLOCKS.apb1_timer_hz(),
+        trigger_extsel: 0b1000,
+        triggers_per_sample: 1,
+    },
+    sample_rate_hz: SAMPLE_RATE_HZ,
+    adc_oversample: ADC_OVERSAMPLE,
+
+    // PB5 (Arduino D4): plain push-pull GPIO, RF amplifier arm/interlock.
+    rf_arm_pin: Pin { port: 'B', pin: 5, af: None, header: "D4 (CN9-5), morpho CN10-29" },
+    time_driver_timer: "TIM4",
+
+    flash_origin: 0x0800_0000,
+    flash_bytes: 512 * 1024,
+    ram_origin: 0x2000_0000,
+    ram_bytes: 128 * 1024,
+};
+
+// Compile-time proof of the plan.
+const _: () = assert!(CLOCKS.is_valid());
+const _: () = assert!(CLOCKS.vco_in_hz() == 2_000_000);
+const _: () = assert!(CLOCKS.vco_out_hz() == 360_000_000);
+const _: () = assert!(CLOCKS.pll_sysclk_hz() == 180_000_000);
+const _: () = assert!(NUCLEO_F446RE.carrier_timer_clk_hz == 180_000_000);
+const _: () = assert!(NUCLEO_F446RE.carrier_timer_clk_hz % CARRIER_HZ == 0);
+const _: () = assert!(NUCLEO_F446RE.carrier_hz() == CARRIER_HZ);
+const _: () = assert!(NUCLEO_F446RE.burst_timer_clk_hz == 90_000_000);
+const _: () = assert!(NUCLEO_F446RE.is_consistent());

@@ -1,0 +1,106 @@
+//! NUCLEO-G474RE (STM32G474RET6, Cortex-M4F, 170 MHz max).
+//!
+//! Clock plan: HSE 24 MHz **crystal** (X3 on the Nucleo-G474RE) → PLLM 6 → 4 MHz PLL input →
+//! PLLN 75 → 300 MHz VCO → PLLR 2 → SYSCLK 150 MHz. 150 MHz is the range-1 *normal* mode
+//! maximum, so no boost mode is needed, and 150 MHz = 10 × 15 MHz. AHB/APB1/APB2 all /1, every
+//! timer kernel clock is 150 MHz. Carrier: TIM1 ARR 9 → 150 / 10 = 15 MHz exactly, CCR 5 = 50 %.
+use crate::*;
+
+/// STM32G474 PLL and bus limits (DS12288: PLL input 2.66–16 MHz, VCO 96–344 MHz;
+/// RM0440: PLLM 1..=16, PLLN 8..=127, PLLR ∈ {2,4,6,8}; SYSCLK/HCLK/PCLK ≤ 170 MHz in boost mode).
+pub const G474_LIMITS: PllLimits = PllLimits {
+    m_min: 1,
+    m_max: 16,
+    n_min: 8,
+    n_max: 127,
+    out_divs: &[2, 4, 6, 8],
+    vco_in_min_hz: 2_660_000,
+    vco_in_max_hz: 16_000_000,
+    vco_out_min_hz: 96_000_000,
+    vco_out_max_hz: 344_000_000,
+    sysclk_max_hz: 170_000_000,
+    hclk_max_hz: 170_000_000,
+    pclk1_max_hz: 170_000_000,
+    pclk2_max_hz: 170_000_000,
+};
+
+pub const CLOCKS: ClockPlan = ClockPlan {
+    source: OscSource::HseCrystal,
+    osc_hz: 24_000_000,
+    pll_m: 6,
+    pll_n: 75,
+    pll_out: PllOut::R,
+    pll_out_div: 2,
+    sysclk_hz: 150_000_000,
+    ahb_div: 1,
+    apb1_div: 1,
+    apb2_div: 1,
+    limits: G474_LIMITS,
+};
+
+pub const NUCLEO_G474RE: BoardDef = BoardDef {
+    name: "nucleo-g474re",
+    probe_rs_chip: "STM32G474RETx",
+    embassy_chip: "stm32g474re",
+    family: Family::Stm32G4,
+    clocks: CLOCKS,
+    sysclk_hz: CLOCKS.sysclk_hz,
+
+    // TIM1_CH1 = PA8 AF6 (Arduino D7) — same connector position as on the F446 board.
+    carrier: PwmTimer {
+        name: "TIM1",
+        bus: Bus::Apb2,
+        clk_hz: CLOCKS.apb2_timer_hz(),
+        counter_bits: 16,
+        channel: 1,
+        pin: Pin { port: 'A', pin: 8, af: Some(6), header: "D7 (CN9-8), morpho CN10-23" },
+    },
+    carrier_timer_clk_hz: CLOCKS.apb2_timer_hz(),
+    carrier_divider: 10,
+
+    // TIM2_CH1 = PA0 AF1 (Arduino A0). TIM2 is 32-bit on the G474.
+    burst: PwmTimer {
+        name: "TIM2",
+        bus: Bus::Apb1,
+        clk_hz: CLOCKS.apb1_timer_hz(),
+        counter_bits: 32,
+        channel: 1,
+        pin: Pin { port: 'A', pin: 0, af: Some(1), header: "A0 (CN8-1), morpho CN7-28" },
+    },
+    burst_timer_clk_hz: CLOCKS.apb1_timer_hz(),
+    burst_timer_bits: 32,
+    max_burst_hz: MAX_BURST_HZ,
+
+    // Rheostat wiper on PA1 = ADC12_IN2 (Arduino A1). ADC12 EXTSEL 4 = TIM3_TRGO (RM0440).
+    adc: AdcDef {
+        adc: "ADC1",
+        channel: 2,
+        pin: Pin { port: 'A', pin: 1, af: None, header: "A1 (CN8-2), morpho CN7-30" },
+        oversampling: Oversampling::Hardware { ratio: ADC_OVERSAMPLE, shift: 0 },
+        trigger_timer: "TIM3",
+        trigger_bus: Bus::Apb1,
+        trigger_timer_clk_hz: CLOCKS.apb1_timer_hz(),
+        trigger_extsel: 4,
+        triggers_per_sample: 1,
+    },
+    sample_rate_hz: SAMPLE_RATE_HZ,
+    adc_oversample: ADC_OVERSAMPLE,
+
+    rf_arm_pin: Pin { port: 'B', pin: 5, af: None, header: "D4 (CN9-5), morpho CN10-29" },
+    time_driver_timer: "TIM4",
+
+    flash_origin: 0x0800_0000,
+    flash_bytes: 512 * 1024,
+    ram_origin: 0x2000_0000,
+    ram_bytes: 96 * 1024,
+};
+
+const _: () = assert!(CLOCKS.is_valid());
+const _: () = assert!(CLOCKS.vco_in_hz() == 4_000_000);
+const _: () = assert!(CLOCKS.vco_out_hz() == 300_000_000);
+const _: () = assert!(CLOCKS.pll_sysclk_hz() == 150_000_000);
+const _: () = assert!(CLOCKS.sysclk_hz <= 170_000_000);
+const _: () = assert!(NUCLEO_G474RE.carrier_timer_clk_hz % CARRIER_HZ == 0);
+const _: () = assert!(NUCLEO_G474RE.carrier_hz() == CARRIER_HZ);
+const _: () = assert!(NUCLEO_G474RE.burst_timer_clk_hz == 150_000_000);
+const _: () = assert!(NUCLEO_G474RE.is_consistent());
