@@ -1,0 +1,262 @@
+//! Burst stage: a burst command (f_b, duty) → the burst timer's PSC / ARR / CCR.
+//!
+//! The burst timer runs PWM mode 1 on the RF enable line: the line is high while CNT < CCR, so
+//! each period starts with its on-time. Settings are written to preloaded registers and take
+//! effect at the next update event, i.e. only ever between two whole periods.
+//!
+//! Rounding, documented because it sets the f_b error:
+//! - the prescaler is the smallest that fits the period in the counter, so the period keeps the
+//!   most ticks: `psc = ⌈ticks / 2^bits⌉ − 1`;
+//! - the period is rounded to the nearest tick: `arr + 1 = round(clk / ((psc+1) f_b))`, so the
+//!   relative f_b error is at most 0.5 / (arr + 1): ≤ 15 ppm on a 16-bit timer (arr + 1 ≥ 32 768
+//!   whenever the prescaler is in use) and ≤ 0.5 / 45 000 = 11 ppm at 2 kHz on a 90 MHz 32-bit timer;
+//! - the on-time is rounded to the nearest tick, then floored to both caps (duty and on-time), so
+//!   a cap is never exceeded by rounding.
+
+/// The board's burst timer, as the core needs to know it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BurstTimer {
+    /// Timer kernel clock, Hz.
+    pub clock_hz: u32,
+    /// Counter width: 16 or 32.
+    pub counter_bits: u8,
+    /// Highest burst frequency the board renders, Hz (the RF chain's on/off time limits it).
+    pub max_burst_hz: u32,
+}
+
+/// Register values for one burst waveform.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TimerSettings {
+    /// Prescaler: the counter ticks at clock / (psc + 1).
+    pub psc: u16,
+    /// Auto-reload: the period is arr + 1 ticks.
+    pub arr: u32,
+    /// Compare: the enable line is high for the first ccr ticks of each period.
+    pub ccr: u32,
+}
+
+impl TimerSettings {
+    /// Period in kernel-clock cycles.
+    pub fn period_clocks(&self) -> u64 {
+        (self.psc as u64 + 1) * (self.arr as u64 + 1)
+    }
+
+    /// On-time in kernel-clock cycles.
+    pub fn on_clocks(&self) -> u64 {
+        (self.psc as u64 + 1) * self.ccr as u64
+    }
+
+    /// The burst frequency these settings produce, mHz.
+    pub fn produced_millihz(&self, clock_hz: u32) -> u64 {
+        (clock_hz as u64 * 1000 + self.period_clocks() / 2) / self.period_clocks()
+    }
+}
+
+/// A burst as a texture asks for it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BurstCommand {
+    /// Burst frequency f_b, mHz.
+    pub burst_millihz: u32,
+    /// Fraction of each period with the carrier on, ‰ (the seed uses 400).
+    pub duty_permille: u16,
+}
+
+/// Caps the carrier must never exceed, whatever a scene asks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SafetyLimits {
+    /// Highest duty, ‰.
+    pub max_duty_permille: u16,
+    /// Longest single on-time, µs (heat in the IDTs and the amplifier).
+    pub max_on_time_us: u32,
+}
+
+impl Default for SafetyLimits {
+    /// 50 % duty, 50 ms on-time: the seed's 40 % at 20 Hz (20 ms) passes untouched; a 1 Hz burst
+    /// is shortened to 50 ms rather than holding 2–3 W on the IDTs for 0.4 s.
+    fn default() -> Self {
+        Self {
+            max_duty_permille: 500,
+            max_on_time_us: 50_000,
+        }
+    }
+}
+
+/// Why a burst command cannot be rendered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum BurstError {
+    /// f_b is zero.
+    ZeroFrequency,
+    /// f_b above the board's limit.
+    AboveBoardLimit,
+    /// f_b so low the prescaler overflows.
+    BelowTimerRange,
+    /// Duty is zero or above 1000 ‰.
+    BadDuty,
+    /// Duty above the configured cap.
+    DutyAboveCap,
+    /// The caps leave no on-time at all.
+    NoOnTime,
+    /// The timer description itself is impossible (zero clock, width not 16 or 32).
+    BadTimer,
+}
+
+impl SafetyLimits {
+    /// Rejects caps that are zero or above 100 %.
+    pub fn validate(&self) -> Result<(), BurstError> {
+        if self.max_duty_permille == 0 || self.max_duty_permille > 1000 {
+            return Err(BurstError::BadDuty);
+        }
+        if self.max_on_time_us == 0 {
+            return Err(BurstError::NoOnTime);
+        }
+        Ok(())
+    }
+
+    /// Largest compare value allowed for a period of `arr + 1` ticks at prescaler `psc`.
+    pub fn max_ccr(&self, timer: &BurstTimer, psc: u16, arr: u32) -> u32 {
+        let period = arr as u64 + 1;
+        let by_duty = period * self.max_duty_permille as u64 / 1000;
+        let by_time =
+            self.max_on_time_us as u64 * timer.clock_hz as u64 / (1_000_000 * (psc as u64 + 1));
+        by_duty.min(by_time) as u32
+    }
+
+    /// True when `s` stays inside both caps.
+    pub fn allows(&self, timer: &BurstTimer, s: &TimerSettings) -> bool {
+        s.ccr <= self.max_ccr(timer, s.psc, s.arr)
+    }
+}
+
+/// Plans the timer settings of a command; the result stays inside `limits` (an on-time cap
+/// shortens the pulse, never stretches the period). Returns whether a cap cut the on-time.
+pub fn plan(
+    timer: &BurstTimer,
+    limits: &SafetyLimits,
+    cmd: &BurstCommand,
+) -> Result<(TimerSettings, bool), BurstError> {
+    if timer.clock_hz == 0 || !(timer.counter_bits == 16 || timer.counter_bits == 32) {
+        return Err(BurstError::BadTimer);
+    }
+    if cmd.burst_millihz == 0 {
+        return Err(BurstError::ZeroFrequency);
+    }
+    if cmd.burst_millihz as u64 > timer.max_burst_hz as u64 * 1000 {
+        return Err(BurstError::AboveBoardLimit);
+    }
+    if cmd.duty_permille == 0 || cmd.duty_permille > 1000 {
+        return Err(BurstError::BadDuty);
+    }
+    if cmd.duty_permille > limits.max_duty_permille {
+        return Err(BurstError::DutyAboveCap);
+    }
+    let clock_millihz = timer.clock_hz as u64 * 1000;
+    let f = cmd.burst_millihz as u64;
+    let counter_span = 1u64 << timer.counter_bits;
+    let ticks = (clock_millihz + f / 2) / f;
+    let psc = ticks.saturating_sub(1) / counter_span;
+    if psc > u16::MAX as u64 {
+        return Err(BurstError::BelowTimerRange);
+    }
+    let step = f * (psc + 1);
+    let period = (clock_millihz + step / 2) / step;
+    if period < 2 {
+        return Err(BurstError::AboveBoardLimit);
+    }
+    let arr = (period - 1) as u32;
+    let wanted = ((period * cmd.duty_permille as u64 + 500) / 1000).max(1) as u32;
+    let cap = limits.max_ccr(timer, psc as u16, arr);
+    if cap == 0 {
+        return Err(BurstError::NoOnTime);
+    }
+    let ccr = wanted.min(cap);
+    Ok((
+        TimerSettings {
+            psc: psc as u16,
+            arr,
+            ccr,
+        },
+        ccr < wanted,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const T32: BurstTimer = BurstTimer {
+        clock_hz: 90_000_000,
+        counter_bits: 32,
+        max_burst_hz: 5_000,
+    };
+    const T16: BurstTimer = BurstTimer {
+        clock_hz: 180_000_000,
+        counter_bits: 16,
+        max_burst_hz: 5_000,
+    };
+
+    fn cmd(hz: u32) -> BurstCommand {
+        BurstCommand {
+            burst_millihz: hz * 1000,
+            duty_permille: 400,
+        }
+    }
+
+    #[test]
+    fn forty_percent_at_80_hz() {
+        let (s, capped) = plan(&T32, &SafetyLimits::default(), &cmd(80)).unwrap();
+        assert_eq!(s.psc, 0);
+        assert_eq!(s.arr + 1, 90_000_000 / 80);
+        assert_eq!(s.ccr, (s.arr + 1) * 2 / 5);
+        assert!(!capped);
+    }
+
+    #[test]
+    fn sixteen_bit_uses_prescaler_and_keeps_resolution() {
+        let (s, _) = plan(&T16, &SafetyLimits::default(), &cmd(1)).unwrap();
+        assert!(s.psc > 0);
+        assert!(s.arr + 1 >= 32_768, "{s:?}");
+        let produced = s.produced_millihz(T16.clock_hz) as f64;
+        assert!((produced - 1000.0).abs() / 1000.0 < 1e-4);
+    }
+
+    #[test]
+    fn on_time_cap_shortens_pulse_not_period() {
+        let limits = SafetyLimits {
+            max_duty_permille: 500,
+            max_on_time_us: 10_000,
+        };
+        let (s, capped) = plan(&T32, &limits, &cmd(20)).unwrap();
+        assert!(capped);
+        assert_eq!(s.arr + 1, 90_000_000 / 20);
+        assert_eq!(s.ccr, 900_000); // 10 ms at 90 MHz
+    }
+
+    #[test]
+    fn bad_commands_rejected() {
+        let l = SafetyLimits::default();
+        assert_eq!(
+            plan(&T32, &l, &cmd(0)).err(),
+            Some(BurstError::ZeroFrequency)
+        );
+        assert_eq!(
+            plan(&T32, &l, &cmd(5_001)).err(),
+            Some(BurstError::AboveBoardLimit)
+        );
+        let c = BurstCommand {
+            burst_millihz: 80_000,
+            duty_permille: 0,
+        };
+        assert_eq!(plan(&T32, &l, &c).err(), Some(BurstError::BadDuty));
+        let c = BurstCommand {
+            burst_millihz: 80_000,
+            duty_permille: 600,
+        };
+        assert_eq!(plan(&T32, &l, &c).err(), Some(BurstError::DutyAboveCap));
+    }
+}

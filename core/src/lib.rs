@@ -1,0 +1,24 @@
+//! Portable control core of the SAW tactile display.
+//!
+//! One module per stage of the data flow — [`sample`] → [`position`] → [`velocity`] →
+//! [`region`] → [`texture`] → [`burst`] → [`gate`] — tied together by the [`controller`].
+//! The core names no chip, does no I/O and reads no clock: samples arrive with their timestamps,
+//! and gate actions leave through the [`gate::BurstOutput`] port.
+#![no_std]
+#![deny(missing_docs)]
+
+#[macro_use]
+mod fmt;
+
+pub mod burst;
+pub mod controller;
+pub mod gate;
+pub mod position;
+pub mod region;
+pub mod sample;
+pub mod scene;
+pub mod texture;
+pub mod velocity;
+
+pub use controller::{ConfigError, Controller, Output, Telemetry};
+pub use scene::{default_config, default_scene, Config, Scene};

@@ -1,0 +1,205 @@
+//! Position stage: ADC code → µm along the substrate by two-point calibration, and rail detection.
+//!
+//! The rheostat is a voltage divider; its wiper code is linear in position between the two
+//! calibrated ends. A code at either rail means an open wiper (pulled down by the board's
+//! resistor) or a short to the supply: the position is then unknown and the carrier must stop.
+
+use crate::sample::{Sample, CODE_FULL_SCALE};
+
+/// Substrate length of the seed's display: a 17 × 63 mm LiNbO3 plate.
+pub const DEFAULT_LENGTH_UM: u32 = 63_000;
+/// Codes within this distance of 0 or full scale are a rail (1 % of full scale).
+pub const DEFAULT_RAIL_MARGIN_CODE: u16 = (CODE_FULL_SCALE / 100) as u16;
+/// The calibrated ends must span at least a quarter of the ADC range: less means a mis-wired
+/// rheostat or a calibration taken at the wrong points, and would leave > 60 µm per 12-bit LSB.
+pub const MIN_SPAN_CODE: u16 = (CODE_FULL_SCALE / 4) as u16;
+
+/// Two-point calibration of the slide rheostat.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Calibration {
+    /// Code read with the slider at the start (0 µm) end.
+    pub code_at_start: u16,
+    /// Code read with the slider at the far end (`length_um`).
+    pub code_at_end: u16,
+    /// Travel between the two calibration points, µm.
+    pub length_um: u32,
+    /// Codes at or below `rail_margin_code`, or at or above full scale minus it, are rails.
+    pub rail_margin_code: u16,
+}
+
+impl Default for Calibration {
+    /// Ends at 2 % and 98 % of full scale: a rheostat with small end resistors, as on the bench.
+    fn default() -> Self {
+        Self {
+            code_at_start: (CODE_FULL_SCALE * 2 / 100) as u16,
+            code_at_end: (CODE_FULL_SCALE * 98 / 100) as u16,
+            length_um: DEFAULT_LENGTH_UM,
+            rail_margin_code: DEFAULT_RAIL_MARGIN_CODE,
+        }
+    }
+}
+
+/// Why a calibration was rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum CalibrationError {
+    /// `code_at_end` ≤ `code_at_start`: the ends are swapped (or equal).
+    EndsSwapped,
+    /// The ends are closer than [`MIN_SPAN_CODE`].
+    EndsTooClose,
+    /// An end lies inside a rail band, so a reading there would be taken for a fault.
+    EndInRail,
+    /// `length_um` is zero or above 1 m.
+    BadLength,
+    /// The rail margin is zero (no rail detection) or covers half the range.
+    BadRailMargin,
+}
+
+/// A sensor reading that carries no position.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum SensorFault {
+    /// Code at the low rail: open wiper or short to ground.
+    RailLow,
+    /// Code at the high rail: short to the supply.
+    RailHigh,
+    /// No sample for longer than the stale limit.
+    Stale,
+}
+
+/// A validated calibration with its per-sample constants precomputed (done once, at load).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PositionMapper {
+    cal: Calibration,
+    rail_low: u16,
+    rail_high: u16,
+    /// µm per code in Q16, so the per-sample map is one multiply and one shift.
+    um_per_code_q16: u32,
+}
+
+impl PositionMapper {
+    /// Validates `cal` and precomputes the map.
+    pub fn new(cal: Calibration) -> Result<Self, CalibrationError> {
+        let fs = CODE_FULL_SCALE;
+        if cal.rail_margin_code == 0 || cal.rail_margin_code as u32 >= fs / 4 {
+            return Err(CalibrationError::BadRailMargin);
+        }
+        if cal.length_um == 0 || cal.length_um > 1_000_000 {
+            return Err(CalibrationError::BadLength);
+        }
+        if cal.code_at_end <= cal.code_at_start {
+            return Err(CalibrationError::EndsSwapped);
+        }
+        let span = cal.code_at_end - cal.code_at_start;
+        if span < MIN_SPAN_CODE {
+            return Err(CalibrationError::EndsTooClose);
+        }
+        let rail_low = cal.rail_margin_code;
+        let rail_high = (fs - 1 - cal.rail_margin_code as u32) as u16;
+        if cal.code_at_start <= rail_low || cal.code_at_end >= rail_high {
+            return Err(CalibrationError::EndInRail);
+        }
+        // Rounded, so the far end maps to length_um within one µm.
+        let um_per_code_q16 = (((cal.length_um as u64) << 16) + span as u64 / 2) / span as u64;
+        Ok(Self {
+            cal,
+            rail_low,
+            rail_high,
+            um_per_code_q16: um_per_code_q16 as u32,
+        })
+    }
+
+    /// The calibration this mapper was built from.
+    pub fn calibration(&self) -> &Calibration {
+        &self.cal
+    }
+
+    /// Substrate length, µm.
+    pub fn length_um(&self) -> u32 {
+        self.cal.length_um
+    }
+
+    /// Position in µm from the start end, clamped to the calibrated travel (readings just beyond
+    /// an end are mechanical slack, not a fault), or the rail fault.
+    pub fn position_um(&self, sample: &Sample) -> Result<i32, SensorFault> {
+        let code = sample.code;
+        if code <= self.rail_low {
+            return Err(SensorFault::RailLow);
+        }
+        if code >= self.rail_high {
+            return Err(SensorFault::RailHigh);
+        }
+        let offset = code as i32 - self.cal.code_at_start as i32;
+        let um = ((offset as i64 * self.um_per_code_q16 as i64) >> 16) as i32;
+        Ok(um.clamp(0, self.cal.length_um as i32))
+    }
+
+    /// The code at which position `um` reads (inverse map, for host models and tests).
+    pub fn code_at_um(&self, um: f32) -> f32 {
+        let span = (self.cal.code_at_end - self.cal.code_at_start) as f32;
+        self.cal.code_at_start as f32 + um / self.cal.length_um as f32 * span
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn s(code: u16) -> Sample {
+        Sample { code, t_us: 0 }
+    }
+
+    #[test]
+    fn ends_map_to_zero_and_length() {
+        let m = PositionMapper::new(Calibration::default()).unwrap();
+        let c = Calibration::default();
+        assert_eq!(m.position_um(&s(c.code_at_start)), Ok(0));
+        let end = m.position_um(&s(c.code_at_end)).unwrap();
+        assert!((end - 63_000).abs() <= 1, "{end}");
+        let mid = m
+            .position_um(&s((c.code_at_start + c.code_at_end) / 2))
+            .unwrap();
+        assert!((mid - 31_500).abs() <= 2, "{mid}");
+    }
+
+    #[test]
+    fn rails_are_faults() {
+        let m = PositionMapper::new(Calibration::default()).unwrap();
+        assert_eq!(m.position_um(&s(0)), Err(SensorFault::RailLow));
+        assert_eq!(m.position_um(&s(65_535)), Err(SensorFault::RailHigh));
+        assert_eq!(m.position_um(&s(65_520)), Err(SensorFault::RailHigh));
+    }
+
+    #[test]
+    fn bad_calibrations_rejected() {
+        let ok = Calibration::default();
+        let swapped = Calibration {
+            code_at_start: ok.code_at_end,
+            code_at_end: ok.code_at_start,
+            ..ok
+        };
+        assert_eq!(
+            PositionMapper::new(swapped),
+            Err(CalibrationError::EndsSwapped)
+        );
+        let close = Calibration {
+            code_at_end: ok.code_at_start + 1000,
+            ..ok
+        };
+        assert_eq!(
+            PositionMapper::new(close),
+            Err(CalibrationError::EndsTooClose)
+        );
+        let rail = Calibration {
+            code_at_start: 10,
+            ..ok
+        };
+        assert_eq!(PositionMapper::new(rail), Err(CalibrationError::EndInRail));
+        let len = Calibration { length_um: 0, ..ok };
+        assert_eq!(PositionMapper::new(len), Err(CalibrationError::BadLength));
+    }
+}

@@ -1,0 +1,65 @@
+//! Scene: the layout of regions and their textures, plus the default scene of fig. 11.
+
+use heapless::Vec;
+
+use crate::burst::SafetyLimits;
+use crate::position::{Calibration, DEFAULT_LENGTH_UM};
+use crate::region::{DEFAULT_HYSTERESIS_UM, MAX_REGIONS};
+use crate::texture::Texture;
+
+/// Regions and textures, left to right.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Scene {
+    /// Boundaries between regions, µm from the start end, strictly increasing.
+    pub boundaries_um: Vec<u32, { MAX_REGIONS - 1 }>,
+    /// One texture per region (one more than boundaries).
+    pub textures: Vec<Texture, MAX_REGIONS>,
+    /// Half-width of the boundary hysteresis band, µm.
+    pub hysteresis_um: u32,
+}
+
+/// Everything the controller needs besides the board.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Config {
+    /// Rheostat calibration.
+    pub calibration: Calibration,
+    /// The scene to render.
+    pub scene: Scene,
+    /// Carrier caps.
+    pub limits: SafetyLimits,
+    /// With no sample for this long the sensor counts as stale and the carrier stops, µs.
+    pub stale_after_us: u32,
+}
+
+/// Fig. 11's screen ran 0–5000 across the substrate with boundaries at 1505 and 3495.
+const FIG11_SCALE: u32 = 5_000;
+
+/// The default scene: three regions like fig. 11 of the SAW display paper — bumpy 20 Hz,
+/// rough 80 Hz, smooth 1 kHz — split where the figure draws its boundaries.
+pub fn default_scene() -> Scene {
+    let mut boundaries_um = Vec::new();
+    let mut textures = Vec::new();
+    for b in [1_505, 3_495] {
+        let _ = boundaries_um.push(DEFAULT_LENGTH_UM * b / FIG11_SCALE);
+    }
+    for hz in [20, 80, 1_000] {
+        let _ = textures.push(Texture::constant_hz(hz));
+    }
+    Scene {
+        boundaries_um,
+        textures,
+        hysteresis_um: DEFAULT_HYSTERESIS_UM,
+    }
+}
+
+/// Default calibration, default caps, the default scene, stale after 5 ms (50 samples at 10 kHz).
+pub fn default_config() -> Config {
+    Config {
+        calibration: Calibration::default(),
+        scene: default_scene(),
+        limits: SafetyLimits::default(),
+        stale_after_us: 5_000,
+    }
+}

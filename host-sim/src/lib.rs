@@ -1,0 +1,1 @@
+//! Host simulation (placeholder while the crate is written).
