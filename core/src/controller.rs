@@ -364,3 +364,157 @@ impl<E: VelocityEstimator> Controller<E> {
         action
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::burst::BurstCommand;
+    use crate::position::Calibration;
+    use crate::scene::default_config;
+    use crate::texture::Texture;
+
+    const TIMER: BurstTimer = BurstTimer {
+        clock_hz: 90_000_000,
+        counter_bits: 32,
+        max_burst_hz: 5_000,
+    };
+
+    fn loaded() -> Controller {
+        let mut c = Controller::new(TIMER, 100).unwrap();
+        c.load(&default_config()).unwrap();
+        c
+    }
+
+    fn code_at(c: &Controller, um: f32) -> u16 {
+        c.mapper().unwrap().code_at_um(um) as u16
+    }
+
+    /// Feeds `n` samples at `um`, returns the last output and every action seen.
+    fn feed(c: &mut Controller, um: f32, t0: &mut u32, n: usize) -> (Output, usize) {
+        let code = code_at(c, um);
+        let mut last = Output::default();
+        let mut actions = 0;
+        for _ in 0..n {
+            last = c.on_sample(Sample { code, t_us: *t0 });
+            actions += last.action.is_some() as usize;
+            *t0 += 100;
+        }
+        (last, actions)
+    }
+
+    #[test]
+    fn nothing_runs_before_a_scene_loads() {
+        let mut c = Controller::new(TIMER, 100).unwrap();
+        let out = c.on_sample(Sample {
+            code: 30_000,
+            t_us: 0,
+        });
+        assert_eq!(out.action, None);
+        assert_eq!(out.region, None);
+    }
+
+    #[test]
+    fn region_drives_the_gate() {
+        let mut c = loaded();
+        let mut t = 0;
+        let (out, _) = feed(&mut c, 5_000.0, &mut t, 1);
+        assert_eq!(out.region, Some(0));
+        let Some(GateAction::Start(s)) = out.action else {
+            panic!("{out:?}")
+        };
+        assert_eq!(s.produced_millihz(TIMER.clock_hz), 20_000);
+        let (out, _) = feed(&mut c, 30_000.0, &mut t, 1);
+        let Some(GateAction::Update(s)) = out.action else {
+            panic!("{out:?}")
+        };
+        assert_eq!(s.produced_millihz(TIMER.clock_hz), 80_000);
+    }
+
+    #[test]
+    fn rail_turns_the_line_off_on_the_same_sample_and_recovers_after_a_run() {
+        let mut c = loaded();
+        let mut t = 0;
+        feed(&mut c, 5_000.0, &mut t, 40);
+        let out = c.on_sample(Sample { code: 0, t_us: t });
+        t += 100;
+        assert_eq!(out.action, Some(GateAction::Off));
+        assert_eq!(out.fault, Some(SensorFault::RailLow));
+        // Good samples shorter than the recovery run keep it off.
+        let (out, actions) = feed(&mut c, 5_000.0, &mut t, RECOVERY_SAMPLES as usize - 1);
+        assert_eq!(actions, 0);
+        assert_eq!(out.fault, Some(SensorFault::RailLow));
+        let (out, _) = feed(&mut c, 5_000.0, &mut t, 1);
+        assert!(matches!(out.action, Some(GateAction::Start(_))), "{out:?}");
+        assert_eq!(c.telemetry().faults, 1);
+    }
+
+    #[test]
+    fn stale_sensor_turns_the_line_off() {
+        let mut c = loaded();
+        let mut t = 0;
+        feed(&mut c, 5_000.0, &mut t, 10);
+        assert_eq!(c.on_tick(t + 1_000), None);
+        assert_eq!(c.on_tick(t + 6_000), Some(GateAction::Off));
+        assert_eq!(c.on_tick(t + 7_000), None);
+    }
+
+    /// Each bad configuration is rejected with its own error and the running scene is untouched.
+    #[test]
+    fn bad_configs_rejected_previous_kept() {
+        let mut c = loaded();
+        let mut t = 0;
+        let (before, _) = feed(&mut c, 30_000.0, &mut t, 1);
+        let good = default_config();
+        let mut cases: heapless::Vec<(Config, ConfigError), 12> = heapless::Vec::new();
+        let mut cfg = good.clone();
+        cfg.calibration = Calibration {
+            code_at_start: good.calibration.code_at_end,
+            code_at_end: good.calibration.code_at_start,
+            ..good.calibration
+        };
+        let _ = cases.push((cfg, ConfigError::Calibration(CalibrationError::EndsSwapped)));
+        let mut cfg = good.clone();
+        cfg.calibration.code_at_end = cfg.calibration.code_at_start + 100;
+        let _ = cases.push((
+            cfg,
+            ConfigError::Calibration(CalibrationError::EndsTooClose),
+        ));
+        let mut cfg = good.clone();
+        cfg.scene.boundaries_um[1] = cfg.scene.boundaries_um[0] - 1;
+        let _ = cases.push((cfg, ConfigError::Region(RegionError::Unsorted { index: 1 })));
+        for (hz_milli, duty, err) in [
+            (0, 400, BurstError::ZeroFrequency),
+            (5_000_001, 400, BurstError::AboveBoardLimit),
+            (80_000, 0, BurstError::BadDuty),
+            (80_000, 501, BurstError::DutyAboveCap),
+        ] {
+            let mut cfg = good.clone();
+            cfg.scene.textures[1] = Texture::Constant(BurstCommand {
+                burst_millihz: hz_milli,
+                duty_permille: duty,
+            });
+            let _ = cases.push((
+                cfg,
+                ConfigError::Texture {
+                    region: 1,
+                    error: err,
+                },
+            ));
+        }
+        let mut cfg = good.clone();
+        cfg.limits.max_duty_permille = 1001;
+        let _ = cases.push((cfg, ConfigError::Limits(BurstError::BadDuty)));
+        for (cfg, err) in cases.iter() {
+            assert_eq!(c.load(cfg), Err(*err));
+            // Same input, same output: the old scene is still the one running.
+            let out = c.on_sample(Sample {
+                code: code_at(&c, 30_000.0),
+                t_us: t,
+            });
+            t += 100;
+            assert_eq!(out.region, before.region);
+            assert_eq!(out.action, None, "gate changed after rejected {err:?}");
+        }
+        assert_eq!(c.telemetry().burst_millihz, 80_000);
+    }
+}
