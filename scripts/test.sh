@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Runs every test: installs what is missing (no-op when present), the host workspace's tests
+# (core, boards, host simulation, scenario tests), then both boards' firmware release builds with
+# their flash/RAM sizes checked against the 64 KiB budget.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+./scripts/setup.sh
+echo "== host tests"
+cargo test --workspace --locked
+echo "== firmware builds"
+./scripts/build-firmware.sh
