@@ -6,6 +6,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/setup.sh
 echo "== host tests"
-cargo test --workspace --locked
+cargo test --workspace
 echo "== firmware builds"
 ./scripts/build-firmware.sh
