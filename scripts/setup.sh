@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# Idempotent toolchain installer for a fresh Debian machine (run as root; CI has no stdin).
+#
+# Installs Debian's Rust toolchain (rustc-web/cargo-web + rust-web-src for `-Zbuild-std=core`
+# on thumbv7em-none-eabihf — rustup targets are not needed), the lld-22 linker, QEMU for Arm and
+# libfontconfig1-dev (host-side plotting). apt is skipped entirely when everything is present.
+set -euo pipefail
+
+PACKAGES=(rustc-web cargo-web rust-web-src lld-22 qemu-system-arm libfontconfig1-dev)
+
+export DEBIAN_FRONTEND=noninteractive
+
+installed() {
+    # dpkg-query prints "install ok installed" for a fully installed package.
+    [ "$(dpkg-query -W -f='${Status}' "$1" 2>/dev/null || true)" = "install ok installed" ]
+}
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+    if installed "$p"; then
+        echo "setup: $p already installed ($(dpkg-query -W -f='${Version}' "$p"))"
+    else
+        missing+=("$p")
+    fi
+done
+
+if [ "${#missing[@]}" -eq 0 ]; then
+    echo "setup: all ${#PACKAGES[@]} packages present, apt not run"
+else
+    if [ "$(id -u)" -ne 0 ]; then
+        echo "setup: need root to install: ${missing[*]}" >&2
+        exit 1
+    fi
+    echo "setup: installing ${missing[*]}"
+    apt-get update
+    apt-get install -y "${missing[@]}" </dev/null
+    for p in "${missing[@]}"; do
+        installed "$p" || { echo "setup: $p failed to install" >&2; exit 1; }
+        echo "setup: installed $p ($(dpkg-query -W -f='${Version}' "$p"))"
+    done
+fi
+
+# What the firmware build will use.
+for tool in /usr/bin/rustc /usr/bin/cargo /usr/bin/ld.lld-22 /usr/bin/qemu-system-arm; do
+    if [ -x "$tool" ]; then
+        echo "setup: $tool -> $("$tool" --version 2>/dev/null | head -n1)"
+    else
+        echo "setup: warning: $tool not found" >&2
+    fi
+done
