@@ -1,0 +1,149 @@
+//! NUCLEO-F446RE binding: RCC from `saw_boards::NUCLEO_F446RE`, pins, ADC acquisition.
+//!
+//! ADC: TIM3 TRGO (update, 10 kHz) triggers ADC1 (EXTSEL 8 = TIM3_TRGO); one trigger runs a
+//! 16-rank regular sequence that converts the wiper (PA1 = IN1) 16 times; DMA2 stream 0 moves
+//! the 16 results into a circular buffer; the sampler task sums them into one 16-bit sample.
+use embassy_stm32::adc::{Adc, AdcChannel, Exten, RingBufferedAdc, SampleTime};
+use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
+use embassy_stm32::peripherals::{ADC1, TIM1, TIM2, TIM3};
+use embassy_stm32::rcc::{Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllSource, Sysclk};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::Timer;
+use embassy_stm32::timer::simple_pwm::PwmPin;
+use embassy_stm32::timer::low_level::MasterMode;
+use embassy_stm32::timer::Ch1;
+use embassy_stm32::{bind_interrupts, dma, peripherals, Config, Peri, Peripherals};
+use saw_boards::{BoardDef, OscSource, PllOut};
+use static_cell::StaticCell;
+
+pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE;
+
+// The numbers below are what the embassy RCC config is built from; make sure the plan is the one
+// this file knows how to express (HSE bypass, PLL P output).
+const C: saw_boards::ClockPlan = BOARD.clocks;
+const _: () = assert!(matches!(C.source, OscSource::HseBypass));
+const _: () = assert!(matches!(C.pll_out, PllOut::P));
+const _: () = assert!(BOARD.clocks.is_valid() && BOARD.is_consistent());
+
+// F4 register encodings: PLLM = M, PLLN = N, PLLP = P/2 - 1.
+const PLLM: PllPreDiv = PllPreDiv::from_bits(C.pll_m as u8);
+const PLLN: PllMul = PllMul::from_bits(C.pll_n as u16);
+const PLLP: PllPDiv = PllPDiv::from_bits((C.pll_out_div / 2 - 1) as u8);
+const _: () = assert!(matches!(PLLM, PllPreDiv::DIV4));
+const _: () = assert!(matches!(PLLN, PllMul::MUL180));
+const _: () = assert!(matches!(PLLP, PllPDiv::DIV2));
+
+/// Embassy configuration: HSE 8 MHz bypass → PLL (M 4, N 180, P 2) → SYSCLK 180 MHz,
+/// AHB /1, APB1 /4 (timers 90 MHz), APB2 /2 (timers 180 MHz). Over-drive is enabled by embassy.
+pub fn rcc_config() -> Config {
+    let mut config = Config::default();
+    config.rcc.hse = Some(Hse { freq: Hertz(C.osc_hz), mode: HseMode::Bypass });
+    config.rcc.pll_src = PllSource::HSE;
+    config.rcc.pll = Some(Pll { prediv: PLLM, mul: PLLN, divp: Some(PLLP), divq: None, divr: None });
+    config.rcc.sys = Sysclk::PLL1_P;
+    config.rcc.ahb_pre = super::ahb_pre(C.ahb_div);
+    config.rcc.apb1_pre = super::apb_pre(C.apb1_div);
+    config.rcc.apb2_pre = super::apb_pre(C.apb2_div);
+    config
+}
+
+bind_interrupts!(struct Irqs {
+    DMA2_STREAM0 => dma::InterruptHandler<peripherals::DMA2_CH0>;
+});
+
+/// Peripherals bound to their roles.
+pub struct Parts {
+    pub carrier_tim: Peri<'static, TIM1>,
+    pub carrier_pin: PwmPin<'static, TIM1, Ch1>,
+    pub burst_tim: Peri<'static, TIM2>,
+    pub burst_pin: PwmPin<'static, TIM2, Ch1>,
+    pub rf_arm: Output<'static>,
+    pub sampler: Sampler,
+}
+
+pub fn split(p: Peripherals) -> Parts {
+    // RF arm first and low: nothing can reach the amplifier until main says so.
+    let rf_arm = Output::new(p.PB5, Level::Low, Speed::Low);
+    // PA0: TIM2_CH1 AF1 (burst / RF enable). PwmPin::new drives the pin low before switching
+    // it to AF, and the channel is held at force-inactive until the first Start.
+    let burst_pin = PwmPin::new(p.PA0, OutputType::PushPull);
+    // PA8: TIM1_CH1 AF1 (15 MHz carrier).
+    let carrier_pin = PwmPin::new(p.PA8, OutputType::PushPull);
+    let sampler = Sampler::new(p.ADC1, p.PA1, p.DMA2_CH0, p.TIM3);
+    Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, rf_arm, sampler }
+}
+
+/// 16 conversions per trigger (one 16-rank sequence).
+const RANKS: usize = saw_boards::ADC_OVERSAMPLE as usize;
+/// Samples delivered per `read` (one trigger's worth).
+pub const SAMPLES_PER_READ: usize = 1;
+const DMA_LEN: usize = 2 * RANKS * SAMPLES_PER_READ;
+static DMA_BUF: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
+
+/// Timer-triggered, DMA-fed rheostat acquisition.
+pub struct Sampler {
+    adc: RingBufferedAdc<'static, ADC1>,
+    _trigger: Timer<'static, TIM3>,
+    buf: [u16; DMA_LEN / 2],
+}
+
+impl Sampler {
+    fn new(
+        adc: Peri<'static, ADC1>,
+        pin: Peri<'static, peripherals::PA1>,
+        dma: Peri<'static, peripherals::DMA2_CH0>,
+        tim: Peri<'static, TIM3>,
+    ) -> Self {
+        let adc = Adc::new(adc);
+        let ch = BOARD.adc.channel;
+        let buf = DMA_BUF.init([0; DMA_LEN]);
+        // embassy-stm32 0.6's adc_v2 `configure_sequence` writes every rank into SQR3, which has
+        // only 6 slots (rank 7+ panics). So hand embassy a 1-rank sequence (it sets SMPR for the
+        // channel, SCAN, DMA, EXTSEL/EXTEN) and extend it to 16 ranks of the same channel below.
+        let adc = adc.into_ring_buffered(
+            dma,
+            buf,
+            Irqs,
+            [(pin.degrade_adc(), SampleTime::CYCLES56)].into_iter(),
+            embassy_stm32::triggers::TIM3_TRGO,
+            Exten::RISING_EDGE,
+        );
+        let r = embassy_stm32::pac::ADC1;
+        r.sqr3().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
+        r.sqr2().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
+        r.sqr1().write(|w| {
+            (0..4).for_each(|i| w.set_sq(i, ch));
+            w.set_l((RANKS - 1) as u8);
+        });
+        const _: () = assert!(RANKS == 16);
+        let mut adc = adc;
+        // Overrun recovery must restart on a sequence boundary.
+        adc.set_alignment(RANKS);
+        // Arm DMA + ADC before the first trigger arrives, then start the trigger timer.
+        adc.start();
+        let trigger = trigger_timer(tim);
+        Sampler { adc, _trigger: trigger, buf: [0; DMA_LEN / 2] }
+    }
+
+    /// Wait for the next trigger's conversions; returns the 16-bit sums (sum of 16 × 12 bit).
+    pub async fn read(&mut self) -> Result<[u16; SAMPLES_PER_READ], super::AdcOverrun> {
+        self.adc.read(&mut self.buf).await.map_err(|_| super::AdcOverrun)?;
+        let mut out = [0u16; SAMPLES_PER_READ];
+        for (o, chunk) in out.iter_mut().zip(self.buf.chunks_exact(RANKS)) {
+            *o = chunk.iter().map(|&x| x as u32).sum::<u32>() as u16;
+        }
+        Ok(out)
+    }
+}
+
+/// TIM3: free-running at `sample_rate_hz`, TRGO = update event.
+fn trigger_timer(tim: Peri<'static, TIM3>) -> Timer<'static, TIM3> {
+    let (psc, arr) = BOARD.adc_trigger_psc_arr();
+    let t = Timer::new(tim);
+    defmt::assert_eq!(t.get_clock_frequency().0, BOARD.adc.trigger_timer_clk_hz);
+    t.regs_core().psc().write_value(psc as u16);
+    t.set_max_compare_value(arr as u16);
+    t.set_master_mode(MasterMode::UPDATE);
+    t.start();
+    t
+}

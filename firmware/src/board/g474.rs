@@ -1,0 +1,145 @@
+//! NUCLEO-G474RE binding: RCC from `saw_boards::NUCLEO_G474RE`, pins, ADC acquisition.
+//!
+//! ADC: TIM3 TRGO (update, 10 kHz) triggers ADC1 (TIM3_TRGO external trigger); each trigger runs
+//! the 16× hardware oversampler on the wiper (PA1 = ADC1_IN2) with shift 0, so DR holds the
+//! 16-bit sum directly; DMA1 channel 1 (via DMAMUX) moves it into a circular buffer.
+use embassy_stm32::adc::{vals, Adc, AdcChannel, AdcConfig, Exten, RingBufferedAdc, SampleTime};
+use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
+use embassy_stm32::peripherals::{ADC1, TIM1, TIM2, TIM3};
+use embassy_stm32::rcc::{mux, Hse, HseMode, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::Timer;
+use embassy_stm32::timer::simple_pwm::PwmPin;
+use embassy_stm32::timer::low_level::MasterMode;
+use embassy_stm32::timer::Ch1;
+use embassy_stm32::{bind_interrupts, dma, peripherals, Config, Peri, Peripherals};
+use saw_boards::{BoardDef, OscSource, Oversampling, PllOut};
+use static_cell::StaticCell;
+
+pub const BOARD: &BoardDef = &saw_boards::NUCLEO_G474RE;
+
+const C: saw_boards::ClockPlan = BOARD.clocks;
+const _: () = assert!(matches!(C.source, OscSource::HseCrystal));
+const _: () = assert!(matches!(C.pll_out, PllOut::R));
+const _: () = assert!(BOARD.clocks.is_valid() && BOARD.is_consistent());
+// 150 MHz is the range-1 normal-mode limit: no boost mode needed.
+const BOOST: bool = C.sysclk_hz > 150_000_000;
+
+// G4 register encodings: PLLM = M - 1, PLLN = N, PLLR = R/2 - 1.
+const PLLM: PllPreDiv = PllPreDiv::from_bits((C.pll_m - 1) as u8);
+const PLLN: PllMul = PllMul::from_bits(C.pll_n as u8);
+const PLLR: PllRDiv = PllRDiv::from_bits((C.pll_out_div / 2 - 1) as u8);
+const _: () = assert!(matches!(PLLM, PllPreDiv::DIV6));
+const _: () = assert!(matches!(PLLN, PllMul::MUL75));
+const _: () = assert!(matches!(PLLR, PllRDiv::DIV2));
+
+// Hardware oversampler: ratio 16 (OVSR = 3), shift 0 (OVSS = 0) → DR = sum of 16 conversions.
+const OVS: (u8, u8) = match BOARD.adc.oversampling {
+    Oversampling::Hardware { ratio: 16, shift } => (3, shift as u8),
+    _ => panic!("G474 binding expects the 16x hardware oversampler"),
+};
+
+/// Embassy configuration: HSE 24 MHz crystal → PLL (M 6, N 75, R 2) → SYSCLK 150 MHz,
+/// AHB/APB1/APB2 /1 (all timers 150 MHz), ADC12 kernel clock = SYSCLK.
+pub fn rcc_config() -> Config {
+    let mut config = Config::default();
+    config.rcc.hse = Some(Hse { freq: Hertz(C.osc_hz), mode: HseMode::Oscillator });
+    config.rcc.pll = Some(Pll {
+        source: PllSource::HSE,
+        prediv: PLLM,
+        mul: PLLN,
+        divp: None,
+        divq: None,
+        divr: Some(PLLR),
+    });
+    config.rcc.sys = Sysclk::PLL1_R;
+    config.rcc.boost = BOOST;
+    config.rcc.ahb_pre = super::ahb_pre(C.ahb_div);
+    config.rcc.apb1_pre = super::apb_pre(C.apb1_div);
+    config.rcc.apb2_pre = super::apb_pre(C.apb2_div);
+    config.rcc.mux.adc12sel = mux::Adcsel::SYS;
+    config
+}
+
+bind_interrupts!(struct Irqs {
+    DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+});
+
+/// Peripherals bound to their roles.
+pub struct Parts {
+    pub carrier_tim: Peri<'static, TIM1>,
+    pub carrier_pin: PwmPin<'static, TIM1, Ch1>,
+    pub burst_tim: Peri<'static, TIM2>,
+    pub burst_pin: PwmPin<'static, TIM2, Ch1>,
+    pub rf_arm: Output<'static>,
+    pub sampler: Sampler,
+}
+
+pub fn split(p: Peripherals) -> Parts {
+    let rf_arm = Output::new(p.PB5, Level::Low, Speed::Low);
+    // PA0: TIM2_CH1 AF1 (burst / RF enable).
+    let burst_pin = PwmPin::new(p.PA0, OutputType::PushPull);
+    // PA8: TIM1_CH1 AF6 (15 MHz carrier).
+    let carrier_pin = PwmPin::new(p.PA8, OutputType::PushPull);
+    let sampler = Sampler::new(p.ADC1, p.PA1, p.DMA1_CH1, p.TIM3);
+    Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, rf_arm, sampler }
+}
+
+/// Samples delivered per `read` (each is one trigger = 16 oversampled conversions).
+pub const SAMPLES_PER_READ: usize = 2;
+const DMA_LEN: usize = 2 * SAMPLES_PER_READ;
+static DMA_BUF: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
+
+/// Timer-triggered, hardware-oversampled, DMA-fed rheostat acquisition.
+pub struct Sampler {
+    adc: RingBufferedAdc<'static, ADC1>,
+    _trigger: Timer<'static, TIM3>,
+}
+
+impl Sampler {
+    fn new(
+        adc: Peri<'static, ADC1>,
+        pin: Peri<'static, peripherals::PA1>,
+        dma: Peri<'static, peripherals::DMA1_CH1>,
+        tim: Peri<'static, TIM3>,
+    ) -> Self {
+        let mut cfg = AdcConfig::default();
+        cfg.oversampling_ratio = Some(OVS.0);
+        cfg.oversampling_shift = Some(OVS.1);
+        // Regular oversampling, all 16 conversions done after a single trigger (TROVS = 0),
+        // continued mode (ROVSM = 0).
+        cfg.oversampling_mode = Some((vals::Rovsm::CONTINUED, vals::Trovs::AUTOMATIC, true));
+        let adc = Adc::new(adc, cfg);
+        let buf = DMA_BUF.init([0; DMA_LEN]);
+        let mut adc = adc.into_ring_buffered(
+            dma,
+            buf,
+            Irqs,
+            [(pin.degrade_adc(), SampleTime::CYCLES24_5)].into_iter(),
+            embassy_stm32::triggers::TIM3_TRGO,
+            Exten::RISING_EDGE,
+        );
+        adc.start();
+        let trigger = trigger_timer(tim);
+        Sampler { adc, _trigger: trigger }
+    }
+
+    /// Wait for the next samples (each already the 16-bit sum of 16 conversions).
+    pub async fn read(&mut self) -> Result<[u16; SAMPLES_PER_READ], super::AdcOverrun> {
+        let mut out = [0u16; SAMPLES_PER_READ];
+        self.adc.read(&mut out).await.map_err(|_| super::AdcOverrun)?;
+        Ok(out)
+    }
+}
+
+/// TIM3: free-running at `sample_rate_hz`, TRGO = update event.
+fn trigger_timer(tim: Peri<'static, TIM3>) -> Timer<'static, TIM3> {
+    let (psc, arr) = BOARD.adc_trigger_psc_arr();
+    let t = Timer::new(tim);
+    defmt::assert_eq!(t.get_clock_frequency().0, BOARD.adc.trigger_timer_clk_hz);
+    t.regs_core().psc().write_value(psc as u16);
+    t.set_max_compare_value(arr as u16);
+    t.set_master_mode(MasterMode::UPDATE);
+    t.start();
+    t
+}

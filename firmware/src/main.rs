@@ -1,0 +1,149 @@
+//! SAW tactile display firmware (embassy). Thin: init clocks, bind peripherals, spawn tasks.
+//!
+//! Tasks:
+//! - `sampler`: timer-triggered (TIM3 TRGO, 10 kHz), DMA-fed ADC; 16 conversions per sample.
+//! - `control`: feeds every sample to `saw_core::Controller`, applies gate actions to the burst
+//!   timer, runs the stale-sensor watchdog every 1 ms and logs telemetry at 1 Hz.
+#![no_std]
+#![no_main]
+
+mod board;
+mod rf;
+
+use defmt::{info, unwrap, warn};
+use embassy_executor::Spawner;
+use embassy_futures::select::{select, Either};
+use embassy_stm32::gpio::Output;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_time::{Duration, Instant, Ticker};
+use saw_core::burst::BurstTimer;
+use saw_core::gate::BurstOutput;
+use saw_core::sample::Sample;
+use saw_core::Controller;
+use {defmt_rtt as _, panic_probe as _};
+
+use board::BOARD;
+use rf::{BurstGate, Carrier};
+
+const VERSION: &str = env!("CARGO_PKG_VERSION");
+/// Sample period, µs (100 at 10 kHz).
+const SAMPLE_PERIOD_US: u32 = 1_000_000 / BOARD.sample_rate_hz;
+/// Watchdog tick for `Controller::on_tick` (stale limit is 5 ms).
+const WATCHDOG_PERIOD: Duration = Duration::from_millis(1);
+/// Telemetry log period.
+const TELEMETRY_PERIOD_US: u64 = 1_000_000;
+
+/// Samples from the ADC task to the control task (6.4 ms of slack at 10 kHz).
+static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 64> = Channel::new();
+
+#[embassy_executor::main]
+async fn main(spawner: Spawner) {
+    let p = embassy_stm32::init(board::rcc_config());
+    let c = &BOARD.clocks;
+    info!("saw-firmware v{} on {} ({})", VERSION, BOARD.name, BOARD.probe_rs_chip);
+    info!(
+        "clocks: osc {} Hz /M{} xN{} /{}{} -> SYSCLK {} Hz, HCLK {} Hz, PCLK1 {} Hz, PCLK2 {} Hz",
+        c.osc_hz,
+        c.pll_m,
+        c.pll_n,
+        if matches!(c.pll_out, saw_boards::PllOut::P) { "P" } else { "R" },
+        c.pll_out_div,
+        c.sysclk_hz,
+        c.hclk_hz(),
+        c.pclk1_hz(),
+        c.pclk2_hz()
+    );
+
+    let parts = board::split(p);
+    let mut rf_arm: Output<'static> = parts.rf_arm;
+    let burst = BurstGate::new(parts.burst_tim, parts.burst_pin, BOARD);
+    let carrier = Carrier::start(parts.carrier_tim, parts.carrier_pin, BOARD);
+    info!(
+        "carrier: {} {} / {} = {} Hz (registers give {} Hz); burst: {} {}-bit @ {} Hz",
+        BOARD.carrier.name,
+        BOARD.carrier_timer_clk_hz,
+        BOARD.carrier_divider,
+        BOARD.carrier_hz(),
+        carrier.frequency_hz(),
+        BOARD.burst.name,
+        BOARD.burst_timer_bits,
+        BOARD.burst_timer_clk_hz
+    );
+    defmt::assert_eq!(carrier.frequency_hz(), saw_boards::CARRIER_HZ);
+    // Carrier runs free for the life of the firmware.
+    core::mem::forget(carrier);
+
+    let timer = BurstTimer {
+        clock_hz: BOARD.burst_timer_clk_hz,
+        counter_bits: BOARD.burst_timer_bits,
+        max_burst_hz: BOARD.max_burst_hz,
+    };
+    let mut ctrl = unwrap!(Controller::new(timer, SAMPLE_PERIOD_US));
+    unwrap!(ctrl.load(&saw_core::default_config()));
+
+    // Burst line is forced inactive: now the amplifier may be armed.
+    rf_arm.set_high();
+    info!(
+        "adc: {} ch{} @ {} Hz x{} (trigger {} TRGO); rf arm high",
+        BOARD.adc.adc, BOARD.adc.channel, BOARD.sample_rate_hz, BOARD.adc_oversample, BOARD.adc.trigger_timer
+    );
+
+    spawner.spawn(unwrap!(sampler(parts.sampler)));
+    spawner.spawn(unwrap!(control(ctrl, burst, rf_arm)));
+}
+
+#[embassy_executor::task]
+async fn sampler(mut s: board::Sampler) {
+    let mut overruns: u32 = 0;
+    loop {
+        match s.read().await {
+            Ok(codes) => {
+                // `read` returns when the newest sample has landed; older ones in the batch were
+                // taken one sample period apart before it.
+                let now = Instant::now().as_micros() as u32;
+                let n = codes.len() as u32;
+                for (i, &code) in codes.iter().enumerate() {
+                    let t_us = now.wrapping_sub((n - 1 - i as u32) * SAMPLE_PERIOD_US);
+                    if SAMPLES.try_send(Sample { code, t_us }).is_err() {
+                        // Control task is behind; the stale watchdog covers a stuck consumer.
+                        overruns = overruns.wrapping_add(1);
+                    }
+                }
+            }
+            Err(_) => {
+                overruns = overruns.wrapping_add(1);
+                warn!("adc dma overrun ({} total)", overruns);
+            }
+        }
+    }
+}
+
+#[embassy_executor::task]
+async fn control(mut ctrl: Controller, mut burst: BurstGate, mut rf_arm: Output<'static>) {
+    let mut watchdog = Ticker::every(WATCHDOG_PERIOD);
+    let mut next_log = Instant::now().as_micros() + TELEMETRY_PERIOD_US;
+    loop {
+        match select(SAMPLES.receive(), watchdog.next()).await {
+            Either::First(sample) => {
+                let out = ctrl.on_sample(sample);
+                if let Some(a) = out.action {
+                    burst.apply(a);
+                }
+            }
+            Either::Second(()) => {
+                let now = Instant::now().as_micros();
+                if let Some(a) = ctrl.on_tick(now as u32) {
+                    burst.apply(a);
+                }
+                if now >= next_log {
+                    next_log += TELEMETRY_PERIOD_US;
+                    info!("telemetry {} burst {} running {}", ctrl.telemetry(), burst.stats, burst.is_running());
+                }
+            }
+        }
+        // Keep the amplifier armed only while the control loop is alive and the burst timer is
+        // in a defined state (it always is here; the pin is dropped low by a reset).
+        let _ = &mut rf_arm;
+    }
+}

@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# Build the firmware for every board (release) and check the flash budget.
+#
+#   scripts/build-firmware.sh            # both boards
+#   scripts/build-firmware.sh nucleo-g474re
+#
+# Uses Debian's toolchain: /usr/bin/cargo + /usr/bin/rustc with RUSTC_BOOTSTRAP=1 so that
+# `build-std = ["core"]` (firmware/.cargo/config.toml) rebuilds core for thumbv7em-none-eabihf
+# from rust-web-src; links with ld.lld-22. ELFs are copied to firmware/target/<board>.elf.
+# Fails if a build fails or an image's flash (vector table + text + rodata + data) > 64 KiB.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+FW="$ROOT/firmware"
+TARGET=thumbv7em-none-eabihf
+BUDGET=$((64 * 1024))
+BOARDS=("$@")
+[ "${#BOARDS[@]}" -eq 0 ] && BOARDS=(nucleo-f446re nucleo-g474re)
+
+export RUSTC=/usr/bin/rustc
+export RUSTC_BOOTSTRAP=1
+CARGO=/usr/bin/cargo
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$FW/target}"
+
+if command -v size >/dev/null 2>&1; then SIZE=size
+elif command -v llvm-size-22 >/dev/null 2>&1; then SIZE=llvm-size-22
+else SIZE=llvm-size; fi
+
+# Sum the sizes of the named sections from `size -A` (SysV format: name size addr).
+sections() { # elf, section names...
+    local elf=$1; shift
+    "$SIZE" -A "$elf" | awk -v want=" $* " '
+        index(want, " " $1 " ") { s += $2 } END { print s + 0 }'
+}
+
+fail=0
+summary=()
+for board in "${BOARDS[@]}"; do
+    case "$board" in
+        nucleo-f446re) feat=(--features nucleo-f446re) ;;
+        nucleo-g474re) feat=(--no-default-features --features nucleo-g474re) ;;
+        *) echo "build-firmware: unknown board '$board'" >&2; exit 2 ;;
+    esac
+    echo "==> $board: (cd firmware && RUSTC=$RUSTC RUSTC_BOOTSTRAP=1 $CARGO build --release ${feat[*]})"
+    start=$(date +%s)
+    (cd "$FW" && "$CARGO" build --release "${feat[@]}")
+    secs=$(( $(date +%s) - start ))
+    elf="$CARGO_TARGET_DIR/$TARGET/release/saw-firmware"
+    cp "$elf" "$CARGO_TARGET_DIR/$board.elf"
+    flash=$(sections "$elf" .vector_table .text .rodata .data .gnu.sgstubs)
+    ram=$(sections "$elf" .data .bss .uninit)
+    pct=$(awk -v f="$flash" -v b="$BUDGET" 'BEGIN { printf "%.1f", 100 * f / b }')
+    line="$board: flash $flash B ($pct % of 64 KiB budget), ram $ram B (static; + stack), built in ${secs} s -> firmware/target/$board.elf"
+    echo "$line"
+    "$SIZE" -A "$elf" | awk '$1 ~ /^\.(vector_table|text|rodata|data|bss|uninit)$/ { printf "    %-14s %8d\n", $1, $2 }'
+    summary+=("$line")
+    if [ "$flash" -gt "$BUDGET" ]; then
+        echo "build-firmware: $board flash $flash B exceeds the 64 KiB budget" >&2
+        fail=1
+    fi
+done
+
+echo
+echo "== firmware sizes =="
+printf '%s\n' "${summary[@]}"
+exit "$fail"
