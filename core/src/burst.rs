@@ -122,14 +122,106 @@ impl SafetyLimits {
     pub fn max_ccr(&self, timer: &BurstTimer, psc: u16, arr: u32) -> u32 {
         let period = arr as u64 + 1;
         let by_duty = period * self.max_duty_permille as u64 / 1000;
-        let by_time =
-            self.max_on_time_us as u64 * timer.clock_hz as u64 / (1_000_000 * (psc as u64 + 1));
+        let by_time = self.max_on_time_clocks(timer) / (psc as u64 + 1);
         by_duty.min(by_time) as u32
     }
 
-    /// True when `s` stays inside both caps.
+    /// The on-time cap in kernel-clock cycles.
+    pub fn max_on_time_clocks(&self, timer: &BurstTimer) -> u64 {
+        self.max_on_time_us as u64 * timer.clock_hz as u64 / 1_000_000
+    }
+
+    /// True when periodic bursts `s` stay inside both caps (multiplies only: it runs on every
+    /// gate change).
     pub fn allows(&self, timer: &BurstTimer, s: &TimerSettings) -> bool {
-        s.ccr <= self.max_ccr(timer, s.psc, s.arr)
+        s.ccr as u64 * 1000 <= (s.arr as u64 + 1) * self.max_duty_permille as u64
+            && s.on_clocks() <= self.max_on_time_clocks(timer)
+    }
+}
+
+/// Per-sample planner for textures whose f_b changes with motion: the divisions and cap
+/// arithmetic of [`plan`] are done once at scene load, leaving a float divide, a shift and an
+/// integer divide per call.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FastPlanner {
+    clock_hz: f32,
+    counter_bits: u8,
+    /// Shortest period the board renders, kernel clocks.
+    min_period_clocks: u32,
+    /// Longest period before the prescaler overflows, kernel clocks.
+    max_period_clocks: u64,
+    /// Requested duty as a Q16 fraction.
+    duty_q16: u64,
+    /// The duty cap as a Q16 fraction, floored so it never rounds above the cap.
+    cap_duty_q16: u64,
+    max_on_clocks: u64,
+}
+
+impl FastPlanner {
+    /// Prepares a planner for bursts of `duty_permille` on `timer` under `limits`.
+    pub fn new(
+        timer: &BurstTimer,
+        limits: &SafetyLimits,
+        duty_permille: u16,
+    ) -> Result<Self, BurstError> {
+        if timer.clock_hz == 0 || !(timer.counter_bits == 16 || timer.counter_bits == 32) {
+            return Err(BurstError::BadTimer);
+        }
+        if duty_permille == 0 || duty_permille > 1000 {
+            return Err(BurstError::BadDuty);
+        }
+        if duty_permille > limits.max_duty_permille {
+            return Err(BurstError::DutyAboveCap);
+        }
+        let min_period = (timer.clock_hz as u64)
+            .div_ceil(timer.max_burst_hz.max(1) as u64)
+            .max(2);
+        Ok(Self {
+            clock_hz: timer.clock_hz as f32,
+            counter_bits: timer.counter_bits,
+            min_period_clocks: min_period.min(u32::MAX as u64) as u32,
+            max_period_clocks: (1u64 << timer.counter_bits) * 65_536,
+            duty_q16: (duty_permille as u64 * 65_536) / 1000,
+            cap_duty_q16: (limits.max_duty_permille as u64 * 65_536) / 1000,
+            max_on_clocks: limits.max_on_time_clocks(timer),
+        })
+    }
+
+    /// The highest f_b this planner renders, Hz.
+    pub fn max_hz(&self) -> f32 {
+        self.clock_hz / self.min_period_clocks as f32
+    }
+
+    /// Settings for bursts at `hz`, or None below the timer's range. Frequencies above the board
+    /// limit are clamped to it; the flag says so, so the caller can log it (never alias silently).
+    // Negated comparisons on purpose: a NaN fails them and is refused like zero.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    pub fn plan_hz(&self, hz: f32) -> Option<(TimerSettings, bool)> {
+        if !(hz > 0.0) {
+            return None;
+        }
+        let period_f = self.clock_hz / hz;
+        if !(period_f < self.max_period_clocks as f32) {
+            return None;
+        }
+        let mut period = period_f as u64;
+        let clamped = period < self.min_period_clocks as u64;
+        if clamped {
+            period = self.min_period_clocks as u64;
+        }
+        let psc = (period - 1) >> self.counter_bits;
+        let ticks = period / (psc + 1);
+        let wanted = ((ticks * self.duty_q16) >> 16).max(1);
+        let cap = ((ticks * self.cap_duty_q16) >> 16).min(self.max_on_clocks / (psc + 1));
+        if cap == 0 {
+            return None;
+        }
+        let settings = TimerSettings {
+            psc: psc as u16,
+            arr: (ticks - 1) as u32,
+            ccr: wanted.min(cap) as u32,
+        };
+        Some((settings, clamped))
     }
 }
 

@@ -1,17 +1,23 @@
 //! Controller: runs the stages in order for each sample and owns the fault state.
 //!
-//! Loading a configuration is a compile step: everything is validated and the per-region timer
-//! settings are planned before anything is replaced, so a bad configuration changes nothing.
-//! The per-sample path is then: map → fault check → velocity → region → table look-up → gate.
+//! Loading a configuration is a compile step: everything is validated, per-region constants are
+//! prepared (timer settings of constant textures, 1/λ, stick-slip constants, fast planners, line
+//! pulses) before anything is replaced, so a bad configuration changes nothing and the
+//! per-sample path computes only what the active region's texture needs:
+//! map → fault check → velocity → region → texture → burst → gate.
 
 use heapless::Vec;
 
-use crate::burst::{self, BurstError, BurstTimer, SafetyLimits, TimerSettings};
-use crate::gate::{BurstOutput, Gate, GateAction};
+use crate::burst::{self, BurstError, BurstTimer, FastPlanner, SafetyLimits, TimerSettings};
+use crate::gate::{BurstOutput, DriveMode, Gate, GateAction};
 use crate::position::{CalibrationError, PositionMapper, SensorFault};
 use crate::region::{RegionError, RegionMap, MAX_REGIONS};
 use crate::sample::{PositionSource, Sample};
 use crate::scene::Config;
+use crate::texture::lines::LineTracker;
+use crate::texture::material::MaterialConsts;
+use crate::texture::random::RandomState;
+use crate::texture::{Lines, RandomBurst, Texture, TextureError, FULL_AMPLITUDE};
 use crate::velocity::{EstimatorError, LsqSlope, VelocityEstimator};
 
 /// Samples in the default least-squares window: 3.2 ms at 10 kHz, 1.55 ms group delay.
@@ -21,8 +27,8 @@ pub type DefaultEstimator = LsqSlope<DEFAULT_WINDOW>;
 /// Consecutive good samples needed to leave a sensor fault (1.6 ms at 10 kHz): a wiper bouncing
 /// on a worn track must not flash the carrier on between bounces.
 pub const RECOVERY_SAMPLES: u16 = 16;
-/// Region changes are logged at most this often; the rest are counted and reported with the next.
-pub const REGION_LOG_INTERVAL_US: u32 = 100_000;
+/// Region changes and clamps are logged at most this often; the rest are counted.
+pub const LOG_INTERVAL_US: u32 = 100_000;
 
 /// Why a configuration was rejected (the previous one stays active).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -35,13 +41,24 @@ pub enum ConfigError {
     Region(RegionError),
     /// The carrier caps.
     Limits(BurstError),
-    /// Region `region`'s texture cannot be rendered on this board.
+    /// Region `region`'s burst cannot be rendered on this board.
     Texture {
         /// Index of the region.
         region: u8,
         /// What is wrong with its burst.
         error: BurstError,
     },
+    /// Region `region`'s texture parameters are invalid.
+    TextureParams {
+        /// Index of the region.
+        region: u8,
+        /// What is wrong.
+        error: TextureError,
+    },
+    /// The lines are invalid.
+    Lines(TextureError),
+    /// The line pulse cannot be rendered on this board.
+    LinePulse(BurstError),
     /// Textures must number one more than boundaries.
     TextureCount,
     /// Stale limit shorter than two sample periods or above one second.
@@ -62,6 +79,12 @@ pub struct Output {
     pub region: Option<u8>,
     /// The action for the burst-timer port, when the line must change.
     pub action: Option<GateAction>,
+    /// The new drive amplitude, ‰, when it changes.
+    pub amplitude_permille: Option<u16>,
+    /// The drive mode, on the first sample after a scene loads.
+    pub drive: Option<DriveMode>,
+    /// The index of a line crossed on this sample (its pulse fired).
+    pub line: Option<u8>,
     /// The sensor fault in force, if any.
     pub fault: Option<SensorFault>,
 }
@@ -78,6 +101,12 @@ pub struct Telemetry {
     pub region_switches: u32,
     /// Gate actions issued.
     pub gate_actions: u32,
+    /// Samples whose f_b was clamped to the board's limit.
+    pub clamped: u32,
+    /// Line pulses fired.
+    pub line_pulses: u32,
+    /// Line crossings dropped to keep the duty cap.
+    pub lines_skipped: u32,
     /// Last position, µm (−1 when unknown).
     pub position_um: i32,
     /// Last velocity, µm/s.
@@ -88,15 +117,254 @@ pub struct Telemetry {
     pub burst_millihz: u32,
 }
 
+/// A region's texture, compiled: only what its per-sample path needs.
+#[derive(Clone, Debug)]
+enum Compiled {
+    Off,
+    Fixed(TimerSettings),
+    Grating {
+        inv_wavelength_per_um: f32,
+        motion: MotionGate,
+        planner: FastPlanner,
+        amplitude: u16,
+    },
+    Material {
+        consts: MaterialConsts,
+        motion: MotionGate,
+        planner: FastPlanner,
+    },
+    Random {
+        params: RandomBurst,
+        state: RandomState,
+        planner: FastPlanner,
+        next_draw_us: Option<u32>,
+    },
+}
+
+/// Speed threshold with hysteresis: on at `on_um_s`, off below half of it.
+#[derive(Clone, Copy, Debug)]
+struct MotionGate {
+    on_um_s: f32,
+    moving: bool,
+}
+
+impl MotionGate {
+    fn new(min_speed_um_s: u32) -> Self {
+        Self {
+            on_um_s: min_speed_um_s as f32,
+            moving: false,
+        }
+    }
+
+    /// The speed to render, or None while below the threshold (or velocity unknown).
+    fn speed(&mut self, velocity_um_s: Option<i32>) -> Option<f32> {
+        let Some(v) = velocity_um_s else {
+            self.moving = false;
+            return None;
+        };
+        let speed = (v as f32).abs();
+        self.moving = if self.moving {
+            speed >= 0.5 * self.on_um_s
+        } else {
+            speed >= self.on_um_s
+        };
+        self.moving.then_some(speed)
+    }
+}
+
+/// What a texture asks for on one sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Request {
+    settings: Option<TimerSettings>,
+    amplitude: u16,
+    clamped: bool,
+}
+
+impl Compiled {
+    fn compile(
+        texture: &Texture,
+        region: u8,
+        timer: &BurstTimer,
+        limits: &SafetyLimits,
+        length_um: u32,
+    ) -> Result<(Self, bool), ConfigError> {
+        let params = |error| ConfigError::TextureParams { region, error };
+        let burst = |error| ConfigError::Texture { region, error };
+        Ok(match texture {
+            Texture::Off => (Compiled::Off, false),
+            Texture::Constant(cmd) => {
+                let (s, capped) = burst::plan(timer, limits, cmd).map_err(burst)?;
+                (Compiled::Fixed(s), capped)
+            }
+            Texture::Grating(g) => {
+                g.validate(length_um).map_err(params)?;
+                let planner = FastPlanner::new(timer, limits, g.duty_permille).map_err(burst)?;
+                let c = Compiled::Grating {
+                    inv_wavelength_per_um: 1.0 / g.wavelength_um as f32,
+                    motion: MotionGate::new(g.min_speed_um_s),
+                    planner,
+                    amplitude: g.amplitude_permille,
+                };
+                (c, false)
+            }
+            Texture::Material(m) => {
+                m.validate().map_err(params)?;
+                let planner = FastPlanner::new(timer, limits, m.duty_permille).map_err(burst)?;
+                (
+                    Compiled::Material {
+                        consts: m.prepare(),
+                        motion: MotionGate::new(m.min_speed_um_s),
+                        planner,
+                    },
+                    false,
+                )
+            }
+            Texture::Random(r) => {
+                r.validate().map_err(params)?;
+                // Both extremes of the draw must be renderable, so no draw is ever refused.
+                for millihz in [r.min_millihz(), r.max_millihz()] {
+                    let cmd = burst::BurstCommand {
+                        burst_millihz: millihz as u32,
+                        duty_permille: r.duty_permille,
+                    };
+                    burst::plan(timer, limits, &cmd).map_err(burst)?;
+                }
+                let planner = FastPlanner::new(timer, limits, r.duty_permille).map_err(burst)?;
+                (
+                    Compiled::Random {
+                        params: *r,
+                        state: RandomState::new(r.seed),
+                        planner,
+                        next_draw_us: None,
+                    },
+                    false,
+                )
+            }
+        })
+    }
+
+    /// Forgets motion and draw state (region change, fault).
+    fn reset(&mut self) {
+        match self {
+            Compiled::Grating { motion, .. } | Compiled::Material { motion, .. } => {
+                motion.moving = false
+            }
+            Compiled::Random { next_draw_us, .. } => *next_draw_us = None,
+            Compiled::Off | Compiled::Fixed(_) => {}
+        }
+    }
+
+    /// The request of this texture for one sample.
+    fn request(
+        &mut self,
+        velocity_um_s: Option<i32>,
+        t_us: u32,
+        running: Option<TimerSettings>,
+    ) -> Request {
+        let off = Request {
+            settings: None,
+            amplitude: FULL_AMPLITUDE,
+            clamped: false,
+        };
+        let planned = |p: Option<(TimerSettings, bool)>, amplitude| match p {
+            Some((s, clamped)) => Request {
+                settings: Some(s),
+                amplitude,
+                clamped,
+            },
+            None => off,
+        };
+        match self {
+            Compiled::Off => off,
+            Compiled::Fixed(s) => Request {
+                settings: Some(*s),
+                ..off
+            },
+            Compiled::Grating {
+                inv_wavelength_per_um,
+                motion,
+                planner,
+                amplitude,
+            } => match motion.speed(velocity_um_s) {
+                Some(speed) => planned(planner.plan_hz(speed * *inv_wavelength_per_um), *amplitude),
+                None => off,
+            },
+            Compiled::Material {
+                consts,
+                motion,
+                planner,
+            } => match motion.speed(velocity_um_s) {
+                Some(speed) => planned(
+                    planner.plan_hz(consts.stick_slip_hz(speed * 1e-6)),
+                    FULL_AMPLITUDE,
+                ),
+                None => off,
+            },
+            Compiled::Random {
+                params,
+                state,
+                planner,
+                next_draw_us,
+            } => {
+                // A new draw once the running burst has had its whole period; until then keep it.
+                let due = next_draw_us.is_none_or(|next| t_us.wrapping_sub(next) as i32 >= 0);
+                if !due {
+                    return Request {
+                        settings: running,
+                        amplitude: u16::MAX,
+                        clamped: false,
+                    };
+                }
+                let (hz, amplitude) = state.draw(params);
+                let r = planned(planner.plan_hz(hz), amplitude);
+                *next_draw_us = Some(t_us.wrapping_add((1e6 / hz) as u32));
+                r
+            }
+        }
+    }
+}
+
+/// A rate limit for log lines, on the sample clock.
+#[derive(Clone, Copy, Debug, Default)]
+struct LogLimit {
+    last_us: Option<u32>,
+    suppressed: u32,
+}
+
+impl LogLimit {
+    /// True when a line may be logged now; otherwise counts it as suppressed.
+    fn due(&mut self, t_us: u32) -> bool {
+        let due = self
+            .last_us
+            .is_none_or(|last| t_us.wrapping_sub(last) >= LOG_INTERVAL_US);
+        if due {
+            self.last_us = Some(t_us);
+        } else {
+            self.suppressed += 1;
+        }
+        due
+    }
+
+    /// Lines suppressed since the last logged one; resets the count.
+    fn take_suppressed(&mut self) -> u32 {
+        core::mem::take(&mut self.suppressed)
+    }
+}
+
 /// A validated, compiled configuration.
 #[derive(Clone, Debug)]
 struct Active {
     mapper: PositionMapper,
     regions: RegionMap,
-    /// Per region: the planned settings, or None for an off region.
-    settings: Vec<Option<TimerSettings>, MAX_REGIONS>,
+    compiled: Vec<Compiled, MAX_REGIONS>,
+    lines: Lines,
+    /// The pulse of a line (one-pulse settings), when the scene has lines.
+    line_pulse: Option<TimerSettings>,
+    /// After a line pulse the line stays low this long, so the duty over pulse + rest keeps the cap.
+    line_refractory_us: u32,
     limits: SafetyLimits,
     stale_after_us: u32,
+    drive: DriveMode,
 }
 
 /// The control core.
@@ -111,8 +379,13 @@ pub struct Controller<E: VelocityEstimator = DefaultEstimator> {
     fault: Option<SensorFault>,
     good_run: u16,
     last_sample_us: Option<u32>,
-    last_region_log_us: Option<u32>,
-    unlogged_switches: u32,
+    region_log: LogLimit,
+    clamp_log: LogLimit,
+    lines: LineTracker,
+    /// Start of the running line pulse, while in its pulse + refractory window.
+    pulse_start_us: Option<u32>,
+    amplitude: Option<u16>,
+    drive_pending: bool,
     telemetry: Telemetry,
 }
 
@@ -137,8 +410,12 @@ impl<E: VelocityEstimator> Controller<E> {
             fault: None,
             good_run: 0,
             last_sample_us: None,
-            last_region_log_us: None,
-            unlogged_switches: 0,
+            region_log: LogLimit::default(),
+            clamp_log: LogLimit::default(),
+            lines: LineTracker::default(),
+            pulse_start_us: None,
+            amplitude: None,
+            drive_pending: false,
             telemetry: Telemetry {
                 position_um: -1,
                 region: u8::MAX,
@@ -152,15 +429,21 @@ impl<E: VelocityEstimator> Controller<E> {
         match self.compile(config) {
             Ok(active) => {
                 info!(
-                    "scene loaded: {} regions, hysteresis {} um, duty cap {} permille, on-time cap {} us",
+                    "scene loaded: {} regions, {} lines, hysteresis {} um, duty cap {} permille, on-time cap {} us",
                     active.regions.len(),
+                    active.lines.positions_um.len(),
                     config.scene.hysteresis_um,
                     active.limits.max_duty_permille,
                     active.limits.max_on_time_us
                 );
+                for (i, t) in config.scene.textures.iter().enumerate() {
+                    debug!("region {}: {}", i, t.kind());
+                }
                 self.active = Some(active);
-                // The old region index means nothing in the new layout.
+                // The old region index and line arming mean nothing in the new layout.
                 self.region = None;
+                self.lines.reset();
+                self.drive_pending = true;
                 Ok(())
             }
             Err(e) => {
@@ -187,36 +470,62 @@ impl<E: VelocityEstimator> Controller<E> {
         if config.stale_after_us < 2 * self.sample_period_us || config.stale_after_us > 1_000_000 {
             return Err(ConfigError::StaleLimit);
         }
-        let mut settings = Vec::new();
+        let mut compiled = Vec::new();
         for (i, texture) in scene.textures.iter().enumerate() {
-            let planned = match texture.fixed_command() {
-                None => None,
-                Some(cmd) => {
-                    let (s, capped) =
-                        burst::plan(&self.timer, &config.limits, &cmd).map_err(|error| {
-                            ConfigError::Texture {
-                                region: i as u8,
-                                error,
-                            }
-                        })?;
-                    if capped {
-                        warn!(
-                            "region {}: on-time capped to {} us",
-                            i, config.limits.max_on_time_us
-                        );
-                    }
-                    Some(s)
-                }
-            };
+            let (c, capped) = Compiled::compile(
+                texture,
+                i as u8,
+                &self.timer,
+                &config.limits,
+                mapper.length_um(),
+            )?;
+            if capped {
+                warn!(
+                    "region {}: on-time capped to {} us",
+                    i, config.limits.max_on_time_us
+                );
+            }
             // Cannot fail: the region map holds at most MAX_REGIONS.
-            let _ = settings.push(planned);
+            let _ = compiled.push(c);
         }
+        scene
+            .lines
+            .validate(mapper.length_um(), config.limits.max_on_time_us)
+            .map_err(ConfigError::Lines)?;
+        let (line_pulse, line_refractory_us) = if scene.lines.positions_um.is_empty() {
+            (None, 0)
+        } else {
+            (
+                Some(self.pulse_settings(scene.lines.pulse_us)?),
+                line_refractory_us(&scene.lines, &config.limits),
+            )
+        };
         Ok(Active {
             mapper,
             regions,
-            settings,
+            compiled,
+            lines: scene.lines.clone(),
+            line_pulse,
+            line_refractory_us,
             limits: config.limits,
             stale_after_us: config.stale_after_us,
+            drive: scene.drive,
+        })
+    }
+
+    /// One-pulse settings of `pulse_us`: high for the whole count, one tick low at the end.
+    fn pulse_settings(&self, pulse_us: u32) -> Result<TimerSettings, ConfigError> {
+        let clocks = pulse_us as u64 * self.timer.clock_hz as u64 / 1_000_000;
+        let span = 1u64 << self.timer.counter_bits;
+        let psc = clocks / span;
+        if psc > u16::MAX as u64 {
+            return Err(ConfigError::LinePulse(BurstError::BelowTimerRange));
+        }
+        let ticks = (clocks / (psc + 1)).max(1);
+        Ok(TimerSettings {
+            psc: psc as u16,
+            arr: ticks as u32,
+            ccr: ticks as u32,
         })
     }
 
@@ -239,8 +548,9 @@ impl<E: VelocityEstimator> Controller<E> {
     pub fn on_sample(&mut self, sample: Sample) -> Output {
         self.telemetry.samples = self.telemetry.samples.wrapping_add(1);
         self.last_sample_us = Some(sample.t_us);
+        let t_us = sample.t_us;
         let Some(active) = self.active.as_ref() else {
-            let action = self.drive(None);
+            let action = self.gate.force_off();
             return Output {
                 action,
                 ..Output::default()
@@ -262,27 +572,97 @@ impl<E: VelocityEstimator> Controller<E> {
             info!("sensor recovered after {:?}: {} um", fault, position_um);
             self.fault = None;
         }
-        let velocity_um_s = self.estimator.update(position_um, sample.t_us);
+        let drive = core::mem::take(&mut self.drive_pending).then_some(active.drive);
+        let velocity_um_s = self.estimator.update(position_um, t_us);
         let region = match self.region {
             None => active.regions.lookup(position_um),
             Some(r) => active.regions.track(r, position_um),
         };
-        let desired = active.settings.get(region as usize).copied().flatten();
         if self.region != Some(region) {
-            self.note_region_change(region, position_um, sample.t_us);
+            self.note_region_change(region, position_um, t_us);
         }
-        let action = self.drive(desired);
+        let mut out = Output {
+            position_um: Some(position_um),
+            velocity_um_s,
+            region: Some(region),
+            drive,
+            ..Output::default()
+        };
+        let crossed = self.lines_step(position_um, t_us);
+        if let Some((amplitude, action, line)) = crossed {
+            // Inside a line pulse or its rest: the pulse owns the line and the amplitude.
+            out.action = action;
+            out.line = line;
+            out.amplitude_permille = self.set_amplitude(amplitude);
+        } else {
+            let Some(active) = self.active.as_mut() else {
+                return out;
+            };
+            let running = self.gate.running();
+            let request = match active.compiled.get_mut(region as usize) {
+                Some(c) => c.request(velocity_um_s, t_us, running),
+                None => Request {
+                    settings: None,
+                    amplitude: FULL_AMPLITUDE,
+                    clamped: false,
+                },
+            };
+            if request.clamped {
+                self.telemetry.clamped = self.telemetry.clamped.wrapping_add(1);
+                if self.clamp_log.due(t_us) {
+                    warn!(
+                        "region {}: f_b above the board limit {} Hz, clamped ({} more)",
+                        region,
+                        self.timer.max_burst_hz,
+                        self.clamp_log.take_suppressed()
+                    );
+                }
+            }
+            out.action = self.drive(request.settings);
+            if request.amplitude != u16::MAX {
+                out.amplitude_permille = self.set_amplitude(request.amplitude);
+            }
+        }
         let t = &mut self.telemetry;
         t.position_um = position_um;
         t.velocity_um_s = velocity_um_s.unwrap_or(0);
         t.region = region;
-        Output {
-            position_um: Some(position_um),
-            velocity_um_s,
-            region: Some(region),
-            action,
-            fault: None,
+        out
+    }
+
+    /// Lines: fires a pulse on a crossing, and owns the gate during a pulse and its rest.
+    /// Returns (amplitude, action, line fired) while the pulse window is open.
+    fn lines_step(
+        &mut self,
+        position_um: i32,
+        t_us: u32,
+    ) -> Option<(u16, Option<GateAction>, Option<u8>)> {
+        let active = self.active.as_ref()?;
+        let pulse = active.line_pulse?;
+        let fired = self.lines.update(&active.lines, position_um);
+        let window_us = active.lines.pulse_us + active.line_refractory_us;
+        if let Some(start) = self.pulse_start_us {
+            let dt = t_us.wrapping_sub(start);
+            if dt < window_us {
+                if fired.is_some() {
+                    self.telemetry.lines_skipped = self.telemetry.lines_skipped.wrapping_add(1);
+                    debug!("line crossed during a pulse's rest: skipped to keep the duty cap");
+                }
+                return Some((active.lines.amplitude_at(dt), None, None));
+            }
+            self.pulse_start_us = None;
         }
+        let line = fired?;
+        let amplitude = active.lines.amplitude_at(0);
+        self.pulse_start_us = Some(t_us);
+        self.telemetry.line_pulses = self.telemetry.line_pulses.wrapping_add(1);
+        debug!("line {} crossed at {} um: pulse", line, position_um);
+        let action = self.gate.pulse(pulse, &self.timer, &active.limits);
+        if action.is_some() {
+            self.telemetry.gate_actions = self.telemetry.gate_actions.wrapping_add(1);
+            self.telemetry.burst_millihz = 0;
+        }
+        Some((amplitude, action, Some(line)))
     }
 
     /// Checks the stale-sensor watchdog at `now_us`; call it from a timer at least every few
@@ -304,9 +684,7 @@ impl<E: VelocityEstimator> Controller<E> {
     ) -> Option<Output> {
         let sample = source.next_sample()?;
         let output = self.on_sample(sample);
-        if let Some(action) = output.action {
-            out.apply(action);
-        }
+        apply(&output, out);
         Some(output)
     }
 
@@ -319,9 +697,15 @@ impl<E: VelocityEstimator> Controller<E> {
         self.good_run = 0;
         self.estimator.reset();
         self.region = None;
+        self.lines.reset();
+        self.pulse_start_us = None;
+        if let Some(active) = self.active.as_mut() {
+            active.compiled.iter_mut().for_each(Compiled::reset);
+        }
         self.telemetry.position_um = -1;
         self.telemetry.region = u8::MAX;
-        let action = self.drive(None);
+        let action = self.gate.force_off();
+        self.count_action(action);
         Output {
             action,
             fault: Some(fault),
@@ -334,25 +718,38 @@ impl<E: VelocityEstimator> Controller<E> {
             self.telemetry.region_switches = self.telemetry.region_switches.wrapping_add(1);
         }
         self.region = Some(region);
-        let due = match self.last_region_log_us {
-            None => true,
-            Some(last) => t_us.wrapping_sub(last) >= REGION_LOG_INTERVAL_US,
-        };
-        if due {
+        if let Some(c) = self
+            .active
+            .as_mut()
+            .and_then(|a| a.compiled.get_mut(region as usize))
+        {
+            c.reset();
+        }
+        if self.region_log.due(t_us) {
             info!(
                 "region {} at {} um ({} changes not logged)",
-                region, position_um, self.unlogged_switches
+                region,
+                position_um,
+                self.region_log.take_suppressed()
             );
-            self.last_region_log_us = Some(t_us);
-            self.unlogged_switches = 0;
-        } else {
-            self.unlogged_switches += 1;
         }
+    }
+
+    fn set_amplitude(&mut self, permille: u16) -> Option<u16> {
+        (self.amplitude != Some(permille)).then(|| {
+            self.amplitude = Some(permille);
+            permille
+        })
     }
 
     fn drive(&mut self, desired: Option<TimerSettings>) -> Option<GateAction> {
         let limits = self.active.as_ref().map(|a| a.limits).unwrap_or_default();
         let action = self.gate.request(desired, &self.timer, &limits);
+        self.count_action(action);
+        action
+    }
+
+    fn count_action(&mut self, action: Option<GateAction>) {
         if action.is_some() {
             self.telemetry.gate_actions = self.telemetry.gate_actions.wrapping_add(1);
             self.telemetry.burst_millihz = self
@@ -361,8 +758,26 @@ impl<E: VelocityEstimator> Controller<E> {
                 .map(|s| s.produced_millihz(self.timer.clock_hz) as u32)
                 .unwrap_or(0);
         }
-        action
     }
+}
+
+/// Sends one output's changes to a burst port: drive mode first, then amplitude, then the line.
+pub fn apply<B: BurstOutput>(output: &Output, out: &mut B) {
+    if let Some(mode) = output.drive {
+        out.set_drive(mode);
+    }
+    if let Some(a) = output.amplitude_permille {
+        out.set_amplitude(a);
+    }
+    if let Some(action) = output.action {
+        out.apply(action);
+    }
+}
+
+/// Rest after a line pulse so that pulse / (pulse + rest) ≤ the duty cap.
+fn line_refractory_us(lines: &Lines, limits: &SafetyLimits) -> u32 {
+    let cap = limits.max_duty_permille as u64;
+    (lines.pulse_us as u64 * (1000 - cap)).div_ceil(cap) as u32
 }
 
 #[cfg(test)]

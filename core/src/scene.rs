@@ -3,12 +3,13 @@
 use heapless::Vec;
 
 use crate::burst::SafetyLimits;
+use crate::gate::DriveMode;
 use crate::position::{Calibration, DEFAULT_LENGTH_UM};
 use crate::region::{DEFAULT_HYSTERESIS_UM, MAX_REGIONS};
-use crate::texture::Texture;
+use crate::texture::{Lines, Texture};
 
 /// Regions and textures, left to right.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Scene {
     /// Boundaries between regions, µm from the start end, strictly increasing.
@@ -17,10 +18,14 @@ pub struct Scene {
     pub textures: Vec<Texture, MAX_REGIONS>,
     /// Half-width of the boundary hysteresis band, µm.
     pub hysteresis_um: u32,
+    /// Tangible lines drawn over the regions (fig. 12); none by default.
+    pub lines: Lines,
+    /// Standing (both IDTs) or progressive (one IDT) waves.
+    pub drive: DriveMode,
 }
 
 /// Everything the controller needs besides the board.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Config {
     /// Rheostat calibration.
@@ -51,6 +56,8 @@ pub fn default_scene() -> Scene {
         boundaries_um,
         textures,
         hysteresis_um: DEFAULT_HYSTERESIS_UM,
+        lines: Lines::default(),
+        drive: DriveMode::Standing,
     }
 }
 

@@ -1,0 +1,213 @@
+//! Tangible lines (fig. 12 of the SAW display paper): crossing a line fires one carrier pulse.
+//!
+//! The paper found a long rectangular pulse is felt as two strings (the friction changes at both
+//! its edges) and a triangle-modulated pulse as one, so the envelope is selectable. A line fires
+//! once per crossing in either direction: after firing it is disarmed until the finger has moved
+//! `hysteresis_um` clear of it on either side, so a finger resting on a line never re-fires.
+
+use heapless::Vec;
+
+use super::TextureError;
+
+/// Most lines a scene may draw.
+pub const MAX_LINES: usize = 16;
+
+/// Amplitude envelope of a line pulse.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Envelope {
+    /// Full amplitude for the whole pulse (felt as two strings when long).
+    Rectangular,
+    /// Rising then falling linearly (felt as one string).
+    Triangular,
+}
+
+/// The lines of a scene.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Lines {
+    /// Line positions, µm, strictly increasing.
+    pub positions_um: Vec<u32, MAX_LINES>,
+    /// Pulse length, µs.
+    pub pulse_us: u32,
+    /// Pulse envelope.
+    pub envelope: Envelope,
+    /// Peak amplitude, ‰.
+    pub amplitude_permille: u16,
+    /// Distance the finger must move clear of a line to re-arm it, µm.
+    pub hysteresis_um: u32,
+}
+
+impl Default for Lines {
+    /// No lines; 10 ms triangular pulses at full drive, 200 µm re-arm distance once some are added.
+    fn default() -> Self {
+        Self {
+            positions_um: Vec::new(),
+            pulse_us: 10_000,
+            envelope: Envelope::Triangular,
+            amplitude_permille: 1000,
+            hysteresis_um: 200,
+        }
+    }
+}
+
+impl Lines {
+    /// Checks positions against a substrate of `length_um` and the pulse against the on-time cap.
+    pub fn validate(&self, length_um: u32, max_on_time_us: u32) -> Result<(), TextureError> {
+        let mut prev: Option<u32> = None;
+        for &p in &self.positions_um {
+            if p == 0 || p >= length_um || prev.is_some_and(|q| p <= q) {
+                return Err(TextureError::BadLines);
+            }
+            prev = Some(p);
+        }
+        if self.positions_um.is_empty() {
+            return Ok(());
+        }
+        if self.pulse_us == 0 || self.pulse_us > max_on_time_us {
+            return Err(TextureError::BadPulse);
+        }
+        if self.amplitude_permille == 0
+            || self.amplitude_permille > 1000
+            || self.hysteresis_um > 5_000
+        {
+            return Err(TextureError::BadLines);
+        }
+        Ok(())
+    }
+
+    /// Amplitude `dt_us` into a pulse, ‰ (0 outside the pulse).
+    pub fn amplitude_at(&self, dt_us: u32) -> u16 {
+        if dt_us >= self.pulse_us {
+            return 0;
+        }
+        match self.envelope {
+            Envelope::Rectangular => self.amplitude_permille,
+            Envelope::Triangular => {
+                let half = self.pulse_us as u64;
+                let x = 2 * dt_us as u64;
+                let rise = if x <= half { x } else { 2 * half - x };
+                (self.amplitude_permille as u64 * rise / half) as u16
+            }
+        }
+    }
+}
+
+/// Which side of a line the finger was last seen clear of.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Side {
+    Below,
+    Above,
+}
+
+/// Per-line arming state.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct LineTracker {
+    armed: [Option<Side>; MAX_LINES],
+}
+
+impl LineTracker {
+    /// Forgets which side the finger was on (after a fault or a scene load).
+    pub(crate) fn reset(&mut self) {
+        self.armed = [None; MAX_LINES];
+    }
+
+    /// Updates with a new position; returns the index of a line crossed, if any.
+    pub(crate) fn update(&mut self, lines: &Lines, position_um: i32) -> Option<u8> {
+        let h = lines.hysteresis_um as i32;
+        let mut fired = None;
+        for (i, (&line, armed)) in lines
+            .positions_um
+            .iter()
+            .zip(self.armed.iter_mut())
+            .enumerate()
+        {
+            let line = line as i32;
+            let crossed = match *armed {
+                Some(Side::Below) => position_um >= line,
+                Some(Side::Above) => position_um <= line,
+                None => false,
+            };
+            if crossed {
+                *armed = None;
+                fired = Some(i as u8);
+            }
+            if position_um < line - h {
+                *armed = Some(Side::Below);
+            } else if position_um > line + h {
+                *armed = Some(Side::Above);
+            }
+        }
+        fired
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lines() -> Lines {
+        let mut l = Lines::default();
+        let _ = l.positions_um.push(10_000);
+        let _ = l.positions_um.push(20_000);
+        l
+    }
+
+    #[test]
+    fn fires_once_per_crossing_either_way() {
+        let l = lines();
+        let mut t = LineTracker::default();
+        let mut fires = 0;
+        // Sweep up and back at 10 µm per sample.
+        for p in (5_000..25_000)
+            .step_by(10)
+            .chain((5_000..25_000).rev().step_by(10))
+        {
+            fires += t.update(&l, p).is_some() as u32;
+        }
+        assert_eq!(fires, 4);
+    }
+
+    #[test]
+    fn resting_on_a_line_never_refires() {
+        let l = lines();
+        let mut t = LineTracker::default();
+        assert_eq!(t.update(&l, 9_000), None);
+        assert_eq!(t.update(&l, 10_000), Some(0));
+        let mut fires = 0;
+        for i in 0..10_000 {
+            // ±150 µm of dither, inside the 200 µm re-arm distance.
+            let p = 10_000 + ((i * 37) % 301) - 150;
+            fires += t.update(&l, p).is_some() as u32;
+        }
+        assert_eq!(fires, 0);
+    }
+
+    #[test]
+    fn triangle_envelope_peaks_mid_pulse() {
+        let l = lines();
+        assert_eq!(l.amplitude_at(0), 0);
+        assert_eq!(l.amplitude_at(5_000), 1000);
+        assert_eq!(l.amplitude_at(2_500), 500);
+        assert_eq!(l.amplitude_at(10_000), 0);
+        let r = Lines {
+            envelope: Envelope::Rectangular,
+            ..lines()
+        };
+        assert_eq!(r.amplitude_at(0), 1000);
+        assert_eq!(r.amplitude_at(9_999), 1000);
+    }
+
+    #[test]
+    fn bad_lines_rejected() {
+        let mut l = lines();
+        assert!(l.validate(63_000, 50_000).is_ok());
+        l.positions_um[1] = 5_000;
+        assert_eq!(l.validate(63_000, 50_000), Err(TextureError::BadLines));
+        let l = Lines {
+            pulse_us: 60_000,
+            ..lines()
+        };
+        assert_eq!(l.validate(63_000, 50_000), Err(TextureError::BadPulse));
+    }
+}

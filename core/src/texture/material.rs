@@ -1,0 +1,152 @@
+//! Material texture: the stick-slip frequency of the SAW display paper (eq. 10–12) at the live
+//! hand speed U = |V|:
+//!
+//! f_ss⁻¹ = (2/ω0)(π − atan R + R),  R = (μs − μc) P / (m ω0 U),  ω0 = √(k/m).
+//!
+//! With A = (μs − μc) P / (m ω0), so R = A/U, this is rewritten as
+//! f_ss = ω0 U / (2 ((π − atan(A/U)) U + A)),
+//! which is finite for every U ≥ 0: U → 0 (R → ∞) gives f → kU/(2ΔμP) → 0, and Δμ = 0 gives
+//! ω0/2π. ω0 and A are computed once at scene load; the per-sample cost is one atan, two
+//! multiplies and one divide. Δμ itself comes from the material parameters of eq. 12
+//! (μs − μc = π(s − s')β/(E σ)), resolved when the scene file is read.
+
+use super::TextureError;
+
+/// A material region's parameters (SI units).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Material {
+    /// μs − μc, the static minus kinetic friction coefficient (eq. 12), ≥ 0.
+    pub delta_mu: f32,
+    /// P: total normal force of the skin, N.
+    pub normal_force_n: f32,
+    /// m: finger mass of the spring-mass model, kg.
+    pub mass_kg: f32,
+    /// k: finger stiffness, N/m.
+    pub stiffness_n_per_m: f32,
+    /// Duty of each burst, ‰.
+    pub duty_permille: u16,
+    /// Bursts start above this speed, µm/s, and stop below half of it.
+    pub min_speed_um_s: u32,
+}
+
+/// Constants of a material prepared at load.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct MaterialConsts {
+    omega0: f32,
+    /// A = Δμ P / (m ω0), m/s.
+    a_m_per_s: f32,
+}
+
+impl Material {
+    /// Fig. 5's finger: P = 1 N, m = 1 g, k = 500 N/m, with the given Δμ.
+    pub const fn fig5(delta_mu: f32) -> Self {
+        Self {
+            delta_mu,
+            normal_force_n: 1.0,
+            mass_kg: 0.001,
+            stiffness_n_per_m: 500.0,
+            duty_permille: 400,
+            min_speed_um_s: 5_000,
+        }
+    }
+
+    /// Checks the parameters.
+    pub fn validate(&self) -> Result<(), TextureError> {
+        let positive = |x: f32| x.is_finite() && x > 0.0;
+        let friction_ok = self.delta_mu.is_finite() && self.delta_mu >= 0.0;
+        if !friction_ok
+            || !positive(self.normal_force_n)
+            || !positive(self.mass_kg)
+            || !positive(self.stiffness_n_per_m)
+        {
+            return Err(TextureError::BadMaterial);
+        }
+        if self.min_speed_um_s > 1_000_000 {
+            return Err(TextureError::BadSpeedThreshold);
+        }
+        Ok(())
+    }
+
+    pub(crate) fn prepare(&self) -> MaterialConsts {
+        let omega0 = libm::sqrtf(self.stiffness_n_per_m / self.mass_kg);
+        MaterialConsts {
+            omega0,
+            a_m_per_s: self.delta_mu * self.normal_force_n / (self.mass_kg * omega0),
+        }
+    }
+
+    /// f_ss in Hz at hand speed `speed_m_s` ≥ 0 (load-time constants recomputed: for hosts and
+    /// tests; the controller uses the prepared form).
+    pub fn stick_slip_hz(&self, speed_m_s: f32) -> f32 {
+        self.prepare().stick_slip_hz(speed_m_s)
+    }
+}
+
+impl MaterialConsts {
+    /// f_ss in Hz at hand speed `u` m/s, finite for every u ≥ 0.
+    // Negated on purpose: a NaN speed is refused like zero.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    pub(crate) fn stick_slip_hz(&self, u: f32) -> f32 {
+        if !(u > 0.0) {
+            return 0.0;
+        }
+        let a = self.a_m_per_s;
+        let atan_r = if a == 0.0 { 0.0 } else { atan(a / u) };
+        self.omega0 * u / (2.0 * ((core::f32::consts::PI - atan_r) * u + a))
+    }
+}
+
+/// The atan of the per-sample path. libm's `atanf` is used until the error-against-cost study
+/// (docs/models.md) says otherwise.
+#[inline]
+fn atan(x: f32) -> f32 {
+    libm::atanf(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn limits_are_finite_and_right() {
+        let m = Material::fig5(0.5);
+        let omega0 = (500.0f32 / 0.001).sqrt();
+        assert_eq!(m.stick_slip_hz(0.0), 0.0);
+        // Frictionless limit: ω0/2π.
+        let free = Material::fig5(0.0).stick_slip_hz(0.04);
+        assert!(
+            (free - omega0 / (2.0 * core::f32::consts::PI)).abs() < 1e-3,
+            "{free}"
+        );
+        // Slow limit: kU/(2ΔμP).
+        let u = 1e-5;
+        let slow = m.stick_slip_hz(u);
+        let asym = 500.0 * u / (2.0 * 0.5 * 1.0);
+        assert!((slow - asym).abs() / asym < 1e-2, "{slow} vs {asym}");
+        // Monotone in speed.
+        let mut last = 0.0;
+        for i in 1..200 {
+            let f = m.stick_slip_hz(i as f32 * 0.002);
+            assert!(f.is_finite() && f > last);
+            last = f;
+        }
+    }
+
+    #[test]
+    fn bad_parameters_rejected() {
+        assert!(Material {
+            mass_kg: 0.0,
+            ..Material::fig5(0.5)
+        }
+        .validate()
+        .is_err());
+        assert!(Material {
+            delta_mu: f32::NAN,
+            ..Material::fig5(0.5)
+        }
+        .validate()
+        .is_err());
+        assert!(Material::fig5(0.0).validate().is_ok());
+    }
+}

@@ -1,0 +1,128 @@
+//! Random texture: f_b and amplitude drawn uniformly about central values once per burst, like
+//! the SAW display paper's "Randomness button" (a surface of fine, randomly distributed
+//! scratches). The PRNG is a seeded PCG32, so a run reproduces exactly on host and target.
+
+use rand_core::{Rng, SeedableRng};
+use rand_pcg::Pcg32;
+
+use super::TextureError;
+
+/// A random region's parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RandomBurst {
+    /// Central burst frequency, mHz.
+    pub center_millihz: u32,
+    /// f_b is drawn in center × (1 ± spread), ‰.
+    pub spread_permille: u16,
+    /// Central amplitude, ‰ of full drive.
+    pub amplitude_permille: u16,
+    /// Amplitude is drawn in amplitude × (1 ± spread), ‰, clamped to full drive.
+    pub amplitude_spread_permille: u16,
+    /// Duty of each burst, ‰.
+    pub duty_permille: u16,
+    /// PRNG seed.
+    pub seed: u64,
+}
+
+impl RandomBurst {
+    /// Checks the spreads; the f_b extremes are checked against the board when the scene loads.
+    pub fn validate(&self) -> Result<(), TextureError> {
+        if self.spread_permille >= 1000
+            || self.amplitude_spread_permille > 1000
+            || self.amplitude_permille == 0
+            || self.amplitude_permille > 1000
+        {
+            return Err(TextureError::BadSpread);
+        }
+        Ok(())
+    }
+
+    /// Highest f_b this texture can draw, mHz.
+    pub fn max_millihz(&self) -> u64 {
+        self.center_millihz as u64 * (1000 + self.spread_permille as u64) / 1000
+    }
+
+    /// Lowest f_b this texture can draw, mHz.
+    pub fn min_millihz(&self) -> u64 {
+        self.center_millihz as u64 * (1000 - self.spread_permille as u64) / 1000
+    }
+}
+
+/// The running state of a random texture: its PRNG.
+#[derive(Clone, Debug)]
+pub(crate) struct RandomState {
+    rng: Pcg32,
+}
+
+impl RandomState {
+    pub(crate) fn new(seed: u64) -> Self {
+        Self {
+            rng: Pcg32::seed_from_u64(seed),
+        }
+    }
+
+    /// A uniform draw in [−1, 1).
+    fn unit(&mut self) -> f32 {
+        // 24 random bits: exactly representable in f32, identical on every platform.
+        (self.rng.next_u32() >> 8) as f32 * (2.0 / 16_777_216.0) - 1.0
+    }
+
+    /// Draws (f_b in Hz, amplitude ‰) for the next burst.
+    pub(crate) fn draw(&mut self, p: &RandomBurst) -> (f32, u16) {
+        let f =
+            p.center_millihz as f32 * 1e-3 * (1.0 + self.unit() * p.spread_permille as f32 * 1e-3);
+        let a = p.amplitude_permille as f32
+            * (1.0 + self.unit() * p.amplitude_spread_permille as f32 * 1e-3);
+        (f, a.clamp(1.0, 1000.0) as u16)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p() -> RandomBurst {
+        RandomBurst {
+            center_millihz: 80_000,
+            spread_permille: 250,
+            amplitude_permille: 800,
+            amplitude_spread_permille: 200,
+            duty_permille: 400,
+            seed: 7,
+        }
+    }
+
+    #[test]
+    fn draws_stay_in_range_and_reproduce() {
+        let mut a = RandomState::new(7);
+        let mut b = RandomState::new(7);
+        let (mut lo, mut hi) = (f32::MAX, 0.0f32);
+        for _ in 0..10_000 {
+            let (f, amp) = a.draw(&p());
+            assert_eq!((f, amp), b.draw(&p()));
+            assert!((60.0..=100.0).contains(&f), "{f}");
+            assert!((640..=960).contains(&amp), "{amp}");
+            lo = lo.min(f);
+            hi = hi.max(f);
+        }
+        // The spread is really used, not collapsed to the centre.
+        assert!(lo < 61.0 && hi > 99.0, "{lo}..{hi}");
+    }
+
+    #[test]
+    fn bad_spread_rejected() {
+        assert!(RandomBurst {
+            spread_permille: 1000,
+            ..p()
+        }
+        .validate()
+        .is_err());
+        assert!(RandomBurst {
+            amplitude_permille: 0,
+            ..p()
+        }
+        .validate()
+        .is_err());
+    }
+}

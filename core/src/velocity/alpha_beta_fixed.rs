@@ -1,0 +1,203 @@
+//! α-β filter in I16F16 fixed point (the `fixed` crate): integer-only, bit-exact everywhere,
+//! for a core without an FPU.
+//!
+//! I16F16 spans ±32 768 with a resolution of 1/65 536, too short for absolute positions in µm
+//! (63 000). So the state is kept *relative to the last measurement*: `e = x̂ − x_last` (µm, a
+//! few tens at most in tracking) and the velocity `v` in µm per slot (±30 µm at 300 mm/s and
+//! 10 kHz). Per sample, m slots later: Δx = x − x_last (integer µm, saturated to the I16F16
+//! range), residual r = Δx − e − m·v, then e = −(1 − α)·r and v = v + (β/m)·r — the same
+//! recursion as [`super::AlphaBeta`], shifted by x_last.
+//!
+//! Products are rounded to nearest (not floored) so that quantization does not bias the
+//! velocity: with floor rounding a body at rest settles a few LSB below zero. All arithmetic
+//! saturates, so an absurd input gives a bounded output. Gains are quantized to 2⁻¹⁶
+//! (β = 0.01 → 655/65 536, −0.05 %). Group delay as for the f32 filter: T_s·(α/β − ½).
+
+use fixed::types::I16F16;
+
+use super::common::{check_period, SlotClock, Tick, TuningError};
+use super::VelocityEstimator;
+
+/// α-β filter in I16F16.
+#[derive(Clone, Debug)]
+pub struct AlphaBetaFixed {
+    one_minus_alpha: I16F16,
+    beta: I16F16,
+    /// x̂ − last measurement, µm.
+    e: I16F16,
+    /// Velocity, µm per slot.
+    v: I16F16,
+    last_x: i32,
+    clock: SlotClock,
+    seen: u32,
+    warmup: u32,
+    last_out: Option<i32>,
+}
+
+/// a·b rounded to nearest (ties up), saturating.
+fn mul(a: I16F16, b: I16F16) -> I16F16 {
+    let p = (a.to_bits() as i64 * b.to_bits() as i64 + (1 << 15)) >> 16;
+    I16F16::from_bits(p.clamp(i32::MIN as i64, i32::MAX as i64) as i32)
+}
+
+impl AlphaBetaFixed {
+    /// Critically damped, double pole at `pole` (see [`super::AlphaBeta::critically_damped`]).
+    pub fn critically_damped(sample_period_us: u32, pole: f32) -> Result<Self, TuningError> {
+        if !(pole > 0.0 && pole < 1.0) {
+            return Err(TuningError::BadGain);
+        }
+        Self::with_gains(sample_period_us, 1.0 - pole * pole, (1.0 - pole) * (1.0 - pole))
+    }
+
+    /// Explicit gains, inside the stability triangle and not below the I16F16 resolution.
+    pub fn with_gains(sample_period_us: u32, alpha: f32, beta: f32) -> Result<Self, TuningError> {
+        check_period(sample_period_us)?;
+        if !(alpha > 0.0 && alpha < 2.0 && beta >= 1.0 / 8_192.0 && beta < 4.0 - 2.0 * alpha) {
+            return Err(TuningError::BadGain);
+        }
+        let one_minus_alpha = I16F16::from_num(1.0 - alpha);
+        let beta_q = I16F16::from_num(beta);
+        let delay_samples = alpha / beta - 0.5;
+        let warmup = (2.0 * delay_samples).clamp(1.0, 10_000.0) as u32;
+        Ok(Self {
+            one_minus_alpha,
+            beta: beta_q,
+            e: I16F16::ZERO,
+            v: I16F16::ZERO,
+            last_x: 0,
+            clock: SlotClock::new(sample_period_us),
+            seen: 0,
+            warmup,
+            last_out: None,
+        })
+    }
+
+    /// Velocity state in µm per slot (for tests and telemetry).
+    pub fn velocity_per_slot(&self) -> I16F16 {
+        self.v
+    }
+}
+
+impl VelocityEstimator for AlphaBetaFixed {
+    fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
+        let m = match self.clock.tick(t_us) {
+            Tick::Duplicate => return self.last_out,
+            Tick::Slots(m) => m,
+            Tick::First | Tick::Gap => {
+                self.reset();
+                self.clock.tick(t_us);
+                self.last_x = position_um;
+                self.seen = 1;
+                return None;
+            }
+        };
+        let dx = position_um.saturating_sub(self.last_x).clamp(-32_767, 32_767);
+        self.last_x = position_um;
+        let mv = self.v.saturating_mul_int(m as i32);
+        let r = I16F16::from_num(dx)
+            .saturating_sub(self.e)
+            .saturating_sub(mv);
+        self.e = -mul(self.one_minus_alpha, r);
+        let step = mul(self.beta, r);
+        let step = if m > 1 {
+            step / I16F16::from_num(m)
+        } else {
+            step
+        };
+        self.v = self.v.saturating_add(step);
+        self.seen = self.seen.saturating_add(1);
+        let out = (self.seen > self.warmup).then(|| {
+            // µm/slot (Q16) × slots per second, rounded.
+            let per_s = 1_000_000 / self.clock.period_us() as i64;
+            ((self.v.to_bits() as i64 * per_s + (1 << 15)) >> 16) as i32
+        });
+        self.last_out = out;
+        out
+    }
+
+    fn reset(&mut self) {
+        self.e = I16F16::ZERO;
+        self.v = I16F16::ZERO;
+        self.last_x = 0;
+        self.seen = 0;
+        self.clock.reset();
+        self.last_out = None;
+    }
+
+    fn group_delay_us(&self) -> u32 {
+        let alpha = 1.0 - self.one_minus_alpha.to_num::<f32>();
+        let samples = alpha / self.beta.to_num::<f32>() - 0.5;
+        libm::roundf(samples * self.clock.period_us() as f32) as u32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::velocity::AlphaBeta;
+
+    #[test]
+    fn settles_exactly_on_ramps() {
+        for speed in [-30i32, -2, 1, 7] {
+            let mut e = AlphaBetaFixed::critically_damped(100, 0.9).unwrap();
+            let mut v = None;
+            for i in 0..800i32 {
+                v = e.update(31_000 + speed * i, i as u32 * 100);
+            }
+            assert_eq!(v, Some(speed * 10_000), "speed {speed} µm/sample");
+        }
+    }
+
+    #[test]
+    fn zero_at_rest_no_limit_cycle() {
+        let mut e = AlphaBetaFixed::critically_damped(100, 0.9).unwrap();
+        let mut outs = [0i32; 200];
+        for i in 0..1_200u32 {
+            // Rest, quantized: flickers between two 16 µm codes, then holds still.
+            let x = if i < 600 && i % 2 == 0 { 48_016 } else { 48_000 };
+            if let Some(v) = e.update(x, i * 100) {
+                if i >= 1_000 {
+                    outs[(i - 1_000) as usize] = v;
+                }
+            }
+        }
+        assert!(outs.iter().all(|&v| v == 0), "{:?}", &outs[..10]);
+    }
+
+    #[test]
+    fn tracks_the_f32_filter() {
+        let mut f = AlphaBeta::critically_damped(100, 0.85).unwrap();
+        let mut q = AlphaBetaFixed::critically_damped(100, 0.85).unwrap();
+        let mut worst = 0;
+        for i in 0..4_000u32 {
+            // A 3 Hz sine of ±10 mm with a deterministic ±8 µm dither.
+            let t = i as f32 * 1e-4;
+            let x = 30_000.0 + 10_000.0 * libm::sinf(2.0 * core::f32::consts::PI * 3.0 * t);
+            let x = x as i32 + ((i * 7919) % 17) as i32 - 8;
+            if let (Some(a), Some(b)) = (f.update(x, i * 100), q.update(x, i * 100)) {
+                worst = worst.max((a - b).abs());
+            }
+        }
+        // The two differ only by quantization of gains and state: < 0.5 mm/s.
+        assert!(worst < 500, "worst {worst} µm/s");
+    }
+
+    #[test]
+    fn dropped_sample_reset_and_saturation() {
+        let mut e = AlphaBetaFixed::critically_damped(100, 0.8).unwrap();
+        let mut v = None;
+        for i in 0..400u32 {
+            if i % 40 == 13 {
+                continue;
+            }
+            v = e.update(5 * i as i32, i * 100);
+        }
+        assert_eq!(v, Some(50_000));
+        // A 60 mm jump in one sample saturates instead of wrapping.
+        let v = e.update(60_000 + 2_000, 40_000).unwrap();
+        assert!(v > 0 && v < 400_000_000, "{v}");
+        e.reset();
+        assert_eq!(e.update(0, 50_000), None);
+        assert_eq!(e.group_delay_us(), 850);
+    }
+}

@@ -1,0 +1,127 @@
+//! Median-of-3 pre-filter: wraps any estimator and feeds it the median of the last three
+//! positions, stamped with the middle sample's time.
+//!
+//! A single-sample outlier (a wiper spark, an ADC glitch) never reaches the inner estimator; a
+//! ramp passes unchanged (the median of three samples of a monotone ramp is the middle one).
+//! Cost: two or three compares per sample. Group delay: the inner estimator's plus one sample.
+//! Not removed: two consecutive outliers, and the corner of a reversal is clipped by one sample.
+
+use super::VelocityEstimator;
+
+/// Median-of-3 pre-filter around `E`.
+#[derive(Clone, Debug)]
+pub struct Median3<E> {
+    inner: E,
+    /// Oldest first.
+    xs: [i32; 3],
+    ts: [u32; 3],
+    len: usize,
+    period_us: u32,
+}
+
+impl<E: VelocityEstimator> Median3<E> {
+    /// Wraps `inner`, whose samples come every `sample_period_us`.
+    pub fn new(inner: E, sample_period_us: u32) -> Self {
+        Self {
+            inner,
+            xs: [0; 3],
+            ts: [0; 3],
+            len: 0,
+            period_us: sample_period_us,
+        }
+    }
+
+    /// The wrapped estimator.
+    pub fn inner(&self) -> &E {
+        &self.inner
+    }
+}
+
+fn median3(a: i32, b: i32, c: i32) -> i32 {
+    a.max(b).min(a.min(b).max(c))
+}
+
+impl<E: VelocityEstimator> VelocityEstimator for Median3<E> {
+    fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
+        if self.len == 3 {
+            self.xs = [self.xs[1], self.xs[2], position_um];
+            self.ts = [self.ts[1], self.ts[2], t_us];
+        } else {
+            self.xs[self.len] = position_um;
+            self.ts[self.len] = t_us;
+            self.len += 1;
+            if self.len < 3 {
+                return None;
+            }
+        }
+        let [a, b, c] = self.xs;
+        self.inner.update(median3(a, b, c), self.ts[1])
+    }
+
+    fn reset(&mut self) {
+        self.len = 0;
+        self.inner.reset();
+    }
+
+    fn group_delay_us(&self) -> u32 {
+        self.inner.group_delay_us() + self.period_us
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::velocity::{LsqSlope, OneSampleDifference};
+
+    #[test]
+    fn median_of_three() {
+        for (a, b, c) in [(1, 2, 3), (3, 2, 1), (2, 1, 3), (2, 3, 1), (3, 1, 2), (1, 3, 2)] {
+            assert_eq!(median3(a, b, c), 2);
+        }
+        assert_eq!(median3(5, 5, -1), 5);
+    }
+
+    #[test]
+    fn ramp_passes_exactly_and_outlier_is_removed() {
+        let mut e = Median3::new(OneSampleDifference::new(100).unwrap(), 100);
+        let mut outs = [None; 40];
+        for i in 0..40i32 {
+            let mut x = 1_000 + 4 * i;
+            if i == 20 {
+                x += 5_000; // a spike
+            }
+            outs[i as usize] = e.update(x, i as u32 * 100);
+        }
+        assert_eq!(outs[2], None);
+        assert!(outs[3..].iter().all(|v| *v == Some(40_000)), "{outs:?}");
+    }
+
+    #[test]
+    fn zero_at_rest_delay_and_reset() {
+        let mut e = Median3::new(LsqSlope::<8>::new(100).unwrap(), 100);
+        let mut v = None;
+        for i in 0..20u32 {
+            v = e.update(7_000, i * 100);
+        }
+        assert_eq!(v, Some(0));
+        assert_eq!(e.group_delay_us(), 350 + 100);
+        e.reset();
+        assert_eq!(e.update(7_000, 2_000), None);
+        assert_eq!(e.update(7_000, 2_100), None);
+    }
+
+    #[test]
+    fn dropped_sample_passes_to_the_inner_estimator() {
+        // The inner difference sees the middle sample's true time, so a lost sample is bridged.
+        let mut e = Median3::new(OneSampleDifference::new(100).unwrap(), 100);
+        let mut v = None;
+        for i in 0..30u32 {
+            if i == 15 {
+                continue;
+            }
+            v = e.update(3 * i as i32, i * 100);
+            assert!(v.is_none() || v == Some(30_000), "{i}: {v:?}");
+        }
+        assert_eq!(v, Some(30_000));
+    }
+}
