@@ -352,3 +352,58 @@ mod tests {
         assert_eq!(plan(&T32, &l, &c).err(), Some(BurstError::DutyAboveCap));
     }
 }
+
+#[cfg(test)]
+mod fast_tests {
+    use super::*;
+
+    const T32: BurstTimer = BurstTimer {
+        clock_hz: 90_000_000,
+        counter_bits: 32,
+        max_burst_hz: 5_000,
+    };
+    const T16: BurstTimer = BurstTimer {
+        clock_hz: 180_000_000,
+        counter_bits: 16,
+        max_burst_hz: 5_000,
+    };
+
+    /// The fast planner agrees with the exact one to the rounding of one tick, on both widths.
+    #[test]
+    fn agrees_with_exact_planner() {
+        let limits = SafetyLimits::default();
+        for timer in [T32, T16] {
+            let fast = FastPlanner::new(&timer, &limits, 400).unwrap();
+            for hz in [1u32, 3, 20, 80, 333, 1000, 2000, 4999] {
+                let (exact, _) = plan(
+                    &timer,
+                    &limits,
+                    &BurstCommand {
+                        burst_millihz: hz * 1000,
+                        duty_permille: 400,
+                    },
+                )
+                .unwrap();
+                let (s, clamped) = fast.plan_hz(hz as f32).unwrap();
+                assert!(!clamped);
+                assert_eq!(s.psc, exact.psc, "{hz} Hz");
+                assert!(
+                    s.arr.abs_diff(exact.arr) <= 1,
+                    "{hz} Hz: {s:?} vs {exact:?}"
+                );
+                assert!(limits.allows(&timer, &s), "{hz} Hz: {s:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn clamps_above_board_limit_and_refuses_nonsense() {
+        let fast = FastPlanner::new(&T32, &SafetyLimits::default(), 400).unwrap();
+        let (s, clamped) = fast.plan_hz(50_000.0).unwrap();
+        assert!(clamped);
+        assert_eq!(s.produced_millihz(T32.clock_hz), 5_000_000);
+        assert_eq!(fast.plan_hz(0.0), None);
+        assert_eq!(fast.plan_hz(f32::NAN), None);
+        assert_eq!(fast.plan_hz(-3.0), None);
+    }
+}

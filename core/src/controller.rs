@@ -932,4 +932,148 @@ mod tests {
         }
         assert_eq!(c.telemetry().burst_millihz, 80_000);
     }
+
+    /// A one-region scene with `texture` (and optional lines).
+    fn single(texture: Texture, lines: &[u32]) -> Controller {
+        let mut cfg = default_config();
+        cfg.scene.boundaries_um.clear();
+        cfg.scene.textures.clear();
+        let _ = cfg.scene.textures.push(texture);
+        for &l in lines {
+            let _ = cfg.scene.lines.positions_um.push(l);
+        }
+        let mut c = Controller::new(TIMER, 100).unwrap();
+        c.load(&cfg).unwrap();
+        c
+    }
+
+    /// Moves at `speed_um_s` from `from_um` for `n` samples; returns every output.
+    fn stroke(
+        c: &mut Controller,
+        from_um: f32,
+        speed_um_s: f32,
+        t: &mut u32,
+        n: usize,
+    ) -> std::vec::Vec<Output> {
+        (0..n)
+            .map(|i| {
+                let um = from_um + speed_um_s * i as f32 * 1e-4;
+                let out = c.on_sample(Sample {
+                    code: code_at(c, um),
+                    t_us: *t,
+                });
+                *t += 100;
+                out
+            })
+            .collect()
+    }
+
+    fn last_settings(outs: &[Output]) -> Option<TimerSettings> {
+        outs.iter().rev().find_map(|o| match o.action {
+            Some(GateAction::Start(s) | GateAction::Update(s)) => Some(s),
+            _ => None,
+        })
+    }
+
+    #[test]
+    fn grating_frequency_follows_speed_and_rests_silent() {
+        for speed in [20_000.0f32, 50_000.0, 150_000.0] {
+            let mut c = single(Texture::Grating(crate::texture::Grating::new(1_000)), &[]);
+            let mut t = 0;
+            let outs = stroke(&mut c, 5_000.0, speed, &mut t, 200);
+            let s = last_settings(&outs).expect("bursts while moving");
+            let hz = s.produced_millihz(TIMER.clock_hz) as f32 / 1000.0;
+            // f = V/λ with V in mm/s and λ = 1 mm; 1 µm code quantization bounds the error.
+            assert!(
+                (hz - speed / 1000.0).abs() / (speed / 1000.0) < 0.02,
+                "{speed}: {hz} Hz"
+            );
+        }
+        let mut c = single(Texture::Grating(crate::texture::Grating::new(1_000)), &[]);
+        let mut t = 0;
+        let outs = stroke(&mut c, 30_000.0, 0.0, &mut t, 10_000);
+        assert!(outs.iter().all(|o| o.action.is_none()), "bursts at rest");
+    }
+
+    #[test]
+    fn material_follows_stick_slip_model() {
+        let m = crate::texture::Material::fig5(0.3);
+        let mut c = single(Texture::Material(m), &[]);
+        let mut t = 0;
+        let outs = stroke(&mut c, 5_000.0, 40_000.0, &mut t, 400);
+        let s = last_settings(&outs).unwrap();
+        let hz = s.produced_millihz(TIMER.clock_hz) as f32 / 1000.0;
+        let want = m.stick_slip_hz(0.04);
+        assert!((hz - want).abs() / want < 0.02, "{hz} vs {want}");
+    }
+
+    #[test]
+    fn random_bursts_stay_in_spread_and_reproduce() {
+        let r = crate::texture::RandomBurst {
+            center_millihz: 80_000,
+            spread_permille: 250,
+            amplitude_permille: 800,
+            amplitude_spread_permille: 200,
+            duty_permille: 400,
+            seed: 11,
+        };
+        let run = || {
+            let mut c = single(Texture::Random(r), &[]);
+            let mut t = 0;
+            stroke(&mut c, 30_000.0, 0.0, &mut t, 20_000)
+        };
+        let a = run();
+        assert_eq!(a, run());
+        let mut changes = 0;
+        for o in &a {
+            if let Some(GateAction::Start(s) | GateAction::Update(s)) = o.action {
+                let hz = s.produced_millihz(TIMER.clock_hz) as f32 / 1000.0;
+                assert!((59.9..=100.1).contains(&hz), "{hz}");
+                changes += 1;
+            }
+            if let Some(amp) = o.amplitude_permille {
+                assert!((640..=960).contains(&amp), "{amp}");
+            }
+        }
+        // 2 s at ~80 Hz: one draw per burst.
+        assert!((140..=180).contains(&changes), "{changes}");
+    }
+
+    #[test]
+    fn lines_fire_once_per_crossing_and_faults_cut_pulses() {
+        let mut c = single(Texture::Off, &[20_000, 40_000]);
+        let mut t = 0;
+        // 100 mm/s from 10 mm to 50 mm and back.
+        let mut outs = stroke(&mut c, 10_000.0, 100_000.0, &mut t, 4_000);
+        outs.extend(stroke(&mut c, 50_000.0, -100_000.0, &mut t, 4_000));
+        let pulses = outs
+            .iter()
+            .filter(|o| matches!(o.action, Some(GateAction::Pulse(_))))
+            .count();
+        assert_eq!(pulses, 4);
+        let fired: std::vec::Vec<u8> = outs.iter().filter_map(|o| o.line).collect();
+        assert_eq!(fired, [0, 1, 1, 0]);
+        // Arriving on a line is a crossing (one pulse); resting there fires nothing more.
+        let rest = stroke(&mut c, 20_000.0, 0.0, &mut t, 5_000);
+        assert_eq!(rest[0].line, Some(0));
+        assert!(rest[1..].iter().all(|o| o.line.is_none()));
+        // A rail fault in the middle of a pulse cuts it.
+        let mut c = single(Texture::Off, &[20_000]);
+        let mut t = 0;
+        let outs = stroke(&mut c, 19_000.0, 100_000.0, &mut t, 120);
+        assert!(outs
+            .iter()
+            .any(|o| matches!(o.action, Some(GateAction::Pulse(_)))));
+        let out = c.on_sample(Sample { code: 0, t_us: t });
+        assert_eq!(out.action, Some(GateAction::Off));
+    }
+
+    #[test]
+    fn drive_mode_is_announced_once_after_load() {
+        let mut c = loaded();
+        let mut t = 0;
+        let outs = stroke(&mut c, 5_000.0, 0.0, &mut t, 3);
+        assert_eq!(outs[0].drive, Some(crate::gate::DriveMode::Standing));
+        assert!(outs[1..].iter().all(|o| o.drive.is_none()));
+    }
 }

@@ -12,6 +12,12 @@
 //! velocity: with floor rounding a body at rest settles a few LSB below zero. All arithmetic
 //! saturates, so an absurd input gives a bounded output. Gains are quantized to 2⁻¹⁶
 //! (β = 0.01 → 655/65 536, −0.05 %). Group delay as for the f32 filter: T_s·(α/β − ½).
+//!
+//! Dead band: the velocity integrator stops moving once |β·r| rounds to zero, i.e. for
+//! |r| < 2⁻¹⁷/β µm, and the state can rest there with v ≈ −α·r: a velocity error of up to
+//! α/(2β)·2⁻¹⁶ µm per slot (p = 0.9: 9.5 LSB = 1.45 µm/s at 10 kHz) that never decays. At rest
+//! this is a residual velocity of ≤ 1.5 µm/s (a 1 mm grating would wrap its phase every
+//! ≥ 11 minutes); it is the fixed-point price, and the tests bound it rather than hide it.
 
 use fixed::types::I16F16;
 
@@ -58,7 +64,7 @@ impl AlphaBetaFixed {
         let one_minus_alpha = I16F16::from_num(1.0 - alpha);
         let beta_q = I16F16::from_num(beta);
         let delay_samples = alpha / beta - 0.5;
-        let warmup = (2.0 * delay_samples).clamp(1.0, 10_000.0) as u32;
+        let warmup = libm::roundf(2.0 * delay_samples).clamp(1.0, 10_000.0) as u32;
         Ok(Self {
             one_minus_alpha,
             beta: beta_q,
@@ -137,14 +143,15 @@ mod tests {
     use crate::velocity::AlphaBeta;
 
     #[test]
-    fn settles_exactly_on_ramps() {
+    fn settles_on_ramps_within_the_dead_band() {
         for speed in [-30i32, -2, 1, 7] {
             let mut e = AlphaBetaFixed::critically_damped(100, 0.9).unwrap();
             let mut v = None;
             for i in 0..800i32 {
                 v = e.update(31_000 + speed * i, i as u32 * 100);
             }
-            assert_eq!(v, Some(speed * 10_000), "speed {speed} µm/sample");
+            let err = (v.unwrap() - speed * 10_000).abs();
+            assert!(err <= 2, "speed {speed} µm/sample: {v:?}");
         }
     }
 
@@ -161,7 +168,9 @@ mod tests {
                 }
             }
         }
-        assert!(outs.iter().all(|&v| v == 0), "{:?}", &outs[..10]);
+        // Inside the dead band (≤ 1.45 µm/s), not necessarily 0, and constant: no limit cycle.
+        assert!(outs.iter().all(|&v| v.abs() <= 2), "{:?}", &outs[..10]);
+        assert!(outs.iter().all(|&v| v == outs[0]), "{:?}", &outs[..10]);
     }
 
     #[test]
@@ -192,7 +201,7 @@ mod tests {
             }
             v = e.update(5 * i as i32, i * 100);
         }
-        assert_eq!(v, Some(50_000));
+        assert!((v.unwrap() - 50_000).abs() <= 2, "{v:?}");
         // A 60 mm jump in one sample saturates instead of wrapping.
         let v = e.update(60_000 + 2_000, 40_000).unwrap();
         assert!(v > 0 && v < 400_000_000, "{v}");
