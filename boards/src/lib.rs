@@ -305,8 +305,12 @@ pub struct BoardDef {
     /// carrier_timer_clk_hz / carrier_divider = 15 MHz exactly (ARR = divider − 1).
     pub carrier_divider: u32,
 
-    /// Burst timer: PWM mode 1 on the RF-enable pin.
+    /// Burst timer: PWM mode 1 on the RF-enable pin (IDT A; always follows the burst).
     pub burst: PwmTimer,
+    /// Second RF-enable output on another channel of the same burst timer (IDT B): follows the
+    /// burst in standing-wave drive, held inactive in progressive drive.
+    pub burst_b_channel: u8,
+    pub burst_b_pin: Pin,
     /// = `burst.clk_hz`.
     pub burst_timer_clk_hz: u32,
     /// = `burst.counter_bits`.
@@ -400,6 +404,14 @@ impl BoardDef {
             && !is_reserved(&self.burst.pin)
             && !is_reserved(&self.adc.pin)
             && !is_reserved(&self.rf_arm_pin)
+            && !is_reserved(&self.burst_b_pin)
+            && !same(&self.burst_b_pin, &self.carrier.pin)
+            && !same(&self.burst_b_pin, &self.burst.pin)
+            && !same(&self.burst_b_pin, &self.adc.pin)
+            && !same(&self.burst_b_pin, &self.rf_arm_pin)
+            && self.burst_b_channel != self.burst.channel
+            && self.burst_b_channel >= 1
+            && self.burst_b_channel <= 4
             && !same(&self.carrier.pin, &self.burst.pin)
             && !same(&self.carrier.pin, &self.adc.pin)
             && !same(&self.carrier.pin, &self.rf_arm_pin)
@@ -534,7 +546,7 @@ mod tests {
     fn pins_avoid_nucleo_reserved() {
         let reserved = [('A', 2), ('A', 3), ('A', 5), ('A', 13), ('A', 14)];
         for b in ALL {
-            for p in [b.carrier.pin, b.burst.pin, b.adc.pin, b.rf_arm_pin] {
+            for p in [b.carrier.pin, b.burst.pin, b.burst_b_pin, b.adc.pin, b.rf_arm_pin] {
                 assert!(!reserved.iter().any(|&(port, pin)| p.is(port, pin)), "{}: {:?}", b.name, p);
             }
         }

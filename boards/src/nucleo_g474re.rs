@@ -67,6 +67,9 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
         channel: 1,
         pin: Pin { port: 'A', pin: 0, af: Some(1), header: "A0 (CN8-1), morpho CN7-28" },
     },
+    // TIM2_CH3 = PB10 AF1 (Arduino D6): second RF enable (IDT B).
+    burst_b_channel: 3,
+    burst_b_pin: Pin { port: 'B', pin: 10, af: Some(1), header: "D6 (CN9-7), morpho CN10-25" },
     burst_timer_clk_hz: CLOCKS.apb1_timer_hz(),
     burst_timer_bits: 32,
     max_burst_hz: MAX_BURST_HZ,

@@ -57,7 +57,7 @@ async fn main(spawner: Spawner) {
 
     let parts = board::split(p);
     let mut rf_arm: Output<'static> = parts.rf_arm;
-    let burst = BurstGate::new(parts.burst_tim, parts.burst_pin, BOARD);
+    let burst = BurstGate::new(parts.burst_tim, parts.burst_pin, parts.burst_b_pin, BOARD);
     let carrier = Carrier::start(parts.carrier_tim, parts.carrier_pin, BOARD);
     info!(
         "carrier: {} {} / {} = {} Hz (registers give {} Hz); burst: {} {}-bit @ {} Hz",
@@ -85,8 +85,10 @@ async fn main(spawner: Spawner) {
     // Burst line is forced inactive: now the amplifier may be armed.
     rf_arm.set_high();
     info!(
-        "adc: {} ch{} @ {} Hz x{} (trigger {} TRGO); rf arm high",
-        BOARD.adc.adc, BOARD.adc.channel, BOARD.sample_rate_hz, BOARD.adc_oversample, BOARD.adc.trigger_timer
+        "adc: {} ch{} @ {} Hz x{} (trigger {} TRGO); enables CH{} + CH{} (no RF level control); rf arm high",
+        BOARD.adc.adc, BOARD.adc.channel, BOARD.sample_rate_hz, BOARD.adc_oversample, BOARD.adc.trigger_timer,
+        BOARD.burst.channel,
+        BOARD.burst_b_channel
     );
 
     spawner.spawn(unwrap!(sampler(parts.sampler)));
@@ -127,9 +129,8 @@ async fn control(mut ctrl: Controller, mut burst: BurstGate, mut rf_arm: Output<
         match select(SAMPLES.receive(), watchdog.next()).await {
             Either::First(sample) => {
                 let out = ctrl.on_sample(sample);
-                if let Some(a) = out.action {
-                    burst.apply(a);
-                }
+                // Drive mode, then amplitude, then the line (saw-core's order).
+                saw_core::controller::apply(&out, &mut burst);
             }
             Either::Second(()) => {
                 let now = Instant::now().as_micros();
@@ -138,7 +139,7 @@ async fn control(mut ctrl: Controller, mut burst: BurstGate, mut rf_arm: Output<
                 }
                 if now >= next_log {
                     next_log += TELEMETRY_PERIOD_US;
-                    info!("telemetry {} burst {} running {}", ctrl.telemetry(), burst.stats, burst.is_running());
+                    info!("telemetry {} burst {} line {}", ctrl.telemetry(), burst.stats, burst.line());
                 }
             }
         }

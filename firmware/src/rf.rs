@@ -9,11 +9,11 @@ use defmt::{assert_eq, Format};
 use embassy_stm32::peripherals::{TIM1, TIM2};
 use embassy_stm32::timer::low_level::{OutputCompareMode, Timer};
 use embassy_stm32::timer::simple_pwm::PwmPin;
-use embassy_stm32::timer::{Ch1, Channel};
+use embassy_stm32::timer::{Ch1, Ch3, Channel};
 use embassy_stm32::Peri;
 use saw_boards::BoardDef;
 use saw_core::burst::TimerSettings;
-use saw_core::gate::{BurstOutput, GateAction};
+use saw_core::gate::{BurstOutput, DriveMode, GateAction};
 
 /// The 15 MHz carrier: TIM1 CH1, PSC 0, ARR = divider − 1, CCR = divider / 2 (50 %).
 pub struct Carrier {
@@ -52,58 +52,117 @@ pub struct BurstStats {
     pub starts: u32,
     pub updates: u32,
     pub offs: u32,
+    pub pulses: u32,
+    /// Amplitude requests dropped (these boards have no RF level control).
+    pub amplitude_ignored: u32,
 }
 
-/// The burst timer driving the RF enable line (TIM2 CH1, 32-bit, PWM mode 1, preloaded).
+/// What the enable lines are doing.
+#[derive(Clone, Copy, PartialEq, Eq, Format)]
+pub enum Line {
+    Off,
+    Running,
+    /// One-pulse fired; the hardware ends it and stops the counter by itself.
+    Pulse,
+}
+
+// Channel roles are fixed by this driver; the board table must agree.
+const A: Channel = Channel::Ch1;
+const B: Channel = Channel::Ch3;
+const _: () = assert!(crate::board::BOARD.burst.channel == 1 && crate::board::BOARD.burst_b_channel == 3);
+
+/// The burst timer (TIM2, 32-bit) driving the RF enable lines: CH1 = IDT A, CH3 = IDT B.
+/// PWM mode 1 with ARR/CCR preload (ARPE, OCxPE): new PSC/ARR/CCR take effect at the next update.
 pub struct BurstGate {
     tim: Timer<'static, TIM2>,
-    _pin: PwmPin<'static, TIM2, Ch1>,
-    running: bool,
+    _pin_a: PwmPin<'static, TIM2, Ch1>,
+    _pin_b: PwmPin<'static, TIM2, Ch3>,
+    line: Line,
+    drive: DriveMode,
     pub stats: BurstStats,
 }
 
 impl BurstGate {
-    /// Configures the timer with the line held inactive and the counter stopped.
-    pub fn new(tim: Peri<'static, TIM2>, pin: PwmPin<'static, TIM2, Ch1>, board: &BoardDef) -> Self {
+    /// Configures the timer with both lines held inactive and the counter stopped.
+    pub fn new(
+        tim: Peri<'static, TIM2>,
+        pin_a: PwmPin<'static, TIM2, Ch1>,
+        pin_b: PwmPin<'static, TIM2, Ch3>,
+        board: &BoardDef,
+    ) -> Self {
         let t = Timer::new(tim);
         assert_eq!(t.get_clock_frequency().0, board.burst_timer_clk_hz);
         t.stop();
-        // Line inactive before the output is even enabled.
-        t.set_output_compare_mode(Channel::Ch1, OutputCompareMode::ForceInactive);
-        // ARPE + OC1PE: PSC/ARR/CCR writes take effect at the next update event only.
+        for ch in [A, B] {
+            // Inactive before the outputs are even enabled.
+            t.set_output_compare_mode(ch, OutputCompareMode::ForceInactive);
+            t.set_output_compare_preload(ch, true);
+            t.enable_channel(ch, true);
+        }
         t.set_autoreload_preload(true);
-        t.set_output_compare_preload(Channel::Ch1, true);
-        t.enable_channel(Channel::Ch1, true);
-        BurstGate { tim: t, _pin: pin, running: false, stats: BurstStats::default() }
+        BurstGate { tim: t, _pin_a: pin_a, _pin_b: pin_b, line: Line::Off, drive: DriveMode::Standing, stats: BurstStats::default() }
     }
 
-    fn write(&self, s: &TimerSettings) {
+    /// Output-compare mode of both channels: A follows `mode`, B too in standing-wave drive.
+    fn set_mode(&self, mode: OutputCompareMode) {
+        self.tim.set_output_compare_mode(A, mode);
+        let b = match self.drive {
+            DriveMode::Standing => mode,
+            DriveMode::Progressive => OutputCompareMode::ForceInactive,
+        };
+        self.tim.set_output_compare_mode(B, b);
+    }
+
+    fn write(&self, psc: u16, arr: u32, ccr: u32) {
         let r = self.tim.regs_gp32();
-        r.psc().write_value(s.psc);
-        r.arr().write_value(s.arr);
-        r.ccr(0).write_value(s.ccr);
+        r.psc().write_value(psc);
+        r.arr().write_value(arr);
+        r.ccr(A.index()).write_value(ccr);
+        r.ccr(B.index()).write_value(ccr);
     }
 
     /// Load, latch with UG, enable the counter: the first period starts whole at CNT = 0.
     fn start(&mut self, s: &TimerSettings) {
         self.tim.stop();
-        self.write(s);
+        self.set_mode(OutputCompareMode::ForceInactive);
+        self.tim.regs_gp32().cr1().modify(|w| w.set_opm(false));
+        self.write(s.psc, s.arr, s.ccr);
         self.tim.reset(); // CNT = 0
         self.tim.generate_update_event(); // latch PSC/ARR/CCR from preload
-        self.tim.set_output_compare_mode(Channel::Ch1, OutputCompareMode::PwmMode1);
+        self.set_mode(OutputCompareMode::PwmMode1);
         self.tim.start();
-        self.running = true;
+        self.line = Line::Running;
     }
 
-    /// Force the line inactive now (OC1M is not preloaded), then stop the counter.
-    pub fn off(&mut self) {
-        self.tim.set_output_compare_mode(Channel::Ch1, OutputCompareMode::ForceInactive);
+    /// One pulse of `s.ccr` ticks. PWM mode 1 + OPM would leave the line HIGH after the pulse
+    /// (the counter stops at 0 and 0 < CCR), so this uses PWM mode 2 with a 1-tick delay:
+    /// CCR = 1, ARR = ccr → the line is high for CNT = 1..=ccr (ccr ticks), then the update
+    /// event stops the counter at 0 where PWM mode 2 is inactive.
+    fn pulse(&mut self, s: &TimerSettings) {
+        if s.ccr == 0 {
+            self.off();
+            return;
+        }
         self.tim.stop();
-        self.running = false;
+        self.set_mode(OutputCompareMode::ForceInactive);
+        self.tim.regs_gp32().cr1().modify(|w| w.set_opm(true));
+        self.write(s.psc, s.ccr, 1);
+        self.tim.reset();
+        self.tim.generate_update_event();
+        self.set_mode(OutputCompareMode::PwmMode2);
+        self.tim.start();
+        self.line = Line::Pulse;
     }
 
-    pub fn is_running(&self) -> bool {
-        self.running
+    /// Force both lines inactive now (OCxM is not preloaded), then stop the counter.
+    pub fn off(&mut self) {
+        self.set_mode(OutputCompareMode::ForceInactive);
+        self.tim.stop();
+        self.line = Line::Off;
+    }
+
+    pub fn line(&self) -> Line {
+        self.line
     }
 }
 
@@ -119,14 +178,34 @@ impl BurstOutput for BurstGate {
                 self.stats.starts = self.stats.starts.wrapping_add(1);
             }
             GateAction::Update(s) => {
-                if self.running {
+                if self.line == Line::Running {
                     // Preloaded: the running period finishes untouched.
-                    self.write(&s);
+                    self.write(s.psc, s.arr, s.ccr);
                 } else {
                     self.start(&s);
                 }
                 self.stats.updates = self.stats.updates.wrapping_add(1);
             }
+            GateAction::Pulse(s) => {
+                self.pulse(&s);
+                self.stats.pulses = self.stats.pulses.wrapping_add(1);
+            }
         }
+    }
+
+    fn set_amplitude(&mut self, _permille: u16) {
+        // No RF level control on the Nucleo builds: bursts stay at full amplitude.
+        self.stats.amplitude_ignored = self.stats.amplitude_ignored.wrapping_add(1);
+    }
+
+    fn set_drive(&mut self, mode: DriveMode) {
+        self.drive = mode;
+        // Re-apply B's mode to the line's current state (A is unaffected).
+        let b = match (self.drive, self.line) {
+            (DriveMode::Progressive, _) | (_, Line::Off) => OutputCompareMode::ForceInactive,
+            (DriveMode::Standing, Line::Running) => OutputCompareMode::PwmMode1,
+            (DriveMode::Standing, Line::Pulse) => OutputCompareMode::PwmMode2,
+        };
+        self.tim.set_output_compare_mode(B, b);
     }
 }

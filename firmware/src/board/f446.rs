@@ -11,7 +11,7 @@ use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::low_level::MasterMode;
-use embassy_stm32::timer::Ch1;
+use embassy_stm32::timer::{Ch1, Ch3};
 use embassy_stm32::{bind_interrupts, dma, peripherals, Config, Peri, Peripherals};
 use saw_boards::{BoardDef, OscSource, PllOut};
 use static_cell::StaticCell;
@@ -57,6 +57,7 @@ pub struct Parts {
     pub carrier_pin: PwmPin<'static, TIM1, Ch1>,
     pub burst_tim: Peri<'static, TIM2>,
     pub burst_pin: PwmPin<'static, TIM2, Ch1>,
+    pub burst_b_pin: PwmPin<'static, TIM2, Ch3>,
     pub rf_arm: Output<'static>,
     pub sampler: Sampler,
 }
@@ -69,8 +70,10 @@ pub fn split(p: Peripherals) -> Parts {
     let burst_pin = PwmPin::new(p.PA0, OutputType::PushPull);
     // PA8: TIM1_CH1 AF1 (15 MHz carrier).
     let carrier_pin = PwmPin::new(p.PA8, OutputType::PushPull);
+    // PB10: TIM2_CH3 AF1 (second RF enable, IDT B).
+    let burst_b_pin = PwmPin::new(p.PB10, OutputType::PushPull);
     let sampler = Sampler::new(p.ADC1, p.PA1, p.DMA2_CH0, p.TIM3);
-    Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, rf_arm, sampler }
+    Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, burst_b_pin, rf_arm, sampler }
 }
 
 /// 16 conversions per trigger (one 16-rank sequence).
@@ -94,6 +97,11 @@ impl Sampler {
         dma: Peri<'static, peripherals::DMA2_CH0>,
         tim: Peri<'static, TIM3>,
     ) -> Self {
+        // The EXTSEL code documented in saw-boards must be the one embassy uses for TIM3_TRGO.
+        defmt::assert_eq!(
+            embassy_stm32::adc::RegularTrigger::<ADC1>::signal(&embassy_stm32::triggers::TIM3_TRGO),
+            BOARD.adc.trigger_extsel
+        );
         let adc = Adc::new(adc);
         let ch = BOARD.adc.channel;
         let buf = DMA_BUF.init([0; DMA_LEN]);
