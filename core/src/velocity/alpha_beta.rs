@@ -39,7 +39,11 @@ impl AlphaBeta {
         if !(pole > 0.0 && pole < 1.0) {
             return Err(TuningError::BadGain);
         }
-        Self::with_gains(sample_period_us, 1.0 - pole * pole, (1.0 - pole) * (1.0 - pole))
+        Self::with_gains(
+            sample_period_us,
+            1.0 - pole * pole,
+            (1.0 - pole) * (1.0 - pole),
+        )
     }
 
     /// α-β with explicit gains, inside the stability triangle 0 < α < 2, 0 < β < 4 − 2α.

@@ -52,7 +52,11 @@ impl AlphaBetaFixed {
         if !(pole > 0.0 && pole < 1.0) {
             return Err(TuningError::BadGain);
         }
-        Self::with_gains(sample_period_us, 1.0 - pole * pole, (1.0 - pole) * (1.0 - pole))
+        Self::with_gains(
+            sample_period_us,
+            1.0 - pole * pole,
+            (1.0 - pole) * (1.0 - pole),
+        )
     }
 
     /// Explicit gains, inside the stability triangle and not below the I16F16 resolution.
@@ -97,7 +101,9 @@ impl VelocityEstimator for AlphaBetaFixed {
                 return None;
             }
         };
-        let dx = position_um.saturating_sub(self.last_x).clamp(-32_767, 32_767);
+        let dx = position_um
+            .saturating_sub(self.last_x)
+            .clamp(-32_767, 32_767);
         self.last_x = position_um;
         let mv = self.v.saturating_mul_int(m as i32);
         let r = I16F16::from_num(dx)
@@ -161,7 +167,11 @@ mod tests {
         let mut outs = [0i32; 200];
         for i in 0..1_200u32 {
             // Rest, quantized: flickers between two 16 µm codes, then holds still.
-            let x = if i < 600 && i % 2 == 0 { 48_016 } else { 48_000 };
+            let x = if i < 600 && i % 2 == 0 {
+                48_016
+            } else {
+                48_000
+            };
             if let Some(v) = e.update(x, i * 100) {
                 if i >= 1_000 {
                     outs[(i - 1_000) as usize] = v;

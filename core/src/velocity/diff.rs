@@ -55,7 +55,8 @@ impl<const K: usize> VelocityEstimator for BackwardDifference<K> {
         }
         let out = if self.len == K {
             let (x_old, s_old) = self.ring[self.head];
-            let span_s = self.slot.wrapping_sub(s_old) as f32 * self.clock.period_us() as f32 * 1e-6;
+            let span_s =
+                self.slot.wrapping_sub(s_old) as f32 * self.clock.period_us() as f32 * 1e-6;
             let v = (position_um as f32 - x_old as f32) / span_s;
             self.ring[self.head] = (position_um, self.slot);
             self.head = (self.head + 1) % K;

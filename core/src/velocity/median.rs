@@ -75,7 +75,14 @@ mod tests {
 
     #[test]
     fn median_of_three() {
-        for (a, b, c) in [(1, 2, 3), (3, 2, 1), (2, 1, 3), (2, 3, 1), (3, 1, 2), (1, 3, 2)] {
+        for (a, b, c) in [
+            (1, 2, 3),
+            (3, 2, 1),
+            (2, 1, 3),
+            (2, 3, 1),
+            (3, 1, 2),
+            (1, 3, 2),
+        ] {
             assert_eq!(median3(a, b, c), 2);
         }
         assert_eq!(median3(5, 5, -1), 5);

@@ -13,9 +13,23 @@
 //! Samples are expected at a fixed period (the ADC is timer-triggered); a gap of more than 1.5
 //! periods (a dropped sample) restarts the window rather than bending the slope.
 
+mod alpha_beta;
+mod alpha_beta_fixed;
+mod common;
+mod diff;
+mod foaw;
 mod lsq;
+mod median;
+mod super_twisting;
 
+pub use alpha_beta::AlphaBeta;
+pub use alpha_beta_fixed::AlphaBetaFixed;
+pub use common::{TuningError, MAX_BRIDGED_SLOTS};
+pub use diff::{BackwardDifference, OneSampleDifference};
+pub use foaw::{Foaw, FoawFit};
 pub use lsq::LsqSlope;
+pub use median::Median3;
+pub use super_twisting::{SuperTwisting, STD_LAMBDA0, STD_LAMBDA1};
 
 /// One velocity estimator: fed each position with its timestamp, answers velocity in µm/s
 /// (positive towards the far end), or `None` while it has too little history.
