@@ -20,6 +20,8 @@ pub mod position;
 pub mod region;
 pub mod sample;
 pub mod scene;
+#[cfg(feature = "scene-file")]
+pub mod scene_file;
 pub mod texture;
 pub mod velocity;
 
