@@ -1076,4 +1076,43 @@ mod tests {
         assert_eq!(outs[0].drive, Some(crate::gate::DriveMode::Standing));
         assert!(outs[1..].iter().all(|o| o.drive.is_none()));
     }
+
+    /// Above the board's limit a grating is clamped to it and counted (never aliased), and every
+    /// velocity-driven texture goes quiet through a reversal and comes back after it.
+    #[test]
+    fn velocity_textures_at_the_edges() {
+        // λ = 10 µm at 100 mm/s asks for 10 kHz on a 5 kHz board.
+        let mut c = single(Texture::Grating(crate::texture::Grating::new(10)), &[]);
+        let mut t = 0;
+        let outs = stroke(&mut c, 5_000.0, 100_000.0, &mut t, 200);
+        let s = last_settings(&outs).unwrap();
+        assert_eq!(
+            s.produced_millihz(TIMER.clock_hz),
+            TIMER.max_burst_hz as u64 * 1000
+        );
+        assert!(c.telemetry().clamped > 100, "{:?}", c.telemetry());
+
+        for texture in [
+            Texture::Grating(crate::texture::Grating::new(1_000)),
+            Texture::Material(crate::texture::Material::fig5(0.3)),
+        ] {
+            let mut c = single(texture, &[]);
+            let mut t = 0;
+            // Forward at 50 mm/s, then back at 50 mm/s: |V| passes through 0 at the turn.
+            let mut outs = stroke(&mut c, 20_000.0, 50_000.0, &mut t, 1_000);
+            let turn = outs.len();
+            outs.extend(stroke(&mut c, 25_000.0, -50_000.0, &mut t, 1_000));
+            let off_at_turn = outs[turn..turn + 40]
+                .iter()
+                .any(|o| o.action == Some(GateAction::Off));
+            assert!(
+                off_at_turn,
+                "{}: no quiet spell at the reversal",
+                texture.kind()
+            );
+            let back = last_settings(&outs[turn..]).expect("bursts after the reversal");
+            let hz = back.produced_millihz(TIMER.clock_hz) as f32 / 1000.0;
+            assert!(hz > 1.0, "{}: {hz}", texture.kind());
+        }
+    }
 }
