@@ -1,1 +1,2 @@
 //! Host simulation (placeholder while the crate is written).
+pub mod models;
