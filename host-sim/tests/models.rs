@@ -554,6 +554,15 @@ fn tile_to_scene_normalised_and_lambda() {
         ),
         "{toml}"
     );
+    let toml = run_tile_to_scene(&args(
+        "--groove-mm 0.5 --land-mm 0.25 --force-g 112 --scene-file",
+    ))
+    .unwrap();
+    let want = format!(
+        "[[region]]\nkind = \"grating\"\nwavelength_mm = 0.75\namplitude_percent = {}\n",
+        mid.amplitude_permille as f64 / 10.0
+    );
+    assert!(toml.contains(&want), "{toml}");
 }
 
 // ---------------------------------------------------------------- sandpaper

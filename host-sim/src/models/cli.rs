@@ -23,10 +23,11 @@ usage: host-sim model <name> [flags]
   theta-solvers : CSV of iterations against accuracy for the three solvers
   tiles        : CSV of the paper's tile sets (D, A_c, A, grating region)
   sandpaper    (--grit N | --f-b-hz F) [--json]
-  atan         : CSV of atan / f_ss errors (micromath, libm, f64)
+  atan         [--curve] : CSV of atan / f_ss errors (micromath, libm, f64); --curve: against R
   atan-bench   --impl none|micromath|libm|f64|fss-micromath|fss-libm [--n 100000]
 usage: host-sim tile-to-scene --groove-mm G --land-mm L --force-g F [--k-mm-per-g 0.08] [--mu 0.5]
-               [--pad-area-mm2 150] [--pad-ref-force-g 112] [--pad-exponent 0.15] [--speed-mm-s V]";
+               [--pad-area-mm2 150] [--pad-ref-force-g 112] [--pad-exponent 0.15] [--speed-mm-s V]
+               [--scene-file]  (keys of scenes/*.toml: wavelength_mm, amplitude_percent)";
 
 /// Parsed `--name value` / `--flag` arguments; every flag must be consumed.
 struct Flags {
@@ -35,7 +36,7 @@ struct Flags {
     used: Vec<String>,
 }
 
-const SWITCHES: [&str; 3] = ["json", "csv", "help"];
+const SWITCHES: [&str; 5] = ["json", "csv", "help", "curve", "scene-file"];
 
 impl Flags {
     fn parse(args: &[String]) -> Result<Self, String> {
@@ -515,6 +516,9 @@ fn cmd_sandpaper(fl: &mut Flags) -> Result<String, String> {
 
 fn cmd_atan(fl: &mut Flags) -> Result<String, String> {
     fl.switch("csv");
+    if fl.switch("curve") {
+        return Ok(atan_curve());
+    }
     let mut s = String::from("impl,max_abs_rad,mean_abs_rad,max_rel_f_ss,mean_rel_f_ss\n");
     for imp in AtanImpl::ALL {
         let e = atan_errors(imp);
@@ -531,6 +535,38 @@ fn cmd_atan(fl: &mut Flags) -> Result<String, String> {
     Ok(s)
 }
 
+/// Error against R for each implementation (every 10th grid point), CSV.
+fn atan_curve() -> String {
+    let p = StickSlipParams::fig5(1.0);
+    let Ok(reference) = stick_slip(&p) else {
+        return String::new();
+    };
+    let (w0, a) = (reference.omega0_rad_s, reference.a_m_s);
+    let mut s = String::from("r,impl,abs_err_rad,rel_err_f_ss\n");
+    for (i, &x) in super::atan::r_grid().iter().enumerate() {
+        if i % 10 != 0 || x <= 0.0 {
+            continue;
+        }
+        let u = a / x as f64;
+        let Ok(fr) = stick_slip(&StickSlipParams { speed_m_s: u, ..p }) else {
+            continue;
+        };
+        for imp in AtanImpl::ALL {
+            let e = (imp.eval(x) as f64 - (x as f64).atan()).abs();
+            let f =
+                super::stick_slip::stick_slip_f32(w0 as f32, a as f32, u as f32, |r| imp.eval(r))
+                    as f64;
+            let _ = writeln!(
+                s,
+                "{x:e},{},{e:e},{:e}",
+                imp.name(),
+                ((f - fr.f_ss_hz) / fr.f_ss_hz).abs()
+            );
+        }
+    }
+    s
+}
+
 /// `host-sim tile-to-scene <args>`; returns the TOML snippet.
 pub fn run_tile_to_scene(args: &[String]) -> Result<String, String> {
     let mut fl = Flags::parse(args)?;
@@ -539,6 +575,7 @@ pub fn run_tile_to_scene(args: &[String]) -> Result<String, String> {
     }
     let inp = grooved_input(&mut fl)?;
     let speed = fl.opt_f64("speed-mm-s")?;
+    let scene_file = fl.switch("scene-file");
     fl.finish()?;
     let reg = tile_to_region(&inp).map_err(|e| e.to_string())?;
     let a_max = a_max_mm2().map_err(|e| e.to_string())?;
@@ -553,6 +590,10 @@ pub fn run_tile_to_scene(args: &[String]) -> Result<String, String> {
             v * 1000.0 / reg.wavelength_um as f64
         );
     }
-    s.push_str(&reg.to_toml());
+    if scene_file {
+        s.push_str(&reg.to_scene_file_toml());
+    } else {
+        s.push_str(&reg.to_toml());
+    }
     Ok(s)
 }

@@ -108,7 +108,17 @@ pub fn tile_to_region(inp: &GroovedInput) -> Result<GratingRegion, GroovedError>
 }
 
 impl GratingRegion {
-    /// The TOML snippet of the region.
+    /// The same region with the keys `scenes/*.toml` files use (saw_core::scene_file):
+    /// `wavelength_mm` and `amplitude_percent` (one decimal, so the ‰ value is kept exactly).
+    pub fn to_scene_file_toml(&self) -> String {
+        format!(
+            "[[region]]\nkind = \"grating\"\nwavelength_mm = {}\namplitude_percent = {}\n",
+            self.wavelength_um as f64 / 1000.0,
+            self.amplitude_permille as f64 / 10.0
+        )
+    }
+
+    /// The TOML snippet of the region, with the field names of `saw_core::texture::Grating`.
     pub fn to_toml(&self) -> String {
         format!(
             "[[region]]\nkind = \"grating\"\nwavelength_um = {}\namplitude_permille = {}\n",
