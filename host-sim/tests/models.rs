@@ -618,6 +618,38 @@ fn sandpaper_monotone_clamped_invertible() {
 // ---------------------------------------------------------------- atan
 
 #[test]
+fn f32_path_never_nan_and_tracks_f64() {
+    use host_sim::models::stick_slip::stick_slip_f32;
+    let p = StickSlipParams::fig5(1.0);
+    let r = stick_slip(&p).unwrap();
+    let (w0, a) = (r.omega0_rad_s as f32, r.a_m_s as f32);
+    for imp in AtanImpl::ALL {
+        let mut last = -1.0f32;
+        for e in -380..=30 {
+            let u = 10f32.powf(e as f32 / 10.0); // 1e-38 … 1e3 m/s
+            let f = stick_slip_f32(w0, a, u, |x| imp.eval(x));
+            assert!(f.is_finite() && f >= 0.0, "{imp:?} U = {u:e}: {f}");
+            assert!(f >= last * (1.0 - 1e-6), "{imp:?} not monotone at U = {u:e}");
+            last = f;
+            let fr = stick_slip(&StickSlipParams {
+                speed_m_s: u as f64,
+                ..p
+            })
+            .unwrap()
+            .f_ss_hz;
+            if fr > 1e-30 {
+                assert!(
+                    ((f as f64 - fr) / fr).abs() < 2e-3,
+                    "{imp:?} U = {u:e}: {f} vs {fr}"
+                );
+            }
+        }
+        assert_eq!(stick_slip_f32(w0, a, 0.0, |x| imp.eval(x)), 0.0);
+        assert!((stick_slip_f32(w0, 0.0, 0.04, |x| imp.eval(x)) - 112.539_54).abs() < 1e-3);
+    }
+}
+
+#[test]
 fn atan_errors_bounded_and_ordered() {
     let m = atan_errors(AtanImpl::Micromath);
     let l = atan_errors(AtanImpl::Libm);

@@ -190,13 +190,22 @@ pub fn large_r_asymptote_hz(p: &StickSlipParams) -> f64 {
 
 /// The f32 per-sample form used on the MCU, with the atan passed in (see `models::atan`).
 /// `a_m_s` = Δμ P/(m ω0) is precomputed per region; only U changes per sample.
+///
+/// For U < A it uses atan(A/U) = π/2 − atan(U/A), so the atan argument stays in [0, 1]: A/U
+/// overflows f32 for tiny U, and approximations such as micromath's square their argument
+/// (inf/inf = NaN). Finite, ≥ 0 and never NaN for every finite U ≥ 0.
 pub fn stick_slip_f32(omega0: f32, a_m_s: f32, speed_m_s: f32, atan: impl Fn(f32) -> f32) -> f32 {
+    use core::f32::consts::{FRAC_PI_2, PI};
     if a_m_s <= 0.0 {
-        return omega0 / (2.0 * core::f32::consts::PI);
+        return omega0 / (2.0 * PI);
     }
     if speed_m_s <= 0.0 {
         return 0.0;
     }
-    let at = atan(a_m_s / speed_m_s);
-    omega0 * speed_m_s / (2.0 * ((core::f32::consts::PI - at) * speed_m_s + a_m_s))
+    let at = if a_m_s > speed_m_s {
+        FRAC_PI_2 - atan(speed_m_s / a_m_s)
+    } else {
+        atan(a_m_s / speed_m_s)
+    };
+    omega0 * speed_m_s / (2.0 * ((PI - at) * speed_m_s + a_m_s))
 }
