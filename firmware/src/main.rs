@@ -82,7 +82,7 @@ async fn main(spawner: Spawner) {
     let mut ctrl = unwrap!(Controller::new(timer, SAMPLE_PERIOD_US));
     unwrap!(ctrl.load(&saw_core::default_config()));
 
-    // Burst line is forced inactive: now the amplifier may be armed.
+    // Both enable lines are forced inactive: now the amplifier may be armed.
     rf_arm.set_high();
     info!(
         "adc: {} ch{} @ {} Hz x{} (trigger {} TRGO); enables CH{} + CH{} (no RF level control); rf arm high",
@@ -98,6 +98,7 @@ async fn main(spawner: Spawner) {
 #[embassy_executor::task]
 async fn sampler(mut s: board::Sampler) {
     let mut overruns: u32 = 0;
+    s.start();
     loop {
         match s.read().await {
             Ok(codes) => {
@@ -122,7 +123,9 @@ async fn sampler(mut s: board::Sampler) {
 }
 
 #[embassy_executor::task]
-async fn control(mut ctrl: Controller, mut burst: BurstGate, mut rf_arm: Output<'static>) {
+async fn control(mut ctrl: Controller, mut burst: BurstGate, _rf_arm: Output<'static>) {
+    // `_rf_arm` is owned here for the life of the loop (a reset drops it low; an external
+    // pull-down keeps the amplifier disarmed while the pin is unconfigured).
     let mut watchdog = Ticker::every(WATCHDOG_PERIOD);
     let mut next_log = Instant::now().as_micros() + TELEMETRY_PERIOD_US;
     loop {
@@ -133,18 +136,16 @@ async fn control(mut ctrl: Controller, mut burst: BurstGate, mut rf_arm: Output<
                 saw_core::controller::apply(&out, &mut burst);
             }
             Either::Second(()) => {
-                let now = Instant::now().as_micros();
-                if let Some(a) = ctrl.on_tick(now as u32) {
+                if let Some(a) = ctrl.on_tick(Instant::now().as_micros() as u32) {
                     burst.apply(a);
-                }
-                if now >= next_log {
-                    next_log += TELEMETRY_PERIOD_US;
-                    info!("telemetry {} burst {} line {}", ctrl.telemetry(), burst.stats, burst.line());
                 }
             }
         }
-        // Keep the amplifier armed only while the control loop is alive and the burst timer is
-        // in a defined state (it always is here; the pin is dropped low by a reset).
-        let _ = &mut rf_arm;
+        // Checked on both branches so a busy sample queue cannot starve the log.
+        let now = Instant::now().as_micros();
+        if now >= next_log {
+            next_log = now + TELEMETRY_PERIOD_US;
+            info!("telemetry {} burst {} line {}", ctrl.telemetry(), burst.stats, burst.line());
+        }
     }
 }

@@ -86,7 +86,7 @@ static DMA_BUF: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 /// Timer-triggered, DMA-fed rheostat acquisition.
 pub struct Sampler {
     adc: RingBufferedAdc<'static, ADC1>,
-    _trigger: Timer<'static, TIM3>,
+    trigger: Timer<'static, TIM3>,
     buf: [u16; DMA_LEN / 2],
 }
 
@@ -127,10 +127,15 @@ impl Sampler {
         let mut adc = adc;
         // Overrun recovery must restart on a sequence boundary.
         adc.set_alignment(RANKS);
-        // Arm DMA + ADC before the first trigger arrives, then start the trigger timer.
-        adc.start();
         let trigger = trigger_timer(tim);
-        Sampler { adc, _trigger: trigger, buf: [0; DMA_LEN / 2] }
+        Sampler { adc, trigger, buf: [0; DMA_LEN / 2] }
+    }
+
+    /// Arm DMA + ADC, then start the trigger timer: the first conversions land in a running
+    /// ring buffer. Call from the task that reads, right before the first `read`.
+    pub fn start(&mut self) {
+        self.adc.start();
+        self.trigger.start();
     }
 
     /// Wait for the next trigger's conversions; returns the 16-bit sums (sum of 16 × 12 bit).
@@ -144,7 +149,7 @@ impl Sampler {
     }
 }
 
-/// TIM3: free-running at `sample_rate_hz`, TRGO = update event.
+/// TIM3: `sample_rate_hz` period, TRGO = update event; started by `Sampler::start`.
 fn trigger_timer(tim: Peri<'static, TIM3>) -> Timer<'static, TIM3> {
     let (psc, arr) = BOARD.adc_trigger_psc_arr();
     let t = Timer::new(tim);
@@ -152,6 +157,5 @@ fn trigger_timer(tim: Peri<'static, TIM3>) -> Timer<'static, TIM3> {
     t.regs_core().psc().write_value(psc as u16);
     t.set_max_compare_value(arr as u16);
     t.set_master_mode(MasterMode::UPDATE);
-    t.start();
     t
 }

@@ -96,7 +96,7 @@ static DMA_BUF: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 /// Timer-triggered, hardware-oversampled, DMA-fed rheostat acquisition.
 pub struct Sampler {
     adc: RingBufferedAdc<'static, ADC1>,
-    _trigger: Timer<'static, TIM3>,
+    trigger: Timer<'static, TIM3>,
 }
 
 impl Sampler {
@@ -119,7 +119,7 @@ impl Sampler {
         );
         let adc = Adc::new(adc, cfg);
         let buf = DMA_BUF.init([0; DMA_LEN]);
-        let mut adc = adc.into_ring_buffered(
+        let adc = adc.into_ring_buffered(
             dma,
             buf,
             Irqs,
@@ -127,9 +127,15 @@ impl Sampler {
             embassy_stm32::triggers::TIM3_TRGO,
             Exten::RISING_EDGE,
         );
-        adc.start();
         let trigger = trigger_timer(tim);
-        Sampler { adc, _trigger: trigger }
+        Sampler { adc, trigger }
+    }
+
+    /// Arm DMA + ADC, then start the trigger timer: the first conversions land in a running
+    /// ring buffer. Call from the task that reads, right before the first `read`.
+    pub fn start(&mut self) {
+        self.adc.start();
+        self.trigger.start();
     }
 
     /// Wait for the next samples (each already the 16-bit sum of 16 conversions).
@@ -140,7 +146,7 @@ impl Sampler {
     }
 }
 
-/// TIM3: free-running at `sample_rate_hz`, TRGO = update event.
+/// TIM3: `sample_rate_hz` period, TRGO = update event; started by `Sampler::start`.
 fn trigger_timer(tim: Peri<'static, TIM3>) -> Timer<'static, TIM3> {
     let (psc, arr) = BOARD.adc_trigger_psc_arr();
     let t = Timer::new(tim);
@@ -148,6 +154,5 @@ fn trigger_timer(tim: Peri<'static, TIM3>) -> Timer<'static, TIM3> {
     t.regs_core().psc().write_value(psc as u16);
     t.set_max_compare_value(arr as u16);
     t.set_master_mode(MasterMode::UPDATE);
-    t.start();
     t
 }
