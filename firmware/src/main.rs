@@ -14,6 +14,7 @@ use defmt::{info, unwrap, warn};
 use embassy_executor::Spawner;
 use embassy_futures::select::{select, Either};
 use embassy_stm32::gpio::Output;
+use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_time::{Duration, Instant, Ticker};
@@ -21,7 +22,26 @@ use saw_core::burst::BurstTimer;
 use saw_core::gate::BurstOutput;
 use saw_core::sample::Sample;
 use saw_core::Controller;
-use {defmt_rtt as _, panic_probe as _};
+use defmt_rtt as _;
+
+/// Panic: RF off first (the burst timer keeps running without the CPU), then log, then trap so
+/// probe-rs stops and prints the backtrace.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    rf::emergency_off();
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    cortex_m::asm::udf()
+}
+
+/// Same for hard faults.
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    rf::emergency_off();
+    defmt::error!("hard fault: RF off");
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
 
 use board::BOARD;
 use rf::{BurstGate, Carrier};
@@ -31,6 +51,10 @@ const VERSION: &str = env!("CARGO_PKG_VERSION");
 const SAMPLE_PERIOD_US: u32 = 1_000_000 / BOARD.sample_rate_hz;
 /// Watchdog tick for `Controller::on_tick` (stale limit is 5 ms).
 const WATCHDOG_PERIOD: Duration = Duration::from_millis(1);
+/// Independent watchdog: if the control loop stops petting it (hang, starvation), the chip
+/// resets and every RF pin returns to its reset state (enables low, arm low). Not frozen under
+/// a debugger halt on purpose: a halted CPU must not leave the burst timer driving RF.
+const IWDG_TIMEOUT_US: u32 = 50_000;
 /// Telemetry log period.
 const TELEMETRY_PERIOD_US: u64 = 1_000_000;
 
@@ -91,8 +115,11 @@ async fn main(spawner: Spawner) {
         BOARD.burst_b_channel
     );
 
+    let mut wdg = IndependentWatchdog::new(parts.iwdg, IWDG_TIMEOUT_US);
+    wdg.unleash();
+
     spawner.spawn(unwrap!(sampler(parts.sampler)));
-    spawner.spawn(unwrap!(control(ctrl, burst, rf_arm)));
+    spawner.spawn(unwrap!(control(ctrl, burst, rf_arm, wdg)));
 }
 
 #[embassy_executor::task]
@@ -123,7 +150,12 @@ async fn sampler(mut s: board::Sampler) {
 }
 
 #[embassy_executor::task]
-async fn control(mut ctrl: Controller, mut burst: BurstGate, _rf_arm: Output<'static>) {
+async fn control(
+    mut ctrl: Controller,
+    mut burst: BurstGate,
+    _rf_arm: Output<'static>,
+    mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+) {
     // `_rf_arm` is owned here for the life of the loop (a reset drops it low; an external
     // pull-down keeps the amplifier disarmed while the pin is unconfigured).
     let mut watchdog = Ticker::every(WATCHDOG_PERIOD);
@@ -141,6 +173,8 @@ async fn control(mut ctrl: Controller, mut burst: BurstGate, _rf_arm: Output<'st
                 }
             }
         }
+        // A completed iteration is a live control loop.
+        wdg.pet();
         // Checked on both branches so a busy sample queue cannot starve the log.
         let now = Instant::now().as_micros();
         if now >= next_log {

@@ -209,3 +209,17 @@ impl BurstOutput for BurstGate {
         self.tim.set_output_compare_mode(B, b);
     }
 }
+
+/// Last-resort RF off for the panic and HardFault handlers: no ownership, no allocation, no
+/// locks — raw register writes. Forces both burst outputs inactive (OCxM is not preloaded, so
+/// this is immediate), stops the burst timer and drops the RF arm line (PB5).
+pub fn emergency_off() {
+    use embassy_stm32::pac;
+    use embassy_stm32::pac::timer::vals::Ocm;
+    // CCMR1 channel 0 = CH1 (IDT A), CCMR2 channel 0 = CH3 (IDT B).
+    pac::TIM2.ccmr_output(0).modify(|w| w.set_ocm(0, Ocm::FORCE_INACTIVE));
+    pac::TIM2.ccmr_output(1).modify(|w| w.set_ocm(0, Ocm::FORCE_INACTIVE));
+    pac::TIM2.cr1().modify(|w| w.set_cen(false));
+    pac::GPIOB.bsrr().write(|w| w.set_br(5, true));
+}
+const _: () = assert!(crate::board::BOARD.rf_arm_pin.port == 'B' && crate::board::BOARD.rf_arm_pin.pin == 5);

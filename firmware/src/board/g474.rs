@@ -74,6 +74,7 @@ pub struct Parts {
     pub burst_b_pin: PwmPin<'static, TIM2, Ch3>,
     pub rf_arm: Output<'static>,
     pub sampler: Sampler,
+    pub iwdg: Peri<'static, peripherals::IWDG>,
 }
 
 pub fn split(p: Peripherals) -> Parts {
@@ -85,7 +86,7 @@ pub fn split(p: Peripherals) -> Parts {
     // PB10: TIM2_CH3 AF1 (second RF enable, IDT B).
     let burst_b_pin = PwmPin::new(p.PB10, OutputType::PushPull);
     let sampler = Sampler::new(p.ADC1, p.PA1, p.DMA1_CH1, p.TIM3);
-    Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, burst_b_pin, rf_arm, sampler }
+    Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, burst_b_pin, rf_arm, sampler, iwdg: p.IWDG }
 }
 
 /// Samples delivered per `read` (each is one trigger = 16 oversampled conversions).
