@@ -1,2 +1,21 @@
-//! Host simulation (placeholder while the crate is written).
+//! Host simulation of the SAW tactile display: the portable control core (`saw-core`) bound to
+//! models of its hardware.
+//!
+//! - [`trajectory`]: the finger's motion;
+//! - [`adc`]: the slide rheostat and the oversampling ADC, with noise and rail faults;
+//! - [`timer`]: the burst timer as an STM32 timer with (or without) preload, recording edges;
+//! - [`sim`]: the closed loop, trajectory → ADC → controller → timer;
+//! - [`metrics`]: f_b produced vs commanded, region switches, velocity error and delay;
+//! - [`chart`]: a PNG of a run;
+//! - [`scenario`]: TOML scenario files with expectations;
+//! - [`report`]: the human summary the CLI prints.
+
+pub mod adc;
+pub mod chart;
+pub mod metrics;
 pub mod models;
+pub mod report;
+pub mod scenario;
+pub mod sim;
+pub mod timer;
+pub mod trajectory;

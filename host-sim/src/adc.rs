@@ -1,0 +1,233 @@
+//! Rheostat + ADC model: true position → oversampled 16-bit code, as the core's sample stage
+//! expects it.
+//!
+//! Each control sample is the sum of [`OVERSAMPLE`] 12-bit conversions. One conversion is the
+//! ideal code of the position (the calibration's `code_at_um`, divided by 16 to get 12-bit LSBs),
+//! plus a fixed offset and Gaussian noise (σ in 12-bit LSB RMS, independent per conversion),
+//! rounded and clamped to 0..=4095. Rail faults replace every conversion of the window by 0
+//! (open wiper, pulled down) or 4095 (short to the supply); a dropout delivers no sample at all.
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use saw_core::position::{Calibration, PositionMapper};
+use saw_core::sample::{Sample, CONVERSION_FULL_SCALE, OVERSAMPLE};
+use serde::Deserialize;
+
+/// What goes wrong with the sensor during a fault window.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultKind {
+    /// Open wiper: the pull-down reads 0 on every conversion.
+    Open,
+    /// Wiper shorted to the supply: 4095 on every conversion.
+    Short,
+    /// No samples arrive (DMA stalled, ADC stopped): exercises the stale watchdog.
+    Dropout,
+}
+
+/// A fault over `[start_us, end_us)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+pub struct FaultWindow {
+    /// What happens.
+    pub kind: FaultKind,
+    /// Start, µs of simulation time.
+    pub start_us: u64,
+    /// End (exclusive), µs.
+    pub end_us: u64,
+}
+
+impl FaultWindow {
+    /// True when `t_us` lies inside the window.
+    pub fn contains(&self, t_us: u64) -> bool {
+        (self.start_us..self.end_us).contains(&t_us)
+    }
+}
+
+/// ADC parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdcParams {
+    /// Offset added to every conversion, 12-bit LSB.
+    pub offset_lsb: f64,
+    /// Gaussian noise per conversion, 12-bit LSB RMS.
+    pub noise_lsb_rms: f64,
+    /// Conversions summed per sample (the core expects 16).
+    pub oversample: u32,
+    /// PRNG seed.
+    pub seed: u64,
+    /// Fault windows.
+    pub faults: Vec<FaultWindow>,
+}
+
+impl Default for AdcParams {
+    fn default() -> Self {
+        Self {
+            offset_lsb: 0.0,
+            noise_lsb_rms: 2.0,
+            oversample: OVERSAMPLE,
+            seed: 1,
+            faults: Vec::new(),
+        }
+    }
+}
+
+/// The rheostat and ADC.
+#[derive(Clone, Debug)]
+pub struct AdcModel {
+    mapper: PositionMapper,
+    params: AdcParams,
+    rng: ChaCha8Rng,
+    noise: Option<Normal<f64>>,
+}
+
+/// Why an ADC model could not be built.
+#[derive(Clone, Debug, PartialEq)]
+pub enum AdcError {
+    /// The calibration is invalid.
+    Calibration(saw_core::position::CalibrationError),
+    /// Negative or non-finite noise.
+    BadNoise,
+}
+
+impl AdcModel {
+    /// A model of the rheostat calibrated as `cal`.
+    pub fn new(cal: Calibration, params: AdcParams) -> Result<Self, AdcError> {
+        let mapper = PositionMapper::new(cal).map_err(AdcError::Calibration)?;
+        let noise = if params.noise_lsb_rms > 0.0 {
+            Some(Normal::new(0.0, params.noise_lsb_rms).map_err(|_| AdcError::BadNoise)?)
+        } else if params.noise_lsb_rms == 0.0 {
+            None
+        } else {
+            return Err(AdcError::BadNoise);
+        };
+        let rng = ChaCha8Rng::seed_from_u64(params.seed);
+        Ok(Self {
+            mapper,
+            params,
+            rng,
+            noise,
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &AdcParams {
+        &self.params
+    }
+
+    /// The active fault at `t_us`, if any (the first listed wins).
+    pub fn fault_at(&self, t_us: u64) -> Option<FaultKind> {
+        self.params
+            .faults
+            .iter()
+            .find(|f| f.contains(t_us))
+            .map(|f| f.kind)
+    }
+
+    /// Ideal (noise-free, unquantized) 12-bit conversion value at `position_um`.
+    pub fn ideal_conversion(&self, position_um: f64) -> f64 {
+        self.mapper.code_at_um(position_um as f32) as f64 / OVERSAMPLE as f64
+    }
+
+    /// One conversion at `position_um` (noise, offset, quantization, clamping).
+    pub fn convert(&mut self, position_um: f64) -> u32 {
+        let mut v = self.ideal_conversion(position_um) + self.params.offset_lsb;
+        if let Some(n) = &self.noise {
+            v += n.sample(&mut self.rng);
+        }
+        v.round().clamp(0.0, (CONVERSION_FULL_SCALE - 1) as f64) as u32
+    }
+
+    /// The control sample at `t_us` for a finger at `position_um`, or None during a dropout.
+    /// `t_us` is simulation time; the sample carries it truncated to the core's wrapping u32.
+    pub fn sample(&mut self, position_um: f64, t_us: u64) -> Option<Sample> {
+        let sum = match self.fault_at(t_us) {
+            Some(FaultKind::Dropout) => return None,
+            Some(FaultKind::Open) => 0,
+            Some(FaultKind::Short) => (CONVERSION_FULL_SCALE - 1) * self.params.oversample,
+            None => (0..self.params.oversample)
+                .map(|_| self.convert(position_um))
+                .sum(),
+        };
+        Some(Sample::from_sum(sum, t_us as u32))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn noiseless_code_matches_calibration() {
+        let cal = Calibration::default();
+        let mut adc = AdcModel::new(
+            cal,
+            AdcParams {
+                noise_lsb_rms: 0.0,
+                ..AdcParams::default()
+            },
+        )
+        .unwrap();
+        let s = adc.sample(0.0, 0).unwrap();
+        // 2 % of full scale = 1310.72 codes → 81.92 LSB per conversion → 82 × 16.
+        assert_eq!(s.code, 82 * 16);
+        let m = PositionMapper::new(cal).unwrap();
+        let s = adc.sample(30_000.0, 100).unwrap();
+        let back = m.position_um(&s).unwrap();
+        // Quantized to one 12-bit LSB (16 codes ≈ 16 µm).
+        assert!((back - 30_000).abs() <= 16, "{back}");
+    }
+
+    #[test]
+    fn rails_and_dropouts() {
+        let mut adc = AdcModel::new(
+            Calibration::default(),
+            AdcParams {
+                faults: vec![
+                    FaultWindow {
+                        kind: FaultKind::Open,
+                        start_us: 100,
+                        end_us: 200,
+                    },
+                    FaultWindow {
+                        kind: FaultKind::Short,
+                        start_us: 200,
+                        end_us: 300,
+                    },
+                    FaultWindow {
+                        kind: FaultKind::Dropout,
+                        start_us: 300,
+                        end_us: 400,
+                    },
+                ],
+                ..AdcParams::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(adc.sample(10_000.0, 100).unwrap().code, 0);
+        assert_eq!(adc.sample(10_000.0, 200).unwrap().code, 65_520);
+        assert_eq!(adc.sample(10_000.0, 300), None);
+        assert!(adc.sample(10_000.0, 400).unwrap().code > 1_000);
+    }
+
+    #[test]
+    fn noise_is_seeded_and_averaged() {
+        let p = AdcParams {
+            noise_lsb_rms: 3.0,
+            seed: 42,
+            ..AdcParams::default()
+        };
+        let mut a = AdcModel::new(Calibration::default(), p.clone()).unwrap();
+        let mut b = AdcModel::new(Calibration::default(), p).unwrap();
+        let xs: Vec<f64> = (0..4000)
+            .map(|i| a.sample(31_500.0, i).unwrap().code as f64)
+            .collect();
+        let ys: Vec<f64> = (0..4000)
+            .map(|i| b.sample(31_500.0, i).unwrap().code as f64)
+            .collect();
+        assert_eq!(xs, ys);
+        let mean = xs.iter().sum::<f64>() / xs.len() as f64;
+        let sd = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / xs.len() as f64).sqrt();
+        // 16 conversions of σ = 3 LSB summed: σ = 3 × √16 = 12 codes.
+        assert!((sd - 12.0).abs() < 1.0, "{sd}");
+    }
+}

@@ -1,0 +1,295 @@
+//! Figures of merit of a run: commanded vs produced f_b per region (from the gate edges), region
+//! switches against the scene's boundaries, velocity error and delay, faults, pulse integrity.
+
+use saw_core::burst::TimerSettings;
+
+use crate::sim::SimResult;
+
+/// Burst figures of one region.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RegionStats {
+    /// Region index.
+    pub region: u8,
+    /// f_b the scene asks for, Hz (None for an off or motion-dependent texture).
+    pub commanded_hz: Option<f64>,
+    /// f_b measured on the gate line while the finger was in this region, Hz.
+    pub produced_hz: Option<f64>,
+    /// (produced − commanded) / commanded, %.
+    pub error_pct: Option<f64>,
+    /// Pulses that started in this region.
+    pub pulses: usize,
+    /// Rise-to-rise intervals used for the measurement (whole intervals inside the region).
+    pub intervals: usize,
+    /// Mean on-time / period of those intervals, %.
+    pub duty_pct: Option<f64>,
+    /// Time spent in the region, s.
+    pub time_s: f64,
+}
+
+/// One region switch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Switch {
+    /// Sample time, µs.
+    pub t_us: u64,
+    /// Region left.
+    pub from: u8,
+    /// Region entered.
+    pub to: u8,
+    /// The boundary crossed, µm.
+    pub boundary_um: f64,
+    /// True finger position at the switch, µm.
+    pub true_um: f64,
+    /// Measured position at the switch, µm.
+    pub meas_um: Option<i32>,
+    /// How far past the boundary (in the direction of travel) the finger was, µm; negative if
+    /// the switch came early.
+    pub past_um: f64,
+}
+
+/// Velocity estimate quality.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VelocityStats {
+    /// RMS of estimate − true velocity at the same instant, µm/s.
+    pub rms_err_um_s: f64,
+    /// The lag that best aligns the estimate with the true velocity, µs.
+    pub delay_us: f64,
+    /// RMS error against the true velocity delayed by that lag, µm/s.
+    pub rms_err_at_delay_um_s: f64,
+    /// Samples compared.
+    pub samples: usize,
+}
+
+/// All figures of one run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Metrics {
+    /// Per region.
+    pub regions: Vec<RegionStats>,
+    /// Every switch, in order.
+    pub switches: Vec<Switch>,
+    /// Velocity estimate quality (None if the estimator never produced a value).
+    pub velocity: Option<VelocityStats>,
+    /// Fault onsets seen in the trace.
+    pub fault_onsets: usize,
+    /// Samples with a fault in force.
+    pub fault_samples: usize,
+    /// Samples simulated.
+    pub samples: usize,
+    /// Complete pulses on the line.
+    pub pulses: usize,
+    /// Pulses whose (period, on-time) matches none of the planned region settings, i.e. runts,
+    /// doubled or stretched pulses. Pulses ended by an Off or followed by a restart are judged on
+    /// on-time only.
+    pub malformed_pulses: usize,
+}
+
+/// Computes the metrics of a run.
+pub fn compute(r: &SimResult) -> Metrics {
+    let n_regions = r.params.config.scene.textures.len();
+    let boundaries: Vec<f64> = r
+        .params
+        .config
+        .scene
+        .boundaries_um
+        .iter()
+        .map(|&b| b as f64)
+        .collect();
+    let period_clk = r.clocks(r.sample_period_us as u64);
+
+    // Run-length segments of the region, by trace index.
+    let mut seg_end = vec![0usize; r.trace.len()];
+    let mut i = r.trace.len();
+    while i > 0 {
+        i -= 1;
+        let same_next = i + 1 < r.trace.len()
+            && r.trace[i + 1].region == r.trace[i].region
+            && r.trace[i].region.is_some();
+        seg_end[i] = if same_next { seg_end[i + 1] } else { i };
+    }
+    let index_at = |t: u64| (t / period_clk) as usize;
+
+    let pulses = r.waveform.pulses();
+    let mut per_region_intervals: Vec<Vec<(u64, u64)>> = vec![Vec::new(); n_regions];
+    let mut per_region_pulses = vec![0usize; n_regions];
+    for p in &pulses {
+        // The sample before the rise decided the settings that the rise latched.
+        let idx = index_at(p.rise.saturating_sub(1));
+        let Some(region) = r.trace.get(idx).and_then(|t| t.region) else {
+            continue;
+        };
+        per_region_pulses[region as usize] += 1;
+        if let Some(next) = p.next_rise {
+            let before = idx.saturating_sub(1);
+            let last = index_at(next).min(r.trace.len() - 1);
+            if r.trace[before].region == Some(region) && seg_end[before] >= last {
+                per_region_intervals[region as usize].push((next - p.rise, p.on()));
+            }
+        }
+    }
+    let mut time_in = vec![0usize; n_regions];
+    for t in &r.trace {
+        if let Some(reg) = t.region {
+            time_in[reg as usize] += 1;
+        }
+    }
+    let clock = r.timer.clock_hz as f64;
+    let regions = (0..n_regions)
+        .map(|i| {
+            let commanded_hz = r.params.config.scene.textures[i]
+                .fixed_command()
+                .map(|c| c.burst_millihz as f64 / 1000.0);
+            let iv = &per_region_intervals[i];
+            let (produced_hz, duty_pct) = if iv.is_empty() {
+                (None, None)
+            } else {
+                let total: u64 = iv.iter().map(|x| x.0).sum();
+                let on: u64 = iv.iter().map(|x| x.1).sum();
+                (
+                    Some(clock * iv.len() as f64 / total as f64),
+                    Some(100.0 * on as f64 / total as f64),
+                )
+            };
+            let error_pct = match (commanded_hz, produced_hz) {
+                (Some(c), Some(p)) => Some(100.0 * (p - c) / c),
+                _ => None,
+            };
+            RegionStats {
+                region: i as u8,
+                commanded_hz,
+                produced_hz,
+                error_pct,
+                pulses: per_region_pulses[i],
+                intervals: iv.len(),
+                duty_pct,
+                time_s: time_in[i] as f64 * r.sample_period_us as f64 * 1e-6,
+            }
+        })
+        .collect();
+
+    // Switches: consecutive samples, both with a region, different regions.
+    let mut switches = Vec::new();
+    for w in r.trace.windows(2) {
+        let (Some(a), Some(b)) = (w[0].region, w[1].region) else {
+            continue;
+        };
+        if a == b {
+            continue;
+        }
+        let up = b > a;
+        let bi = if up { b as usize - 1 } else { b as usize };
+        let boundary_um = boundaries.get(bi).copied().unwrap_or(f64::NAN);
+        let true_um = w[1].true_um;
+        let past_um = if up {
+            true_um - boundary_um
+        } else {
+            boundary_um - true_um
+        };
+        switches.push(Switch {
+            t_us: w[1].t_us,
+            from: a,
+            to: b,
+            boundary_um,
+            true_um,
+            meas_um: w[1].meas_um,
+            past_um,
+        });
+    }
+
+    let mut fault_onsets = 0;
+    let mut prev = None;
+    for t in &r.trace {
+        if t.fault.is_some() && prev.is_none() {
+            fault_onsets += 1;
+        }
+        prev = t.fault;
+    }
+    let fault_samples = r.trace.iter().filter(|t| t.fault.is_some()).count();
+
+    let planned: Vec<TimerSettings> = r.region_settings.iter().flatten().copied().collect();
+    let malformed_pulses = pulses
+        .iter()
+        .filter(|p| !pulse_matches(p.on(), p.period(), &planned))
+        .count();
+
+    Metrics {
+        regions,
+        switches,
+        velocity: velocity_stats(r),
+        fault_onsets,
+        fault_samples,
+        samples: r.trace.len(),
+        pulses: pulses.len(),
+        malformed_pulses,
+    }
+}
+
+/// True when a pulse is one of `planned`: on-time and period both equal to one setting's. A pulse
+/// not followed by another rise of the same run (Off, restart, end) is checked for on-time ≤ the
+/// setting's only, since Off cuts it short by design.
+fn pulse_matches(on: u64, period: Option<u64>, planned: &[TimerSettings]) -> bool {
+    planned.iter().any(|s| match period {
+        Some(p) => {
+            (s.on_clocks() == on && s.period_clocks() == p)
+                // A pulse cut by Off and restarted later: shorter on-time, longer gap.
+                || (on <= s.on_clocks() && p > s.period_clocks())
+        }
+        None => on <= s.on_clocks(),
+    })
+}
+
+/// Velocity RMS error, at zero lag and at the best lag (searched 0–10 ms in 10 µs steps against
+/// the trajectory's true velocity).
+pub fn velocity_stats(r: &SimResult) -> Option<VelocityStats> {
+    let pts: Vec<(f64, f64, f64)> = r
+        .trace
+        .iter()
+        .filter(|t| t.fault.is_none())
+        .filter_map(|t| {
+            t.est_vel_um_s
+                .map(|v| (t.t_us as f64 * 1e-6, v as f64, t.true_vel_um_s))
+        })
+        .collect();
+    if pts.is_empty() {
+        return None;
+    }
+    let rms = |lag_s: f64| -> f64 {
+        let s: f64 = pts
+            .iter()
+            .map(|&(t, est, _)| {
+                let v = r
+                    .params
+                    .trajectory
+                    .state((t - lag_s).max(0.0))
+                    .velocity_um_s;
+                (est - v).powi(2)
+            })
+            .sum();
+        (s / pts.len() as f64).sqrt()
+    };
+    let rms0 = (pts.iter().map(|p| (p.1 - p.2).powi(2)).sum::<f64>() / pts.len() as f64).sqrt();
+    // Coarse search (100 µs) then fine (5 µs) around the best.
+    let mut best = (0.0, rms(0.0));
+    for k in 0..=100 {
+        let lag = k as f64 * 100e-6;
+        let e = rms(lag);
+        if e < best.1 {
+            best = (lag, e);
+        }
+    }
+    let centre = best.0;
+    for k in -20..=20 {
+        let lag = centre + k as f64 * 5e-6;
+        if lag < 0.0 {
+            continue;
+        }
+        let e = rms(lag);
+        if e < best.1 {
+            best = (lag, e);
+        }
+    }
+    Some(VelocityStats {
+        rms_err_um_s: rms0,
+        delay_us: best.0 * 1e6,
+        rms_err_at_delay_um_s: best.1,
+        samples: pts.len(),
+    })
+}

@@ -1,0 +1,122 @@
+//! The human summary of a run.
+
+use std::fmt::Write;
+
+use crate::metrics::Metrics;
+use crate::sim::SimResult;
+
+/// Formats the summary of run `r` with metrics `m`.
+pub fn summary(r: &SimResult, m: &Metrics) -> String {
+    let mut s = String::new();
+    let p = &r.params;
+    let _ = writeln!(
+        s,
+        "board {}: burst timer {} MHz, {}-bit, f_b ≤ {} Hz; sample period {} µs",
+        p.board.name,
+        r.timer.clock_hz as f64 / 1e6,
+        r.timer.counter_bits,
+        r.timer.max_burst_hz,
+        r.sample_period_us
+    );
+    let _ = writeln!(
+        s,
+        "trajectory: {} for {:.2} s; ADC noise {:.2} LSB RMS/conversion, offset {:.2} LSB, seed {}",
+        p.trajectory.describe(),
+        p.duration_s,
+        p.adc.noise_lsb_rms,
+        p.adc.offset_lsb,
+        p.adc.seed
+    );
+    let b: Vec<String> = p
+        .config
+        .scene
+        .boundaries_um
+        .iter()
+        .map(|b| format!("{:.3}", *b as f64 / 1e3))
+        .collect();
+    let _ = writeln!(
+        s,
+        "scene: {} regions, boundaries [{}] mm, hysteresis {} µm",
+        p.config.scene.textures.len(),
+        b.join(", "),
+        p.config.scene.hysteresis_um
+    );
+    let _ = writeln!(
+        s,
+        "\nburst frequency per region (measured from gate edges):"
+    );
+    let _ = writeln!(
+        s,
+        "  region  commanded    produced       error      duty   pulses  periods  time"
+    );
+    for g in &m.regions {
+        let fmt_hz = |x: Option<f64>| x.map(|v| format!("{v:.4} Hz")).unwrap_or("—".into());
+        let _ = writeln!(
+            s,
+            "  {:>6}  {:>11}  {:>13}  {:>10}  {:>6}  {:>6}  {:>7}  {:.2} s",
+            g.region,
+            fmt_hz(g.commanded_hz),
+            fmt_hz(g.produced_hz),
+            g.error_pct
+                .map(|e| format!("{e:+.5} %"))
+                .unwrap_or("—".into()),
+            g.duty_pct
+                .map(|d| format!("{d:.1} %"))
+                .unwrap_or("—".into()),
+            g.pulses,
+            g.intervals,
+            g.time_s
+        );
+    }
+    let _ = writeln!(s, "\nregion switches: {}", m.switches.len());
+    for w in &m.switches {
+        let _ = writeln!(
+            s,
+            "  t = {:7.4} s  {} → {}  at {:7.3} mm (measured {}), boundary {:.3} mm, {:+.3} mm past",
+            w.t_us as f64 * 1e-6,
+            w.from,
+            w.to,
+            w.true_um / 1e3,
+            w.meas_um
+                .map(|x| format!("{:.3} mm", x as f64 / 1e3))
+                .unwrap_or("—".into()),
+            w.boundary_um / 1e3,
+            w.past_um / 1e3
+        );
+    }
+    if let Some(worst) = m
+        .switches
+        .iter()
+        .map(|w| w.past_um.abs())
+        .fold(None, |a: Option<f64>, x| Some(a.map_or(x, |a| a.max(x))))
+    {
+        let _ = writeln!(s, "  worst distance from boundary: {:.3} mm", worst / 1e3);
+    }
+    match &m.velocity {
+        Some(v) => {
+            let _ = writeln!(
+                s,
+                "\nvelocity: RMS error {:.2} mm/s at zero lag; best-fit delay {:.0} µs, RMS error {:.2} mm/s at that delay ({} samples)",
+                v.rms_err_um_s / 1e3,
+                v.delay_us,
+                v.rms_err_at_delay_um_s / 1e3,
+                v.samples
+            );
+        }
+        None => {
+            let _ = writeln!(s, "\nvelocity: no estimate");
+        }
+    }
+    let _ = writeln!(
+        s,
+        "faults: {} onsets, {} samples under fault (controller counted {})",
+        m.fault_onsets, m.fault_samples, r.telemetry.faults
+    );
+    let _ = writeln!(
+        s,
+        "gate: {} pulses, {} malformed (runt/doubled/stretched), {} gate actions",
+        m.pulses, m.malformed_pulses, r.telemetry.gate_actions
+    );
+    let _ = writeln!(s, "samples: {}", m.samples);
+    s
+}

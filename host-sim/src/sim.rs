@@ -1,0 +1,235 @@
+//! The closed loop on the host: trajectory → ADC model → [`Controller`] → burst-timer model.
+//!
+//! Samples arrive every `1 / sample_rate_hz` (10 kHz on both boards); each is run through
+//! `on_sample` and its gate action applied to the timer model at the sample's time (plus an
+//! optional latency). Half a period later `on_tick` runs the stale watchdog, as the firmware's
+//! supervision timer does. Every sample period leaves one [`TracePoint`].
+
+use saw_boards::BoardDef;
+use saw_core::burst::{self, BurstTimer, TimerSettings};
+use saw_core::gate::GateAction;
+use saw_core::position::SensorFault;
+use saw_core::sample::Sample;
+use saw_core::{Config, ConfigError, Controller, Telemetry};
+
+use crate::adc::{AdcError, AdcModel, AdcParams};
+use crate::timer::{TimerModel, Waveform};
+use crate::trajectory::{State, Trajectory};
+
+/// Everything a run needs.
+#[derive(Clone, Debug)]
+pub struct SimParams {
+    /// The board (burst timer clock and width, f_b limit, sample rate).
+    pub board: &'static BoardDef,
+    /// The configuration loaded into the controller.
+    pub config: Config,
+    /// The finger's motion.
+    pub trajectory: Trajectory,
+    /// Simulated time, s.
+    pub duration_s: f64,
+    /// Rheostat / ADC model.
+    pub adc: AdcParams,
+    /// Timer preload (ARPE/OCxPE) as the firmware sets it; `false` only to show what it prevents.
+    pub preload: bool,
+    /// Delay from a sample's timestamp to its gate action reaching the timer, µs.
+    pub action_latency_us: u32,
+}
+
+impl SimParams {
+    /// The default run: default scene on `board`, the given trajectory and time, 2 LSB noise.
+    pub fn new(board: &'static BoardDef, trajectory: Trajectory, duration_s: f64) -> Self {
+        Self {
+            board,
+            config: saw_core::default_config(),
+            trajectory,
+            duration_s,
+            adc: AdcParams::default(),
+            preload: true,
+            action_latency_us: 0,
+        }
+    }
+}
+
+/// The burst timer of a board as the core sees it.
+pub fn burst_timer(board: &BoardDef) -> BurstTimer {
+    BurstTimer {
+        clock_hz: board.burst_timer_clk_hz,
+        counter_bits: board.burst_timer_bits,
+        max_burst_hz: board.max_burst_hz,
+    }
+}
+
+/// The sample period of a board, µs.
+pub fn sample_period_us(board: &BoardDef) -> u32 {
+    1_000_000 / board.sample_rate_hz
+}
+
+/// One sample period of the run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TracePoint {
+    /// Sample time, µs.
+    pub t_us: u64,
+    /// True finger position, µm.
+    pub true_um: f64,
+    /// True finger velocity, µm/s.
+    pub true_vel_um_s: f64,
+    /// Whether a sample arrived (false during a dropout).
+    pub sampled: bool,
+    /// The code the ADC delivered.
+    pub code: Option<u16>,
+    /// Position the core measured, µm.
+    pub meas_um: Option<i32>,
+    /// Velocity the core estimated, µm/s.
+    pub est_vel_um_s: Option<i32>,
+    /// Region the core chose.
+    pub region: Option<u8>,
+    /// Gate line after this sample's action.
+    pub gate: bool,
+    /// Fault in force after this sample (or the tick after it).
+    pub fault: Option<SensorFault>,
+    /// The action this sample (or its tick) produced.
+    pub action: Option<GateAction>,
+}
+
+/// What a run produced.
+#[derive(Clone, Debug)]
+pub struct SimResult {
+    /// The parameters it ran with.
+    pub params: SimParams,
+    /// The burst timer.
+    pub timer: BurstTimer,
+    /// Sample period, µs.
+    pub sample_period_us: u32,
+    /// Per-sample trace.
+    pub trace: Vec<TracePoint>,
+    /// The enable line.
+    pub waveform: Waveform,
+    /// The controller's counters at the end.
+    pub telemetry: Telemetry,
+    /// Per region: the settings the planner gives its texture (None for motion-dependent or off).
+    pub region_settings: Vec<Option<TimerSettings>>,
+    /// Actions the timer model could not make sense of (should be 0).
+    pub timer_protocol_errors: u32,
+}
+
+impl SimResult {
+    /// Kernel-clock time of µs `t_us`.
+    pub fn clocks(&self, t_us: u64) -> u64 {
+        t_us * self.timer.clock_hz as u64 / 1_000_000
+    }
+
+    /// The trace point covering kernel-clock time `t` (the last sample at or before it).
+    pub fn trace_at_clock(&self, t: u64) -> Option<&TracePoint> {
+        let t_us = t * 1_000_000 / self.timer.clock_hz as u64;
+        let i = (t_us / self.sample_period_us as u64) as usize;
+        self.trace.get(i)
+    }
+}
+
+/// Why a run could not start.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SimError {
+    /// The controller refused the board's sample period.
+    Controller(ConfigError),
+    /// The configuration was rejected.
+    Config(ConfigError),
+    /// The ADC model could not be built.
+    Adc(AdcError),
+}
+
+impl std::fmt::Display for SimError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{self:?}")
+    }
+}
+
+impl std::error::Error for SimError {}
+
+/// Runs the closed loop.
+pub fn run(params: &SimParams) -> Result<SimResult, SimError> {
+    let timer = burst_timer(params.board);
+    let period_us = sample_period_us(params.board);
+    let mut ctrl = Controller::new(timer, period_us).map_err(SimError::Controller)?;
+    ctrl.load(&params.config).map_err(SimError::Config)?;
+    let mut adc =
+        AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
+    let mut tm = TimerModel::new(timer.clock_hz, timer.counter_bits, params.preload);
+    let clk = |t_us: u64| t_us * timer.clock_hz as u64 / 1_000_000;
+
+    let region_settings = params
+        .config
+        .scene
+        .textures
+        .iter()
+        .map(|tex| {
+            tex.fixed_command()
+                .and_then(|cmd| burst::plan(&timer, &params.config.limits, &cmd).ok())
+                .map(|(s, _)| s)
+        })
+        .collect();
+
+    let n = (params.duration_s * 1e6 / period_us as f64).round() as u64;
+    let mut trace = Vec::with_capacity(n as usize);
+    let mut fault: Option<SensorFault> = None;
+    let mut region: Option<u8> = None;
+    for k in 0..n {
+        let t_us = k * period_us as u64;
+        let State {
+            position_um,
+            velocity_um_s,
+        } = params.trajectory.state(t_us as f64 * 1e-6);
+        let sample: Option<Sample> = adc.sample(position_um, t_us);
+        let mut point = TracePoint {
+            t_us,
+            true_um: position_um,
+            true_vel_um_s: velocity_um_s,
+            sampled: sample.is_some(),
+            code: sample.map(|s| s.code),
+            meas_um: None,
+            est_vel_um_s: None,
+            region: None,
+            gate: false,
+            fault,
+            action: None,
+        };
+        if let Some(s) = sample {
+            let out = ctrl.on_sample(s);
+            if let Some(a) = out.action {
+                tm.apply(clk(t_us + params.action_latency_us as u64), a);
+                point.action = Some(a);
+            }
+            point.meas_um = out.position_um;
+            point.est_vel_um_s = out.velocity_um_s;
+            point.region = out.region;
+            fault = out.fault;
+            region = out.region;
+        } else {
+            point.region = if fault.is_some() { None } else { region };
+        }
+        let tick_us = t_us + period_us as u64 / 2;
+        if let Some(a) = ctrl.on_tick(tick_us as u32) {
+            tm.apply(clk(tick_us), a);
+            point.action = Some(a);
+            fault = Some(SensorFault::Stale);
+            region = None;
+            point.region = None;
+        }
+        point.fault = fault;
+        tm.advance_to(clk(t_us + params.action_latency_us as u64));
+        point.gate = tm.is_high();
+        trace.push(point);
+    }
+    let end = clk(n * period_us as u64);
+    let timer_protocol_errors = tm.protocol_errors;
+    let waveform = tm.finish(end);
+    Ok(SimResult {
+        params: params.clone(),
+        timer,
+        sample_period_us: period_us,
+        trace,
+        waveform,
+        telemetry: ctrl.telemetry(),
+        region_settings,
+        timer_protocol_errors,
+    })
+}

@@ -1,0 +1,364 @@
+//! Burst-timer model: turns the core's [`GateAction`]s into gate edges the way an STM32
+//! general-purpose timer in PWM mode 1 (line high while CNT < CCR, up-counting) does.
+//!
+//! Times are kernel-clock cycles (u64). The counter ticks every `psc + 1` clocks; a period is
+//! `arr + 1` ticks and ends with an update event (UEV), where the shadow registers are loaded
+//! from the preload registers.
+//!
+//! - `Start(s)`: load the registers, generate an update (UG) and count from 0: the line rises at
+//!   once (if `ccr > 0`) and the first period is whole.
+//! - `Update(s)`: with preload (ARPE = 1, OCxPE = 1, the core's assumption) the values go to the
+//!   preload registers and take effect at the next UEV; without preload (`preload: false`) ARR
+//!   and CCR take effect immediately — a CCR above the count re-raises the line (a doubled
+//!   pulse), an ARR below the count makes the counter run on to 2^bits before wrapping. PSC is
+//!   always buffered by the hardware, in both modes.
+//! - `Off`: line low now, counter stopped.
+
+use saw_core::burst::TimerSettings;
+use saw_core::gate::GateAction;
+
+/// One level change of the enable line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Edge {
+    /// Kernel-clock time.
+    pub t: u64,
+    /// The level after the edge.
+    pub high: bool,
+}
+
+/// One pulse of the enable line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Pulse {
+    /// Rising edge, kernel clocks.
+    pub rise: u64,
+    /// Falling edge, kernel clocks.
+    pub fall: u64,
+    /// The next rising edge, if any (its distance is the pulse's period).
+    pub next_rise: Option<u64>,
+}
+
+impl Pulse {
+    /// On-time, kernel clocks.
+    pub fn on(&self) -> u64 {
+        self.fall - self.rise
+    }
+
+    /// Rise-to-next-rise, kernel clocks.
+    pub fn period(&self) -> Option<u64> {
+        self.next_rise.map(|n| n - self.rise)
+    }
+}
+
+/// The recorded waveform of the enable line.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Waveform {
+    /// Level changes in time order; the line starts low.
+    pub edges: Vec<Edge>,
+    /// Kernel clock, Hz.
+    pub clock_hz: u32,
+    /// End of the recording, kernel clocks.
+    pub end: u64,
+}
+
+impl Waveform {
+    /// Complete pulses (a rise followed by a fall), each with the following rise when there is
+    /// one. A pulse still high at the end of the recording is left out.
+    pub fn pulses(&self) -> Vec<Pulse> {
+        let mut out: Vec<Pulse> = Vec::new();
+        let mut rise = None;
+        for e in &self.edges {
+            if e.high {
+                if let Some(last) = out.last_mut() {
+                    if last.next_rise.is_none() {
+                        last.next_rise = Some(e.t);
+                    }
+                }
+                rise = Some(e.t);
+            } else if let Some(r) = rise.take() {
+                out.push(Pulse {
+                    rise: r,
+                    fall: e.t,
+                    next_rise: None,
+                });
+            }
+        }
+        out
+    }
+
+    /// Rising edges with time in `[from, to)`.
+    pub fn rises_in(&self, from: u64, to: u64) -> Vec<u64> {
+        self.edges
+            .iter()
+            .filter(|e| e.high && e.t >= from && e.t < to)
+            .map(|e| e.t)
+            .collect()
+    }
+
+    /// Burst frequency measured from the rising edges in `[from, to)`: clock / mean interval
+    /// (first to last rise over the number of intervals). None with fewer than two rises.
+    pub fn measured_hz(&self, from: u64, to: u64) -> Option<f64> {
+        let r = self.rises_in(from, to);
+        if r.len() < 2 {
+            return None;
+        }
+        let span = (r[r.len() - 1] - r[0]) as f64 / (r.len() - 1) as f64;
+        Some(self.clock_hz as f64 / span)
+    }
+
+    /// Level at kernel-clock time `t` (after any edge at exactly `t`).
+    pub fn level_at(&self, t: u64) -> bool {
+        match self.edges.partition_point(|e| e.t <= t) {
+            0 => false,
+            i => self.edges[i - 1].high,
+        }
+    }
+
+    /// True when the line is high anywhere in `[from, to)`.
+    pub fn high_within(&self, from: u64, to: u64) -> bool {
+        if self.level_at(from) {
+            return true;
+        }
+        self.edges.iter().any(|e| e.high && e.t >= from && e.t < to)
+    }
+
+    /// Converts µs to kernel clocks.
+    pub fn us_to_clocks(&self, us: f64) -> u64 {
+        (us * self.clock_hz as f64 / 1e6).round() as u64
+    }
+
+    /// Converts kernel clocks to seconds.
+    pub fn clocks_to_s(&self, t: u64) -> f64 {
+        t as f64 / self.clock_hz as f64
+    }
+}
+
+/// The counter while running.
+#[derive(Clone, Copy, Debug)]
+struct Running {
+    /// Start of the current period (counter = 0), kernel clocks.
+    t0: u64,
+    /// Active (shadow) registers.
+    psc: u16,
+    ccr: u32,
+    /// Ticks until the update event ending this period (arr + 1, or 2^bits after an ARR written
+    /// below the count without preload).
+    end_ticks: u64,
+    /// What the next update event loads.
+    pending: Option<TimerSettings>,
+}
+
+/// The burst timer.
+#[derive(Clone, Debug)]
+pub struct TimerModel {
+    clock_hz: u32,
+    counter_bits: u8,
+    preload: bool,
+    running: Option<Running>,
+    high: bool,
+    /// Time up to which the waveform has been generated.
+    now: u64,
+    edges: Vec<Edge>,
+    /// Actions that made no sense in the state they arrived in (Update while off).
+    pub protocol_errors: u32,
+    /// Every action applied, with its time.
+    pub actions: Vec<(u64, GateAction)>,
+}
+
+impl TimerModel {
+    /// A stopped timer. `preload` = ARPE/OCxPE set (the firmware's configuration).
+    pub fn new(clock_hz: u32, counter_bits: u8, preload: bool) -> Self {
+        Self {
+            clock_hz,
+            counter_bits,
+            preload,
+            running: None,
+            high: false,
+            now: 0,
+            edges: Vec::new(),
+            protocol_errors: 0,
+            actions: Vec::new(),
+        }
+    }
+
+    /// Kernel clock, Hz.
+    pub fn clock_hz(&self) -> u32 {
+        self.clock_hz
+    }
+
+    /// The line's level at the last processed time.
+    pub fn is_high(&self) -> bool {
+        self.high
+    }
+
+    /// True while the counter runs.
+    pub fn is_running(&self) -> bool {
+        self.running.is_some()
+    }
+
+    fn set_level(&mut self, t: u64, high: bool) {
+        if self.high != high {
+            self.high = high;
+            self.edges.push(Edge { t, high });
+        }
+    }
+
+    /// Generates the waveform up to time `t` (events at exactly `t` included).
+    pub fn advance_to(&mut self, t: u64) {
+        assert!(t >= self.now, "time runs backwards: {t} < {}", self.now);
+        while let Some(mut r) = self.running {
+            let tick = r.psc as u64 + 1;
+            let end = r.t0 + r.end_ticks * tick;
+            let fall = r.t0 + r.ccr as u64 * tick;
+            if self.high && fall < end && fall <= t {
+                self.set_level(fall, false);
+                continue;
+            }
+            if end > t {
+                break;
+            }
+            // Update event: load the preloaded values, restart the period.
+            if let Some(p) = r.pending.take() {
+                r.psc = p.psc;
+                r.ccr = p.ccr;
+                r.end_ticks = p.arr as u64 + 1;
+            }
+            r.t0 = end;
+            self.running = Some(r);
+            self.set_level(end, r.ccr > 0);
+        }
+        self.now = t;
+    }
+
+    /// Applies `action` at kernel-clock time `t`.
+    pub fn apply(&mut self, t: u64, action: GateAction) {
+        self.advance_to(t);
+        self.actions.push((t, action));
+        #[allow(unreachable_patterns)]
+        match action {
+            GateAction::Off => {
+                self.running = None;
+                self.set_level(t, false);
+            }
+            GateAction::Start(s) => {
+                self.running = Some(Running {
+                    t0: t,
+                    psc: s.psc,
+                    ccr: s.ccr,
+                    end_ticks: s.arr as u64 + 1,
+                    pending: None,
+                });
+                self.set_level(t, s.ccr > 0);
+            }
+            GateAction::Update(s) => {
+                let Some(mut r) = self.running else {
+                    self.protocol_errors += 1;
+                    return;
+                };
+                r.pending = Some(s);
+                if !self.preload {
+                    let tick = r.psc as u64 + 1;
+                    let cnt = (t - r.t0) / tick;
+                    r.ccr = s.ccr;
+                    r.end_ticks = if s.arr as u64 >= cnt {
+                        s.arr as u64 + 1
+                    } else {
+                        1u64 << self.counter_bits
+                    };
+                    self.running = Some(r);
+                    self.set_level(t, cnt < s.ccr as u64);
+                } else {
+                    self.running = Some(r);
+                }
+            }
+            _ => {
+                // An action this model does not know (a newer core): safe side, line off.
+                self.protocol_errors += 1;
+                self.running = None;
+                self.set_level(t, false);
+            }
+        }
+    }
+
+    /// Finishes the recording at `t` and returns the waveform.
+    pub fn finish(mut self, t: u64) -> Waveform {
+        self.advance_to(t);
+        Waveform {
+            edges: self.edges,
+            clock_hz: self.clock_hz,
+            end: t,
+        }
+    }
+
+    /// The waveform recorded so far (up to the last processed time).
+    pub fn waveform(&self) -> Waveform {
+        Waveform {
+            edges: self.edges.clone(),
+            clock_hz: self.clock_hz,
+            end: self.now,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn s(arr: u32, ccr: u32) -> TimerSettings {
+        TimerSettings { psc: 0, arr, ccr }
+    }
+
+    #[test]
+    fn start_runs_whole_periods() {
+        let mut t = TimerModel::new(1_000, 32, true);
+        t.apply(10, GateAction::Start(s(99, 40)));
+        let w = t.finish(10 + 350);
+        let p = w.pulses();
+        assert_eq!(p.len(), 4);
+        assert_eq!(p[0].rise, 10);
+        assert_eq!(p[0].on(), 40);
+        assert_eq!(p[0].period(), Some(100));
+        assert_eq!(w.measured_hz(0, 1_000), Some(10.0));
+    }
+
+    #[test]
+    fn preload_waits_for_the_update_event() {
+        let mut t = TimerModel::new(1_000, 32, true);
+        t.apply(0, GateAction::Start(s(99, 40)));
+        t.apply(50, GateAction::Update(s(49, 20)));
+        let w = t.finish(300);
+        let p = w.pulses();
+        assert_eq!((p[0].on(), p[0].period()), (40, Some(100)));
+        assert_eq!((p[1].on(), p[1].period()), (20, Some(50)));
+    }
+
+    #[test]
+    fn without_preload_a_short_arr_runs_on_and_a_late_ccr_doubles() {
+        // ARR written below the count: the counter runs to 2^16 before wrapping.
+        let mut t = TimerModel::new(1_000, 16, false);
+        t.apply(0, GateAction::Start(s(99, 40)));
+        t.apply(60, GateAction::Update(s(49, 20)));
+        let w = t.finish(70_000);
+        let p = w.pulses();
+        assert_eq!(p[0].period(), Some(65_536));
+        // CCR written above the count while low: the line rises again in the same period.
+        let mut t = TimerModel::new(1_000, 32, false);
+        t.apply(0, GateAction::Start(s(99, 40)));
+        t.apply(60, GateAction::Update(s(199, 80)));
+        let w = t.finish(400);
+        let p = w.pulses();
+        assert_eq!((p[0].on(), p[0].period()), (40, Some(60)));
+        assert_eq!(p[1].on(), 20);
+    }
+
+    #[test]
+    fn off_is_immediate() {
+        let mut t = TimerModel::new(1_000, 32, true);
+        t.apply(0, GateAction::Start(s(99, 40)));
+        t.apply(20, GateAction::Off);
+        let w = t.finish(1_000);
+        assert_eq!(
+            w.edges,
+            vec![Edge { t: 0, high: true }, Edge { t: 20, high: false }]
+        );
+    }
+}

@@ -1,0 +1,301 @@
+//! Finger trajectories: position (µm) and true velocity (µm/s) as closed-form functions of time.
+//!
+//! Positions are along the substrate from its start end. Trajectories are not clamped to the
+//! substrate: a scene that drives the finger past an end is the caller's mistake, and the ADC
+//! model clamps the reading like the real rheostat does.
+
+use serde::Deserialize;
+
+/// A finger motion. Time `t_s` starts at 0 at the beginning of the trajectory.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Trajectory {
+    /// At rest at `at_um`.
+    Rest {
+        /// Position, µm.
+        at_um: f64,
+    },
+    /// Constant speed from `from_um` (negative speed moves towards the start end).
+    Constant {
+        /// Start position, µm.
+        from_um: f64,
+        /// Speed, µm/s.
+        speed_um_s: f64,
+    },
+    /// Back and forth between `a_um` and `b_um` at constant speed (a triangle wave), starting at
+    /// `a_um` heading for `b_um`.
+    Triangle {
+        /// First turning point (start), µm.
+        a_um: f64,
+        /// Second turning point, µm.
+        b_um: f64,
+        /// Speed, µm/s (> 0).
+        speed_um_s: f64,
+    },
+    /// Back and forth between `a_um` and `b_um` as a sine, starting at `a_um` at rest.
+    Sine {
+        /// First turning point (start), µm.
+        a_um: f64,
+        /// Second turning point, µm.
+        b_um: f64,
+        /// Full period (there and back), s.
+        period_s: f64,
+    },
+    /// One reversal: from `from_um` to `turn_um` at `speed_um_s`, then back forever.
+    Reversal {
+        /// Start position, µm.
+        from_um: f64,
+        /// Turning point, µm.
+        turn_um: f64,
+        /// Speed, µm/s (> 0).
+        speed_um_s: f64,
+    },
+    /// Constant acceleration from `v0_um_s` until the speed reaches `v_max_um_s` (magnitude),
+    /// then constant speed.
+    Ramp {
+        /// Start position, µm.
+        from_um: f64,
+        /// Initial velocity, µm/s.
+        v0_um_s: f64,
+        /// Acceleration, µm/s² (10 m/s² = 1e7).
+        accel_um_s2: f64,
+        /// Speed limit, µm/s (> 0).
+        v_max_um_s: f64,
+    },
+    /// Pieces played one after another, each for its duration with its own time origin.
+    Piecewise {
+        /// (trajectory, duration in s).
+        pieces: Vec<Piece>,
+    },
+}
+
+/// One piece of a piecewise trajectory.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+pub struct Piece {
+    /// The motion of this piece.
+    pub trajectory: Trajectory,
+    /// How long it lasts, s.
+    pub duration_s: f64,
+}
+
+/// Position and velocity at one instant.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct State {
+    /// Position, µm.
+    pub position_um: f64,
+    /// Velocity, µm/s.
+    pub velocity_um_s: f64,
+}
+
+impl Trajectory {
+    /// Position and velocity at `t_s` ≥ 0.
+    pub fn state(&self, t_s: f64) -> State {
+        let t = t_s.max(0.0);
+        let (position_um, velocity_um_s) = match self {
+            Trajectory::Rest { at_um } => (*at_um, 0.0),
+            Trajectory::Constant {
+                from_um,
+                speed_um_s,
+            } => (from_um + speed_um_s * t, *speed_um_s),
+            Trajectory::Triangle {
+                a_um,
+                b_um,
+                speed_um_s,
+            } => {
+                let span = (b_um - a_um).abs();
+                if span == 0.0 || *speed_um_s <= 0.0 {
+                    (*a_um, 0.0)
+                } else {
+                    let dir = (b_um - a_um).signum();
+                    let leg = span / speed_um_s;
+                    let phase = (t / leg) as u64;
+                    let within = t - phase as f64 * leg;
+                    if phase % 2 == 0 {
+                        (a_um + dir * speed_um_s * within, dir * speed_um_s)
+                    } else {
+                        (b_um - dir * speed_um_s * within, -dir * speed_um_s)
+                    }
+                }
+            }
+            Trajectory::Sine {
+                a_um,
+                b_um,
+                period_s,
+            } => {
+                let mid = (a_um + b_um) / 2.0;
+                let amp = (b_um - a_um) / 2.0;
+                let w = 2.0 * std::f64::consts::PI / period_s;
+                (mid - amp * (w * t).cos(), amp * w * (w * t).sin())
+            }
+            Trajectory::Reversal {
+                from_um,
+                turn_um,
+                speed_um_s,
+            } => {
+                let dir = (turn_um - from_um).signum();
+                let t_turn = (turn_um - from_um).abs() / speed_um_s;
+                if t < t_turn {
+                    (from_um + dir * speed_um_s * t, dir * speed_um_s)
+                } else {
+                    (turn_um - dir * speed_um_s * (t - t_turn), -dir * speed_um_s)
+                }
+            }
+            Trajectory::Ramp {
+                from_um,
+                v0_um_s,
+                accel_um_s2,
+                v_max_um_s,
+            } => {
+                let a = *accel_um_s2;
+                let vmax = v_max_um_s.abs();
+                let v_unclamped = v0_um_s + a * t;
+                if a == 0.0 || v_unclamped.abs() <= vmax {
+                    (from_um + v0_um_s * t + 0.5 * a * t * t, v_unclamped)
+                } else {
+                    // Time at which |v| reaches vmax in the direction of the acceleration.
+                    let v_end = vmax * a.signum();
+                    let t_sat = ((v_end - v0_um_s) / a).max(0.0);
+                    let x_sat = from_um + v0_um_s * t_sat + 0.5 * a * t_sat * t_sat;
+                    (x_sat + v_end * (t - t_sat), v_end)
+                }
+            }
+            Trajectory::Piecewise { pieces } => {
+                let mut start = 0.0;
+                for (i, p) in pieces.iter().enumerate() {
+                    if t < start + p.duration_s || i + 1 == pieces.len() {
+                        let s = p.trajectory.state(t - start);
+                        return s;
+                    }
+                    start += p.duration_s;
+                }
+                (0.0, 0.0)
+            }
+        };
+        State {
+            position_um,
+            velocity_um_s,
+        }
+    }
+
+    /// Total duration for a piecewise trajectory, None for the unbounded kinds.
+    pub fn duration_s(&self) -> Option<f64> {
+        match self {
+            Trajectory::Piecewise { pieces } => Some(pieces.iter().map(|p| p.duration_s).sum()),
+            _ => None,
+        }
+    }
+
+    /// Short name for reports.
+    pub fn describe(&self) -> String {
+        match self {
+            Trajectory::Rest { at_um } => format!("rest at {:.3} mm", at_um / 1e3),
+            Trajectory::Constant {
+                from_um,
+                speed_um_s,
+            } => format!(
+                "constant {:.1} mm/s from {:.3} mm",
+                speed_um_s / 1e3,
+                from_um / 1e3
+            ),
+            Trajectory::Triangle {
+                a_um,
+                b_um,
+                speed_um_s,
+            } => format!(
+                "back-and-forth (triangle) {:.1}–{:.1} mm at {:.1} mm/s",
+                a_um / 1e3,
+                b_um / 1e3,
+                speed_um_s / 1e3
+            ),
+            Trajectory::Sine {
+                a_um,
+                b_um,
+                period_s,
+            } => format!(
+                "back-and-forth (sine) {:.1}–{:.1} mm, period {:.2} s",
+                a_um / 1e3,
+                b_um / 1e3,
+                period_s
+            ),
+            Trajectory::Reversal {
+                from_um,
+                turn_um,
+                speed_um_s,
+            } => format!(
+                "reversal {:.1} → {:.1} mm and back at {:.1} mm/s",
+                from_um / 1e3,
+                turn_um / 1e3,
+                speed_um_s / 1e3
+            ),
+            Trajectory::Ramp {
+                from_um,
+                v0_um_s,
+                accel_um_s2,
+                v_max_um_s,
+            } => format!(
+                "ramp from {:.1} mm, v0 {:.1} mm/s, a {:.2} m/s², vmax {:.1} mm/s",
+                from_um / 1e3,
+                v0_um_s / 1e3,
+                accel_um_s2 / 1e6,
+                v_max_um_s / 1e3
+            ),
+            Trajectory::Piecewise { pieces } => format!("{} pieces", pieces.len()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn triangle_turns_at_the_ends() {
+        let t = Trajectory::Triangle {
+            a_um: 1_000.0,
+            b_um: 11_000.0,
+            speed_um_s: 10_000.0,
+        };
+        assert_eq!(t.state(0.0).position_um, 1_000.0);
+        assert!((t.state(0.5).position_um - 6_000.0).abs() < 1e-6);
+        assert!((t.state(1.5).position_um - 6_000.0).abs() < 1e-6);
+        assert_eq!(t.state(1.5).velocity_um_s, -10_000.0);
+    }
+
+    #[test]
+    fn ramp_saturates() {
+        let r = Trajectory::Ramp {
+            from_um: 0.0,
+            v0_um_s: 0.0,
+            accel_um_s2: 1e7,
+            v_max_um_s: 100_000.0,
+        };
+        // 10 m/s² reaches 100 mm/s after 10 ms, 0.5 mm travelled.
+        let s = r.state(0.02);
+        assert_eq!(s.velocity_um_s, 100_000.0);
+        assert!((s.position_um - (500.0 + 1_000.0)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn piecewise_and_reversal() {
+        let p = Trajectory::Piecewise {
+            pieces: vec![
+                Piece {
+                    trajectory: Trajectory::Rest { at_um: 5.0 },
+                    duration_s: 1.0,
+                },
+                Piece {
+                    trajectory: Trajectory::Reversal {
+                        from_um: 5.0,
+                        turn_um: 15.0,
+                        speed_um_s: 10.0,
+                    },
+                    duration_s: 3.0,
+                },
+            ],
+        };
+        assert_eq!(p.state(0.5).position_um, 5.0);
+        assert!((p.state(2.0).position_um - 15.0).abs() < 1e-9);
+        assert!((p.state(3.0).position_um - 5.0).abs() < 1e-9);
+        assert_eq!(p.duration_s(), Some(4.0));
+    }
+}
