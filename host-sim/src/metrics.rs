@@ -85,14 +85,6 @@ pub struct Metrics {
 /// Computes the metrics of a run.
 pub fn compute(r: &SimResult) -> Metrics {
     let n_regions = r.params.config.scene.textures.len();
-    let boundaries: Vec<f64> = r
-        .params
-        .config
-        .scene
-        .boundaries_um
-        .iter()
-        .map(|&b| b as f64)
-        .collect();
     let period_clk = r.clocks(r.sample_period_us as u64);
 
     // Run-length segments of the region, by trace index.
@@ -165,34 +157,7 @@ pub fn compute(r: &SimResult) -> Metrics {
         })
         .collect();
 
-    // Switches: consecutive samples, both with a region, different regions.
-    let mut switches = Vec::new();
-    for w in r.trace.windows(2) {
-        let (Some(a), Some(b)) = (w[0].region, w[1].region) else {
-            continue;
-        };
-        if a == b {
-            continue;
-        }
-        let up = b > a;
-        let bi = if up { b as usize - 1 } else { b as usize };
-        let boundary_um = boundaries.get(bi).copied().unwrap_or(f64::NAN);
-        let true_um = w[1].true_um;
-        let past_um = if up {
-            true_um - boundary_um
-        } else {
-            boundary_um - true_um
-        };
-        switches.push(Switch {
-            t_us: w[1].t_us,
-            from: a,
-            to: b,
-            boundary_um,
-            true_um,
-            meas_um: w[1].meas_um,
-            past_um,
-        });
-    }
+    let switches = switches(r);
 
     let mut fault_onsets = 0;
     let mut prev = None;
@@ -292,4 +257,46 @@ pub fn velocity_stats(r: &SimResult) -> Option<VelocityStats> {
         rms_err_at_delay_um_s: best.1,
         samples: pts.len(),
     })
+}
+
+/// Region switches: consecutive samples that both have a region and differ. A region regained
+/// after a fault (no region in between) is not a switch, as in the controller's own count.
+pub fn switches(r: &SimResult) -> Vec<Switch> {
+    let boundaries: Vec<f64> = r
+        .params
+        .config
+        .scene
+        .boundaries_um
+        .iter()
+        .map(|&b| b as f64)
+        .collect();
+    let mut switches = Vec::new();
+    for w in r.trace.windows(2) {
+        let (Some(a), Some(b)) = (w[0].region, w[1].region) else {
+            continue;
+        };
+        if a == b {
+            continue;
+        }
+        let up = b > a;
+        let bi = if up { b as usize - 1 } else { b as usize };
+        let boundary_um = boundaries.get(bi).copied().unwrap_or(f64::NAN);
+        let true_um = w[1].true_um;
+        let past_um = if up {
+            true_um - boundary_um
+        } else {
+            boundary_um - true_um
+        };
+        switches.push(Switch {
+            t_us: w[1].t_us,
+            from: a,
+            to: b,
+            boundary_um,
+            true_um,
+            meas_um: w[1].meas_um,
+            past_um,
+        });
+    }
+
+    switches
 }
