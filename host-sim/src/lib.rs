@@ -19,3 +19,4 @@ pub mod scenario;
 pub mod sim;
 pub mod timer;
 pub mod trajectory;
+pub mod bench;

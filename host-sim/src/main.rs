@@ -94,6 +94,10 @@ impl log::Log for StderrLog {
 }
 
 fn main() -> ExitCode {
+    // `host-sim bench …`: the velocity estimators measured (docs/bench-results.md).
+    if let Some(code) = host_sim::bench::run_from_env() {
+        return code;
+    }
     let args = Args::parse();
     let _ = log::set_logger(&StderrLog);
     log::set_max_level(args.log);

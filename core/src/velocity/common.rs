@@ -3,10 +3,13 @@
 //!
 //! The ADC is timer-triggered, so samples are taken on a fixed grid even when their timestamps
 //! are read late (interrupt latency) or a sample is lost (DMA overrun). The estimators therefore
-//! count *slots*: the time since the previous sample, rounded to whole sample periods. Timestamp
-//! jitter smaller than half a period between consecutive samples is rounded away; a dropped
-//! sample shows as a step of two slots and is bridged exactly (the estimators use the true slot
-//! spacing); a silence longer than [`MAX_BRIDGED_SLOTS`] restarts the estimator.
+//! count *slots*: the time since the previous sample's place on the sampling grid, rounded to
+//! whole sample periods. The grid follows the timestamps through a first-order loop (each step
+//! moves it by 1/16 of the timestamp's offset), so a clock running a little fast or slow is
+//! tracked while the jitter of single timestamps is not: jitter below half a period around the
+//! grid is rounded away. A dropped sample shows as a step of two slots and is bridged exactly
+//! (the estimators use the true slot spacing); a silence longer than [`MAX_BRIDGED_SLOTS`]
+//! restarts the estimator.
 
 use super::EstimatorError;
 
@@ -56,14 +59,18 @@ pub(crate) enum Tick {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SlotClock {
     period_us: u32,
-    last_t_us: Option<u32>,
+    /// Where the previous sample sits on the sampling grid, µs (wrapping).
+    grid_us: Option<u32>,
+    /// Sub-µs part of the grid, 1/256 µs.
+    grid_frac: i32,
 }
 
 impl SlotClock {
     pub(crate) const fn new(period_us: u32) -> Self {
         Self {
             period_us,
-            last_t_us: None,
+            grid_us: None,
+            grid_frac: 0,
         }
     }
 
@@ -72,26 +79,39 @@ impl SlotClock {
     }
 
     pub(crate) fn tick(&mut self, t_us: u32) -> Tick {
-        let Some(last) = self.last_t_us else {
-            self.last_t_us = Some(t_us);
+        let Some(grid) = self.grid_us else {
+            self.grid_us = Some(t_us);
             return Tick::First;
         };
-        // Wrapping difference: a timestamp that ran backwards becomes a huge step, i.e. a gap.
-        let dt = t_us.wrapping_sub(last);
-        let slots = (dt as u64 + self.period_us as u64 / 2) / self.period_us as u64;
-        if slots == 0 {
+        // Signed offset from the previous grid point; a timestamp that ran backwards by more
+        // than half a period is a gap (restart), not a duplicate.
+        let dt = t_us.wrapping_sub(grid) as i32 as i64;
+        let p = self.period_us as i64;
+        if dt < -p / 2 {
+            self.grid_us = Some(t_us);
+            return Tick::Gap;
+        }
+        let slots = (dt + p / 2).div_euclid(p);
+        if slots <= 0 {
             return Tick::Duplicate;
         }
-        self.last_t_us = Some(t_us);
-        if slots > MAX_BRIDGED_SLOTS as u64 {
-            Tick::Gap
-        } else {
-            Tick::Slots(slots as u32)
+        if slots > MAX_BRIDGED_SLOTS as i64 {
+            self.grid_us = Some(t_us);
+            return Tick::Gap;
         }
+        let on_grid = grid.wrapping_add((slots * p) as u32);
+        // Move the grid by 1/16 of the offset, in 1/256 µs so small offsets still count.
+        let offset = t_us.wrapping_sub(on_grid) as i32;
+        self.grid_frac += offset.clamp(-1 << 20, 1 << 20) * 16;
+        let whole = self.grid_frac >> 8;
+        self.grid_frac -= whole << 8;
+        self.grid_us = Some(on_grid.wrapping_add(whole as u32));
+        Tick::Slots(slots as u32)
     }
 
     pub(crate) fn reset(&mut self) {
-        self.last_t_us = None;
+        self.grid_us = None;
+        self.grid_frac = 0;
     }
 }
 
@@ -110,11 +130,26 @@ mod tests {
         let mut c = SlotClock::new(100);
         assert_eq!(c.tick(1_000), Tick::First);
         assert_eq!(c.tick(1_140), Tick::Slots(1)); // 40 µs late
-        assert_eq!(c.tick(1_210), Tick::Slots(1)); // back on time after the late one
-        assert_eq!(c.tick(1_410), Tick::Slots(2)); // one sample lost
+        assert_eq!(c.tick(1_160), Tick::Slots(1)); // 40 µs early: only 20 µs after the last
+        assert_eq!(c.tick(1_400), Tick::Slots(2)); // one sample lost
         assert_eq!(c.tick(1_420), Tick::Duplicate);
-        assert_eq!(c.tick(1_910), Tick::Gap); // five slots: restart
+        assert_eq!(c.tick(1_900), Tick::Gap); // five slots: restart
         assert_eq!(c.tick(1_000), Tick::Gap); // ran backwards
+    }
+
+    #[test]
+    fn grid_follows_a_slow_clock_and_ignores_jitter() {
+        // Period really 100.01 µs (100 ppm slow) with ±30 µs jitter: never a wrong slot count
+        // (the grid itself wanders by σ ≈ 3 µs, so the margin is not the full ±50 µs).
+        let mut c = SlotClock::new(100);
+        c.tick(0);
+        let mut lcg = 12_345u32;
+        for k in 1..20_000u32 {
+            lcg = lcg.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let jitter = (lcg >> 16) % 61;
+            let t = (k as f64 * 100.01) as u32 + jitter;
+            assert_eq!(c.tick(t.wrapping_sub(30)), Tick::Slots(1), "sample {k}");
+        }
     }
 
     #[test]
