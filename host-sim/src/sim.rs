@@ -206,17 +206,18 @@ pub fn run(params: &SimParams) -> Result<SimResult, SimError> {
         } else {
             point.region = if fault.is_some() { None } else { region };
         }
-        let tick_us = t_us + period_us as u64 / 2;
+        tm.advance_to(clk(t_us + params.action_latency_us as u64));
+        point.gate = tm.is_high();
+        let tick_us = t_us + (period_us as u64 / 2).max(params.action_latency_us as u64);
         if let Some(a) = ctrl.on_tick(tick_us as u32) {
             tm.apply(clk(tick_us), a);
             point.action = Some(a);
             fault = Some(SensorFault::Stale);
             region = None;
             point.region = None;
+            point.gate = tm.is_high();
         }
         point.fault = fault;
-        tm.advance_to(clk(t_us + params.action_latency_us as u64));
-        point.gate = tm.is_high();
         trace.push(point);
     }
     let end = clk(n * period_us as u64);

@@ -198,7 +198,13 @@ impl TimerModel {
     fn set_level(&mut self, t: u64, high: bool) {
         if self.high != high {
             self.high = high;
-            self.edges.push(Edge { t, high });
+            // A level change at the very instant of the previous one (an update event and an
+            // Off on the same clock) is no pulse at all: the two edges cancel.
+            if self.edges.last().is_some_and(|e| e.t == t) {
+                self.edges.pop();
+            } else {
+                self.edges.push(Edge { t, high });
+            }
         }
     }
 
