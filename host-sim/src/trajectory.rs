@@ -110,7 +110,7 @@ impl Trajectory {
                     let leg = span / speed_um_s;
                     let phase = (t / leg) as u64;
                     let within = t - phase as f64 * leg;
-                    if phase % 2 == 0 {
+                    if phase.is_multiple_of(2) {
                         (a_um + dir * speed_um_s * within, dir * speed_um_s)
                     } else {
                         (b_um - dir * speed_um_s * within, -dir * speed_um_s)
