@@ -1,0 +1,342 @@
+//! Golden vectors for the Cortex-M4F emulator image (`firmware/emu`), and the check of its report.
+//!
+//! ```text
+//! cargo run --release -p host-sim --features saw-core/scene-file --bin golden -- gen target/golden
+//! golden gen   <dir>                 # writes <dir>/golden.bin (+ manifest.txt)
+//! golden check <dir> <decoded.log> <cost.md>
+//! ```
+//!
+//! `gen` records, for every scene × trajectory, the ADC input stream (16-bit codes with their
+//! timestamps, from the rheostat/ADC model of `host_sim::adc`) and the outputs of the host's own
+//! `saw_core::Controller` (NUCLEO-F446RE burst timer, 10 kHz), in the format of
+//! `firmware/emu/src/format.rs` (shared source). The scene configs go in as every field of the
+//! compiled-from-TOML `Config` (f32 as raw bits); the round trip is checked here.
+//!
+//! `check` reads the image's defmt log (decoded by defmt-print) and fails unless: every vector
+//! was replayed with the host's output CRC (bit-exact) — or, for scenes with f32 inside, every
+//! differing record is within the tolerance of `format::within_tolerance`; the expected log
+//! lines are there (boot, scene loaded, region change, sensor fault); and the default scene
+//! costs ≤ 400 instructions per sample. It writes the cost table (markdown) to `<cost.md>`.
+
+#[path = "../../../firmware/emu/src/format.rs"]
+#[allow(dead_code)]
+mod format;
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::process::ExitCode;
+
+use format::{encode_config, encode_output, encode_timer, Reader, Sink};
+use host_sim::adc::{AdcModel, AdcParams, FaultKind, FaultWindow};
+use host_sim::trajectory::Trajectory;
+use saw_core::burst::BurstTimer;
+use saw_core::texture::{Grating, Texture};
+use saw_core::{Config, Controller};
+
+/// Samples per vector: 0.5 s at 10 kHz.
+const SAMPLES: u64 = 5_000;
+/// First timestamp: the u32 µs clock wraps 0.2 s into every vector.
+const T0_US: u32 = u32::MAX - 199_999;
+/// Per-sample instruction budget of the default scene.
+const BUDGET: u64 = 400;
+
+struct VecSink(Vec<u8>);
+impl Sink for VecSink {
+    fn put(&mut self, b: &[u8]) {
+        self.0.extend_from_slice(b);
+    }
+}
+
+fn scenes(timer: BurstTimer, period: u32) -> Vec<(String, Config)> {
+    let dir = std::env::var_os("SAW_SCENES_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes"));
+    let mut out = vec![("default".to_string(), saw_core::default_config())];
+    for name in ["grating", "material", "random", "lines"] {
+        let path = dir.join(format!("{name}.toml"));
+        let text = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let cfg = saw_core::scene_file::load_for_board(&format!("{name}.toml"), &text, timer, period)
+            .unwrap_or_else(|e| panic!("{e}"));
+        out.push((name.to_string(), cfg));
+    }
+    // The default scene with a fourth region, a grating from 60 mm, that no trajectory enters:
+    // its cost must equal the default scene's (a scene pays only for the textures it renders).
+    let mut cfg = saw_core::default_config();
+    cfg.scene.boundaries_um.push(60_000).unwrap();
+    cfg.scene
+        .textures
+        .push(Texture::Grating(Grating::new(1_000)))
+        .unwrap();
+    out.push(("default+unused-grating".to_string(), cfg));
+    out
+}
+
+fn trajectories() -> Vec<(&'static str, Trajectory, Vec<FaultWindow>)> {
+    vec![
+        ("rest", Trajectory::Rest { at_um: 30_000.0 }, vec![]),
+        (
+            "back-and-forth",
+            Trajectory::Triangle {
+                a_um: 5_000.0,
+                b_um: 55_000.0,
+                speed_um_s: 200_000.0,
+            },
+            vec![],
+        ),
+        (
+            "reversal",
+            Trajectory::Reversal {
+                from_um: 20_000.0,
+                turn_um: 35_000.0,
+                speed_um_s: 60_000.0,
+            },
+            vec![],
+        ),
+        (
+            "rail-fault",
+            Trajectory::Constant {
+                from_um: 10_000.0,
+                speed_um_s: 80_000.0,
+            },
+            vec![FaultWindow {
+                kind: FaultKind::Open,
+                start_us: 200_000,
+                end_us: 230_000,
+            }],
+        ),
+    ]
+}
+
+fn gen(dir: &Path) -> Result<(), String> {
+    // The NUCLEO-F446RE's burst timer and sample rate (as host_sim::sim derives them).
+    let board = &saw_boards::NUCLEO_F446RE;
+    let timer = BurstTimer {
+        clock_hz: board.burst_timer_clk_hz,
+        counter_bits: board.burst_timer_bits,
+        max_burst_hz: board.max_burst_hz,
+    };
+    let period = 1_000_000 / board.sample_rate_hz;
+    let scenes = scenes(timer, period);
+    let mut s = VecSink(Vec::new());
+    s.put(format::MAGIC);
+    s.u32(format::VERSION);
+    encode_timer(&mut s, &timer, period);
+    s.u8(scenes.len() as u8);
+    for (name, cfg) in &scenes {
+        s.name(name);
+        let mut c = VecSink(Vec::new());
+        encode_config(&mut c, cfg);
+        let back = format::decode_config(&mut Reader::new(&c.0));
+        if &back != cfg {
+            return Err(format!("scene {name}: config does not survive the round trip"));
+        }
+        s.put(&c.0);
+    }
+    let trajs = trajectories();
+    s.u8((scenes.len() * trajs.len()) as u8);
+    let mut manifest = String::new();
+    for (si, (sname, cfg)) in scenes.iter().enumerate() {
+        for (tname, traj, faults) in &trajs {
+            let mut adc = AdcModel::new(
+                cfg.calibration,
+                AdcParams {
+                    seed: 7,
+                    faults: faults.clone(),
+                    ..AdcParams::default()
+                },
+            )
+            .map_err(|e| format!("{e:?}"))?;
+            let mut ctl = Controller::new(timer, period).map_err(|e| format!("{e:?}"))?;
+            ctl.load(cfg).map_err(|e| format!("{e:?}"))?;
+            let mut inputs = VecSink(Vec::new());
+            let mut outputs = VecSink(Vec::new());
+            let mut n = 0u32;
+            for k in 0..SAMPLES {
+                let t_sim = k * period as u64;
+                let pos = traj.state(t_sim as f64 * 1e-6).position_um;
+                let Some(mut sample) = adc.sample(pos, t_sim) else {
+                    continue;
+                };
+                sample.t_us = T0_US.wrapping_add(t_sim as u32);
+                inputs.u16(sample.code);
+                inputs.u32(sample.t_us);
+                encode_output(&mut outputs, &ctl.on_sample(sample));
+                n += 1;
+            }
+            let crc = format::crc32_update(0, &outputs.0);
+            let vname = format!("{sname}/{tname}");
+            s.name(&vname);
+            s.u8(si as u8);
+            s.u32(n);
+            s.put(&inputs.0);
+            s.u32(outputs.0.len() as u32);
+            s.put(&outputs.0);
+            s.u32(crc);
+            writeln!(manifest, "{vname} n={n} crc={crc:08x} bytes={}", outputs.0.len()).unwrap();
+        }
+    }
+    std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
+    std::fs::write(dir.join("golden.bin"), &s.0).map_err(|e| e.to_string())?;
+    std::fs::write(dir.join("manifest.txt"), &manifest).map_err(|e| e.to_string())?;
+    println!(
+        "golden: {} scenes x {} trajectories, {} bytes -> {}",
+        scenes.len(),
+        trajs.len(),
+        s.0.len(),
+        dir.join("golden.bin").display()
+    );
+    Ok(())
+}
+
+/// `key=value` fields of a report line.
+fn fields(line: &str) -> BTreeMap<&str, &str> {
+    line.split_whitespace()
+        .filter_map(|w| w.split_once('='))
+        .collect()
+}
+
+fn num(f: &BTreeMap<&str, &str>, k: &str) -> Result<u64, String> {
+    f.get(k)
+        .ok_or_else(|| format!("missing {k}"))?
+        .parse()
+        .map_err(|e| format!("{k}: {e}"))
+}
+
+fn check(dir: &Path, log: &Path, cost_md: &Path) -> Result<(), String> {
+    let manifest = std::fs::read_to_string(dir.join("manifest.txt")).map_err(|e| e.to_string())?;
+    let log = std::fs::read_to_string(log).map_err(|e| e.to_string())?;
+    let mut failures = Vec::new();
+    // Equivalence.
+    let mut seen = 0;
+    let f32_scenes = ["grating", "material", "random"];
+    for m in manifest.lines() {
+        let name = m.split_whitespace().next().unwrap_or("");
+        let want = fields(m);
+        let Some(line) = log
+            .lines()
+            .find(|l| l.contains("EQUIV ") && l.contains(&format!("vector={name} ")))
+        else {
+            failures.push(format!("{name}: not reported by the image"));
+            continue;
+        };
+        seen += 1;
+        let got = fields(line);
+        let exact = got.get("crc") == want.get("crc") && got.get("n") == want.get("n");
+        let diff = num(&got, "diff")?;
+        let beyond = num(&got, "beyond_tol")?;
+        let f32_inside = f32_scenes.iter().any(|s| name.starts_with(&format!("{s}/")));
+        if exact && diff == 0 {
+            println!("  {name:<40} bit-exact (n={}, crc={})", want["n"], want["crc"]);
+        } else if f32_inside && beyond == 0 {
+            println!("  {name:<40} {diff} records differ, all within ±1 tick (f32 scene)");
+        } else {
+            failures.push(format!(
+                "{name}: crc {} vs host {}, {diff} records differ, {beyond} beyond tolerance",
+                got.get("crc").unwrap_or(&"?"),
+                want["crc"]
+            ));
+        }
+    }
+    println!("equivalence: {seen} vectors compared");
+    // Logs.
+    for (what, needle) in [
+        ("boot", "boot: saw-core emulator image"),
+        ("scene loaded", "scene loaded: "),
+        ("region change", "region "),
+        ("sensor fault", "sensor fault RailLow: carrier off"),
+        ("sensor recovered", "sensor recovered after RailLow"),
+    ] {
+        if log.lines().any(|l| l.contains(needle)) {
+            println!("  log line present: {what}");
+        } else {
+            failures.push(format!("log line missing: {what} ('{needle}')"));
+        }
+    }
+    // Costs.
+    let mut md = String::new();
+    let mut default_cost = None;
+    let mut unused_cost = None;
+    let sections = [
+        ("COST-SCENE", "Whole `on_sample` per scene and trajectory (default estimator lsq32)"),
+        ("COST-TEXTURE", "Whole `on_sample`, one-region scene per texture kind (back-and-forth)"),
+        ("COST-ESTIMATOR", "Velocity estimators: `update` alone, and whole `on_sample` on the default scene (back-and-forth)"),
+        ("COST-STAGE", "Stages alone (default scene, back-and-forth inputs)"),
+    ];
+    for (tag, title) in sections {
+        let rows: Vec<_> = log.lines().filter(|l| l.contains(&format!("{tag} "))).collect();
+        if rows.is_empty() {
+            failures.push(format!("no {tag} lines in the log"));
+            continue;
+        }
+        writeln!(md, "\n### {title}\n").unwrap();
+        if tag == "COST-ESTIMATOR" {
+            writeln!(md, "| estimator | update, instr/sample | on_sample, instr/sample |").unwrap();
+            writeln!(md, "|---|---:|---:|").unwrap();
+        } else {
+            writeln!(md, "| case | instr/sample | samples |").unwrap();
+            writeln!(md, "|---|---:|---:|").unwrap();
+        }
+        for l in rows {
+            let f = fields(l);
+            let name = f.get("case").copied().unwrap_or("?");
+            if tag == "COST-ESTIMATOR" {
+                writeln!(md, "| {name} | {} | {} |", f["update"], f["on_sample"]).unwrap();
+                continue;
+            }
+            let per = f.get("per_sample").copied().unwrap_or("?");
+            writeln!(md, "| {name} | {per} | {} |", f.get("n").unwrap_or(&"?")).unwrap();
+            if tag == "COST-SCENE" {
+                let v: f64 = per.parse().unwrap_or(f64::MAX);
+                if name == "default/back-and-forth" {
+                    default_cost = Some(v);
+                }
+                if name == "default+unused-grating/back-and-forth" {
+                    unused_cost = Some(v);
+                }
+            }
+        }
+    }
+    std::fs::write(cost_md, &md).map_err(|e| e.to_string())?;
+    print!("{md}");
+    match (default_cost, unused_cost) {
+        (Some(d), Some(u)) => {
+            println!(
+                "\nDEFAULT SCENE: {d:.1} instructions/sample (budget {BUDGET}); with an unused grating region: {u:.1}"
+            );
+            if d > BUDGET as f64 {
+                failures.push(format!("default scene {d:.1} instr/sample > {BUDGET}"));
+            }
+            if (u - d).abs() > 2.0 {
+                failures.push(format!(
+                    "an unused grating region changes the cost: {u:.1} vs {d:.1} instr/sample"
+                ));
+            }
+        }
+        _ => failures.push("default-scene cost not reported".into()),
+    }
+    if failures.is_empty() {
+        Ok(())
+    } else {
+        Err(failures.join("\n"))
+    }
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().collect();
+    let r = match args.get(1).map(String::as_str) {
+        Some("gen") if args.len() == 3 => gen(Path::new(&args[2])),
+        Some("check") if args.len() == 5 => {
+            check(Path::new(&args[2]), Path::new(&args[3]), Path::new(&args[4]))
+        }
+        _ => Err("usage: golden gen <dir> | golden check <dir> <decoded.log> <cost.md>".into()),
+    };
+    match r {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("golden: FAIL\n{e}");
+            ExitCode::FAILURE
+        }
+    }
+}
