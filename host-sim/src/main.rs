@@ -98,6 +98,10 @@ fn main() -> ExitCode {
     if let Some(code) = host_sim::bench::run_from_env() {
         return code;
     }
+    // `host-sim model …` and `host-sim tile-to-scene …`: physical models (docs/models.md).
+    if let Some(code) = host_sim::models::cli::run_from_env() {
+        return code;
+    }
     let args = Args::parse();
     let _ = log::set_logger(&StderrLog);
     log::set_max_level(args.log);

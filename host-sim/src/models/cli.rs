@@ -128,6 +128,28 @@ fn json(fields: &[(&str, String)]) -> String {
     format!("{{{}}}", body.join(","))
 }
 
+/// Hook for a binary's `main`: if the process arguments start with `model` or `tile-to-scene`,
+/// runs that subcommand, prints its output (or `error: …` on stderr) and returns the exit code;
+/// otherwise returns `None` and the caller parses its own CLI.
+pub fn run_from_env() -> Option<std::process::ExitCode> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let out = match args.split_first() {
+        Some((c, rest)) if c == "model" => run_model(rest),
+        Some((c, rest)) if c == "tile-to-scene" => run_tile_to_scene(rest),
+        _ => return None,
+    };
+    Some(match out {
+        Ok(s) => {
+            println!("{}", s.trim_end());
+            std::process::ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::from(2)
+        }
+    })
+}
+
 /// `host-sim model <args>`; returns the text to print.
 pub fn run_model(args: &[String]) -> Result<String, String> {
     let Some((name, rest)) = args.split_first() else {
