@@ -533,7 +533,7 @@ pub struct Grooved {
     pub a_g_mm2: f64,
     /// Pad width W, mm.
     pub pad_width_mm: f64,
-    /// A_c = W B/(G + L), mm³ (area summed over the pad width).
+    /// A_c = W B/(G + L), mm² (A_cg summed over the grooves under the pad).
     pub a_c_mm2: f64,
     /// A = W A_g/(G + L).
     pub a_mm2: f64,
