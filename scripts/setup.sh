@@ -40,6 +40,14 @@ else
     done
 fi
 
+# defmt-print decodes the emulator image's defmt logs (scripts/emu.sh); skipped when present.
+if defmt-print --version >/dev/null 2>&1 || "$HOME/.cargo/bin/defmt-print" --version >/dev/null 2>&1; then
+    echo "setup: defmt-print already installed"
+else
+    echo "setup: installing defmt-print (cargo install --locked)"
+    RUSTC=/usr/bin/rustc /usr/bin/cargo install defmt-print --locked
+fi
+
 # What the firmware build will use.
 for tool in /usr/bin/rustc /usr/bin/cargo /usr/bin/ld.lld-22 /usr/bin/qemu-system-arm; do
     if [ -x "$tool" ]; then

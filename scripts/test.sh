@@ -9,3 +9,4 @@ echo "== host tests"
 cargo test --workspace
 echo "== firmware builds"
 ./scripts/build-firmware.sh
+./scripts/emu.sh

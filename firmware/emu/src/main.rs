@@ -383,15 +383,15 @@ fn estimator_costs(g: &Golden, n: usize) {
     estimator(g, "diff1", OneSampleDifference::new(p).unwrap_or_else(|_| fail()), n, m);
     estimator(g, "diff4", BackwardDifference::<4>::new(p).unwrap_or_else(|_| fail()), n, m);
     estimator(g, "lsq16", LsqSlope::<16>::new(p).unwrap_or_else(|_| fail()), n, m);
-    estimator(g, "lsq32 (default)", LsqSlope::<32>::new(p).unwrap_or_else(|_| fail()), n, m);
+    estimator(g, "lsq32(default)", LsqSlope::<32>::new(p).unwrap_or_else(|_| fail()), n, m);
     estimator(g, "lsq64", LsqSlope::<64>::new(p).unwrap_or_else(|_| fail()), n, m);
     let foaw = |fit| Foaw::<33>::new(fit, 24.0, p).unwrap_or_else(|_| fail());
     estimator(g, "foaw-end-d24-n32", foaw(FoawFit::EndFit), n, m);
     estimator(g, "foaw-best-d24-n32", foaw(FoawFit::BestFit), n, m);
     let ab = AlphaBeta::critically_damped(p, 0.9).unwrap_or_else(|_| fail());
-    estimator(g, "ab-p0.9 (f32)", ab.clone(), n, m);
+    estimator(g, "ab-p0.9(f32)", ab.clone(), n, m);
     let abq = AlphaBetaFixed::critically_damped(p, 0.9).unwrap_or_else(|_| fail());
-    estimator(g, "abq16-p0.9 (I16F16)", abq, n, m);
+    estimator(g, "abq16-p0.9(I16F16)", abq, n, m);
     let st = SuperTwisting::new(p, 1e6).unwrap_or_else(|_| fail());
     estimator(g, "std-L1e6", st, n, m);
     let med = Median3::new(LsqSlope::<32>::new(p).unwrap_or_else(|_| fail()), p);
@@ -414,7 +414,7 @@ fn stage_costs(n: usize) {
             let _ = black_box(mapper.position_um(black_box(s)));
         }
     });
-    report("COST-STAGE", "position (code -> um, rail check)", n, per_sample_x10(cost, base, n));
+    report("COST-STAGE", "position(code->um,rail-check)", n, per_sample_x10(cost, base, n));
     let m = positions(n);
     let regions = RegionMap::new(
         cfg.scene.textures.len(),
@@ -434,7 +434,7 @@ fn stage_costs(n: usize) {
             r = black_box(regions.track(r, black_box(p)));
         }
     });
-    report("COST-STAGE", "region (track, 3 regions)", m, per_sample_x10(cost, base, m));
+    report("COST-STAGE", "region(track,3-regions)", m, per_sample_x10(cost, base, m));
     let timer = BurstTimer {
         clock_hz: 90_000_000,
         counter_bits: 32,
@@ -452,7 +452,7 @@ fn stage_costs(n: usize) {
             black_box((p as f32) * 0.01);
         }
     });
-    report("COST-STAGE", "burst planner (f32 Hz -> PSC/ARR/CCR)", m, per_sample_x10(cost, base2, m));
+    report("COST-STAGE", "burst-planner(f32-Hz->PSC/ARR/CCR)", m, per_sample_x10(cost, base2, m));
 }
 
 #[entry]
