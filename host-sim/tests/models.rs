@@ -578,6 +578,30 @@ fn tile_to_scene_normalised_and_lambda() {
     assert!(toml.contains(&want), "{toml}");
 }
 
+#[test]
+fn tile_to_scene_snippet_loads_as_a_scene_file() {
+    // The --scene-file snippet, placed before a second region, is read by saw_core's scene loader
+    // into the grating the model asked for.
+    let snippet = run_tile_to_scene(&args(
+        "--groove-mm 0.5 --land-mm 0.25 --force-g 112 --scene-file",
+    ))
+    .unwrap();
+    let mut text = snippet.replace(
+        "kind = \"grating\"\n",
+        "kind = \"grating\"\nuntil_mm = 30\n",
+    );
+    text.push_str("\n[[region]]\nkind = \"grating\"\nwavelength_mm = 1.0\n");
+    let doc = saw_core::scene_file::parse("tile.toml", &text).unwrap();
+    let want = tile_to_region(&GroovedInput::paper(0.5, 0.25, 112.0)).unwrap();
+    match doc.config.scene.textures[0] {
+        saw_core::texture::Texture::Grating(g) => {
+            assert_eq!(g.wavelength_um, want.wavelength_um);
+            assert_eq!(g.amplitude_permille, want.amplitude_permille);
+        }
+        ref other => panic!("{other:?}"),
+    }
+}
+
 // ---------------------------------------------------------------- sandpaper
 
 #[test]
