@@ -54,7 +54,9 @@ grep -E '^(DIFF|  (target|host):)' "$OUT/decoded.log" | head -n 30 || true
 
 step "compare with the host, logs, costs"
 check=0
-"$ROOT/target/release/golden" check "$GOLDEN_DIR" "$OUT/decoded.log" "$OUT/target-cost.md" || check=$?
+"$ROOT/target/release/golden" check "$GOLDEN_DIR" "$OUT/decoded.log" "$OUT/target-cost.md" \
+    >"$OUT/check.txt" || check=$?
+cat "$OUT/check.txt"
 grep -E '^DONE' "$OUT/decoded.log" || echo "emu: the image did not finish" >&2
 
 step "firmware ELFs: f64 / soft-float helpers"
@@ -100,7 +102,7 @@ for elf in "$ROOT/firmware/target/nucleo-f446re.elf" "$ROOT/firmware/target/nucl
 done
 
 step "summary"
-sed -n 's/^DEFAULT SCENE/default scene/p' "$OUT/decoded.log" >/dev/null
+grep -E '^DEFAULT SCENE' "$OUT/check.txt" || echo "default scene: no figure (see above)"
 status=0
 [ "$rc" -eq 0 ] || { echo "emu: FAIL image exited with $rc (mismatch or panic)" >&2; status=1; }
 [ "$check" -eq 0 ] || { echo "emu: FAIL golden check" >&2; status=1; }

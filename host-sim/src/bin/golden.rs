@@ -260,7 +260,7 @@ fn check(dir: &Path, log: &Path, cost_md: &Path) -> Result<(), String> {
     let mut unused_cost = None;
     let sections = [
         ("COST-SCENE", "Whole `on_sample` per scene and trajectory (default estimator lsq32)"),
-        ("COST-TEXTURE", "Whole `on_sample`, one-region scene per texture kind (back-and-forth)"),
+        ("COST-TEXTURE", "Whole `on_sample`, one-region scene per texture kind (default vectors' back-and-forth and rest inputs)"),
         ("COST-ESTIMATOR", "Velocity estimators: `update` alone, and whole `on_sample` on the default scene (back-and-forth)"),
         ("COST-STAGE", "Stages alone (default scene, back-and-forth inputs)"),
     ];
