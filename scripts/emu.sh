@@ -67,7 +67,7 @@ for board in nucleo-f446re nucleo-g474re; do
 done
 # f64 anything; f32 arithmetic, compares and 32-bit conversions done in software (the M4F's FPU
 # does those in hardware, so a helper means a wrong target/float ABI or a stray f64).
-SOFT='^(__aeabi_(d[a-z0-9]*|f(add|sub|rsub|mul|div|cmp[a-z]*)|[iu]2[fd]|l2d|ul2d|l2f|f2[iu]z|f2lz|f2d|ul2f|f2ulz)|__(add|sub|mul|div|neg|pow)[sd]f3|__(eq|ne|lt|le|gt|ge|un|cmp)[sd]f2|__fix(uns)?[sd]f[sdt]i|__float(un)?[sdt]i[sd]f|__extendsfdf2|__truncdfsf2)$'
+SOFT='^(__aeabi_(d[a-z0-9]*|f(add|sub|rsub|mul|div|cmp[a-z]*)|u?[il]2[fd]|f2u?[il]z|f2d)|__(add|sub|mul|div)[sd]f3|__(eq|ne|lt|le|gt|ge|unord|cmp|neg|powi)[sd]f2|__fix(uns)?[sd]f[sdt]i|__float(un)?[sdt]i[sd]f|__extendsfdf2|__truncdfsf2)$'
 # Narrow allow-list: f32 <-> u64 conversions (no FPv4-SP instruction exists for them), only when
 # every call comes from saw_core::burst::FastPlanner::plan_hz.
 ALLOW='^__aeabi_(f2ulz|ul2f)$'
