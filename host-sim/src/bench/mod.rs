@@ -13,6 +13,7 @@ pub mod charts;
 pub mod cost;
 pub mod measure;
 pub mod methods;
+pub mod renderers;
 pub mod scenario;
 
 use std::collections::BTreeMap;
@@ -541,6 +542,30 @@ fn write_report(
         x,
         y,
     };
+    let _ = writeln!(
+        w,
+        "\n## Grating renderers: burst placement against ridges (λ = 1 mm, 2 LSB, 10 kHz)\n\n\
+         Placement error = true finger position at the burst − ridge, µm, signed along the motion \
+         (see `host_sim::bench::renderers` for the three models).\n"
+    );
+    let _ = writeln!(
+        w,
+        "| renderer | speed mm/s | ridges crossed | bursts | mean error µm | RMS error µm | worst µm |"
+    );
+    let _ = writeln!(w, "|---|---:|---:|---:|---:|---:|---:|");
+    for r in renderers::run(opts.seed) {
+        let _ = writeln!(
+            w,
+            "| {} | {} | {} | {} | {:.1} | {:.1} | {:.1} |",
+            r.renderer,
+            r.speed_mm_s,
+            r.ridges,
+            r.bursts,
+            r.mean_err_um,
+            r.rms_err_um,
+            r.worst_err_um
+        );
+    }
     let _ = writeln!(w, "\n## Pareto fronts (lower is better on both axes)\n");
     for (file, title, y_of, what) in [
         (
