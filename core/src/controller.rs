@@ -550,7 +550,9 @@ impl<E: VelocityEstimator> Controller<E> {
         self.last_sample_us = Some(sample.t_us);
         let t_us = sample.t_us;
         let Some(active) = self.active.as_ref() else {
-            let action = self.gate.force_off();
+            let action = self
+                .gate
+                .force_off(t_us, &self.timer, &SafetyLimits::default());
             return Output {
                 action,
                 ..Output::default()
@@ -558,7 +560,7 @@ impl<E: VelocityEstimator> Controller<E> {
         };
         let position_um = match active.mapper.position_um(&sample) {
             Ok(p) => p,
-            Err(fault) => return self.enter_fault(fault),
+            Err(fault) => return self.enter_fault(fault, t_us),
         };
         if let Some(fault) = self.fault {
             self.good_run += 1;
@@ -618,7 +620,7 @@ impl<E: VelocityEstimator> Controller<E> {
                     );
                 }
             }
-            out.action = self.drive(request.settings);
+            out.action = self.drive(request.settings, t_us);
             if request.amplitude != u16::MAX {
                 out.amplitude_permille = self.set_amplitude(request.amplitude);
             }
@@ -654,14 +656,21 @@ impl<E: VelocityEstimator> Controller<E> {
         }
         let line = fired?;
         let amplitude = active.lines.amplitude_at(0);
+        let action = self.gate.pulse(pulse, t_us, &self.timer, &active.limits);
+        if !matches!(action, Some(GateAction::Pulse(_))) {
+            // A burst is running or resting: a pulse now would break the duty cap.
+            self.telemetry.lines_skipped = self.telemetry.lines_skipped.wrapping_add(1);
+            debug!(
+                "line {} crossed at {} um while the duty cap is spent: skipped",
+                line, position_um
+            );
+            self.count_action(action);
+            return None;
+        }
         self.pulse_start_us = Some(t_us);
         self.telemetry.line_pulses = self.telemetry.line_pulses.wrapping_add(1);
         debug!("line {} crossed at {} um: pulse", line, position_um);
-        let action = self.gate.pulse(pulse, &self.timer, &active.limits);
-        if action.is_some() {
-            self.telemetry.gate_actions = self.telemetry.gate_actions.wrapping_add(1);
-            self.telemetry.burst_millihz = 0;
-        }
+        self.count_action(action);
         Some((amplitude, action, Some(line)))
     }
 
@@ -671,7 +680,7 @@ impl<E: VelocityEstimator> Controller<E> {
         let stale_after = self.active.as_ref()?.stale_after_us;
         let last = self.last_sample_us?;
         if now_us.wrapping_sub(last) > stale_after && self.fault != Some(SensorFault::Stale) {
-            return self.enter_fault(SensorFault::Stale).action;
+            return self.enter_fault(SensorFault::Stale, now_us).action;
         }
         None
     }
@@ -688,7 +697,7 @@ impl<E: VelocityEstimator> Controller<E> {
         Some(output)
     }
 
-    fn enter_fault(&mut self, fault: SensorFault) -> Output {
+    fn enter_fault(&mut self, fault: SensorFault, t_us: u32) -> Output {
         if self.fault != Some(fault) {
             self.telemetry.faults = self.telemetry.faults.wrapping_add(1);
             error!("sensor fault {:?}: carrier off", fault);
@@ -704,7 +713,8 @@ impl<E: VelocityEstimator> Controller<E> {
         }
         self.telemetry.position_um = -1;
         self.telemetry.region = u8::MAX;
-        let action = self.gate.force_off();
+        let limits = self.active.as_ref().map(|a| a.limits).unwrap_or_default();
+        let action = self.gate.force_off(t_us, &self.timer, &limits);
         self.count_action(action);
         Output {
             action,
@@ -742,9 +752,9 @@ impl<E: VelocityEstimator> Controller<E> {
         })
     }
 
-    fn drive(&mut self, desired: Option<TimerSettings>) -> Option<GateAction> {
+    fn drive(&mut self, desired: Option<TimerSettings>, t_us: u32) -> Option<GateAction> {
         let limits = self.active.as_ref().map(|a| a.limits).unwrap_or_default();
-        let action = self.gate.request(desired, &self.timer, &limits);
+        let action = self.gate.request(desired, t_us, &self.timer, &limits);
         self.count_action(action);
         action
     }
@@ -850,6 +860,7 @@ mod tests {
         let mut c = loaded();
         let mut t = 0;
         feed(&mut c, 5_000.0, &mut t, 40);
+        let fault_t = t;
         let out = c.on_sample(Sample { code: 0, t_us: t });
         t += 100;
         assert_eq!(out.action, Some(GateAction::Off));
@@ -859,7 +870,23 @@ mod tests {
         assert_eq!(actions, 0);
         assert_eq!(out.fault, Some(SensorFault::RailLow));
         let (out, _) = feed(&mut c, 5_000.0, &mut t, 1);
-        assert!(matches!(out.action, Some(GateAction::Start(_))), "{out:?}");
+        assert_eq!(out.fault, None);
+        // The 20 Hz region's 20 ms on-time may have run right up to the fault: at a 50 % cap the
+        // line restarts 20 ms after it, not before.
+        let mut started = None;
+        for _ in 0..400 {
+            let (out, _) = feed(&mut c, 5_000.0, &mut t, 1);
+            if matches!(out.action, Some(GateAction::Start(_))) {
+                started = Some(t - 100);
+                break;
+            }
+        }
+        let started = started.expect("restarts after the rest");
+        assert!(
+            (20_000..20_200).contains(&(started - fault_t)),
+            "{}",
+            started - fault_t
+        );
         assert_eq!(c.telemetry().faults, 1);
     }
 

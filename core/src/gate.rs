@@ -58,11 +58,32 @@ enum State {
     Pulse,
 }
 
-/// The gate's state machine: emits only the actions that change the line.
+/// The gate's state machine: emits only the actions that change the line, and keeps the duty
+/// cap across transitions.
+///
+/// The timer keeps the cap within a burst by itself (each period is long enough for its
+/// on-time). Across an Off or a one-pulse it cannot: a restart would begin a new on-time at
+/// once. So on leaving a running burst at `t` the gate assumes the worst — that burst's last
+/// pulse ran its whole on-time up to `t` — and lets the line on again only after
+/// `t + on × (1000 − cap)/cap`; after a one-pulse, only after `start + on × 1000/cap`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Gate {
     state: State,
+    /// The line may go on again from this time (µs, wrapping), if set.
+    earliest_on_us: Option<u32>,
+    /// Longest on-time issued since the last Start, clocks. An Update only takes effect at the
+    /// next update event, so the hardware may still be running an earlier, longer on-time.
+    max_on_clocks: u64,
+}
+
+/// µs the line must stay off after an on-time of `on_clocks`, so on/(on + rest) ≤ cap.
+fn rest_us(on_clocks: u64, timer: &BurstTimer, limits: &SafetyLimits) -> u32 {
+    let cap = limits.max_duty_permille.max(1) as u64;
+    let on_us = (on_clocks * 1_000_000).div_ceil(timer.clock_hz.max(1) as u64);
+    (on_us * (1000 - cap.min(1000)))
+        .div_ceil(cap)
+        .min(u32::MAX as u64 / 2) as u32
 }
 
 impl Gate {
@@ -74,49 +95,107 @@ impl Gate {
         }
     }
 
-    /// Moves towards `desired` (None = off); returns the action to apply, if anything changes.
-    /// Settings outside the caps are refused (line off): the planner never makes them, so this
-    /// only fires on a bug, and then on the safe side. Called after a pulse has ended, it starts
-    /// afresh (the one-pulse stopped the counter by itself).
+    fn may_go_on(&self, t_us: u32) -> bool {
+        self.earliest_on_us
+            .is_none_or(|e| t_us.wrapping_sub(e) as i32 >= 0)
+    }
+
+    /// Leaving a running burst at `t_us`: the worst-case rest before the line may go on again.
+    fn leave_running(
+        &mut self,
+        s: &TimerSettings,
+        t_us: u32,
+        timer: &BurstTimer,
+        limits: &SafetyLimits,
+    ) {
+        let on = self.max_on_clocks.max(s.on_clocks());
+        self.earliest_on_us = Some(t_us.wrapping_add(rest_us(on, timer, limits)));
+    }
+
+    /// Moves towards `desired` (None = off) at time `t_us`; returns the action to apply, if
+    /// anything changes. Unchanged settings return at once (this runs every sample). Settings
+    /// outside the caps are refused (line off): the planner never makes them, so this only fires
+    /// on a bug, and then on the safe side. A start inside the rest after an Off or a pulse is
+    /// held back (None) and happens on the first request after the rest.
     pub fn request(
         &mut self,
         desired: Option<TimerSettings>,
+        t_us: u32,
         timer: &BurstTimer,
         limits: &SafetyLimits,
     ) -> Option<GateAction> {
+        if let (State::Running(r), Some(s)) = (self.state, desired) {
+            if r == s {
+                return None;
+            }
+        }
         let desired = desired.filter(|s| limits.allows(timer, s));
-        let (next, action) = match (self.state, desired) {
-            (State::Off | State::Pulse, None) => (State::Off, None),
-            (State::Running(_), None) => (State::Off, Some(GateAction::Off)),
-            (State::Off | State::Pulse, Some(s)) => (State::Running(s), Some(GateAction::Start(s))),
-            (State::Running(r), Some(s)) if r == s => (State::Running(r), None),
-            (State::Running(_), Some(s)) => (State::Running(s), Some(GateAction::Update(s))),
-        };
-        self.state = next;
-        action
+        match (self.state, desired) {
+            (State::Off | State::Pulse, None) => {
+                self.state = State::Off;
+                None
+            }
+            (State::Running(r), None) => {
+                self.leave_running(&r, t_us, timer, limits);
+                self.state = State::Off;
+                Some(GateAction::Off)
+            }
+            (State::Off | State::Pulse, Some(s)) => {
+                if !self.may_go_on(t_us) {
+                    return None;
+                }
+                self.state = State::Running(s);
+                self.max_on_clocks = s.on_clocks();
+                Some(GateAction::Start(s))
+            }
+            (State::Running(_), Some(s)) => {
+                self.state = State::Running(s);
+                self.max_on_clocks = self.max_on_clocks.max(s.on_clocks());
+                Some(GateAction::Update(s))
+            }
+        }
     }
 
     /// Turns the line off now, whatever it does (faults): also cuts a pulse short.
-    pub fn force_off(&mut self) -> Option<GateAction> {
+    pub fn force_off(
+        &mut self,
+        t_us: u32,
+        timer: &BurstTimer,
+        limits: &SafetyLimits,
+    ) -> Option<GateAction> {
         let was = self.state;
+        if let State::Running(r) = was {
+            self.leave_running(&r, t_us, timer, limits);
+        }
         self.state = State::Off;
         (was != State::Off).then_some(GateAction::Off)
     }
 
-    /// Fires one pulse of `settings` (a line), replacing whatever runs. Refused (line off) above
-    /// the on-time cap; the duty cap is kept by the caller's refractory time after the pulse.
+    /// Fires one pulse of `settings` (a line) at `t_us`. Refused (None, nothing changes) while a
+    /// burst runs or inside the rest after one, since the pulse would add its on-time to an
+    /// on-time already spent; refused (line off) above the on-time cap.
     pub fn pulse(
         &mut self,
         settings: TimerSettings,
+        t_us: u32,
         timer: &BurstTimer,
         limits: &SafetyLimits,
     ) -> Option<GateAction> {
-        if settings.on_clocks() <= limits.max_on_time_clocks(timer) {
-            self.state = State::Pulse;
-            Some(GateAction::Pulse(settings))
-        } else {
-            self.force_off()
+        if settings.on_clocks() > limits.max_on_time_clocks(timer) {
+            return self.force_off(t_us, timer, limits);
         }
+        if matches!(self.state, State::Running(_)) || !self.may_go_on(t_us) {
+            return None;
+        }
+        self.state = State::Pulse;
+        let on_us =
+            (settings.on_clocks() * 1_000_000).div_ceil(timer.clock_hz.max(1) as u64) as u32;
+        self.earliest_on_us = Some(t_us.wrapping_add(on_us).wrapping_add(rest_us(
+            settings.on_clocks(),
+            timer,
+            limits,
+        )));
+        Some(GateAction::Pulse(settings))
     }
 }
 
@@ -144,34 +223,12 @@ mod tests {
             ccr: 200,
         };
         let mut g = Gate::default();
-        assert_eq!(g.request(None, &T, &l), None);
-        assert_eq!(g.request(Some(a), &T, &l), Some(GateAction::Start(a)));
-        assert_eq!(g.request(Some(a), &T, &l), None);
-        assert_eq!(g.request(Some(b), &T, &l), Some(GateAction::Update(b)));
-        assert_eq!(g.request(None, &T, &l), Some(GateAction::Off));
-        assert_eq!(g.force_off(), None);
-    }
-
-    #[test]
-    fn pulses_end_by_themselves_but_faults_cut_them() {
-        let l = SafetyLimits::default();
-        let p = TimerSettings {
-            psc: 0,
-            arr: 900_000,
-            ccr: 900_000,
-        };
-        let mut g = Gate::default();
-        assert_eq!(g.pulse(p, &T, &l), Some(GateAction::Pulse(p)));
-        assert_eq!(g.force_off(), Some(GateAction::Off));
-        g.pulse(p, &T, &l);
-        // After the pulse nothing is left to switch off.
-        assert_eq!(g.request(None, &T, &l), None);
-        let too_long = TimerSettings {
-            psc: 0,
-            arr: 9_000_000,
-            ccr: 9_000_000,
-        };
-        assert_eq!(g.pulse(too_long, &T, &l), None);
+        assert_eq!(g.request(None, 0, &T, &l), None);
+        assert_eq!(g.request(Some(a), 0, &T, &l), Some(GateAction::Start(a)));
+        assert_eq!(g.request(Some(a), 100, &T, &l), None);
+        assert_eq!(g.request(Some(b), 200, &T, &l), Some(GateAction::Update(b)));
+        assert_eq!(g.request(None, 300, &T, &l), Some(GateAction::Off));
+        assert_eq!(g.force_off(400, &T, &l), None);
     }
 
     #[test]
@@ -183,7 +240,71 @@ mod tests {
             ccr: 600,
         };
         let mut g = Gate::default();
-        assert_eq!(g.request(Some(too_long), &T, &l), None);
+        assert_eq!(g.request(Some(too_long), 0, &T, &l), None);
         assert_eq!(g.running(), None);
+    }
+
+    /// 20 Hz at 40 %: 20 ms on. After an Off the line stays off for 20 ms (cap 50 %).
+    #[test]
+    fn restart_after_off_waits_out_the_rest() {
+        let l = SafetyLimits::default();
+        let s = TimerSettings {
+            psc: 0,
+            arr: 4_499_999,
+            ccr: 1_800_000,
+        };
+        let mut g = Gate::default();
+        g.request(Some(s), 0, &T, &l);
+        assert_eq!(g.force_off(30_000, &T, &l), Some(GateAction::Off));
+        assert_eq!(g.request(Some(s), 31_000, &T, &l), None);
+        assert_eq!(g.request(Some(s), 49_999, &T, &l), None);
+        assert_eq!(
+            g.request(Some(s), 50_000, &T, &l),
+            Some(GateAction::Start(s))
+        );
+        // An Update to a short on-time just before the Off: the hardware may still run the long
+        // one until its update event, so the rest is still the long one's.
+        let short = TimerSettings {
+            psc: 0,
+            arr: 89_999,
+            ccr: 36_000,
+        };
+        g.request(Some(short), 60_000, &T, &l);
+        g.force_off(60_100, &T, &l);
+        assert_eq!(g.request(Some(short), 79_999, &T, &l), None);
+        assert!(g.request(Some(short), 80_100, &T, &l).is_some());
+    }
+
+    #[test]
+    fn pulses_end_by_themselves_but_faults_cut_them() {
+        let l = SafetyLimits::default();
+        let p = TimerSettings {
+            psc: 0,
+            arr: 900_000,
+            ccr: 900_000,
+        };
+        let mut g = Gate::default();
+        assert_eq!(g.pulse(p, 0, &T, &l), Some(GateAction::Pulse(p)));
+        assert_eq!(g.force_off(100, &T, &l), Some(GateAction::Off));
+        // 10 ms pulse at a 50 % cap: nothing on again before 20 ms.
+        assert_eq!(g.pulse(p, 19_999, &T, &l), None);
+        assert_eq!(g.pulse(p, 20_000, &T, &l), Some(GateAction::Pulse(p)));
+        // After the pulse nothing is left to switch off.
+        assert_eq!(g.request(None, 45_000, &T, &l), None);
+        let too_long = TimerSettings {
+            psc: 0,
+            arr: 9_000_000,
+            ccr: 9_000_000,
+        };
+        assert_eq!(g.pulse(too_long, 90_000, &T, &l), None);
+        // A running burst is never topped up by a pulse.
+        let s = TimerSettings {
+            psc: 0,
+            arr: 999,
+            ccr: 400,
+        };
+        g.request(Some(s), 100_000, &T, &l);
+        assert_eq!(g.pulse(p, 100_100, &T, &l), None);
+        assert_eq!(g.running(), Some(s));
     }
 }

@@ -433,7 +433,7 @@ pub fn parse(file: &str, text: &str) -> Result<SceneDoc, SceneFileError> {
             )
         };
         let speed = |s: &Option<Spanned<f64>>| -> Result<u32, SceneFileError> {
-            Ok((cx.opt(s, &field("min_speed_mm_s"), 0.0, 1000.0, 5.0)? * 1000.0).round() as u32)
+            Ok((cx.opt(s, &field("min_speed_mm_s"), 0.0, 1000.0, 15.0)? * 1000.0).round() as u32)
         };
         let need = |v: &Option<Spanned<f64>>, name: &str, lo: f64, hi: f64| match v {
             Some(v) => cx.range(v, &field(name), lo, hi),

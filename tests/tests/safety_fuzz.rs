@@ -131,10 +131,14 @@ fn caps_never_exceeded_over_random_scenes() {
             worst_on = worst_on.max(pl.on() as f64 / max_on as f64);
             if let Some(period) = pl.period() {
                 if restarts.contains(&pl.next_rise.unwrap()) {
-                    // The next rise is a fresh Start after an Off, not the timer's period:
-                    // judged by `restart_after_off_respects_the_duty_cap` below.
+                    // The next rise is a fresh Start after an Off, not the timer's period: the
+                    // gate's rest after the Off must keep the cap across it too.
                     let duty = pl.on() as f64 * 1000.0 / (period * cap) as f64;
                     worst_restart = worst_restart.max(duty);
+                    assert!(
+                        duty <= 1.0,
+                        "case {case}: duty across an Off→Start restart {duty:.4} of cap"
+                    );
                     continue;
                 }
                 assert!(
@@ -165,9 +169,9 @@ fn caps_never_exceeded_over_random_scenes() {
 /// on-time is followed by a new one less than a period later: on-time / rise-to-rise exceeds the
 /// duty cap (fuzz case: 24.85 ms on, next rise 29.1 ms later = 85 % against an 80.8 % cap, after
 /// a 2.6 ms rail fault). The core needs a hold-off before a Start (e.g. not before the previous
-/// period would have ended). Ignored until saw-core fixes it; run with `--ignored` to see it.
+/// period would have ended). Fixed in saw-core's gate: after an Off the line rests
+/// on × (1000 − cap)/cap before it may start again.
 #[test]
-#[ignore = "saw-core: Start right after Off can exceed the duty cap (reported)"]
 fn restart_after_off_respects_the_duty_cap() {
     use saw_core::sample::Sample;
     let board = &saw_boards::NUCLEO_F446RE;

@@ -22,12 +22,12 @@ pub struct Grating {
 }
 
 impl Grating {
-    /// A grating of period `wavelength_um` with 40 % duty, a 5 mm/s start threshold, full drive.
+    /// A grating of period `wavelength_um` with 40 % duty, a 15 mm/s start threshold (below it, noise at rest would fire bursts: docs/estimators.md), full drive.
     pub const fn new(wavelength_um: u32) -> Self {
         Self {
             wavelength_um,
             duty_permille: 400,
-            min_speed_um_s: 5_000,
+            min_speed_um_s: 15_000,
             amplitude_permille: 1000,
         }
     }

@@ -47,7 +47,7 @@ impl Material {
             mass_kg: 0.001,
             stiffness_n_per_m: 500.0,
             duty_permille: 400,
-            min_speed_um_s: 5_000,
+            min_speed_um_s: 15_000,
         }
     }
 
