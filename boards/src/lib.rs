@@ -471,13 +471,31 @@ mod tests {
         for b in ALL {
             let c = &b.clocks;
             let l = &c.limits;
-            assert_eq!(c.osc_hz % c.pll_m, 0, "{}: PLLM does not divide the oscillator", b.name);
+            assert_eq!(
+                c.osc_hz % c.pll_m,
+                0,
+                "{}: PLLM does not divide the oscillator",
+                b.name
+            );
             let vin = c.osc_hz / c.pll_m;
-            assert!((l.vco_in_min_hz..=l.vco_in_max_hz).contains(&vin), "{}: VCO in {vin}", b.name);
+            assert!(
+                (l.vco_in_min_hz..=l.vco_in_max_hz).contains(&vin),
+                "{}: VCO in {vin}",
+                b.name
+            );
             let vco = vin * c.pll_n;
-            assert!((l.vco_out_min_hz..=l.vco_out_max_hz).contains(&vco), "{}: VCO {vco}", b.name);
+            assert!(
+                (l.vco_out_min_hz..=l.vco_out_max_hz).contains(&vco),
+                "{}: VCO {vco}",
+                b.name
+            );
             assert_eq!(vco % c.pll_out_div, 0);
-            assert_eq!(vco / c.pll_out_div, c.sysclk_hz, "{}: PLL chain != SYSCLK", b.name);
+            assert_eq!(
+                vco / c.pll_out_div,
+                c.sysclk_hz,
+                "{}: PLL chain != SYSCLK",
+                b.name
+            );
             assert_eq!(b.sysclk_hz, c.sysclk_hz);
             assert!(c.sysclk_hz <= l.sysclk_max_hz);
             assert!(c.pclk1_hz() <= l.pclk1_max_hz && c.pclk2_hz() <= l.pclk2_max_hz);
@@ -546,8 +564,19 @@ mod tests {
     fn pins_avoid_nucleo_reserved() {
         let reserved = [('A', 2), ('A', 3), ('A', 5), ('A', 13), ('A', 14)];
         for b in ALL {
-            for p in [b.carrier.pin, b.burst.pin, b.burst_b_pin, b.adc.pin, b.rf_arm_pin] {
-                assert!(!reserved.iter().any(|&(port, pin)| p.is(port, pin)), "{}: {:?}", b.name, p);
+            for p in [
+                b.carrier.pin,
+                b.burst.pin,
+                b.burst_b_pin,
+                b.adc.pin,
+                b.rf_arm_pin,
+            ] {
+                assert!(
+                    !reserved.iter().any(|&(port, pin)| p.is(port, pin)),
+                    "{}: {:?}",
+                    b.name,
+                    p
+                );
             }
         }
     }

@@ -55,7 +55,12 @@ pub const NUCLEO_F446RE: BoardDef = BoardDef {
         clk_hz: CLOCKS.apb2_timer_hz(),
         counter_bits: 16,
         channel: 1,
-        pin: Pin { port: 'A', pin: 8, af: Some(1), header: "D7 (CN9-8), morpho CN10-23" },
+        pin: Pin {
+            port: 'A',
+            pin: 8,
+            af: Some(1),
+            header: "D7 (CN9-8), morpho CN10-23",
+        },
     },
     carrier_timer_clk_hz: CLOCKS.apb2_timer_hz(),
     carrier_divider: 12,
@@ -67,11 +72,21 @@ pub const NUCLEO_F446RE: BoardDef = BoardDef {
         clk_hz: CLOCKS.apb1_timer_hz(),
         counter_bits: 32,
         channel: 1,
-        pin: Pin { port: 'A', pin: 0, af: Some(1), header: "A0 (CN8-1), morpho CN7-28" },
+        pin: Pin {
+            port: 'A',
+            pin: 0,
+            af: Some(1),
+            header: "A0 (CN8-1), morpho CN7-28",
+        },
     },
     // TIM2_CH3 = PB10 AF1 (Arduino D6): second RF enable (IDT B).
     burst_b_channel: 3,
-    burst_b_pin: Pin { port: 'B', pin: 10, af: Some(1), header: "D6 (CN9-7), morpho CN10-25" },
+    burst_b_pin: Pin {
+        port: 'B',
+        pin: 10,
+        af: Some(1),
+        header: "D6 (CN9-7), morpho CN10-25",
+    },
     burst_timer_clk_hz: CLOCKS.apb1_timer_hz(),
     burst_timer_bits: 32,
     max_burst_hz: MAX_BURST_HZ,
@@ -80,8 +95,15 @@ pub const NUCLEO_F446RE: BoardDef = BoardDef {
     adc: AdcDef {
         adc: "ADC1",
         channel: 1,
-        pin: Pin { port: 'A', pin: 1, af: None, header: "A1 (CN8-2), morpho CN7-30" },
-        oversampling: Oversampling::Software { conversions: ADC_OVERSAMPLE },
+        pin: Pin {
+            port: 'A',
+            pin: 1,
+            af: None,
+            header: "A1 (CN8-2), morpho CN7-30",
+        },
+        oversampling: Oversampling::Software {
+            conversions: ADC_OVERSAMPLE,
+        },
         trigger_timer: "TIM3",
         trigger_bus: Bus::Apb1,
         trigger_timer_clk_hz: CLOCKS.apb1_timer_hz(),
@@ -92,7 +114,12 @@ pub const NUCLEO_F446RE: BoardDef = BoardDef {
     adc_oversample: ADC_OVERSAMPLE,
 
     // PB5 (Arduino D4): plain push-pull GPIO, RF amplifier arm/interlock.
-    rf_arm_pin: Pin { port: 'B', pin: 5, af: None, header: "D4 (CN9-5), morpho CN10-29" },
+    rf_arm_pin: Pin {
+        port: 'B',
+        pin: 5,
+        af: None,
+        header: "D4 (CN9-5), morpho CN10-29",
+    },
     time_driver_timer: "TIM4",
 
     flash_origin: 0x0800_0000,

@@ -53,7 +53,12 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
         clk_hz: CLOCKS.apb2_timer_hz(),
         counter_bits: 16,
         channel: 1,
-        pin: Pin { port: 'A', pin: 8, af: Some(6), header: "D7 (CN9-8), morpho CN10-23" },
+        pin: Pin {
+            port: 'A',
+            pin: 8,
+            af: Some(6),
+            header: "D7 (CN9-8), morpho CN10-23",
+        },
     },
     carrier_timer_clk_hz: CLOCKS.apb2_timer_hz(),
     carrier_divider: 10,
@@ -65,11 +70,21 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
         clk_hz: CLOCKS.apb1_timer_hz(),
         counter_bits: 32,
         channel: 1,
-        pin: Pin { port: 'A', pin: 0, af: Some(1), header: "A0 (CN8-1), morpho CN7-28" },
+        pin: Pin {
+            port: 'A',
+            pin: 0,
+            af: Some(1),
+            header: "A0 (CN8-1), morpho CN7-28",
+        },
     },
     // TIM2_CH3 = PB10 AF1 (Arduino D6): second RF enable (IDT B).
     burst_b_channel: 3,
-    burst_b_pin: Pin { port: 'B', pin: 10, af: Some(1), header: "D6 (CN9-7), morpho CN10-25" },
+    burst_b_pin: Pin {
+        port: 'B',
+        pin: 10,
+        af: Some(1),
+        header: "D6 (CN9-7), morpho CN10-25",
+    },
     burst_timer_clk_hz: CLOCKS.apb1_timer_hz(),
     burst_timer_bits: 32,
     max_burst_hz: MAX_BURST_HZ,
@@ -78,8 +93,16 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
     adc: AdcDef {
         adc: "ADC1",
         channel: 2,
-        pin: Pin { port: 'A', pin: 1, af: None, header: "A1 (CN8-2), morpho CN7-30" },
-        oversampling: Oversampling::Hardware { ratio: ADC_OVERSAMPLE, shift: 0 },
+        pin: Pin {
+            port: 'A',
+            pin: 1,
+            af: None,
+            header: "A1 (CN8-2), morpho CN7-30",
+        },
+        oversampling: Oversampling::Hardware {
+            ratio: ADC_OVERSAMPLE,
+            shift: 0,
+        },
         trigger_timer: "TIM3",
         trigger_bus: Bus::Apb1,
         trigger_timer_clk_hz: CLOCKS.apb1_timer_hz(),
@@ -89,7 +112,12 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
     sample_rate_hz: SAMPLE_RATE_HZ,
     adc_oversample: ADC_OVERSAMPLE,
 
-    rf_arm_pin: Pin { port: 'B', pin: 5, af: None, header: "D4 (CN9-5), morpho CN10-29" },
+    rf_arm_pin: Pin {
+        port: 'B',
+        pin: 5,
+        af: None,
+        header: "D4 (CN9-5), morpho CN10-29",
+    },
     time_driver_timer: "TIM4",
 
     flash_origin: 0x0800_0000,

@@ -11,6 +11,7 @@
 //! - [`report`]: the human summary the CLI prints.
 
 pub mod adc;
+pub mod bench;
 pub mod chart;
 pub mod metrics;
 pub mod models;
@@ -19,4 +20,3 @@ pub mod scenario;
 pub mod sim;
 pub mod timer;
 pub mod trajectory;
-pub mod bench;

@@ -55,10 +55,11 @@ fn scenes(timer: BurstTimer, period: u32) -> Vec<(String, Config)> {
     let mut out = vec![("default".to_string(), saw_core::default_config())];
     for name in ["grating", "material", "random", "lines"] {
         let path = dir.join(format!("{name}.toml"));
-        let text = std::fs::read_to_string(&path)
-            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let cfg = saw_core::scene_file::load_for_board(&format!("{name}.toml"), &text, timer, period)
-            .unwrap_or_else(|e| panic!("{e}"));
+        let text =
+            std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let cfg =
+            saw_core::scene_file::load_for_board(&format!("{name}.toml"), &text, timer, period)
+                .unwrap_or_else(|e| panic!("{e}"));
         out.push((name.to_string(), cfg));
     }
     // The default scene with a fourth region, a grating from 60 mm, that no trajectory enters:
@@ -130,7 +131,9 @@ fn gen(dir: &Path) -> Result<(), String> {
         encode_config(&mut c, cfg);
         let back = format::decode_config(&mut Reader::new(&c.0));
         if &back != cfg {
-            return Err(format!("scene {name}: config does not survive the round trip"));
+            return Err(format!(
+                "scene {name}: config does not survive the round trip"
+            ));
         }
         s.put(&c.0);
     }
@@ -174,7 +177,12 @@ fn gen(dir: &Path) -> Result<(), String> {
             s.u32(outputs.0.len() as u32);
             s.put(&outputs.0);
             s.u32(crc);
-            writeln!(manifest, "{vname} n={n} crc={crc:08x} bytes={}", outputs.0.len()).unwrap();
+            writeln!(
+                manifest,
+                "{vname} n={n} crc={crc:08x} bytes={}",
+                outputs.0.len()
+            )
+            .unwrap();
         }
     }
     std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
@@ -226,9 +234,14 @@ fn check(dir: &Path, log: &Path, cost_md: &Path) -> Result<(), String> {
         let exact = got.get("crc") == want.get("crc") && got.get("n") == want.get("n");
         let diff = num(&got, "diff")?;
         let beyond = num(&got, "beyond_tol")?;
-        let f32_inside = f32_scenes.iter().any(|s| name.starts_with(&format!("{s}/")));
+        let f32_inside = f32_scenes
+            .iter()
+            .any(|s| name.starts_with(&format!("{s}/")));
         if exact && diff == 0 {
-            println!("  {name:<40} bit-exact (n={}, crc={})", want["n"], want["crc"]);
+            println!(
+                "  {name:<40} bit-exact (n={}, crc={})",
+                want["n"], want["crc"]
+            );
         } else if f32_inside && beyond == 0 {
             println!("  {name:<40} {diff} records differ, all within ±1 tick (f32 scene)");
         } else {
@@ -265,14 +278,21 @@ fn check(dir: &Path, log: &Path, cost_md: &Path) -> Result<(), String> {
         ("COST-STAGE", "Stages alone (default scene, back-and-forth inputs)"),
     ];
     for (tag, title) in sections {
-        let rows: Vec<_> = log.lines().filter(|l| l.contains(&format!("{tag} "))).collect();
+        let rows: Vec<_> = log
+            .lines()
+            .filter(|l| l.contains(&format!("{tag} ")))
+            .collect();
         if rows.is_empty() {
             failures.push(format!("no {tag} lines in the log"));
             continue;
         }
         writeln!(md, "\n### {title}\n").unwrap();
         if tag == "COST-ESTIMATOR" {
-            writeln!(md, "| estimator | update, instr/sample | on_sample, instr/sample |").unwrap();
+            writeln!(
+                md,
+                "| estimator | update, instr/sample | on_sample, instr/sample |"
+            )
+            .unwrap();
             writeln!(md, "|---|---:|---:|").unwrap();
         } else {
             writeln!(md, "| case | instr/sample | samples |").unwrap();
@@ -327,9 +347,11 @@ fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().collect();
     let r = match args.get(1).map(String::as_str) {
         Some("gen") if args.len() == 3 => gen(Path::new(&args[2])),
-        Some("check") if args.len() == 5 => {
-            check(Path::new(&args[2]), Path::new(&args[3]), Path::new(&args[4]))
-        }
+        Some("check") if args.len() == 5 => check(
+            Path::new(&args[2]),
+            Path::new(&args[3]),
+            Path::new(&args[4]),
+        ),
         _ => Err("usage: golden gen <dir> | golden check <dir> <decoded.log> <cost.md>".into()),
     };
     match r {
