@@ -329,10 +329,10 @@ pub fn parse(file: &str, text: &str) -> Result<SceneDoc, SceneFileError> {
     let cx = Ctx { file, text };
     let doc: File = toml::from_str(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
-        let line_text = text[..span.start.min(text.len())]
-            .rsplit('\n')
-            .next()
-            .unwrap_or("");
+        // The whole line holding the error: its key names the field.
+        let start = span.start.min(text.len());
+        let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+        let line_text = text[line_start..].split('\n').next().unwrap_or("");
         let field = line_text.split('=').next().unwrap_or("").trim();
         let field = if field.is_empty() { "(file)" } else { field };
         cx.err(span, field, e.message())
@@ -690,7 +690,7 @@ mod tests {
     #[test]
     fn unknown_field_is_located() {
         let e = err("[[region]]\nkind = \"constant\"\nf_b_hz = 80\ncolour = \"red\"\n");
-        assert_eq!(e.line, 4, "{e}");
+        assert_eq!((e.line, e.field.as_str()), (4, "colour"), "{e}");
         assert!(e.message.contains("colour"), "{e}");
         assert!(e.to_string().starts_with("bad.toml:4:"), "{e}");
     }

@@ -64,6 +64,9 @@ struct Args {
     /// Disable timer preload (shows the runts preload prevents).
     #[arg(long)]
     no_preload: bool,
+    /// Scene file (TOML, see scenes/); default: the built-in default scene.
+    #[arg(long)]
+    scene: Option<PathBuf>,
     /// Run a scenario file instead (its expectations are checked too).
     #[arg(long)]
     scenario: Option<PathBuf>,
@@ -161,6 +164,16 @@ fn run(args: &Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
                 ..AdcParams::default()
             };
             p.preload = !args.no_preload;
+            if let Some(path) = &args.scene {
+                let text = std::fs::read_to_string(path)
+                    .map_err(|e| format!("{}: {e}", path.display()))?;
+                p.config = saw_core::scene_file::load_for_board(
+                    &path.display().to_string(),
+                    &text,
+                    sim::burst_timer(board),
+                    sim::sample_period_us(board),
+                )?;
+            }
             (p, None)
         }
     };

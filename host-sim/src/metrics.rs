@@ -2,6 +2,7 @@
 //! switches against the scene's boundaries, velocity error and delay, faults, pulse integrity.
 
 use saw_core::burst::TimerSettings;
+use saw_core::gate::GateAction;
 
 use crate::sim::SimResult;
 
@@ -169,7 +170,15 @@ pub fn compute(r: &SimResult) -> Metrics {
     }
     let fault_samples = r.trace.iter().filter(|t| t.fault.is_some()).count();
 
-    let planned: Vec<TimerSettings> = r.region_settings.iter().flatten().copied().collect();
+    // Every setting the core handed the timer (constant regions', and the per-sample ones of
+    // grating/material/random regions and line pulses): a whole pulse matches one of them.
+    let mut planned: Vec<TimerSettings> = r.region_settings.iter().flatten().copied().collect();
+    planned.extend(r.trace.iter().filter_map(|t| match t.action {
+        Some(GateAction::Start(s) | GateAction::Update(s) | GateAction::Pulse(s)) => Some(s),
+        _ => None,
+    }));
+    planned.sort_by_key(|s| (s.psc, s.arr, s.ccr));
+    planned.dedup();
     let malformed_pulses = pulses
         .iter()
         .filter(|p| !pulse_matches(p.on(), p.period(), &planned))

@@ -145,6 +145,8 @@ struct Running {
     end_ticks: u64,
     /// What the next update event loads.
     pending: Option<TimerSettings>,
+    /// One-pulse mode (OPM): the update event ending this period stops the counter.
+    one_pulse: bool,
 }
 
 /// The burst timer.
@@ -222,6 +224,12 @@ impl TimerModel {
             if end > t {
                 break;
             }
+            if r.one_pulse {
+                // OPM: the update event clears CEN; the line stays low.
+                self.running = None;
+                self.set_level(end, false);
+                break;
+            }
             // Update event: load the preloaded values, restart the period.
             if let Some(p) = r.pending.take() {
                 r.psc = p.psc;
@@ -252,6 +260,19 @@ impl TimerModel {
                     ccr: s.ccr,
                     end_ticks: s.arr as u64 + 1,
                     pending: None,
+                    one_pulse: false,
+                });
+                self.set_level(t, s.ccr > 0);
+            }
+            GateAction::Pulse(s) => {
+                // One-pulse mode from a stopped counter: high for ccr ticks, then low and stopped.
+                self.running = Some(Running {
+                    t0: t,
+                    psc: s.psc,
+                    ccr: s.ccr,
+                    end_ticks: s.arr as u64 + 1,
+                    pending: None,
+                    one_pulse: true,
                 });
                 self.set_level(t, s.ccr > 0);
             }
