@@ -115,6 +115,10 @@ async fn main(spawner: Spawner) {
         BOARD.burst_b_channel
     );
 
+    // Random amplitude and line envelopes need a level input on the RF amplifier; the Nucleo
+    // builds have none wired, so they degrade to full-drive bursts — said once, clearly.
+    warn!("amplitude: no RF level control on {}: random amplitude and line envelopes run at full drive", BOARD.name);
+
     let mut wdg = IndependentWatchdog::new(parts.iwdg, IWDG_TIMEOUT_US);
     wdg.unleash();
 
