@@ -351,22 +351,6 @@ mod tests {
         };
         assert_eq!(plan(&T32, &l, &c).err(), Some(BurstError::DutyAboveCap));
     }
-}
-
-#[cfg(test)]
-mod fast_tests {
-    use super::*;
-
-    const T32: BurstTimer = BurstTimer {
-        clock_hz: 90_000_000,
-        counter_bits: 32,
-        max_burst_hz: 5_000,
-    };
-    const T16: BurstTimer = BurstTimer {
-        clock_hz: 180_000_000,
-        counter_bits: 16,
-        max_burst_hz: 5_000,
-    };
 
     /// The fast planner agrees with the exact one to the rounding of one tick, on both widths.
     #[test]

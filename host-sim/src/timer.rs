@@ -243,6 +243,19 @@ impl TimerModel {
         self.now = t;
     }
 
+    /// Latches `s` and counts from 0 at `t` (UG + CEN); `one_pulse` stops at the update event.
+    fn start(&mut self, t: u64, s: TimerSettings, one_pulse: bool) {
+        self.running = Some(Running {
+            t0: t,
+            psc: s.psc,
+            ccr: s.ccr,
+            end_ticks: s.arr as u64 + 1,
+            pending: None,
+            one_pulse,
+        });
+        self.set_level(t, s.ccr > 0);
+    }
+
     /// Applies `action` at kernel-clock time `t`.
     pub fn apply(&mut self, t: u64, action: GateAction) {
         self.advance_to(t);
@@ -253,29 +266,9 @@ impl TimerModel {
                 self.running = None;
                 self.set_level(t, false);
             }
-            GateAction::Start(s) => {
-                self.running = Some(Running {
-                    t0: t,
-                    psc: s.psc,
-                    ccr: s.ccr,
-                    end_ticks: s.arr as u64 + 1,
-                    pending: None,
-                    one_pulse: false,
-                });
-                self.set_level(t, s.ccr > 0);
-            }
-            GateAction::Pulse(s) => {
-                // One-pulse mode from a stopped counter: high for ccr ticks, then low and stopped.
-                self.running = Some(Running {
-                    t0: t,
-                    psc: s.psc,
-                    ccr: s.ccr,
-                    end_ticks: s.arr as u64 + 1,
-                    pending: None,
-                    one_pulse: true,
-                });
-                self.set_level(t, s.ccr > 0);
-            }
+            GateAction::Start(s) => self.start(t, s, false),
+            // One-pulse mode from a stopped counter: high for ccr ticks, then low and stopped.
+            GateAction::Pulse(s) => self.start(t, s, true),
             GateAction::Update(s) => {
                 let Some(mut r) = self.running else {
                     self.protocol_errors += 1;
