@@ -77,11 +77,15 @@ pub struct Gate {
     max_on_clocks: u64,
 }
 
+/// An on-time in µs, rounded up (so rests computed from it are never short).
+fn on_us(on_clocks: u64, timer: &BurstTimer) -> u64 {
+    (on_clocks * 1_000_000).div_ceil(timer.clock_hz.max(1) as u64)
+}
+
 /// µs the line must stay off after an on-time of `on_clocks`, so on/(on + rest) ≤ cap.
 fn rest_us(on_clocks: u64, timer: &BurstTimer, limits: &SafetyLimits) -> u32 {
     let cap = limits.max_duty_permille.max(1) as u64;
-    let on_us = (on_clocks * 1_000_000).div_ceil(timer.clock_hz.max(1) as u64);
-    (on_us * (1000 - cap.min(1000)))
+    (on_us(on_clocks, timer) * (1000 - cap.min(1000)))
         .div_ceil(cap)
         .min(u32::MAX as u64 / 2) as u32
 }
@@ -188,8 +192,7 @@ impl Gate {
             return None;
         }
         self.state = State::Pulse;
-        let on_us =
-            (settings.on_clocks() * 1_000_000).div_ceil(timer.clock_hz.max(1) as u64) as u32;
+        let on_us = on_us(settings.on_clocks(), timer) as u32;
         self.earliest_on_us = Some(t_us.wrapping_add(on_us).wrapping_add(rest_us(
             settings.on_clocks(),
             timer,
