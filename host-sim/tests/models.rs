@@ -711,3 +711,199 @@ fn atan_errors_bounded_and_ordered() {
     );
     assert!(l.max_rel_f_ss < 1e-6);
 }
+
+// ---------------------------------------------------------------- charts (`model charts`)
+
+/// A fresh scratch directory per test (tests run in parallel).
+fn scratch_dir(test: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("saw-model-charts-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// (width, height) from a PNG's IHDR, after checking the signature.
+fn png_size(bytes: &[u8]) -> (u32, u32) {
+    assert!(bytes.len() > 24, "{} bytes", bytes.len());
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "not a PNG");
+    assert_eq!(&bytes[12..16], b"IHDR");
+    let be = |i: usize| u32::from_be_bytes(bytes[i..i + 4].try_into().unwrap());
+    (be(16), be(20))
+}
+
+/// Bytes of a blank white PNG per (width, height), written by the same encoder as the charts.
+type BlankSizes = std::collections::HashMap<(u32, u32), usize>;
+
+/// Asserts that `path` is a PNG of a real chart: a sensible size, and several times the bytes of
+/// a blank white PNG of the same dimensions (a chart that drew nothing, or only a background,
+/// compresses to about the blank size). Blanks are cached in `blanks`: encoding is most of the
+/// cost of a chart in a debug build.
+fn assert_nontrivial_png(
+    path: &std::path::Path,
+    scratch: &std::path::Path,
+    blanks: &mut BlankSizes,
+) {
+    use plotters::prelude::*;
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let (w, h) = png_size(&bytes);
+    assert!(
+        w >= 600 && h >= 400,
+        "{}: {w}×{h} px is too small",
+        path.display()
+    );
+    let blank = *blanks.entry((w, h)).or_insert_with(|| {
+        let blank_path = scratch.join(format!("blank-{w}x{h}.png"));
+        let root = BitMapBackend::new(&blank_path, (w, h)).into_drawing_area();
+        root.fill(&WHITE).unwrap();
+        root.present().unwrap();
+        std::fs::metadata(&blank_path).unwrap().len() as usize
+    });
+    assert!(
+        bytes.len() > 5 * blank,
+        "{}: {} bytes, a blank {w}×{h} PNG is {blank}",
+        path.display(),
+        bytes.len()
+    );
+}
+
+#[test]
+fn model_charts_cli_writes_the_four_pngs_and_tables() {
+    use host_sim::models::charts::Chart;
+    let dir = scratch_dir("all");
+    let out = run_model(&[
+        "charts".into(),
+        "--out".into(),
+        dir.join("charts").display().to_string(),
+        "--no-cost".into(),
+    ])
+    .unwrap();
+    let mut blanks = BlankSizes::new();
+    for chart in Chart::ALL {
+        let path = dir.join("charts").join(chart.file_name());
+        assert!(out.contains(&format!("wrote {}", path.display())), "{out}");
+        assert_nontrivial_png(&path, &dir, &mut blanks);
+    }
+    // The tables of docs/models.md: all three solvers at rtol 1e-3…1e-15, all three atans
+    // (cost columns empty without valgrind), fig. 5 at four Δμ.
+    for solver in Solver::ALL {
+        for n in [3, 6, 9, 12, 15] {
+            let row = format!("| {} | 1e-{n} |", solver.name());
+            assert!(out.contains(&row), "missing {row:?} in\n{out}");
+        }
+    }
+    for imp in AtanImpl::ALL {
+        assert!(out.contains(&format!("| {} |", imp.name())), "{out}");
+    }
+    assert_eq!(out.matches("fig5: delta_mu = ").count(), 4, "{out}");
+    assert!(out.contains("atan cost not measured"), "{out}");
+    assert!(run_model(&args("charts --out /nonexistent --only nope")).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn model_charts_only_one_and_atan_cost_axis() {
+    use host_sim::models::charts::{draw_atan, AtanCost, Chart};
+    use host_sim::models::cli::atan_curve;
+    let dir = scratch_dir("only");
+    let one = dir.join("one");
+    run_model(&[
+        "charts".into(),
+        "--out".into(),
+        one.display().to_string(),
+        "--only".into(),
+        "fig5".into(),
+        "--no-cost".into(),
+    ])
+    .unwrap();
+    let written: Vec<String> = std::fs::read_dir(&one)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(written, vec![Chart::Fig5.file_name().to_string()]);
+    // The cost-axis variant of the atan chart (what valgrind feeds), with made-up counts: this
+    // checks the drawing, not the counts.
+    let cost = AtanCost {
+        loop_instr: 6.0,
+        atan_instr: [14.0, 48.0, 75.0],
+        fss_instr: [Some(26.0), Some(59.0), None],
+    };
+    let errors = AtanImpl::ALL.map(atan_errors);
+    let path = dir.join("atan-cost.png");
+    draw_atan(&path, &errors, Some(&cost), &atan_curve()).unwrap();
+    assert_nontrivial_png(&path, &dir, &mut BlankSizes::new());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn chart_series_have_the_shapes_the_models_predict() {
+    use host_sim::models::cli::{atan_curve, fig5_curve, solver_sweep, tile_rows};
+    // Fig. 5: Δμ log-spaced over 1e-3…10; f_ss strictly falling in Δμ, below the ω0/2π plateau
+    // and approaching the kU/(2ΔμP) asymptote from below.
+    let c = fig5_curve(400).unwrap();
+    assert_eq!(c.len(), 401);
+    assert!((c[0].delta_mu - 1e-3).abs() < 1e-15 && (c[400].delta_mu - 10.0).abs() < 1e-9);
+    for w in c.windows(2) {
+        assert!(w[1].delta_mu > w[0].delta_mu);
+        assert!(
+            w[1].f_ss_hz < w[0].f_ss_hz,
+            "not falling at Δμ = {}",
+            w[1].delta_mu
+        );
+    }
+    for p in &c {
+        assert!(p.f_ss_hz < p.f0_hz && p.f_ss_hz < p.asymptote_hz, "{p:?}");
+        assert_eq!(p.f0_hz, c[0].f0_hz);
+    }
+    let last = c[400];
+    assert!((last.asymptote_hz - last.f_ss_hz) / last.asymptote_hz < 2.0 / last.r);
+
+    // Tiles: every paper tile at every force; A and D grow with force; amplitudes span 1…1000
+    // with 1000 at the largest A (the normaliser).
+    let rows = tile_rows().unwrap();
+    assert_eq!(rows.len(), paper_tiles().len() * PAPER_FORCES_G.len());
+    for t in paper_tiles() {
+        let per_tile: Vec<_> = rows.iter().filter(|r| r.tile == t).collect();
+        assert_eq!(per_tile.len(), PAPER_FORCES_G.len());
+        for w in per_tile.windows(2) {
+            assert!(w[1].force_g > w[0].force_g);
+            assert!(w[1].a_mm2 > w[0].a_mm2 && w[1].d_mm > w[0].d_mm, "{t:?}");
+        }
+    }
+    let a_max = rows.iter().map(|r| r.a_mm2).fold(0.0, f64::max);
+    for r in &rows {
+        assert!((1..=1000).contains(&r.amplitude_permille));
+        assert_eq!(r.amplitude_permille == 1000, r.a_mm2 == a_max, "{r:?}");
+    }
+
+    // Solver sweep: each solver at 15 tolerances; bisection's iterations grow and its error
+    // shrinks as rtol tightens; safeguarded solves every case at every tolerance.
+    let sweep = solver_sweep();
+    assert_eq!(sweep.len(), 3 * 15);
+    let bis: Vec<_> = sweep
+        .iter()
+        .filter(|s| s.solver == Solver::Bisection)
+        .collect();
+    for w in bis.windows(2) {
+        assert!(w[1].rtol < w[0].rtol);
+        assert!(w[1].mean_iterations > w[0].mean_iterations);
+        assert!(w[1].max_rel_theta_error <= w[0].max_rel_theta_error);
+    }
+    assert!(sweep
+        .iter()
+        .filter(|s| s.solver == Solver::Safeguarded)
+        .all(|s| s.solved == s.cases));
+
+    // atan curve: the three implementations at each R > 0, R rising to R_MAX.
+    let curve = atan_curve();
+    assert!(!curve.is_empty() && curve.chunks_exact(3).remainder().is_empty());
+    for (i, chunk) in curve.chunks(3).enumerate() {
+        let imps: Vec<_> = chunk.iter().map(|p| p.imp).collect();
+        assert_eq!(imps, AtanImpl::ALL.to_vec());
+        assert!(chunk.iter().all(|p| p.r == chunk[0].r && p.r > 0.0));
+        if i > 0 {
+            assert!(chunk[0].r > curve[3 * i - 3].r);
+        }
+    }
+    let r_end = curve.last().unwrap().r as f64;
+    assert!((r_end - host_sim::models::atan::R_MAX).abs() < 1e-3 * r_end);
+}

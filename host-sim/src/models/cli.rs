@@ -6,7 +6,7 @@ use super::atan::{atan_errors, run_bench, AtanImpl};
 use super::grooved::{grooved, Eq4, GroovedInput, Pad, SolveOptions, Solver};
 use super::sandpaper;
 use super::stick_slip::{large_r_asymptote_hz, stick_slip, Material, StickSlipParams};
-use super::tile::{a_max_mm2, paper_tiles, tile_to_region, PAPER_FORCES_G};
+use super::tile::{a_max_mm2, paper_tiles, tile_to_region, Tile, PAPER_FORCES_G};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
@@ -25,6 +25,9 @@ usage: host-sim model <name> [flags]
   sandpaper    (--grit N | --f-b-hz F) [--json]
   atan         [--curve] : CSV of atan / f_ss errors (micromath, libm, f64); --curve: against R
   atan-bench   --impl none|micromath|libm|f64|fss-micromath|fss-libm [--n 100000]
+  charts       [--out docs/charts] [--only fig5|solvers|tiles|atan] [--no-cost] : writes the
+               models-*.png charts and prints the tables of docs/models.md; the atan cost axis
+               runs this binary under valgrind (callgrind), skipped if valgrind is missing
 usage: host-sim tile-to-scene --groove-mm G --land-mm L --force-g F [--k-mm-per-g 0.08] [--mu 0.5]
                [--pad-area-mm2 150] [--pad-ref-force-g 112] [--pad-exponent 0.15] [--speed-mm-s V]
                [--scene-file]  (keys of scenes/*.toml: wavelength_mm, amplitude_percent)";
@@ -36,7 +39,7 @@ struct Flags {
     used: Vec<String>,
 }
 
-const SWITCHES: [&str; 5] = ["json", "csv", "help", "curve", "scene-file"];
+const SWITCHES: [&str; 6] = ["json", "csv", "help", "curve", "scene-file", "no-cost"];
 
 impl Flags {
     fn parse(args: &[String]) -> Result<Self, String> {
@@ -167,6 +170,7 @@ pub fn run_model(args: &[String]) -> Result<String, String> {
         "tiles" => cmd_tiles(&mut fl)?,
         "sandpaper" => cmd_sandpaper(&mut fl)?,
         "atan" => cmd_atan(&mut fl)?,
+        "charts" => cmd_charts(&mut fl)?,
         "atan-bench" => {
             let what = fl.opt_str("impl").ok_or("--impl is required")?;
             let n = fl.f64_or("n", 100_000.0)? as usize;
@@ -261,21 +265,48 @@ fn cmd_stick_slip(fl: &mut Flags) -> Result<String, String> {
     }
 }
 
+/// One point of fig. 5's curve (P, m, k, U of [`StickSlipParams::fig5`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fig5Point {
+    /// μs − μc.
+    pub delta_mu: f64,
+    /// R of eq. 11.
+    pub r: f64,
+    /// f_ss of eq. 10, Hz.
+    pub f_ss_hz: f64,
+    /// Large-R asymptote kU/(2ΔμP), Hz.
+    pub asymptote_hz: f64,
+    /// ω0/2π (the Δμ → 0 limit), Hz.
+    pub f0_hz: f64,
+}
+
+/// Fig. 5's curve at `points + 1` values of Δμ, log-spaced over 1e-3…10 (the paper prints no
+/// axis range; this one shows both the plateau and the asymptote).
+pub fn fig5_curve(points: usize) -> Result<Vec<Fig5Point>, String> {
+    (0..=points)
+        .map(|i| {
+            let dm = 1e-3 * 1e4f64.powf(i as f64 / points.max(1) as f64);
+            let p = StickSlipParams::fig5(dm);
+            let r = stick_slip(&p).map_err(|e| e.to_string())?;
+            Ok(Fig5Point {
+                delta_mu: dm,
+                r: r.r,
+                f_ss_hz: r.f_ss_hz,
+                asymptote_hz: large_r_asymptote_hz(&p),
+                f0_hz: r.omega0_rad_s / (2.0 * core::f64::consts::PI),
+            })
+        })
+        .collect()
+}
+
 fn cmd_fig5(fl: &mut Flags) -> Result<String, String> {
     let n = fl.f64_or("points", 200.0)? as usize;
     let mut s = String::from("delta_mu,r,f_ss_hz,asymptote_hz,f0_hz\n");
-    for i in 0..=n {
-        let dm = 1e-3 * 1e4f64.powf(i as f64 / n.max(1) as f64);
-        let p = StickSlipParams::fig5(dm);
-        let r = stick_slip(&p).map_err(|e| e.to_string())?;
-        let f0 = r.omega0_rad_s / (2.0 * core::f64::consts::PI);
+    for p in fig5_curve(n)? {
         let _ = writeln!(
             s,
-            "{dm:e},{:e},{:e},{:e},{:e}",
-            r.r,
-            r.f_ss_hz,
-            large_r_asymptote_hz(&p),
-            f0
+            "{:e},{:e},{:e},{:e},{:e}",
+            p.delta_mu, p.r, p.f_ss_hz, p.asymptote_hz, p.f0_hz
         );
     }
     Ok(s)
@@ -453,54 +484,105 @@ pub fn solver_stats(solver: Solver, rtol: f64) -> SolverStats {
     }
 }
 
+/// Exponents n of the swept tolerances rtol = 10⁻ⁿ in [`solver_sweep`].
+pub const SWEEP_RTOL_EXPONENTS: core::ops::RangeInclusive<i32> = 1..=15;
+
+/// [`solver_stats`] for every solver (in [`Solver::ALL`] order) at every rtol = 10⁻ⁿ,
+/// n ∈ [`SWEEP_RTOL_EXPONENTS`] (loosest first).
+pub fn solver_sweep() -> Vec<SolverStats> {
+    let mut v = Vec::new();
+    for solver in Solver::ALL {
+        for e in SWEEP_RTOL_EXPONENTS {
+            v.push(solver_stats(solver, 10f64.powi(-e)));
+        }
+    }
+    v
+}
+
 fn cmd_theta_solvers(fl: &mut Flags) -> Result<String, String> {
     fl.switch("csv");
     let mut s = String::from("solver,rtol,solved,cases,mean_iterations,max_iterations,mean_evaluations,max_rel_theta_error\n");
-    for solver in Solver::ALL {
-        for e in 1..=15 {
-            let st = solver_stats(solver, 10f64.powi(-e));
-            let _ = writeln!(
-                s,
-                "{},{:e},{},{},{:.3},{},{:.3},{:e}",
-                solver.name(),
-                st.rtol,
-                st.solved,
-                st.cases,
-                st.mean_iterations,
-                st.max_iterations,
-                st.mean_evaluations,
-                st.max_rel_theta_error
-            );
-        }
+    for st in solver_sweep() {
+        let _ = writeln!(
+            s,
+            "{},{:e},{},{},{:.3},{},{:.3},{:e}",
+            st.solver.name(),
+            st.rtol,
+            st.solved,
+            st.cases,
+            st.mean_iterations,
+            st.max_iterations,
+            st.mean_evaluations,
+            st.max_rel_theta_error
+        );
     }
     Ok(s)
 }
 
-fn cmd_tiles(fl: &mut Flags) -> Result<String, String> {
-    fl.switch("csv");
-    let mut s = String::from("set,label,groove_mm,land_mm,force_g,theta_rad,d_mm,a_c_mm2,a_mm2,wavelength_um,amplitude_permille\n");
+/// One tile of the paper's sets at one force, with the paper's k and μ.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TileRow {
+    /// The tile.
+    pub tile: Tile,
+    /// Finger force, g.
+    pub force_g: f64,
+    /// θ of eq. 4, rad.
+    pub theta_rad: f64,
+    /// D of eq. 1, mm.
+    pub d_mm: f64,
+    /// A_c summed over the pad, mm².
+    pub a_c_mm2: f64,
+    /// A summed over the pad, mm².
+    pub a_mm2: f64,
+    /// λ = G + L of the grating region, µm.
+    pub wavelength_um: u32,
+    /// Drive amplitude of the grating region, ‰ (1000·A/A_max).
+    pub amplitude_permille: u16,
+}
+
+/// [`paper_tiles`] × [`PAPER_FORCES_G`] (tile-major), solved with safeguarded Newton.
+pub fn tile_rows() -> Result<Vec<TileRow>, String> {
+    let mut v = Vec::new();
     for t in paper_tiles() {
         for f in PAPER_FORCES_G {
             let inp = GroovedInput::paper(t.groove_mm, t.land_mm, f);
             let r = grooved(&inp, Solver::Safeguarded, &SolveOptions::default())
                 .map_err(|e| e.to_string())?;
             let reg = tile_to_region(&inp).map_err(|e| e.to_string())?;
-            let _ = writeln!(
-                s,
-                "{},{},{},{},{},{:e},{:e},{:e},{:e},{},{}",
-                t.set,
-                t.label,
-                t.groove_mm,
-                t.land_mm,
-                f,
-                r.theta_rad,
-                r.d_mm,
-                r.a_c_mm2,
-                r.a_mm2,
-                reg.wavelength_um,
-                reg.amplitude_permille
-            );
+            v.push(TileRow {
+                tile: t,
+                force_g: f,
+                theta_rad: r.theta_rad,
+                d_mm: r.d_mm,
+                a_c_mm2: r.a_c_mm2,
+                a_mm2: r.a_mm2,
+                wavelength_um: reg.wavelength_um,
+                amplitude_permille: reg.amplitude_permille,
+            });
         }
+    }
+    Ok(v)
+}
+
+fn cmd_tiles(fl: &mut Flags) -> Result<String, String> {
+    fl.switch("csv");
+    let mut s = String::from("set,label,groove_mm,land_mm,force_g,theta_rad,d_mm,a_c_mm2,a_mm2,wavelength_um,amplitude_permille\n");
+    for r in tile_rows()? {
+        let _ = writeln!(
+            s,
+            "{},{},{},{},{},{:e},{:e},{:e},{:e},{},{}",
+            r.tile.set,
+            r.tile.label,
+            r.tile.groove_mm,
+            r.tile.land_mm,
+            r.force_g,
+            r.theta_rad,
+            r.d_mm,
+            r.a_c_mm2,
+            r.a_mm2,
+            r.wavelength_um,
+            r.amplitude_permille
+        );
     }
     Ok(s)
 }
@@ -539,7 +621,18 @@ fn cmd_sandpaper(fl: &mut Flags) -> Result<String, String> {
 fn cmd_atan(fl: &mut Flags) -> Result<String, String> {
     fl.switch("csv");
     if fl.switch("curve") {
-        return Ok(atan_curve());
+        let mut s = String::from("r,impl,abs_err_rad,rel_err_f_ss\n");
+        for p in atan_curve() {
+            let _ = writeln!(
+                s,
+                "{:e},{},{:e},{:e}",
+                p.r,
+                p.imp.name(),
+                p.abs_err_rad,
+                p.rel_err_f_ss
+            );
+        }
+        return Ok(s);
     }
     let mut s = String::from("impl,max_abs_rad,mean_abs_rad,max_rel_f_ss,mean_rel_f_ss\n");
     for imp in AtanImpl::ALL {
@@ -557,14 +650,28 @@ fn cmd_atan(fl: &mut Flags) -> Result<String, String> {
     Ok(s)
 }
 
-/// Error against R for each implementation (every 10th grid point), CSV.
-fn atan_curve() -> String {
+/// One point of the atan error curve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AtanCurvePoint {
+    /// R = Δμ P/(m ω0 U) (an f32 grid value).
+    pub r: f32,
+    /// Implementation.
+    pub imp: AtanImpl,
+    /// |atan_impl(R) − atan(R)|, rad (reference in f64).
+    pub abs_err_rad: f64,
+    /// Relative error of eq. 10 in f32 with this atan against the f64 model.
+    pub rel_err_f_ss: f64,
+}
+
+/// Error against R for each implementation (every 10th point of the R grid, R > 0; all
+/// implementations at one R before the next R).
+pub fn atan_curve() -> Vec<AtanCurvePoint> {
     let p = StickSlipParams::fig5(1.0);
     let Ok(reference) = stick_slip(&p) else {
-        return String::new();
+        return Vec::new();
     };
     let (w0, a) = (reference.omega0_rad_s, reference.a_m_s);
-    let mut s = String::from("r,impl,abs_err_rad,rel_err_f_ss\n");
+    let mut v = Vec::new();
     for (i, &x) in super::atan::r_grid().iter().enumerate() {
         if i % 10 != 0 || x <= 0.0 {
             continue;
@@ -578,15 +685,34 @@ fn atan_curve() -> String {
             let f =
                 super::stick_slip::stick_slip_f32(w0 as f32, a as f32, u as f32, |r| imp.eval(r))
                     as f64;
-            let _ = writeln!(
-                s,
-                "{x:e},{},{e:e},{:e}",
-                imp.name(),
-                ((f - fr.f_ss_hz) / fr.f_ss_hz).abs()
-            );
+            v.push(AtanCurvePoint {
+                r: x,
+                imp,
+                abs_err_rad: e,
+                rel_err_f_ss: ((f - fr.f_ss_hz) / fr.f_ss_hz).abs(),
+            });
         }
     }
-    s
+    v
+}
+
+fn cmd_charts(fl: &mut Flags) -> Result<String, String> {
+    let out = fl.opt_str("out").unwrap_or_else(|| "docs/charts".into());
+    let only = match fl.opt_str("only") {
+        None => None,
+        Some(s) => Some(
+            super::charts::Chart::parse(&s)
+                .ok_or_else(|| format!("--only: unknown chart {s:?} (fig5|solvers|tiles|atan)"))?,
+        ),
+    };
+    let cost = if fl.switch("no-cost") {
+        super::charts::AtanCostSource::Skip
+    } else {
+        let exe = std::env::current_exe().map_err(|e| format!("current executable: {e}"))?;
+        super::charts::AtanCostSource::Callgrind { exe }
+    };
+    fl.finish()?;
+    super::charts::write_charts(std::path::Path::new(&out), only, &cost)
 }
 
 /// `host-sim tile-to-scene <args>`; returns the TOML snippet.

@@ -7,8 +7,10 @@
 //! - [`sandpaper`]: grit ↔ burst frequency through the scales of Nara et al., table 1.
 //! - [`atan`]: atan choice for the f32 per-sample stick-slip path.
 //! - [`cli`]: the `model …` and `tile-to-scene` subcommands (plain `&[String]` arguments).
+//! - [`charts`]: `model charts`, the docs/charts/models-*.png charts and docs/models.md's tables.
 
 pub mod atan;
+pub mod charts;
 pub mod cli;
 pub mod grooved;
 pub mod sandpaper;
