@@ -25,6 +25,25 @@ pub struct BurstTimer {
     pub max_burst_hz: u32,
 }
 
+impl BurstTimer {
+    /// One-pulse settings with the line high for `on_clocks` kernel clocks (rounded down to a
+    /// whole tick, at least one): high for the whole count, one tick low at the end.
+    pub fn one_pulse(&self, on_clocks: u64) -> Result<TimerSettings, BurstError> {
+        let span = 1u64 << self.counter_bits.min(32);
+        let psc = on_clocks / span;
+        if psc > u16::MAX as u64 {
+            return Err(BurstError::BelowTimerRange);
+        }
+        // psc + 1 > on_clocks / span, so ticks < span: it fits the counter.
+        let ticks = (on_clocks / (psc + 1)).max(1) as u32;
+        Ok(TimerSettings {
+            psc: psc as u16,
+            arr: ticks,
+            ccr: ticks,
+        })
+    }
+}
+
 /// Register values for one burst waveform.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -54,8 +54,13 @@ enum State {
     #[default]
     Off,
     Running(TimerSettings),
-    /// A one-pulse was fired; the hardware ends it by itself.
-    Pulse,
+    /// A one-pulse was fired at `start_us`; the hardware ends it by itself at `end_us`
+    /// (wrapping). Until then only a fault ([`Gate::force_off`]) or its texture
+    /// ([`Gate::end_pulse`]) may cut it.
+    Pulse {
+        start_us: u32,
+        end_us: u32,
+    },
 }
 
 /// The gate's state machine: emits only the actions that change the line, and keeps the duty
@@ -84,8 +89,13 @@ fn on_us(on_clocks: u64, timer: &BurstTimer) -> u64 {
 
 /// µs the line must stay off after an on-time of `on_clocks`, so on/(on + rest) ≤ cap.
 fn rest_us(on_clocks: u64, timer: &BurstTimer, limits: &SafetyLimits) -> u32 {
+    rest_after_us(on_us(on_clocks, timer), limits)
+}
+
+/// µs the line must stay off after an on-time of `on_us`, so on/(on + rest) ≤ cap.
+fn rest_after_us(on_us: u64, limits: &SafetyLimits) -> u32 {
     let cap = limits.max_duty_permille.max(1) as u64;
-    (on_us(on_clocks, timer) * (1000 - cap.min(1000)))
+    (on_us * (1000 - cap.min(1000)))
         .div_ceil(cap)
         .min(u32::MAX as u64 / 2) as u32
 }
@@ -135,7 +145,8 @@ impl Gate {
         }
         let desired = desired.filter(|s| limits.allows(timer, s));
         match (self.state, desired) {
-            (State::Off | State::Pulse, None) => {
+            (State::Pulse { end_us, .. }, None) if (t_us.wrapping_sub(end_us) as i32) < 0 => None,
+            (State::Off | State::Pulse { .. }, None) => {
                 self.state = State::Off;
                 None
             }
@@ -144,7 +155,7 @@ impl Gate {
                 self.state = State::Off;
                 Some(GateAction::Off)
             }
-            (State::Off | State::Pulse, Some(s)) => {
+            (State::Off | State::Pulse { .. }, Some(s)) => {
                 if !self.may_go_on(t_us) {
                     return None;
                 }
@@ -175,6 +186,21 @@ impl Gate {
         (was != State::Off).then_some(GateAction::Off)
     }
 
+    /// Ends a running one-pulse early at `t_us` (its texture says the finger has left the
+    /// ridge); the rest then follows the on-time actually spent. Nothing when no pulse is on.
+    pub fn end_pulse(&mut self, t_us: u32, limits: &SafetyLimits) -> Option<GateAction> {
+        let State::Pulse { start_us, end_us } = self.state else {
+            return None;
+        };
+        if t_us.wrapping_sub(end_us) as i32 >= 0 {
+            return None;
+        }
+        let on = t_us.wrapping_sub(start_us);
+        self.state = State::Off;
+        self.earliest_on_us = Some(t_us.wrapping_add(rest_after_us(on as u64, limits)));
+        Some(GateAction::Off)
+    }
+
     /// Fires one pulse of `settings` (a line) at `t_us`. Refused (None, nothing changes) while a
     /// burst runs or inside the rest after one, since the pulse would add its on-time to an
     /// on-time already spent; refused (line off) above the on-time cap.
@@ -191,13 +217,13 @@ impl Gate {
         if matches!(self.state, State::Running(_)) || !self.may_go_on(t_us) {
             return None;
         }
-        self.state = State::Pulse;
-        let on_us = on_us(settings.on_clocks(), timer) as u32;
-        self.earliest_on_us = Some(t_us.wrapping_add(on_us).wrapping_add(rest_us(
-            settings.on_clocks(),
-            timer,
-            limits,
-        )));
+        let end_us = t_us.wrapping_add(on_us(settings.on_clocks(), timer) as u32);
+        self.state = State::Pulse {
+            start_us: t_us,
+            end_us,
+        };
+        self.earliest_on_us =
+            Some(end_us.wrapping_add(rest_us(settings.on_clocks(), timer, limits)));
         Some(GateAction::Pulse(settings))
     }
 }
@@ -288,12 +314,23 @@ mod tests {
         };
         let mut g = Gate::default();
         assert_eq!(g.pulse(p, 0, &T, &l), Some(GateAction::Pulse(p)));
+        // A texture asking for nothing during the pulse does not make the gate forget it: a
+        // fault must still cut it.
+        assert_eq!(g.request(None, 50, &T, &l), None);
         assert_eq!(g.force_off(100, &T, &l), Some(GateAction::Off));
         // 10 ms pulse at a 50 % cap: nothing on again before 20 ms.
         assert_eq!(g.pulse(p, 19_999, &T, &l), None);
         assert_eq!(g.pulse(p, 20_000, &T, &l), Some(GateAction::Pulse(p)));
         // After the pulse nothing is left to switch off.
         assert_eq!(g.request(None, 45_000, &T, &l), None);
+        assert_eq!(g.end_pulse(45_000, &l), None);
+        // Ended early after 4 ms: the rest is 4 ms, not the 10 ms pulse's.
+        assert_eq!(g.pulse(p, 50_000, &T, &l), Some(GateAction::Pulse(p)));
+        assert_eq!(g.end_pulse(54_000, &l), Some(GateAction::Off));
+        assert_eq!(g.pulse(p, 57_999, &T, &l), None);
+        assert_eq!(g.pulse(p, 58_000, &T, &l), Some(GateAction::Pulse(p)));
+        assert_eq!(g.end_pulse(68_000, &l), None, "ended by itself");
+        assert_eq!(g.request(None, 80_000, &T, &l), None);
         let too_long = TimerSettings {
             psc: 0,
             arr: 9_000_000,
@@ -309,5 +346,10 @@ mod tests {
         g.request(Some(s), 100_000, &T, &l);
         assert_eq!(g.pulse(p, 100_100, &T, &l), None);
         assert_eq!(g.running(), Some(s));
+        assert_eq!(
+            g.end_pulse(100_200, &l),
+            None,
+            "a running burst is not a pulse"
+        );
     }
 }

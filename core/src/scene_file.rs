@@ -23,7 +23,7 @@ use crate::gate::DriveMode;
 use crate::position::{Calibration, DEFAULT_RAIL_MARGIN_CODE};
 use crate::region::DEFAULT_HYSTERESIS_UM;
 use crate::scene::{Config, Scene};
-use crate::texture::{Envelope, Grating, Lines, Material, RandomBurst, Texture};
+use crate::texture::{Envelope, Grating, GratingRender, Lines, Material, RandomBurst, Texture};
 
 /// A scene file that cannot be used, located in the file.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -88,6 +88,14 @@ enum Drive {
     Progressive,
 }
 
+/// How a grating is rendered (`render = "position"`, the default, or `"velocity"`).
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "kebab-case")]
+enum RenderSpec {
+    Position,
+    Velocity,
+}
+
 #[derive(Deserialize, Clone, Copy)]
 #[serde(rename_all = "kebab-case")]
 enum EnvelopeSpec {
@@ -109,6 +117,8 @@ struct RegionSpec {
     groove_mm: Option<Spanned<f64>>,
     min_speed_mm_s: Option<Spanned<f64>>,
     amplitude_percent: Option<Spanned<f64>>,
+    render: Option<Spanned<RenderSpec>>,
+    rearm_mm: Option<Spanned<f64>>,
     delta_mu: Option<Spanned<f64>>,
     // Eq. 12 parameters, used when `delta_mu` is absent.
     e_object_pa: Option<Spanned<f64>>,
@@ -139,6 +149,8 @@ const KINDS: &[(&str, &[&str])] = &[
             "duty_percent",
             "min_speed_mm_s",
             "amplitude_percent",
+            "render",
+            "rearm_mm",
         ],
     ),
     (
@@ -198,6 +210,8 @@ impl RegionSpec {
             f("spread_percent", &self.spread_percent),
             f("amplitude_spread_percent", &self.amplitude_spread_percent),
             self.seed.as_ref().map(|v| ("seed", v.span())),
+            self.render.as_ref().map(|v| ("render", v.span())),
+            f("rearm_mm", &self.rearm_mm),
         ]
         .into_iter()
         .flatten()
@@ -465,8 +479,28 @@ pub fn parse(file: &str, text: &str) -> Result<SceneDoc, SceneFileError> {
                         ))
                     }
                 };
+                let base = Grating::new((wavelength * 1000.0).round() as u32);
+                let render = match spec.render.as_ref().map(|r| *r.get_ref()) {
+                    None | Some(RenderSpec::Position) => GratingRender::PositionPhase,
+                    Some(RenderSpec::Velocity) => GratingRender::VelocitySynthesis,
+                };
+                // A fired ridge must re-arm before the next one: below half the period.
+                let rearm_um = match &spec.rearm_mm {
+                    Some(v) => {
+                        let half_mm = base.wavelength_um as f64 / 2000.0;
+                        let mm = cx.range(v, &field("rearm_mm"), 0.0, half_mm)?;
+                        if mm >= half_mm {
+                            return Err(cx.err(
+                                v.span(),
+                                &field("rearm_mm"),
+                                format_args!("must be below half the period ({half_mm} mm)"),
+                            ));
+                        }
+                        (mm * 1000.0).round() as u32
+                    }
+                    None => base.rearm_um,
+                };
                 Texture::Grating(Grating {
-                    wavelength_um: (wavelength * 1000.0).round() as u32,
                     duty_permille: duty(&spec.duty_percent)?,
                     min_speed_um_s: speed(&spec.min_speed_mm_s)?,
                     amplitude_permille: cx.permille(
@@ -475,6 +509,9 @@ pub fn parse(file: &str, text: &str) -> Result<SceneDoc, SceneFileError> {
                         0.1,
                         100.0,
                     )?,
+                    render,
+                    rearm_um,
+                    ..base
                 })
             }
             "material" => {
@@ -733,6 +770,30 @@ mod tests {
         let e = err("[[region]]\nkind = \"velvet\"\n");
         assert_eq!((e.line, e.field.as_str()), (2, "region[0].kind"), "{e}");
         assert!(e.message.contains("grating"), "{e}");
+    }
+
+    #[test]
+    fn grating_render_and_rearm() {
+        let g = |text: &str| match load_for_board("t.toml", text, TIMER, 100)
+            .map(|c| c.scene.textures[0])
+        {
+            Ok(Texture::Grating(g)) => g,
+            other => panic!("{other:?}"),
+        };
+        let d = g("[[region]]\nkind = \"grating\"\nwavelength_mm = 1\n");
+        assert_eq!((d.render, d.rearm_um), (GratingRender::PositionPhase, 100));
+        let v = g("[[region]]\nkind = \"grating\"\nwavelength_mm = 1\nrender = \"velocity\"\nrearm_mm = 0.2\n");
+        assert_eq!(
+            (v.render, v.rearm_um),
+            (GratingRender::VelocitySynthesis, 200)
+        );
+        let e = err("[[region]]\nkind = \"grating\"\nwavelength_mm = 1\nrearm_mm = 0.5\n");
+        assert_eq!((e.line, e.field.as_str()), (4, "region[0].rearm_mm"), "{e}");
+        assert!(e.message.contains("half the period"), "{e}");
+        let e = err("[[region]]\nkind = \"grating\"\nwavelength_mm = 1\nrender = \"phase\"\n");
+        assert_eq!(e.line, 4, "{e}");
+        let e = err("[[region]]\nkind = \"constant\"\nf_b_hz = 80\nrender = \"velocity\"\n");
+        assert_eq!((e.line, e.field.as_str()), (4, "region[0].render"), "{e}");
     }
 
     /// Every shipped scene loads on a 16-bit and a 32-bit burst timer.

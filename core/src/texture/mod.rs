@@ -3,7 +3,8 @@
 //!
 //! - [`Texture::Constant`]: fixed f_b (fig. 11 of the SAW display paper) — planned once at load,
 //!   one table look-up per sample.
-//! - [`Texture::Grating`]: a virtual grating of period λ, f = |V|/λ (Konyo et al., eq. 1).
+//! - [`Texture::Grating`]: a virtual grating of period λ (Konyo et al., eq. 1): one burst per
+//!   ridge crossing placed by position, or f = |V|/λ by velocity synthesis.
 //! - [`Texture::Material`]: the stick-slip frequency of a material at the live hand speed
 //!   (SAW display paper, eq. 10–12).
 //! - [`Texture::Random`]: f_b and amplitude drawn about central values each burst (the paper's
@@ -18,7 +19,7 @@ pub mod lines;
 pub mod material;
 pub mod random;
 
-pub use grating::Grating;
+pub use grating::{Grating, GratingRender};
 pub use lines::{Envelope, Lines};
 pub use material::Material;
 pub use random::RandomBurst;
@@ -35,7 +36,7 @@ pub enum Texture {
     Off,
     /// Bursts at a fixed f_b and duty (fig. 11): < 30 Hz bumpy, 30–100 Hz rough, > 1 kHz smooth.
     Constant(BurstCommand),
-    /// A virtual grating: f = |V|/λ, no bursts at rest.
+    /// A virtual grating of period λ: a burst per ridge crossing, none at rest.
     Grating(Grating),
     /// A material's stick-slip frequency at the hand speed.
     Material(Material),
@@ -89,4 +90,6 @@ pub enum TextureError {
     BadLines,
     /// Line pulse empty or longer than the on-time cap.
     BadPulse,
+    /// Grating re-arm distance not below half the period.
+    BadRearm,
 }

@@ -19,7 +19,7 @@ use saw_core::burst::{BurstCommand, BurstTimer, SafetyLimits, TimerSettings};
 use saw_core::gate::{DriveMode, GateAction};
 use saw_core::position::{Calibration, SensorFault};
 use saw_core::scene::{Config, Scene};
-use saw_core::texture::{Envelope, Grating, Lines, Material, RandomBurst, Texture};
+use saw_core::texture::{Envelope, Grating, GratingRender, Lines, Material, RandomBurst, Texture};
 use saw_core::Output;
 
 /// File magic.
@@ -194,6 +194,11 @@ pub fn encode_config<S: Sink>(s: &mut S, c: &Config) {
                 s.u16(g.duty_permille);
                 s.u32(g.min_speed_um_s);
                 s.u16(g.amplitude_permille);
+                s.u8(match g.render {
+                    GratingRender::PositionPhase => 0,
+                    GratingRender::VelocitySynthesis => 1,
+                });
+                s.u32(g.rearm_um);
             }
             Texture::Material(m) => {
                 s.u8(3);
@@ -272,6 +277,11 @@ pub fn decode_config(r: &mut Reader) -> Config {
                 duty_permille: r.u16(),
                 min_speed_um_s: r.u32(),
                 amplitude_permille: r.u16(),
+                render: match r.u8() {
+                    0 => GratingRender::PositionPhase,
+                    _ => GratingRender::VelocitySynthesis,
+                },
+                rearm_um: r.u32(),
             }),
             3 => Texture::Material(Material {
                 delta_mu: r.f32(),

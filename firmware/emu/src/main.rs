@@ -29,7 +29,7 @@ use saw_core::burst::{BurstTimer, FastPlanner};
 use saw_core::position::PositionMapper;
 use saw_core::region::RegionMap;
 use saw_core::sample::Sample;
-use saw_core::texture::{Grating, Material, RandomBurst, Texture};
+use saw_core::texture::{Grating, GratingRender, Material, RandomBurst, Texture};
 use saw_core::velocity::{
     AlphaBeta, AlphaBetaFixed, BackwardDifference, Foaw, FoawFit, LsqSlope, Median3,
     OneSampleDifference, SuperTwisting, VelocityEstimator,
@@ -303,10 +303,15 @@ fn texture_costs(g: &Golden, traj: &str, n: usize) {
         duty_permille: 400,
         seed: 1,
     };
-    let cases: [(&str, Texture, bool); 6] = [
+    let synth = Grating {
+        render: GratingRender::VelocitySynthesis,
+        ..Grating::new(1_000)
+    };
+    let cases: [(&str, Texture, bool); 7] = [
         ("off", Texture::Off, false),
         ("constant", Texture::constant_hz(80), false),
         ("grating", Texture::Grating(Grating::new(1_000)), false),
+        ("grating-velocity", Texture::Grating(synth), false),
         ("material", Texture::Material(Material::fig5(0.3)), false),
         ("random", Texture::Random(random), false),
         ("lines+off", Texture::Off, true),
@@ -331,7 +336,8 @@ fn join<'a>(buf: &'a mut [u8; 48], a: &str, b: &str) -> &'a str {
 
 /// Fills POSITIONS from SAMPLES through the default mapper (faults skipped); returns the count.
 fn positions(n: usize) -> usize {
-    let mapper = PositionMapper::new(saw_core::default_config().calibration).unwrap_or_else(|_| fail());
+    let mapper =
+        PositionMapper::new(saw_core::default_config().calibration).unwrap_or_else(|_| fail());
     let samples = unsafe { &*core::ptr::addr_of!(SAMPLES) };
     let pos = unsafe { &mut *core::ptr::addr_of_mut!(POSITIONS) };
     let mut m = 0;
@@ -380,11 +386,41 @@ fn estimator_costs(g: &Golden, n: usize) {
     let p = g.period_us;
     let m = positions(n);
     let ok = |r: Result<(), ()>| r.unwrap_or_else(|_| fail());
-    estimator(g, "diff1", OneSampleDifference::new(p).unwrap_or_else(|_| fail()), n, m);
-    estimator(g, "diff4", BackwardDifference::<4>::new(p).unwrap_or_else(|_| fail()), n, m);
-    estimator(g, "lsq16", LsqSlope::<16>::new(p).unwrap_or_else(|_| fail()), n, m);
-    estimator(g, "lsq32(default)", LsqSlope::<32>::new(p).unwrap_or_else(|_| fail()), n, m);
-    estimator(g, "lsq64", LsqSlope::<64>::new(p).unwrap_or_else(|_| fail()), n, m);
+    estimator(
+        g,
+        "diff1",
+        OneSampleDifference::new(p).unwrap_or_else(|_| fail()),
+        n,
+        m,
+    );
+    estimator(
+        g,
+        "diff4",
+        BackwardDifference::<4>::new(p).unwrap_or_else(|_| fail()),
+        n,
+        m,
+    );
+    estimator(
+        g,
+        "lsq16",
+        LsqSlope::<16>::new(p).unwrap_or_else(|_| fail()),
+        n,
+        m,
+    );
+    estimator(
+        g,
+        "lsq32",
+        LsqSlope::<32>::new(p).unwrap_or_else(|_| fail()),
+        n,
+        m,
+    );
+    estimator(
+        g,
+        "lsq64",
+        LsqSlope::<64>::new(p).unwrap_or_else(|_| fail()),
+        n,
+        m,
+    );
     let foaw = |fit| Foaw::<33>::new(fit, 24.0, p).unwrap_or_else(|_| fail());
     estimator(g, "foaw-end-d24-n32", foaw(FoawFit::EndFit), n, m);
     estimator(g, "foaw-best-d24-n32", foaw(FoawFit::BestFit), n, m);
@@ -395,7 +431,7 @@ fn estimator_costs(g: &Golden, n: usize) {
     let st = SuperTwisting::new(p, 1e6).unwrap_or_else(|_| fail());
     estimator(g, "std-L1e6", st, n, m);
     let med = Median3::new(LsqSlope::<32>::new(p).unwrap_or_else(|_| fail()), p);
-    estimator(g, "med3+lsq32", med, n, m);
+    estimator(g, "med3+lsq32(default)", med, n, m);
     ok(Ok(()));
 }
 
@@ -414,7 +450,12 @@ fn stage_costs(n: usize) {
             let _ = black_box(mapper.position_um(black_box(s)));
         }
     });
-    report("COST-STAGE", "position(code->um,rail-check)", n, per_sample_x10(cost, base, n));
+    report(
+        "COST-STAGE",
+        "position(code->um,rail-check)",
+        n,
+        per_sample_x10(cost, base, n),
+    );
     let m = positions(n);
     let regions = RegionMap::new(
         cfg.scene.textures.len(),
@@ -434,7 +475,12 @@ fn stage_costs(n: usize) {
             r = black_box(regions.track(r, black_box(p)));
         }
     });
-    report("COST-STAGE", "region(track,3-regions)", m, per_sample_x10(cost, base, m));
+    report(
+        "COST-STAGE",
+        "region(track,3-regions)",
+        m,
+        per_sample_x10(cost, base, m),
+    );
     let timer = BurstTimer {
         clock_hz: 90_000_000,
         counter_bits: 32,
@@ -452,7 +498,12 @@ fn stage_costs(n: usize) {
             black_box((p as f32) * 0.01);
         }
     });
-    report("COST-STAGE", "burst-planner(f32-Hz->PSC/ARR/CCR)", m, per_sample_x10(cost, base2, m));
+    report(
+        "COST-STAGE",
+        "burst-planner(f32-Hz->PSC/ARR/CCR)",
+        m,
+        per_sample_x10(cost, base2, m),
+    );
 }
 
 #[entry]
@@ -472,7 +523,11 @@ fn main() -> ! {
     );
     // Calibration of the counter itself: an empty measurement.
     let empty = measure(|| {});
-    defmt::println!("SYSTICK empty_measure={=u64} instr_per_tick={=u64}", empty, INSTR_PER_TICK);
+    defmt::println!(
+        "SYSTICK empty_measure={=u64} instr_per_tick={=u64}",
+        empty,
+        INSTR_PER_TICK
+    );
 
     let ok = equivalence_and_scene_costs(&g);
     for traj in ["back-and-forth", "rest"] {
