@@ -309,3 +309,53 @@ pub fn switches(r: &SimResult) -> Vec<Switch> {
 
     switches
 }
+
+/// One burst of a grating against the ridge it renders.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RidgeHit {
+    /// Rising edge, s.
+    pub t_s: f64,
+    /// True finger position at the rising edge minus the nearest ridge (a multiple of λ),
+    /// signed along the motion (positive: the burst came after the ridge), µm.
+    pub error_um: f64,
+    /// On-time, s.
+    pub on_s: f64,
+    /// True speed at the rising edge, µm/s.
+    pub speed_um_s: f64,
+}
+
+/// Where every burst of a run landed against a grating of period `wavelength_um` whose ridges
+/// sit at the multiples of λ.
+pub fn ridge_hits(r: &SimResult, wavelength_um: f64) -> Vec<RidgeHit> {
+    let clock = r.waveform.clock_hz as f64;
+    r.waveform
+        .pulses()
+        .iter()
+        .map(|p| {
+            let t_s = p.rise as f64 / clock;
+            let st = r.params.trajectory.state(t_s);
+            let (x, v) = (st.position_um, st.velocity_um_s);
+            let off = x - (x / wavelength_um).round() * wavelength_um;
+            RidgeHit {
+                t_s,
+                error_um: if v < 0.0 { -off } else { off },
+                on_s: p.on() as f64 / clock,
+                speed_um_s: v.abs(),
+            }
+        })
+        .collect()
+}
+
+/// Ridges (multiples of `wavelength_um`) the true finger position crossed during the run,
+/// counted on the trace's sampling grid.
+pub fn ridges_crossed(r: &SimResult, wavelength_um: f64) -> u64 {
+    let cells = r
+        .trace
+        .iter()
+        .map(|t| (t.true_um / wavelength_um).floor() as i64);
+    cells
+        .clone()
+        .zip(cells.skip(1))
+        .map(|(a, b)| a.abs_diff(b))
+        .sum()
+}
