@@ -165,6 +165,8 @@ struct Ridges {
     max_on_clocks: u64,
     /// Pulses start at least this far apart, µs (the board's top f_b).
     min_spacing_us: u32,
+    /// A pulse is not cut before it has been on this long, µs (the shortest pulse).
+    min_on_us: u32,
     amplitude: u16,
     tracker: RidgeTracker,
     last_pulse_us: Option<u32>,
@@ -214,6 +216,7 @@ impl Ridges {
             min_on_clocks,
             max_on_clocks,
             min_spacing_us: 1_000_000u32.div_ceil(timer.max_burst_hz),
+            min_on_us: (min_on_clocks * 1_000_000).div_ceil(clock.max(1)) as u32,
             amplitude: g.amplitude_permille,
             tracker: RidgeTracker::default(),
             last_pulse_us: None,
@@ -244,7 +247,10 @@ impl Ridges {
     ) -> (Want, Option<TimerSettings>, u32) {
         let mut want = Want::Periodic;
         if let Some((lo, hi)) = self.on_span_um {
-            if position_um < lo || position_um > hi {
+            let long_enough = self
+                .last_pulse_us
+                .is_some_and(|t0| t_us.wrapping_sub(t0) >= self.min_on_us);
+            if (position_um < lo || position_um > hi) && long_enough {
                 self.on_span_um = None;
                 want = Want::EndPulse;
             }
@@ -770,7 +776,6 @@ impl<E: VelocityEstimator> Controller<E> {
                 Some(c) => c.request(position_um, velocity_um_s, t_us, running, &self.timer),
                 None => Request::OFF,
             };
-            let limits = active.limits;
             if request.clamped {
                 self.telemetry.clamped = self.telemetry.clamped.wrapping_add(1);
                 if self.clamp_log.due(t_us) {
@@ -785,6 +790,7 @@ impl<E: VelocityEstimator> Controller<E> {
             let mut skipped = request.skipped;
             out.action = match (request.want, request.settings) {
                 (Want::Pulse, Some(p)) => {
+                    let limits = self.limits();
                     let action = self.gate.pulse(p, t_us, &self.timer, &limits);
                     if matches!(action, Some(GateAction::Pulse(_))) {
                         self.telemetry.ridge_pulses = self.telemetry.ridge_pulses.wrapping_add(1);
@@ -796,7 +802,7 @@ impl<E: VelocityEstimator> Controller<E> {
                     action
                 }
                 (Want::EndPulse, _) => {
-                    let action = self.gate.end_pulse(t_us, &limits);
+                    let action = self.gate.end_pulse(t_us, &self.limits());
                     self.count_action(action);
                     action
                 }
@@ -940,8 +946,17 @@ impl<E: VelocityEstimator> Controller<E> {
         })
     }
 
+    /// The active caps (the defaults before any scene loads).
+    fn limits(&self) -> SafetyLimits {
+        self.active.as_ref().map(|a| a.limits).unwrap_or_default()
+    }
+
     fn drive(&mut self, desired: Option<TimerSettings>, t_us: u32) -> Option<GateAction> {
-        let limits = self.active.as_ref().map(|a| a.limits).unwrap_or_default();
+        // The common case, a burst running unchanged, before the caps are even fetched.
+        if desired.is_some() && self.gate.running() == desired {
+            return None;
+        }
+        let limits = self.limits();
         let action = self.gate.request(desired, t_us, &self.timer, &limits);
         self.count_action(action);
         action

@@ -12,10 +12,14 @@ use super::VelocityEstimator;
 #[derive(Clone, Debug)]
 pub struct Median3<E> {
     inner: E,
-    /// Oldest first.
-    xs: [i32; 3],
-    ts: [u32; 3],
-    len: usize,
+    /// The two previous positions, older first (only the last two are kept: the third is the
+    /// new sample, so nothing is shifted through an array).
+    x_old: i32,
+    x_mid: i32,
+    /// Timestamp of `x_mid`, the time the median is stamped with.
+    t_mid: u32,
+    /// Samples seen since the last reset, saturating at 2.
+    len: u8,
     period_us: u32,
 }
 
@@ -24,8 +28,9 @@ impl<E: VelocityEstimator> Median3<E> {
     pub fn new(inner: E, sample_period_us: u32) -> Self {
         Self {
             inner,
-            xs: [0; 3],
-            ts: [0; 3],
+            x_old: 0,
+            x_mid: 0,
+            t_mid: 0,
             len: 0,
             period_us: sample_period_us,
         }
@@ -43,19 +48,15 @@ fn median3(a: i32, b: i32, c: i32) -> i32 {
 
 impl<E: VelocityEstimator> VelocityEstimator for Median3<E> {
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
-        if self.len == 3 {
-            self.xs = [self.xs[1], self.xs[2], position_um];
-            self.ts = [self.ts[1], self.ts[2], t_us];
-        } else {
-            self.xs[self.len] = position_um;
-            self.ts[self.len] = t_us;
+        let (a, b, t) = (self.x_old, self.x_mid, self.t_mid);
+        self.x_old = b;
+        self.x_mid = position_um;
+        self.t_mid = t_us;
+        if self.len < 2 {
             self.len += 1;
-            if self.len < 3 {
-                return None;
-            }
+            return None;
         }
-        let [a, b, c] = self.xs;
-        self.inner.update(median3(a, b, c), self.ts[1])
+        self.inner.update(median3(a, b, position_um), t)
     }
 
     fn reset(&mut self) {
