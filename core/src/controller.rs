@@ -172,7 +172,17 @@ struct Ridges {
     last_pulse_us: Option<u32>,
     /// While a pulse may be on: the span of positions it stays on over, µm (lo ..hi).
     on_span_um: Option<(i32, i32)>,
+    /// Largest step between two samples the slider can make, µm; a larger one is a glitch
+    /// until the next sample confirms it.
+    max_step_um: i32,
+    /// The last position accepted, and a jump waiting for confirmation.
+    last_um: Option<i32>,
+    jump_um: Option<i32>,
 }
+
+/// The fastest the slider is taken to move, µm/s: a step between two samples that would need
+/// more (over up to four sample periods, to bridge dropped samples) is a sensor glitch.
+pub const MAX_SLIDER_SPEED_UM_S: u32 = 2_000_000;
 
 /// What a texture wants from the gate on one sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -190,6 +200,7 @@ impl Ridges {
         g: &crate::texture::Grating,
         timer: &BurstTimer,
         limits: &SafetyLimits,
+        sample_period_us: u32,
     ) -> Result<Self, BurstError> {
         if timer.max_burst_hz == 0 {
             return Err(BurstError::BadTimer);
@@ -221,12 +232,33 @@ impl Ridges {
             tracker: RidgeTracker::default(),
             last_pulse_us: None,
             on_span_um: None,
+            max_step_um: (4 * MAX_SLIDER_SPEED_UM_S as u64 * sample_period_us as u64 / 1_000_000)
+                .min(i32::MAX as u64) as i32,
+            last_um: None,
+            jump_um: None,
         })
     }
 
     fn reset(&mut self) {
         self.tracker.reset();
         self.on_span_um = None;
+        self.last_um = None;
+        self.jump_um = None;
+    }
+
+    /// False for a single-sample glitch: a step the slider cannot make, not (yet) confirmed by
+    /// a second sample near it. A real jump (after a gap) costs one sample.
+    fn plausible(&mut self, position_um: i32) -> bool {
+        let near = |a: i32, b: i32| a.abs_diff(b) <= self.max_step_um as u32;
+        let ok = self.last_um.is_none_or(|last| near(last, position_um))
+            || self.jump_um.is_some_and(|j| near(j, position_um));
+        if ok {
+            self.last_um = Some(position_um);
+            self.jump_um = None;
+        } else {
+            self.jump_um = Some(position_um);
+        }
+        ok
     }
 
     /// What to do on this sample, the pulse's settings, and the ridges passed without a pulse.
@@ -246,6 +278,9 @@ impl Ridges {
         timer: &BurstTimer,
     ) -> (Want, Option<TimerSettings>, u32) {
         let mut want = Want::Periodic;
+        if !self.plausible(position_um) {
+            return (want, None, 0);
+        }
         if let Some((lo, hi)) = self.on_span_um {
             let long_enough = self
                 .last_pulse_us
@@ -350,6 +385,7 @@ impl Compiled {
         timer: &BurstTimer,
         limits: &SafetyLimits,
         length_um: u32,
+        sample_period_us: u32,
     ) -> Result<(Self, bool), ConfigError> {
         let params = |error| ConfigError::TextureParams { region, error };
         let burst = |error| ConfigError::Texture { region, error };
@@ -362,7 +398,9 @@ impl Compiled {
             Texture::Grating(g) if g.render == GratingRender::PositionPhase => {
                 g.validate(length_um).map_err(params)?;
                 (
-                    Compiled::Ridges(Ridges::new(g, timer, limits).map_err(burst)?),
+                    Compiled::Ridges(
+                        Ridges::new(g, timer, limits, sample_period_us).map_err(burst)?,
+                    ),
                     false,
                 )
             }
@@ -659,6 +697,7 @@ impl<E: VelocityEstimator> Controller<E> {
                 &self.timer,
                 &config.limits,
                 mapper.length_um(),
+                self.sample_period_us,
             )?;
             if capped {
                 warn!(
@@ -1412,6 +1451,47 @@ mod tests {
         for &(i, on_us) in p.iter().filter(|&&(i, _)| i >= jump) {
             assert!(on_us <= 2_667.0 + 200.0, "pulse at sample {i}: {on_us} us");
         }
+    }
+
+    /// A single-sample glitch of ±2 mm (a wiper spark) crosses ridges in the reading but not
+    /// under the finger: it fires nothing and cuts nothing. A dropped sample changes nothing.
+    #[test]
+    fn position_phase_ignores_glitches_and_bridges_drops() {
+        let run = |glitch: Option<(usize, f32)>, drop: Option<usize>| {
+            let mut c = single(Texture::Grating(crate::texture::Grating::new(1_000)), &[]);
+            let mut outs = std::vec::Vec::new();
+            for i in 0..1_000usize {
+                if drop == Some(i) {
+                    continue;
+                }
+                let mut um = 5_500.0 + 50_000.0 * i as f32 * 1e-4; // 50 mm/s to 10.5 mm
+                if let Some((at, d)) = glitch {
+                    if at == i {
+                        um += d;
+                    }
+                }
+                outs.push(c.on_sample(Sample {
+                    code: code_at(&c, um),
+                    t_us: i as u32 * 100,
+                }));
+            }
+            (pulses(&outs), c.telemetry())
+        };
+        let (clean, _) = run(None, None);
+        assert_eq!(clean.len(), 5, "{clean:?}");
+        // Mid-pulse (just past ridge 7 at sample 300) and mid-cell, up and down.
+        for (at, d) in [
+            (303, 2_000.0),
+            (303, -2_000.0),
+            (350, 2_000.0),
+            (350, -2_000.0),
+        ] {
+            let (p, tel) = run(Some((at, d)), None);
+            assert_eq!(p, clean, "glitch {d} at {at}");
+            assert_eq!(tel.ridges_skipped, 0);
+        }
+        let (p, _) = run(None, Some(500));
+        assert_eq!(p.len(), 5);
     }
 
     /// Faster than the board's f_b limit (and than half the sample rate): one pulse per sample
