@@ -147,7 +147,7 @@ pub fn all() -> Vec<Method> {
 }
 
 /// The controller's default.
-pub const DEFAULT: &str = "lsq32";
+pub const DEFAULT: &str = "med3+lsq32";
 /// The FOAW best-fit the targets compare against, unless another band tunes it better: the
 /// report picks the FOAW best-fit with n_max = 32 and the lowest RMS on the reference motion.
 pub const FOAW_REFERENCE: &str = "foaw-best-d24-n32";
