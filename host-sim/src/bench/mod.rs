@@ -689,11 +689,43 @@ fn write_report(
                 .collect()
         }),
     )?;
+    // Renderers: worst placement against speed, with the λ/20 target as a line.
+    let mut render_curves: Vec<charts::Curve> = [
+        ("position phase", methods::Family::Lsq),
+        ("velocity synthesis", methods::Family::Foaw),
+        ("hybrid (host model)", methods::Family::Median),
+    ]
+    .into_iter()
+    .map(|(name, family)| charts::Curve {
+        name: name.to_string(),
+        family,
+        points: rendered
+            .iter()
+            .filter(|r| r.renderer == name)
+            .filter_map(|r| Some((r.case.parse::<f64>().ok()?, r.worst_err_um.max(0.1))))
+            .collect(),
+    })
+    .collect();
+    render_curves.push(charts::Curve {
+        name: "target: λ/20".to_string(),
+        family: methods::Family::Difference,
+        points: renderers::SPEEDS_MM_S
+            .iter()
+            .map(|&v| (v, renderers::RIDGE_UM / 20.0))
+            .collect(),
+    });
+    charts::curves(
+        &charts_dir.join("renderers-placement-vs-speed.png"),
+        "Grating bursts: worst distance from the ridge against speed (λ = 1 mm, 2 LSB, 10 kHz)",
+        "speed, mm/s (log)",
+        "worst |placement error|, µm (log)",
+        &render_curves,
+    )?;
     let _ = writeln!(
         w,
         "\nCharts: `charts/estimators-error-vs-delay.png`, `charts/estimators-mixed-error-vs-delay.png`, \
          `charts/estimators-error-vs-cost.png`, `charts/estimators-error-vs-speed.png`, \
-         `charts/estimators-error-vs-noise.png`."
+         `charts/estimators-error-vs-noise.png`, `charts/renderers-placement-vs-speed.png`."
     );
     std::fs::write(opts.out_dir.join("bench-results.md"), md).map_err(|e| e.to_string())?;
     eprintln!(
