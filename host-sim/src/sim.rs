@@ -10,6 +10,7 @@ use saw_core::burst::{self, BurstTimer, TimerSettings};
 use saw_core::gate::GateAction;
 use saw_core::position::SensorFault;
 use saw_core::sample::Sample;
+use saw_core::velocity::VelocityEstimator;
 use saw_core::{Config, ConfigError, Controller, Telemetry};
 
 use crate::adc::{AdcError, AdcModel, AdcParams};
@@ -145,11 +146,29 @@ impl std::fmt::Display for SimError {
 
 impl std::error::Error for SimError {}
 
-/// Runs the closed loop.
+/// Runs the closed loop with the default estimator.
 pub fn run(params: &SimParams) -> Result<SimResult, SimError> {
+    let ctrl = Controller::new(burst_timer(params.board), sample_period_us(params.board))
+        .map_err(SimError::Controller)?;
+    run_controller(params, ctrl)
+}
+
+/// Runs the closed loop with another velocity estimator (the bench compares them).
+pub fn run_with<E: VelocityEstimator>(
+    params: &SimParams,
+    estimator: E,
+) -> Result<SimResult, SimError> {
+    let timer = burst_timer(params.board);
+    let ctrl = Controller::with_estimator(timer, sample_period_us(params.board), estimator);
+    run_controller(params, ctrl)
+}
+
+fn run_controller<E: VelocityEstimator>(
+    params: &SimParams,
+    mut ctrl: Controller<E>,
+) -> Result<SimResult, SimError> {
     let timer = burst_timer(params.board);
     let period_us = sample_period_us(params.board);
-    let mut ctrl = Controller::new(timer, period_us).map_err(SimError::Controller)?;
     ctrl.load(&params.config).map_err(SimError::Config)?;
     let mut adc =
         AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;

@@ -11,6 +11,21 @@ use saw_core::velocity::{
 /// A boxed estimator the bench can move between threads.
 pub type BoxedEstimator = Box<dyn VelocityEstimator + Send>;
 
+/// A boxed estimator as the controller takes it (the closed-loop runs of the renderer columns).
+pub struct Dyn(pub BoxedEstimator);
+
+impl VelocityEstimator for Dyn {
+    fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
+        self.0.update(position_um, t_us)
+    }
+    fn reset(&mut self) {
+        self.0.reset()
+    }
+    fn group_delay_us(&self) -> u32 {
+        self.0.group_delay_us()
+    }
+}
+
 /// One configured estimator.
 #[derive(Clone, Copy, Debug)]
 pub struct Method {

@@ -14,6 +14,9 @@
 
 use saw_boards::NUCLEO_F446RE;
 use saw_core::texture::{Grating, GratingRender, Texture};
+use saw_core::velocity::VelocityEstimator;
+
+use super::methods::Dyn;
 
 use super::scenario::{self, constant, Input, Spec};
 use crate::adc::AdcParams;
@@ -96,6 +99,19 @@ pub fn core_run(
     noise_lsb: f64,
     seed: u64,
 ) -> RenderStats {
+    core_run_with::<Dyn>(render, case, trajectory, duration_s, noise_lsb, seed, None)
+}
+
+/// As [`core_run`], with `estimator` in the controller instead of the default.
+pub fn core_run_with<E: VelocityEstimator>(
+    render: GratingRender,
+    case: String,
+    trajectory: Trajectory,
+    duration_s: f64,
+    noise_lsb: f64,
+    seed: u64,
+    estimator: Option<E>,
+) -> RenderStats {
     let mut p = SimParams::new(&NUCLEO_F446RE, trajectory, duration_s);
     p.config = grating_config(render);
     p.adc = AdcParams {
@@ -103,7 +119,11 @@ pub fn core_run(
         seed,
         ..AdcParams::default()
     };
-    let r = sim::run(&p).expect("the grating scene loads");
+    let r = match estimator {
+        Some(e) => sim::run_with(&p, e),
+        None => sim::run(&p),
+    }
+    .expect("the grating scene loads");
     let hits = metrics::ridge_hits(&r, RIDGE_UM);
     let errs: Vec<f64> = hits.iter().map(|h| h.error_um).collect();
     // On-time against duty·λ/|V| where that is inside the caps (above 8 mm/s for 0.4 mm of
