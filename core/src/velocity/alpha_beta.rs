@@ -11,7 +11,10 @@
 //! Velocity noise for white position noise σ_x: σ_v = σ_x/T_s·√(2β² / (α(4 − 2α − β)))
 //! (p = 0.9: 0.0171·σ_x/T_s — the LSQ window of equal delay, N = 38, gives 0.0148·σ_x/T_s).
 
-use super::common::{check_period, to_um_s, SlotClock, Tick, TuningError};
+use super::common::{
+    alpha_beta_group_delay_us, alpha_beta_stable, alpha_beta_warmup, check_period,
+    critically_damped_gains, to_um_s, SlotClock, Tick, TuningError,
+};
 use super::VelocityEstimator;
 
 /// α-β filter, f32.
@@ -36,25 +39,18 @@ impl AlphaBeta {
     /// Critically damped α-β with its double pole at `pole` (0 < pole < 1; larger = smoother
     /// and slower).
     pub fn critically_damped(sample_period_us: u32, pole: f32) -> Result<Self, TuningError> {
-        if !(pole > 0.0 && pole < 1.0) {
-            return Err(TuningError::BadGain);
-        }
-        Self::with_gains(
-            sample_period_us,
-            1.0 - pole * pole,
-            (1.0 - pole) * (1.0 - pole),
-        )
+        let (alpha, beta) = critically_damped_gains(pole)?;
+        Self::with_gains(sample_period_us, alpha, beta)
     }
 
     /// α-β with explicit gains, inside the stability triangle 0 < α < 2, 0 < β < 4 − 2α.
     pub fn with_gains(sample_period_us: u32, alpha: f32, beta: f32) -> Result<Self, TuningError> {
         check_period(sample_period_us)?;
-        if !(alpha > 0.0 && alpha < 2.0 && beta > 0.0 && beta < 4.0 - 2.0 * alpha) {
+        if !alpha_beta_stable(alpha, beta) {
             return Err(TuningError::BadGain);
         }
         // No output until the start transient (from v̂ = 0) has had about two group delays.
-        let delay_samples = alpha / beta - 0.5;
-        let warmup = libm::roundf(2.0 * delay_samples).clamp(1.0, 10_000.0) as u32;
+        let warmup = alpha_beta_warmup(alpha, beta);
         Ok(Self {
             alpha,
             beta,
@@ -111,8 +107,7 @@ impl VelocityEstimator for AlphaBeta {
     }
 
     fn group_delay_us(&self) -> u32 {
-        let samples = self.alpha / self.beta - 0.5;
-        libm::roundf(samples * self.clock.period_us() as f32) as u32
+        alpha_beta_group_delay_us(self.alpha, self.beta, self.clock.period_us())
     }
 }
 

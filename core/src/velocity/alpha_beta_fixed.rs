@@ -21,7 +21,10 @@
 
 use fixed::types::I16F16;
 
-use super::common::{check_period, SlotClock, Tick, TuningError};
+use super::common::{
+    alpha_beta_group_delay_us, alpha_beta_stable, alpha_beta_warmup, check_period,
+    critically_damped_gains, SlotClock, Tick, TuningError,
+};
 use super::VelocityEstimator;
 
 /// α-β filter in I16F16.
@@ -49,26 +52,20 @@ fn mul(a: I16F16, b: I16F16) -> I16F16 {
 impl AlphaBetaFixed {
     /// Critically damped, double pole at `pole` (see [`super::AlphaBeta::critically_damped`]).
     pub fn critically_damped(sample_period_us: u32, pole: f32) -> Result<Self, TuningError> {
-        if !(pole > 0.0 && pole < 1.0) {
-            return Err(TuningError::BadGain);
-        }
-        Self::with_gains(
-            sample_period_us,
-            1.0 - pole * pole,
-            (1.0 - pole) * (1.0 - pole),
-        )
+        let (alpha, beta) = critically_damped_gains(pole)?;
+        Self::with_gains(sample_period_us, alpha, beta)
     }
 
     /// Explicit gains, inside the stability triangle and not below the I16F16 resolution.
     pub fn with_gains(sample_period_us: u32, alpha: f32, beta: f32) -> Result<Self, TuningError> {
         check_period(sample_period_us)?;
-        if !(alpha > 0.0 && alpha < 2.0 && beta >= 1.0 / 8_192.0 && beta < 4.0 - 2.0 * alpha) {
+        if !(alpha_beta_stable(alpha, beta) && beta >= 1.0 / 8_192.0) {
             return Err(TuningError::BadGain);
         }
         let one_minus_alpha = I16F16::from_num(1.0 - alpha);
         let beta_q = I16F16::from_num(beta);
-        let delay_samples = alpha / beta - 0.5;
-        let warmup = libm::roundf(2.0 * delay_samples).clamp(1.0, 10_000.0) as u32;
+        // From the f32 gains, as for the f32 filter (the declared delay uses the quantized ones).
+        let warmup = alpha_beta_warmup(alpha, beta);
         Ok(Self {
             one_minus_alpha,
             beta: beta_q,
@@ -138,8 +135,7 @@ impl VelocityEstimator for AlphaBetaFixed {
 
     fn group_delay_us(&self) -> u32 {
         let alpha = 1.0 - self.one_minus_alpha.to_num::<f32>();
-        let samples = alpha / self.beta.to_num::<f32>() - 0.5;
-        libm::roundf(samples * self.clock.period_us() as f32) as u32
+        alpha_beta_group_delay_us(alpha, self.beta.to_num::<f32>(), self.clock.period_us())
     }
 }
 

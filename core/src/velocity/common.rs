@@ -1,5 +1,5 @@
-//! Shared by the estimators of this directory: sample-slot bookkeeping, configuration checks and
-//! the f32 → µm/s conversion.
+//! Shared by the estimators of this directory: sample-slot bookkeeping, configuration checks, the
+//! α-β gain formulas (f32 and I16F16 filters) and the f32 → µm/s conversion.
 //!
 //! The ADC is timer-triggered, so samples are taken on a fixed grid even when their timestamps
 //! are read late (interrupt latency) or a sample is lost (DMA overrun). The estimators therefore
@@ -33,13 +33,43 @@ impl From<EstimatorError> for TuningError {
     }
 }
 
-/// The sample periods every estimator accepts (as [`super::LsqSlope`] does).
+/// The sample periods every estimator accepts, [`super::LsqSlope`] included: 10 µs ..= 100 ms.
 pub(crate) fn check_period(sample_period_us: u32) -> Result<(), EstimatorError> {
     if (10..=100_000).contains(&sample_period_us) {
         Ok(())
     } else {
         Err(EstimatorError::BadSamplePeriod)
     }
+}
+
+/// (α, β) of the critically damped α-β filter with its double pole at `pole` (0 < pole < 1):
+/// α = 1 − p², β = (1 − p)².
+pub(crate) fn critically_damped_gains(pole: f32) -> Result<(f32, f32), TuningError> {
+    if !(pole > 0.0 && pole < 1.0) {
+        return Err(TuningError::BadGain);
+    }
+    Ok((1.0 - pole * pole, (1.0 - pole) * (1.0 - pole)))
+}
+
+/// α-β gains inside the stability triangle 0 < α < 2, 0 < β < 4 − 2α (false for NaN).
+pub(crate) fn alpha_beta_stable(alpha: f32, beta: f32) -> bool {
+    alpha > 0.0 && alpha < 2.0 && beta > 0.0 && beta < 4.0 - 2.0 * alpha
+}
+
+/// Group delay of an α-β filter at constant acceleration, in samples: α/β − ½.
+fn alpha_beta_delay_samples(alpha: f32, beta: f32) -> f32 {
+    alpha / beta - 0.5
+}
+
+/// Samples without output after a (re)start, while the transient from v̂ = 0 settles: about two
+/// group delays, 1 ..= 10 000.
+pub(crate) fn alpha_beta_warmup(alpha: f32, beta: f32) -> u32 {
+    libm::roundf(2.0 * alpha_beta_delay_samples(alpha, beta)).clamp(1.0, 10_000.0) as u32
+}
+
+/// Group delay of an α-β filter, µs, rounded.
+pub(crate) fn alpha_beta_group_delay_us(alpha: f32, beta: f32, sample_period_us: u32) -> u32 {
+    libm::roundf(alpha_beta_delay_samples(alpha, beta) * sample_period_us as f32) as u32
 }
 
 /// What the time since the previous sample means.
@@ -56,9 +86,20 @@ pub(crate) enum Tick {
 }
 
 /// Turns timestamps into slot steps (see the module doc).
+///
+/// No 64-bit arithmetic and, on the common path (one slot, or a duplicate), no division: the
+/// offset from the grid, plus half a period, is compared against thresholds computed in `new`.
+/// Only a step of 2..=[`MAX_BRIDGED_SLOTS`] slots (a lost sample) divides, in u32 (one `udiv`
+/// on a Cortex-M3/M4).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SlotClock {
     period_us: u32,
+    /// ⌊period/2⌋: added to the offset from the grid so that whole periods round to nearest.
+    half_us: u32,
+    /// 2 periods: a rounded offset below this (and not below one period) is one slot.
+    two_periods_us: u32,
+    /// (MAX_BRIDGED_SLOTS + 1) periods: a rounded offset from here on is a gap.
+    gap_us: u32,
     /// Where the previous sample sits on the sampling grid, µs (wrapping).
     grid_us: Option<u32>,
     /// Sub-µs part of the grid, 1/256 µs.
@@ -66,9 +107,13 @@ pub(crate) struct SlotClock {
 }
 
 impl SlotClock {
+    /// For periods up to 100 ms ([`check_period`]); the thresholds saturate far above that.
     pub(crate) const fn new(period_us: u32) -> Self {
         Self {
             period_us,
+            half_us: period_us / 2,
+            two_periods_us: period_us.saturating_mul(2),
+            gap_us: period_us.saturating_mul(MAX_BRIDGED_SLOTS + 1),
             grid_us: None,
             grid_frac: 0,
         }
@@ -83,30 +128,31 @@ impl SlotClock {
             self.grid_us = Some(t_us);
             return Tick::First;
         };
-        // Signed offset from the previous grid point; a timestamp that ran backwards by more
-        // than half a period is a gap (restart), not a duplicate.
-        let dt = t_us.wrapping_sub(grid) as i32 as i64;
-        let p = self.period_us as i64;
-        if dt < -p / 2 {
-            self.grid_us = Some(t_us);
-            return Tick::Gap;
-        }
-        let slots = (dt + p / 2).div_euclid(p);
-        if slots <= 0 {
+        // Offset from the previous grid point plus half a period: its whole periods are the
+        // slot count, rounded to nearest. Read as u32, a timestamp more than half a period
+        // *before* the grid (signed offset < −⌊p/2⌋) lands at ≥ 2³¹, past `gap_us`: time that
+        // ran backwards is a gap (restart) like a long silence, not a duplicate.
+        let rounded = t_us.wrapping_sub(grid).wrapping_add(self.half_us);
+        let p = self.period_us;
+        let (slots, on_grid) = if rounded < p {
             return Tick::Duplicate;
-        }
-        if slots > MAX_BRIDGED_SLOTS as i64 {
+        } else if rounded < self.two_periods_us {
+            (1, grid.wrapping_add(p))
+        } else if rounded < self.gap_us {
+            let slots = rounded / p;
+            (slots, grid.wrapping_add(slots * p))
+        } else {
             self.grid_us = Some(t_us);
             return Tick::Gap;
-        }
-        let on_grid = grid.wrapping_add((slots * p) as u32);
-        // Move the grid by 1/16 of the offset, in 1/256 µs so small offsets still count.
+        };
+        // Move the grid by 1/16 of the offset, in 1/256 µs so small offsets still count. The
+        // offset is (rounded mod p) − ⌊p/2⌋, within ±p/2, so 16× it cannot overflow.
         let offset = t_us.wrapping_sub(on_grid) as i32;
-        self.grid_frac += offset.clamp(-1 << 20, 1 << 20) * 16;
+        self.grid_frac += offset * 16;
         let whole = self.grid_frac >> 8;
         self.grid_frac -= whole << 8;
         self.grid_us = Some(on_grid.wrapping_add(whole as u32));
-        Tick::Slots(slots as u32)
+        Tick::Slots(slots)
     }
 
     pub(crate) fn reset(&mut self) {
@@ -158,5 +204,184 @@ mod tests {
         assert_eq!(to_um_s(-2.5), -3);
         assert_eq!(to_um_s(1e12), i32::MAX);
         assert_eq!(to_um_s(f32::NAN), 0);
+    }
+
+    /// [`SlotClock::tick`] against the implementation it replaced (an i64 `div_euclid` per
+    /// sample), kept here verbatim: the same ticks and the same grid state, step by step.
+    mod equivalence {
+        use super::*;
+        use proptest::prelude::*;
+
+        /// The i64 implementation, as it was.
+        struct OldSlotClock {
+            period_us: u32,
+            grid_us: Option<u32>,
+            grid_frac: i32,
+        }
+
+        impl OldSlotClock {
+            fn new(period_us: u32) -> Self {
+                Self {
+                    period_us,
+                    grid_us: None,
+                    grid_frac: 0,
+                }
+            }
+
+            fn tick(&mut self, t_us: u32) -> Tick {
+                let Some(grid) = self.grid_us else {
+                    self.grid_us = Some(t_us);
+                    return Tick::First;
+                };
+                let dt = t_us.wrapping_sub(grid) as i32 as i64;
+                let p = self.period_us as i64;
+                if dt < -p / 2 {
+                    self.grid_us = Some(t_us);
+                    return Tick::Gap;
+                }
+                let slots = (dt + p / 2).div_euclid(p);
+                if slots <= 0 {
+                    return Tick::Duplicate;
+                }
+                if slots > MAX_BRIDGED_SLOTS as i64 {
+                    self.grid_us = Some(t_us);
+                    return Tick::Gap;
+                }
+                let on_grid = grid.wrapping_add((slots * p) as u32);
+                let offset = t_us.wrapping_sub(on_grid) as i32;
+                self.grid_frac += offset.clamp(-1 << 20, 1 << 20) * 16;
+                let whole = self.grid_frac >> 8;
+                self.grid_frac -= whole << 8;
+                self.grid_us = Some(on_grid.wrapping_add(whole as u32));
+                Tick::Slots(slots as u32)
+            }
+
+            fn reset(&mut self) {
+                self.grid_us = None;
+                self.grid_frac = 0;
+            }
+        }
+
+        /// One step of a timestamp sequence, made concrete against the period and the grid.
+        #[derive(Clone, Debug)]
+        enum Step {
+            /// One period later, ± up to a whole period of jitter.
+            Next(i32),
+            /// k periods later (k = 2..=6: one to five samples lost), ± jitter.
+            Drop(u32, i32),
+            /// Up to a period later: a repeated or early reading.
+            Soon(u32),
+            /// Anywhere (long silences, the u32 clock's wrap, half the clock away).
+            Jump(u32),
+            /// Up to three periods back.
+            Back(u32),
+            /// Within ±2 µs of a rounding threshold: k·p + p/2 from the grid (k = −2..=6).
+            Edge(i32, i32),
+            /// Forget the grid.
+            Reset,
+        }
+
+        fn step() -> impl Strategy<Value = Step> {
+            prop_oneof![
+                8 => any::<i32>().prop_map(Step::Next),
+                2 => (2u32..=6, any::<i32>()).prop_map(|(k, j)| Step::Drop(k, j)),
+                1 => any::<u32>().prop_map(Step::Soon),
+                1 => any::<u32>().prop_map(Step::Jump),
+                1 => any::<u32>().prop_map(Step::Back),
+                2 => (-2i32..=6, -2i32..=2).prop_map(|(k, d)| Step::Edge(k, d)),
+                1 => Just(Step::Reset),
+            ]
+        }
+
+        fn period() -> impl Strategy<Value = u32> {
+            // The accepted range is 10..=100 000 (`check_period`); the clock itself is checked
+            // beyond it, both ways, and at the odd/even halves.
+            prop_oneof![
+                Just(100u32),
+                Just(10),
+                Just(100_000),
+                Just(101),
+                1u32..=200_000
+            ]
+        }
+
+        fn start() -> impl Strategy<Value = u32> {
+            prop_oneof![any::<u32>(), (u32::MAX - 2_000_000)..=u32::MAX]
+        }
+
+        /// The next timestamp for `s`, from the last one and the old clock's grid.
+        fn next_t(s: &Step, t: u32, p: u32, grid: Option<u32>) -> u32 {
+            let jitter = |j: i32| (j % p as i32) as u32;
+            match *s {
+                Step::Next(j) => t.wrapping_add(p).wrapping_add(jitter(j)),
+                Step::Drop(k, j) => t.wrapping_add(k * p).wrapping_add(jitter(j)),
+                Step::Soon(d) => t.wrapping_add(d % (p + 1)),
+                Step::Jump(d) => t.wrapping_add(d),
+                Step::Back(d) => t.wrapping_sub(d % (3 * p + 1)),
+                Step::Edge(k, d) => grid
+                    .unwrap_or(t)
+                    .wrapping_add((k * p as i32) as u32)
+                    .wrapping_add(p / 2)
+                    .wrapping_add(d as u32),
+                Step::Reset => t,
+            }
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig { cases: 500, ..ProptestConfig::default() })]
+
+            #[test]
+            fn slot_clock_tick_matches_the_old_i64_division(
+                p in period(),
+                t0 in start(),
+                steps in prop::collection::vec(step(), 1..300),
+            ) {
+                let mut old = OldSlotClock::new(p);
+                let mut new = SlotClock::new(p);
+                prop_assert_eq!(new.tick(t0), old.tick(t0));
+                let mut t = t0;
+                for (i, s) in steps.iter().enumerate() {
+                    t = next_t(s, t, p, old.grid_us);
+                    if let Step::Reset = s {
+                        old.reset();
+                        new.reset();
+                    } else {
+                        prop_assert_eq!(new.tick(t), old.tick(t), "step {} {:?} t={}", i, s, t);
+                    }
+                    prop_assert_eq!(new.grid_us, old.grid_us, "step {}", i);
+                    prop_assert_eq!(new.grid_frac, old.grid_frac, "step {}", i);
+                }
+            }
+        }
+
+        /// Every offset from −3 to +7 periods around the grid (and the extremes of the signed
+        /// 32-bit offset), from grids near 0 and near the wrap, with sub-µs parts across their
+        /// range: one tick each, from the same state.
+        #[test]
+        fn slot_clock_tick_matches_the_old_i64_division_at_every_offset() {
+            for p in [1u32, 2, 3, 10, 11, 99, 100, 101, 1_000, 4_097, 100_000] {
+                let pi = p as i64;
+                let offsets = (-3 * pi..=7 * pi)
+                    .chain([i32::MIN as i64, i32::MIN as i64 + 1, i32::MAX as i64 - 1])
+                    .chain([i32::MAX as i64]);
+                for dt in offsets {
+                    for grid in [0u32, 12_345, u32::MAX - 150_000, u32::MAX] {
+                        for frac in [0i32, 1, 8, 128, 255] {
+                            let t = grid.wrapping_add(dt as i32 as u32);
+                            let mut old = OldSlotClock::new(p);
+                            old.grid_us = Some(grid);
+                            old.grid_frac = frac;
+                            let mut new = SlotClock::new(p);
+                            new.grid_us = Some(grid);
+                            new.grid_frac = frac;
+                            let what = (p, dt, grid, frac);
+                            assert_eq!(new.tick(t), old.tick(t), "{what:?}");
+                            assert_eq!(new.grid_us, old.grid_us, "{what:?}");
+                            assert_eq!(new.grid_frac, old.grid_frac, "{what:?}");
+                        }
+                    }
+                }
+            }
+        }
     }
 }

@@ -1,5 +1,6 @@
 //! Least-squares slope estimator: O(1) integer running sums, bit-exact on every platform.
 
+use super::common::check_period;
 use super::{EstimatorError, VelocityEstimator};
 
 /// Least-squares slope over the last `N` samples, integer arithmetic.
@@ -25,9 +26,7 @@ impl<const N: usize> LsqSlope<N> {
         if N < 2 {
             return Err(EstimatorError::WindowTooShort);
         }
-        if !(10..=100_000).contains(&sample_period_us) {
-            return Err(EstimatorError::BadSamplePeriod);
-        }
+        check_period(sample_period_us)?;
         let n = N as i64;
         let denom = n * (n * n - 1) * sample_period_us as i64;
         let gain_q32 = ((6_000_000i128 << 32) + denom as i128 / 2) / denom as i128;
