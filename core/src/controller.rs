@@ -991,8 +991,9 @@ impl<E: VelocityEstimator> Controller<E> {
     }
 
     fn drive(&mut self, desired: Option<TimerSettings>, t_us: u32) -> Option<GateAction> {
-        // The common case, a burst running unchanged, before the caps are even fetched.
-        if desired.is_some() && self.gate.running() == desired {
+        // The common cases, a burst running unchanged or the line idle and staying so, before
+        // the caps are even fetched.
+        if self.gate.running() == desired && (desired.is_some() || self.gate.is_idle()) {
             return None;
         }
         let limits = self.limits();

@@ -109,6 +109,11 @@ impl Gate {
         }
     }
 
+    /// True when the line is off and no pulse is pending its end.
+    pub fn is_idle(&self) -> bool {
+        self.state == State::Off
+    }
+
     fn may_go_on(&self, t_us: u32) -> bool {
         self.earliest_on_us
             .is_none_or(|e| t_us.wrapping_sub(e) as i32 >= 0)

@@ -117,7 +117,8 @@ impl VelocityEstimator for AlphaBetaFixed {
         self.seen = self.seen.saturating_add(1);
         let out = (self.seen > self.warmup).then(|| {
             // µm/slot (Q16) × slots per second, rounded.
-            let per_s = 1_000_000 / self.clock.period_us() as i64;
+            // u32 division (one udiv on the M4); the period is at least 10 µs.
+            let per_s = (1_000_000 / self.clock.period_us()) as i64;
             ((self.v.to_bits() as i64 * per_s + (1 << 15)) >> 16) as i32
         });
         self.last_out = out;

@@ -272,7 +272,7 @@ fn check(dir: &Path, log: &Path, cost_md: &Path) -> Result<(), String> {
     let mut default_cost = None;
     let mut unused_cost = None;
     let sections = [
-        ("COST-SCENE", "Whole `on_sample` per scene and trajectory (default estimator lsq32)"),
+        ("COST-SCENE", "Whole `on_sample` per scene and trajectory (default estimator med3+lsq32)"),
         ("COST-TEXTURE", "Whole `on_sample`, one-region scene per texture kind (default vectors' back-and-forth and rest inputs)"),
         ("COST-ESTIMATOR", "Velocity estimators: `update` alone, and whole `on_sample` on the default scene (back-and-forth)"),
         ("COST-STAGE", "Stages alone (default scene, back-and-forth inputs)"),
