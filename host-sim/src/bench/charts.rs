@@ -1,7 +1,9 @@
 //! Charts of the bench (plotters, PNG): error against delay, against cost, against speed.
 
+use std::ops::Range;
 use std::path::Path;
 
+use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::methods::Family;
@@ -64,23 +66,8 @@ pub fn scatter(
     let (x0, x1) = range(pts.iter().map(|p| p.x));
     let (y0, y1) = range(pts.iter().map(|p| p.y));
     let root = BitMapBackend::new(path, (1200, 800)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 24))
-        .margin(20)
-        .x_label_area_size(50)
-        .y_label_area_size(70)
-        .build_cartesian_2d(
-            (x0 / 1.5..x1 * 1.5).log_scale(),
-            (y0 / 1.5..y1 * 1.5).log_scale(),
-        )
-        .map_err(|e| e.to_string())?;
-    chart
-        .configure_mesh()
-        .x_desc(x_label)
-        .y_desc(y_label)
-        .draw()
-        .map_err(|e| e.to_string())?;
+    let axes = (x_label, y_label, x0 / 1.5..x1 * 1.5, y0 / 1.5..y1 * 1.5);
+    let mut chart = log_log_panel(&root, title, axes)?;
     let front = pareto(&pts);
     let mut line: Vec<(f64, f64)> = front.iter().map(|&i| (pts[i].x, pts[i].y)).collect();
     line.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -119,6 +106,34 @@ pub fn scatter(
     Ok(())
 }
 
+/// A log–log chart on both axes.
+type LogLog<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>;
+
+/// Clears `root` to white and sets up the bench's log–log panel: caption, margins, and the mesh
+/// with `(x label, y label, x range, y range)`.
+fn log_log_panel<'a, 'b>(
+    root: &'a DrawingArea<BitMapBackend<'b>, Shift>,
+    title: &str,
+    (x_label, y_label, x, y): (&str, &str, Range<f64>, Range<f64>),
+) -> Result<LogLog<'a, 'b>, String> {
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 24))
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x.log_scale(), y.log_scale())
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .x_desc(x_label)
+        .y_desc(y_label)
+        .draw()
+        .map_err(|e| e.to_string())?;
+    Ok(chart)
+}
+
 /// One curve.
 #[derive(Clone, Debug)]
 pub struct Curve {
@@ -145,23 +160,8 @@ pub fn curves(
     let (x0, x1) = range(all.clone().map(|p| p.0));
     let (y0, y1) = range(all.map(|p| p.1));
     let root = BitMapBackend::new(path, (1200, 800)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 24))
-        .margin(20)
-        .x_label_area_size(50)
-        .y_label_area_size(70)
-        .build_cartesian_2d(
-            (x0 / 1.2..x1 * 1.2).log_scale(),
-            (y0 / 1.5..y1 * 1.5).log_scale(),
-        )
-        .map_err(|e| e.to_string())?;
-    chart
-        .configure_mesh()
-        .x_desc(x_label)
-        .y_desc(y_label)
-        .draw()
-        .map_err(|e| e.to_string())?;
+    let axes = (x_label, y_label, x0 / 1.2..x1 * 1.2, y0 / 1.5..y1 * 1.5);
+    let mut chart = log_log_panel(&root, title, axes)?;
     for (i, c) in curves.iter().enumerate() {
         let base = colour(c.family);
         // Members of a family get different line widths so they stay apart.
