@@ -2,6 +2,7 @@
 
 use std::path::Path;
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::sim::SimResult;
@@ -63,6 +64,42 @@ fn runs(points: impl Iterator<Item = (f64, Option<f64>)>) -> Vec<Vec<(f64, f64)>
 }
 
 /// Writes the chart of `r` to `path` (PNG).
+/// Draws what the core saw (red, in runs broken by faults) over the truth (blue), decimated to
+/// the panel's width, and the legend: `(runs, label, line width)` and `(truth, line width)`.
+fn core_against_truth<'a, DB: DrawingBackend + 'a>(
+    c: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    (core, label, core_width): (&[Vec<(f64, f64)>], &str, u32),
+    (truth, truth_width): (&[(f64, f64)], u32),
+    t_end: f64,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    for (i, run) in core.iter().enumerate() {
+        let s = c.draw_series(LineSeries::new(
+            decimate(run, 0.0, t_end, BUCKETS),
+            RED.stroke_width(core_width),
+        ))?;
+        if i == 0 {
+            s.label(label)
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+        }
+    }
+    c.draw_series(LineSeries::new(
+        decimate(truth, 0.0, t_end, BUCKETS),
+        BLUE.stroke_width(truth_width),
+    ))?
+    .label("true")
+    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+    c.configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 15))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()?;
+    Ok(())
+}
+
 pub fn write_png(
     r: &SimResult,
     path: &Path,
@@ -115,28 +152,7 @@ pub fn write_png(
             .label(format!("boundary {b:.3} mm"))
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
         }
-        for (i, run) in meas.iter().enumerate() {
-            let s = c.draw_series(LineSeries::new(
-                decimate(run, 0.0, t_end, BUCKETS),
-                RED.stroke_width(2),
-            ))?;
-            if i == 0 {
-                s.label("measured")
-                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-            }
-        }
-        c.draw_series(LineSeries::new(
-            decimate(&tp, 0.0, t_end, BUCKETS),
-            BLUE.stroke_width(1),
-        ))?
-        .label("true")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()?;
+        core_against_truth(&mut c, (&meas, "measured", 2), (&tp, 1), t_end)?;
     }
 
     // Velocity.
@@ -168,28 +184,7 @@ pub fn write_png(
             .label_style(("sans-serif", 15))
             .light_line_style(WHITE.mix(0.0))
             .draw()?;
-        for (i, run) in est.iter().enumerate() {
-            let s = c.draw_series(LineSeries::new(
-                decimate(run, 0.0, t_end, BUCKETS),
-                RED.stroke_width(1),
-            ))?;
-            if i == 0 {
-                s.label("estimated (core)")
-                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-            }
-        }
-        c.draw_series(LineSeries::new(
-            decimate(&tv, 0.0, t_end, BUCKETS),
-            BLUE.stroke_width(2),
-        ))?
-        .label("true")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()?;
+        core_against_truth(&mut c, (&est, "estimated (core)", 1), (&tv, 2), t_end)?;
     }
 
     // Region (−1 = none: fault or no scene).
