@@ -123,6 +123,7 @@ impl SlotClock {
         self.period_us
     }
 
+    #[inline(always)]
     pub(crate) fn tick(&mut self, t_us: u32) -> Tick {
         let Some(grid) = self.grid_us else {
             self.grid_us = Some(t_us);

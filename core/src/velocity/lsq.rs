@@ -1,6 +1,11 @@
 //! Least-squares slope estimator: O(1) integer running sums, bit-exact on every platform.
+//!
+//! Samples are placed on the sampling grid by the shared slot clock (`common.rs`): timestamp
+//! jitter below half a period is rounded away, a lost sample (a step of 2..=4 slots) is bridged by
+//! the straight line between its neighbours, so a ramp stays exact through it, and only a longer
+//! silence or time running backwards restarts the window.
 
-use super::common::check_period;
+use super::common::{check_period, SlotClock, Tick};
 use super::{EstimatorError, VelocityEstimator};
 
 /// Least-squares slope over the last `N` samples, integer arithmetic.
@@ -14,8 +19,10 @@ pub struct LsqSlope<const N: usize> {
     sum: i64,
     /// Σ k·x_k with k = 0 for the oldest entry.
     weighted: i64,
-    last_t_us: Option<u32>,
-    sample_period_us: u32,
+    clock: SlotClock,
+    /// The newest position in the window, and the last estimate (a duplicate reading returns it).
+    last_x: i32,
+    last_out: Option<i32>,
     /// µm/s per unit of 2·Σ(k − (N−1)/2)·x_k, Q32: 6·10⁶ / (N (N²−1) T_s).
     gain_q32: i64,
 }
@@ -37,23 +44,18 @@ impl<const N: usize> LsqSlope<N> {
             len: 0,
             sum: 0,
             weighted: 0,
-            last_t_us: None,
-            sample_period_us,
+            clock: SlotClock::new(sample_period_us),
+            last_x: 0,
+            last_out: None,
             gain_q32,
         })
     }
 }
 
-impl<const N: usize> VelocityEstimator for LsqSlope<N> {
-    fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
-        if let Some(last) = self.last_t_us {
-            // A dropped sample would put two positions one period apart that are really two:
-            // restart instead of reporting a slope that is off by the gap ratio.
-            if t_us.wrapping_sub(last) > self.sample_period_us + self.sample_period_us / 2 {
-                self.reset();
-            }
-        }
-        self.last_t_us = Some(t_us);
+impl<const N: usize> LsqSlope<N> {
+    /// Adds a position at the next slot, dropping the oldest once the window is full.
+    #[inline(always)]
+    fn push(&mut self, position_um: i32) {
         let x = position_um as i64;
         if self.len < N {
             self.weighted += self.len as i64 * x;
@@ -68,6 +70,12 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
             self.window[self.head] = position_um;
             self.head = (self.head + 1) % N;
         }
+        self.last_x = position_um;
+    }
+
+    /// The slope of a full window, µm/s.
+    #[inline(always)]
+    fn estimate(&self) -> Option<i32> {
         if self.len < N {
             return None;
         }
@@ -87,16 +95,45 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
         Some(v.clamp(i32::MIN as i64, i32::MAX as i64) as i32)
     }
 
-    fn reset(&mut self) {
+    /// Empties the window (the clock is left as it is).
+    fn clear(&mut self) {
         self.head = 0;
         self.len = 0;
         self.sum = 0;
         self.weighted = 0;
-        self.last_t_us = None;
+        self.last_out = None;
+    }
+}
+
+impl<const N: usize> VelocityEstimator for LsqSlope<N> {
+    fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
+        match self.clock.tick(t_us) {
+            Tick::Duplicate => return self.last_out,
+            Tick::Gap => {
+                self.clear();
+                // The clock restarted on this sample already; only the window is cleared.
+            }
+            Tick::Slots(m) if m > 1 && self.len > 0 => {
+                // Lost samples: fill their slots on the line between the neighbours.
+                let (a, b) = (self.last_x as i64, position_um as i64);
+                for k in 1..m as i64 {
+                    self.push((a + (b - a) * k / m as i64) as i32);
+                }
+            }
+            Tick::First | Tick::Slots(_) => {}
+        }
+        self.push(position_um);
+        self.last_out = self.estimate();
+        self.last_out
+    }
+
+    fn reset(&mut self) {
+        self.clear();
+        self.clock.reset();
     }
 
     fn group_delay_us(&self) -> u32 {
-        (N as u32 - 1) * self.sample_period_us / 2
+        (N as u32 - 1) * self.clock.period_us() / 2
     }
 }
 
@@ -122,9 +159,21 @@ mod tests {
         for i in 0..7u32 {
             assert_eq!(e.update(i as i32, i * 100), None);
         }
-        assert!(e.update(7, 700).is_some());
-        // A dropped sample (gap of 2 periods) restarts the window.
-        assert_eq!(e.update(9, 900), None);
+        assert_eq!(e.update(7, 700), Some(10_000));
+        // A dropped sample (a step of 2 periods) is bridged: still 1 µm per 100 µs.
+        assert_eq!(e.update(9, 900), Some(10_000));
+        // A late stamp (+40 µs) is rounded to its slot; a repeated reading changes nothing.
+        assert_eq!(e.update(10, 1_040), Some(10_000));
+        assert_eq!(e.update(10, 1_045), Some(10_000));
+        assert_eq!(e.update(11, 1_100), Some(10_000));
+        // Six periods of silence restart the window.
+        assert_eq!(e.update(17, 1_700), None);
+        // So does time running backwards.
+        let mut e = LsqSlope::<8>::new(100).unwrap();
+        for i in 0..8u32 {
+            e.update(i as i32, 10_000 + i * 100);
+        }
+        assert_eq!(e.update(8, 5_000), None);
     }
 
     #[test]

@@ -10,8 +10,9 @@
 //!   (N = 32, T_s = 100 µs, σ_x = 12 µm → σ_v ≈ 2.3 mm/s);
 //! - group delay at constant acceleration: (N − 1)/2 · T_s (N = 32 → 1.55 ms).
 //!
-//! Samples are expected at a fixed period (the ADC is timer-triggered); a gap of more than 1.5
-//! periods (a dropped sample) restarts the window rather than bending the slope.
+//! Samples are expected at a fixed period (the ADC is timer-triggered). Every estimator places
+//! them on the sampling grid with the shared slot clock (`common.rs`): jitter is rounded away, up
+//! to three lost samples are bridged, and a longer silence restarts the estimator.
 
 mod alpha_beta;
 mod alpha_beta_fixed;
