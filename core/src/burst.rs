@@ -26,6 +26,19 @@ pub struct BurstTimer {
 }
 
 impl BurstTimer {
+    /// `clocks` kernel clocks in µs, rounded up (so rests computed from it are never short).
+    pub fn clocks_to_us_ceil(&self, clocks: u64) -> u64 {
+        (clocks * 1_000_000).div_ceil(self.clock_hz.max(1) as u64)
+    }
+
+    /// Rejects an impossible timer description (zero clock, width not 16 or 32).
+    fn validate(&self) -> Result<(), BurstError> {
+        if self.clock_hz == 0 || !(self.counter_bits == 16 || self.counter_bits == 32) {
+            return Err(BurstError::BadTimer);
+        }
+        Ok(())
+    }
+
     /// One-pulse settings with the line high for `on_clocks` kernel clocks (rounded down to a
     /// whole tick, at least one): high for the whole count, one tick low at the end.
     pub fn one_pulse(&self, on_clocks: u64) -> Result<TimerSettings, BurstError> {
@@ -145,6 +158,17 @@ impl SafetyLimits {
         by_duty.min(by_time) as u32
     }
 
+    /// Rejects a burst duty that is zero, above 100 % or above the duty cap.
+    pub fn check_duty(&self, duty_permille: u16) -> Result<(), BurstError> {
+        if duty_permille == 0 || duty_permille > 1000 {
+            return Err(BurstError::BadDuty);
+        }
+        if duty_permille > self.max_duty_permille {
+            return Err(BurstError::DutyAboveCap);
+        }
+        Ok(())
+    }
+
     /// The on-time cap in kernel-clock cycles.
     pub fn max_on_time_clocks(&self, timer: &BurstTimer) -> u64 {
         self.max_on_time_us as u64 * timer.clock_hz as u64 / 1_000_000
@@ -183,15 +207,8 @@ impl FastPlanner {
         limits: &SafetyLimits,
         duty_permille: u16,
     ) -> Result<Self, BurstError> {
-        if timer.clock_hz == 0 || !(timer.counter_bits == 16 || timer.counter_bits == 32) {
-            return Err(BurstError::BadTimer);
-        }
-        if duty_permille == 0 || duty_permille > 1000 {
-            return Err(BurstError::BadDuty);
-        }
-        if duty_permille > limits.max_duty_permille {
-            return Err(BurstError::DutyAboveCap);
-        }
+        timer.validate()?;
+        limits.check_duty(duty_permille)?;
         let min_period = (timer.clock_hz as u64)
             .div_ceil(timer.max_burst_hz.max(1) as u64)
             .max(2);
@@ -251,21 +268,14 @@ pub fn plan(
     limits: &SafetyLimits,
     cmd: &BurstCommand,
 ) -> Result<(TimerSettings, bool), BurstError> {
-    if timer.clock_hz == 0 || !(timer.counter_bits == 16 || timer.counter_bits == 32) {
-        return Err(BurstError::BadTimer);
-    }
+    timer.validate()?;
     if cmd.burst_millihz == 0 {
         return Err(BurstError::ZeroFrequency);
     }
     if cmd.burst_millihz as u64 > timer.max_burst_hz as u64 * 1000 {
         return Err(BurstError::AboveBoardLimit);
     }
-    if cmd.duty_permille == 0 || cmd.duty_permille > 1000 {
-        return Err(BurstError::BadDuty);
-    }
-    if cmd.duty_permille > limits.max_duty_permille {
-        return Err(BurstError::DutyAboveCap);
-    }
+    limits.check_duty(cmd.duty_permille)?;
     let clock_millihz = timer.clock_hz as u64 * 1000;
     let f = cmd.burst_millihz as u64;
     let counter_span = 1u64 << timer.counter_bits;

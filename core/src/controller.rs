@@ -205,13 +205,8 @@ impl Ridges {
         if timer.max_burst_hz == 0 {
             return Err(BurstError::BadTimer);
         }
+        limits.check_duty(g.duty_permille)?;
         let duty = g.duty_permille as u64;
-        if duty == 0 || duty > 1000 {
-            return Err(BurstError::BadDuty);
-        }
-        if duty > limits.max_duty_permille as u64 {
-            return Err(BurstError::DutyAboveCap);
-        }
         let clock = timer.clock_hz as u64;
         let max_on_clocks = limits.max_on_time_clocks(timer);
         let min_on_clocks =
@@ -227,7 +222,7 @@ impl Ridges {
             min_on_clocks,
             max_on_clocks,
             min_spacing_us: 1_000_000u32.div_ceil(timer.max_burst_hz),
-            min_on_us: (min_on_clocks * 1_000_000).div_ceil(clock.max(1)) as u32,
+            min_on_us: timer.clocks_to_us_ceil(min_on_clocks) as u32,
             amplitude: g.amplitude_permille,
             tracker: RidgeTracker::default(),
             last_pulse_us: None,
@@ -993,7 +988,7 @@ impl<E: VelocityEstimator> Controller<E> {
     fn drive(&mut self, desired: Option<TimerSettings>, t_us: u32) -> Option<GateAction> {
         // The common cases, a burst running unchanged or the line idle and staying so, before
         // the caps are even fetched.
-        if self.gate.running() == desired && (desired.is_some() || self.gate.is_idle()) {
+        if self.gate.steady(desired) {
             return None;
         }
         let limits = self.limits();

@@ -82,14 +82,14 @@ pub struct Gate {
     max_on_clocks: u64,
 }
 
-/// An on-time in µs, rounded up (so rests computed from it are never short).
-fn on_us(on_clocks: u64, timer: &BurstTimer) -> u64 {
-    (on_clocks * 1_000_000).div_ceil(timer.clock_hz.max(1) as u64)
+/// True while `t_us` is before `deadline_us` (both wrapping µs).
+fn before(t_us: u32, deadline_us: u32) -> bool {
+    (t_us.wrapping_sub(deadline_us) as i32) < 0
 }
 
 /// µs the line must stay off after an on-time of `on_clocks`, so on/(on + rest) ≤ cap.
 fn rest_us(on_clocks: u64, timer: &BurstTimer, limits: &SafetyLimits) -> u32 {
-    rest_after_us(on_us(on_clocks, timer), limits)
+    rest_after_us(timer.clocks_to_us_ceil(on_clocks), limits)
 }
 
 /// µs the line must stay off after an on-time of `on_us`, so on/(on + rest) ≤ cap.
@@ -109,14 +109,18 @@ impl Gate {
         }
     }
 
-    /// True when the line is off and no pulse is pending its end.
-    pub fn is_idle(&self) -> bool {
-        self.state == State::Off
+    /// True when `desired` is what the line already does: the same burst running, or off and
+    /// staying off. [`Gate::request`] returns at once then; callers may skip it (and the caps).
+    pub fn steady(&self, desired: Option<TimerSettings>) -> bool {
+        match (self.state, desired) {
+            (State::Running(r), Some(s)) => r == s,
+            (State::Off, None) => true,
+            _ => false,
+        }
     }
 
     fn may_go_on(&self, t_us: u32) -> bool {
-        self.earliest_on_us
-            .is_none_or(|e| t_us.wrapping_sub(e) as i32 >= 0)
+        self.earliest_on_us.is_none_or(|e| !before(t_us, e))
     }
 
     /// Leaving a running burst at `t_us`: the worst-case rest before the line may go on again.
@@ -143,14 +147,12 @@ impl Gate {
         timer: &BurstTimer,
         limits: &SafetyLimits,
     ) -> Option<GateAction> {
-        if let (State::Running(r), Some(s)) = (self.state, desired) {
-            if r == s {
-                return None;
-            }
+        if self.steady(desired) {
+            return None;
         }
         let desired = desired.filter(|s| limits.allows(timer, s));
         match (self.state, desired) {
-            (State::Pulse { end_us, .. }, None) if (t_us.wrapping_sub(end_us) as i32) < 0 => None,
+            (State::Pulse { end_us, .. }, None) if before(t_us, end_us) => None,
             (State::Off | State::Pulse { .. }, None) => {
                 self.state = State::Off;
                 None
@@ -197,7 +199,7 @@ impl Gate {
         let State::Pulse { start_us, end_us } = self.state else {
             return None;
         };
-        if t_us.wrapping_sub(end_us) as i32 >= 0 {
+        if !before(t_us, end_us) {
             return None;
         }
         let on = t_us.wrapping_sub(start_us);
@@ -222,7 +224,7 @@ impl Gate {
         if matches!(self.state, State::Running(_)) || !self.may_go_on(t_us) {
             return None;
         }
-        let end_us = t_us.wrapping_add(on_us(settings.on_clocks(), timer) as u32);
+        let end_us = t_us.wrapping_add(timer.clocks_to_us_ceil(settings.on_clocks()) as u32);
         self.state = State::Pulse {
             start_us: t_us,
             end_us,
