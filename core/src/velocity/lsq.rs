@@ -20,8 +20,7 @@ pub struct LsqSlope<const N: usize> {
     /// Σ k·x_k with k = 0 for the oldest entry.
     weighted: i64,
     clock: SlotClock,
-    /// The newest position in the window, and the last estimate (a duplicate reading returns it).
-    last_x: i32,
+    /// The last estimate (a duplicate reading returns it).
     last_out: Option<i32>,
     /// µm/s per unit of 2·Σ(k − (N−1)/2)·x_k, Q32: 6·10⁶ / (N (N²−1) T_s).
     gain_q32: i64,
@@ -45,7 +44,6 @@ impl<const N: usize> LsqSlope<N> {
             sum: 0,
             weighted: 0,
             clock: SlotClock::new(sample_period_us),
-            last_x: 0,
             last_out: None,
             gain_q32,
         })
@@ -70,7 +68,6 @@ impl<const N: usize> LsqSlope<N> {
             self.window[self.head] = position_um;
             self.head = (self.head + 1) % N;
         }
-        self.last_x = position_um;
     }
 
     /// The slope of a full window, µm/s.
@@ -115,7 +112,8 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
             }
             Tick::Slots(m) if m > 1 && self.len > 0 => {
                 // Lost samples: fill their slots on the line between the neighbours.
-                let (a, b) = (self.last_x as i64, position_um as i64);
+                let newest = self.window[(self.head + self.len - 1) % N];
+                let (a, b) = (newest as i64, position_um as i64);
                 for k in 1..m as i64 {
                     self.push((a + (b - a) * k / m as i64) as i32);
                 }
