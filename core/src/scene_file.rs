@@ -488,12 +488,14 @@ pub fn parse(file: &str, text: &str) -> Result<SceneDoc, SceneFileError> {
                 let rearm_um = match &spec.rearm_mm {
                     Some(v) => {
                         let half_mm = base.wavelength_um as f64 / 2000.0;
-                        let mm = cx.range(v, &field("rearm_mm"), 0.0, half_mm)?;
-                        if mm >= half_mm {
+                        let mm = *v.get_ref();
+                        if !(0.0..half_mm).contains(&mm) {
                             return Err(cx.err(
                                 v.span(),
                                 &field("rearm_mm"),
-                                format_args!("must be below half the period ({half_mm} mm)"),
+                                format_args!(
+                                    "{mm} must be ≥ 0 and below half the period ({half_mm} mm)"
+                                ),
                             ));
                         }
                         (mm * 1000.0).round() as u32
