@@ -146,12 +146,9 @@ impl RidgeTracker {
                 }
             }
             Some(prev) if prev != cell => {
-                // Moving up the last ridge passed is `cell`'s lower edge; moving down, `prev`'s.
-                let (ridge, passed) = if cell > prev {
-                    (cell, cell.abs_diff(prev))
-                } else {
-                    (prev, prev.abs_diff(cell))
-                };
+                // Moving up the last ridge passed is `cell`'s lower edge; moving down, `prev`'s:
+                // the higher cell's either way.
+                let (ridge, passed) = (cell.max(prev), cell.abs_diff(prev));
                 if self.disarmed != Some(ridge) || passed > 1 {
                     crossing = Some(Crossing {
                         ridge,
