@@ -301,7 +301,7 @@ pub fn run(opts: &BenchOptions) -> Result<Vec<MethodResult>, String> {
     let mut results = par_map(all.len(), opts.threads, |i| {
         let mut r = measure_method(&all[i], &streams);
         let (mixed, d) = scenario::mixed();
-        let period_us = 100;
+        let period_us = crate::sim::sample_period_us(&saw_boards::NUCLEO_F446RE);
         let grating = |render| {
             renderers::core_run_with(
                 render,

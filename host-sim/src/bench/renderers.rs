@@ -14,7 +14,6 @@
 
 use saw_boards::NUCLEO_F446RE;
 use saw_core::texture::{Grating, GratingRender, Texture};
-use saw_core::velocity::VelocityEstimator;
 
 use super::methods::Dyn;
 
@@ -99,18 +98,18 @@ pub fn core_run(
     noise_lsb: f64,
     seed: u64,
 ) -> RenderStats {
-    core_run_with::<Dyn>(render, case, trajectory, duration_s, noise_lsb, seed, None)
+    core_run_with(render, case, trajectory, duration_s, noise_lsb, seed, None)
 }
 
 /// As [`core_run`], with `estimator` in the controller instead of the default.
-pub fn core_run_with<E: VelocityEstimator>(
+pub fn core_run_with(
     render: GratingRender,
     case: String,
     trajectory: Trajectory,
     duration_s: f64,
     noise_lsb: f64,
     seed: u64,
-    estimator: Option<E>,
+    estimator: Option<Dyn>,
 ) -> RenderStats {
     let mut p = SimParams::new(&NUCLEO_F446RE, trajectory, duration_s);
     p.config = grating_config(render);
@@ -129,10 +128,14 @@ pub fn core_run_with<E: VelocityEstimator>(
     // On-time against duty·λ/|V| where that is inside the caps (above 8 mm/s for 0.4 mm of
     // ridge and a 50 ms cap), and the pulse was not cut by a later Off.
     let limits = &p.config.limits;
+    let duty = match p.config.scene.textures[0] {
+        Texture::Grating(g) => g.duty_permille as f64 / 1000.0,
+        _ => unreachable!("grating_config makes one grating region"),
+    };
     let on_errs: Vec<f64> = hits
         .iter()
         .filter_map(|h| {
-            let ideal_s = 0.4 * RIDGE_UM / h.speed_um_s;
+            let ideal_s = duty * RIDGE_UM / h.speed_um_s;
             (h.speed_um_s > 0.0 && ideal_s * 1e6 < limits.max_on_time_us as f64)
                 .then(|| 100.0 * (h.on_s - ideal_s) / ideal_s)
         })
