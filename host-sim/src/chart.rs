@@ -5,7 +5,7 @@ use std::path::Path;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
-use crate::sim::SimResult;
+use crate::sim::{SimResult, TracePoint};
 
 /// Points per trace after decimation (min/max per bucket, so spikes survive).
 const BUCKETS: usize = 1_500;
@@ -64,6 +64,21 @@ fn runs(points: impl Iterator<Item = (f64, Option<f64>)>) -> Vec<Vec<(f64, f64)>
 }
 
 /// Writes the chart of `r` to `path` (PNG).
+/// (t s, value) points.
+type Series = Vec<(f64, f64)>;
+
+/// One quantity over time from the trace: the truth, and what the core saw (in runs broken where
+/// it saw nothing).
+fn truth_and_core(
+    r: &SimResult,
+    truth: impl Fn(&TracePoint) -> f64,
+    core: impl Fn(&TracePoint) -> Option<f64>,
+) -> (Series, Vec<Series>) {
+    let t_s = |p: &TracePoint| p.t_us as f64 * 1e-6;
+    let truth = r.trace.iter().map(|p| (t_s(p), truth(p))).collect();
+    (truth, runs(r.trace.iter().map(|p| (t_s(p), core(p)))))
+}
+
 /// Draws what the core saw (red, in runs broken by faults) over the truth (blue), decimated to
 /// the panel's width, and the legend: `(runs, label, line width)` and `(truth, line width)`.
 fn core_against_truth<'a, DB: DrawingBackend + 'a>(
@@ -119,15 +134,10 @@ pub fn write_png(
 
     // Position.
     {
-        let tp: Vec<(f64, f64)> = r
-            .trace
-            .iter()
-            .map(|p| (p.t_us as f64 * 1e-6, p.true_um / 1e3))
-            .collect();
-        let meas = runs(
-            r.trace
-                .iter()
-                .map(|p| (p.t_us as f64 * 1e-6, p.meas_um.map(|m| m as f64 / 1e3))),
+        let (tp, meas) = truth_and_core(
+            r,
+            |p| p.true_um / 1e3,
+            |p| p.meas_um.map(|m| m as f64 / 1e3),
         );
         let len_mm = r.params.config.calibration.length_um as f64 / 1e3;
         let mut c = ChartBuilder::on(&panels[0])
@@ -157,15 +167,10 @@ pub fn write_png(
 
     // Velocity.
     {
-        let tv: Vec<(f64, f64)> = r
-            .trace
-            .iter()
-            .map(|p| (p.t_us as f64 * 1e-6, p.true_vel_um_s / 1e3))
-            .collect();
-        let est = runs(
-            r.trace
-                .iter()
-                .map(|p| (p.t_us as f64 * 1e-6, p.est_vel_um_s.map(|v| v as f64 / 1e3))),
+        let (tv, est) = truth_and_core(
+            r,
+            |p| p.true_vel_um_s / 1e3,
+            |p| p.est_vel_um_s.map(|v| v as f64 / 1e3),
         );
         let vmax = tv
             .iter()
