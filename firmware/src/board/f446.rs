@@ -98,6 +98,14 @@ impl Sampler {
         dma: Peri<'static, peripherals::DMA2_CH0>,
         tim: Peri<'static, TIM3>,
     ) -> Self {
+        // TIM3 first, completely, counter stopped. Every UG it takes is a TRGO pulse (with
+        // MMS = 000 after its reset, UG *is* TRGO: RM0390 §17.4.2 TIMx_CR2.MMS), and embassy's
+        // `set_max_compare_value` writes one. Had ADC1 been armed already (EXTEN rising, EXTSEL
+        // TIM3_TRGO, DMA = 1), that pulse would start a sequence into a DMA stream that is not
+        // running yet: overrun, after which the ADC blocks DMA requests and ignores regular
+        // triggers until OVR is cleared and the DMA re-initialised (RM0390 §13.8.1) — no sample,
+        // ever. `Adc::new` below resets ADC1 through RCC, so nothing here can reach it.
+        let trigger = trigger_timer(tim);
         // The EXTSEL code documented in saw-boards must be the one embassy uses for TIM3_TRGO.
         defmt::assert_eq!(
             embassy_stm32::adc::RegularTrigger::<ADC1>::signal(&embassy_stm32::triggers::TIM3_TRGO),
@@ -125,17 +133,23 @@ impl Sampler {
             w.set_l((RANKS - 1) as u8);
         });
         const _: () = assert!(RANKS == 16);
+        // Powered down until `start` (into_ring_buffered left ADON = 1): see there.
+        r.cr2().modify(|w| w.set_adon(false));
         let mut adc = adc;
         // Overrun recovery must restart on a sequence boundary.
         adc.set_alignment(RANKS);
-        let trigger = trigger_timer(tim);
         Sampler { adc, trigger, buf: [0; DMA_LEN / 2] }
     }
 
-    /// Arm DMA + ADC, then start the trigger timer: the first conversions land in a running
-    /// ring buffer. Call from the task that reads, right before the first `read`.
+    /// DMA stream first, then the ADC, then the trigger timer: the first TRGO (one period after
+    /// this) starts rank 1 into a running stream. Call from the task that reads, right before the
+    /// first `read`.
     pub fn start(&mut self) {
+        // embassy's `start` enables the stream and also writes SWSTART, which would start an
+        // extra, unaligned sequence now — but SWSTART "can be set only when ADON = 1, otherwise no
+        // conversion is launched" (RM0390 §13.13.3 ADC_CR2), and the ADC is still off.
         self.adc.start();
+        power_up();
         self.trigger.start();
     }
 
@@ -150,13 +164,20 @@ impl Sampler {
     }
 }
 
-/// TIM3: `sample_rate_hz` period, TRGO = update event; started by `Sampler::start`.
+/// ADON = 1, then wait t_STAB (3 µs max, STM32F446 datasheet ADC characteristics) before the
+/// first trigger can come (RM0390 §13.3.1).
+fn power_up() {
+    embassy_stm32::pac::ADC1.cr2().modify(|w| w.set_adon(true));
+    cortex_m::asm::delay(3 * (BOARD.sysclk_hz / 1_000_000));
+}
+
+/// TIM3: `sample_rate_hz` period, TRGO = update event; counter stopped until `Sampler::start`.
 fn trigger_timer(tim: Peri<'static, TIM3>) -> Timer<'static, TIM3> {
     let (psc, arr) = BOARD.adc_trigger_psc_arr();
     let t = Timer::new(tim);
     defmt::assert_eq!(t.get_clock_frequency().0, BOARD.adc.trigger_timer_clk_hz);
-    t.regs_core().psc().write_value(psc as u16);
-    t.set_max_compare_value(arr as u16);
     t.set_master_mode(MasterMode::UPDATE);
+    t.regs_core().psc().write_value(psc as u16);
+    t.set_max_compare_value(arr as u16); // ARR, then UG latches PSC/ARR (a TRGO pulse)
     t
 }
