@@ -1,0 +1,338 @@
+//! The two Nucleo boards: each chip's memory map, peripheral instances at their addresses
+//! (RM0390 §2.2.2 table 1 for the F446; RM0440 §2.2.2 table 4 for the G474), interrupt numbers
+//! (vector tables: RM0390 §10.2 table 38; RM0440 §16.3 table 97), the recorded pins (UM1724 /
+//! UM2505 Arduino and Morpho headers) and the rheostat wired to the wiper's ADC input.
+
+use crate::machine::{ChipSpec, Machine, Mapped, PinMode, PinSpec};
+use crate::periph::{
+    self, adc_f4, adc_g4, dma_f4, dma_g4, gpio, iwdg, misc, rcc_f4, rcc_g4, tim, ClockDomain,
+    Peripheral, ResetCause, Time,
+};
+use std::path::Path;
+
+/// Which board.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BoardKind {
+    F446,
+    G474,
+}
+
+impl BoardKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            BoardKind::F446 => "nucleo-f446re",
+            BoardKind::G474 => "nucleo-g474re",
+        }
+    }
+
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "nucleo-f446re" | "f446" => Ok(BoardKind::F446),
+            "nucleo-g474re" | "g474" => Ok(BoardKind::G474),
+            _ => Err(format!(
+                "--board {s:?}: unknown board; use nucleo-f446re or nucleo-g474re"
+            )),
+        }
+    }
+
+    /// The saw-boards definition the firmware was built from.
+    pub fn def(self) -> &'static saw_boards::BoardDef {
+        match self {
+            BoardKind::F446 => &saw_boards::NUCLEO_F446RE,
+            BoardKind::G474 => &saw_boards::NUCLEO_G474RE,
+        }
+    }
+}
+
+/// The rheostat wiper as the ADC sees it: one 12-bit conversion at a time (host-sim's model).
+pub type Wiper = Box<dyn FnMut(Time) -> u16>;
+
+/// Names of the recorded pins, in `Sim::pins` order.
+pub const PIN_BURST_A: usize = 0;
+pub const PIN_BURST_B: usize = 1;
+pub const PIN_CARRIER: usize = 2;
+pub const PIN_RF_ARM: usize = 3;
+
+/// Tells the RCC model why the chip reset (its reset flags).
+pub fn note_reset(rcc: &mut dyn Peripheral, cause: ResetCause) {
+    if let Some(r) = rcc.as_any_mut().downcast_mut::<rcc_f4::RccF4>() {
+        r.note_reset(cause);
+    } else if let Some(r) = rcc.as_any_mut().downcast_mut::<rcc_g4::RccG4>() {
+        r.note_reset(cause);
+    }
+}
+
+fn map(base: u32, size: u32, p: impl Peripheral + 'static) -> Mapped {
+    Mapped {
+        base,
+        size,
+        p: Box::new(p),
+    }
+}
+
+fn timer(
+    number: u8,
+    bits: u8,
+    advanced: bool,
+    clock: ClockDomain,
+    name: &'static str,
+    irq_up: u16,
+    irq_cc: u16,
+) -> tim::Timer {
+    tim::Timer::new(tim::TimerConfig {
+        number,
+        bits,
+        advanced,
+        clock,
+        name,
+        irq_up,
+        irq_cc,
+    })
+}
+
+fn pin_mode(p: &dyn Peripheral, pin: u8) -> PinMode {
+    let g = p
+        .as_any()
+        .downcast_ref::<gpio::Gpio>()
+        .expect("pin spec names a GPIO port");
+    match g.pin_mode(pin) {
+        gpio::PinMode::Input => PinMode::Input,
+        gpio::PinMode::Output { high } => PinMode::Output { high },
+        gpio::PinMode::Alternate(n) => PinMode::Alternate(n),
+        gpio::PinMode::Analog => PinMode::Analog,
+    }
+}
+
+/// Index of the peripheral mapped at `base`.
+fn index(periphs: &[Mapped], base: u32) -> usize {
+    periphs.iter().position(|m| m.base == base).expect("mapped")
+}
+
+/// Builds the machine for `kind` running `elf`, the wiper read through `wiper`.
+pub fn build(kind: BoardKind, elf: &Path, mut wiper: Wiper) -> Result<Machine, String> {
+    let image = crate::elf::Image::load(elf)?;
+    let wiper_channel = kind.def().adc.channel;
+    let input = Box::new(move |t: Time, ch: u8| {
+        if ch == wiper_channel {
+            Some(wiper(t))
+        } else {
+            None
+        }
+    });
+    let (periphs, spec) = match kind {
+        BoardKind::F446 => f446(input),
+        BoardKind::G474 => g474(input),
+    };
+    let mut m = Machine::new(spec, periphs, image, true)?;
+    // Keep every write to the burst timer (latency, update sequences) and to TIM3 (trigger).
+    m.sim_mut().watch = vec![(0x4000_0000, 0x400), (0x4000_0400, 0x400)];
+    // Record the burst channels always; the carrier only while `record_carrier` is on.
+    for t in m.sim_mut().periphs.iter_mut() {
+        if let Some(tm) = t.p.as_any_mut().downcast_mut::<tim::Timer>() {
+            if tm.name() == "TIM2" {
+                tm.record_channel(1, true);
+                tm.record_channel(3, true);
+            }
+        }
+    }
+    Ok(m)
+}
+
+type Input = Box<dyn FnMut(Time, u8) -> Option<u16>>;
+
+fn f446(input: Input) -> (Vec<Mapped>, ChipSpec) {
+    use ClockDomain::*;
+    let periphs = vec![
+        map(
+            0x4000_0000,
+            0x400,
+            timer(2, 32, false, TimApb1, "TIM2", 28, 28),
+        ),
+        map(
+            0x4000_0400,
+            0x400,
+            timer(3, 16, false, TimApb1, "TIM3", 29, 29),
+        ),
+        map(
+            0x4000_0800,
+            0x400,
+            timer(4, 16, false, TimApb1, "TIM4", 30, 30),
+        ),
+        map(0x4000_3000, 0x400, iwdg::Iwdg::new(false)),
+        map(0x4000_7000, 0x400, misc::PwrF4::new()),
+        map(
+            0x4001_0000,
+            0x400,
+            timer(1, 16, true, TimApb2, "TIM1", 25, 27),
+        ),
+        map(0x4001_2000, 0x400, adc_f4::AdcF4::new(18, input)),
+        map(0x4001_3800, 0x400, misc::Syscfg::new()),
+        map(0x4001_3C00, 0x400, misc::Exti::new()),
+        map(0x4002_0000, 0x400, gpio::Gpio::new('A')),
+        map(0x4002_0400, 0x400, gpio::Gpio::new('B')),
+        map(0x4002_0800, 0x400, gpio::Gpio::new('C')),
+        map(0x4002_3800, 0x400, rcc_f4::RccF4::new()),
+        map(0x4002_3C00, 0x400, misc::FlashF4::new()),
+        map(
+            0x4002_6000,
+            0x400,
+            dma_f4::DmaF4::new(1, [11, 12, 13, 14, 15, 16, 17, 47], 0x4002_6000),
+        ),
+        map(
+            0x4002_6400,
+            0x400,
+            dma_f4::DmaF4::new(2, [56, 57, 58, 59, 60, 68, 69, 70], 0x4002_6400),
+        ),
+        map(0xE004_2000, 0x400, misc::DbgMcu::new(0x421)),
+    ];
+    let (gpioa, gpiob) = (index(&periphs, 0x4002_0000), index(&periphs, 0x4002_0400));
+    let spec = ChipSpec {
+        name: "STM32F446RE",
+        irqs: 97,
+        flash: (0x0800_0000, 512 * 1024),
+        ram: vec![(0x2000_0000, 128 * 1024)],
+        rcc: index(&periphs, 0x4002_3800),
+        clocks: |p| p.as_any().downcast_ref::<rcc_f4::RccF4>().unwrap().clocks(),
+        clock_enabled: |p, base| {
+            p.as_any()
+                .downcast_ref::<rcc_f4::RccF4>()
+                .unwrap()
+                .clock_enabled(base)
+        },
+        flash_if: index(&periphs, 0x4002_3C00),
+        flash_timing: |p| {
+            let f = p.as_any().downcast_ref::<misc::FlashF4>().unwrap();
+            (f.art_enabled(), f.wait_states())
+        },
+        pin_mode,
+        // UM1724 §6.11 / RM0390 table 11 (AF map, DS10693): PA0 AF1 = TIM2_CH1, PB10 AF1 =
+        // TIM2_CH3, PA8 AF1 = TIM1_CH1, PB5 = RF arm (GPIO output).
+        pins: vec![
+            PinSpec {
+                name: "PA0 burst A (TIM2_CH1)",
+                port: gpioa,
+                pin: 0,
+                af: Some((1, 2, 1)),
+            },
+            PinSpec {
+                name: "PB10 burst B (TIM2_CH3)",
+                port: gpiob,
+                pin: 10,
+                af: Some((1, 2, 3)),
+            },
+            PinSpec {
+                name: "PA8 carrier (TIM1_CH1)",
+                port: gpioa,
+                pin: 8,
+                af: Some((1, 1, 1)),
+            },
+            PinSpec {
+                name: "PB5 RF arm",
+                port: gpiob,
+                pin: 5,
+                af: None,
+            },
+        ],
+    };
+    (periphs, spec)
+}
+
+fn g474(input: Input) -> (Vec<Mapped>, ChipSpec) {
+    use ClockDomain::*;
+    let periphs = vec![
+        map(
+            0x4000_0000,
+            0x400,
+            timer(2, 32, false, TimApb1, "TIM2", 28, 28),
+        ),
+        map(
+            0x4000_0400,
+            0x400,
+            timer(3, 16, false, TimApb1, "TIM3", 29, 29),
+        ),
+        map(
+            0x4000_0800,
+            0x400,
+            timer(4, 16, false, TimApb1, "TIM4", 30, 30),
+        ),
+        map(0x4000_3000, 0x400, iwdg::Iwdg::new(true)),
+        map(0x4000_7000, 0x400, misc::PwrG4::new()),
+        map(0x4001_0000, 0x400, misc::Syscfg::new()),
+        map(0x4001_0400, 0x400, misc::Exti::new()),
+        map(
+            0x4001_2C00,
+            0x400,
+            timer(1, 16, true, TimApb2, "TIM1", 25, 27),
+        ),
+        map(
+            0x4002_0000,
+            0x400,
+            dma_g4::DmaG4::new(1, [11, 12, 13, 14, 15, 16, 17, 96]),
+        ),
+        map(
+            0x4002_0400,
+            0x400,
+            dma_g4::DmaG4::new(2, [56, 57, 58, 59, 60, 97, 98, 99]),
+        ),
+        map(0x4002_0800, 0x400, dma_g4::DmaMux::new()),
+        map(0x4002_1000, 0x400, rcc_g4::RccG4::new()),
+        map(0x4002_2000, 0x400, misc::FlashG4::new()),
+        map(0x4800_0000, 0x400, gpio::Gpio::new('A')),
+        map(0x4800_0400, 0x400, gpio::Gpio::new('B')),
+        map(0x4800_0800, 0x400, gpio::Gpio::new('C')),
+        map(0x5000_0000, 0x400, adc_g4::AdcG4::new(18, input)),
+        map(0xE004_2000, 0x400, misc::DbgMcu::new(0x469)),
+    ];
+    let (gpioa, gpiob) = (index(&periphs, 0x4800_0000), index(&periphs, 0x4800_0400));
+    let spec = ChipSpec {
+        name: "STM32G474RE",
+        irqs: 102,
+        flash: (0x0800_0000, 512 * 1024),
+        ram: vec![(0x2000_0000, 96 * 1024), (0x1000_0000, 32 * 1024)],
+        rcc: index(&periphs, 0x4002_1000),
+        clocks: |p| p.as_any().downcast_ref::<rcc_g4::RccG4>().unwrap().clocks(),
+        clock_enabled: |p, base| {
+            p.as_any()
+                .downcast_ref::<rcc_g4::RccG4>()
+                .unwrap()
+                .clock_enabled(base)
+        },
+        flash_if: index(&periphs, 0x4002_2000),
+        flash_timing: |p| {
+            let f = p.as_any().downcast_ref::<misc::FlashG4>().unwrap();
+            (f.art_enabled(), f.wait_states())
+        },
+        pin_mode,
+        // UM2505 / DS12288 AF map: PA0 AF1 = TIM2_CH1, PB10 AF1 = TIM2_CH3, PA8 AF6 = TIM1_CH1.
+        pins: vec![
+            PinSpec {
+                name: "PA0 burst A (TIM2_CH1)",
+                port: gpioa,
+                pin: 0,
+                af: Some((1, 2, 1)),
+            },
+            PinSpec {
+                name: "PB10 burst B (TIM2_CH3)",
+                port: gpiob,
+                pin: 10,
+                af: Some((1, 2, 3)),
+            },
+            PinSpec {
+                name: "PA8 carrier (TIM1_CH1)",
+                port: gpioa,
+                pin: 8,
+                af: Some((6, 1, 1)),
+            },
+            PinSpec {
+                name: "PB5 RF arm",
+                port: gpiob,
+                pin: 5,
+                af: None,
+            },
+        ],
+    };
+    (periphs, spec)
+}
+
+#[allow(unused)]
+fn _uses(_: periph::Time) {}

@@ -1,0 +1,11 @@
+//! A model of the NUCLEO-F446RE and NUCLEO-G474RE boards that runs the real firmware ELF: the
+//! Cortex-M4F core on Unicorn, the NVIC/SysTick/SCB, and register-level models of the STM32
+//! peripherals the firmware uses, in virtual time.
+//!
+//! License: GPL-2.0-or-later (links libunicorn). Test tooling only: nothing that ships links it.
+#[cfg(any())]
+pub mod board;
+pub mod elf;
+pub mod machine;
+pub mod periph;
+pub mod scs;

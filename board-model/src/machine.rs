@@ -1,0 +1,1126 @@
+//! The machine: Unicorn running the firmware's instructions, virtual time, the bus that routes
+//! register accesses to the peripheral models, exception entry and return, sleep (WFE/WFI), the
+//! RTT log buffer and the recorded pins.
+//!
+//! Time: every executed instruction costs one core clock (HCLK) cycle, plus flash wait states
+//! when the ART accelerator is off (see `block_cycles`); exception entry and return cost 12
+//! cycles each (Cortex-M4 TRM r0p1 §3.3.1, zero-wait-state memory). Peripherals only act at
+//! their own event times; the CPU is never run past the next one, so an interrupt is taken
+//! within one translated block (a few instructions) of the moment its flag rises.
+
+use crate::elf::{thumb_instructions, Image};
+use crate::periph::{
+    micros, ticks_per_cycle, ChannelLevel, Clocks, Peripheral, ResetCause, Signals, Time,
+    Unmodelled, TICKS_PER_S,
+};
+use crate::scs::{exc, Scs, SCS_BASE, SCS_SIZE};
+use std::collections::HashMap;
+use unicorn_engine::unicorn_const::{uc_error, Arch, Mode, Prot};
+use unicorn_engine::{RegisterARM, Unicorn};
+
+/// Cycles the Cortex-M4 spends stacking or unstacking an exception frame.
+pub const EXCEPTION_CYCLES: u64 = 12;
+
+/// Longest CPU slice without a peripheral event, so the RTT buffer is drained often enough.
+const MAX_SLICE: Time = TICKS_PER_S / 10_000;
+
+/// A peripheral mapped at `base`.
+pub struct Mapped {
+    pub base: u32,
+    pub size: u32,
+    pub p: Box<dyn Peripheral>,
+}
+
+/// What the chip description tells the machine (filled in by `crate::board`).
+pub struct ChipSpec {
+    pub name: &'static str,
+    /// External interrupts implemented.
+    pub irqs: u16,
+    pub flash: (u32, u32),
+    /// RAM regions (base, size).
+    pub ram: Vec<(u32, u32)>,
+    /// Index of the RCC in `periphs`, and how to read its clock tree and clock gates.
+    pub rcc: usize,
+    pub clocks: fn(&dyn Peripheral) -> Clocks,
+    pub clock_enabled: fn(&dyn Peripheral, u32) -> Option<bool>,
+    /// Index of the FLASH interface and how to read (ART/caches on, wait states).
+    pub flash_if: usize,
+    pub flash_timing: fn(&dyn Peripheral) -> (bool, u32),
+    /// How to read a GPIO port's pin mode.
+    pub pin_mode: fn(&dyn Peripheral, u8) -> PinMode,
+    /// Pins whose level is recorded.
+    pub pins: Vec<PinSpec>,
+}
+
+/// A GPIO pin's configuration as far as its level is concerned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PinMode {
+    Input,
+    Output { high: bool },
+    Alternate(u8),
+    Analog,
+}
+
+/// A recorded pin: which GPIO port (index in `periphs`), pin number, and the timer channel its
+/// alternate function carries.
+#[derive(Clone, Debug)]
+pub struct PinSpec {
+    pub name: &'static str,
+    pub port: usize,
+    pub pin: u8,
+    /// (AF number, timer, channel) that drives the pin in alternate-function mode.
+    pub af: Option<(u8, u8, u8)>,
+}
+
+/// A recorded edge: time, new level, and how many RTT log bytes had been written by then.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PinEdge {
+    pub at: Time,
+    pub high: bool,
+    pub log_bytes: usize,
+}
+
+/// A register write the firmware made, kept for the latency and sequence checks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BusWrite {
+    pub at: Time,
+    pub addr: u32,
+    pub value: u32,
+    pub mask: u32,
+}
+
+/// Why a run stopped early.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Stop {
+    /// The firmware touched something the model does not implement, or the emulator failed.
+    Fault(String),
+    /// A breakpoint (BKPT): a debugger would halt here.
+    Breakpoint { pc: u32 },
+    /// The core locked up (a fault inside HardFault or NMI).
+    Lockup { pc: u32 },
+}
+
+/// Everything the Unicorn hooks reach: the board's state.
+pub struct Sim {
+    pub chip: ChipSpec,
+    pub now: Time,
+    deadline: Time,
+    ticks_per_cycle: u64,
+    pub instructions: u64,
+    pub periphs: Vec<Mapped>,
+    pub scs: Scs,
+    sig: Signals,
+    pub stop: Option<Stop>,
+    event_register: bool,
+    replan: bool,
+    block_cache: HashMap<u32, (u32, u32)>,
+    flash_image: Vec<u8>,
+    art: (bool, u32),
+    pub clocks: Clocks,
+    /// Timer channel levels last signalled: (timer, channel) → high.
+    channel_levels: HashMap<(u8, u8), bool>,
+    pub pins: Vec<Vec<PinEdge>>,
+    pub writes: Vec<BusWrite>,
+    /// Address ranges whose writes are kept in `writes`.
+    pub watch: Vec<(u32, u32)>,
+    pub events: Vec<(Time, crate::periph::Event)>,
+    /// RTT: control block address and the bytes read so far with the time each was seen.
+    rtt: Option<u32>,
+    pub log: Vec<u8>,
+    pub log_times: Vec<(Time, usize)>,
+    pub resets: Vec<(Time, ResetCause)>,
+    pending_reset: Option<ResetCause>,
+    pub exceptions_taken: u64,
+    pub sleeping_ticks: Time,
+}
+
+impl Sim {
+    fn find(&self, addr: u32) -> Option<usize> {
+        self.periphs
+            .iter()
+            .position(|m| addr >= m.base && addr - m.base < m.size)
+    }
+
+    /// Brings every peripheral up to `t`, in global time order, carrying what they signal.
+    fn advance_periphs(&mut self, t: Time) {
+        loop {
+            let next = self.periphs.iter().filter_map(|m| m.p.next_event()).min();
+            let Some(n) = next.filter(|&n| n <= t) else {
+                break;
+            };
+            for m in &mut self.periphs {
+                m.p.advance(n, &mut self.sig);
+            }
+            self.settle_local();
+            if self.stop.is_some() {
+                return;
+            }
+        }
+        for m in &mut self.periphs {
+            m.p.advance(t, &mut self.sig);
+        }
+        self.settle_local();
+    }
+
+    /// Carries signals that need no CPU memory: events between peripherals, pin levels, resets,
+    /// interrupt lines. DMA copies that touch RAM are left in `sig.copies` for the caller that
+    /// holds the Unicorn handle; copies between peripherals are done here.
+    fn settle_local(&mut self) {
+        let mut guard = 0;
+        loop {
+            guard += 1;
+            if guard > 10_000 {
+                self.stop = Some(Stop::Fault(
+                    "peripheral signals do not settle (event loop)".into(),
+                ));
+                return;
+            }
+            let events = std::mem::take(&mut self.sig.events);
+            let levels = std::mem::take(&mut self.sig.levels);
+            if let Some(r) = self.sig.reset.take() {
+                self.pending_reset.get_or_insert(r);
+            }
+            if std::mem::take(&mut self.sig.replan) {
+                self.replan = true;
+            }
+            if events.is_empty() && levels.is_empty() {
+                break;
+            }
+            for l in levels {
+                self.channel_level(l);
+            }
+            for (t, e) in events {
+                self.events.push((t, e));
+                let Sim { periphs, sig, .. } = self;
+                for m in periphs.iter_mut() {
+                    m.p.on_event(t, e, sig);
+                }
+            }
+        }
+        let Sim { periphs, scs, .. } = self;
+        for m in periphs.iter() {
+            m.p.irq_lines(&mut |n| scs.raise_irq(n));
+        }
+    }
+
+    fn channel_level(&mut self, l: ChannelLevel) {
+        self.channel_levels.insert((l.timer, l.channel), l.high);
+        self.update_pins(l.at);
+    }
+
+    /// Recomputes every recorded pin from its GPIO mode and the timer channel it may carry.
+    fn update_pins(&mut self, at: Time) {
+        for (i, spec) in self.chip.pins.iter().enumerate() {
+            let mode = (self.chip.pin_mode)(&*self.periphs[spec.port].p, spec.pin);
+            // Input/analog: the board's pull-down holds the line low (boards/README.md).
+            let high = match mode {
+                PinMode::Output { high } => high,
+                PinMode::Alternate(af) => match spec.af {
+                    Some((n, tim, ch)) if n == af => self
+                        .channel_levels
+                        .get(&(tim, ch))
+                        .copied()
+                        .unwrap_or(false),
+                    _ => false,
+                },
+                PinMode::Input | PinMode::Analog => false,
+            };
+            let rec = &mut self.pins[i];
+            if rec.last().map_or(true, |e| e.high != high) {
+                rec.push(PinEdge {
+                    at,
+                    high,
+                    log_bytes: self.log.len(),
+                });
+            }
+        }
+    }
+
+    fn set_clocks(&mut self) {
+        let c = (self.chip.clocks)(&*self.periphs[self.chip.rcc].p);
+        if c != self.clocks {
+            self.clocks = c;
+            self.ticks_per_cycle = ticks_per_cycle(c.hclk_hz.max(1));
+            let now = self.now;
+            for m in &mut self.periphs {
+                m.p.set_clocks(now, &c);
+            }
+            self.replan = true;
+        }
+    }
+
+    /// A CPU or DMA read of a peripheral register.
+    fn bus_read(&mut self, addr: u32, size: u8) -> Result<u32, String> {
+        let i = self
+            .find(addr)
+            .ok_or_else(|| format!("read of unmapped peripheral address 0x{addr:08X}"))?;
+        self.check_clock(i, addr, None)?;
+        let now = self.now;
+        let m = &mut self.periphs[i];
+        let off = addr - m.base;
+        let word =
+            m.p.read(now, off & !3, &mut self.sig)
+                .map_err(|u| describe(m.p.name(), m.base, u))?;
+        self.settle_local();
+        let shift = 8 * (off & 3);
+        Ok(match size {
+            1 => (word >> shift) & 0xFF,
+            2 => (word >> shift) & 0xFFFF,
+            _ => word,
+        })
+    }
+
+    /// A CPU or DMA write of a peripheral register.
+    fn bus_write(&mut self, addr: u32, size: u8, value: u32) -> Result<(), String> {
+        let i = self.find(addr).ok_or_else(|| {
+            format!("write of 0x{value:X} to unmapped peripheral address 0x{addr:08X}")
+        })?;
+        self.check_clock(i, addr, Some(value))?;
+        let now = self.now;
+        let off = addr - self.periphs[i].base;
+        let shift = 8 * (off & 3);
+        let lane = match size {
+            1 => 0xFFu32,
+            2 => 0xFFFF,
+            _ => 0xFFFF_FFFF,
+        };
+        let (v, mask) = (value << shift, lane << shift);
+        if self.watch.iter().any(|&(b, s)| addr >= b && addr - b < s) {
+            self.writes.push(BusWrite {
+                at: now,
+                addr: addr & !3,
+                value: v,
+                mask,
+            });
+        }
+        let m = &mut self.periphs[i];
+        m.p.write(now, off & !3, v, mask, &mut self.sig)
+            .map_err(|u| describe(m.p.name(), m.base, u))?;
+        if i == self.chip.rcc {
+            self.set_clocks();
+        }
+        if i == self.chip.flash_if {
+            self.art = (self.chip.flash_timing)(&*self.periphs[i].p);
+        }
+        if self.chip.pins.iter().any(|p| p.port == i) {
+            self.update_pins(now);
+        }
+        self.settle_local();
+        Ok(())
+    }
+
+    /// A real chip ignores writes to (and reads 0 from) a peripheral whose bus clock is off: a
+    /// firmware that does this has a bug the model must show (RM0390 §6.3.13; RM0440 §7.4.16).
+    fn check_clock(&self, i: usize, addr: u32, write: Option<u32>) -> Result<(), String> {
+        if i == self.chip.rcc {
+            return Ok(());
+        }
+        let base = self.periphs[i].base;
+        if (self.chip.clock_enabled)(&*self.periphs[self.chip.rcc].p, base) == Some(false) {
+            let what = match write {
+                Some(v) => format!("write of 0x{v:X} to"),
+                None => "read of".into(),
+            };
+            return Err(format!(
+                "{what} {} at 0x{addr:08X} while its clock is disabled in RCC (the access would be lost on the chip)",
+                self.periphs[i].p.name()
+            ));
+        }
+        Ok(())
+    }
+
+    /// Cycles a translated block of `insns` instructions and `bytes` bytes costs. With the ART
+    /// accelerator (prefetch + instruction cache) on, every fetch is assumed to hit: one cycle per
+    /// instruction. With it off, each 128-bit flash line costs LATENCY + 1 cycles and a block
+    /// starts with a fresh line (RM0390 §3.4.2, "Instruction prefetch"; RM0440 §5.3.4).
+    fn block_cycles(&self, addr: u32, insns: u32, bytes: u32) -> u64 {
+        let in_flash = addr >= self.chip.flash.0 && addr - self.chip.flash.0 < self.chip.flash.1;
+        let (art_on, ws) = self.art;
+        if !in_flash || art_on || ws == 0 {
+            return insns as u64;
+        }
+        let lines = (bytes as u64).div_ceil(16).max(1);
+        (insns as u64).max(lines * (ws as u64 + 1))
+    }
+}
+
+fn describe(name: &str, base: u32, u: Unmodelled) -> String {
+    let what = match u.write {
+        Some(v) => format!("write of 0x{v:08X} to"),
+        None => "read of".into(),
+    };
+    format!("{what} {name} at 0x{:08X}: {}", base + u.offset, u.why)
+}
+
+/// The machine: a Unicorn instance whose data is the board.
+pub struct Machine {
+    pub uc: Unicorn<'static, Sim>,
+    pub image: Image,
+}
+
+fn uc_err(e: uc_error) -> String {
+    format!("unicorn: {e:?}")
+}
+
+impl Machine {
+    /// Builds the machine: memory map from `chip`, the image loaded into flash, every peripheral
+    /// mapped, the core reset from the vector table.
+    pub fn new(
+        chip: ChipSpec,
+        periphs: Vec<Mapped>,
+        image: Image,
+        rtt: bool,
+    ) -> Result<Self, String> {
+        let irqs = chip.irqs;
+        let (flash_base, flash_size) = chip.flash;
+        let mut flash_image = vec![0xFFu8; flash_size as usize];
+        for s in &image.segments {
+            if s.addr < flash_base
+                || (s.addr - flash_base) as usize + s.bytes.len() > flash_size as usize
+            {
+                return Err(format!(
+                    "image segment at 0x{:08X} ({} B) is outside flash",
+                    s.addr,
+                    s.bytes.len()
+                ));
+            }
+            let o = (s.addr - flash_base) as usize;
+            flash_image[o..o + s.bytes.len()].copy_from_slice(&s.bytes);
+        }
+        let pins = vec![Vec::new(); chip.pins.len()];
+        let rtt_addr = if rtt {
+            image.symbol("_SEGGER_RTT")
+        } else {
+            None
+        };
+        let sim = Sim {
+            chip,
+            now: 0,
+            deadline: 0,
+            ticks_per_cycle: 1,
+            instructions: 0,
+            periphs,
+            scs: Scs::new(irqs),
+            sig: Signals::default(),
+            stop: None,
+            event_register: false,
+            replan: false,
+            block_cache: HashMap::new(),
+            flash_image: flash_image.clone(),
+            art: (false, 0),
+            clocks: Clocks::default(),
+            channel_levels: HashMap::new(),
+            pins,
+            writes: Vec::new(),
+            watch: Vec::new(),
+            events: Vec::new(),
+            rtt: rtt_addr,
+            log: Vec::new(),
+            log_times: Vec::new(),
+            resets: Vec::new(),
+            pending_reset: None,
+            exceptions_taken: 0,
+            sleeping_ticks: 0,
+        };
+        let mut uc =
+            Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, sim).map_err(uc_err)?;
+        uc.ctl_set_cpu_model(unicorn_engine::ArmCpuModel::CORTEX_M4 as i32)
+            .map_err(uc_err)?;
+        uc.mem_map(
+            flash_base as u64,
+            flash_size as u64,
+            Prot::READ | Prot::EXEC,
+        )
+        .map_err(uc_err)?;
+        uc.mem_write(flash_base as u64, &flash_image)
+            .map_err(uc_err)?;
+        let ram = uc.get_data().chip.ram.clone();
+        for (b, s) in ram {
+            uc.mem_map(b as u64, s as u64, Prot::ALL).map_err(uc_err)?;
+        }
+        // Peripheral space (APB/AHB1 at 0x4000_0000, AHB2 at 0x4800_0000 / 0x5000_0000): one
+        // MMIO window routed by address; an address nothing claims stops the run.
+        uc.mmio_map(
+            0x4000_0000,
+            0x2000_0000,
+            Some(|uc: &mut Unicorn<'_, Sim>, off: u64, size: usize| {
+                let addr = 0x4000_0000u32 + off as u32;
+                let r = uc.get_data_mut().bus_read(addr, size as u8);
+                let v = finish_access(uc, r.map(Some)).unwrap_or(0);
+                v as u64
+            }),
+            Some(
+                |uc: &mut Unicorn<'_, Sim>, off: u64, size: usize, value: u64| {
+                    let addr = 0x4000_0000u32 + off as u32;
+                    let r = uc.get_data_mut().bus_write(addr, size as u8, value as u32);
+                    finish_access(uc, r.map(|_| None));
+                },
+            ),
+        )
+        .map_err(uc_err)?;
+        // Peripherals outside that window (DBGMCU at 0xE004_2000), one 4 KiB page each.
+        let extra: Vec<u32> = uc
+            .get_data()
+            .periphs
+            .iter()
+            .map(|m| m.base)
+            .filter(|&b| !Self::is_periph(b))
+            .collect();
+        for base in extra {
+            let page = base & !0xFFF;
+            uc.mmio_map(
+                page as u64,
+                0x1000,
+                Some(move |uc: &mut Unicorn<'_, Sim>, off: u64, size: usize| {
+                    let r = uc.get_data_mut().bus_read(page + off as u32, size as u8);
+                    finish_access(uc, r.map(Some)).unwrap_or(0) as u64
+                }),
+                Some(
+                    move |uc: &mut Unicorn<'_, Sim>, off: u64, size: usize, value: u64| {
+                        let r = uc.get_data_mut().bus_write(
+                            page + off as u32,
+                            size as u8,
+                            value as u32,
+                        );
+                        finish_access(uc, r.map(|_| None));
+                    },
+                ),
+            )
+            .map_err(uc_err)?;
+        }
+        // The System Control Space.
+        uc.mmio_map(
+            SCS_BASE as u64,
+            SCS_SIZE as u64,
+            Some(|uc: &mut Unicorn<'_, Sim>, off: u64, _size: usize| {
+                let r = uc
+                    .get_data()
+                    .scs
+                    .read(off as u32 & !3)
+                    .map_err(|u| describe("SCS", SCS_BASE, u));
+                let shift = 8 * (off as u32 & 3);
+                finish_access(uc, r.map(|v| Some(v >> shift))).unwrap_or(0) as u64
+            }),
+            Some(
+                |uc: &mut Unicorn<'_, Sim>, off: u64, size: usize, value: u64| {
+                    let shift = 8 * (off as u32 & 3);
+                    let lane = match size {
+                        1 => 0xFFu32,
+                        2 => 0xFFFF,
+                        _ => !0,
+                    };
+                    let s = uc.get_data_mut();
+                    let r = s
+                        .scs
+                        .write(off as u32 & !3, (value as u32) << shift, lane << shift)
+                        .map_err(|u| describe("SCS", SCS_BASE, u));
+                    if std::mem::take(&mut s.scs.changed) {
+                        s.replan = true;
+                    }
+                    finish_access(uc, r.map(|_| None));
+                },
+            ),
+        )
+        .map_err(uc_err)?;
+        // Debug/trace components the firmware may probe (ITM, DWT, FPB at 0xE000_0000..0xE000_3000;
+        // TPIU, ETM, ROM table): none are modelled, any access stops the run.
+        uc.mmio_map(
+            0xE000_0000,
+            0xE000,
+            Some(|uc: &mut Unicorn<'_, Sim>, off: u64, _s: usize| {
+                let msg = format!(
+                    "read of 0x{:08X}: ITM/DWT/FPB are not modelled",
+                    0xE000_0000u64 + off
+                );
+                finish_access(uc, Err(msg)).unwrap_or(0) as u64
+            }),
+            Some(|uc: &mut Unicorn<'_, Sim>, off: u64, _s: usize, v: u64| {
+                let msg = format!(
+                    "write of 0x{v:X} to 0x{:08X}: ITM/DWT/FPB are not modelled",
+                    0xE000_0000u64 + off
+                );
+                finish_access(uc, Err(msg));
+            }),
+        )
+        .map_err(uc_err)?;
+        // Instruction counting and the slice deadline, per translated block.
+        uc.add_block_hook(1, 0, |uc: &mut Unicorn<'_, Sim>, addr: u64, size: u32| {
+            let s = uc.get_data_mut();
+            let a = addr as u32;
+            let (insns, bytes) = match s.block_cache.get(&a) {
+                Some(&v) => v,
+                None => {
+                    let o = a.wrapping_sub(s.chip.flash.0) as usize;
+                    let n = if o + size as usize <= s.flash_image.len() {
+                        thumb_instructions(&s.flash_image[o..o + size as usize])
+                    } else {
+                        size / 2
+                    };
+                    s.block_cache.insert(a, (n, size));
+                    (n, size)
+                }
+            };
+            let cycles = s.block_cycles(a, insns, bytes);
+            s.instructions += insns as u64;
+            s.now += cycles * s.ticks_per_cycle;
+            if s.now >= s.deadline || s.replan || s.stop.is_some() {
+                let _ = uc.emu_stop();
+            }
+        })
+        .map_err(uc_err)?;
+        // SEV sets the event register (Unicorn executes it as a NOP); CPSIE may unmask a pending
+        // interrupt, which must be taken now, not at the next peripheral event.
+        for a in image.halfwords(0xBF40) {
+            uc.add_code_hook(
+                a as u64,
+                a as u64,
+                |uc: &mut Unicorn<'_, Sim>, _a: u64, _s: u32| {
+                    uc.get_data_mut().event_register = true;
+                },
+            )
+            .map_err(uc_err)?;
+        }
+        for a in image.halfwords(0xB662) {
+            uc.add_code_hook(
+                a as u64,
+                a as u64,
+                |uc: &mut Unicorn<'_, Sim>, _a: u64, _s: u32| {
+                    let s = uc.get_data_mut();
+                    if s.scs.any_pending_enabled() {
+                        s.replan = true;
+                        let _ = uc.emu_stop();
+                    }
+                },
+            )
+            .map_err(uc_err)?;
+        }
+        uc.add_intr_hook(|uc: &mut Unicorn<'_, Sim>, intno: u32| {
+            // EXCP_EXCEPTION_EXIT (8): a branch to an EXC_RETURN value in handler mode.
+            // EXCP_BKPT (7): a debugger would halt.
+            match intno {
+                8 => {
+                    if let Err(e) = exception_return(uc) {
+                        uc.get_data_mut().stop = Some(Stop::Fault(e));
+                        let _ = uc.emu_stop();
+                    }
+                }
+                7 => {
+                    let pc = uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
+                    uc.get_data_mut().stop = Some(Stop::Breakpoint { pc });
+                    let _ = uc.emu_stop();
+                }
+                n => {
+                    let pc = uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
+                    uc.get_data_mut().stop =
+                        Some(Stop::Fault(format!("CPU exception {n} at pc 0x{pc:08X}")));
+                    let _ = uc.emu_stop();
+                }
+            }
+        })
+        .map_err(uc_err)?;
+        let mut m = Machine { uc, image };
+        m.reset_core()?;
+        {
+            let s = m.uc.get_data_mut();
+            s.set_clocks();
+            s.art = (s.chip.flash_timing)(&*s.periphs[s.chip.flash_if].p);
+            s.update_pins(0);
+        }
+        Ok(m)
+    }
+
+    /// Core reset: SP and PC from the vector table at the start of flash (boot from main flash,
+    /// BOOT0 = 0: flash is aliased at 0 and VTOR reads 0; RM0390 §2.4).
+    fn reset_core(&mut self) -> Result<(), String> {
+        let base = self.uc.get_data().chip.flash.0;
+        let sp = self
+            .image
+            .word(base)
+            .ok_or("no vector table at the start of flash")?;
+        let pc = self.image.word(base + 4).ok_or("no reset vector")?;
+        let uc = &mut self.uc;
+        uc.reg_write(RegisterARM::CONTROL, 0).map_err(uc_err)?;
+        uc.reg_write(RegisterARM::IPSR, 0).map_err(uc_err)?;
+        uc.reg_write(RegisterARM::PRIMASK, 0).map_err(uc_err)?;
+        uc.reg_write(RegisterARM::BASEPRI, 0).map_err(uc_err)?;
+        uc.reg_write(RegisterARM::FAULTMASK, 0).map_err(uc_err)?;
+        uc.reg_write(RegisterARM::MSP, sp as u64).map_err(uc_err)?;
+        uc.reg_write(RegisterARM::SP, sp as u64).map_err(uc_err)?;
+        uc.reg_write(RegisterARM::LR, 0xFFFF_FFFF).map_err(uc_err)?;
+        uc.reg_write(RegisterARM::PC, (pc | 1) as u64)
+            .map_err(uc_err)?;
+        Ok(())
+    }
+
+    /// System reset (IWDG, SYSRESETREQ): peripherals and the SCS to reset values, RAM kept, the
+    /// core restarted from the vector table; the RCC learns the cause (reset flags).
+    fn system_reset(&mut self, cause: ResetCause) -> Result<(), String> {
+        let s = self.uc.get_data_mut();
+        let now = s.now;
+        s.resets.push((now, cause));
+        for m in &mut s.periphs {
+            m.p.reset(now);
+        }
+        //NOTE_RESET
+        s.scs.reset();
+        s.channel_levels.clear();
+        s.event_register = false;
+        s.pending_reset = None;
+        s.clocks = Clocks::default();
+        s.set_clocks();
+        s.art = (s.chip.flash_timing)(&*s.periphs[s.chip.flash_if].p);
+        s.update_pins(now);
+        // The RTT control block is rebuilt by the new boot; read from its start again.
+        self.reset_core()
+    }
+
+    /// Virtual time now.
+    pub fn now(&self) -> Time {
+        self.uc.get_data().now
+    }
+
+    pub fn sim(&self) -> &Sim {
+        self.uc.get_data()
+    }
+
+    pub fn sim_mut(&mut self) -> &mut Sim {
+        self.uc.get_data_mut()
+    }
+
+    /// Runs until virtual time `until`, or until something stops the run (returned).
+    pub fn run_until(&mut self, until: Time) -> Option<Stop> {
+        while self.now() < until {
+            if let Some(s) = self.uc.get_data_mut().stop.take() {
+                return Some(s);
+            }
+            if let Err(e) = self.take_exceptions() {
+                return Some(Stop::Fault(e));
+            }
+            let s = self.uc.get_data_mut();
+            s.replan = false;
+            let next = s
+                .periphs
+                .iter()
+                .filter_map(|m| m.p.next_event())
+                .min()
+                .unwrap_or(Time::MAX);
+            s.deadline = next.min(until).min(s.now + MAX_SLICE).max(s.now + 1);
+            let pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0);
+            let r = self.uc.emu_start(pc | 1, 0, 0, 0);
+            if let Err(e) = r {
+                if let Some(stop) = self.on_cpu_error(e) {
+                    return Some(stop);
+                }
+            }
+            self.copy_dma();
+            let s = self.uc.get_data_mut();
+            let now = s.now;
+            s.advance_periphs(now);
+            self.copy_dma();
+            self.drain_rtt();
+            if let Some(cause) = self.uc.get_data_mut().pending_reset.take() {
+                if let Err(e) = self.system_reset(cause) {
+                    return Some(Stop::Fault(e));
+                }
+            }
+            if self.uc.get_data().scs.reset_requested {
+                if let Err(e) = self.system_reset(ResetCause::Software) {
+                    return Some(Stop::Fault(e));
+                }
+            }
+        }
+        self.uc.get_data_mut().stop.take()
+    }
+
+    /// Unicorn stopped on an error: WFE/WFI (which it reports as invalid instructions), UDF
+    /// (a permanently undefined instruction: UsageFault, escalated to HardFault since the
+    /// firmware does not enable UsageFault; ARMv7-M B1.5.14), or a real fault.
+    fn on_cpu_error(&mut self, e: uc_error) -> Option<Stop> {
+        if let Some(s) = self.uc.get_data_mut().stop.take() {
+            return Some(s);
+        }
+        let pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
+        let half = |uc: &Unicorn<'_, Sim>, a: u32| -> u16 {
+            let mut b = [0u8; 2];
+            uc.mem_read(a as u64, &mut b)
+                .map(|_| u16::from_le_bytes(b))
+                .unwrap_or(0)
+        };
+        if e == uc_error::INSN_INVALID {
+            // Unicorn leaves PC after WFE/WFI.
+            let prev = half(&self.uc, pc.wrapping_sub(2));
+            if prev == 0xBF20 || prev == 0xBF30 {
+                let wfi = prev == 0xBF30;
+                // The sleep itself costs its instruction.
+                let s = self.uc.get_data_mut();
+                s.instructions += 1;
+                s.now += s.ticks_per_cycle;
+                return self.sleep(wfi).err().map(Stop::Fault);
+            }
+            let at = half(&self.uc, pc);
+            if at & 0xFF00 == 0xDE00 {
+                return self
+                    .fault(exc::HARD_FAULT, pc, 1 << 16)
+                    .err()
+                    .map(Stop::Fault);
+            }
+        }
+        Some(Stop::Fault(format!(
+            "emulation stopped at pc 0x{pc:08X}: {e:?}"
+        )))
+    }
+
+    /// Takes a fault: HardFault entry with the status registers set, or lockup when already in
+    /// HardFault.
+    fn fault(&mut self, e: u16, pc: u32, cfsr: u32) -> Result<(), String> {
+        let s = self.uc.get_data_mut();
+        s.scs.cfsr |= cfsr;
+        s.scs.hfsr |= 1 << 30; // FORCED: escalated to HardFault
+        if s.scs.active_stack.contains(&exc::HARD_FAULT) {
+            s.stop = Some(Stop::Lockup { pc });
+            return Ok(());
+        }
+        let _ = e;
+        s.scs.set_pending(exc::HARD_FAULT);
+        self.enter(exc::HARD_FAULT)
+    }
+
+    /// WFE/WFI: sleep until something would wake the core (ARMv7-M B1.5.18/19).
+    fn sleep(&mut self, wfi: bool) -> Result<(), String> {
+        if !wfi && std::mem::take(&mut self.uc.get_data_mut().event_register) {
+            return Ok(());
+        }
+        loop {
+            if self.takeable()?.is_some() {
+                return Ok(());
+            }
+            let s = self.uc.get_data_mut();
+            if wfi && s.scs.any_pending_enabled() {
+                return Ok(());
+            }
+            if let Some(stop) = &s.stop {
+                return Err(format!("{stop:?}"));
+            }
+            let next = s.periphs.iter().filter_map(|m| m.p.next_event()).min();
+            let Some(t) = next else {
+                return Err("the core sleeps with nothing scheduled to wake it (a hang)".into());
+            };
+            let t = t.max(s.now);
+            s.sleeping_ticks += t - s.now;
+            s.now = t;
+            s.advance_periphs(t);
+            self.copy_dma();
+            self.drain_rtt();
+            let s = self.uc.get_data_mut();
+            if s.pending_reset.is_some() || s.scs.reset_requested {
+                return Ok(());
+            }
+            if !wfi && s.scs.sevonpend() && s.scs.any_pending_enabled() {
+                return Ok(());
+            }
+        }
+    }
+
+    fn takeable(&self) -> Result<Option<u16>, String> {
+        let uc = &self.uc;
+        let primask = uc.reg_read(RegisterARM::PRIMASK).map_err(uc_err)? & 1 != 0;
+        let basepri = uc.reg_read(RegisterARM::BASEPRI).map_err(uc_err)? as u8;
+        let faultmask = uc.reg_read(RegisterARM::FAULTMASK).map_err(uc_err)? & 1 != 0;
+        let s = uc.get_data();
+        Ok(s.scs
+            .next_to_take(s.scs.execution_priority(primask, basepri, faultmask)))
+    }
+
+    /// Takes every exception that can preempt now (nested ones stack on top).
+    fn take_exceptions(&mut self) -> Result<(), String> {
+        while let Some(e) = self.takeable()? {
+            self.enter(e)?;
+        }
+        Ok(())
+    }
+
+    /// Exception entry (ARMv7-M B1.5.6 PushStack / ExceptionTaken): stack the basic or, with
+    /// CONTROL.FPCA, the extended frame (the lazy-stacking reservation filled eagerly), realign
+    /// to 8 bytes (CCR.STKALIGN), EXC_RETURN in LR, handler mode on the main stack.
+    fn enter(&mut self, e: u16) -> Result<(), String> {
+        let uc = &mut self.uc;
+        let r = |uc: &Unicorn<'_, Sim>, reg| uc.reg_read(reg).map(|v| v as u32).map_err(uc_err);
+        let xpsr = r(uc, RegisterARM::XPSR)?;
+        let control = r(uc, RegisterARM::CONTROL)?;
+        let handler = xpsr & 0x1FF != 0;
+        let psp = !handler && control & 2 != 0;
+        let fpca = control & 4 != 0;
+        let sp = r(uc, RegisterARM::SP)?;
+        let frame_size = if fpca { 0x68 } else { 0x20 };
+        let align = sp & 4 != 0;
+        let frame = (sp - frame_size) & !4;
+        let pc = r(uc, RegisterARM::PC)? & !1;
+        let mut words = vec![
+            r(uc, RegisterARM::R0)?,
+            r(uc, RegisterARM::R1)?,
+            r(uc, RegisterARM::R2)?,
+            r(uc, RegisterARM::R3)?,
+            r(uc, RegisterARM::R12)?,
+            r(uc, RegisterARM::LR)?,
+            pc,
+            (xpsr & !(1 << 9)) | (align as u32) << 9 | 1 << 24,
+        ];
+        if fpca {
+            for i in 0..16 {
+                words.push(r(uc, s_reg(i))?);
+            }
+            words.push(r(uc, RegisterARM::FPSCR)?);
+            words.push(0);
+        }
+        let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+        uc.mem_write(frame as u64, &bytes).map_err(|err| {
+            format!("exception {e}: stacking at 0x{frame:08X} failed ({err:?}): stack overflow?")
+        })?;
+        let exc_return = 0xFFFF_FFE1u32
+            | if handler { 0 } else { 8 }
+            | if psp { 4 } else { 0 }
+            | if fpca { 0 } else { 0x10 };
+        uc.reg_write(RegisterARM::SP, frame as u64)
+            .map_err(uc_err)?;
+        // Leave thread mode's stack selection while still in thread mode (an MSR CONTROL in
+        // handler mode ignores SPSEL), then enter handler mode.
+        if !handler {
+            uc.reg_write(RegisterARM::CONTROL, (control & !6) as u64)
+                .map_err(uc_err)?;
+        } else {
+            uc.reg_write(RegisterARM::CONTROL, (control & !4) as u64)
+                .map_err(uc_err)?;
+        }
+        let s = uc.get_data();
+        let vtor = s.scs.vtor();
+        let table = if vtor == 0 { s.chip.flash.0 } else { vtor };
+        let mut v = [0u8; 4];
+        uc.mem_read((table + 4 * e as u32) as u64, &mut v)
+            .map_err(uc_err)?;
+        let vector = u32::from_le_bytes(v);
+        uc.reg_write(RegisterARM::IPSR, e as u64).map_err(uc_err)?;
+        uc.reg_write(RegisterARM::LR, exc_return as u64)
+            .map_err(uc_err)?;
+        uc.reg_write(RegisterARM::PC, (vector | 1) as u64)
+            .map_err(uc_err)?;
+        let s = uc.get_data_mut();
+        s.scs.activate(e);
+        s.exceptions_taken += 1;
+        s.now += EXCEPTION_CYCLES * s.ticks_per_cycle;
+        Ok(())
+    }
+
+    /// Carries out DMA copies that touch RAM (peripheral ↔ memory).
+    fn copy_dma(&mut self) {
+        loop {
+            let copies = std::mem::take(&mut self.uc.get_data_mut().sig.copies);
+            if copies.is_empty() {
+                return;
+            }
+            for c in copies {
+                let v = match self.read_any(c.from, c.size) {
+                    Ok(v) => v,
+                    Err(e) => {
+                        self.uc.get_data_mut().stop = Some(Stop::Fault(format!("DMA read: {e}")));
+                        return;
+                    }
+                };
+                if let Err(e) = self.write_any(c.to, c.size, v) {
+                    self.uc.get_data_mut().stop = Some(Stop::Fault(format!("DMA write: {e}")));
+                    return;
+                }
+            }
+            self.uc.get_data_mut().settle_local();
+        }
+    }
+
+    fn is_periph(addr: u32) -> bool {
+        (0x4000_0000..0x6000_0000).contains(&addr) || (0xE004_0000..0xE010_0000).contains(&addr)
+    }
+
+    fn read_any(&mut self, addr: u32, size: u8) -> Result<u32, String> {
+        if Self::is_periph(addr) {
+            return self.uc.get_data_mut().bus_read(addr, size);
+        }
+        let mut b = [0u8; 4];
+        self.uc
+            .mem_read(addr as u64, &mut b[..size as usize])
+            .map_err(|e| format!("0x{addr:08X}: {e:?}"))?;
+        Ok(u32::from_le_bytes(b))
+    }
+
+    fn write_any(&mut self, addr: u32, size: u8, v: u32) -> Result<(), String> {
+        if Self::is_periph(addr) {
+            return self.uc.get_data_mut().bus_write(addr, size, v);
+        }
+        self.uc
+            .mem_write(addr as u64, &v.to_le_bytes()[..size as usize])
+            .map_err(|e| format!("0x{addr:08X}: {e:?}"))
+    }
+
+    /// Reads what the firmware wrote to RTT up-channel 0 since the last call, as a probe does:
+    /// the control block's first up-buffer descriptor (name, buffer, size, write, read, flags) is
+    /// at +24 (SEGGER RTT layout, as defmt-rtt defines it); the read offset is advanced.
+    pub fn drain_rtt(&mut self) {
+        let Some(cb) = self.uc.get_data().rtt else {
+            return;
+        };
+        let mut d = [0u8; 24];
+        if self.uc.mem_read(cb as u64 + 24, &mut d).is_err() {
+            return;
+        }
+        let w = |i: usize| u32::from_le_bytes(d[i..i + 4].try_into().unwrap());
+        let (buf, size, write, read) = (w(4), w(8), w(12), w(16));
+        if buf == 0 || size == 0 || write >= size || read >= size || write == read {
+            return;
+        }
+        let mut out = Vec::new();
+        let mut r = read;
+        while r != write {
+            let end = if write > r { write } else { size };
+            let mut chunk = vec![0u8; (end - r) as usize];
+            if self.uc.mem_read((buf + r) as u64, &mut chunk).is_err() {
+                return;
+            }
+            out.extend_from_slice(&chunk);
+            r = if end == size { 0 } else { end };
+        }
+        let _ = self.uc.mem_write(cb as u64 + 24 + 16, &write.to_le_bytes());
+        let s = self.uc.get_data_mut();
+        s.log_times.push((s.now, s.log.len()));
+        s.log.extend_from_slice(&out);
+    }
+
+    /// Microseconds of virtual time now.
+    pub fn now_us(&self) -> u64 {
+        micros(self.now())
+    }
+}
+
+fn s_reg(i: u32) -> RegisterARM {
+    use RegisterARM::*;
+    [
+        S0, S1, S2, S3, S4, S5, S6, S7, S8, S9, S10, S11, S12, S13, S14, S15,
+    ][i as usize]
+}
+
+/// After a bus access from a hook: a failed access stops the run with its sentence; a schedule
+/// change stops the slice so the board re-plans.
+fn finish_access(uc: &mut Unicorn<'_, Sim>, r: Result<Option<u32>, String>) -> Option<u32> {
+    match r {
+        Ok(v) => {
+            if uc.get_data().replan {
+                let _ = uc.emu_stop();
+            }
+            v
+        }
+        Err(msg) => {
+            let pc = uc.reg_read(RegisterARM::PC).unwrap_or(0);
+            let s = uc.get_data_mut();
+            if s.stop.is_none() {
+                s.stop = Some(Stop::Fault(format!(
+                    "{msg} (pc 0x{pc:08X}, t = {} µs)",
+                    micros(s.now)
+                )));
+            }
+            let _ = uc.emu_stop();
+            None
+        }
+    }
+}
+
+/// Exception return (ARMv7-M B1.5.8 ExceptionReturn / PopStack), from the EXC_RETURN value the
+/// handler branched to.
+fn exception_return(uc: &mut Unicorn<'_, Sim>) -> Result<(), String> {
+    let pc = uc.reg_read(RegisterARM::PC).map_err(uc_err)? as u32;
+    let exc_return = if pc >= 0xFFFF_FF00 {
+        pc
+    } else {
+        uc.reg_read(RegisterARM::LR).map_err(uc_err)? as u32
+    };
+    if exc_return & 0xFFFF_FFE1 != 0xFFFF_FFE1 {
+        return Err(format!(
+            "exception return with invalid EXC_RETURN 0x{exc_return:08X}"
+        ));
+    }
+    let to_thread = exc_return & 8 != 0;
+    let psp = exc_return & 4 != 0;
+    let fp = exc_return & 0x10 == 0;
+    {
+        let s = uc.get_data_mut();
+        s.scs.deactivate();
+        s.event_register = true;
+        s.now += EXCEPTION_CYCLES * s.ticks_per_cycle;
+    }
+    // The frame is on the stack EXC_RETURN names; in handler mode SP is MSP.
+    let frame = if psp {
+        uc.reg_read(RegisterARM::PSP).map_err(uc_err)? as u32
+    } else {
+        uc.reg_read(RegisterARM::SP).map_err(uc_err)? as u32
+    };
+    let n = if fp { 26 } else { 8 };
+    let mut b = vec![0u8; 4 * n];
+    uc.mem_read(frame as u64, &mut b)
+        .map_err(|e| format!("unstacking at 0x{frame:08X}: {e:?}"))?;
+    let w = |i: usize| u32::from_le_bytes(b[4 * i..4 * i + 4].try_into().unwrap());
+    let xpsr = w(7);
+    let sp_after = frame + 4 * n as u32 + if xpsr & (1 << 9) != 0 { 4 } else { 0 };
+    for (i, reg) in [
+        RegisterARM::R0,
+        RegisterARM::R1,
+        RegisterARM::R2,
+        RegisterARM::R3,
+        RegisterARM::R12,
+        RegisterARM::LR,
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        uc.reg_write(reg, w(i) as u64).map_err(uc_err)?;
+    }
+    if fp {
+        for i in 0..16 {
+            uc.reg_write(s_reg(i), w(8 + i as usize) as u64)
+                .map_err(uc_err)?;
+        }
+        uc.reg_write(RegisterARM::FPSCR, w(24) as u64)
+            .map_err(uc_err)?;
+    }
+    // Back to the interrupted mode first (IPSR from the frame), then its stack selection.
+    uc.reg_write(RegisterARM::XPSR, (xpsr & !(1 << 9)) as u64)
+        .map_err(uc_err)?;
+    uc.reg_write(RegisterARM::IPSR, (xpsr & 0x1FF) as u64)
+        .map_err(uc_err)?;
+    if !to_thread && xpsr & 0x1FF == 0 {
+        return Err(format!(
+            "EXC_RETURN 0x{exc_return:08X} returns to handler mode but the frame holds thread mode"
+        ));
+    }
+    let control = uc.reg_read(RegisterARM::CONTROL).map_err(uc_err)? as u32;
+    let control = (control & !6) | if to_thread && psp { 2 } else { 0 } | if fp { 4 } else { 0 };
+    if psp {
+        uc.reg_write(RegisterARM::PSP, sp_after as u64)
+            .map_err(uc_err)?;
+        uc.reg_write(RegisterARM::CONTROL, control as u64)
+            .map_err(uc_err)?;
+    } else {
+        uc.reg_write(RegisterARM::CONTROL, control as u64)
+            .map_err(uc_err)?;
+        uc.reg_write(RegisterARM::SP, sp_after as u64)
+            .map_err(uc_err)?;
+    }
+    uc.reg_write(RegisterARM::PC, (w(6) | 1) as u64)
+        .map_err(uc_err)?;
+    // Tail-chaining: whatever can be taken now is taken before returning to the interrupted code.
+    let primask = uc.reg_read(RegisterARM::PRIMASK).map_err(uc_err)? & 1 != 0;
+    let basepri = uc.reg_read(RegisterARM::BASEPRI).map_err(uc_err)? as u8;
+    let s = uc.get_data();
+    if s.scs
+        .next_to_take(s.scs.execution_priority(primask, basepri, false))
+        .is_some()
+    {
+        uc.get_data_mut().replan = true;
+        let _ = uc.emu_stop();
+    }
+    Ok(())
+}
