@@ -57,6 +57,8 @@ const WATCHDOG_PERIOD: Duration = Duration::from_millis(1);
 const IWDG_TIMEOUT_US: u32 = 50_000;
 /// Telemetry log period.
 const TELEMETRY_PERIOD_US: u64 = 1_000_000;
+/// Shortest interval between two ADC fault warnings.
+const ADC_WARN_PERIOD_US: u64 = 1_000_000;
 
 /// Samples from the ADC task to the control task (6.4 ms of slack at 10 kHz).
 static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 64> = Channel::new();
@@ -128,7 +130,9 @@ async fn main(spawner: Spawner) {
 
 #[embassy_executor::task]
 async fn sampler(mut s: board::Sampler) {
-    let mut overruns: u32 = 0;
+    // Acquisition restarts, and samples the control task had no room for.
+    let (mut restarts, mut dropped) = (0u32, 0u32);
+    let mut quiet_until_us = 0u64;
     s.start();
     loop {
         match s.read().await {
@@ -141,13 +145,19 @@ async fn sampler(mut s: board::Sampler) {
                     let t_us = now.wrapping_sub((n - 1 - i as u32) * SAMPLE_PERIOD_US);
                     if SAMPLES.try_send(Sample { code, t_us }).is_err() {
                         // Control task is behind; the stale watchdog covers a stuck consumer.
-                        overruns = overruns.wrapping_add(1);
+                        dropped = dropped.wrapping_add(1);
                     }
                 }
             }
-            Err(_) => {
-                overruns = overruns.wrapping_add(1);
-                warn!("adc dma overrun ({} total)", overruns);
+            Err(fault) => {
+                // The sampler has already restarted the acquisition. At most one line per
+                // ADC_WARN_PERIOD_US; the totals count the ones not logged.
+                restarts = restarts.wrapping_add(1);
+                let now = Instant::now().as_micros();
+                if now >= quiet_until_us {
+                    quiet_until_us = now + ADC_WARN_PERIOD_US;
+                    warn!("adc {}: acquisition restarted ({} restarts, {} samples dropped so far)", fault, restarts, dropped);
+                }
             }
         }
     }

@@ -13,8 +13,12 @@ use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::low_level::MasterMode;
 use embassy_stm32::timer::{Ch1, Ch3};
 use embassy_stm32::{bind_interrupts, dma, peripherals, Config, Peri, Peripherals};
+use embassy_stm32::pac;
+use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, PllOut};
 use static_cell::StaticCell;
+
+use super::AdcFault;
 
 pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE;
 
@@ -82,6 +86,8 @@ const RANKS: usize = saw_boards::ADC_OVERSAMPLE as usize;
 /// Samples delivered per `read` (one trigger's worth).
 pub const SAMPLES_PER_READ: usize = 1;
 const DMA_LEN: usize = 2 * RANKS * SAMPLES_PER_READ;
+/// DMA2 stream of `DMA2_CH0` (for the raw re-initialisation in `Sampler::restart`).
+const DMA_STREAM: usize = 0;
 static DMA_BUF: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 
 /// Timer-triggered, DMA-fed rheostat acquisition.
@@ -125,7 +131,7 @@ impl Sampler {
             embassy_stm32::triggers::TIM3_TRGO,
             Exten::RISING_EDGE,
         );
-        let r = embassy_stm32::pac::ADC1;
+        let r = pac::ADC1;
         r.sqr3().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
         r.sqr2().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
         r.sqr1().write(|w| {
@@ -154,20 +160,64 @@ impl Sampler {
     }
 
     /// Wait for the next trigger's conversions; returns the 16-bit sums (sum of 16 × 12 bit).
-    pub async fn read(&mut self) -> Result<[u16; SAMPLES_PER_READ], super::AdcOverrun> {
-        self.adc.read(&mut self.buf).await.map_err(|_| super::AdcOverrun)?;
-        let mut out = [0u16; SAMPLES_PER_READ];
-        for (o, chunk) in out.iter_mut().zip(self.buf.chunks_exact(RANKS)) {
-            *o = chunk.iter().map(|&x| x as u32).sum::<u32>() as u16;
-        }
-        Ok(out)
+    /// On an overrun or a stall the acquisition is restarted before this returns the fault.
+    pub async fn read(&mut self) -> Result<[u16; SAMPLES_PER_READ], AdcFault> {
+        let fault = match with_timeout(super::READ_TIMEOUT, self.adc.read(&mut self.buf)).await {
+            Ok(Ok(_)) => {
+                let mut out = [0u16; SAMPLES_PER_READ];
+                for (o, chunk) in out.iter_mut().zip(self.buf.chunks_exact(RANKS)) {
+                    *o = chunk.iter().map(|&x| x as u32).sum::<u32>() as u16;
+                }
+                return Ok(out);
+            }
+            Ok(Err(_)) => AdcFault::Overrun,
+            Err(_) => AdcFault::Stalled,
+        };
+        self.restart();
+        Err(fault)
+    }
+
+    /// Recovery from an ADC overrun in DMA mode (RM0390 §13.8.1: re-initialise the DMA —
+    /// address and NDTR —, clear OVR, trigger again), also used after a ring-buffer lap: ADC off
+    /// (ADON = 0 aborts any conversion; the next trigger starts at rank 1) and its DMA requests
+    /// off, stream stopped and reloaded with the whole buffer, flags cleared, ring buffer emptied,
+    /// then the order of `start`. TIM3 keeps running throughout.
+    fn restart(&mut self) {
+        let adc = pac::ADC1;
+        adc.cr2().modify(|w| {
+            w.set_adon(false);
+            w.set_dma(false);
+        });
+        self.adc.stop(); // stream EN = 0
+        // RM0390 §9.3.17: EN must read 0 and the stream's flags must be cleared before the
+        // stream is reprogrammed and re-enabled. NDTR = full length puts the stream back at the
+        // buffer's start, where `clear` puts the ring buffer's indices.
+        let (dma, st) = (pac::DMA2, DMA_STREAM);
+        while dma.st(st).cr().read().en() {}
+        dma.ifcr(st / 4).write(|w| {
+            w.set_tcif(st % 4, true);
+            w.set_htif(st % 4, true);
+            w.set_teif(st % 4, true);
+            w.set_dmeif(st % 4, true);
+            w.set_feif(st % 4, true);
+        });
+        dma.st(st).ndtr().write(|w| w.set_ndt(DMA_LEN as u16));
+        // SR flags are rc_w0.
+        adc.sr().modify(|w| {
+            w.set_ovr(false);
+            w.set_eoc(false);
+            w.set_strt(false);
+        });
+        adc.cr2().modify(|w| w.set_dma(true));
+        self.adc.clear();
+        self.start();
     }
 }
 
 /// ADON = 1, then wait t_STAB (3 µs max, STM32F446 datasheet ADC characteristics) before the
 /// first trigger can come (RM0390 §13.3.1).
 fn power_up() {
-    embassy_stm32::pac::ADC1.cr2().modify(|w| w.set_adon(true));
+    pac::ADC1.cr2().modify(|w| w.set_adon(true));
     cortex_m::asm::delay(3 * (BOARD.sysclk_hz / 1_000_000));
 }
 

@@ -13,8 +13,12 @@ use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::low_level::MasterMode;
 use embassy_stm32::timer::{Ch1, Ch3};
 use embassy_stm32::{bind_interrupts, dma, peripherals, Config, Peri, Peripherals};
+use embassy_stm32::pac;
+use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, Oversampling, PllOut};
 use static_cell::StaticCell;
+
+use super::AdcFault;
 
 pub const BOARD: &BoardDef = &saw_boards::NUCLEO_G474RE;
 
@@ -92,6 +96,8 @@ pub fn split(p: Peripherals) -> Parts {
 /// Samples delivered per `read` (each is one trigger = 16 oversampled conversions).
 pub const SAMPLES_PER_READ: usize = 2;
 const DMA_LEN: usize = 2 * SAMPLES_PER_READ;
+/// DMA1 channel index of `DMA1_CH1` (channel 1 in RM0440 numbering is index 0 in the PAC).
+const DMA_CH: usize = 0;
 static DMA_BUF: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 
 /// Timer-triggered, hardware-oversampled, DMA-fed rheostat acquisition.
@@ -139,11 +145,52 @@ impl Sampler {
         self.trigger.start();
     }
 
-    /// Wait for the next samples (each already the 16-bit sum of 16 conversions).
-    pub async fn read(&mut self) -> Result<[u16; SAMPLES_PER_READ], super::AdcOverrun> {
+    /// Wait for the next samples (each already the 16-bit sum of 16 conversions). On an overrun
+    /// or a stall the acquisition is restarted before this returns the fault.
+    pub async fn read(&mut self) -> Result<[u16; SAMPLES_PER_READ], AdcFault> {
         let mut out = [0u16; SAMPLES_PER_READ];
-        self.adc.read(&mut out).await.map_err(|_| super::AdcOverrun)?;
-        Ok(out)
+        let fault = match with_timeout(super::READ_TIMEOUT, self.adc.read(&mut out)).await {
+            Ok(Ok(_)) => return Ok(out),
+            Ok(Err(_)) => AdcFault::Overrun,
+            Err(_) => AdcFault::Stalled,
+        };
+        self.restart();
+        Err(fault)
+    }
+
+    /// Recovery from an ADC overrun (with DMA the requests stay blocked until OVR is cleared;
+    /// RM0440 ADC chapter, "ADC overrun (OVR, OVRMOD)" and "Managing conversions using the DMA"),
+    /// also used after a ring-buffer lap or a stall: ADSTP (aborts the oversampled conversion,
+    /// clears ADSTART, so triggers are ignored from here on), channel stopped and reloaded with
+    /// the whole buffer, flags cleared, DMAEN toggled (writable only while ADSTART = 0), ring
+    /// buffer emptied, then `start`: ADSTART = 1 arms the next TIM3 trigger. TIM3 keeps running.
+    fn restart(&mut self) {
+        let adc = pac::ADC1;
+        if adc.cr().read().adstart() {
+            // ADSTART/ADEN are set-only bits: writing 0 to ADSTART leaves it alone.
+            adc.cr().modify(|w| {
+                w.set_adstart(false);
+                w.set_adstp(vals::Adstp::STOP);
+            });
+            while adc.cr().read().adstart() {}
+        }
+        self.adc.stop(); // channel EN = 0
+        // RM0440 DMA chapter, channel configuration: CNDTR is writable only while EN = 0; the
+        // full length puts the channel back at the buffer's start, where `clear` puts the ring
+        // buffer's indices. CGIF clears all of the channel's flags.
+        let dma = pac::DMA1;
+        dma.ifcr().write(|w| w.set_gif(DMA_CH, true));
+        dma.ch(DMA_CH).ndtr().write(|w| w.set_ndt(DMA_LEN as u16));
+        // ISR flags are rc_w1.
+        adc.isr().write(|w| {
+            w.set_ovr(true);
+            w.set_eoc(true);
+            w.set_eos(true);
+        });
+        adc.cfgr().modify(|w| w.set_dmaen(vals::Dmaen::DISABLE));
+        adc.cfgr().modify(|w| w.set_dmaen(vals::Dmaen::ENABLE));
+        self.adc.clear();
+        self.start();
     }
 }
 

@@ -40,6 +40,19 @@ pub const fn apb_pre(div: u32) -> APBPrescaler {
     }
 }
 
-/// The ADC's DMA ring buffer was lapped (samples lost); the next read restarts it.
+/// Why `Sampler::read` returned no samples. Either way the sampler has already restarted the
+/// acquisition (ADC overrun cleared, DMA re-initialised, armed for the next TIM3 trigger).
 #[derive(Clone, Copy, Debug, defmt::Format)]
-pub struct AdcOverrun;
+pub enum AdcFault {
+    /// The DMA ring buffer was lapped: the reader fell behind, samples were lost.
+    Overrun,
+    /// Nothing arrived within [`READ_TIMEOUT`]: the ADC stopped converting or its DMA requests
+    /// are blocked (an ADC overrun with DMA = 1, which embassy's ring buffer neither clears nor
+    /// reports).
+    Stalled,
+}
+
+/// How long `Sampler::read` waits for a batch: the batch's own sample periods plus four.
+pub const READ_TIMEOUT: embassy_time::Duration = embassy_time::Duration::from_micros(
+    (SAMPLES_PER_READ as u64 + 4) * 1_000_000 / BOARD.sample_rate_hz as u64,
+);
