@@ -49,6 +49,14 @@ use rf::{BurstGate, Carrier};
 const VERSION: &str = env!("CARGO_PKG_VERSION");
 /// Sample period, µs (100 at 10 kHz).
 const SAMPLE_PERIOD_US: u32 = 1_000_000 / BOARD.sample_rate_hz;
+// The sampler counts samples instead of reading the clock: the trigger timer's period must be
+// exactly SAMPLE_PERIOD_US.
+const _: () = {
+    let (psc, arr) = BOARD.adc_trigger_psc_arr();
+    let ticks = (psc + 1) * (arr + 1) * BOARD.adc.triggers_per_sample;
+    assert!(1_000_000 % BOARD.sample_rate_hz == 0 && BOARD.adc.trigger_timer_clk_hz % 1_000_000 == 0);
+    assert!(ticks == BOARD.adc.trigger_timer_clk_hz / 1_000_000 * SAMPLE_PERIOD_US);
+};
 /// Watchdog tick for `Controller::on_tick` (stale limit is 5 ms).
 const WATCHDOG_PERIOD: Duration = Duration::from_millis(1);
 /// Independent watchdog: if the control loop stops petting it (hang, starvation), the chip
@@ -133,23 +141,33 @@ async fn sampler(mut s: board::Sampler) {
     // Acquisition restarts, and samples the control task had no room for.
     let (mut restarts, mut dropped) = (0u32, 0u32);
     let mut quiet_until_us = 0u64;
+    // Time of the next sample. TIM3 triggers exactly every SAMPLE_PERIOD_US (checked below)
+    // from the same APB1 timer clock as the 1 MHz time driver (TIM4), so within one run of the
+    // acquisition sample n is at t0 + n × period: no drift against `Instant`, no bunching when
+    // `read` hands out an older backlog. None = anchor again (at start and after a restart).
+    let mut next_t: Option<u32> = None;
     s.start();
     loop {
         match s.read().await {
-            Ok(codes) => {
-                // `read` returns when the newest sample has landed; older ones in the batch were
-                // taken one sample period apart before it.
-                let now = Instant::now().as_micros() as u32;
-                let n = codes.len() as u32;
-                for (i, &code) in codes.iter().enumerate() {
-                    let t_us = now.wrapping_sub((n - 1 - i as u32) * SAMPLE_PERIOD_US);
+            Ok(batch) => {
+                let n = batch.codes.len() as u32;
+                // Anchor: the newest sample in the ring buffer has just landed; the batch's first
+                // one is (backlog + n − 1) periods older.
+                let mut t_us = next_t.unwrap_or_else(|| {
+                    let now = Instant::now().as_micros() as u32;
+                    now.wrapping_sub((batch.backlog + n - 1) * SAMPLE_PERIOD_US)
+                });
+                for &code in &batch.codes {
                     if SAMPLES.try_send(Sample { code, t_us }).is_err() {
                         // Control task is behind; the stale watchdog covers a stuck consumer.
                         dropped = dropped.wrapping_add(1);
                     }
+                    t_us = t_us.wrapping_add(SAMPLE_PERIOD_US);
                 }
+                next_t = Some(t_us);
             }
             Err(fault) => {
+                next_t = None;
                 // The sampler has already restarted the acquisition. At most one line per
                 // ADC_WARN_PERIOD_US; the totals count the ones not logged.
                 restarts = restarts.wrapping_add(1);

@@ -18,7 +18,7 @@ use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, PllOut};
 use static_cell::StaticCell;
 
-use super::AdcFault;
+use super::{AdcFault, Batch};
 
 pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE;
 
@@ -161,14 +161,14 @@ impl Sampler {
 
     /// Wait for the next trigger's conversions; returns the 16-bit sums (sum of 16 × 12 bit).
     /// On an overrun or a stall the acquisition is restarted before this returns the fault.
-    pub async fn read(&mut self) -> Result<[u16; SAMPLES_PER_READ], AdcFault> {
+    pub async fn read(&mut self) -> Result<Batch, AdcFault> {
         let fault = match with_timeout(super::READ_TIMEOUT, self.adc.read(&mut self.buf)).await {
-            Ok(Ok(_)) => {
-                let mut out = [0u16; SAMPLES_PER_READ];
-                for (o, chunk) in out.iter_mut().zip(self.buf.chunks_exact(RANKS)) {
+            Ok(Ok(remaining)) => {
+                let mut codes = [0u16; SAMPLES_PER_READ];
+                for (o, chunk) in codes.iter_mut().zip(self.buf.chunks_exact(RANKS)) {
                     *o = chunk.iter().map(|&x| x as u32).sum::<u32>() as u16;
                 }
-                return Ok(out);
+                return Ok(Batch { codes, backlog: (remaining / RANKS) as u32 });
             }
             Ok(Err(_)) => AdcFault::Overrun,
             Err(_) => AdcFault::Stalled,

@@ -18,7 +18,7 @@ use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, Oversampling, PllOut};
 use static_cell::StaticCell;
 
-use super::AdcFault;
+use super::{AdcFault, Batch};
 
 pub const BOARD: &BoardDef = &saw_boards::NUCLEO_G474RE;
 
@@ -147,10 +147,10 @@ impl Sampler {
 
     /// Wait for the next samples (each already the 16-bit sum of 16 conversions). On an overrun
     /// or a stall the acquisition is restarted before this returns the fault.
-    pub async fn read(&mut self) -> Result<[u16; SAMPLES_PER_READ], AdcFault> {
-        let mut out = [0u16; SAMPLES_PER_READ];
-        let fault = match with_timeout(super::READ_TIMEOUT, self.adc.read(&mut out)).await {
-            Ok(Ok(_)) => return Ok(out),
+    pub async fn read(&mut self) -> Result<Batch, AdcFault> {
+        let mut codes = [0u16; SAMPLES_PER_READ];
+        let fault = match with_timeout(super::READ_TIMEOUT, self.adc.read(&mut codes)).await {
+            Ok(Ok(remaining)) => return Ok(Batch { codes, backlog: remaining as u32 }),
             Ok(Err(_)) => AdcFault::Overrun,
             Err(_) => AdcFault::Stalled,
         };

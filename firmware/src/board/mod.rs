@@ -52,6 +52,14 @@ pub enum AdcFault {
     Stalled,
 }
 
+/// One `Sampler::read`: the oldest unread samples (embassy's ring buffer hands them out in
+/// order), and how many newer ones were already waiting behind them.
+pub struct Batch {
+    pub codes: [u16; SAMPLES_PER_READ],
+    /// Whole samples left in the ring buffer after `codes` (0 while the reader keeps up).
+    pub backlog: u32,
+}
+
 /// How long `Sampler::read` waits for a batch: the batch's own sample periods plus four.
 pub const READ_TIMEOUT: embassy_time::Duration = embassy_time::Duration::from_micros(
     (SAMPLES_PER_READ as u64 + 4) * 1_000_000 / BOARD.sample_rate_hz as u64,
