@@ -121,6 +121,20 @@ impl BurstGate {
         r.ccr(B.index()).write_value(ccr);
     }
 
+    /// New settings for a running burst, taking effect together at the next update event.
+    /// PSC, ARR, CCR1 and CCR3 are separate stores, and an update event between two of them
+    /// would run a period with a mixed set (a new short ARR with the old long CCR is 100 % on,
+    /// above the duty cap). UDIS = 1 holds every update event off while they are written: the
+    /// shadow registers keep the old set, the counter still wraps (RM0390 §17.3.2 upcounting
+    /// mode, §17.4.1 TIMx_CR1.UDIS; RM0440 TIMx_CR1 is the same). At most one period runs
+    /// longer on the old set.
+    fn update(&self, s: &TimerSettings) {
+        let cr1 = self.tim.regs_gp32().cr1();
+        cr1.modify(|w| w.set_udis(true));
+        self.write(s.psc, s.arr, s.ccr);
+        cr1.modify(|w| w.set_udis(false));
+    }
+
     /// Load, latch with UG, enable the counter: the first period starts whole at CNT = 0.
     fn start(&mut self, s: &TimerSettings) {
         self.tim.stop();
@@ -180,7 +194,7 @@ impl BurstOutput for BurstGate {
             GateAction::Update(s) => {
                 if self.line == Line::Running {
                     // Preloaded: the running period finishes untouched.
-                    self.write(s.psc, s.arr, s.ccr);
+                    self.update(&s);
                 } else {
                     self.start(&s);
                 }
