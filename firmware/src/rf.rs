@@ -135,7 +135,8 @@ impl BurstGate {
         cr1.modify(|w| w.set_udis(false));
     }
 
-    /// Load, latch with UG, enable the counter: the first period starts whole at CNT = 0.
+    /// Load, latch with UG, enable the counter: the first period starts (whole, bar the few
+    /// ticks between CEN and the mode write) at CNT = 0.
     fn start(&mut self, s: &TimerSettings) {
         self.tim.stop();
         self.set_mode(OutputCompareMode::ForceInactive);
@@ -143,8 +144,14 @@ impl BurstGate {
         self.write(s.psc, s.arr, s.ccr);
         self.tim.reset(); // CNT = 0
         self.tim.generate_update_event(); // latch PSC/ARR/CCR from preload
-        self.set_mode(OutputCompareMode::PwmMode1);
+        // In PWM mode OCxREF changes only when the comparison result changes or when the mode
+        // switches from Frozen to PWM (RM0390 §17.3.9; RM0440 PWM mode alike). Straight from
+        // force-inactive, CNT = 0 < CCR is no change: the line would stay low for the whole
+        // first period. Frozen keeps the (low) level; Frozen → PWM 1 evaluates CNT < CCR at once.
+        // The counter runs first, so the first pulse can only come out a few ticks short.
+        self.set_mode(OutputCompareMode::Frozen);
         self.tim.start();
+        self.set_mode(OutputCompareMode::PwmMode1);
         self.line = Line::Running;
     }
 
