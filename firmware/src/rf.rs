@@ -221,7 +221,12 @@ impl BurstOutput for BurstGate {
 
     fn set_drive(&mut self, mode: DriveMode) {
         self.drive = mode;
-        // Re-apply B's mode to the line's current state (A is unaffected).
+        // Re-apply B's mode to the line's current state (A is unaffected). Switching B on
+        // mid-burst goes straight from force-inactive to PWM, deliberately *not* through Frozen
+        // (compare `start`): OCxREF then keeps its forced-low level until the comparison result
+        // next changes (RM0390 §17.3.9), i.e. B's first pulse starts whole at the next counter
+        // wrap — never a partial pulse from mid-period. (In a one-pulse, B simply stays low.)
+        // Switching B off is immediate and may cut its current pulse short: less on-time only.
         let b = match (self.drive, self.line) {
             (DriveMode::Progressive, _) | (_, Line::Off) => OutputCompareMode::ForceInactive,
             (DriveMode::Standing, Line::Running) => OutputCompareMode::PwmMode1,
