@@ -73,7 +73,7 @@ static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 64> = Channel::new();
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
-    let p = embassy_stm32::init(board::rcc_config());
+    let p = board::init();
     let c = &BOARD.clocks;
     info!("saw-firmware v{} on {} ({})", VERSION, BOARD.name, BOARD.probe_rs_chip);
     info!(

@@ -39,7 +39,7 @@ const _: () = assert!(matches!(PLLP, PllPDiv::DIV2));
 
 /// Embassy configuration: HSE 8 MHz bypass → PLL (M 4, N 180, P 2) → SYSCLK 180 MHz,
 /// AHB /1, APB1 /4 (timers 90 MHz), APB2 /2 (timers 180 MHz). Over-drive is enabled by embassy.
-pub fn rcc_config() -> Config {
+fn rcc_config() -> Config {
     let mut config = Config::default();
     config.rcc.hse = Some(Hse { freq: Hertz(C.osc_hz), mode: HseMode::Bypass });
     config.rcc.pll_src = PllSource::HSE;
@@ -49,6 +49,34 @@ pub fn rcc_config() -> Config {
     config.rcc.apb1_pre = super::apb_pre(C.apb1_div);
     config.rcc.apb2_pre = super::apb_pre(C.apb2_div);
     config
+}
+
+/// embassy init with [`rcc_config`], then the flash accelerator. embassy's F4 RCC code writes
+/// FLASH_ACR whole (`FLASH.acr().write(|w| w.set_latency(..))`, embassy-stm32 0.6 rcc/f247.rs),
+/// which leaves prefetch and both ART caches off (their reset state too): at 180 MHz and 5 wait
+/// states every flash fetch would stall. Caches are reset while disabled, then ICEN, DCEN and
+/// PRFTEN set (RM0390 §3.4.2 ART accelerator, §3.8.1 FLASH_ACR).
+pub fn init() -> Peripherals {
+    let p = embassy_stm32::init(rcc_config());
+    let acr = pac::FLASH.acr();
+    acr.modify(|w| {
+        w.set_icen(false);
+        w.set_dcen(false);
+    });
+    acr.modify(|w| {
+        w.set_icrst(true);
+        w.set_dcrst(true);
+    });
+    acr.modify(|w| {
+        w.set_icrst(false);
+        w.set_dcrst(false);
+    });
+    acr.modify(|w| {
+        w.set_icen(true);
+        w.set_dcen(true);
+        w.set_prften(true);
+    });
+    p
 }
 
 bind_interrupts!(struct Irqs {

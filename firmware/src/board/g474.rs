@@ -45,7 +45,7 @@ const OVS: (u8, u8) = match BOARD.adc.oversampling {
 
 /// Embassy configuration: HSE 24 MHz crystal → PLL (M 6, N 75, R 2) → SYSCLK 150 MHz,
 /// AHB/APB1/APB2 /1 (all timers 150 MHz), ADC12 kernel clock = SYSCLK.
-pub fn rcc_config() -> Config {
+fn rcc_config() -> Config {
     let mut config = Config::default();
     config.rcc.hse = Some(Hse { freq: Hertz(C.osc_hz), mode: HseMode::Oscillator });
     config.rcc.pll = Some(Pll {
@@ -63,6 +63,13 @@ pub fn rcc_config() -> Config {
     config.rcc.apb2_pre = super::apb_pre(C.apb2_div);
     config.rcc.mux.adc12sel = mux::Adcsel::SYS;
     config
+}
+
+/// embassy init with [`rcc_config`]. Nothing to add for the flash: FLASH_ACR resets with ICEN
+/// and DCEN set and embassy's G4 RCC code only modifies LATENCY (RM0440 FLASH_ACR; embassy-stm32
+/// 0.6 rcc/g4.rs). Prefetch stays off, as in ST's G4 defaults.
+pub fn init() -> Peripherals {
+    embassy_stm32::init(rcc_config())
 }
 
 bind_interrupts!(struct Irqs {

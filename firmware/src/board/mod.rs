@@ -1,6 +1,6 @@
 //! Board selection: exactly one of `board::f446` / `board::g474` is compiled, chosen by the
 //! `nucleo-f446re` (default) / `nucleo-g474re` cargo features. Both expose the same items:
-//! `BOARD`, `rcc_config()`, `Parts`, `split()` and `Sampler`.
+//! `BOARD`, `init()`, `Parts`, `split()` and `Sampler`.
 #[cfg(all(feature = "nucleo-f446re", feature = "nucleo-g474re"))]
 compile_error!("select exactly one board: `--no-default-features --features nucleo-g474re` for the G474");
 
