@@ -109,6 +109,13 @@ pub fn split(p: Peripherals) -> Parts {
     Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, burst_b_pin, rf_arm, sampler, iwdg: p.IWDG }
 }
 
+/// Sampling time against the rheostat's source impedance (assumed 10 kΩ divider, ≤ 2.5 kΩ
+/// mid-travel; see g474.rs). STM32F446 datasheet, ADC characteristics: R_AIN < (k − 0.5) /
+/// (f_ADC · C_ADC · ln 2^(N+2)) − R_ADC with N = 12, R_ADC = 6 kΩ max, C_ADC = 4 pF typ (7 pF
+/// max taken), f_ADC = 90 MHz / 4 = 22.5 MHz (embassy's ADCPRE for ≤ 36 MHz): 56 cycles allow
+/// < 30 kΩ. 16 × (56 + 12) cycles = 48 µs per trigger.
+const SAMPLE_TIME: SampleTime = SampleTime::CYCLES56;
+
 /// 16 conversions per trigger (one 16-rank sequence).
 const RANKS: usize = saw_boards::ADC_OVERSAMPLE as usize;
 /// Samples delivered per `read` (one trigger's worth).
@@ -155,7 +162,7 @@ impl Sampler {
             dma,
             buf,
             Irqs,
-            [(pin.degrade_adc(), SampleTime::CYCLES56)].into_iter(),
+            [(pin.degrade_adc(), SAMPLE_TIME)].into_iter(),
             embassy_stm32::triggers::TIM3_TRGO,
             Exten::RISING_EDGE,
         );

@@ -100,6 +100,19 @@ pub fn split(p: Peripherals) -> Parts {
     Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, burst_b_pin, rf_arm, sampler, iwdg: p.IWDG }
 }
 
+/// Sampling time against the rheostat's source impedance. No rheostat value is stated in
+/// boards/README.md or saw-boards; assumed: a 10 kΩ linear slide potentiometer wired as a divider
+/// (core/src/position.rs), whose Thevenin resistance peaks at R/4 = 2.5 kΩ mid-travel. Datasheet
+/// bound (STM32G474 DS12288, ADC characteristics): R_AIN < t_S / (f_ADC · C_ADC · ln 2^(N+2)) −
+/// R_ADC, N = 12 (ln 2^14 = 9.70), C_ADC = 5 pF, f_ADC = 150 MHz / 4 = 37.5 MHz (embassy's
+/// PRESC for ≤ 60 MHz). 24.5 cycles (653 ns): < 13.2 kΩ − R_ADC by the formula, but the
+/// datasheet's "maximum ADC R_AIN" table (which includes pad and parasitics; values from memory,
+/// not re-checked here) puts ~650 ns near 2 kΩ — no margin for 2.5 kΩ. 92.5 cycles (2.47 µs):
+/// < 50 kΩ − R_ADC by the formula, ~7 kΩ scaled from that table. 16 × (92.5 + 12.5) cycles =
+/// 44.8 µs per trigger, inside the 100 µs period (the F446's 16 conversions take 48 µs).
+const SAMPLE_TIME: SampleTime = SampleTime::CYCLES92_5;
+const _: () = assert!(16 * 105 * 1_000_000 / (BOARD.sysclk_hz / 4) < 1_000_000 / BOARD.sample_rate_hz);
+
 /// Samples delivered per `read` (each is one trigger = 16 oversampled conversions).
 pub const SAMPLES_PER_READ: usize = 2;
 const DMA_LEN: usize = 2 * SAMPLES_PER_READ;
@@ -137,7 +150,7 @@ impl Sampler {
             dma,
             buf,
             Irqs,
-            [(pin.degrade_adc(), SampleTime::CYCLES24_5)].into_iter(),
+            [(pin.degrade_adc(), SAMPLE_TIME)].into_iter(),
             embassy_stm32::triggers::TIM3_TRGO,
             Exten::RISING_EDGE,
         );
