@@ -25,10 +25,12 @@ use saw_core::Controller;
 use defmt_rtt as _;
 
 /// Panic: RF off first (the burst timer keeps running without the CPU), then log, then trap so
-/// probe-rs stops and prints the backtrace.
+/// probe-rs stops and prints the backtrace. With RF off, a debugger's halt may freeze the IWDG
+/// (only then: see IWDG_TIMEOUT_US), so the backtrace is not cut by a watchdog reset.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     rf::emergency_off();
+    board::freeze_watchdog_if_debugged();
     defmt::error!("panic: {}", defmt::Display2Format(info));
     cortex_m::asm::udf()
 }
@@ -37,6 +39,7 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 #[cortex_m_rt::exception]
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
     rf::emergency_off();
+    board::freeze_watchdog_if_debugged();
     defmt::error!("hard fault: RF off");
     loop {
         cortex_m::asm::bkpt();
@@ -61,7 +64,8 @@ const _: () = {
 const WATCHDOG_PERIOD: Duration = Duration::from_millis(1);
 /// Independent watchdog: if the control loop stops petting it (hang, starvation), the chip
 /// resets and every RF pin returns to its reset state (enables low, arm low). Not frozen under
-/// a debugger halt on purpose: a halted CPU must not leave the burst timer driving RF.
+/// a debugger halt on purpose: a halted CPU must not leave the burst timer driving RF. Only the
+/// panic/HardFault path, after RF is off, freezes it (and only with a debugger attached).
 const IWDG_TIMEOUT_US: u32 = 50_000;
 /// Telemetry log period.
 const TELEMETRY_PERIOD_US: u64 = 1_000_000;

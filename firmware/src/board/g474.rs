@@ -72,6 +72,16 @@ pub fn init() -> Peripherals {
     embassy_stm32::init(rcc_config())
 }
 
+/// Fault path only, after RF is off: with a debugger attached (DHCSR.C_DEBUGEN, ARMv7-M ARM
+/// C1.6.2) stop the IWDG while the core is halted (RM0440 DBG chapter, DBGMCU_APB1FZR1.DBG_IWDG_STOP), so the watchdog does
+/// not reset the chip under probe-rs's backtrace. Never at boot: a CPU halted mid-burst must
+/// still be reset.
+pub fn freeze_watchdog_if_debugged() {
+    if cortex_m::peripheral::DCB::is_debugger_attached() {
+        pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
+    }
+}
+
 bind_interrupts!(struct Irqs {
     DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
 });
