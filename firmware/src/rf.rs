@@ -238,14 +238,27 @@ impl BurstOutput for BurstGate {
 
 /// Last-resort RF off for the panic and HardFault handlers: no ownership, no allocation, no
 /// locks — raw register writes. Forces both burst outputs inactive (OCxM is not preloaded, so
-/// this is immediate), stops the burst timer and drops the RF arm line (PB5).
+/// this is immediate), stops the burst timer, then takes the enable pins (PA0, PB10) away from
+/// the timer — ODR low, MODER = general-purpose output (RM0390 §7.4.1/§7.4.7; RM0440 GPIO
+/// alike) — so they are low whatever TIM2 still does, and drops the RF arm line (PB5).
+/// (Writes to a peripheral whose clock is still off, before `board::split`, are ignored.)
 pub fn emergency_off() {
     use embassy_stm32::pac;
+    use embassy_stm32::pac::gpio::vals::Moder;
     use embassy_stm32::pac::timer::vals::Ocm;
     // CCMR1 channel 0 = CH1 (IDT A), CCMR2 channel 0 = CH3 (IDT B).
     pac::TIM2.ccmr_output(0).modify(|w| w.set_ocm(0, Ocm::FORCE_INACTIVE));
     pac::TIM2.ccmr_output(1).modify(|w| w.set_ocm(0, Ocm::FORCE_INACTIVE));
     pac::TIM2.cr1().modify(|w| w.set_cen(false));
+    pac::GPIOA.bsrr().write(|w| w.set_br(0, true));
+    pac::GPIOB.bsrr().write(|w| w.set_br(10, true));
+    pac::GPIOA.moder().modify(|w| w.set_moder(0, Moder::OUTPUT));
+    pac::GPIOB.moder().modify(|w| w.set_moder(10, Moder::OUTPUT));
     pac::GPIOB.bsrr().write(|w| w.set_br(5, true));
 }
-const _: () = assert!(crate::board::BOARD.rf_arm_pin.port == 'B' && crate::board::BOARD.rf_arm_pin.pin == 5);
+const _: () = {
+    let b = crate::board::BOARD;
+    assert!(b.burst.pin.port == 'A' && b.burst.pin.pin == 0);
+    assert!(b.burst_b_pin.port == 'B' && b.burst_b_pin.pin == 10);
+    assert!(b.rf_arm_pin.port == 'B' && b.rf_arm_pin.pin == 5);
+};
