@@ -107,8 +107,13 @@ const CCR_DMA_MASK: u32 = 0x3 << 14;
 const CCR_ADCPRE_SHIFT: u32 = 16;
 const CCR_VBATE: u32 = 1 << 22;
 const CCR_TSVREFE: u32 = 1 << 23;
-const CCR_DEFINED: u32 =
-    CCR_MULTI_MASK | CCR_DELAY_MASK | CCR_DDS | CCR_DMA_MASK | (0x3 << CCR_ADCPRE_SHIFT) | CCR_VBATE | CCR_TSVREFE;
+const CCR_DEFINED: u32 = CCR_MULTI_MASK
+    | CCR_DELAY_MASK
+    | CCR_DDS
+    | CCR_DMA_MASK
+    | (0x3 << CCR_ADCPRE_SHIFT)
+    | CCR_VBATE
+    | CCR_TSVREFE;
 
 /// SMPx codes 000..111 → sampling time in ADCCLK cycles (§13.13.4/5).
 const SAMPLE_CYCLES: [u64; 8] = [3, 15, 28, 56, 84, 112, 144, 480];
@@ -328,7 +333,11 @@ impl AdcF4 {
         }
 
         // Data alignment (§13.4): right, or left-aligned 12-bit (<< 4).
-        self.dr = if self.cr2 & CR2_ALIGN != 0 { code << 4 } else { code };
+        self.dr = if self.cr2 & CR2_ALIGN != 0 {
+            code << 4
+        } else {
+            code
+        };
         self.dr_unread = true;
         // EOCS = 1: EOC after each conversion; EOCS = 0: at the end of the sequence (§13.13.3).
         if self.cr2 & CR2_EOCS != 0 || c.rank == c.last_rank {
@@ -427,7 +436,10 @@ impl Peripheral for AdcF4 {
             // them is Unmodelled), so their fields are truly 0.
             CSR => Ok(self.sr & SR_MASK),
             CCR => Ok(self.ccr),
-            CDR => Err(Unmodelled::read(offset, "ADC_CDR (multi-ADC data) is not modelled")),
+            CDR => Err(Unmodelled::read(
+                offset,
+                "ADC_CDR (multi-ADC data) is not modelled",
+            )),
             0x100..=0x2FF => Err(Unmodelled::read(offset, "ADC2/ADC3 are not modelled")),
             0x14..=0x28 | 0x38..=0x48 => Err(Unmodelled::read(
                 offset,
@@ -437,7 +449,14 @@ impl Peripheral for AdcF4 {
         }
     }
 
-    fn write(&mut self, now: Time, offset: u32, value: u32, mask: u32, out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         match offset {
             SR => {
                 // rc_w0: writing 0 clears, 1 leaves (§13.13.1).
@@ -463,7 +482,8 @@ impl Peripheral for AdcF4 {
                 // SWSTART starts the regular group, external trigger enabled or not; it "can be set
                 // only when ADON = 1" — ADON must already have been 1 before this write (§13.13.3).
                 if new & CR2_SWSTART != 0 && was_on {
-                    self.trigger(now).map_err(|why| Unmodelled::write(offset, value, why))?;
+                    self.trigger(now)
+                        .map_err(|why| Unmodelled::write(offset, value, why))?;
                 }
                 out.replan = true;
             }
@@ -501,7 +521,13 @@ impl Peripheral for AdcF4 {
                     "ADC_CDR is read-only (multi-ADC data)",
                 ))
             }
-            0x100..=0x2FF => return Err(Unmodelled::write(offset, value, "ADC2/ADC3 are not modelled")),
+            0x100..=0x2FF => {
+                return Err(Unmodelled::write(
+                    offset,
+                    value,
+                    "ADC2/ADC3 are not modelled",
+                ))
+            }
             0x14..=0x28 | 0x38..=0x48 => {
                 return Err(Unmodelled::write(
                     offset,
@@ -509,7 +535,13 @@ impl Peripheral for AdcF4 {
                     "ADC1 injected group / analog watchdog registers are not modelled",
                 ))
             }
-            _ => return Err(Unmodelled::write(offset, value, "no ADC register at this offset")),
+            _ => {
+                return Err(Unmodelled::write(
+                    offset,
+                    value,
+                    "no ADC register at this offset",
+                ))
+            }
         }
         Ok(())
     }
@@ -556,7 +588,8 @@ impl Peripheral for AdcF4 {
 
     fn irq_lines(&self, raise: &mut dyn FnMut(u16)) {
         // §13.12: EOC with EOCIE, OVR with OVRIE (AWD/JEOC cannot be enabled here).
-        if (self.sr & SR_EOC != 0 && self.cr1 & CR1_EOCIE != 0) || (self.sr & SR_OVR != 0 && self.cr1 & CR1_OVRIE != 0)
+        if (self.sr & SR_EOC != 0 && self.cr1 & CR1_EOCIE != 0)
+            || (self.sr & SR_OVR != 0 && self.cr1 & CR1_OVRIE != 0)
         {
             raise(self.irq);
         }
@@ -617,7 +650,10 @@ mod tests {
     }
 
     /// Input that answers `base + n` for the n-th sample it is asked for and logs (time, channel).
-    fn counting_input(base: u16, log: Rc<RefCell<Vec<(Time, u8)>>>) -> Box<dyn FnMut(Time, u8) -> Option<u16>> {
+    fn counting_input(
+        base: u16,
+        log: Rc<RefCell<Vec<(Time, u8)>>>,
+    ) -> Box<dyn FnMut(Time, u8) -> Option<u16>> {
         Box::new(move |t, ch| {
             let mut l = log.borrow_mut();
             l.push((t, ch));
@@ -665,7 +701,9 @@ mod tests {
                 for c in s.copies {
                     assert_eq!(c.size, 2);
                     let v = if (ADC_BASE..ADC_BASE + 0x400).contains(&c.from) {
-                        self.adc.read(at, c.from - ADC_BASE, &mut Signals::default()).unwrap() as u16
+                        self.adc
+                            .read(at, c.from - ADC_BASE, &mut Signals::default())
+                            .unwrap() as u16
                     } else {
                         self.ram[&c.from]
                     };
@@ -717,12 +755,20 @@ mod tests {
         b.adc_w(CR1, CR1_EOCIE | CR1_OVRIE | CR1_SCAN);
         b.adc_w(
             CR2,
-            CR2_ADON | CR2_DMA | CR2_DDS | CR2_EOCS | (0b01 << CR2_EXTEN_SHIFT) | (0b1000 << CR2_EXTSEL_SHIFT),
+            CR2_ADON
+                | CR2_DMA
+                | CR2_DDS
+                | CR2_EOCS
+                | (0b01 << CR2_EXTEN_SHIFT)
+                | (0b1000 << CR2_EXTSEL_SHIFT),
         );
         let six = (0..6).fold(0, |acc, i| acc | (1 << (5 * i)));
         b.adc_w(SQR3, six);
         b.adc_w(SQR2, six);
-        b.adc_w(SQR1, (0..4).fold(0, |acc, i| acc | (1 << (5 * i))) | (15 << 20));
+        b.adc_w(
+            SQR1,
+            (0..4).fold(0, |acc, i| acc | (1 << (5 * i))) | (15 << 20),
+        );
     }
 
     /// What embassy's ReadableRingBuffer::new leaves in DMA2 stream 0 (dma_bdma.rs configure):
@@ -734,7 +780,14 @@ mod tests {
         b.dma_w(S0M0AR, BUF);
         b.dma_w(S0NDTR, 32);
         b.dma_w(S0CR + 0x14, 0); // FCR: direct mode
-        let cr = (1 << 13) | (1 << 11) | (1 << 10) | (1 << 8) | (0b11 << 16) | (1 << 4) | (1 << 3) | (1 << 2);
+        let cr = (1 << 13)
+            | (1 << 11)
+            | (1 << 10)
+            | (1 << 8)
+            | (0b11 << 16)
+            | (1 << 4)
+            | (1 << 3)
+            | (1 << 2);
         b.dma_w(S0CR, cr);
     }
 
@@ -843,7 +896,9 @@ mod tests {
         assert!(adc.read(0, 0x100, &mut s).is_err());
         assert!(adc.read(0, 0x3C, &mut s).is_err());
         // EXTEN = 0 with any EXTSEL is fine (the selector is inert).
-        assert!(adc.write(0, CR2, 0b0111 << CR2_EXTSEL_SHIFT, !0, &mut s).is_ok());
+        assert!(adc
+            .write(0, CR2, 0b0111 << CR2_EXTSEL_SHIFT, !0, &mut s)
+            .is_ok());
     }
 
     #[test]
@@ -912,7 +967,11 @@ mod tests {
         // Rank 2 ends at t0 + 21 760 with DR still unread: overrun, sequence aborted.
         b.run_to(t0 + 21_760);
         assert_eq!(b.adc_r(SR) & SR_OVR, SR_OVR);
-        assert_eq!(b.adc.next_event(), None, "the rest of the sequence is aborted");
+        assert_eq!(
+            b.adc.next_event(),
+            None,
+            "the rest of the sequence is aborted"
+        );
         let mut lines = Vec::new();
         b.adc.irq_lines(&mut |n| lines.push(n));
         assert_eq!(lines, vec![18], "OVRIE: the ADC line is up");
@@ -931,7 +990,11 @@ mod tests {
         }
         assert_eq!(b.copies, 0);
         assert_eq!(b.dma_r(S0NDTR), 32, "nothing ever reaches the ring buffer");
-        assert_eq!(log.borrow().len(), 2, "only the two conversions before the overrun ran");
+        assert_eq!(
+            log.borrow().len(),
+            2,
+            "only the two conversions before the overrun ran"
+        );
         // Recovery per RM0390 §13.8.1: DMA re-initialised (it is, and enabled), clear OVR, trigger.
         b.adc_w(SR, !SR_OVR);
         assert_eq!(b.adc_r(SR) & SR_OVR, 0);

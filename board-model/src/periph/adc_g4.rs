@@ -469,7 +469,14 @@ impl AdcG4 {
 
     /// Registers that "software is allowed to write only when ADSTART = 0" (CFGR, CFGR2, SMPR,
     /// SQR: §21.7.4-21.7.11): a change while ADSTART = 1 is refused.
-    fn guard_adstart(&self, offset: u32, value: u32, old: u32, new: u32, name: &str) -> Result<(), Unmodelled> {
+    fn guard_adstart(
+        &self,
+        offset: u32,
+        value: u32,
+        old: u32,
+        new: u32,
+        name: &str,
+    ) -> Result<(), Unmodelled> {
         if self.cr & CR_ADSTART != 0 && old != new {
             return Err(Unmodelled::write(
                 offset,
@@ -480,7 +487,14 @@ impl AdcG4 {
         Ok(())
     }
 
-    fn write_cr(&mut self, now: Time, offset: u32, value: u32, mask: u32, out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write_cr(
+        &mut self,
+        now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         let old = self.cr;
         let written = merge(old, value, mask);
         let set = written & !old & CR_RS;
@@ -488,10 +502,13 @@ impl AdcG4 {
         if set & (CR_JADSTART | CR_JADSTP) != 0 {
             return refuse("injected group (JADSTART/JADSTP) is not modelled");
         }
-        let busy = old & (CR_ADCAL | CR_ADSTART | CR_ADSTP | CR_ADDIS | CR_JADSTART | CR_JADSTP) != 0;
+        let busy =
+            old & (CR_ADCAL | CR_ADSTART | CR_ADSTP | CR_ADDIS | CR_JADSTART | CR_JADSTP) != 0;
         let disabled = old & CR_ADEN == 0 && !busy;
         if (written ^ old) & CR_RW != 0 && !disabled {
-            return refuse("DEEPPWD/ADVREGEN/ADCALDIF written while the ADC is not disabled (§21.7.3)");
+            return refuse(
+                "DEEPPWD/ADVREGEN/ADCALDIF written while the ADC is not disabled (§21.7.3)",
+            );
         }
         // rw bits take the written value; rs bits only go 0 → 1 by software. Nothing is committed
         // until every rule has passed.
@@ -503,7 +520,9 @@ impl AdcG4 {
         let mut start = false;
         if set & CR_ADCAL != 0 {
             if !disabled || !regulator_on {
-                return refuse("ADCAL set while the ADC is enabled/busy or its regulator is off (§21.4.8)");
+                return refuse(
+                    "ADCAL set while the ADC is enabled/busy or its regulator is off (§21.4.8)",
+                );
             }
             let tick = self
                 .ticks_per_adc_cycle()
@@ -513,7 +532,9 @@ impl AdcG4 {
         }
         if set & CR_ADEN != 0 {
             if !disabled || set & CR_ADCAL != 0 || !regulator_on {
-                return refuse("ADEN set while other ADC_CR bits are set or the regulator is off (§21.4.9)");
+                return refuse(
+                    "ADEN set while other ADC_CR bits are set or the regulator is off (§21.4.9)",
+                );
             }
             let tick = self
                 .ticks_per_adc_cycle()
@@ -538,7 +559,11 @@ impl AdcG4 {
             stop = true;
         }
         if set & CR_ADSTART != 0 {
-            if old & CR_ADEN == 0 || old & CR_ADDIS != 0 || self.ready_at.is_some() || set & CR_ADSTP != 0 {
+            if old & CR_ADEN == 0
+                || old & CR_ADDIS != 0
+                || self.ready_at.is_some()
+                || set & CR_ADSTP != 0
+            {
                 return refuse("ADSTART set while the ADC is not enabled and ready (§21.4.15)");
             }
             cr |= CR_ADSTART;
@@ -563,7 +588,13 @@ impl AdcG4 {
     }
 
     fn check_cfgr(&self, offset: u32, value: u32, new: u32) -> Result<(), Unmodelled> {
-        let refuse = |why: String| Err(Unmodelled::write(offset, value, format!("ADC1_CFGR: {why}")));
+        let refuse = |why: String| {
+            Err(Unmodelled::write(
+                offset,
+                value,
+                format!("ADC1_CFGR: {why}"),
+            ))
+        };
         if new & !CFGR_DEFINED != 0 {
             return refuse("reserved bit 2 written non-zero".into());
         }
@@ -589,7 +620,13 @@ impl AdcG4 {
     }
 
     fn check_cfgr2(&self, offset: u32, value: u32, new: u32) -> Result<(), Unmodelled> {
-        let refuse = |why: &str| Err(Unmodelled::write(offset, value, format!("ADC1_CFGR2: {why}")));
+        let refuse = |why: &str| {
+            Err(Unmodelled::write(
+                offset,
+                value,
+                format!("ADC1_CFGR2: {why}"),
+            ))
+        };
         if new & !CFGR2_DEFINED != 0 {
             return refuse("reserved bits written non-zero");
         }
@@ -647,7 +684,14 @@ impl Peripheral for AdcG4 {
         }
     }
 
-    fn write(&mut self, now: Time, offset: u32, value: u32, mask: u32, out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         self.settle(now);
         match offset {
             ISR => {
@@ -876,7 +920,10 @@ mod tests {
         all
     }
 
-    fn counting_input(base: u16, log: Rc<RefCell<Vec<(Time, u8)>>>) -> Box<dyn FnMut(Time, u8) -> Option<u16>> {
+    fn counting_input(
+        base: u16,
+        log: Rc<RefCell<Vec<(Time, u8)>>>,
+    ) -> Box<dyn FnMut(Time, u8) -> Option<u16>> {
         Box::new(move |t, ch| {
             let mut l = log.borrow_mut();
             l.push((t, ch));
@@ -913,7 +960,9 @@ mod tests {
         assert_eq!(adc.next_event(), Some(t + 15 * 96));
         t += 15 * 96;
         assert_eq!(r(adc, t, ISR) & ADRDY, ADRDY);
-        modify(adc, t, CFGR, |v| v & !(CFGR_CONT | (0x3 << CFGR_EXTEN_SHIFT)));
+        modify(adc, t, CFGR, |v| {
+            v & !(CFGR_CONT | (0x3 << CFGR_EXTEN_SHIFT))
+        });
         if let Some((ovsr, ovss)) = rovs {
             modify(adc, t, CFGR2, |v| v | (ovss << CFGR2_OVSS_SHIFT));
             modify(adc, t, CFGR2, |v| v | (ovsr << CFGR2_OVSR_SHIFT));
@@ -939,7 +988,9 @@ mod tests {
         modify(adc, t, ISR, |v| v | OVR);
         modify(adc, t, CFGR, |v| v | CFGR_DMACFG | CFGR_DMAEN);
         modify(adc, t, CFGR, |v| v & !CFGR_CONT);
-        modify(adc, t, CFGR, |v| v | (4 << CFGR_EXTSEL_SHIFT) | (1 << CFGR_EXTEN_SHIFT));
+        modify(adc, t, CFGR, |v| {
+            v | (4 << CFGR_EXTSEL_SHIFT) | (1 << CFGR_EXTEN_SHIFT)
+        });
         modify(adc, t, IER, |v| v & !EOS);
         assert_eq!(r(adc, t, CR) & CR_ADEN, CR_ADEN);
     }
@@ -999,7 +1050,11 @@ mod tests {
         let t0 = bring_up(&mut adc, Some((0b011, 0)));
         configure_ring_buffered(&mut adc, t0, 2);
         modify(&mut adc, t0, CR, |v| v | CR_ADSTART);
-        assert_eq!(adc.next_event(), None, "EXTEN rising: armed, waiting for TRGO");
+        assert_eq!(
+            adc.next_event(),
+            None,
+            "EXTEN rising: armed, waiting for TRGO"
+        );
         let t = t0 + 1_000;
         let mut s = Signals::default();
         adc.on_event(t, Event::Trgo { timer: 3 }, &mut s);
@@ -1007,9 +1062,16 @@ mod tests {
         assert_eq!(adc.next_event(), Some(t + 56_832));
         let s = run(&mut adc, t + 56_831);
         assert!(s.events.is_empty());
-        assert_eq!(r(&mut adc, t, ISR) & EOC, 0, "no EOC before the 16th conversion");
+        assert_eq!(
+            r(&mut adc, t, ISR) & EOC,
+            0,
+            "no EOC before the 16th conversion"
+        );
         let s = run(&mut adc, t + 56_832);
-        assert_eq!(s.events, vec![(t + 56_832, Event::DmaRequest(Request::Adc1))]);
+        assert_eq!(
+            s.events,
+            vec![(t + 56_832, Event::DmaRequest(Request::Adc1))]
+        );
         assert_eq!(r(&mut adc, t, DR), 64_120);
         assert_eq!(log.borrow().len(), 16);
         // Each held at its own sampling end: t + k × 3 552 + 2 352.
@@ -1051,14 +1113,20 @@ mod tests {
         assert_eq!(adc.next_event(), None);
         modify(&mut adc, t + 20, CR, |v| v | CR_ADSTART);
         adc.on_event(t + 30, Event::Trgo { timer: 4 }, &mut Signals::default());
-        assert_eq!(adc.next_event(), None, "TIM4 TRGO is not the selected trigger");
+        assert_eq!(
+            adc.next_event(),
+            None,
+            "TIM4 TRGO is not the selected trigger"
+        );
         adc.on_event(t + 40, Event::Trgo { timer: 3 }, &mut Signals::default());
         assert_eq!(adc.next_event(), Some(t + 40 + 56_832));
         // A trigger during the conversion is ignored.
         adc.on_event(t + 50, Event::Trgo { timer: 3 }, &mut Signals::default());
         assert_eq!(adc.next_event(), Some(t + 40 + 56_832));
         // Configuration is locked while ADSTART = 1; ADSTP stops at once.
-        assert!(adc.write(t + 60, CFGR2, 0, !0, &mut Signals::default()).is_err());
+        assert!(adc
+            .write(t + 60, CFGR2, 0, !0, &mut Signals::default())
+            .is_err());
         modify(&mut adc, t + 60, CR, |v| v | CR_ADSTP);
         assert_eq!(r(&mut adc, t + 60, CR) & (CR_ADSTART | CR_ADSTP), 0);
         assert_eq!(adc.next_event(), None);
@@ -1079,7 +1147,11 @@ mod tests {
         assert_eq!(trig(&mut adc), 1, "first result: request (nobody reads DR)");
         assert_eq!(trig(&mut adc), 0, "EOC still 1: overrun, no request");
         assert_eq!(r(&mut adc, 0, ISR) & OVR, OVR);
-        assert_eq!(trig(&mut adc), 0, "conversions go on, requests stay blocked");
+        assert_eq!(
+            trig(&mut adc),
+            0,
+            "conversions go on, requests stay blocked"
+        );
         modify(&mut adc, 0, ISR, |_| OVR | EOC);
         assert_eq!(trig(&mut adc), 1, "OVR cleared: requests resume");
         assert_eq!(adc.fault(), None);
@@ -1098,7 +1170,9 @@ mod tests {
                 &mut s
             )
             .is_err());
-        assert!(adc.write(0, CFGR, CFGR_RESET | CFGR_DISCEN, !0, &mut s).is_err());
+        assert!(adc
+            .write(0, CFGR, CFGR_RESET | CFGR_DISCEN, !0, &mut s)
+            .is_err());
         assert!(adc.write(0, CFGR2, CFGR2_TROVS, !0, &mut s).is_err());
         assert!(adc.write(0, IER, 1 << 1, !0, &mut s).is_err(), "EOSMPIE");
         assert!(adc.write(0, DIFSEL, 1 << 2, !0, &mut s).is_err());
@@ -1126,7 +1200,8 @@ mod tests {
         w(&mut dma, t0, 0x14, BUF); // CMAR1
         w(&mut dma, t0, 0x0C, 4); // CNDTR1
                                   // CCR1: PSIZE/MSIZE 16, MINC, CIRC, TEIE/HTIE/TCIE, PL very high, EN = 0.
-        let ccr = (1 << 8) | (1 << 10) | (1 << 7) | (1 << 5) | (1 << 3) | (1 << 2) | (1 << 1) | (3 << 12);
+        let ccr =
+            (1 << 8) | (1 << 10) | (1 << 7) | (1 << 5) | (1 << 3) | (1 << 2) | (1 << 1) | (3 << 12);
         w(&mut dma, t0, 0x08, ccr);
         // Sampler::start: DMA EN, ADSTART; then TIM3 runs.
         w(&mut dma, t0, 0x08, ccr | 1);
@@ -1156,7 +1231,9 @@ mod tests {
                         let mut moved = Signals::default();
                         dma.on_event(at2, ev2, &mut moved);
                         for c in moved.copies {
-                            let v = adc.read(at2, c.from - ADC_BASE, &mut Signals::default()).unwrap() as u16;
+                            let v = adc
+                                .read(at2, c.from - ADC_BASE, &mut Signals::default())
+                                .unwrap() as u16;
                             ram.insert(c.to, v);
                         }
                     }

@@ -148,7 +148,9 @@ impl DmaF4 {
 
     fn isr(&self, high: bool) -> u32 {
         let first = if high { 4 } else { 0 };
-        (0..4).fold(0, |acc, i| acc | (self.streams[first + i].flags << GROUP_SHIFT[i]))
+        (0..4).fold(0, |acc, i| {
+            acc | (self.streams[first + i].flags << GROUP_SHIFT[i])
+        })
     }
 
     fn clear_flags(&mut self, high: bool, bits: u32) {
@@ -161,7 +163,13 @@ impl DmaF4 {
     /// Checks and latches a stream being enabled (EN 0 → 1).
     fn enable(&mut self, x: usize, offset: u32, value: u32, cr: u32) -> Result<u32, Unmodelled> {
         let n = self.number;
-        let refuse = |why: String| Err(Unmodelled::write(offset, value, format!("DMA{n} stream {x}: {why}")));
+        let refuse = |why: String| {
+            Err(Unmodelled::write(
+                offset,
+                value,
+                format!("DMA{n} stream {x}: {why}"),
+            ))
+        };
         let s = &self.streams[x];
         if s.flags != 0 {
             return refuse(format!(
@@ -209,10 +217,20 @@ impl DmaF4 {
         self.streams[x].transfer = Some(transfer);
         // Direct mode: MSIZE forced to PSIZE, bursts to single, as soon as EN = 1 (§9.5.5).
         let psize = (cr >> CR_PSIZE_SHIFT) & 0x3;
-        Ok((cr & !(0x3 << CR_MSIZE_SHIFT) & !CR_PBURST_MASK & !CR_MBURST_MASK) | (psize << CR_MSIZE_SHIFT))
+        Ok(
+            (cr & !(0x3 << CR_MSIZE_SHIFT) & !CR_PBURST_MASK & !CR_MBURST_MASK)
+                | (psize << CR_MSIZE_SHIFT),
+        )
     }
 
-    fn write_cr(&mut self, x: usize, offset: u32, value: u32, mask: u32, out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write_cr(
+        &mut self,
+        x: usize,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         let old = self.streams[x].cr;
         let new = merge(old, value, mask);
         if new & !CR_DEFINED != 0 {
@@ -336,7 +354,14 @@ impl Peripheral for DmaF4 {
         }
     }
 
-    fn write(&mut self, _now: Time, offset: u32, value: u32, mask: u32, out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        _now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         match offset {
             LISR | HISR => {
                 return Err(Unmodelled::write(
@@ -402,7 +427,9 @@ impl Peripheral for DmaF4 {
         if let Event::DmaRequest(request) = event {
             for x in 0..STREAMS {
                 let chsel = (self.streams[x].cr >> CR_CHSEL_SHIFT) & 0x7;
-                if self.streams[x].cr & CR_EN != 0 && request_for(self.number, x, chsel) == Some(request) {
+                if self.streams[x].cr & CR_EN != 0
+                    && request_for(self.number, x, chsel) == Some(request)
+                {
                     self.serve(x, out);
                 }
             }
@@ -505,7 +532,10 @@ mod tests {
         assert_eq!(r(&mut d, 0x00), TCIF | HTIF);
         assert_eq!(r(&mut d, S0CR) & CR_EN, 0);
         assert_eq!(r(&mut d, S0NDTR), 0);
-        assert!(request(&mut d).is_empty(), "after the last item nothing moves");
+        assert!(
+            request(&mut d).is_empty(),
+            "after the last item nothing moves"
+        );
     }
 
     #[test]
@@ -614,12 +644,18 @@ mod tests {
         w(&mut d, S0NDTR, 2).unwrap();
         assert!(w(&mut d, S0CR, CR_ADC | CR_EN).is_err(), "FIFO mode");
         w(&mut d, S0FCR, 0).unwrap();
-        assert!(w(&mut d, S0CR, CR_ADC | CR_DBM | CR_EN).is_err(), "double buffer");
+        assert!(
+            w(&mut d, S0CR, CR_ADC | CR_DBM | CR_EN).is_err(),
+            "double buffer"
+        );
         assert!(
             w(&mut d, S0CR, CR_ADC | (2 << CR_DIR_SHIFT) | CR_EN).is_err(),
             "memory to memory"
         );
         assert!(w(&mut d, 0x00, 0).is_err(), "LISR is read-only");
-        assert!(d.read(0, 0x08, &mut Signals::default()).is_err(), "LIFCR is write-only");
+        assert!(
+            d.read(0, 0x08, &mut Signals::default()).is_err(),
+            "LIFCR is write-only"
+        );
     }
 }

@@ -110,7 +110,14 @@ impl DmaG4 {
         })
     }
 
-    fn write_ccr(&mut self, i: usize, offset: u32, value: u32, mask: u32, out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write_ccr(
+        &mut self,
+        i: usize,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         let n = self.number;
         let refuse = |why: String| {
             Err(Unmodelled::write(
@@ -126,7 +133,10 @@ impl DmaG4 {
         }
         let was_on = c.ccr & CCR_EN != 0;
         if was_on && (new ^ c.ccr) & !CCR_EN != 0 {
-            return refuse("CCR bits changed while EN = 1 (RM0440 §12.6.3: must not be written when enabled)".into());
+            return refuse(
+                "CCR bits changed while EN = 1 (RM0440 §12.6.3: must not be written when enabled)"
+                    .into(),
+            );
         }
         match (was_on, new & CCR_EN != 0) {
             (false, true) => {
@@ -240,7 +250,14 @@ impl Peripheral for DmaG4 {
         }
     }
 
-    fn write(&mut self, _now: Time, offset: u32, value: u32, mask: u32, out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        _now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         match offset {
             ISR => {
                 return Err(Unmodelled::write(
@@ -270,14 +287,23 @@ impl Peripheral for DmaG4 {
                     0x4 => (&mut c.cndtr, 0xFFFF, "CNDTR"),
                     0x8 => (&mut c.cpar, 0xFFFF_FFFF, "CPAR"),
                     0xC => (&mut c.cmar, 0xFFFF_FFFF, "CMAR"),
-                    _ => return Err(Unmodelled::write(offset, value, "reserved DMA channel word")),
+                    _ => {
+                        return Err(Unmodelled::write(
+                            offset,
+                            value,
+                            "reserved DMA channel word",
+                        ))
+                    }
                 };
                 let new = merge(*field, value, mask & writable);
                 if c.ccr & CCR_EN != 0 && new != *field {
                     return Err(Unmodelled::write(
                         offset,
                         value,
-                        format!("DMA{n} {name}{} written while the channel is enabled (§12.6)", i + 1),
+                        format!(
+                            "DMA{n} {name}{} written while the channel is enabled (§12.6)",
+                            i + 1
+                        ),
                     ));
                 }
                 *field = new;
@@ -285,13 +311,23 @@ impl Peripheral for DmaG4 {
                     c.cndtr_written = new;
                 }
             }
-            _ => return Err(Unmodelled::write(offset, value, "no DMA register at this offset")),
+            _ => {
+                return Err(Unmodelled::write(
+                    offset,
+                    value,
+                    "no DMA register at this offset",
+                ))
+            }
         }
         Ok(())
     }
 
     fn on_event(&mut self, _now: Time, event: Event, out: &mut Signals) {
-        if let Event::DmaChannelRequest { controller, channel } = event {
+        if let Event::DmaChannelRequest {
+            controller,
+            channel,
+        } = event
+        {
             if controller == self.number && (1..=CHANNELS as u8).contains(&channel) {
                 self.serve(channel as usize - 1, out);
             }
@@ -381,18 +417,37 @@ impl Peripheral for DmaMux {
             // flag can ever be set: 0 is the true value.
             MUX_CSR | MUX_RGSR => Ok(0),
             MUX_RGCR_BASE..=0x10C => Ok(self.rgcr[((offset - MUX_RGCR_BASE) / 4) as usize]),
-            MUX_CFR | MUX_RGCFR => Err(Unmodelled::read(offset, "DMAMUX clear-flag registers are write-only")),
-            _ => Err(Unmodelled::read(offset, "no DMAMUX register at this offset")),
+            MUX_CFR | MUX_RGCFR => Err(Unmodelled::read(
+                offset,
+                "DMAMUX clear-flag registers are write-only",
+            )),
+            _ => Err(Unmodelled::read(
+                offset,
+                "no DMAMUX register at this offset",
+            )),
         }
     }
 
-    fn write(&mut self, _now: Time, offset: u32, value: u32, mask: u32, _out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        _now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        _out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         match offset {
             0x00..=0x3C => {
                 let n = (offset / 4) as usize;
                 let old = self.cxcr[n];
                 let new = merge(old, value, mask);
-                let refuse = |why: String| Err(Unmodelled::write(offset, value, format!("DMAMUX_C{n}CR: {why}")));
+                let refuse = |why: String| {
+                    Err(Unmodelled::write(
+                        offset,
+                        value,
+                        format!("DMAMUX_C{n}CR: {why}"),
+                    ))
+                };
                 if new & !CXCR_DEFINED != 0 {
                     return refuse("reserved bits written non-zero".into());
                 }
@@ -430,7 +485,13 @@ impl Peripheral for DmaMux {
                 }
                 self.rgcr[g] = new;
             }
-            _ => return Err(Unmodelled::write(offset, value, "no DMAMUX register at this offset")),
+            _ => {
+                return Err(Unmodelled::write(
+                    offset,
+                    value,
+                    "no DMAMUX register at this offset",
+                ))
+            }
         }
         Ok(())
     }
@@ -443,7 +504,13 @@ impl Peripheral for DmaMux {
                     // Channels 0..=7 feed DMA1 channels 1..=8, 8..=15 DMA2 channels 1..=8 (§13.3.2).
                     let controller = 1 + (n / 8) as u8;
                     let channel = (n % 8) as u8 + 1;
-                    out.events.push((now, Event::DmaChannelRequest { controller, channel }));
+                    out.events.push((
+                        now,
+                        Event::DmaChannelRequest {
+                            controller,
+                            channel,
+                        },
+                    ));
                 }
             }
         }
@@ -471,7 +538,8 @@ mod tests {
     const CMAR1: u32 = 0x14;
     const ADC1_DR: u32 = 0x5000_0040;
     /// PSIZE/MSIZE 16, MINC, TCIE, HTIE.
-    const CCR_ADC: u32 = (1 << CCR_PSIZE_SHIFT) | (1 << CCR_MSIZE_SHIFT) | CCR_MINC | CCR_TCIE | CCR_HTIE;
+    const CCR_ADC: u32 =
+        (1 << CCR_PSIZE_SHIFT) | (1 << CCR_MSIZE_SHIFT) | CCR_MINC | CCR_TCIE | CCR_HTIE;
 
     fn w(p: &mut dyn Peripheral, off: u32, v: u32) -> Result<(), Unmodelled> {
         p.write(0, off, v, 0xFFFF_FFFF, &mut Signals::default())
@@ -484,7 +552,14 @@ mod tests {
     }
     fn request(d: &mut DmaG4, channel: u8) -> Vec<Copy> {
         let mut s = Signals::default();
-        d.on_event(0, Event::DmaChannelRequest { controller: 1, channel }, &mut s);
+        d.on_event(
+            0,
+            Event::DmaChannelRequest {
+                controller: 1,
+                channel,
+            },
+            &mut s,
+        );
         s.copies
     }
     fn setup(d: &mut DmaG4, items: u32, ccr: u32) {
@@ -640,12 +715,23 @@ mod tests {
         setup(&mut d, 4, CCR_ADC | CCR_CIRC | CCR_EN);
         assert!(w(&mut d, CNDTR1, 8).is_err());
         assert!(w(&mut d, CMAR1, 0x2000_0100).is_err());
-        assert!(w(&mut d, CCR1, CCR_ADC | CCR_EN).is_err(), "CIRC cleared while enabled");
-        assert!(w(&mut d, CMAR1, 0x2000_0000).is_ok(), "same value: no change");
+        assert!(
+            w(&mut d, CCR1, CCR_ADC | CCR_EN).is_err(),
+            "CIRC cleared while enabled"
+        );
+        assert!(
+            w(&mut d, CMAR1, 0x2000_0000).is_ok(),
+            "same value: no change"
+        );
         let mut d = dma1();
         w(&mut d, CNDTR1, 4).unwrap();
         assert!(w(&mut d, CCR1, CCR_ADC | CCR_MEM2MEM | CCR_EN).is_err());
-        assert!(w(&mut d, CCR1, (1 << CCR_PSIZE_SHIFT) | (2 << CCR_MSIZE_SHIFT) | CCR_EN).is_err());
+        assert!(w(
+            &mut d,
+            CCR1,
+            (1 << CCR_PSIZE_SHIFT) | (2 << CCR_MSIZE_SHIFT) | CCR_EN
+        )
+        .is_err());
         assert!(w(&mut d, ISR, 0).is_err());
         assert!(d.read(0, IFCR, &mut Signals::default()).is_err());
         assert!(
