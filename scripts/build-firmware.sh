@@ -5,8 +5,10 @@
 #   scripts/build-firmware.sh nucleo-g474re
 #
 # Uses Debian's toolchain: /usr/bin/cargo + /usr/bin/rustc with RUSTC_BOOTSTRAP=1 so that
-# `build-std = ["core"]` (firmware/.cargo/config.toml) rebuilds core for thumbv7em-none-eabihf
-# from rust-web-src; links with ld.lld-22. ELFs are copied to firmware/target/<board>.elf.
+# `-Zbuild-std=core` rebuilds core for thumbv7em-none-eabihf from rust-web-src (Debian ships no
+# prebuilt thumb target); links with ld.lld-22. All of that is on this command line, not in
+# firmware/.cargo/config.toml, which stays plain stable cargo for rustup users (`cargo run
+# --release` there builds and flashes). ELFs are copied to firmware/target/<board>.elf.
 # Fails if a build fails or an image's flash (vector table + text + rodata + data) > 64 KiB.
 set -euo pipefail
 
@@ -20,7 +22,9 @@ BOARDS=("$@")
 
 export RUSTC=/usr/bin/rustc
 export RUSTC_BOOTSTRAP=1
+export CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER=ld.lld-22
 CARGO=/usr/bin/cargo
+BUILD_STD=-Zbuild-std=core
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$FW/target}"
 
 if command -v size >/dev/null 2>&1; then SIZE=size
@@ -42,9 +46,9 @@ for board in "${BOARDS[@]}"; do
         nucleo-g474re) feat=(--no-default-features --features nucleo-g474re) ;;
         *) echo "build-firmware: unknown board '$board'" >&2; exit 2 ;;
     esac
-    echo "==> $board: (cd firmware && RUSTC=$RUSTC RUSTC_BOOTSTRAP=1 $CARGO build --release ${feat[*]})"
+    echo "==> $board: (cd firmware && RUSTC=$RUSTC RUSTC_BOOTSTRAP=1 CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER=ld.lld-22 $CARGO build --release $BUILD_STD ${feat[*]})"
     start=$(date +%s)
-    (cd "$FW" && "$CARGO" build --release "${feat[@]}")
+    (cd "$FW" && "$CARGO" build --release "$BUILD_STD" "${feat[@]}")
     secs=$(( $(date +%s) - start ))
     elf="$CARGO_TARGET_DIR/$TARGET/release/saw-firmware"
     cp "$elf" "$CARGO_TARGET_DIR/$board.elf"

@@ -37,8 +37,10 @@ cargo build -q --release -p host-sim --features saw-core/scene-file --bin golden
 "$ROOT/target/release/golden" gen "$GOLDEN_DIR"
 
 step "image build (firmware/emu, thumbv7em-none-eabihf, DEFMT_LOG=info)"
+# Target and link scripts come from firmware/.cargo/config.toml (inherited); the Debian toolchain
+# specifics (core from source, ld.lld-22) are given here, as in scripts/build-firmware.sh.
 (cd "$EMU" && GOLDEN_DIR="$GOLDEN_DIR" DEFMT_LOG=info RUSTC=/usr/bin/rustc RUSTC_BOOTSTRAP=1 \
-    /usr/bin/cargo build --release)
+    CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER=ld.lld-22 /usr/bin/cargo build --release -Zbuild-std=core)
 
 step "QEMU mps2-an386 (cortex-m4, -icount shift=0, semihosting)"
 rc=0
