@@ -196,10 +196,13 @@ impl Sampler {
     /// buffer emptied, then `start`: ADSTART = 1 arms the next TIM3 trigger. TIM3 keeps running.
     fn restart(&mut self) {
         let adc = pac::ADC1;
-        if adc.cr().read().adstart() {
-            // ADSTART/ADEN are set-only bits: writing 0 to ADSTART leaves it alone.
-            adc.cr().modify(|w| {
-                w.set_adstart(false);
+        let cr = adc.cr().read();
+        if cr.adstart() {
+            // ADC_CR's other rs bits (ADEN, ADSTART, ...) written as 0 (no effect), as ST's LL
+            // driver does: only ADVREGEN and ADCALDIF carry over.
+            adc.cr().write(|w| {
+                w.set_advregen(cr.advregen());
+                w.set_adcaldif(cr.adcaldif());
                 w.set_adstp(vals::Adstp::STOP);
             });
             while adc.cr().read().adstart() {}
@@ -224,7 +227,10 @@ impl Sampler {
     }
 }
 
-/// TIM3: `sample_rate_hz` period, TRGO = update event; started by `Sampler::start`.
+/// TIM3: `sample_rate_hz` period, TRGO = update event; started by `Sampler::start`. Its UG
+/// (in `set_max_compare_value`, a TRGO pulse while MMS = 000) cannot start a conversion here:
+/// the G474 ADC only accepts hardware triggers while ADSTART = 1 (RM0440 ADC chapter, "Conversion
+/// on external trigger"), which only `start` sets.
 fn trigger_timer(tim: Peri<'static, TIM3>) -> Timer<'static, TIM3> {
     let (psc, arr) = BOARD.adc_trigger_psc_arr();
     let t = Timer::new(tim);
