@@ -145,22 +145,28 @@ async fn sampler(mut s: board::Sampler) {
     // Acquisition restarts, and samples the control task had no room for.
     let (mut restarts, mut dropped) = (0u32, 0u32);
     let mut quiet_until_us = 0u64;
-    // Time of the next sample. TIM3 triggers exactly every SAMPLE_PERIOD_US (checked below)
-    // from the same APB1 timer clock as the 1 MHz time driver (TIM4), so within one run of the
-    // acquisition sample n is at t0 + n × period: no drift against `Instant`, no bunching when
-    // `read` hands out an older backlog. None = anchor again (at start and after a restart).
+    // Time of the next sample. TIM3 triggers exactly every SAMPLE_PERIOD_US (const-checked at
+    // SAMPLE_PERIOD_US) from the same APB1 timer clock as the 1 MHz time driver (TIM4), so within
+    // one run of the acquisition sample n is at t0 + n × period: no drift against `Instant`, no
+    // bunching when `read` hands out an older backlog. None = anchor again (after a restart).
     let mut next_t: Option<u32> = None;
     s.start();
     loop {
         match s.read().await {
             Ok(batch) => {
                 let n = batch.codes.len() as u32;
-                // Anchor: the newest sample in the ring buffer has just landed; the batch's first
-                // one is (backlog + n − 1) periods older.
-                let mut t_us = next_t.unwrap_or_else(|| {
-                    let now = Instant::now().as_micros() as u32;
-                    now.wrapping_sub((batch.backlog + n - 1) * SAMPLE_PERIOD_US)
-                });
+                // The newest sample in the ring buffer has landed by now, so the batch's first
+                // one was taken no later than `latest`, and (one landing per period) less than
+                // two periods before it. The count carries on while it stays in that window; it
+                // is re-anchored at `latest` at start, after lost samples, and whenever it would
+                // stamp a sample later than now — the core's stale check (now − t, wrapping)
+                // must never see a sample from the future.
+                let now = Instant::now().as_micros() as u32;
+                let latest = now.wrapping_sub((batch.backlog + n - 1) * SAMPLE_PERIOD_US);
+                let mut t_us = match next_t {
+                    Some(t) if latest.wrapping_sub(t) < 2 * SAMPLE_PERIOD_US => t,
+                    _ => latest,
+                };
                 for &code in &batch.codes {
                     if SAMPLES.try_send(Sample { code, t_us }).is_err() {
                         // Control task is behind; the stale watchdog covers a stuck consumer.
