@@ -11,6 +11,7 @@ mod board;
 mod rf;
 
 use defmt::{info, unwrap, warn};
+use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_futures::select::{select, Either};
 use embassy_stm32::gpio::Output;
@@ -22,7 +23,6 @@ use saw_core::burst::BurstTimer;
 use saw_core::gate::BurstOutput;
 use saw_core::sample::Sample;
 use saw_core::Controller;
-use defmt_rtt as _;
 
 /// Panic: RF off first (the burst timer keeps running without the CPU), then log, then trap so
 /// probe-rs stops and prints the backtrace. With RF off, a debugger's halt may freeze the IWDG
@@ -124,7 +124,11 @@ async fn main(spawner: Spawner) {
     rf_arm.set_high();
     info!(
         "adc: {} ch{} @ {} Hz x{} (trigger {} TRGO); enables CH{} + CH{} (no RF level control); rf arm high",
-        BOARD.adc.adc, BOARD.adc.channel, BOARD.sample_rate_hz, BOARD.adc_oversample, BOARD.adc.trigger_timer,
+        BOARD.adc.adc,
+        BOARD.adc.channel,
+        BOARD.sample_rate_hz,
+        BOARD.adc_oversample,
+        BOARD.adc.trigger_timer,
         BOARD.burst.channel,
         BOARD.burst_b_channel
     );
@@ -184,7 +188,10 @@ async fn sampler(mut s: board::Sampler) {
                 let now = Instant::now().as_micros();
                 if now >= quiet_until_us {
                     quiet_until_us = now + ADC_WARN_PERIOD_US;
-                    warn!("adc {}: acquisition restarted ({} restarts, {} samples dropped so far)", fault, restarts, dropped);
+                    warn!(
+                        "adc {}: acquisition restarted ({} restarts, {} samples dropped so far)",
+                        fault, restarts, dropped
+                    );
                 }
             }
         }

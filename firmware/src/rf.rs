@@ -100,7 +100,14 @@ impl BurstGate {
             t.enable_channel(ch, true);
         }
         t.set_autoreload_preload(true);
-        BurstGate { tim: t, _pin_a: pin_a, _pin_b: pin_b, line: Line::Off, drive: DriveMode::Standing, stats: BurstStats::default() }
+        BurstGate {
+            tim: t,
+            _pin_a: pin_a,
+            _pin_b: pin_b,
+            line: Line::Off,
+            drive: DriveMode::Standing,
+            stats: BurstStats::default(),
+        }
     }
 
     /// Output-compare mode of both channels: A follows `mode`, B too in standing-wave drive.
@@ -144,11 +151,11 @@ impl BurstGate {
         self.write(s.psc, s.arr, s.ccr);
         self.tim.reset(); // CNT = 0
         self.tim.generate_update_event(); // latch PSC/ARR/CCR from preload
-        // In PWM mode OCxREF changes only when the comparison result changes or when the mode
-        // switches from Frozen to PWM (RM0390 §17.3.9; RM0440 PWM mode alike). Straight from
-        // force-inactive, CNT = 0 < CCR is no change: the line would stay low for the whole
-        // first period. Frozen keeps the (low) level; Frozen → PWM 1 evaluates CNT < CCR at once.
-        // The counter runs first, so the first pulse can only come out a few ticks short.
+                                          // In PWM mode OCxREF changes only when the comparison result changes or when the mode
+                                          // switches from Frozen to PWM (RM0390 §17.3.9; RM0440 PWM mode alike). Straight from
+                                          // force-inactive, CNT = 0 < CCR is no change: the line would stay low for the whole
+                                          // first period. Frozen keeps the (low) level; Frozen → PWM 1 evaluates CNT < CCR at once.
+                                          // The counter runs first, so the first pulse can only come out a few ticks short.
         self.set_mode(OutputCompareMode::Frozen);
         self.tim.start();
         self.set_mode(OutputCompareMode::PwmMode1);

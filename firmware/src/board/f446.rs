@@ -5,15 +5,15 @@
 //! the 16 results into a circular buffer; the sampler task sums them into one 16-bit sample.
 use embassy_stm32::adc::{Adc, AdcChannel, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
+use embassy_stm32::pac;
 use embassy_stm32::peripherals::{ADC1, TIM1, TIM2, TIM3};
 use embassy_stm32::rcc::{Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllSource, Sysclk};
 use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::MasterMode;
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::simple_pwm::PwmPin;
-use embassy_stm32::timer::low_level::MasterMode;
 use embassy_stm32::timer::{Ch1, Ch3};
 use embassy_stm32::{bind_interrupts, dma, peripherals, Config, Peri, Peripherals};
-use embassy_stm32::pac;
 use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, PllOut};
 use static_cell::StaticCell;
@@ -233,7 +233,8 @@ impl Sampler {
             w.set_adon(false);
             w.set_dma(false);
         });
-        self.adc.stop(); // stream EN = 0
+        // Stream EN = 0.
+        self.adc.stop();
         // RM0390 §9.3.17: EN must read 0 and the stream's flags must be cleared before the
         // stream is reprogrammed and re-enabled. NDTR = full length puts the stream back at the
         // buffer's start, where `clear` puts the ring buffer's indices.

@@ -5,15 +5,15 @@
 //! 16-bit sum directly; DMA1 channel 1 (via DMAMUX) moves it into a circular buffer.
 use embassy_stm32::adc::{vals, Adc, AdcChannel, AdcConfig, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
+use embassy_stm32::pac;
 use embassy_stm32::peripherals::{ADC1, TIM1, TIM2, TIM3};
 use embassy_stm32::rcc::{mux, Hse, HseMode, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
 use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::MasterMode;
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::simple_pwm::PwmPin;
-use embassy_stm32::timer::low_level::MasterMode;
 use embassy_stm32::timer::{Ch1, Ch3};
 use embassy_stm32::{bind_interrupts, dma, peripherals, Config, Peri, Peripherals};
-use embassy_stm32::pac;
 use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, Oversampling, PllOut};
 use static_cell::StaticCell;
@@ -48,14 +48,8 @@ const OVS: (u8, u8) = match BOARD.adc.oversampling {
 fn rcc_config() -> Config {
     let mut config = Config::default();
     config.rcc.hse = Some(Hse { freq: Hertz(C.osc_hz), mode: HseMode::Oscillator });
-    config.rcc.pll = Some(Pll {
-        source: PllSource::HSE,
-        prediv: PLLM,
-        mul: PLLN,
-        divp: None,
-        divq: None,
-        divr: Some(PLLR),
-    });
+    config.rcc.pll =
+        Some(Pll { source: PllSource::HSE, prediv: PLLM, mul: PLLN, divp: None, divq: None, divr: Some(PLLR) });
     config.rcc.sys = Sysclk::PLL1_R;
     config.rcc.boost = BOOST;
     config.rcc.ahb_pre = super::ahb_pre(C.ahb_div);
@@ -207,7 +201,8 @@ impl Sampler {
             });
             while adc.cr().read().adstart() {}
         }
-        self.adc.stop(); // channel EN = 0
+        // Channel EN = 0.
+        self.adc.stop();
         // RM0440 DMA chapter, channel configuration: CNDTR is writable only while EN = 0; the
         // full length puts the channel back at the buffer's start, where `clear` puts the ring
         // buffer's indices. CGIF clears all of the channel's flags.

@@ -61,6 +61,5 @@ pub struct Batch {
 }
 
 /// How long `Sampler::read` waits for a batch: the batch's own sample periods plus four.
-pub const READ_TIMEOUT: embassy_time::Duration = embassy_time::Duration::from_micros(
-    (SAMPLES_PER_READ as u64 + 4) * 1_000_000 / BOARD.sample_rate_hz as u64,
-);
+pub const READ_TIMEOUT: embassy_time::Duration =
+    embassy_time::Duration::from_micros((SAMPLES_PER_READ as u64 + 4) * 1_000_000 / BOARD.sample_rate_hz as u64);
