@@ -1,7 +1,8 @@
 //! Independent watchdog (IWDG, one per chip): the key register, the write-protected prescaler,
 //! reload and (G4) window registers with their LSI-domain update delay, the 12-bit down-counter
 //! clocked by the LSI in virtual time, and the chip reset at the end of count
-//! (RM0390 §19 for the STM32F446, RM0440 §41 for the STM32G474).
+//! (RM0390 §19 for the STM32F446; RM0440's IWDG chapter for the STM32G474 — §41 in the
+//! numbering used here, §42 in RM0440 Rev 4).
 //!
 //! What embassy-stm32 0.6 (`wdg::IndependentWatchdog`) does with it: `new` writes KR = 0x5555,
 //! PR, RLR (without waiting for PVU/RVU), `unleash` writes KR = 0xCCCC, `pet` writes
@@ -58,7 +59,7 @@ struct Pending {
 pub struct Iwdg {
     has_winr: bool,
     lsi_hz: u64,
-    /// Register values as written over the bus (what a read returns).
+    /// Last values written over the bus (the base a half-word write merges into).
     pr: u32,
     rlr: u32,
     winr: u32,
@@ -305,8 +306,12 @@ impl Peripheral for Iwdg {
         match offset {
             // KR is write-only and reads 0 (RM0390 §19.4.1).
             OFF_KR => Ok(0),
-            OFF_PR => Ok(self.pr),
-            OFF_RLR => Ok(self.rlr),
+            // PR/RLR/WINR read back the LSI (VDD) domain's copy: "Reading this register returns
+            // the reload value from the VDD voltage domain. This value may not be up to date/valid
+            // if a write operation to this register is ongoing" (RM0390 §19.4.3). The model
+            // returns the old value until the update lands.
+            OFF_PR => Ok(self.pr_eff),
+            OFF_RLR => Ok(self.rlr_eff),
             OFF_SR => {
                 let mut sr = 0;
                 if Self::busy(&self.pr_pending, now) {
@@ -320,7 +325,7 @@ impl Peripheral for Iwdg {
                 }
                 Ok(sr)
             }
-            OFF_WINR if self.has_winr => Ok(self.winr),
+            OFF_WINR if self.has_winr => Ok(self.winr_eff),
             _ => Err(Unmodelled::read(
                 offset,
                 format!("IWDG register at offset {offset:#x} does not exist on this chip"),
@@ -562,13 +567,16 @@ mod tests {
         w(&mut i, 2000, OFF_RLR, 0x123);
         // Both in progress: PVU | RVU.
         assert_eq!(r(&mut i, 2000, OFF_SR), 0b11);
-        assert_eq!(r(&mut i, 2000, OFF_PR), 3);
+        // Reads give the LSI-domain value: still the old one.
+        assert_eq!(r(&mut i, 2000, OFF_PR), 0);
         assert_eq!(i.effective_pr_rlr(), (0, 0xFFF));
         // PVU clears 5 LSI periods after its write, RVU 5 after its own.
         assert_eq!(r(&mut i, 1000 + 5 * LSI - 1, OFF_SR), 0b11);
         assert_eq!(r(&mut i, 1000 + 5 * LSI, OFF_SR), 0b10);
         assert_eq!(r(&mut i, 2000 + 5 * LSI, OFF_SR), 0b00);
         assert_eq!(i.effective_pr_rlr(), (3, 0x123));
+        assert_eq!(r(&mut i, 2000 + 5 * LSI, OFF_PR), 3);
+        assert_eq!(r(&mut i, 2000 + 5 * LSI, OFF_RLR), 0x123);
     }
 
     #[test]
