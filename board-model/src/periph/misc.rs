@@ -14,9 +14,9 @@
 //!   the firmware's fault path sets the IWDG freeze bit. IDCODE is read only by the F4 flash
 //!   driver (dual-bank erase), which the firmware does not use.
 //!
-//! Registers outside that list return `Unmodelled`. EXTI and SYSCFG have no model here: init
-//! only enables/resets SYSCFG through the RCC and enables the EXTI interrupts in the NVIC; no
-//! register of either block is read or written.
+//! Registers outside that list return `Unmodelled`. SYSCFG and EXTI are mapped as blocks whose
+//! every access is `Unmodelled`: init only enables/resets SYSCFG through the RCC and enables the
+//! EXTI interrupts in the NVIC; no register of either block is read or written.
 
 use super::gpio::Chip;
 use super::{merge, Peripheral, Signals, Time, Unmodelled};
@@ -648,6 +648,89 @@ impl Peripheral for PwrG4 {
 }
 
 // ------------------------------------------------------------------------------------------
+// SYSCFG, EXTI
+// ------------------------------------------------------------------------------------------
+
+/// SYSCFG (RM0390 §8, RM0440 §10): mapped so that an access is reported by name. embassy init
+/// only enables and resets it through the RCC; neither embassy nor the firmware reads or writes
+/// a SYSCFG register (EXTI line muxing, memory remap, compensation cell, and on the G474 the
+/// VREFBUF/COMP/OPAMP registers in the same 1 KB window), so every access is `Unmodelled`.
+#[derive(Clone, Debug, Default)]
+pub struct Syscfg;
+
+impl Syscfg {
+    pub fn new() -> Self {
+        Syscfg
+    }
+}
+
+impl Peripheral for Syscfg {
+    fn name(&self) -> &'static str {
+        "SYSCFG"
+    }
+    fn read(&mut self, _now: Time, offset: u32, _out: &mut Signals) -> Result<u32, Unmodelled> {
+        Err(Unmodelled::read(
+            offset,
+            format!("SYSCFG register at offset {offset:#x} is not modelled (nothing in the firmware's init uses it)"),
+        ))
+    }
+    fn write(&mut self, _now: Time, offset: u32, value: u32, _mask: u32, _out: &mut Signals) -> Result<(), Unmodelled> {
+        Err(Unmodelled::write(
+            offset,
+            value,
+            format!("SYSCFG register at offset {offset:#x} is not modelled (nothing in the firmware's init uses it)"),
+        ))
+    }
+    fn reset(&mut self, _now: Time) {}
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+}
+
+/// EXTI (RM0390 §10.2, RM0440 §15): mapped so that an access is reported by name. embassy's
+/// `exti::init` only enables the EXTI interrupt lines in the NVIC; no EXTI register is read or
+/// written (the firmware configures no external interrupt, and the EXTI handlers, which read
+/// the pending register, never run because no line can become pending). Every access is
+/// `Unmodelled`.
+#[derive(Clone, Debug, Default)]
+pub struct Exti;
+
+impl Exti {
+    pub fn new() -> Self {
+        Exti
+    }
+}
+
+impl Peripheral for Exti {
+    fn name(&self) -> &'static str {
+        "EXTI"
+    }
+    fn read(&mut self, _now: Time, offset: u32, _out: &mut Signals) -> Result<u32, Unmodelled> {
+        Err(Unmodelled::read(
+            offset,
+            format!("EXTI register at offset {offset:#x} is not modelled (no EXTI line is used)"),
+        ))
+    }
+    fn write(&mut self, _now: Time, offset: u32, value: u32, _mask: u32, _out: &mut Signals) -> Result<(), Unmodelled> {
+        Err(Unmodelled::write(
+            offset,
+            value,
+            format!("EXTI register at offset {offset:#x} is not modelled (no EXTI line is used)"),
+        ))
+    }
+    fn reset(&mut self, _now: Time) {}
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+}
+
+// ------------------------------------------------------------------------------------------
 // DBGMCU
 // ------------------------------------------------------------------------------------------
 
@@ -669,6 +752,16 @@ pub struct DbgMcu {
 }
 
 impl DbgMcu {
+    /// The chip with DBGMCU_IDCODE.DEV_ID `dev_id`: 0x421 (STM32F446) or 0x469 (STM32G474).
+    /// Panics on another id (a board-building mistake, not a firmware value).
+    pub fn new(dev_id: u16) -> Self {
+        match dev_id {
+            0x421 => Self::f446(),
+            0x469 => Self::g474(),
+            _ => panic!("DbgMcu::new: DEV_ID {dev_id:#x} is neither the F446 (0x421) nor the G474 (0x469)"),
+        }
+    }
+
     /// STM32F446: DEV_ID 0x421. REV_ID 0x1000 (revision A) is a plausible value, not read from
     /// a particular board.
     pub fn f446() -> Self {
@@ -961,10 +1054,26 @@ mod tests {
     }
 
     #[test]
+    fn syscfg_and_exti_report_every_access() {
+        let mut s = Syscfg::new();
+        assert!(s
+            .read(0, 0x08, &mut Signals::default())
+            .unwrap_err()
+            .why
+            .contains("SYSCFG"));
+        let mut e = Exti::new();
+        assert!(e
+            .write(0, 0x00, 1, 0xFFFF_FFFF, &mut Signals::default())
+            .unwrap_err()
+            .why
+            .contains("EXTI"));
+    }
+
+    #[test]
     fn dbgmcu_idcodes_and_freeze_bits() {
-        let mut f = DbgMcu::f446();
+        let mut f = DbgMcu::new(0x421);
         assert_eq!(r(&mut f, 0) & 0xFFF, 0x421);
-        let mut g = DbgMcu::g474();
+        let mut g = DbgMcu::new(0x469);
         assert_eq!(r(&mut g, 0) & 0xFFF, 0x469);
         // embassy init: CR |= DBG_SLEEP | DBG_STOP | DBG_STANDBY.
         let v = r(&mut f, 0x04) | 7;

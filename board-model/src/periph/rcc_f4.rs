@@ -504,7 +504,6 @@ pub struct RccF4 {
     dckcfgr2: u32,
     backup_writable: bool,
     lsi_forced: bool,
-    pending_cause: Option<ResetCause>,
     resets_out: Vec<u32>,
     last_clocks: Clocks,
     clocks_changed: bool,
@@ -512,8 +511,13 @@ pub struct RccF4 {
 }
 
 impl RccF4 {
+    /// Power-on state of the Nucleo board's chip (see `nucleo_f446re`).
+    pub fn new() -> Self {
+        Self::nucleo_f446re()
+    }
+
     /// Power-on state with `hse` on the oscillator pins.
-    pub fn new(hse: HseInput) -> Self {
+    pub fn with_hse(hse: HseInput) -> Self {
         let mut r = RccF4 {
             hse_input: hse,
             delays: ReadyDelays::default(),
@@ -537,7 +541,6 @@ impl RccF4 {
             dckcfgr2: 0,
             backup_writable: false,
             lsi_forced: false,
-            pending_cause: None,
             resets_out: Vec::new(),
             last_clocks: Clocks::default(),
             clocks_changed: false,
@@ -550,7 +553,7 @@ impl RccF4 {
 
     /// NUCLEO-F446RE: HSE is the ST-LINK's 8 MHz MCO on OSC_IN (bypass mode required).
     pub fn nucleo_f446re() -> Self {
-        Self::new(HseInput::ExternalClock(8_000_000))
+        Self::with_hse(HseInput::ExternalClock(8_000_000))
     }
 
     /// Start-up/lock times for the ready flags (default immediate).
@@ -558,9 +561,14 @@ impl RccF4 {
         self.delays = delays;
     }
 
-    /// The cause of the next `reset` (the board calls this just before resetting the chip).
+    /// The chip is being reset by `cause`: sets its RCC_CSR reset flag and PINRSTF (an
+    /// internal reset source also drives NRST low; see `reset`). The flags survive the system
+    /// reset, so the board may call this before or after `reset`.
     pub fn note_reset(&mut self, cause: ResetCause) {
-        self.pending_cause = Some(cause);
+        self.csr_flags |= match cause {
+            ResetCause::IndependentWatchdog => CSR_IWDGRSTF | CSR_PINRSTF,
+            ResetCause::Software => CSR_SFTRSTF | CSR_PINRSTF,
+        };
     }
 
     /// PWR_CR.DBP as the PWR model has it: RCC_BDCR is write-protected without it (RM0390
@@ -1123,17 +1131,12 @@ impl Peripheral for RccF4 {
     }
 
     /// System reset: registers back to their reset values, except the backup domain (BDCR)
-    /// and the reset flags, which only a power-on reset clears; the flag for the cause given to
-    /// `note_reset` is set, with PINRSTF: an internal reset source drives the NRST pin low
-    /// (RM0390 §6.1.2, figure 11), which the pin-reset detector also sees — the author's
-    /// reading of the figure. Without a noted cause the reset counts as an NRST pin reset.
+    /// and the reset flags, which only a power-on reset clears (RM0390 §6.3.21). The flags of
+    /// the cause are set by `note_reset`: the cause's own flag and PINRSTF, because an internal
+    /// reset source drives the NRST pin low (RM0390 §6.1.2, figure 11) and the pin-reset
+    /// detector sees that too — the author's reading of the figure, not a sentence of the
+    /// manual.
     fn reset(&mut self, now: Time) {
-        let flags = match self.pending_cause.take() {
-            Some(ResetCause::IndependentWatchdog) => CSR_IWDGRSTF | CSR_PINRSTF,
-            Some(ResetCause::Software) => CSR_SFTRSTF | CSR_PINRSTF,
-            None => CSR_PINRSTF,
-        };
-        self.csr_flags |= flags;
         self.reset_registers(now);
         let c = self.clocks();
         if c != self.last_clocks {
@@ -1469,7 +1472,7 @@ mod tests {
         assert!(r
             .write(0, OFF_CR, 0x83 | CR_HSEON, 0xFFFF_FFFF, &mut Signals::default())
             .is_err());
-        let mut g = RccF4::new(HseInput::None);
+        let mut g = RccF4::with_hse(HseInput::None);
         assert!(g
             .write(
                 0,

@@ -486,7 +486,6 @@ pub struct RccG4 {
     csr_flags: u32,
     backup_writable: bool,
     lsi_forced: bool,
-    pending_cause: Option<ResetCause>,
     resets_out: Vec<u32>,
     last_clocks: Clocks,
     clocks_changed: bool,
@@ -494,8 +493,13 @@ pub struct RccG4 {
 }
 
 impl RccG4 {
+    /// Power-on state of the Nucleo board's chip (see `nucleo_g474re`).
+    pub fn new() -> Self {
+        Self::nucleo_g474re()
+    }
+
     /// Power-on state with `hse` on the oscillator pins.
-    pub fn new(hse: HseInput) -> Self {
+    pub fn with_hse(hse: HseInput) -> Self {
         let mut r = RccG4 {
             hse_input: hse,
             delays: ReadyDelays::default(),
@@ -519,7 +523,6 @@ impl RccG4 {
             csr_flags: CSR_POR_FLAGS,
             backup_writable: false,
             lsi_forced: false,
-            pending_cause: None,
             resets_out: Vec::new(),
             last_clocks: Clocks::default(),
             clocks_changed: false,
@@ -532,16 +535,21 @@ impl RccG4 {
 
     /// NUCLEO-G474RE: a 24 MHz crystal on OSC_IN/OSC_OUT (oscillator mode, HSEBYP = 0).
     pub fn nucleo_g474re() -> Self {
-        Self::new(HseInput::Crystal(24_000_000))
+        Self::with_hse(HseInput::Crystal(24_000_000))
     }
 
     pub fn set_ready_delays(&mut self, delays: ReadyDelays) {
         self.delays = delays;
     }
 
-    /// The cause of the next `reset` (the board calls this just before resetting the chip).
+    /// The chip is being reset by `cause`: sets its RCC_CSR reset flag and PINRSTF (an
+    /// internal reset source also drives NRST low; see `reset`). The flags survive the system
+    /// reset, so the board may call this before or after `reset`.
     pub fn note_reset(&mut self, cause: ResetCause) {
-        self.pending_cause = Some(cause);
+        self.csr_flags |= match cause {
+            ResetCause::IndependentWatchdog => CSR_IWDGRSTF | CSR_PINRSTF,
+            ResetCause::Software => CSR_SFTRSTF | CSR_PINRSTF,
+        };
     }
 
     /// PWR_CR1.DBP as the PWR model has it: RCC_BDCR is write-protected without it (RM0440
@@ -1077,16 +1085,10 @@ impl Peripheral for RccG4 {
         }
     }
 
-    /// System reset: as the F446 model (BDCR and reset flags kept, the noted cause's flag set
-    /// together with PINRSTF since an internal reset drives NRST low, RM0440 §7.1.2 figure 14
-    /// as the author reads it).
+    /// System reset: as the F446 model (BDCR and reset flags kept; `note_reset` sets the
+    /// cause's flag together with PINRSTF since an internal reset drives NRST low, RM0440
+    /// §7.1.2, as the author reads the reset circuit figure).
     fn reset(&mut self, now: Time) {
-        let flags = match self.pending_cause.take() {
-            Some(ResetCause::IndependentWatchdog) => CSR_IWDGRSTF | CSR_PINRSTF,
-            Some(ResetCause::Software) => CSR_SFTRSTF | CSR_PINRSTF,
-            None => CSR_PINRSTF,
-        };
-        self.csr_flags |= flags;
         self.reset_registers(now);
         let c = self.clocks();
         if c != self.last_clocks {
