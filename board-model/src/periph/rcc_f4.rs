@@ -180,232 +180,53 @@ const fn is_rstr(off: u32) -> bool {
 /// The blocks with an enable bit, by base address (RM0390 §2.2.2 memory map, §6.3 bit lists).
 /// The three ADCs share one reset bit (APB2RSTR.ADCRST); the common registers at 0x4001_2300
 /// are taken to be clocked when any ADC is (the manual does not single one out).
+#[rustfmt::skip]
 const GATES: &[Gate] = &[
-    Gate {
-        base: 0x4002_0000,
-        en: &[(OFF_AHB1ENR, 0)],
-        rst: Some((OFF_AHB1RSTR, 0)),
-    },
-    Gate {
-        base: 0x4002_0400,
-        en: &[(OFF_AHB1ENR, 1)],
-        rst: Some((OFF_AHB1RSTR, 1)),
-    },
-    Gate {
-        base: 0x4002_0800,
-        en: &[(OFF_AHB1ENR, 2)],
-        rst: Some((OFF_AHB1RSTR, 2)),
-    },
-    Gate {
-        base: 0x4002_0C00,
-        en: &[(OFF_AHB1ENR, 3)],
-        rst: Some((OFF_AHB1RSTR, 3)),
-    },
-    Gate {
-        base: 0x4002_1000,
-        en: &[(OFF_AHB1ENR, 4)],
-        rst: Some((OFF_AHB1RSTR, 4)),
-    },
-    Gate {
-        base: 0x4002_1400,
-        en: &[(OFF_AHB1ENR, 5)],
-        rst: Some((OFF_AHB1RSTR, 5)),
-    },
-    Gate {
-        base: 0x4002_1800,
-        en: &[(OFF_AHB1ENR, 6)],
-        rst: Some((OFF_AHB1RSTR, 6)),
-    },
-    Gate {
-        base: 0x4002_1C00,
-        en: &[(OFF_AHB1ENR, 7)],
-        rst: Some((OFF_AHB1RSTR, 7)),
-    },
-    Gate {
-        base: 0x4002_3000,
-        en: &[(OFF_AHB1ENR, 12)],
-        rst: Some((OFF_AHB1RSTR, 12)),
-    }, // CRC
-    Gate {
-        base: 0x4002_6000,
-        en: &[(OFF_AHB1ENR, 21)],
-        rst: Some((OFF_AHB1RSTR, 21)),
-    }, // DMA1
-    Gate {
-        base: 0x4002_6400,
-        en: &[(OFF_AHB1ENR, 22)],
-        rst: Some((OFF_AHB1RSTR, 22)),
-    }, // DMA2
-    Gate {
-        base: 0x4000_0000,
-        en: &[(OFF_APB1ENR, 0)],
-        rst: Some((OFF_APB1RSTR, 0)),
-    }, // TIM2
-    Gate {
-        base: 0x4000_0400,
-        en: &[(OFF_APB1ENR, 1)],
-        rst: Some((OFF_APB1RSTR, 1)),
-    }, // TIM3
-    Gate {
-        base: 0x4000_0800,
-        en: &[(OFF_APB1ENR, 2)],
-        rst: Some((OFF_APB1RSTR, 2)),
-    }, // TIM4
-    Gate {
-        base: 0x4000_0C00,
-        en: &[(OFF_APB1ENR, 3)],
-        rst: Some((OFF_APB1RSTR, 3)),
-    }, // TIM5
-    Gate {
-        base: 0x4000_1000,
-        en: &[(OFF_APB1ENR, 4)],
-        rst: Some((OFF_APB1RSTR, 4)),
-    }, // TIM6
-    Gate {
-        base: 0x4000_1400,
-        en: &[(OFF_APB1ENR, 5)],
-        rst: Some((OFF_APB1RSTR, 5)),
-    }, // TIM7
-    Gate {
-        base: 0x4000_1800,
-        en: &[(OFF_APB1ENR, 6)],
-        rst: Some((OFF_APB1RSTR, 6)),
-    }, // TIM12
-    Gate {
-        base: 0x4000_1C00,
-        en: &[(OFF_APB1ENR, 7)],
-        rst: Some((OFF_APB1RSTR, 7)),
-    }, // TIM13
-    Gate {
-        base: 0x4000_2000,
-        en: &[(OFF_APB1ENR, 8)],
-        rst: Some((OFF_APB1RSTR, 8)),
-    }, // TIM14
-    Gate {
-        base: 0x4000_2C00,
-        en: &[(OFF_APB1ENR, 11)],
-        rst: Some((OFF_APB1RSTR, 11)),
-    }, // WWDG
-    Gate {
-        base: 0x4000_3800,
-        en: &[(OFF_APB1ENR, 14)],
-        rst: Some((OFF_APB1RSTR, 14)),
-    }, // SPI2
-    Gate {
-        base: 0x4000_3C00,
-        en: &[(OFF_APB1ENR, 15)],
-        rst: Some((OFF_APB1RSTR, 15)),
-    }, // SPI3
-    Gate {
-        base: 0x4000_4400,
-        en: &[(OFF_APB1ENR, 17)],
-        rst: Some((OFF_APB1RSTR, 17)),
-    }, // USART2
-    Gate {
-        base: 0x4000_4800,
-        en: &[(OFF_APB1ENR, 18)],
-        rst: Some((OFF_APB1RSTR, 18)),
-    }, // USART3
-    Gate {
-        base: 0x4000_4C00,
-        en: &[(OFF_APB1ENR, 19)],
-        rst: Some((OFF_APB1RSTR, 19)),
-    }, // UART4
-    Gate {
-        base: 0x4000_5000,
-        en: &[(OFF_APB1ENR, 20)],
-        rst: Some((OFF_APB1RSTR, 20)),
-    }, // UART5
-    Gate {
-        base: 0x4000_5400,
-        en: &[(OFF_APB1ENR, 21)],
-        rst: Some((OFF_APB1RSTR, 21)),
-    }, // I2C1
-    Gate {
-        base: 0x4000_5800,
-        en: &[(OFF_APB1ENR, 22)],
-        rst: Some((OFF_APB1RSTR, 22)),
-    }, // I2C2
-    Gate {
-        base: 0x4000_5C00,
-        en: &[(OFF_APB1ENR, 23)],
-        rst: Some((OFF_APB1RSTR, 23)),
-    }, // I2C3
-    Gate {
-        base: 0x4000_7000,
-        en: &[(OFF_APB1ENR, 28)],
-        rst: Some((OFF_APB1RSTR, 28)),
-    }, // PWR
-    Gate {
-        base: 0x4000_7400,
-        en: &[(OFF_APB1ENR, 29)],
-        rst: Some((OFF_APB1RSTR, 29)),
-    }, // DAC
-    Gate {
-        base: 0x4001_0000,
-        en: &[(OFF_APB2ENR, 0)],
-        rst: Some((OFF_APB2RSTR, 0)),
-    }, // TIM1
-    Gate {
-        base: 0x4001_0400,
-        en: &[(OFF_APB2ENR, 1)],
-        rst: Some((OFF_APB2RSTR, 1)),
-    }, // TIM8
-    Gate {
-        base: 0x4001_1000,
-        en: &[(OFF_APB2ENR, 4)],
-        rst: Some((OFF_APB2RSTR, 4)),
-    }, // USART1
-    Gate {
-        base: 0x4001_1400,
-        en: &[(OFF_APB2ENR, 5)],
-        rst: Some((OFF_APB2RSTR, 5)),
-    }, // USART6
-    Gate {
-        base: 0x4001_2000,
-        en: &[(OFF_APB2ENR, 8)],
-        rst: Some((OFF_APB2RSTR, 8)),
-    }, // ADC1
-    Gate {
-        base: 0x4001_2100,
-        en: &[(OFF_APB2ENR, 9)],
-        rst: Some((OFF_APB2RSTR, 8)),
-    }, // ADC2
-    Gate {
-        base: 0x4001_2200,
-        en: &[(OFF_APB2ENR, 10)],
-        rst: Some((OFF_APB2RSTR, 8)),
-    }, // ADC3
-    Gate {
-        base: 0x4001_2300, // ADC common
-        en: &[(OFF_APB2ENR, 8), (OFF_APB2ENR, 9), (OFF_APB2ENR, 10)],
-        rst: Some((OFF_APB2RSTR, 8)),
-    },
-    Gate {
-        base: 0x4001_3000,
-        en: &[(OFF_APB2ENR, 12)],
-        rst: Some((OFF_APB2RSTR, 12)),
-    }, // SPI1
-    Gate {
-        base: 0x4001_3800,
-        en: &[(OFF_APB2ENR, 14)],
-        rst: Some((OFF_APB2RSTR, 14)),
-    }, // SYSCFG
-    Gate {
-        base: 0x4001_4000,
-        en: &[(OFF_APB2ENR, 16)],
-        rst: Some((OFF_APB2RSTR, 16)),
-    }, // TIM9
-    Gate {
-        base: 0x4001_4400,
-        en: &[(OFF_APB2ENR, 17)],
-        rst: Some((OFF_APB2RSTR, 17)),
-    }, // TIM10
-    Gate {
-        base: 0x4001_4800,
-        en: &[(OFF_APB2ENR, 18)],
-        rst: Some((OFF_APB2RSTR, 18)),
-    }, // TIM11
+    Gate { base: 0x4002_0000, en: &[(OFF_AHB1ENR, 0)], rst: Some((OFF_AHB1RSTR, 0)) },
+    Gate { base: 0x4002_0400, en: &[(OFF_AHB1ENR, 1)], rst: Some((OFF_AHB1RSTR, 1)) },
+    Gate { base: 0x4002_0800, en: &[(OFF_AHB1ENR, 2)], rst: Some((OFF_AHB1RSTR, 2)) },
+    Gate { base: 0x4002_0C00, en: &[(OFF_AHB1ENR, 3)], rst: Some((OFF_AHB1RSTR, 3)) },
+    Gate { base: 0x4002_1000, en: &[(OFF_AHB1ENR, 4)], rst: Some((OFF_AHB1RSTR, 4)) },
+    Gate { base: 0x4002_1400, en: &[(OFF_AHB1ENR, 5)], rst: Some((OFF_AHB1RSTR, 5)) },
+    Gate { base: 0x4002_1800, en: &[(OFF_AHB1ENR, 6)], rst: Some((OFF_AHB1RSTR, 6)) },
+    Gate { base: 0x4002_1C00, en: &[(OFF_AHB1ENR, 7)], rst: Some((OFF_AHB1RSTR, 7)) },
+    Gate { base: 0x4002_3000, en: &[(OFF_AHB1ENR, 12)], rst: Some((OFF_AHB1RSTR, 12)) }, // CRC
+    Gate { base: 0x4002_6000, en: &[(OFF_AHB1ENR, 21)], rst: Some((OFF_AHB1RSTR, 21)) }, // DMA1
+    Gate { base: 0x4002_6400, en: &[(OFF_AHB1ENR, 22)], rst: Some((OFF_AHB1RSTR, 22)) }, // DMA2
+    Gate { base: 0x4000_0000, en: &[(OFF_APB1ENR, 0)], rst: Some((OFF_APB1RSTR, 0)) }, // TIM2
+    Gate { base: 0x4000_0400, en: &[(OFF_APB1ENR, 1)], rst: Some((OFF_APB1RSTR, 1)) }, // TIM3
+    Gate { base: 0x4000_0800, en: &[(OFF_APB1ENR, 2)], rst: Some((OFF_APB1RSTR, 2)) }, // TIM4
+    Gate { base: 0x4000_0C00, en: &[(OFF_APB1ENR, 3)], rst: Some((OFF_APB1RSTR, 3)) }, // TIM5
+    Gate { base: 0x4000_1000, en: &[(OFF_APB1ENR, 4)], rst: Some((OFF_APB1RSTR, 4)) }, // TIM6
+    Gate { base: 0x4000_1400, en: &[(OFF_APB1ENR, 5)], rst: Some((OFF_APB1RSTR, 5)) }, // TIM7
+    Gate { base: 0x4000_1800, en: &[(OFF_APB1ENR, 6)], rst: Some((OFF_APB1RSTR, 6)) }, // TIM12
+    Gate { base: 0x4000_1C00, en: &[(OFF_APB1ENR, 7)], rst: Some((OFF_APB1RSTR, 7)) }, // TIM13
+    Gate { base: 0x4000_2000, en: &[(OFF_APB1ENR, 8)], rst: Some((OFF_APB1RSTR, 8)) }, // TIM14
+    Gate { base: 0x4000_2C00, en: &[(OFF_APB1ENR, 11)], rst: Some((OFF_APB1RSTR, 11)) }, // WWDG
+    Gate { base: 0x4000_3800, en: &[(OFF_APB1ENR, 14)], rst: Some((OFF_APB1RSTR, 14)) }, // SPI2
+    Gate { base: 0x4000_3C00, en: &[(OFF_APB1ENR, 15)], rst: Some((OFF_APB1RSTR, 15)) }, // SPI3
+    Gate { base: 0x4000_4400, en: &[(OFF_APB1ENR, 17)], rst: Some((OFF_APB1RSTR, 17)) }, // USART2
+    Gate { base: 0x4000_4800, en: &[(OFF_APB1ENR, 18)], rst: Some((OFF_APB1RSTR, 18)) }, // USART3
+    Gate { base: 0x4000_4C00, en: &[(OFF_APB1ENR, 19)], rst: Some((OFF_APB1RSTR, 19)) }, // UART4
+    Gate { base: 0x4000_5000, en: &[(OFF_APB1ENR, 20)], rst: Some((OFF_APB1RSTR, 20)) }, // UART5
+    Gate { base: 0x4000_5400, en: &[(OFF_APB1ENR, 21)], rst: Some((OFF_APB1RSTR, 21)) }, // I2C1
+    Gate { base: 0x4000_5800, en: &[(OFF_APB1ENR, 22)], rst: Some((OFF_APB1RSTR, 22)) }, // I2C2
+    Gate { base: 0x4000_5C00, en: &[(OFF_APB1ENR, 23)], rst: Some((OFF_APB1RSTR, 23)) }, // I2C3
+    Gate { base: 0x4000_7000, en: &[(OFF_APB1ENR, 28)], rst: Some((OFF_APB1RSTR, 28)) }, // PWR
+    Gate { base: 0x4000_7400, en: &[(OFF_APB1ENR, 29)], rst: Some((OFF_APB1RSTR, 29)) }, // DAC
+    Gate { base: 0x4001_0000, en: &[(OFF_APB2ENR, 0)], rst: Some((OFF_APB2RSTR, 0)) }, // TIM1
+    Gate { base: 0x4001_0400, en: &[(OFF_APB2ENR, 1)], rst: Some((OFF_APB2RSTR, 1)) }, // TIM8
+    Gate { base: 0x4001_1000, en: &[(OFF_APB2ENR, 4)], rst: Some((OFF_APB2RSTR, 4)) }, // USART1
+    Gate { base: 0x4001_1400, en: &[(OFF_APB2ENR, 5)], rst: Some((OFF_APB2RSTR, 5)) }, // USART6
+    Gate { base: 0x4001_2000, en: &[(OFF_APB2ENR, 8)], rst: Some((OFF_APB2RSTR, 8)) }, // ADC1
+    Gate { base: 0x4001_2100, en: &[(OFF_APB2ENR, 9)], rst: Some((OFF_APB2RSTR, 8)) }, // ADC2
+    Gate { base: 0x4001_2200, en: &[(OFF_APB2ENR, 10)], rst: Some((OFF_APB2RSTR, 8)) }, // ADC3
+    Gate { base: 0x4001_2300, en: &[(OFF_APB2ENR, 8), (OFF_APB2ENR, 9), (OFF_APB2ENR, 10)], rst: Some((OFF_APB2RSTR, 8)) }, // ADC common
+    Gate { base: 0x4001_3000, en: &[(OFF_APB2ENR, 12)], rst: Some((OFF_APB2RSTR, 12)) }, // SPI1
+    Gate { base: 0x4001_3800, en: &[(OFF_APB2ENR, 14)], rst: Some((OFF_APB2RSTR, 14)) }, // SYSCFG
+    Gate { base: 0x4001_4000, en: &[(OFF_APB2ENR, 16)], rst: Some((OFF_APB2RSTR, 16)) }, // TIM9
+    Gate { base: 0x4001_4400, en: &[(OFF_APB2ENR, 17)], rst: Some((OFF_APB2RSTR, 17)) }, // TIM10
+    Gate { base: 0x4001_4800, en: &[(OFF_APB2ENR, 18)], rst: Some((OFF_APB2RSTR, 18)) }, // TIM11
 ];
 
 // CR bits (RM0390 §6.3.1).

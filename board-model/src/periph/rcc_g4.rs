@@ -86,332 +86,73 @@ const SYSCFG_RST: Option<(u32, u32)> = Some((OFF_APB2RSTR, 0));
 /// SYSCFGEN/SYSCFGRST also gate COMP, VREFBUF and OPAMP (RM0440 §7.4.24 "SYSCFG + COMP +
 /// VREFBUF + OPAMP clock enable"). RTC/TAMP are clocked by RTCAPBEN and reset only with the
 /// backup domain; WWDG has an enable but no reset bit.
+#[rustfmt::skip]
 const GATES: &[Gate] = &[
-    Gate {
-        base: 0x4002_0000,
-        en: &[(OFF_AHB1ENR, 0)],
-        rst: Some((OFF_AHB1RSTR, 0)),
-    }, // DMA1
-    Gate {
-        base: 0x4002_0400,
-        en: &[(OFF_AHB1ENR, 1)],
-        rst: Some((OFF_AHB1RSTR, 1)),
-    }, // DMA2
-    Gate {
-        base: 0x4002_0800,
-        en: &[(OFF_AHB1ENR, 2)],
-        rst: Some((OFF_AHB1RSTR, 2)),
-    }, // DMAMUX1
-    Gate {
-        base: 0x4002_0C00,
-        en: &[(OFF_AHB1ENR, 3)],
-        rst: Some((OFF_AHB1RSTR, 3)),
-    }, // CORDIC
-    Gate {
-        base: 0x4002_1400,
-        en: &[(OFF_AHB1ENR, 4)],
-        rst: Some((OFF_AHB1RSTR, 4)),
-    }, // FMAC
-    Gate {
-        base: 0x4002_2000,
-        en: &[(OFF_AHB1ENR, 8)],
-        rst: None,
-    }, // FLASH
-    Gate {
-        base: 0x4002_3000,
-        en: &[(OFF_AHB1ENR, 12)],
-        rst: Some((OFF_AHB1RSTR, 12)),
-    }, // CRC
-    Gate {
-        base: 0x4800_0000,
-        en: &[(OFF_AHB2ENR, 0)],
-        rst: Some((OFF_AHB2RSTR, 0)),
-    },
-    Gate {
-        base: 0x4800_0400,
-        en: &[(OFF_AHB2ENR, 1)],
-        rst: Some((OFF_AHB2RSTR, 1)),
-    },
-    Gate {
-        base: 0x4800_0800,
-        en: &[(OFF_AHB2ENR, 2)],
-        rst: Some((OFF_AHB2RSTR, 2)),
-    },
-    Gate {
-        base: 0x4800_0C00,
-        en: &[(OFF_AHB2ENR, 3)],
-        rst: Some((OFF_AHB2RSTR, 3)),
-    },
-    Gate {
-        base: 0x4800_1000,
-        en: &[(OFF_AHB2ENR, 4)],
-        rst: Some((OFF_AHB2RSTR, 4)),
-    },
-    Gate {
-        base: 0x4800_1400,
-        en: &[(OFF_AHB2ENR, 5)],
-        rst: Some((OFF_AHB2RSTR, 5)),
-    },
-    Gate {
-        base: 0x4800_1800,
-        en: &[(OFF_AHB2ENR, 6)],
-        rst: Some((OFF_AHB2RSTR, 6)),
-    },
-    Gate {
-        base: 0x5000_0000,
-        en: &[(OFF_AHB2ENR, 13)],
-        rst: Some((OFF_AHB2RSTR, 13)),
-    }, // ADC1
-    Gate {
-        base: 0x5000_0100,
-        en: &[(OFF_AHB2ENR, 13)],
-        rst: Some((OFF_AHB2RSTR, 13)),
-    }, // ADC2
-    Gate {
-        base: 0x5000_0300,
-        en: &[(OFF_AHB2ENR, 13)],
-        rst: Some((OFF_AHB2RSTR, 13)),
-    }, // ADC12 common
-    Gate {
-        base: 0x5000_0400,
-        en: &[(OFF_AHB2ENR, 14)],
-        rst: Some((OFF_AHB2RSTR, 14)),
-    }, // ADC3
-    Gate {
-        base: 0x5000_0500,
-        en: &[(OFF_AHB2ENR, 14)],
-        rst: Some((OFF_AHB2RSTR, 14)),
-    }, // ADC4
-    Gate {
-        base: 0x5000_0600,
-        en: &[(OFF_AHB2ENR, 14)],
-        rst: Some((OFF_AHB2RSTR, 14)),
-    }, // ADC5
-    Gate {
-        base: 0x5000_0700,
-        en: &[(OFF_AHB2ENR, 14)],
-        rst: Some((OFF_AHB2RSTR, 14)),
-    }, // ADC345 common
-    Gate {
-        base: 0x5000_0800,
-        en: &[(OFF_AHB2ENR, 16)],
-        rst: Some((OFF_AHB2RSTR, 16)),
-    }, // DAC1
-    Gate {
-        base: 0x5000_0C00,
-        en: &[(OFF_AHB2ENR, 17)],
-        rst: Some((OFF_AHB2RSTR, 17)),
-    }, // DAC2
-    Gate {
-        base: 0x5000_1000,
-        en: &[(OFF_AHB2ENR, 18)],
-        rst: Some((OFF_AHB2RSTR, 18)),
-    }, // DAC3
-    Gate {
-        base: 0x5000_1400,
-        en: &[(OFF_AHB2ENR, 19)],
-        rst: Some((OFF_AHB2RSTR, 19)),
-    }, // DAC4
-    Gate {
-        base: 0x5006_0800,
-        en: &[(OFF_AHB2ENR, 26)],
-        rst: Some((OFF_AHB2RSTR, 26)),
-    }, // RNG
-    Gate {
-        base: 0x4000_0000,
-        en: &[(OFF_APB1ENR1, 0)],
-        rst: Some((OFF_APB1RSTR1, 0)),
-    }, // TIM2
-    Gate {
-        base: 0x4000_0400,
-        en: &[(OFF_APB1ENR1, 1)],
-        rst: Some((OFF_APB1RSTR1, 1)),
-    }, // TIM3
-    Gate {
-        base: 0x4000_0800,
-        en: &[(OFF_APB1ENR1, 2)],
-        rst: Some((OFF_APB1RSTR1, 2)),
-    }, // TIM4
-    Gate {
-        base: 0x4000_0C00,
-        en: &[(OFF_APB1ENR1, 3)],
-        rst: Some((OFF_APB1RSTR1, 3)),
-    }, // TIM5
-    Gate {
-        base: 0x4000_1000,
-        en: &[(OFF_APB1ENR1, 4)],
-        rst: Some((OFF_APB1RSTR1, 4)),
-    }, // TIM6
-    Gate {
-        base: 0x4000_1400,
-        en: &[(OFF_APB1ENR1, 5)],
-        rst: Some((OFF_APB1RSTR1, 5)),
-    }, // TIM7
-    Gate {
-        base: 0x4000_2000,
-        en: &[(OFF_APB1ENR1, 8)],
-        rst: Some((OFF_APB1RSTR1, 8)),
-    }, // CRS
-    Gate {
-        base: 0x4000_2400,
-        en: &[(OFF_APB1ENR1, 10)],
-        rst: None,
-    }, // TAMP
-    Gate {
-        base: 0x4000_2800,
-        en: &[(OFF_APB1ENR1, 10)],
-        rst: None,
-    }, // RTC
-    Gate {
-        base: 0x4000_2C00,
-        en: &[(OFF_APB1ENR1, 11)],
-        rst: None,
-    }, // WWDG
-    Gate {
-        base: 0x4000_3800,
-        en: &[(OFF_APB1ENR1, 14)],
-        rst: Some((OFF_APB1RSTR1, 14)),
-    }, // SPI2
-    Gate {
-        base: 0x4000_3C00,
-        en: &[(OFF_APB1ENR1, 15)],
-        rst: Some((OFF_APB1RSTR1, 15)),
-    }, // SPI3
-    Gate {
-        base: 0x4000_4400,
-        en: &[(OFF_APB1ENR1, 17)],
-        rst: Some((OFF_APB1RSTR1, 17)),
-    }, // USART2
-    Gate {
-        base: 0x4000_4800,
-        en: &[(OFF_APB1ENR1, 18)],
-        rst: Some((OFF_APB1RSTR1, 18)),
-    }, // USART3
-    Gate {
-        base: 0x4000_4C00,
-        en: &[(OFF_APB1ENR1, 19)],
-        rst: Some((OFF_APB1RSTR1, 19)),
-    }, // UART4
-    Gate {
-        base: 0x4000_5000,
-        en: &[(OFF_APB1ENR1, 20)],
-        rst: Some((OFF_APB1RSTR1, 20)),
-    }, // UART5
-    Gate {
-        base: 0x4000_5400,
-        en: &[(OFF_APB1ENR1, 21)],
-        rst: Some((OFF_APB1RSTR1, 21)),
-    }, // I2C1
-    Gate {
-        base: 0x4000_5800,
-        en: &[(OFF_APB1ENR1, 22)],
-        rst: Some((OFF_APB1RSTR1, 22)),
-    }, // I2C2
-    Gate {
-        base: 0x4000_5C00,
-        en: &[(OFF_APB1ENR1, 23)],
-        rst: Some((OFF_APB1RSTR1, 23)),
-    }, // USB
-    Gate {
-        base: 0x4000_7000,
-        en: &[(OFF_APB1ENR1, 28)],
-        rst: Some((OFF_APB1RSTR1, 28)),
-    }, // PWR
-    Gate {
-        base: 0x4000_7800,
-        en: &[(OFF_APB1ENR1, 30)],
-        rst: Some((OFF_APB1RSTR1, 30)),
-    }, // I2C3
-    Gate {
-        base: 0x4000_7C00,
-        en: &[(OFF_APB1ENR1, 31)],
-        rst: Some((OFF_APB1RSTR1, 31)),
-    }, // LPTIM1
-    Gate {
-        base: 0x4000_8000,
-        en: &[(OFF_APB1ENR2, 0)],
-        rst: Some((OFF_APB1RSTR2, 0)),
-    }, // LPUART1
-    Gate {
-        base: 0x4000_8400,
-        en: &[(OFF_APB1ENR2, 1)],
-        rst: Some((OFF_APB1RSTR2, 1)),
-    }, // I2C4
-    Gate {
-        base: 0x4000_A000,
-        en: &[(OFF_APB1ENR2, 8)],
-        rst: Some((OFF_APB1RSTR2, 8)),
-    }, // UCPD1
-    Gate {
-        base: 0x4001_0000,
-        en: SYSCFG_EN,
-        rst: SYSCFG_RST,
-    }, // SYSCFG
-    Gate {
-        base: 0x4001_0030,
-        en: SYSCFG_EN,
-        rst: SYSCFG_RST,
-    }, // VREFBUF
-    Gate {
-        base: 0x4001_0200,
-        en: SYSCFG_EN,
-        rst: SYSCFG_RST,
-    }, // COMP1
-    Gate {
-        base: 0x4001_0300,
-        en: SYSCFG_EN,
-        rst: SYSCFG_RST,
-    }, // OPAMP1
-    Gate {
-        base: 0x4001_2C00,
-        en: &[(OFF_APB2ENR, 11)],
-        rst: Some((OFF_APB2RSTR, 11)),
-    }, // TIM1
-    Gate {
-        base: 0x4001_3000,
-        en: &[(OFF_APB2ENR, 12)],
-        rst: Some((OFF_APB2RSTR, 12)),
-    }, // SPI1
-    Gate {
-        base: 0x4001_3400,
-        en: &[(OFF_APB2ENR, 13)],
-        rst: Some((OFF_APB2RSTR, 13)),
-    }, // TIM8
-    Gate {
-        base: 0x4001_3800,
-        en: &[(OFF_APB2ENR, 14)],
-        rst: Some((OFF_APB2RSTR, 14)),
-    }, // USART1
-    Gate {
-        base: 0x4001_4000,
-        en: &[(OFF_APB2ENR, 16)],
-        rst: Some((OFF_APB2RSTR, 16)),
-    }, // TIM15
-    Gate {
-        base: 0x4001_4400,
-        en: &[(OFF_APB2ENR, 17)],
-        rst: Some((OFF_APB2RSTR, 17)),
-    }, // TIM16
-    Gate {
-        base: 0x4001_4800,
-        en: &[(OFF_APB2ENR, 18)],
-        rst: Some((OFF_APB2RSTR, 18)),
-    }, // TIM17
-    Gate {
-        base: 0x4001_5000,
-        en: &[(OFF_APB2ENR, 20)],
-        rst: Some((OFF_APB2RSTR, 20)),
-    }, // TIM20
-    Gate {
-        base: 0x4001_5400,
-        en: &[(OFF_APB2ENR, 21)],
-        rst: Some((OFF_APB2RSTR, 21)),
-    }, // SAI1
-    Gate {
-        base: 0x4001_6800,
-        en: &[(OFF_APB2ENR, 26)],
-        rst: Some((OFF_APB2RSTR, 26)),
-    }, // HRTIM1
+    Gate { base: 0x4002_0000, en: &[(OFF_AHB1ENR, 0)], rst: Some((OFF_AHB1RSTR, 0)) }, // DMA1
+    Gate { base: 0x4002_0400, en: &[(OFF_AHB1ENR, 1)], rst: Some((OFF_AHB1RSTR, 1)) }, // DMA2
+    Gate { base: 0x4002_0800, en: &[(OFF_AHB1ENR, 2)], rst: Some((OFF_AHB1RSTR, 2)) }, // DMAMUX1
+    Gate { base: 0x4002_0C00, en: &[(OFF_AHB1ENR, 3)], rst: Some((OFF_AHB1RSTR, 3)) }, // CORDIC
+    Gate { base: 0x4002_1400, en: &[(OFF_AHB1ENR, 4)], rst: Some((OFF_AHB1RSTR, 4)) }, // FMAC
+    Gate { base: 0x4002_2000, en: &[(OFF_AHB1ENR, 8)], rst: None }, // FLASH
+    Gate { base: 0x4002_3000, en: &[(OFF_AHB1ENR, 12)], rst: Some((OFF_AHB1RSTR, 12)) }, // CRC
+    Gate { base: 0x4800_0000, en: &[(OFF_AHB2ENR, 0)], rst: Some((OFF_AHB2RSTR, 0)) },
+    Gate { base: 0x4800_0400, en: &[(OFF_AHB2ENR, 1)], rst: Some((OFF_AHB2RSTR, 1)) },
+    Gate { base: 0x4800_0800, en: &[(OFF_AHB2ENR, 2)], rst: Some((OFF_AHB2RSTR, 2)) },
+    Gate { base: 0x4800_0C00, en: &[(OFF_AHB2ENR, 3)], rst: Some((OFF_AHB2RSTR, 3)) },
+    Gate { base: 0x4800_1000, en: &[(OFF_AHB2ENR, 4)], rst: Some((OFF_AHB2RSTR, 4)) },
+    Gate { base: 0x4800_1400, en: &[(OFF_AHB2ENR, 5)], rst: Some((OFF_AHB2RSTR, 5)) },
+    Gate { base: 0x4800_1800, en: &[(OFF_AHB2ENR, 6)], rst: Some((OFF_AHB2RSTR, 6)) },
+    Gate { base: 0x5000_0000, en: &[(OFF_AHB2ENR, 13)], rst: Some((OFF_AHB2RSTR, 13)) }, // ADC1
+    Gate { base: 0x5000_0100, en: &[(OFF_AHB2ENR, 13)], rst: Some((OFF_AHB2RSTR, 13)) }, // ADC2
+    Gate { base: 0x5000_0300, en: &[(OFF_AHB2ENR, 13)], rst: Some((OFF_AHB2RSTR, 13)) }, // ADC12 common
+    Gate { base: 0x5000_0400, en: &[(OFF_AHB2ENR, 14)], rst: Some((OFF_AHB2RSTR, 14)) }, // ADC3
+    Gate { base: 0x5000_0500, en: &[(OFF_AHB2ENR, 14)], rst: Some((OFF_AHB2RSTR, 14)) }, // ADC4
+    Gate { base: 0x5000_0600, en: &[(OFF_AHB2ENR, 14)], rst: Some((OFF_AHB2RSTR, 14)) }, // ADC5
+    Gate { base: 0x5000_0700, en: &[(OFF_AHB2ENR, 14)], rst: Some((OFF_AHB2RSTR, 14)) }, // ADC345 common
+    Gate { base: 0x5000_0800, en: &[(OFF_AHB2ENR, 16)], rst: Some((OFF_AHB2RSTR, 16)) }, // DAC1
+    Gate { base: 0x5000_0C00, en: &[(OFF_AHB2ENR, 17)], rst: Some((OFF_AHB2RSTR, 17)) }, // DAC2
+    Gate { base: 0x5000_1000, en: &[(OFF_AHB2ENR, 18)], rst: Some((OFF_AHB2RSTR, 18)) }, // DAC3
+    Gate { base: 0x5000_1400, en: &[(OFF_AHB2ENR, 19)], rst: Some((OFF_AHB2RSTR, 19)) }, // DAC4
+    Gate { base: 0x5006_0800, en: &[(OFF_AHB2ENR, 26)], rst: Some((OFF_AHB2RSTR, 26)) }, // RNG
+    Gate { base: 0x4000_0000, en: &[(OFF_APB1ENR1, 0)], rst: Some((OFF_APB1RSTR1, 0)) }, // TIM2
+    Gate { base: 0x4000_0400, en: &[(OFF_APB1ENR1, 1)], rst: Some((OFF_APB1RSTR1, 1)) }, // TIM3
+    Gate { base: 0x4000_0800, en: &[(OFF_APB1ENR1, 2)], rst: Some((OFF_APB1RSTR1, 2)) }, // TIM4
+    Gate { base: 0x4000_0C00, en: &[(OFF_APB1ENR1, 3)], rst: Some((OFF_APB1RSTR1, 3)) }, // TIM5
+    Gate { base: 0x4000_1000, en: &[(OFF_APB1ENR1, 4)], rst: Some((OFF_APB1RSTR1, 4)) }, // TIM6
+    Gate { base: 0x4000_1400, en: &[(OFF_APB1ENR1, 5)], rst: Some((OFF_APB1RSTR1, 5)) }, // TIM7
+    Gate { base: 0x4000_2000, en: &[(OFF_APB1ENR1, 8)], rst: Some((OFF_APB1RSTR1, 8)) }, // CRS
+    Gate { base: 0x4000_2400, en: &[(OFF_APB1ENR1, 10)], rst: None }, // TAMP
+    Gate { base: 0x4000_2800, en: &[(OFF_APB1ENR1, 10)], rst: None }, // RTC
+    Gate { base: 0x4000_2C00, en: &[(OFF_APB1ENR1, 11)], rst: None }, // WWDG
+    Gate { base: 0x4000_3800, en: &[(OFF_APB1ENR1, 14)], rst: Some((OFF_APB1RSTR1, 14)) }, // SPI2
+    Gate { base: 0x4000_3C00, en: &[(OFF_APB1ENR1, 15)], rst: Some((OFF_APB1RSTR1, 15)) }, // SPI3
+    Gate { base: 0x4000_4400, en: &[(OFF_APB1ENR1, 17)], rst: Some((OFF_APB1RSTR1, 17)) }, // USART2
+    Gate { base: 0x4000_4800, en: &[(OFF_APB1ENR1, 18)], rst: Some((OFF_APB1RSTR1, 18)) }, // USART3
+    Gate { base: 0x4000_4C00, en: &[(OFF_APB1ENR1, 19)], rst: Some((OFF_APB1RSTR1, 19)) }, // UART4
+    Gate { base: 0x4000_5000, en: &[(OFF_APB1ENR1, 20)], rst: Some((OFF_APB1RSTR1, 20)) }, // UART5
+    Gate { base: 0x4000_5400, en: &[(OFF_APB1ENR1, 21)], rst: Some((OFF_APB1RSTR1, 21)) }, // I2C1
+    Gate { base: 0x4000_5800, en: &[(OFF_APB1ENR1, 22)], rst: Some((OFF_APB1RSTR1, 22)) }, // I2C2
+    Gate { base: 0x4000_5C00, en: &[(OFF_APB1ENR1, 23)], rst: Some((OFF_APB1RSTR1, 23)) }, // USB
+    Gate { base: 0x4000_7000, en: &[(OFF_APB1ENR1, 28)], rst: Some((OFF_APB1RSTR1, 28)) }, // PWR
+    Gate { base: 0x4000_7800, en: &[(OFF_APB1ENR1, 30)], rst: Some((OFF_APB1RSTR1, 30)) }, // I2C3
+    Gate { base: 0x4000_7C00, en: &[(OFF_APB1ENR1, 31)], rst: Some((OFF_APB1RSTR1, 31)) }, // LPTIM1
+    Gate { base: 0x4000_8000, en: &[(OFF_APB1ENR2, 0)], rst: Some((OFF_APB1RSTR2, 0)) }, // LPUART1
+    Gate { base: 0x4000_8400, en: &[(OFF_APB1ENR2, 1)], rst: Some((OFF_APB1RSTR2, 1)) }, // I2C4
+    Gate { base: 0x4000_A000, en: &[(OFF_APB1ENR2, 8)], rst: Some((OFF_APB1RSTR2, 8)) }, // UCPD1
+    Gate { base: 0x4001_0000, en: SYSCFG_EN, rst: SYSCFG_RST }, // SYSCFG
+    Gate { base: 0x4001_0030, en: SYSCFG_EN, rst: SYSCFG_RST }, // VREFBUF
+    Gate { base: 0x4001_0200, en: SYSCFG_EN, rst: SYSCFG_RST }, // COMP1
+    Gate { base: 0x4001_0300, en: SYSCFG_EN, rst: SYSCFG_RST }, // OPAMP1
+    Gate { base: 0x4001_2C00, en: &[(OFF_APB2ENR, 11)], rst: Some((OFF_APB2RSTR, 11)) }, // TIM1
+    Gate { base: 0x4001_3000, en: &[(OFF_APB2ENR, 12)], rst: Some((OFF_APB2RSTR, 12)) }, // SPI1
+    Gate { base: 0x4001_3400, en: &[(OFF_APB2ENR, 13)], rst: Some((OFF_APB2RSTR, 13)) }, // TIM8
+    Gate { base: 0x4001_3800, en: &[(OFF_APB2ENR, 14)], rst: Some((OFF_APB2RSTR, 14)) }, // USART1
+    Gate { base: 0x4001_4000, en: &[(OFF_APB2ENR, 16)], rst: Some((OFF_APB2RSTR, 16)) }, // TIM15
+    Gate { base: 0x4001_4400, en: &[(OFF_APB2ENR, 17)], rst: Some((OFF_APB2RSTR, 17)) }, // TIM16
+    Gate { base: 0x4001_4800, en: &[(OFF_APB2ENR, 18)], rst: Some((OFF_APB2RSTR, 18)) }, // TIM17
+    Gate { base: 0x4001_5000, en: &[(OFF_APB2ENR, 20)], rst: Some((OFF_APB2RSTR, 20)) }, // TIM20
+    Gate { base: 0x4001_5400, en: &[(OFF_APB2ENR, 21)], rst: Some((OFF_APB2RSTR, 21)) }, // SAI1
+    Gate { base: 0x4001_6800, en: &[(OFF_APB2ENR, 26)], rst: Some((OFF_APB2RSTR, 26)) }, // HRTIM1
 ];
 
 // CR bits (RM0440 §7.4.1).
