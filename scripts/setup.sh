@@ -2,11 +2,12 @@
 # Idempotent toolchain installer for a fresh Debian machine (run as root; CI has no stdin).
 #
 # Installs Debian's Rust toolchain (rustc-web/cargo-web + rust-web-src for `-Zbuild-std=core`
-# on thumbv7em-none-eabihf — rustup targets are not needed), the lld-22 linker, QEMU for Arm and
-# libfontconfig1-dev (host-side plotting). apt is skipped entirely when everything is present.
+# on thumbv7em-none-eabihf — rustup targets are not needed), the lld-22 linker, QEMU for Arm,
+# libfontconfig1-dev (host-side plotting) and, for the board model (board-model/, test-only, GPL),
+# libunicorn-dev with libclang-dev (bindgen). apt is skipped entirely when everything is present.
 set -euo pipefail
 
-PACKAGES=(rustc-web cargo-web rust-web-src lld-22 qemu-system-arm libfontconfig1-dev)
+PACKAGES=(rustc-web cargo-web rust-web-src lld-22 qemu-system-arm libfontconfig1-dev libunicorn-dev libclang-dev)
 
 export DEBIAN_FRONTEND=noninteractive
 

@@ -62,6 +62,50 @@ pub fn note_reset(rcc: &mut dyn Peripheral, cause: ResetCause) {
     }
 }
 
+/// A model's own fault (a behaviour it found but cannot represent), checked after each slice.
+pub fn model_fault(p: &dyn Peripheral) -> Option<String> {
+    let a = p.as_any();
+    if let Some(x) = a.downcast_ref::<adc_f4::AdcF4>() {
+        return x.fault();
+    }
+    if let Some(x) = a.downcast_ref::<adc_g4::AdcG4>() {
+        return x.fault();
+    }
+    None
+}
+
+/// After a write to RCC or PWR: the blocks RCC just reset (APBxRSTR/AHBxRSTR), and the backup
+/// domain's write protection (PWR_CR.DBP / PWR_CR1.DBP gates RCC_BDCR).
+pub fn after_rcc_or_pwr_write(periphs: &mut [Mapped], rcc: usize, now: Time) {
+    let dbp = periphs.iter().find_map(|m| {
+        let a = m.p.as_any();
+        a.downcast_ref::<misc::PwrF4>()
+            .map(|p| p.dbp())
+            .or_else(|| a.downcast_ref::<misc::PwrG4>().map(|p| p.dbp()))
+    });
+    let resets = {
+        let r = periphs[rcc].p.as_any_mut();
+        if let Some(r) = r.downcast_mut::<rcc_f4::RccF4>() {
+            if let Some(d) = dbp {
+                r.set_backup_domain_writable(d);
+            }
+            r.take_peripheral_resets()
+        } else if let Some(r) = r.downcast_mut::<rcc_g4::RccG4>() {
+            if let Some(d) = dbp {
+                r.set_backup_domain_writable(d);
+            }
+            r.take_peripheral_resets()
+        } else {
+            Vec::new()
+        }
+    };
+    for base in resets {
+        if let Some(m) = periphs.iter_mut().find(|m| m.base == base) {
+            m.p.reset(now);
+        }
+    }
+}
+
 fn map(base: u32, size: u32, p: impl Peripheral + 'static) -> Mapped {
     Mapped {
         base,
@@ -168,9 +212,9 @@ fn f446(input: Input) -> (Vec<Mapped>, ChipSpec) {
         map(0x4001_2000, 0x400, adc_f4::AdcF4::new(18, input)),
         map(0x4001_3800, 0x400, misc::Syscfg::new()),
         map(0x4001_3C00, 0x400, misc::Exti::new()),
-        map(0x4002_0000, 0x400, gpio::Gpio::new('A')),
-        map(0x4002_0400, 0x400, gpio::Gpio::new('B')),
-        map(0x4002_0800, 0x400, gpio::Gpio::new('C')),
+        map(0x4002_0000, 0x400, gpio::Gpio::new(gpio::Chip::F446, 'A')),
+        map(0x4002_0400, 0x400, gpio::Gpio::new(gpio::Chip::F446, 'B')),
+        map(0x4002_0800, 0x400, gpio::Gpio::new(gpio::Chip::F446, 'C')),
         map(0x4002_3800, 0x400, rcc_f4::RccF4::new()),
         map(0x4002_3C00, 0x400, misc::FlashF4::new()),
         map(
@@ -277,9 +321,9 @@ fn g474(input: Input) -> (Vec<Mapped>, ChipSpec) {
         map(0x4002_0800, 0x400, dma_g4::DmaMux::new()),
         map(0x4002_1000, 0x400, rcc_g4::RccG4::new()),
         map(0x4002_2000, 0x400, misc::FlashG4::new()),
-        map(0x4800_0000, 0x400, gpio::Gpio::new('A')),
-        map(0x4800_0400, 0x400, gpio::Gpio::new('B')),
-        map(0x4800_0800, 0x400, gpio::Gpio::new('C')),
+        map(0x4800_0000, 0x400, gpio::Gpio::new(gpio::Chip::G474, 'A')),
+        map(0x4800_0400, 0x400, gpio::Gpio::new(gpio::Chip::G474, 'B')),
+        map(0x4800_0800, 0x400, gpio::Gpio::new(gpio::Chip::G474, 'C')),
         map(0x5000_0000, 0x400, adc_g4::AdcG4::new(18, input)),
         map(0xE004_2000, 0x400, misc::DbgMcu::new(0x469)),
     ];

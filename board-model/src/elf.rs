@@ -116,6 +116,63 @@ impl Image {
     }
 }
 
+impl Image {
+    /// A call site that panics: `movw r0, #lo; movt r0, #hi; bl <function>` where the symbol
+    /// name of `function` contains `callee` (e.g. "panic_const_div_by_zero", whose only
+    /// argument, the caller's `&Location`, is loaded into r0 by the two moves). Returns the
+    /// address of the `movw`.
+    pub fn call_site(&self, callee: &str) -> Option<u32> {
+        let (target, _) = self.symbol_containing(callee)?;
+        for s in &self.segments {
+            let hw = |i: usize| -> Option<u16> {
+                s.bytes
+                    .get(2 * i..2 * i + 2)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+            };
+            for i in 4..s.bytes.len() / 2 {
+                let (Some(h1), Some(h2)) = (hw(i), hw(i + 1)) else {
+                    break;
+                };
+                if h1 & 0xF800 != 0xF000 || h2 & 0xD000 != 0xD000 {
+                    continue;
+                }
+                let addr = s.addr + 2 * i as u32;
+                if bl_target(addr, h1, h2) != target {
+                    continue;
+                }
+                // movw r0 (T3: 11110 i 10 0100 imm4 | 0 imm3 Rd imm8) then movt r0 (…1100…).
+                let (Some(w1), Some(w2), Some(t1), Some(t2)) =
+                    (hw(i - 4), hw(i - 3), hw(i - 2), hw(i - 1))
+                else {
+                    continue;
+                };
+                if w1 & 0xFBF0 == 0xF240
+                    && (w2 >> 8) & 0xF == 0
+                    && t1 & 0xFBF0 == 0xF2C0
+                    && (t2 >> 8) & 0xF == 0
+                {
+                    return Some(addr - 8);
+                }
+            }
+        }
+        None
+    }
+}
+
+/// Target of a Thumb-2 BL (T1) at `addr` (ARMv7-M A7.7.18): I1 = !(J1 ^ S), I2 = !(J2 ^ S).
+fn bl_target(addr: u32, h1: u16, h2: u16) -> u32 {
+    let s = ((h1 >> 10) & 1) as u32;
+    let imm10 = (h1 & 0x3FF) as u32;
+    let j1 = ((h2 >> 13) & 1) as u32;
+    let j2 = ((h2 >> 11) & 1) as u32;
+    let imm11 = (h2 & 0x7FF) as u32;
+    let i1 = !(j1 ^ s) & 1;
+    let i2 = !(j2 ^ s) & 1;
+    let imm = (s << 24) | (i1 << 23) | (i2 << 22) | (imm10 << 12) | (imm11 << 1);
+    let off = ((imm << 7) as i32) >> 7;
+    addr.wrapping_add(4).wrapping_add(off as u32)
+}
+
 /// Number of Thumb instructions in `bytes` starting at an instruction boundary: a halfword whose
 /// top five bits are 0b11101, 0b11110 or 0b11111 starts a 32-bit instruction (ARMv7-M A5.1).
 pub fn thumb_instructions(bytes: &[u8]) -> u32 {
@@ -132,6 +189,12 @@ pub fn thumb_instructions(bytes: &[u8]) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn decodes_a_bl() {
+        // From the F446 image: at 0x080008D4, `bl 0x08004E74` is F004 FACE.
+        assert_eq!(bl_target(0x0800_08D4, 0xF004, 0xFACE), 0x0800_4E74);
+    }
 
     #[test]
     fn counts_mixed_16_and_32_bit_instructions() {

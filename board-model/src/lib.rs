@@ -3,9 +3,10 @@
 //! peripherals the firmware uses, in virtual time.
 //!
 //! License: GPL-2.0-or-later (links libunicorn). Test tooling only: nothing that ships links it.
-#[cfg(any())]
 pub mod board;
+pub mod check;
 pub mod elf;
 pub mod machine;
 pub mod periph;
+pub mod run;
 pub mod scs;

@@ -132,6 +132,27 @@ pub struct Sim {
     pending_reset: Option<ResetCause>,
     pub exceptions_taken: u64,
     pub sleeping_ticks: Time,
+    /// RTT bytes written by the firmware but not yet drained, as of the last peripheral write.
+    rtt_pending: usize,
+    /// IRQ lines held high by a fault injection (an interrupt storm).
+    pub stuck_irqs: Vec<u16>,
+    /// Times of DMA reads from peripheral registers (ADC results reaching memory).
+    pub dma_reads: Vec<Time>,
+    /// DMA transfers waiting for the Unicorn handle (RAM on one side).
+    ram_copies: Vec<RamCopy>,
+    /// Print every block executed (BOARD_MODEL_TRACE=blocks): for debugging the model.
+    trace_blocks: bool,
+    /// The block a slice was stopped in front of (its address is the PC to resume at).
+    stopped_at: Option<u32>,
+}
+
+/// A DMA transfer that touches RAM.
+#[derive(Clone, Copy, Debug)]
+enum RamCopy {
+    /// Peripheral value already read: write it to RAM (or a peripheral).
+    Write { to: u32, size: u8, value: u32 },
+    /// Source in RAM: read and write both wait.
+    Copy(crate::periph::Copy),
 }
 
 impl Sim {
@@ -143,11 +164,32 @@ impl Sim {
 
     /// Brings every peripheral up to `t`, in global time order, carrying what they signal.
     fn advance_periphs(&mut self, t: Time) {
+        let mut last = None;
+        let mut repeats = 0;
         loop {
             let next = self.periphs.iter().filter_map(|m| m.p.next_event()).min();
             let Some(n) = next.filter(|&n| n <= t) else {
                 break;
             };
+            if Some(n) == last {
+                repeats += 1;
+                if repeats > 1000 {
+                    let who: Vec<&str> = self
+                        .periphs
+                        .iter()
+                        .filter(|m| m.p.next_event() == Some(n))
+                        .map(|m| m.p.name())
+                        .collect();
+                    self.stop = Some(Stop::Fault(format!(
+                        "{who:?} keep reporting an event at {} µs after handling it (model bug)",
+                        micros(n)
+                    )));
+                    return;
+                }
+            } else {
+                repeats = 0;
+            }
+            last = Some(n);
             for m in &mut self.periphs {
                 m.p.advance(n, &mut self.sig);
             }
@@ -195,11 +237,47 @@ impl Sim {
                 for m in periphs.iter_mut() {
                     m.p.on_event(t, e, sig);
                 }
+                self.read_copy_sources(t);
             }
         }
-        let Sim { periphs, scs, .. } = self;
+        let now = self.now;
+        self.read_copy_sources(now);
+        let Sim {
+            periphs,
+            scs,
+            stuck_irqs,
+            ..
+        } = self;
         for m in periphs.iter() {
             m.p.irq_lines(&mut |n| scs.raise_irq(n));
+        }
+        for &n in stuck_irqs.iter() {
+            scs.raise_irq(n);
+        }
+    }
+
+    /// DMA copies whose source is a peripheral register are read at once, at the moment of the
+    /// request (the ADC must see its data register read before its next conversion ends); only
+    /// the write to RAM waits for the caller that holds the Unicorn handle.
+    fn read_copy_sources(&mut self, t: Time) {
+        let copies = std::mem::take(&mut self.sig.copies);
+        for c in copies {
+            if !Machine::is_periph(c.from) {
+                self.ram_copies.push(RamCopy::Copy(c));
+                continue;
+            }
+            self.dma_reads.push(t);
+            match self.bus_read_at(c.from, c.size, t) {
+                Ok(v) => self.ram_copies.push(RamCopy::Write {
+                    to: c.to,
+                    size: c.size,
+                    value: v,
+                }),
+                Err(e) => {
+                    self.stop
+                        .get_or_insert(Stop::Fault(format!("DMA read: {e}")));
+                }
+            }
         }
     }
 
@@ -230,7 +308,7 @@ impl Sim {
                 rec.push(PinEdge {
                     at,
                     high,
-                    log_bytes: self.log.len(),
+                    log_bytes: self.log.len() + self.rtt_pending,
                 });
             }
         }
@@ -249,13 +327,34 @@ impl Sim {
         }
     }
 
-    /// A CPU or DMA read of a peripheral register.
+    /// Reads a peripheral register as a debugger would (for checks; read side effects apply).
+    pub fn peek(&mut self, addr: u32) -> Result<u32, String> {
+        self.bus_read(addr, 4)
+    }
+
+    /// Turns recording of a timer channel's output on or off.
+    pub fn record(&mut self, timer: &str, channel: u8, on: bool) {
+        for m in &mut self.periphs {
+            if let Some(t) = m.p.as_any_mut().downcast_mut::<crate::periph::tim::Timer>() {
+                if t.name() == timer {
+                    t.record_channel(channel, on);
+                }
+            }
+        }
+    }
+
+    /// A CPU read of a peripheral register, now.
     fn bus_read(&mut self, addr: u32, size: u8) -> Result<u32, String> {
+        let now = self.now;
+        self.bus_read_at(addr, size, now)
+    }
+
+    /// A read of a peripheral register at time `now` (a DMA read happens at its request).
+    fn bus_read_at(&mut self, addr: u32, size: u8, now: Time) -> Result<u32, String> {
         let i = self
             .find(addr)
             .ok_or_else(|| format!("read of unmapped peripheral address 0x{addr:08X}"))?;
         self.check_clock(i, addr, None)?;
-        let now = self.now;
         let m = &mut self.periphs[i];
         let off = addr - m.base;
         let word =
@@ -296,7 +395,8 @@ impl Sim {
         let m = &mut self.periphs[i];
         m.p.write(now, off & !3, v, mask, &mut self.sig)
             .map_err(|u| describe(m.p.name(), m.base, u))?;
-        if i == self.chip.rcc {
+        if i == self.chip.rcc || self.periphs[i].p.name().starts_with("PWR") {
+            crate::board::after_rcc_or_pwr_write(&mut self.periphs, self.chip.rcc, now);
             self.set_clocks();
         }
         if i == self.chip.flash_if {
@@ -421,6 +521,12 @@ impl Machine {
             pending_reset: None,
             exceptions_taken: 0,
             sleeping_ticks: 0,
+            rtt_pending: 0,
+            stuck_irqs: Vec::new(),
+            dma_reads: Vec::new(),
+            ram_copies: Vec::new(),
+            trace_blocks: std::env::var("BOARD_MODEL_TRACE").is_ok_and(|v| v == "blocks"),
+            stopped_at: None,
         };
         let mut uc =
             Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, sim).map_err(uc_err)?;
@@ -452,6 +558,8 @@ impl Machine {
             Some(
                 |uc: &mut Unicorn<'_, Sim>, off: u64, size: usize, value: u64| {
                     let addr = 0x4000_0000u32 + off as u32;
+                    let pending = rtt_pending(uc);
+                    uc.get_data_mut().rtt_pending = pending;
                     let r = uc.get_data_mut().bus_write(addr, size as u8, value as u32);
                     finish_access(uc, r.map(|_| None));
                 },
@@ -464,7 +572,7 @@ impl Machine {
             .periphs
             .iter()
             .map(|m| m.base)
-            .filter(|&b| !Self::is_periph(b))
+            .filter(|&b| !(0x4000_0000..0x6000_0000).contains(&b))
             .collect();
         for base in extra {
             let page = base & !0xFFF;
@@ -543,6 +651,23 @@ impl Machine {
             }),
         )
         .map_err(uc_err)?;
+        // A read, write or fetch that nothing maps: name the address (the run stops).
+        uc.add_mem_hook(
+            unicorn_engine::unicorn_const::HookType::MEM_UNMAPPED,
+            1,
+            0,
+            |uc: &mut Unicorn<'_, Sim>, kind: unicorn_engine::unicorn_const::MemType, addr: u64, size: usize, value: i64| {
+                let r = |reg| uc.reg_read(reg).unwrap_or(0);
+                let (pc, lr, sp) = (r(RegisterARM::PC), r(RegisterARM::LR), r(RegisterARM::SP));
+                let s = uc.get_data_mut();
+                s.stop.get_or_insert(Stop::Fault(format!(
+                    "{kind:?} of {size} bytes at unmapped address 0x{addr:08X} (value 0x{value:X}), pc 0x{pc:08X} (block start), lr 0x{lr:08X}, sp 0x{sp:08X}, t = {} µs",
+                    micros(s.now)
+                )));
+                false
+            },
+        )
+        .map_err(uc_err)?;
         // Instruction counting and the slice deadline, per translated block.
         uc.add_block_hook(1, 0, |uc: &mut Unicorn<'_, Sim>, addr: u64, size: u32| {
             let s = uc.get_data_mut();
@@ -560,12 +685,35 @@ impl Machine {
                     (n, size)
                 }
             };
+            // A stop requested here ends the slice before this block runs (Unicorn checks the
+            // request at the block's start), so the block is counted only when it will run. The
+            // other hooks only set `replan`/`stop`: an emu_stop from inside a block would leave PC
+            // at the block's start with half its effects done.
+            if s.now >= s.deadline || s.replan || s.stop.is_some() {
+                // Unicorn does not sync PC at a block hook: after this stop, PC would hold the
+                // last value an instruction wrote (a branch target earlier on). The run loop sets
+                // PC to this block's address (a PC write from inside a hook would restart it).
+                s.stopped_at = Some(a);
+                let _ = uc.emu_stop();
+                return;
+            }
+            if s.trace_blocks {
+                let _ = s;
+                let r = |reg| uc.reg_read(reg).unwrap_or(0);
+                eprintln!(
+                    "block 0x{a:08X} +{size} r0={:X} r1={:X} r2={:X} r4={:X} r5={:X} xpsr={:X}",
+                    r(RegisterARM::R0),
+                    r(RegisterARM::R1),
+                    r(RegisterARM::R2),
+                    r(RegisterARM::R4),
+                    r(RegisterARM::R5),
+                    r(RegisterARM::XPSR)
+                );
+            }
+            let s = uc.get_data_mut();
             let cycles = s.block_cycles(a, insns, bytes);
             s.instructions += insns as u64;
             s.now += cycles * s.ticks_per_cycle;
-            if s.now >= s.deadline || s.replan || s.stop.is_some() {
-                let _ = uc.emu_stop();
-            }
         })
         .map_err(uc_err)?;
         // SEV sets the event register (Unicorn executes it as a NOP); CPSIE may unmask a pending
@@ -588,7 +736,6 @@ impl Machine {
                     let s = uc.get_data_mut();
                     if s.scs.any_pending_enabled() {
                         s.replan = true;
-                        let _ = uc.emu_stop();
                     }
                 },
             )
@@ -607,6 +754,8 @@ impl Machine {
                 7 => {
                     let pc = uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
                     uc.get_data_mut().stop = Some(Stop::Breakpoint { pc });
+                    // The run ends here: PC precision does not matter, and the CPU would
+                    // otherwise re-raise the exception without reaching a block hook.
                     let _ = uc.emu_stop();
                 }
                 n => {
@@ -661,8 +810,9 @@ impl Machine {
         for m in &mut s.periphs {
             m.p.reset(now);
         }
-        //NOTE_RESET
+        crate::board::note_reset(&mut *s.periphs[s.chip.rcc].p, cause);
         s.scs.reset();
+        s.stuck_irqs.clear();
         s.channel_levels.clear();
         s.event_register = false;
         s.pending_reset = None;
@@ -706,7 +856,25 @@ impl Machine {
                 .unwrap_or(Time::MAX);
             s.deadline = next.min(until).min(s.now + MAX_SLICE).max(s.now + 1);
             let pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0);
+            if std::env::var_os("BOARD_MODEL_TRACE").is_some() {
+                let s = self.uc.get_data();
+                let evs: Vec<String> = s
+                    .periphs
+                    .iter()
+                    .filter_map(|m| m.p.next_event().map(|t| format!("{}@{}", m.p.name(), t)))
+                    .collect();
+                eprintln!(
+                    "slice pc=0x{pc:08X} now={} deadline={} next={:?}",
+                    s.now, s.deadline, evs
+                );
+            }
+            self.uc.get_data_mut().stopped_at = None;
             let r = self.uc.emu_start(pc | 1, 0, 0, 0);
+            if let Some(a) = self.uc.get_data_mut().stopped_at.take() {
+                if r.is_ok() {
+                    let _ = self.uc.reg_write(RegisterARM::PC, (a | 1) as u64);
+                }
+            }
             if let Err(e) = r {
                 if let Some(stop) = self.on_cpu_error(e) {
                     return Some(stop);
@@ -821,7 +989,15 @@ impl Machine {
         }
     }
 
-    fn takeable(&self) -> Result<Option<u16>, String> {
+    fn takeable(&mut self) -> Result<Option<u16>, String> {
+        {
+            let Sim {
+                scs, stuck_irqs, ..
+            } = self.uc.get_data_mut();
+            for &n in stuck_irqs.iter() {
+                scs.raise_irq(n);
+            }
+        }
         let uc = &self.uc;
         let primask = uc.reg_read(RegisterARM::PRIMASK).map_err(uc_err)? & 1 != 0;
         let basepri = uc.reg_read(RegisterARM::BASEPRI).map_err(uc_err)? as u8;
@@ -910,22 +1086,29 @@ impl Machine {
         Ok(())
     }
 
-    /// Carries out DMA copies that touch RAM (peripheral ↔ memory).
+    /// Carries out DMA transfers that touch RAM.
     fn copy_dma(&mut self) {
         loop {
-            let copies = std::mem::take(&mut self.uc.get_data_mut().sig.copies);
+            let copies = std::mem::take(&mut self.uc.get_data_mut().ram_copies);
             if copies.is_empty() {
                 return;
             }
             for c in copies {
-                let v = match self.read_any(c.from, c.size) {
-                    Ok(v) => v,
-                    Err(e) => {
-                        self.uc.get_data_mut().stop = Some(Stop::Fault(format!("DMA read: {e}")));
-                        return;
-                    }
+                let (to, size, value) = match c {
+                    RamCopy::Write { to, size, value } => (to, size, value),
+                    RamCopy::Copy(c) => match self.read_any(c.from, c.size) {
+                        Ok(v) => (c.to, c.size, v),
+                        Err(e) => {
+                            self.uc.get_data_mut().stop =
+                                Some(Stop::Fault(format!("DMA read: {e}")));
+                            return;
+                        }
+                    },
                 };
-                if let Err(e) = self.write_any(c.to, c.size, v) {
+                if std::env::var_os("BOARD_MODEL_TRACE").is_some() {
+                    eprintln!("dma write 0x{to:08X} <- 0x{value:X} ({size} B)");
+                }
+                if let Err(e) = self.write_any(to, size, value) {
                     self.uc.get_data_mut().stop = Some(Stop::Fault(format!("DMA write: {e}")));
                     return;
                 }
@@ -934,7 +1117,7 @@ impl Machine {
         }
     }
 
-    fn is_periph(addr: u32) -> bool {
+    pub(crate) fn is_periph(addr: u32) -> bool {
         (0x4000_0000..0x6000_0000).contains(&addr) || (0xE004_0000..0xE010_0000).contains(&addr)
     }
 
@@ -991,10 +1174,43 @@ impl Machine {
         s.log.extend_from_slice(&out);
     }
 
+    /// Runs in short steps until the core is in thread mode (IPSR = 0), then sets PC to `addr`.
+    pub fn divert_in_thread_mode(&mut self, addr: u32) -> Option<Stop> {
+        for _ in 0..10_000 {
+            let ipsr = self.uc.reg_read(RegisterARM::IPSR).unwrap_or(1) & 0x1FF;
+            if ipsr == 0 {
+                let _ = self.uc.reg_write(RegisterARM::PC, (addr | 1) as u64);
+                return None;
+            }
+            let t = self.now() + TICKS_PER_S / 10_000_000;
+            if let Some(s) = self.run_until(t) {
+                return Some(s);
+            }
+        }
+        Some(Stop::Fault("the core never returned to thread mode".into()))
+    }
+
     /// Microseconds of virtual time now.
     pub fn now_us(&self) -> u64 {
         micros(self.now())
     }
+}
+
+/// Bytes in the RTT up-buffer not yet read (write − read offsets, modulo its size).
+fn rtt_pending(uc: &Unicorn<'_, Sim>) -> usize {
+    let Some(cb) = uc.get_data().rtt else {
+        return 0;
+    };
+    let mut d = [0u8; 12];
+    if uc.mem_read(cb as u64 + 24 + 8, &mut d).is_err() {
+        return 0;
+    }
+    let w = |i: usize| u32::from_le_bytes(d[i..i + 4].try_into().unwrap()) as usize;
+    let (size, write, read) = (w(0), w(4), w(8));
+    if size == 0 || write >= size || read >= size {
+        return 0;
+    }
+    (write + size - read) % size
 }
 
 fn s_reg(i: u32) -> RegisterARM {
@@ -1008,12 +1224,7 @@ fn s_reg(i: u32) -> RegisterARM {
 /// change stops the slice so the board re-plans.
 fn finish_access(uc: &mut Unicorn<'_, Sim>, r: Result<Option<u32>, String>) -> Option<u32> {
     match r {
-        Ok(v) => {
-            if uc.get_data().replan {
-                let _ = uc.emu_stop();
-            }
-            v
-        }
+        Ok(v) => v,
         Err(msg) => {
             let pc = uc.reg_read(RegisterARM::PC).unwrap_or(0);
             let s = uc.get_data_mut();
@@ -1023,7 +1234,6 @@ fn finish_access(uc: &mut Unicorn<'_, Sim>, r: Result<Option<u32>, String>) -> O
                     micros(s.now)
                 )));
             }
-            let _ = uc.emu_stop();
             None
         }
     }
@@ -1033,8 +1243,9 @@ fn finish_access(uc: &mut Unicorn<'_, Sim>, r: Result<Option<u32>, String>) -> O
 /// handler branched to.
 fn exception_return(uc: &mut Unicorn<'_, Sim>) -> Result<(), String> {
     let pc = uc.reg_read(RegisterARM::PC).map_err(uc_err)? as u32;
+    // PC holds the EXC_RETURN value with bit 0 cleared (an interworking branch target).
     let exc_return = if pc >= 0xFFFF_FF00 {
-        pc
+        pc | 1
     } else {
         uc.reg_read(RegisterARM::LR).map_err(uc_err)? as u32
     };
@@ -1114,13 +1325,20 @@ fn exception_return(uc: &mut Unicorn<'_, Sim>) -> Result<(), String> {
     // Tail-chaining: whatever can be taken now is taken before returning to the interrupted code.
     let primask = uc.reg_read(RegisterARM::PRIMASK).map_err(uc_err)? & 1 != 0;
     let basepri = uc.reg_read(RegisterARM::BASEPRI).map_err(uc_err)? as u8;
+    {
+        let Sim {
+            scs, stuck_irqs, ..
+        } = uc.get_data_mut();
+        for &n in stuck_irqs.iter() {
+            scs.raise_irq(n);
+        }
+    }
     let s = uc.get_data();
     if s.scs
         .next_to_take(s.scs.execution_priority(primask, basepri, false))
         .is_some()
     {
         uc.get_data_mut().replan = true;
-        let _ = uc.emu_stop();
     }
     Ok(())
 }

@@ -82,7 +82,10 @@ impl Gpio {
             Chip::F446 => 'H',
             Chip::G474 => 'G',
         };
-        assert!(('A'..=last).contains(&port), "{chip:?} has no GPIO port {port}");
+        assert!(
+            ('A'..=last).contains(&port),
+            "{chip:?} has no GPIO port {port}"
+        );
         let mut g = Gpio {
             chip,
             port,
@@ -300,7 +303,9 @@ impl Gpio {
 
 impl Peripheral for Gpio {
     fn name(&self) -> &'static str {
-        const NAMES: [&str; 8] = ["GPIOA", "GPIOB", "GPIOC", "GPIOD", "GPIOE", "GPIOF", "GPIOG", "GPIOH"];
+        const NAMES: [&str; 8] = [
+            "GPIOA", "GPIOB", "GPIOC", "GPIOD", "GPIOE", "GPIOF", "GPIOG", "GPIOH",
+        ];
         NAMES[(self.port as u8 - b'A') as usize]
     }
 
@@ -327,12 +332,22 @@ impl Peripheral for Gpio {
             OFF_AFRH => Ok(self.afr[1]),
             _ => Err(Unmodelled::read(
                 offset,
-                format!("GPIO{} register at offset {offset:#x} does not exist", self.port),
+                format!(
+                    "GPIO{} register at offset {offset:#x} does not exist",
+                    self.port
+                ),
             )),
         }
     }
 
-    fn write(&mut self, _now: Time, offset: u32, value: u32, mask: u32, _out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        _now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        _out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         match offset {
             OFF_MODER => {
                 let m = mask & !self.locked_mask2();
@@ -379,7 +394,10 @@ impl Peripheral for Gpio {
                 return Err(Unmodelled::write(
                     offset,
                     value,
-                    format!("GPIO{} register at offset {offset:#x} does not exist", self.port),
+                    format!(
+                        "GPIO{} register at offset {offset:#x} does not exist",
+                        self.port
+                    ),
                 ))
             }
         }
@@ -405,7 +423,8 @@ mod tests {
     use super::*;
 
     fn w(g: &mut Gpio, off: u32, v: u32) {
-        g.write(0, off, v, 0xFFFF_FFFF, &mut Signals::default()).unwrap();
+        g.write(0, off, v, 0xFFFF_FFFF, &mut Signals::default())
+            .unwrap();
     }
     fn r(g: &mut Gpio, off: u32) -> u32 {
         g.read(0, off, &mut Signals::default()).unwrap()
@@ -471,8 +490,14 @@ mod tests {
         let mut g = Gpio::new(Chip::F446, 'B');
         w(&mut g, OFF_ODR, 0xFFFF);
         // A halfword store to BSRR+2 (the BR half): lanes 31:16 only.
-        g.write(0, OFF_BSRR, 0x0020_0000, 0xFFFF_0000, &mut Signals::default())
-            .unwrap();
+        g.write(
+            0,
+            OFF_BSRR,
+            0x0020_0000,
+            0xFFFF_0000,
+            &mut Signals::default(),
+        )
+        .unwrap();
         assert_eq!(g.odr(), 0xFFDF);
     }
 
@@ -483,7 +508,9 @@ mod tests {
         w(&mut g, OFF_BRR, 0x0003);
         assert_eq!(g.odr(), 0x00FC);
         let mut f = Gpio::new(Chip::F446, 'A');
-        assert!(f.write(0, OFF_BRR, 1, 0xFFFF_FFFF, &mut Signals::default()).is_err());
+        assert!(f
+            .write(0, OFF_BRR, 1, 0xFFFF_FFFF, &mut Signals::default())
+            .is_err());
     }
 
     /// embassy `Output::new(PB5, Level::Low, Speed::Low)`: BSRR BR5, PUPDR none, OTYPER push-pull,

@@ -175,7 +175,10 @@ impl Iwdg {
         }
         let t = self.frozen_since.map_or(now, |f| f.min(now));
         let steps = t.saturating_sub(self.base) / self.counter_period_ticks(self.pr_eff);
-        Some(self.count_at_base.saturating_sub(steps.min(u32::MAX as u64) as u32))
+        Some(
+            self.count_at_base
+                .saturating_sub(steps.min(u32::MAX as u64) as u32),
+        )
     }
 
     /// When the counter will reset the chip if nobody reloads it, taking pending prescaler
@@ -240,7 +243,9 @@ impl Iwdg {
         if self.running && pr.min(6) != self.pr_eff.min(6) {
             let t = self.frozen_since.map_or(at, |f| f.min(at));
             let steps = t.saturating_sub(self.base) / self.counter_period_ticks(self.pr_eff);
-            self.count_at_base = self.count_at_base.saturating_sub(steps.min(u32::MAX as u64) as u32);
+            self.count_at_base = self
+                .count_at_base
+                .saturating_sub(steps.min(u32::MAX as u64) as u32);
             self.base = t;
             if let Some(f) = self.frozen_since.as_mut() {
                 // Frozen: the counter resumes from `base` when unfrozen; re-anchor the freeze.
@@ -333,7 +338,14 @@ impl Peripheral for Iwdg {
         }
     }
 
-    fn write(&mut self, now: Time, offset: u32, value: u32, mask: u32, out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         self.settle(now);
         // RM0390 §19.4 / RM0440 §41.4: half-word or word access only.
         if mask & 0xFFFF != 0xFFFF {
@@ -386,7 +398,9 @@ impl Peripheral for Iwdg {
                 Ok(())
             }
             OFF_RLR => {
-                if let Some(v) = self.protected_write(now, offset, value, mask, 0xFFF, "RLR", "RVU")? {
+                if let Some(v) =
+                    self.protected_write(now, offset, value, mask, 0xFFF, "RLR", "RVU")?
+                {
                     self.rlr = v;
                     self.rlr_pending = Some(Pending {
                         at: now + UPDATE_LSI_CYCLES * self.lsi_period_ticks(),
@@ -396,7 +410,9 @@ impl Peripheral for Iwdg {
                 Ok(())
             }
             OFF_WINR if self.has_winr => {
-                if let Some(v) = self.protected_write(now, offset, value, mask, 0xFFF, "WINR", "WVU")? {
+                if let Some(v) =
+                    self.protected_write(now, offset, value, mask, 0xFFF, "WINR", "WVU")?
+                {
                     self.winr = v;
                     self.winr_pending = Some(Pending {
                         at: now + UPDATE_LSI_CYCLES * self.lsi_period_ticks(),
@@ -677,8 +693,11 @@ mod tests {
     #[test]
     fn byte_writes_are_reported() {
         let mut i = Iwdg::new(false);
-        assert!(i.write(0, OFF_KR, 0x55, 0xFF, &mut Signals::default()).is_err());
+        assert!(i
+            .write(0, OFF_KR, 0x55, 0xFF, &mut Signals::default())
+            .is_err());
         // A half-word store is fine.
-        i.write(0, OFF_KR, KEY_UNLOCK, 0xFFFF, &mut Signals::default()).unwrap();
+        i.write(0, OFF_KR, KEY_UNLOCK, 0xFFFF, &mut Signals::default())
+            .unwrap();
     }
 }

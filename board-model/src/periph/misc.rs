@@ -41,7 +41,13 @@ pub fn f446_min_wait_states(hclk_hz: u64) -> u32 {
 /// One write to FLASH_ACR: when, and the register value it left.
 pub type AcrWrite = (Time, u32);
 
-fn acr_cache_reset_check(offset: u32, old: u32, new: u32, value: u32, chip: &str) -> Result<(), Unmodelled> {
+fn acr_cache_reset_check(
+    offset: u32,
+    old: u32,
+    new: u32,
+    value: u32,
+    chip: &str,
+) -> Result<(), Unmodelled> {
     // RM0390 §3.8.1 / RM0440 §5.7.1: ICRST/DCRST "can be written only when the cache is
     // disabled". Setting one while its cache is still on (before this write) is outside what
     // the manuals define, so it is reported.
@@ -49,14 +55,18 @@ fn acr_cache_reset_check(offset: u32, old: u32, new: u32, value: u32, chip: &str
         return Err(Unmodelled::write(
             offset,
             value,
-            format!("{chip} FLASH_ACR.ICRST set while ICEN = 1 (allowed only with the I-cache off)"),
+            format!(
+                "{chip} FLASH_ACR.ICRST set while ICEN = 1 (allowed only with the I-cache off)"
+            ),
         ));
     }
     if new & ACR_DCRST != 0 && old & ACR_DCRST == 0 && old & ACR_DCEN != 0 {
         return Err(Unmodelled::write(
             offset,
             value,
-            format!("{chip} FLASH_ACR.DCRST set while DCEN = 1 (allowed only with the D-cache off)"),
+            format!(
+                "{chip} FLASH_ACR.DCRST set while DCEN = 1 (allowed only with the D-cache off)"
+            ),
         ));
     }
     Ok(())
@@ -132,7 +142,14 @@ impl Peripheral for FlashF4 {
         }
     }
 
-    fn write(&mut self, now: Time, offset: u32, value: u32, mask: u32, _out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        _out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         match offset {
             0x00 => {
                 // LATENCY[3:0], PRFTEN, ICEN, DCEN, ICRST, DCRST (RM0390 §3.8.1).
@@ -271,7 +288,14 @@ impl Peripheral for FlashG4 {
         }
     }
 
-    fn write(&mut self, now: Time, offset: u32, value: u32, mask: u32, _out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        _out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         match offset {
             0x00 => {
                 // LATENCY[3:0], PRFTEN, ICEN, DCEN, ICRST, DCRST, RUN_PD, SLEEP_PD, DBG_SWEN.
@@ -416,7 +440,14 @@ impl Peripheral for PwrF4 {
         }
     }
 
-    fn write(&mut self, _now: Time, offset: u32, value: u32, mask: u32, _out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        _now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        _out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         match offset {
             0x00 => {
                 // Writable: LPDS, PDDS, PVDE, PLS, DBP, FPDS, LPUDS, MRUDS, ADCDC1, VOS, ODEN,
@@ -430,7 +461,10 @@ impl Peripheral for PwrF4 {
                         "F446 PWR_CR.UDEN (under-drive in Stop mode) is not modelled",
                     ));
                 }
-                if new & F4_CR_ODSWEN != 0 && self.cr & F4_CR_ODSWEN == 0 && self.csr_read() & F4_CSR_ODRDY == 0 {
+                if new & F4_CR_ODSWEN != 0
+                    && self.cr & F4_CR_ODSWEN == 0
+                    && self.csr_read() & F4_CSR_ODRDY == 0
+                {
                     // "The ODSWEN bit must only be set when ODRDY flag is set."
                     return Err(Unmodelled::write(
                         offset,
@@ -582,7 +616,14 @@ impl Peripheral for PwrG4 {
         }
     }
 
-    fn write(&mut self, _now: Time, offset: u32, value: u32, mask: u32, _out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        _now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        _out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         match offset {
             0x00 => {
                 // LPMS[2:0], FPD_STOP, DBP, VOS[10:9], LPR.
@@ -674,7 +715,14 @@ impl Peripheral for Syscfg {
             format!("SYSCFG register at offset {offset:#x} is not modelled (nothing in the firmware's init uses it)"),
         ))
     }
-    fn write(&mut self, _now: Time, offset: u32, value: u32, _mask: u32, _out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        _now: Time,
+        offset: u32,
+        value: u32,
+        _mask: u32,
+        _out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         Err(Unmodelled::write(
             offset,
             value,
@@ -714,7 +762,14 @@ impl Peripheral for Exti {
             format!("EXTI register at offset {offset:#x} is not modelled (no EXTI line is used)"),
         ))
     }
-    fn write(&mut self, _now: Time, offset: u32, value: u32, _mask: u32, _out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        _now: Time,
+        offset: u32,
+        value: u32,
+        _mask: u32,
+        _out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         Err(Unmodelled::write(
             offset,
             value,
@@ -758,7 +813,9 @@ impl DbgMcu {
         match dev_id {
             0x421 => Self::f446(),
             0x469 => Self::g474(),
-            _ => panic!("DbgMcu::new: DEV_ID {dev_id:#x} is neither the F446 (0x421) nor the G474 (0x469)"),
+            _ => panic!(
+                "DbgMcu::new: DEV_ID {dev_id:#x} is neither the F446 (0x421) nor the G474 (0x469)"
+            ),
         }
     }
 
@@ -868,7 +925,14 @@ impl Peripheral for DbgMcu {
         }
     }
 
-    fn write(&mut self, _now: Time, offset: u32, value: u32, mask: u32, _out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        _now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        _out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         if mask != 0xFFFF_FFFF {
             return Err(Unmodelled::write(
                 offset,
@@ -877,7 +941,11 @@ impl Peripheral for DbgMcu {
             ));
         }
         match offset {
-            0x00 => Err(Unmodelled::write(offset, value, "DBGMCU_IDCODE is read-only")),
+            0x00 => Err(Unmodelled::write(
+                offset,
+                value,
+                "DBGMCU_IDCODE is read-only",
+            )),
             0x04 => {
                 // DBG_SLEEP, DBG_STOP, DBG_STANDBY, TRACE_IOEN, TRACE_MODE.
                 let new = value & 0xE7;
@@ -921,7 +989,8 @@ mod tests {
     use super::*;
 
     fn w<P: Peripheral>(p: &mut P, now: Time, off: u32, v: u32) {
-        p.write(now, off, v, 0xFFFF_FFFF, &mut Signals::default()).unwrap();
+        p.write(now, off, v, 0xFFFF_FFFF, &mut Signals::default())
+            .unwrap();
     }
     fn r<P: Peripheral>(p: &mut P, off: u32) -> u32 {
         p.read(0, off, &mut Signals::default()).unwrap()
@@ -939,11 +1008,26 @@ mod tests {
 
     #[test]
     fn g474_wait_state_table() {
-        assert_eq!(g474_min_wait_states(150_000_000, G4Range::Range1Normal), Some(4));
-        assert_eq!(g474_min_wait_states(120_000_000, G4Range::Range1Normal), Some(3));
-        assert_eq!(g474_min_wait_states(170_000_000, G4Range::Range1Boost), Some(4));
-        assert_eq!(g474_min_wait_states(136_000_000, G4Range::Range1Boost), Some(3));
-        assert_eq!(g474_min_wait_states(160_000_000, G4Range::Range1Normal), None);
+        assert_eq!(
+            g474_min_wait_states(150_000_000, G4Range::Range1Normal),
+            Some(4)
+        );
+        assert_eq!(
+            g474_min_wait_states(120_000_000, G4Range::Range1Normal),
+            Some(3)
+        );
+        assert_eq!(
+            g474_min_wait_states(170_000_000, G4Range::Range1Boost),
+            Some(4)
+        );
+        assert_eq!(
+            g474_min_wait_states(136_000_000, G4Range::Range1Boost),
+            Some(3)
+        );
+        assert_eq!(
+            g474_min_wait_states(160_000_000, G4Range::Range1Normal),
+            None
+        );
         assert_eq!(g474_min_wait_states(16_000_000, G4Range::Range2), Some(1));
     }
 
@@ -970,7 +1054,13 @@ mod tests {
         assert_eq!(f.acr_history()[0].0, 100);
         // Resetting a cache that is on is reported.
         assert!(f
-            .write(300, 0, 0x0705 | ACR_ICRST, 0xFFFF_FFFF, &mut Signals::default())
+            .write(
+                300,
+                0,
+                0x0705 | ACR_ICRST,
+                0xFFFF_FFFF,
+                &mut Signals::default()
+            )
             .is_err());
         // System reset: ACR back to 0, history kept.
         f.reset(400);
@@ -1021,7 +1111,13 @@ mod tests {
         assert_eq!(r(&mut p, 4) & (F4_CSR_ODRDY | F4_CSR_ODSWRDY), 0);
         // ODSWEN without ODRDY is reported.
         assert!(p
-            .write(0, 0, 0xC000 | F4_CR_ODSWEN, 0xFFFF_FFFF, &mut Signals::default())
+            .write(
+                0,
+                0,
+                0xC000 | F4_CR_ODSWEN,
+                0xFFFF_FFFF,
+                &mut Signals::default()
+            )
             .is_err());
         p.reset(0);
         assert!(!p.dbp());

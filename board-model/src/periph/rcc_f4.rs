@@ -431,7 +431,10 @@ impl RccF4 {
     /// enable bit (IWDG, RCC, FLASH interface, EXTI, DBGMCU) and blocks this model does not list.
     pub fn clock_enabled(&self, block_base: u32) -> Option<bool> {
         let g = GATES.iter().find(|g| g.base == block_base)?;
-        Some(g.en.iter().any(|&(off, bit)| self.bus_reg(off) & (1 << bit) != 0))
+        Some(
+            g.en.iter()
+                .any(|&(off, bit)| self.bus_reg(off) & (1 << bit) != 0),
+        )
     }
 
     /// RCC_CSR reset flags (bits 31:25).
@@ -485,13 +488,16 @@ impl RccF4 {
         }
     }
     fn pll_ready_at(&self) -> Option<Time> {
-        self.pll.ready_at(self.pll_input_osc().ready_at, self.delays.pll)
+        self.pll
+            .ready_at(self.pll_input_osc().ready_at, self.delays.pll)
     }
     fn plli2s_ready_at(&self) -> Option<Time> {
-        self.plli2s.ready_at(self.pll_input_osc().ready_at, self.delays.pll)
+        self.plli2s
+            .ready_at(self.pll_input_osc().ready_at, self.delays.pll)
     }
     fn pllsai_ready_at(&self) -> Option<Time> {
-        self.pllsai.ready_at(self.pll_input_osc().ready_at, self.delays.pll)
+        self.pllsai
+            .ready_at(self.pll_input_osc().ready_at, self.delays.pll)
     }
 
     /// PLL output for divider `div` as an exact fraction (numerator, denominator) of Hz.
@@ -665,7 +671,9 @@ impl RccF4 {
             ("APB2 timer clock", c.tim_apb2_hz),
         ] {
             if !divides_master(hz) {
-                errs.push(format!("{name} {hz} Hz does not divide the 3.6 GHz master clock"));
+                errs.push(format!(
+                    "{name} {hz} Hz does not divide the 3.6 GHz master clock"
+                ));
             }
         }
         if errs.is_empty() {
@@ -718,7 +726,11 @@ impl RccF4 {
                 "HCLK {} Hz above {} Hz for voltage scale {scale}{}",
                 c.hclk_hz,
                 max,
-                if od { " with over-drive" } else { " without over-drive" }
+                if od {
+                    " with over-drive"
+                } else {
+                    " without over-drive"
+                }
             ));
         }
         let need = f446_min_wait_states(c.hclk_hz);
@@ -742,9 +754,18 @@ impl RccF4 {
         v |= bit(self.hsi.on(), CR_HSION) | bit(self.hsi.ready(now), CR_HSIRDY);
         v |= bit(self.hse.on(), CR_HSEON) | bit(self.hse.ready(now), CR_HSERDY);
         v |= bit(self.hsebyp, CR_HSEBYP) | bit(self.csson, CR_CSSON);
-        v |= bit(self.pll.on(), CR_PLLON) | bit(self.pll_ready_at().is_some_and(|t| t <= now), CR_PLLRDY);
-        v |= bit(self.plli2s.on(), CR_PLLI2SON) | bit(self.plli2s_ready_at().is_some_and(|t| t <= now), CR_PLLI2SRDY);
-        v |= bit(self.pllsai.on(), CR_PLLSAION) | bit(self.pllsai_ready_at().is_some_and(|t| t <= now), CR_PLLSAIRDY);
+        v |= bit(self.pll.on(), CR_PLLON)
+            | bit(self.pll_ready_at().is_some_and(|t| t <= now), CR_PLLRDY);
+        v |= bit(self.plli2s.on(), CR_PLLI2SON)
+            | bit(
+                self.plli2s_ready_at().is_some_and(|t| t <= now),
+                CR_PLLI2SRDY,
+            );
+        v |= bit(self.pllsai.on(), CR_PLLSAION)
+            | bit(
+                self.pllsai_ready_at().is_some_and(|t| t <= now),
+                CR_PLLSAIRDY,
+            );
         v
     }
 
@@ -798,7 +819,9 @@ impl RccF4 {
 
     fn reset_registers(&mut self, now: Time) {
         // After reset the HSI runs and is the system clock (RM0390 §6.1.2).
-        self.hsi = Osc { ready_at: Some(now) };
+        self.hsi = Osc {
+            ready_at: Some(now),
+        };
         self.hse = Osc::default();
         self.lsi = Osc::default();
         self.pll = Pll::default();
@@ -855,7 +878,14 @@ impl Peripheral for RccF4 {
         }
     }
 
-    fn write(&mut self, now: Time, offset: u32, value: u32, mask: u32, out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         self.settle(now);
         match offset {
             OFF_CR => self.cr_write(now, value, mask)?,
@@ -910,7 +940,8 @@ impl Peripheral for RccF4 {
                 let v = value & mask;
                 if mask & CSR_LSION != 0 {
                     self.csr_lsion = v & CSR_LSION != 0;
-                    self.lsi.set(now, self.csr_lsion || self.lsi_forced, self.delays.lsi);
+                    self.lsi
+                        .set(now, self.csr_lsion || self.lsi_forced, self.delays.lsi);
                 }
                 if v & CSR_RMVF != 0 {
                     // RMVF clears the reset flags (RM0390 §6.3.21).
@@ -1139,7 +1170,10 @@ mod tests {
             (c.sysclk_hz, c.hclk_hz, c.pclk1_hz, c.pclk2_hz),
             (16_000_000, 16_000_000, 16_000_000, 16_000_000)
         );
-        assert_eq!((c.tim_apb1_hz, c.tim_apb2_hz, c.lsi_hz), (16_000_000, 16_000_000, 0));
+        assert_eq!(
+            (c.tim_apb1_hz, c.tim_apb2_hz, c.lsi_hz),
+            (16_000_000, 16_000_000, 0)
+        );
         assert!(r.clock_plan_valid().is_ok());
     }
 
@@ -1161,7 +1195,10 @@ mod tests {
         assert_eq!(c.lsi_hz, 32_000);
         assert!(chip.rcc.take_clocks_changed());
         assert_eq!(chip.rcc.clock_plan_valid(), Ok(()));
-        assert_eq!(chip.rcc.check_power_and_flash(&chip.pwr, &chip.flash), Ok(()));
+        assert_eq!(
+            chip.rcc.check_power_and_flash(&chip.pwr, &chip.flash),
+            Ok(())
+        );
         // embassy's whole-register PLLCFGR write leaves PLLQ = PLLR = 0.
         assert_eq!(chip.rcc.plan_notes().len(), 2);
         // Every wait ended on its first poll (immediate ready flags).
@@ -1195,17 +1232,23 @@ mod tests {
         let mut r = RccF4::nucleo_f446re();
         let mut s = Signals::default();
         // HSI 16 MHz, AHB /2, APB1 /1, APB2 /8.
-        r.write(0, OFF_CFGR, (8 << 4) | (6 << 13), 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(0, OFF_CFGR, (8 << 4) | (6 << 13), 0xFFFF_FFFF, &mut s)
+            .unwrap();
         let c = r.clocks();
-        assert_eq!((c.hclk_hz, c.pclk1_hz, c.pclk2_hz), (8_000_000, 8_000_000, 1_000_000));
+        assert_eq!(
+            (c.hclk_hz, c.pclk1_hz, c.pclk2_hz),
+            (8_000_000, 8_000_000, 1_000_000)
+        );
         assert_eq!((c.tim_apb1_hz, c.tim_apb2_hz), (8_000_000, 2_000_000));
         assert!(s.replan);
         // TIMPRE = 1: APB1 /1 → HCLK; APB2 /8 → 4 × PCLK2.
-        r.write(0, OFF_DCKCFGR, 1 << 24, 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(0, OFF_DCKCFGR, 1 << 24, 0xFFFF_FFFF, &mut s)
+            .unwrap();
         let c = r.clocks();
         assert_eq!((c.tim_apb1_hz, c.tim_apb2_hz), (8_000_000, 4_000_000));
         // APB2 /4 with TIMPRE: HCLK.
-        r.write(0, OFF_CFGR, (8 << 4) | (5 << 13), 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(0, OFF_CFGR, (8 << 4) | (5 << 13), 0xFFFF_FFFF, &mut s)
+            .unwrap();
         assert_eq!(r.clocks().tim_apb2_hz, 8_000_000);
     }
 
@@ -1220,7 +1263,8 @@ mod tests {
         });
         let mut s = Signals::default();
         let t0 = 1_000;
-        r.write(t0, OFF_CR, 0x83 | CR_HSEBYP, 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(t0, OFF_CR, 0x83 | CR_HSEBYP, 0xFFFF_FFFF, &mut s)
+            .unwrap();
         r.write(t0, OFF_CR, 0x83 | CR_HSEBYP | CR_HSEON, 0xFFFF_FFFF, &mut s)
             .unwrap();
         r.write(
@@ -1231,16 +1275,34 @@ mod tests {
             &mut s,
         )
         .unwrap();
-        r.write(t0, OFF_CR, 0x83 | CR_HSEBYP | CR_HSEON | CR_PLLON, 0xFFFF_FFFF, &mut s)
-            .unwrap();
-        assert_eq!(r.read(t0 + 100 * us - 1, OFF_CR, &mut s).unwrap() & CR_HSERDY, 0);
-        assert_ne!(r.read(t0 + 100 * us, OFF_CR, &mut s).unwrap() & CR_HSERDY, 0);
+        r.write(
+            t0,
+            OFF_CR,
+            0x83 | CR_HSEBYP | CR_HSEON | CR_PLLON,
+            0xFFFF_FFFF,
+            &mut s,
+        )
+        .unwrap();
+        assert_eq!(
+            r.read(t0 + 100 * us - 1, OFF_CR, &mut s).unwrap() & CR_HSERDY,
+            0
+        );
+        assert_ne!(
+            r.read(t0 + 100 * us, OFF_CR, &mut s).unwrap() & CR_HSERDY,
+            0
+        );
         // The PLL locks 200 µs after its input is ready.
         let lock = t0 + 300 * us;
         assert_eq!(r.read(lock - 1, OFF_CR, &mut s).unwrap() & CR_PLLRDY, 0);
         // Switching to the PLL before it locks: SWS stays HSI until the lock.
-        r.write(lock - 1, OFF_CFGR, SW_PLLP | (5 << 10) | (4 << 13), 0xFFFF_FFFF, &mut s)
-            .unwrap();
+        r.write(
+            lock - 1,
+            OFF_CFGR,
+            SW_PLLP | (5 << 10) | (4 << 13),
+            0xFFFF_FFFF,
+            &mut s,
+        )
+        .unwrap();
         assert_eq!(r.read(lock - 1, OFF_CFGR, &mut s).unwrap() >> 2 & 3, SW_HSI);
         assert_eq!(r.next_event(), Some(lock));
         assert!(r.clock_plan_valid().is_err());
@@ -1291,7 +1353,13 @@ mod tests {
         let mut r = RccF4::nucleo_f446re();
         // Crystal mode on an external clock input.
         assert!(r
-            .write(0, OFF_CR, 0x83 | CR_HSEON, 0xFFFF_FFFF, &mut Signals::default())
+            .write(
+                0,
+                OFF_CR,
+                0x83 | CR_HSEON,
+                0xFFFF_FFFF,
+                &mut Signals::default()
+            )
             .is_err());
         let mut g = RccF4::with_hse(HseInput::None);
         assert!(g
@@ -1337,38 +1405,47 @@ mod tests {
     fn bdcr_needs_dbp() {
         let mut r = RccF4::nucleo_f446re();
         let mut s = Signals::default();
-        r.write(0, OFF_BDCR, (1 << 15) | (2 << 8), 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(0, OFF_BDCR, (1 << 15) | (2 << 8), 0xFFFF_FFFF, &mut s)
+            .unwrap();
         assert_eq!(r.read(0, OFF_BDCR, &mut s).unwrap(), 0);
         assert_eq!(r.bdcr_writes_ignored(), 1);
         r.set_backup_domain_writable(true);
-        r.write(0, OFF_BDCR, (1 << 15) | (2 << 8), 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(0, OFF_BDCR, (1 << 15) | (2 << 8), 0xFFFF_FFFF, &mut s)
+            .unwrap();
         // RTCSEL is write-once until a backup domain reset.
-        r.write(0, OFF_BDCR, (1 << 15) | (3 << 8), 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(0, OFF_BDCR, (1 << 15) | (3 << 8), 0xFFFF_FFFF, &mut s)
+            .unwrap();
         assert_eq!(r.read(0, OFF_BDCR, &mut s).unwrap(), (1 << 15) | (2 << 8));
-        r.write(0, OFF_BDCR, BDCR_BDRST, 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(0, OFF_BDCR, BDCR_BDRST, 0xFFFF_FFFF, &mut s)
+            .unwrap();
         r.write(0, OFF_BDCR, 3 << 8, 0xFFFF_FFFF, &mut s).unwrap();
         assert_eq!(r.read(0, OFF_BDCR, &mut s).unwrap(), 3 << 8);
-        assert!(r.write(0, OFF_BDCR, BDCR_LSEON, 0xFFFF_FFFF, &mut s).is_err());
+        assert!(r
+            .write(0, OFF_BDCR, BDCR_LSEON, 0xFFFF_FFFF, &mut s)
+            .is_err());
     }
 
     #[test]
     fn peripheral_resets_and_shared_adc_reset() {
         let mut r = RccF4::nucleo_f446re();
         let mut s = Signals::default();
-        r.write(0, OFF_APB2RSTR, 1 << 8, 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(0, OFF_APB2RSTR, 1 << 8, 0xFFFF_FFFF, &mut s)
+            .unwrap();
         assert_eq!(
             r.take_peripheral_resets(),
             vec![0x4001_2000, 0x4001_2100, 0x4001_2200, 0x4001_2300]
         );
         assert_eq!(r.held_in_reset(0x4001_2000), Some(true));
         // Holding the bit set does not ask again.
-        r.write(0, OFF_APB2RSTR, 1 << 8, 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(0, OFF_APB2RSTR, 1 << 8, 0xFFFF_FFFF, &mut s)
+            .unwrap();
         assert!(r.take_peripheral_resets().is_empty());
         r.write(0, OFF_APB2RSTR, 0, 0xFFFF_FFFF, &mut s).unwrap();
         assert_eq!(r.held_in_reset(0x4001_2000), Some(false));
         assert_eq!(r.held_in_reset(0x4000_3000), None);
         // ADC common is clocked by any ADC's enable.
-        r.write(0, OFF_APB2ENR, 1 << 9, 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(0, OFF_APB2ENR, 1 << 9, 0xFFFF_FFFF, &mut s)
+            .unwrap();
         assert_eq!(r.clock_enabled(0x4001_2300), Some(true));
         assert_eq!(r.clock_enabled(0x4001_2000), Some(false));
     }
@@ -1378,7 +1455,8 @@ mod tests {
         let mut r = RccF4::nucleo_f446re();
         let mut s = Signals::default();
         // 8 MHz / 2 = 4 MHz VCO input (above 2 MHz), ×108 = 432 MHz, /2 = 216 MHz SYSCLK.
-        r.write(0, OFF_CR, 0x83 | CR_HSEBYP, 0xFFFF_FFFF, &mut s).unwrap();
+        r.write(0, OFF_CR, 0x83 | CR_HSEBYP, 0xFFFF_FFFF, &mut s)
+            .unwrap();
         r.write(0, OFF_CR, 0x83 | CR_HSEBYP | CR_HSEON, 0xFFFF_FFFF, &mut s)
             .unwrap();
         r.write(
@@ -1389,10 +1467,22 @@ mod tests {
             &mut s,
         )
         .unwrap();
-        r.write(0, OFF_CR, 0x83 | CR_HSEBYP | CR_HSEON | CR_PLLON, 0xFFFF_FFFF, &mut s)
-            .unwrap();
-        r.write(0, OFF_CFGR, SW_PLLP | (5 << 10) | (4 << 13), 0xFFFF_FFFF, &mut s)
-            .unwrap();
+        r.write(
+            0,
+            OFF_CR,
+            0x83 | CR_HSEBYP | CR_HSEON | CR_PLLON,
+            0xFFFF_FFFF,
+            &mut s,
+        )
+        .unwrap();
+        r.write(
+            0,
+            OFF_CFGR,
+            SW_PLLP | (5 << 10) | (4 << 13),
+            0xFFFF_FFFF,
+            &mut s,
+        )
+        .unwrap();
         assert_eq!(r.clocks().sysclk_hz, 216_000_000);
         let e = r.clock_plan_valid().unwrap_err();
         assert!(
@@ -1403,13 +1493,19 @@ mod tests {
         let mut chip = Chip::new(RccF4::nucleo_f446re());
         chip.embassy_init();
         chip.modify(B::Pwr, 0x00, 3 << 16, 0);
-        let e = chip.rcc.check_power_and_flash(&chip.pwr, &chip.flash).unwrap_err();
+        let e = chip
+            .rcc
+            .check_power_and_flash(&chip.pwr, &chip.flash)
+            .unwrap_err();
         assert!(e.contains("over-drive"), "{e}");
         // Too few wait states.
         chip.modify(B::Pwr, 0x00, 0, 1 << 16);
         chip.modify(B::Pwr, 0x00, 0, 1 << 17);
         chip.modify(B::Flash, 0x00, 0xF, 4);
-        let e = chip.rcc.check_power_and_flash(&chip.pwr, &chip.flash).unwrap_err();
+        let e = chip
+            .rcc
+            .check_power_and_flash(&chip.pwr, &chip.flash)
+            .unwrap_err();
         assert!(e.contains("LATENCY"), "{e}");
     }
 
@@ -1418,6 +1514,8 @@ mod tests {
         let mut r = RccF4::nucleo_f446re();
         let e = r.read(0, 0x0C, &mut Signals::default()).unwrap_err();
         assert!(e.why.contains("RCC_CIR"));
-        assert!(r.write(0, 0x84, 0, 0xFFFF_FFFF, &mut Signals::default()).is_err());
+        assert!(r
+            .write(0, 0x84, 0, 0xFFFF_FFFF, &mut Signals::default())
+            .is_err());
     }
 }

@@ -330,7 +330,10 @@ impl RccG4 {
     /// enable bit (IWDG, RCC, EXTI, DBGMCU) and blocks this model does not list.
     pub fn clock_enabled(&self, block_base: u32) -> Option<bool> {
         let g = GATES.iter().find(|g| g.base == block_base)?;
-        Some(g.en.iter().any(|&(off, bit)| self.bus_reg(off) & (1 << bit) != 0))
+        Some(
+            g.en.iter()
+                .any(|&(off, bit)| self.bus_reg(off) & (1 << bit) != 0),
+        )
     }
 
     /// RCC_CSR reset flags (bits 31:25).
@@ -395,7 +398,8 @@ impl RccG4 {
         }
     }
     fn pll_ready_at(&self) -> Option<Time> {
-        self.pll.ready_at(self.pll_input_ready_at(), self.delays.pll)
+        self.pll
+            .ready_at(self.pll_input_ready_at(), self.delays.pll)
     }
     /// PLL output for divider `div` as an exact fraction of Hz.
     fn pll_out(&self, div: u64) -> (u64, u64) {
@@ -531,7 +535,11 @@ impl RccG4 {
             errs.push(format!("SYSCLK {num}/{den} Hz is not a whole number of Hz"));
         }
         let c = self.clocks();
-        for (name, hz) in [("SYSCLK", c.sysclk_hz), ("PCLK1", c.pclk1_hz), ("PCLK2", c.pclk2_hz)] {
+        for (name, hz) in [
+            ("SYSCLK", c.sysclk_hz),
+            ("PCLK1", c.pclk1_hz),
+            ("PCLK2", c.pclk2_hz),
+        ] {
             if hz > 170 * MHZ {
                 errs.push(format!("{name} {hz} Hz above 170 MHz"));
             }
@@ -551,7 +559,9 @@ impl RccG4 {
             ("APB2 timer clock", c.tim_apb2_hz),
         ] {
             if !divides_master(hz) {
-                errs.push(format!("{name} {hz} Hz does not divide the 3.6 GHz master clock"));
+                errs.push(format!(
+                    "{name} {hz} Hz does not divide the 3.6 GHz master clock"
+                ));
             }
         }
         if c.adc_kernel_hz != 0 && !divides_master(c.adc_kernel_hz) {
@@ -656,7 +666,9 @@ impl RccG4 {
 
     fn reset_registers(&mut self, now: Time) {
         // After reset the HSI16 runs and is the system clock (RM0440 §7.1.2).
-        self.hsi = Osc { ready_at: Some(now) };
+        self.hsi = Osc {
+            ready_at: Some(now),
+        };
         self.hse = Osc::default();
         self.hsi48 = Osc::default();
         self.lsi = Osc::default();
@@ -708,7 +720,9 @@ impl Peripheral for RccG4 {
                 Ok(v)
             }
             // HSI48ON (0), HSI48RDY (1); HSI48CAL not modelled (0).
-            OFF_CRRCR => Ok(if self.hsi48.on() { 1 } else { 0 } | if self.hsi48.ready(now) { 2 } else { 0 }),
+            OFF_CRRCR => {
+                Ok(if self.hsi48.on() { 1 } else { 0 } | if self.hsi48.ready(now) { 2 } else { 0 })
+            }
             _ => match Self::bus_index(offset) {
                 Some(i) => Ok(self.bus[i]),
                 None => Err(Unmodelled::read(offset, unmodelled_reg(offset))),
@@ -716,16 +730,29 @@ impl Peripheral for RccG4 {
         }
     }
 
-    fn write(&mut self, now: Time, offset: u32, value: u32, mask: u32, out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         self.settle(now);
         match offset {
             OFF_CR => self.cr_write(now, value, mask)?,
-            OFF_ICSCR => self.hsitrim = (merge(self.hsitrim << 24, value, mask & 0x7F00_0000) >> 24) & 0x7F,
+            OFF_ICSCR => {
+                self.hsitrim = (merge(self.hsitrim << 24, value, mask & 0x7F00_0000) >> 24) & 0x7F
+            }
             OFF_CFGR => {
                 // SW, HPRE, PPRE1, PPRE2, MCOSEL, MCOPRE; SWS read-only.
                 let new = merge(self.cfgr, value, mask & 0x7F00_3FF3);
                 if new & 3 == 0 {
-                    return Err(Unmodelled::write(offset, value, "RCC_CFGR.SW = 00 is reserved"));
+                    return Err(Unmodelled::write(
+                        offset,
+                        value,
+                        "RCC_CFGR.SW = 00 is reserved",
+                    ));
                 }
                 self.cfgr = new;
                 self.settle(now);
@@ -733,10 +760,18 @@ impl Peripheral for RccG4 {
             OFF_PLLCFGR => {
                 let mut new = merge(self.pllcfgr, value, mask & PLLCFGR_WRITABLE);
                 if new & 3 == 1 {
-                    return Err(Unmodelled::write(offset, value, "RCC_PLLCFGR.PLLSRC = 01 is reserved"));
+                    return Err(Unmodelled::write(
+                        offset,
+                        value,
+                        "RCC_PLLCFGR.PLLSRC = 01 is reserved",
+                    ));
                 }
                 if (new >> 27) & 0x1F == 1 {
-                    return Err(Unmodelled::write(offset, value, "RCC_PLLCFGR.PLLPDIV = 1 is reserved"));
+                    return Err(Unmodelled::write(
+                        offset,
+                        value,
+                        "RCC_PLLCFGR.PLLPDIV = 1 is reserved",
+                    ));
                 }
                 let enables = PLL_PEN | PLL_QEN | PLL_REN;
                 if self.pll.on() && (new ^ self.pllcfgr) & !enables != 0 {
@@ -785,7 +820,8 @@ impl Peripheral for RccG4 {
                 let v = value & mask;
                 if mask & CSR_LSION != 0 {
                     self.csr_lsion = v & CSR_LSION != 0;
-                    self.lsi.set(now, self.csr_lsion || self.lsi_forced, self.delays.lsi);
+                    self.lsi
+                        .set(now, self.csr_lsion || self.lsi_forced, self.delays.lsi);
                 }
                 if v & CSR_RMVF != 0 {
                     self.csr_flags &= !CSR_FLAGS;
@@ -1019,7 +1055,10 @@ mod tests {
         assert_eq!(c.lsi_hz, 32_000);
         assert_eq!(chip.rcc.clock_plan_valid(), Ok(()));
         assert_eq!(chip.pwr.range(), G4Range::Range1Normal);
-        assert_eq!(chip.rcc.check_power_and_flash(&chip.pwr, &chip.flash), Ok(()));
+        assert_eq!(
+            chip.rcc.check_power_and_flash(&chip.pwr, &chip.flash),
+            Ok(())
+        );
         assert_eq!(chip.polls, 10);
         assert_eq!(chip.rd(B::Rcc, OFF_BDCR), (1 << 15) | (2 << 8));
         assert_eq!(chip.rd(B::Rcc, OFF_PLLCFGR), 0x0100_4B53);
@@ -1065,12 +1104,20 @@ mod tests {
         // ADC12SEL = PLL P with P off: no clock, and the plan check says why.
         chip.modify(B::Rcc, OFF_CCIPR, 3 << 28, 1 << 28);
         assert_eq!(chip.rcc.clocks().adc_kernel_hz, 0);
-        assert!(chip.rcc.clock_plan_valid().unwrap_err().contains("ADC12SEL"));
+        assert!(chip
+            .rcc
+            .clock_plan_valid()
+            .unwrap_err()
+            .contains("ADC12SEL"));
         // PLLPEN may be set while the PLL runs: PLLPDIV = 0 and PLLP = 0 give /7 (300/7 MHz,
         // floored; the plan check objects to it).
         chip.modify(B::Rcc, OFF_PLLCFGR, 0, PLL_PEN);
         assert_eq!(chip.rcc.clocks().adc_kernel_hz, 300_000_000 / 7);
-        assert!(chip.rcc.clock_plan_valid().unwrap_err().contains("ADC12 kernel"));
+        assert!(chip
+            .rcc
+            .clock_plan_valid()
+            .unwrap_err()
+            .contains("ADC12 kernel"));
         // Changing the P divider while the PLL runs is refused.
         let e = chip.rcc.write(
             chip.now,
@@ -1090,9 +1137,16 @@ mod tests {
         // 24 / 6 × 85 / 2 = 170 MHz.
         let mut r = RccG4::nucleo_g474re();
         let mut s = Signals::default();
-        r.write(0, OFF_CR, 0x500 | CR_HSEON, 0xFFFF_FFFF, &mut s).unwrap();
-        r.write(0, OFF_PLLCFGR, (85 << 8) | (5 << 4) | 3 | PLL_REN, 0xFFFF_FFFF, &mut s)
+        r.write(0, OFF_CR, 0x500 | CR_HSEON, 0xFFFF_FFFF, &mut s)
             .unwrap();
+        r.write(
+            0,
+            OFF_PLLCFGR,
+            (85 << 8) | (5 << 4) | 3 | PLL_REN,
+            0xFFFF_FFFF,
+            &mut s,
+        )
+        .unwrap();
         r.write(0, OFF_CR, 0x500 | CR_HSEON | CR_PLLON, 0xFFFF_FFFF, &mut s)
             .unwrap();
         r.write(0, OFF_CFGR, SW_PLL, 0xFFFF_FFFF, &mut s).unwrap();
@@ -1110,7 +1164,10 @@ mod tests {
         assert!(!e.contains("Range1") && !e.contains("LATENCY"), "{e}");
         // One wait state short in boost.
         flash.write(0, 0, 0x0004_0603, 0xFFFF_FFFF, &mut s).unwrap();
-        assert!(r.check_power_and_flash(&pwr, &flash).unwrap_err().contains("LATENCY"));
+        assert!(r
+            .check_power_and_flash(&pwr, &flash)
+            .unwrap_err()
+            .contains("LATENCY"));
     }
 
     #[test]
@@ -1124,15 +1181,28 @@ mod tests {
             ..Default::default()
         });
         let mut s = Signals::default();
-        r.write(0, OFF_CR, 0x500 | CR_HSEON, 0xFFFF_FFFF, &mut s).unwrap();
-        r.write(0, OFF_PLLCFGR, (75 << 8) | (5 << 4) | 3 | PLL_REN, 0xFFFF_FFFF, &mut s)
+        r.write(0, OFF_CR, 0x500 | CR_HSEON, 0xFFFF_FFFF, &mut s)
             .unwrap();
+        r.write(
+            0,
+            OFF_PLLCFGR,
+            (75 << 8) | (5 << 4) | 3 | PLL_REN,
+            0xFFFF_FFFF,
+            &mut s,
+        )
+        .unwrap();
         r.write(0, OFF_CR, 0x500 | CR_HSEON | CR_PLLON, 0xFFFF_FFFF, &mut s)
             .unwrap();
         r.write(0, OFF_CFGR, SW_PLL, 0xFFFF_FFFF, &mut s).unwrap();
         assert_eq!(r.next_event(), Some(2_040 * us));
-        assert_eq!(r.read(2_040 * us - 1, OFF_CFGR, &mut s).unwrap() >> 2 & 3, SW_HSI);
-        assert_eq!(r.read(2_040 * us, OFF_CFGR, &mut s).unwrap() >> 2 & 3, SW_PLL);
+        assert_eq!(
+            r.read(2_040 * us - 1, OFF_CFGR, &mut s).unwrap() >> 2 & 3,
+            SW_HSI
+        );
+        assert_eq!(
+            r.read(2_040 * us, OFF_CFGR, &mut s).unwrap() >> 2 & 3,
+            SW_PLL
+        );
         // HSI48 ready flag after its own delay.
         r.write(10, OFF_CRRCR, 1, 0xFFFF_FFFF, &mut s).unwrap();
         assert_eq!(r.read(10 + 3 * us - 1, OFF_CRRCR, &mut s).unwrap(), 1);

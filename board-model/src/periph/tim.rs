@@ -28,8 +28,8 @@
 use std::any::Any;
 
 use super::{
-    merge, ticks_per_cycle, ChannelLevel, ClockDomain, Clocks, Event, Peripheral, Signals, Time, Unmodelled,
-    TICKS_PER_S,
+    merge, ticks_per_cycle, ChannelLevel, ClockDomain, Clocks, Event, Peripheral, Signals, Time,
+    Unmodelled, TICKS_PER_S,
 };
 
 /// Which timer this is and where it is wired.
@@ -277,7 +277,11 @@ impl State {
             }
             let from_frozen = old_modes.is_some_and(|m| m[ch] == OcMode::Frozen);
             if from_frozen || now[ch] != before[ch] {
-                self.core.ocref[ch] = if mode == OcMode::Pwm1 { now[ch] } else { !now[ch] };
+                self.core.ocref[ch] = if mode == OcMode::Pwm1 {
+                    now[ch]
+                } else {
+                    !now[ch]
+                };
             }
         }
     }
@@ -298,7 +302,12 @@ impl State {
             if high != self.core.level[ch] {
                 self.core.level[ch] = high;
                 if self.recording[ch] {
-                    out.levels.push(ChannelLevel { at: t, timer: self.number, channel: ch as u8 + 1, high });
+                    out.levels.push(ChannelLevel {
+                        at: t,
+                        timer: self.number,
+                        channel: ch as u8 + 1,
+                        high,
+                    });
                 }
             }
         }
@@ -393,7 +402,11 @@ impl State {
         // unbuffered ARR written below it) runs on to the end of its range and wraps to 0; no
         // UEV is generated there, as the manual describes the overflow only at ARR (not verified
         // on silicon).
-        let (mut s, last) = if c <= a { (a - c + 1, a) } else { (self.modulus - c, self.modulus - 1) };
+        let (mut s, last) = if c <= a {
+            (a - c + 1, a)
+        } else {
+            (self.modulus - c, self.modulus - 1)
+        };
         for &v in &self.core.ccr_sh {
             let v = v as u64;
             if v > c && v <= last {
@@ -499,7 +512,10 @@ impl State {
             let (t, s) = sim.next_step()?;
             let irq_before = sim.irq_bits();
             let overflow = sim.apply_step(t, s, &mut scratch);
-            if !scratch.levels.is_empty() || !scratch.events.is_empty() || sim.irq_bits() & !irq_before != 0 {
+            if !scratch.levels.is_empty()
+                || !scratch.events.is_empty()
+                || sim.irq_bits() & !irq_before != 0
+            {
                 return Some(t);
             }
             if !overflow {
@@ -562,7 +578,11 @@ pub struct Timer {
 
 impl Timer {
     pub fn new(cfg: TimerConfig) -> Self {
-        assert!(cfg.bits == 16 || cfg.bits == 32, "{}: a timer counter has 16 or 32 bits", cfg.name);
+        assert!(
+            cfg.bits == 16 || cfg.bits == 32,
+            "{}: a timer counter has 16 or 32 bits",
+            cfg.name
+        );
         let modulus = 1u64 << cfg.bits;
         Timer {
             st: State {
@@ -585,13 +605,21 @@ impl Timer {
     /// Emit `ChannelLevel` edges for `channel` (1..=4) from now on, or stop. Call after
     /// `advance(now)`; the level at that moment is `channel_level`.
     pub fn record_channel(&mut self, channel: u8, on: bool) {
-        assert!((1..=4).contains(&channel), "{}: channel {channel} is not 1..=4", self.cfg.name);
+        assert!(
+            (1..=4).contains(&channel),
+            "{}: channel {channel} is not 1..=4",
+            self.cfg.name
+        );
         self.st.recording[channel as usize - 1] = on;
     }
 
     /// The output level of `channel` (1..=4) as of the last access or `advance`.
     pub fn channel_level(&self, channel: u8) -> bool {
-        assert!((1..=4).contains(&channel), "{}: channel {channel} is not 1..=4", self.cfg.name);
+        assert!(
+            (1..=4).contains(&channel),
+            "{}: channel {channel} is not 1..=4",
+            self.cfg.name
+        );
         self.st.core.level[channel as usize - 1]
     }
 
@@ -607,13 +635,21 @@ impl Timer {
 
     fn clock_check(&self, offset: u32, write: Option<u32>) -> Result<(), Unmodelled> {
         match &self.clock_error {
-            Some(why) => Err(Unmodelled { offset, write, why: why.clone() }),
+            Some(why) => Err(Unmodelled {
+                offset,
+                write,
+                why: why.clone(),
+            }),
             None => Ok(()),
         }
     }
 
     fn unmodelled(&self, offset: u32, value: u32, why: String) -> Result<(), Unmodelled> {
-        Err(Unmodelled::write(offset, value, format!("{}_{why}", self.cfg.name)))
+        Err(Unmodelled::write(
+            offset,
+            value,
+            format!("{}_{why}", self.cfg.name),
+        ))
     }
 
     fn write_reg(
@@ -631,7 +667,10 @@ impl Timer {
                 for (bit, why) in [
                     (CR1_DIR, "CR1.DIR=1 (down-counting) is not modelled"),
                     (CR1_CMS, "CR1.CMS (center-aligned counting) is not modelled"),
-                    (CR1_UIFREMAP, "CR1.UIFREMAP (UIF copy in CNT bit 31) is not modelled"),
+                    (
+                        CR1_UIFREMAP,
+                        "CR1.UIFREMAP (UIF copy in CNT bit 31) is not modelled",
+                    ),
                     (CR1_DITHEN, "CR1.DITHEN (dithering) is not modelled"),
                 ] {
                     if v & bit != 0 {
@@ -666,7 +705,10 @@ impl Timer {
                     return self.unmodelled(
                         offset,
                         value,
-                        format!("CR2 bits {:#x} (CCPC/CCUS/CCDS/TI1S/OISx/MMS2) are not modelled", v & !CR2_MMS),
+                        format!(
+                            "CR2 bits {:#x} (CCPC/CCUS/CCDS/TI1S/OISx/MMS2) are not modelled",
+                            v & !CR2_MMS
+                        ),
                     );
                 }
                 if mms > 2 {
@@ -688,7 +730,9 @@ impl Timer {
                     return self.unmodelled(
                         offset,
                         value,
-                        format!("SMCR={v:#x}: slave mode, triggers and external clock are not modelled"),
+                        format!(
+                            "SMCR={v:#x}: slave mode, triggers and external clock are not modelled"
+                        ),
                     );
                 }
             }
@@ -717,7 +761,10 @@ impl Timer {
                     return self.unmodelled(
                         offset,
                         value,
-                        format!("EGR bits {:#x} (TG/COMG/BG/B2G) are not modelled", v & !FLAGS_MODELLED),
+                        format!(
+                            "EGR bits {:#x} (TG/COMG/BG/B2G) are not modelled",
+                            v & !FLAGS_MODELLED
+                        ),
                     );
                 }
                 // CCxG on an output channel sets CCxIF (RM0390 §17.4.6).
@@ -736,7 +783,12 @@ impl Timer {
                         return self.unmodelled(
                             offset,
                             value,
-                            format!("CCMR{}.CC{}S={} (input capture) is not modelled", i + 1, ch + 1, byte & 3),
+                            format!(
+                                "CCMR{}.CC{}S={} (input capture) is not modelled",
+                                i + 1,
+                                ch + 1,
+                                byte & 3
+                            ),
                         );
                     }
                     if byte & 0x80 != 0 {
@@ -805,11 +857,19 @@ impl Timer {
                         );
                     }
                     if v & (1 << (4 * ch + 3)) != 0 {
-                        return self.unmodelled(offset, value, format!("CCER.CC{}NP is not modelled", ch + 1));
+                        return self.unmodelled(
+                            offset,
+                            value,
+                            format!("CCER.CC{}NP is not modelled", ch + 1),
+                        );
                     }
                 }
                 if v & 0xFFFF_0000 != 0 {
-                    return self.unmodelled(offset, value, "CCER channels 5/6 are not modelled".into());
+                    return self.unmodelled(
+                        offset,
+                        value,
+                        "CCER channels 5/6 are not modelled".into(),
+                    );
                 }
                 self.st.core.ccer = v;
                 self.st.update_levels(now, out);
@@ -865,9 +925,18 @@ impl Timer {
                 self.st.core.bdtr = v;
                 self.st.update_levels(now, out);
             }
-            DCR_F4 | DMAR_F4 => return self.unmodelled(offset, value, "DCR/DMAR (DMA burst) is not modelled".into()),
+            DCR_F4 | DMAR_F4 => {
+                return self.unmodelled(
+                    offset,
+                    value,
+                    "DCR/DMAR (DMA burst) is not modelled".into(),
+                )
+            }
             _ => {
-                let why = format!("{} register at offset {offset:#x} is not modelled", self.cfg.name);
+                let why = format!(
+                    "{} register at offset {offset:#x} is not modelled",
+                    self.cfg.name
+                );
                 return Err(Unmodelled::write(offset, value, why));
             }
         }
@@ -906,18 +975,31 @@ impl Peripheral for Timer {
             CCR1..=CCR4 if offset.is_multiple_of(4) => c.ccr[((offset - CCR1) / 4) as usize],
             BDTR if self.cfg.advanced => c.bdtr,
             DCR_F4 | DMAR_F4 => {
-                return Err(Unmodelled::read(offset, format!("{}_DCR/DMAR (DMA burst) is not modelled", self.cfg.name)))
+                return Err(Unmodelled::read(
+                    offset,
+                    format!("{}_DCR/DMAR (DMA burst) is not modelled", self.cfg.name),
+                ))
             }
             _ => {
                 return Err(Unmodelled::read(
                     offset,
-                    format!("{} register at offset {offset:#x} is not modelled", self.cfg.name),
+                    format!(
+                        "{} register at offset {offset:#x} is not modelled",
+                        self.cfg.name
+                    ),
                 ))
             }
         })
     }
 
-    fn write(&mut self, now: Time, offset: u32, value: u32, mask: u32, out: &mut Signals) -> Result<(), Unmodelled> {
+    fn write(
+        &mut self,
+        now: Time,
+        offset: u32,
+        value: u32,
+        mask: u32,
+        out: &mut Signals,
+    ) -> Result<(), Unmodelled> {
         self.clock_check(offset, Some(value))?;
         self.flush_pending(out);
         self.st.run(now, out);
@@ -948,7 +1030,13 @@ impl Peripheral for Timer {
     }
 
     fn next_event(&self) -> Option<Time> {
-        let pending = self.pending.levels.iter().map(|l| l.at).chain(self.pending.events.iter().map(|e| e.0)).min();
+        let pending = self
+            .pending
+            .levels
+            .iter()
+            .map(|l| l.at)
+            .chain(self.pending.events.iter().map(|e| e.0))
+            .min();
         if pending.is_some() {
             return pending;
         }
@@ -970,8 +1058,10 @@ impl Peripheral for Timer {
         self.st.tick = if hz == 0 {
             0
         } else if !TICKS_PER_S.is_multiple_of(hz) {
-            self.clock_error =
-                Some(format!("{} kernel clock {hz} Hz does not divide the 3.6 GHz master clock", self.cfg.name));
+            self.clock_error = Some(format!(
+                "{} kernel clock {hz} Hz does not divide the 3.6 GHz master clock",
+                self.cfg.name
+            ));
             0
         } else {
             ticks_per_cycle(hz)
@@ -1047,9 +1137,27 @@ mod tests {
                 4 => (16, false, ClockDomain::TimApb1, 30, 30, "TIM4"),
                 _ => unreachable!(),
             };
-            let mut t = Timer::new(TimerConfig { number, bits, advanced, clock, name, irq_up, irq_cc });
-            t.set_clocks(0, &Clocks { tim_apb1_hz: hz, tim_apb2_hz: hz, ..Default::default() });
-            H { t, log: Signals::default() }
+            let mut t = Timer::new(TimerConfig {
+                number,
+                bits,
+                advanced,
+                clock,
+                name,
+                irq_up,
+                irq_cc,
+            });
+            t.set_clocks(
+                0,
+                &Clocks {
+                    tim_apb1_hz: hz,
+                    tim_apb2_hz: hz,
+                    ..Default::default()
+                },
+            );
+            H {
+                t,
+                log: Signals::default(),
+            }
         }
         /// Full-word write; returns whether it asked for a re-plan.
         fn w(&mut self, now: Time, off: u32, v: u32) -> bool {
@@ -1075,13 +1183,25 @@ mod tests {
         }
         /// Edges of `channel` logged so far, then forget them.
         fn edges(&mut self, channel: u8) -> Vec<(Time, bool)> {
-            let e = self.log.levels.iter().filter(|l| l.channel == channel).map(|l| (l.at, l.high)).collect();
+            let e = self
+                .log
+                .levels
+                .iter()
+                .filter(|l| l.channel == channel)
+                .map(|l| (l.at, l.high))
+                .collect();
             self.log.levels.retain(|l| l.channel != channel);
             e
         }
         fn trgos(&mut self) -> Vec<Time> {
             let timer = self.t.cfg.number;
-            let e = self.log.events.iter().filter(|e| e.1 == Event::Trgo { timer }).map(|e| e.0).collect();
+            let e = self
+                .log
+                .events
+                .iter()
+                .filter(|e| e.1 == Event::Trgo { timer })
+                .map(|e| e.0)
+                .collect();
             self.log.events.clear();
             e
         }
@@ -1138,7 +1258,16 @@ mod tests {
         assert_eq!(h.edges(1), vec![(0, true)]);
         h.w(0, CR1, CR1_CEN);
         h.adv(1500);
-        assert_eq!(h.edges(1), vec![(240, false), (600, true), (840, false), (1200, true), (1440, false)]);
+        assert_eq!(
+            h.edges(1),
+            vec![
+                (240, false),
+                (600, true),
+                (840, false),
+                (1200, true),
+                (1440, false)
+            ]
+        );
         // CNT: 12 changes by t = 1440 → 12 mod 5 = 2; the 13th at 1560.
         assert_eq!(h.r(1500, CNT), 2);
         assert_eq!(h.r(1559, CNT), 2);
@@ -1169,7 +1298,15 @@ mod tests {
         // Old period finishes (low at CNT 5 = 600, wrap at 800); then 20-cycle period, low at 15.
         assert_eq!(
             h.edges(1),
-            vec![(0, true), (200, false), (400, true), (600, false), (800, true), (1400, false), (1600, true)]
+            vec![
+                (0, true),
+                (200, false),
+                (400, true),
+                (600, false),
+                (800, true),
+                (1400, false),
+                (1600, true)
+            ]
         );
     }
 
@@ -1223,7 +1360,11 @@ mod tests {
         // Wraps at 400, 800, … keep the old period: no UEV, so no shadow load and no UIF.
         h.w(2100, CR1, CR1_ARPE | CR1_CEN);
         assert_eq!(h.r(2300, SR) & SR_UIF, 0);
-        assert_eq!(h.r(2400, SR) & SR_UIF, 1, "first wrap after UDIS cleared is an update");
+        assert_eq!(
+            h.r(2400, SR) & SR_UIF,
+            1,
+            "first wrap after UDIS cleared is an update"
+        );
         h.adv(3300);
         let mut expect = vec![(0, true)];
         for k in 0..5 {
@@ -1265,7 +1406,17 @@ mod tests {
         h.w(0, CCMR1, PWM1 | OCPE);
         h.w(0, CR1, CR1_ARPE | CR1_CEN);
         h.adv(1000);
-        assert_eq!(h.edges(1), vec![(0, true), (160, false), (400, true), (560, false), (800, true), (960, false)]);
+        assert_eq!(
+            h.edges(1),
+            vec![
+                (0, true),
+                (160, false),
+                (400, true),
+                (560, false),
+                (800, true),
+                (960, false)
+            ]
+        );
     }
 
     #[test]
@@ -1305,7 +1456,10 @@ mod tests {
         assert!(h.w(1010, CR1, CR1_CEN), "starting the counter re-plans");
         assert_eq!(h.t.next_event(), Some(1040 + 360_000));
         h.adv(1040 + 10 * 360_000);
-        assert_eq!(h.trgos(), (1..=10).map(|k| 1040 + k * 360_000).collect::<Vec<_>>());
+        assert_eq!(
+            h.trgos(),
+            (1..=10).map(|k| 1040 + k * 360_000).collect::<Vec<_>>()
+        );
         assert!(h.irqs().is_empty(), "UIE = 0");
     }
 
@@ -1428,7 +1582,10 @@ mod tests {
         carrier_start(&mut h, true);
         assert_eq!(h.trgos(), vec![0], "UG with MMS = 000");
         assert_eq!(h.t.next_event(), None, "nothing observable");
-        assert!(!h.w(10, PSC, 0), "a write that changes nothing observable does not re-plan");
+        assert!(
+            !h.w(10, PSC, 0),
+            "a write that changes nothing observable does not re-plan"
+        );
         // One second is 15 million periods; the steady cycle is skipped arithmetically.
         h.adv(TICKS_PER_S);
         assert!(h.log.levels.is_empty() && h.log.events.is_empty());
@@ -1438,7 +1595,14 @@ mod tests {
         h.t.record_channel(1, true);
         assert_eq!(h.t.next_event(), Some(TICKS_PER_S + 240));
         h.adv(TICKS_PER_S + 480);
-        assert_eq!(h.edges(1), vec![(TICKS_PER_S + 240, true), (TICKS_PER_S + 360, false), (TICKS_PER_S + 480, true)]);
+        assert_eq!(
+            h.edges(1),
+            vec![
+                (TICKS_PER_S + 240, true),
+                (TICKS_PER_S + 360, false),
+                (TICKS_PER_S + 480, true)
+            ]
+        );
         h.t.record_channel(1, false);
         h.adv(2 * TICKS_PER_S);
         assert!(h.edges(1).is_empty());
@@ -1485,7 +1649,13 @@ mod tests {
         h.w(0, ARR, 999);
         h.w(0, DIER, DIER_UIE);
         h.w(0, CR1, CR1_CEN);
-        h.t.set_clocks(20_000, &Clocks { tim_apb1_hz: 45 * MHZ, ..Default::default() });
+        h.t.set_clocks(
+            20_000,
+            &Clocks {
+                tim_apb1_hz: 45 * MHZ,
+                ..Default::default()
+            },
+        );
         assert_eq!(h.t.frequency_hz(), 45 * MHZ);
         assert_eq!(h.r(28_000, CNT), 600);
         // 500 more changes of 80 ticks to the wrap.
@@ -1519,11 +1689,17 @@ mod tests {
         assert!(h.write_err(0, CR2, 0b011 << 4).why.contains("MMS"));
         assert!(h.write_err(0, DIER, 1 << 8).why.contains("DIER"));
         assert!(h.write_err(0, CCER, 1 << 2).why.contains("CC1NE"));
-        assert!(h.write_err(0, BDTR, BDTR_MOE).why.contains("offset 0x44"), "no BDTR on TIM2");
+        assert!(
+            h.write_err(0, BDTR, BDTR_MOE).why.contains("offset 0x44"),
+            "no BDTR on TIM2"
+        );
         let mut s = Signals::default();
         assert!(h.t.read(0, DCR_F4, &mut s).unwrap_err().why.contains("DCR"));
         h.w(0, CCMR1, PWM1);
-        assert!(h.write_err(0, CCMR1, PWM2).why.contains("PWM modes 1 and 2"));
+        assert!(h
+            .write_err(0, CCMR1, PWM2)
+            .why
+            .contains("PWM modes 1 and 2"));
         let mut t1 = H::new(1, 180 * MHZ);
         assert!(t1.write_err(0, BDTR, BDTR_MOE | 0x40).why.contains("BDTR"));
     }
@@ -1531,8 +1707,19 @@ mod tests {
     #[test]
     fn unrepresentable_clock_is_refused_at_the_next_access() {
         let mut h = H::new(2, 90 * MHZ);
-        h.t.set_clocks(0, &Clocks { tim_apb1_hz: 7 * MHZ, ..Default::default() });
+        h.t.set_clocks(
+            0,
+            &Clocks {
+                tim_apb1_hz: 7 * MHZ,
+                ..Default::default()
+            },
+        );
         let mut s = Signals::default();
-        assert!(h.t.read(0, CNT, &mut s).unwrap_err().why.contains("does not divide"));
+        assert!(h
+            .t
+            .read(0, CNT, &mut s)
+            .unwrap_err()
+            .why
+            .contains("does not divide"));
     }
 }

@@ -1,0 +1,513 @@
+//! The checks a firmware image must pass on the board model, each a named result with its
+//! measured value: boot log, clock tree, carrier, ADC sample rate, the closed loop against
+//! host-sim, duty and on-time caps, sensor-to-gate latency, and the fault paths.
+
+use crate::board::{BoardKind, PIN_BURST_A, PIN_BURST_B, PIN_CARRIER, PIN_RF_ARM};
+use crate::machine::{PinEdge, Stop};
+use crate::periph::{ticks_per_cycle, ResetCause, Time, TICKS_PER_S};
+use crate::run::{self, Options, Outcome};
+use host_sim::adc::{FaultKind, FaultWindow};
+use host_sim::timer::{Edge, Waveform};
+use serde::Serialize;
+use std::path::Path;
+
+/// One check's result.
+#[derive(Clone, Debug, Serialize)]
+pub struct Check {
+    pub name: String,
+    pub pass: bool,
+    /// What was measured, as a sentence.
+    pub detail: String,
+}
+
+fn check(name: &str, pass: bool, detail: impl Into<String>) -> Check {
+    Check {
+        name: name.to_string(),
+        pass,
+        detail: detail.into(),
+    }
+}
+
+/// Burst-timer kernel clock of the board, Hz.
+fn burst_clk(board: BoardKind) -> u64 {
+    board.def().burst_timer_clk_hz as u64
+}
+
+/// Converts recorded pin edges (master ticks) into a host-sim waveform in timer clocks relative
+/// to `t0`, from `from` on.
+pub fn waveform(edges: &[PinEdge], t0: Time, from: Time, end: Time, clk_hz: u64) -> Waveform {
+    let per = ticks_per_cycle(clk_hz);
+    let mut out = Vec::new();
+    for e in edges.iter().filter(|e| e.at >= from && e.at >= t0) {
+        let t = (e.at - t0) / per;
+        if out.last().map_or(!e.high, |l: &Edge| l.high != e.high) {
+            out.push(Edge { t, high: e.high });
+        }
+    }
+    Waveform {
+        edges: out,
+        clock_hz: clk_hz as u32,
+        end: end.saturating_sub(t0) / per,
+    }
+}
+
+/// A run of pulses with one period (rise to rise, within one tick) and on-time.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Segment {
+    /// First rise, timer clocks.
+    pub start: u64,
+    pub period: u64,
+    pub on: u64,
+    pub pulses: usize,
+}
+
+/// Groups the waveform's pulses into segments of equal period (±1 tick).
+pub fn segments(w: &Waveform) -> Vec<Segment> {
+    let mut out: Vec<Segment> = Vec::new();
+    for p in w.pulses() {
+        let Some(period) = p.period() else { continue };
+        match out.last_mut() {
+            Some(s)
+                if s.period.abs_diff(period) <= 1
+                    && s.start + s.period * s.pulses as u64 + 2 >= p.rise =>
+            {
+                s.pulses += 1;
+            }
+            _ => out.push(Segment {
+                start: p.rise,
+                period,
+                on: p.on(),
+                pulses: 1,
+            }),
+        }
+    }
+    // Single stray pulses (a region crossed in under one period) are not a segment of a period.
+    out.retain(|s| s.pulses >= 2);
+    out
+}
+
+/// Every pulse keeps the duty cap over its own period and the on-time cap; returns the
+/// violations as sentences.
+pub fn caps(w: &Waveform, cap_permille: u64, max_on_us: u64) -> Vec<String> {
+    let mut bad = Vec::new();
+    let max_on = max_on_us * w.clock_hz as u64 / 1_000_000;
+    for p in w.pulses() {
+        if p.on() > max_on {
+            bad.push(format!(
+                "pulse at {} clocks is on for {} clocks, above the on-time cap of {max_on}",
+                p.rise,
+                p.on()
+            ));
+        }
+        if let Some(period) = p.period() {
+            if p.on() * 1000 > cap_permille * period {
+                bad.push(format!(
+                    "pulse at {} clocks: {} on in a {} period is {} permille, above the {cap_permille} permille cap",
+                    p.rise,
+                    p.on(),
+                    period,
+                    p.on() * 1000 / period
+                ));
+            }
+        }
+    }
+    bad
+}
+
+fn log_has(o: &Outcome, part: &str) -> bool {
+    o.log.iter().any(|l| l.text.contains(part))
+}
+
+/// Samples processed, from the firmware's 1 Hz telemetry lines ("samples: N").
+fn telemetry_samples(o: &Outcome) -> Vec<(f64, u64)> {
+    o.log
+        .iter()
+        .filter(|l| l.text.starts_with("telemetry"))
+        .filter_map(|l| {
+            let i = l.text.find("samples: ")? + "samples: ".len();
+            let n: String = l.text[i..]
+                .chars()
+                .take_while(|c| c.is_ascii_digit())
+                .collect();
+            Some((l.t_s, n.parse().ok()?))
+        })
+        .collect()
+}
+
+fn level_at(edges: &[PinEdge], t: Time) -> bool {
+    edges
+        .iter()
+        .take_while(|e| e.at <= t)
+        .last()
+        .map_or(false, |e| e.high)
+}
+
+fn high_within(edges: &[PinEdge], from: Time, to: Time) -> bool {
+    level_at(edges, from) || edges.iter().any(|e| e.at > from && e.at < to && e.high)
+}
+
+fn us(t: Time) -> f64 {
+    t as f64 * 1e6 / TICKS_PER_S as f64
+}
+
+/// Summary of one board's checks.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub board: String,
+    pub elf: String,
+    pub checks: Vec<Check>,
+    pub carrier_hz_registers: Option<f64>,
+    pub carrier_hz_edges: Option<f64>,
+    pub samples_per_s: Option<u64>,
+    pub latency_us_median: Option<f64>,
+    pub latency_us_worst: Option<f64>,
+    pub emulated_s: f64,
+    pub instructions: u64,
+    pub wall_s: f64,
+}
+
+impl Report {
+    pub fn passed(&self) -> bool {
+        self.checks.iter().all(|c| c.pass)
+    }
+}
+
+/// Runs every check for `board` on `elf`.
+pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, String> {
+    let mut checks = Vec::new();
+    let def = board.def();
+    let mut opts = Options::new(board, elf, duration_s);
+    opts.carrier_window_s = Some(0.5);
+    let (o, mut m) = run::run(&opts)?;
+    if let Some(s) = &o.stop {
+        checks.push(check(
+            "runs to the end",
+            false,
+            format!(
+                "the run stopped at {:.6} s: {s:?}",
+                o.end as f64 / TICKS_PER_S as f64
+            ),
+        ));
+    } else {
+        checks.push(check(
+            "runs to the end",
+            true,
+            format!("{duration_s} s of board time without an unmodelled access, fault or lockup"),
+        ));
+    }
+
+    // Boot log.
+    for (what, part) in [
+        ("boot line", "saw-firmware v"),
+        ("clock line", "clocks: "),
+        ("carrier line", "carrier: "),
+        ("scene loaded", "scene loaded"),
+    ] {
+        let line = o
+            .log
+            .iter()
+            .find(|l| l.text.contains(part))
+            .map(|l| l.text.clone());
+        checks.push(check(
+            &format!("log: {what}"),
+            line.is_some(),
+            line.unwrap_or_else(|| format!("no line containing {part:?}")),
+        ));
+    }
+
+    // Clock tree as the RCC registers configure it.
+    let c = m.sim().clocks;
+    let want = &def.clocks;
+    let ok = c.sysclk_hz == want.sysclk_hz as u64
+        && c.pclk1_hz == want.pclk1_hz() as u64
+        && c.pclk2_hz == want.pclk2_hz() as u64
+        && c.tim_apb2_hz == def.carrier_timer_clk_hz as u64
+        && c.tim_apb1_hz == def.burst_timer_clk_hz as u64;
+    checks.push(check(
+        "clock tree",
+        ok,
+        format!(
+            "SYSCLK {} Hz, PCLK1 {} Hz, PCLK2 {} Hz, APB1 timers {} Hz, APB2 timers {} Hz (plan: {} / {} / {})",
+            c.sysclk_hz, c.pclk1_hz, c.pclk2_hz, c.tim_apb1_hz, c.tim_apb2_hz, want.sysclk_hz, want.pclk1_hz(), want.pclk2_hz()
+        ),
+    ));
+
+    // Carrier from TIM1's registers and from its recorded edges.
+    let tim1 = if board == BoardKind::F446 {
+        0x4001_0000
+    } else {
+        0x4001_2C00
+    };
+    let psc = m.sim_mut().peek(tim1 + 0x28).unwrap_or(0) as u64;
+    let arr = m.sim_mut().peek(tim1 + 0x2C).unwrap_or(0) as u64;
+    let f_reg = c.tim_apb2_hz as f64 / ((psc + 1) * (arr + 1)) as f64;
+    checks.push(check(
+        "carrier from registers",
+        f_reg == 15e6,
+        format!(
+            "TIM1 {} Hz / (PSC {psc} + 1) / (ARR {arr} + 1) = {f_reg} Hz",
+            c.tim_apb2_hz
+        ),
+    ));
+    let rises: Vec<Time> = o.pins[PIN_CARRIER]
+        .iter()
+        .filter(|e| e.high)
+        .map(|e| e.at)
+        .collect();
+    let periods: Vec<Time> = rises.windows(2).map(|w| w[1] - w[0]).collect();
+    let f_edges = periods.first().map(|&p| TICKS_PER_S as f64 / p as f64);
+    let uniform = !periods.is_empty() && periods.iter().all(|&p| p == periods[0]);
+    checks.push(check(
+        "carrier from edges",
+        uniform && f_edges == Some(15e6) && periods.len() >= 100,
+        format!(
+            "{} periods recorded on PA8, all {:?} ticks → {:?} Hz",
+            periods.len(),
+            periods.first(),
+            f_edges
+        ),
+    ));
+
+    // ADC: triggers exactly 100 µs apart, and the firmware's own count of processed samples.
+    let trig_ok = o
+        .triggers
+        .windows(2)
+        .all(|w| w[1] - w[0] == TICKS_PER_S / def.sample_rate_hz as u64);
+    checks.push(check(
+        "ADC trigger period",
+        trig_ok && o.triggers.len() > 1000,
+        format!(
+            "{} TIM3 TRGO pulses, {}",
+            o.triggers.len(),
+            if trig_ok {
+                "every one 100 µs after the last"
+            } else {
+                "spacing not uniform"
+            }
+        ),
+    ));
+    let tele = telemetry_samples(&o);
+    let rate = tele
+        .windows(2)
+        .map(|w| (w[1].1 - w[0].1) as f64 / (w[1].0 - w[0].0))
+        .last();
+    let samples_per_s = rate.map(|r| r.round() as u64);
+    checks.push(check(
+        "ADC samples reach the control loop",
+        samples_per_s == Some(def.sample_rate_hz as u64),
+        format!("telemetry lines {:?} → {:?} samples/s", tele, samples_per_s),
+    ));
+
+    // Closed loop against host-sim for the same trajectory, noise and seed.
+    let (t0, end) = (o.t0.unwrap_or(0), o.end);
+    let clk = burst_clk(board);
+    let model_w = waveform(&o.pins[PIN_BURST_A], t0, t0, end, clk);
+    let host_duration = (end.saturating_sub(t0)) as f64 / TICKS_PER_S as f64;
+    let mut params = host_sim::sim::SimParams::new(def, opts.trajectory.clone(), host_duration);
+    params.adc = opts.adc.clone();
+    let host = host_sim::sim::run(&params).map_err(|e| format!("host-sim: {e}"))?;
+    let (ms, hs) = (segments(&model_w), segments(&host.waveform));
+    let pos = |t_clk: u64| opts.trajectory.state(t_clk as f64 / clk as f64).position_um / 1000.0;
+    let mut worst_pos: f64 = 0.0;
+    let mut worst_ticks = 0u64;
+    for (a, b) in ms.iter().zip(&hs) {
+        worst_ticks = worst_ticks
+            .max(a.period.abs_diff(b.period))
+            .max(a.on.abs_diff(b.on));
+        worst_pos = worst_pos.max((pos(a.start) - pos(b.start)).abs());
+    }
+    checks.push(check(
+        "closed loop: same bursts as host-sim",
+        !ms.is_empty() && ms.len() == hs.len() && worst_ticks <= 1 && worst_pos <= 0.2,
+        format!(
+            "{} segments on the model, {} on host-sim; worst period/on-time difference {worst_ticks} ticks, worst switch position difference {:.3} mm",
+            ms.len(),
+            hs.len(),
+            worst_pos
+        ),
+    ));
+    let cap = def_cap(&host);
+    let bad = caps(&model_w, cap.0, cap.1);
+    checks.push(check(
+        "duty and on-time caps on every pulse",
+        bad.is_empty() && !model_w.pulses().is_empty(),
+        if bad.is_empty() {
+            format!(
+                "{} pulses, none above {} permille or {} µs",
+                model_w.pulses().len(),
+                cap.0,
+                cap.1
+            )
+        } else {
+            bad[0].clone()
+        },
+    ));
+
+    // Sensor-to-gate latency.
+    let lat = latency(&o, board);
+    let (median, worst) = (lat.get(lat.len() / 2).copied(), lat.last().copied());
+    checks.push(check(
+        "sensor-to-gate latency ≤ 100 µs",
+        worst.map_or(false, |w| w <= 100.0),
+        format!("{} burst-timer updates: median {:?} µs, worst {:?} µs (1 instruction = 1 HCLK cycle, ART on)", lat.len(), median, worst),
+    ));
+
+    let rep = Report {
+        board: board.name().into(),
+        elf: elf.display().to_string(),
+        carrier_hz_registers: Some(f_reg),
+        carrier_hz_edges: f_edges,
+        samples_per_s,
+        latency_us_median: median,
+        latency_us_worst: worst,
+        emulated_s: o.end as f64 / TICKS_PER_S as f64,
+        instructions: o.instructions,
+        wall_s: o.wall_s,
+        checks,
+    };
+    Ok(rep)
+}
+
+/// The duty cap (permille) and on-time cap (µs) of the scene host-sim ran.
+fn def_cap(host: &host_sim::sim::SimResult) -> (u64, u64) {
+    let l = host.params.config.limits;
+    (l.max_duty_permille as u64, l.max_on_time_us as u64)
+}
+
+/// Sensor-to-gate latency, µs, sorted: for each group of burst-timer writes (the firmware acting
+/// on one sample), the time from the TIM3 trigger of the newest sample whose conversions had all
+/// reached memory to the group's last write.
+pub fn latency(o: &Outcome, board: BoardKind) -> Vec<f64> {
+    let _ = board;
+    let tim2: Vec<Time> = o
+        .writes
+        .iter()
+        .filter(|w| w.addr < 0x4000_0400)
+        .map(|w| w.at)
+        .collect();
+    let mut groups = Vec::new();
+    let gap = TICKS_PER_S / 100_000; // 10 µs between writes starts a new group
+    let mut last: Option<Time> = None;
+    for &t in &tim2 {
+        match last {
+            Some(l) if t - l <= gap => {
+                *groups.last_mut().unwrap() = t;
+            }
+            _ => groups.push(t),
+        }
+        last = Some(t);
+    }
+    let completions = &o.sample_completions;
+    let mut out = Vec::new();
+    for w in groups {
+        // Newest sample complete before the write.
+        let k = completions.partition_point(|&c| c <= w);
+        if k == 0 || k > o.triggers.len() {
+            continue;
+        }
+        out.push(us(w - o.triggers[k - 1]));
+    }
+    out.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    out
+}
+
+/// Sensor fault: the wiper opens (reads 0) from 1.0 to 1.2 s of trajectory time. The enables
+/// must be low from the first faulted sample's processing on, through the fault window.
+pub fn rail_fault(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
+    let mut opts = Options::new(board, elf, 1.5);
+    opts.adc.faults = vec![FaultWindow {
+        kind: FaultKind::Open,
+        start_us: 1_000_000,
+        end_us: 1_200_000,
+    }];
+    let (o, _m) = run::run(&opts)?;
+    let mut out = Vec::new();
+    let t0 = o.t0.unwrap_or(0);
+    let start = t0 + TICKS_PER_S;
+    let stop = t0 + TICKS_PER_S * 12 / 10;
+    // The first trigger inside the window and the sample period.
+    let first = o
+        .triggers
+        .iter()
+        .copied()
+        .find(|&t| t + TICKS_PER_S / 1_000_000 >= start)
+        .unwrap_or(start);
+    let period = TICKS_PER_S / board.def().sample_rate_hz as u64;
+    let deadline = first + period;
+    let high_before = high_within(&o.pins[PIN_BURST_A], start - TICKS_PER_S / 10, start);
+    let a = high_within(&o.pins[PIN_BURST_A], deadline, stop);
+    let b = high_within(&o.pins[PIN_BURST_B], deadline, stop);
+    let off_at = o.pins[PIN_BURST_A]
+        .iter()
+        .find(|e| e.at >= first && !e.high)
+        .map(|e| us(e.at - first));
+    out.push(check(
+        "rail fault: enables low by the next sample",
+        high_before && !a && !b && o.stop.is_none(),
+        format!(
+            "bursts before the fault: {high_before}; after the first faulted trigger, PA0 high again before the fault ends: {a}, PB10: {b}; PA0 low {:?} µs after that trigger",
+            off_at.or(Some(0.0))
+        ),
+    ));
+    out.push(check(
+        "rail fault: logged",
+        log_has(&o, "sensor fault"),
+        "the log names the sensor fault",
+    ));
+    Ok(out)
+}
+
+/// A stuck interrupt (storm) from 1.0 s starves the control loop: the IWDG must reset the chip,
+/// with the enables low from the reset on until the new boot, which must come up again.
+pub fn watchdog(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
+    let mut opts = Options::new(board, elf, 1.2);
+    let irq = match board {
+        BoardKind::F446 => 56, // DMA2_STREAM0: the ADC's DMA
+        BoardKind::G474 => 11, // DMA1_CHANNEL1
+    };
+    opts.stuck_irq = Some((1.0, irq));
+    let (o, _m) = run::run(&opts)?;
+    let mut out = Vec::new();
+    let reset = o
+        .resets
+        .iter()
+        .find(|r| r.1 == ResetCause::IndependentWatchdog)
+        .map(|r| r.0);
+    let storm = TICKS_PER_S;
+    let after_ms = reset.map(|r| (r as f64 - storm as f64) / TICKS_PER_S as f64 * 1e3);
+    out.push(check(
+        "stalled loop: IWDG resets the chip",
+        reset.is_some() && after_ms.map_or(false, |ms| ms > 0.0 && ms <= 60.0),
+        format!(
+            "IWDG reset {:?} ms after the interrupt storm began (timeout 50 ms)",
+            after_ms
+        ),
+    ));
+    if let Some(r) = reset {
+        let reboot = o
+            .log
+            .iter()
+            .filter(|l| l.text.contains("saw-firmware v"))
+            .count();
+        // From the reset until the new boot arms RF, enables and arm stay low.
+        let arm_high = o.pins[PIN_RF_ARM]
+            .iter()
+            .find(|e| e.at > r && e.high)
+            .map(|e| e.at)
+            .unwrap_or(o.end);
+        let a = high_within(&o.pins[PIN_BURST_A], r, arm_high);
+        let b = high_within(&o.pins[PIN_BURST_B], r, arm_high);
+        let arm = level_at(&o.pins[PIN_RF_ARM], r);
+        out.push(check(
+            "stalled loop: enables and arm low through the reset",
+            !a && !b && !arm && reboot >= 2,
+            format!("after the reset PA0 high: {a}, PB10 high: {b}, RF arm high at the reset: {arm}; boots logged: {reboot}"),
+        ));
+    }
+    Ok(out)
+}
+
+/// Whether a stop is the firmware halting at its own breakpoint (panic/HardFault path).
+pub fn halted(s: &Option<Stop>) -> bool {
+    matches!(s, Some(Stop::Breakpoint { .. }) | Some(Stop::Lockup { .. }))
+}

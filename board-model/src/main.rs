@@ -1,0 +1,173 @@
+//! `board-model`: runs a firmware image on the model of its Nucleo board and checks what a board
+//! would show (boot, clocks, carrier, ADC rate, closed loop against host-sim, caps, latency,
+//! rail fault, watchdog).
+use clap::{Parser, Subcommand};
+use saw_board_model::board::BoardKind;
+use saw_board_model::{check, run};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    about = "Run the real firmware ELF on a model of its Nucleo board (Unicorn + STM32 peripheral models)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Every check for one board; exits 1 if any fails.
+    Check {
+        /// Board: nucleo-f446re or nucleo-g474re.
+        #[arg(long)]
+        board: String,
+        /// The firmware ELF (scripts/build-firmware.sh leaves firmware/target/<board>.elf).
+        #[arg(long)]
+        elf: PathBuf,
+        /// Board time of the closed-loop run, s (1.1 to 60; the ADC-rate check needs two
+        /// 1 Hz telemetry lines).
+        #[arg(long, default_value_t = 2.2, value_parser = duration)]
+        duration: f64,
+        /// Print the summary as JSON instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Also write the JSON summary to this file.
+        #[arg(long)]
+        json_file: Option<PathBuf>,
+    },
+    /// Run the default closed loop and print the decoded log.
+    Run {
+        #[arg(long)]
+        board: String,
+        #[arg(long)]
+        elf: PathBuf,
+        /// Board time, s (0.001 to 60).
+        #[arg(long, default_value_t = 0.1, value_parser = run_duration)]
+        duration: f64,
+    },
+}
+
+fn range(s: &str, lo: f64, hi: f64, flag: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("{flag} {s:?}: not a number of seconds"))?;
+    if !v.is_finite() || v < lo || v > hi {
+        return Err(format!("{flag} {s}: must be between {lo} and {hi} s"));
+    }
+    Ok(v)
+}
+
+fn duration(s: &str) -> Result<f64, String> {
+    range(s, 1.1, 60.0, "--duration")
+}
+
+fn run_duration(s: &str) -> Result<f64, String> {
+    range(s, 0.001, 60.0, "--duration")
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match real_main(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn real_main(cli: Cli) -> Result<ExitCode, String> {
+    match cli.cmd {
+        Cmd::Check {
+            board,
+            elf,
+            duration,
+            json,
+            json_file,
+        } => {
+            let kind = BoardKind::parse(&board)?;
+            let mut rep = check::all(kind, &elf, duration)?;
+            rep.checks.extend(check::rail_fault(kind, &elf)?);
+            rep.checks.extend(check::watchdog(kind, &elf)?);
+            let text = serde_json::to_string_pretty(&rep).map_err(|e| e.to_string())?;
+            if let Some(f) = &json_file {
+                std::fs::write(f, &text)
+                    .map_err(|e| format!("--json-file {}: {e}", f.display()))?;
+            }
+            if json {
+                println!("{text}");
+            } else {
+                println!("board model: {} running {}", rep.board, rep.elf);
+                for c in &rep.checks {
+                    println!(
+                        "  {} {}: {}",
+                        if c.pass { "ok  " } else { "FAIL" },
+                        c.name,
+                        c.detail
+                    );
+                }
+                println!(
+                    "  {:.2} s of board time, {} instructions, in {:.1} s",
+                    rep.emulated_s, rep.instructions, rep.wall_s
+                );
+            }
+            Ok(if rep.passed() {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            })
+        }
+        Cmd::Run {
+            board,
+            elf,
+            duration,
+        } => {
+            let kind = BoardKind::parse(&board)?;
+            let (o, m) = run::run(&run::Options::new(kind, &elf, duration))?;
+            let pc = m.uc.reg_read(unicorn_engine::RegisterARM::PC).unwrap_or(0);
+            if let (Some(cb), Ok(_)) = (
+                m.image.symbol("_SEGGER_RTT"),
+                std::env::var("BOARD_MODEL_TRACE"),
+            ) {
+                let mut b = [0u8; 48];
+                let _ = m.uc.mem_read(cb as u64, &mut b);
+                let w: Vec<String> = b
+                    .chunks(4)
+                    .map(|c| format!("{:08X}", u32::from_le_bytes(c.try_into().unwrap())))
+                    .collect();
+                eprintln!("_SEGGER_RTT @0x{cb:08X}: {}", w.join(" "));
+                let sp = m.uc.reg_read(unicorn_engine::RegisterARM::SP).unwrap_or(0);
+                let mut st = vec![0u8; 512];
+                let _ = m.uc.mem_read(sp, &mut st);
+                let ra: Vec<String> = st
+                    .chunks(4)
+                    .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
+                    .filter(|v| (0x0800_0000..0x0808_0000).contains(v))
+                    .map(|v| format!("{v:08X}"))
+                    .collect();
+                eprintln!("stack code addresses from sp 0x{sp:08X}: {}", ra.join(" "));
+            }
+            for l in &o.log {
+                println!("{:10.6} {:5} {}", l.t_s, l.level, l.text);
+            }
+            if let Some(s) = &o.stop {
+                println!("stopped: {s:?}");
+            }
+            println!(
+                "pc 0x{pc:08X}; {:.4} s of board time, {} instructions, {} exceptions, {:.1} % asleep, in {:.2} s",
+                o.end as f64 / 3.6e9,
+                o.instructions,
+                o.exceptions,
+                100.0 * o.sleeping as f64 / o.end.max(1) as f64,
+                o.wall_s
+            );
+            Ok(if o.stop.is_some() {
+                ExitCode::FAILURE
+            } else {
+                ExitCode::SUCCESS
+            })
+        }
+    }
+}

@@ -1,0 +1,258 @@
+//! One run of a firmware image on the board model: the finger's trajectory and the rheostat/ADC
+//! model from host-sim wired to the wiper input, faults injected on schedule, and what the run
+//! produced (decoded log, pins, register writes, events) collected for the checks.
+
+use crate::board::{self, BoardKind};
+use crate::machine::{BusWrite, Machine, PinEdge, Stop};
+use crate::periph::{seconds, Event, Time, TICKS_PER_S};
+use host_sim::adc::{AdcModel, AdcParams, FaultKind};
+use host_sim::trajectory::Trajectory;
+use std::cell::Cell;
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+
+/// What to run.
+#[derive(Clone, Debug)]
+pub struct Options {
+    pub board: BoardKind,
+    pub elf: PathBuf,
+    pub trajectory: Trajectory,
+    /// Virtual time to run, s (boot included).
+    pub duration_s: f64,
+    /// Rheostat/ADC model (noise, offset, seed, rail-fault windows in trajectory time).
+    pub adc: AdcParams,
+    /// From this virtual time on (s), the NVIC line of this IRQ is held high: an interrupt storm
+    /// that starves the control loop (the IWDG must reset the chip).
+    pub stuck_irq: Option<(f64, u16)>,
+    /// DHCSR.C_DEBUGEN as the firmware reads it.
+    pub debugger: bool,
+    /// At this virtual time (s), record the carrier pin (TIM1 CH1) for 20 µs: 300 periods at
+    /// 15 MHz (recording it all the time would cost an event per edge).
+    pub carrier_window_s: Option<f64>,
+    /// At this virtual time (s), once the core is in thread mode, divert it into a real panic
+    /// call site of the image (`movw/movt r0, &Location; bl panic_const_div_by_zero`): the
+    /// firmware's own panic machinery runs from there, as after a division by zero.
+    pub force_panic_s: Option<f64>,
+}
+
+impl Options {
+    /// The default closed loop: host-sim's default back-and-forth trajectory (1.5 ↔ 61.5 mm at
+    /// 60 mm/s), 2 LSB noise, seed 1.
+    pub fn new(board: BoardKind, elf: &Path, duration_s: f64) -> Self {
+        Self {
+            board,
+            elf: elf.to_path_buf(),
+            trajectory: Trajectory::Triangle {
+                a_um: 1_500.0,
+                b_um: 61_500.0,
+                speed_um_s: 60_000.0,
+            },
+            duration_s,
+            adc: AdcParams::default(),
+            stuck_irq: None,
+            debugger: false,
+            carrier_window_s: None,
+            force_panic_s: None,
+        }
+    }
+}
+
+/// One decoded defmt line.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LogLine {
+    /// The firmware's own timestamp (embassy uptime), s.
+    pub t_s: f64,
+    pub level: String,
+    pub text: String,
+}
+
+/// What a run produced.
+pub struct Outcome {
+    pub stop: Option<Stop>,
+    /// Virtual time reached, master ticks.
+    pub end: Time,
+    /// Trajectory time origin: the first conversion of the first sample.
+    pub t0: Option<Time>,
+    pub log: Vec<LogLine>,
+    pub raw_log: Vec<u8>,
+    pub pins: Vec<Vec<PinEdge>>,
+    pub writes: Vec<BusWrite>,
+    /// TIM3 TRGO times (the ADC triggers).
+    pub triggers: Vec<Time>,
+    /// ADC conversions the wiper model answered.
+    pub conversions: u64,
+    /// Times at which a sample's last conversion reached memory (its DMA read).
+    pub sample_completions: Vec<Time>,
+    pub resets: Vec<(Time, crate::periph::ResetCause)>,
+    pub instructions: u64,
+    pub sleeping: Time,
+    pub exceptions: u64,
+    pub wall_s: f64,
+}
+
+/// Runs `opts`.
+pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
+    let started = std::time::Instant::now();
+    let def = opts.board.def();
+    let mut adc = AdcModel::new(saw_core::default_config().calibration, opts.adc.clone())
+        .map_err(|e| format!("ADC model: {e:?}"))?;
+    if opts.adc.faults.iter().any(|f| f.kind == FaultKind::Dropout) {
+        return Err("a dropout fault has no meaning at the ADC input of the board model (the ADC always converts); use open or short".into());
+    }
+    let t0: Rc<Cell<Option<Time>>> = Rc::new(Cell::new(None));
+    let conversions = Rc::new(Cell::new(0u64));
+    let traj = opts.trajectory.clone();
+    let (t0_w, conv_w) = (t0.clone(), conversions.clone());
+    let wiper: board::Wiper = Box::new(move |t: Time| {
+        let origin = match t0_w.get() {
+            Some(o) => o,
+            None => {
+                t0_w.set(Some(t));
+                t
+            }
+        };
+        conv_w.set(conv_w.get() + 1);
+        let rel = t - origin;
+        let t_us = rel / (TICKS_PER_S / 1_000_000);
+        match adc.fault_at(t_us) {
+            Some(FaultKind::Open) => 0,
+            Some(FaultKind::Short) => 4095,
+            _ => adc.convert(traj.state(seconds(rel)).position_um) as u16,
+        }
+    });
+    let mut m = board::build(opts.board, &opts.elf, wiper)?;
+    m.sim_mut().scs.debugger_attached = opts.debugger;
+    let end = (opts.duration_s * TICKS_PER_S as f64) as Time;
+    // Scheduled interventions, in time order: (time, what).
+    let at = |s: f64| (s * TICKS_PER_S as f64) as Time;
+    let mut plan: Vec<(Time, u8)> = Vec::new();
+    if let Some(w) = opts.carrier_window_s {
+        plan.push((at(w), 0));
+        plan.push((at(w) + TICKS_PER_S / 50_000, 1));
+    }
+    if let Some((s, _)) = opts.stuck_irq {
+        plan.push((at(s), 2));
+    }
+    if let Some(s) = opts.force_panic_s {
+        plan.push((at(s), 3));
+    }
+    plan.sort();
+    let mut stop = None;
+    for (t, what) in plan {
+        if t >= end {
+            break;
+        }
+        stop = m.run_until(t);
+        if stop.is_some() {
+            break;
+        }
+        match what {
+            0 => m.sim_mut().record("TIM1", 1, true),
+            1 => m.sim_mut().record("TIM1", 1, false),
+            2 => {
+                let irq = opts.stuck_irq.unwrap().1;
+                m.sim_mut().stuck_irqs.push(irq);
+            }
+            _ => {
+                let site = m.image.call_site("panic_const_div_by_zero").ok_or(
+                    "the image has no `bl panic_const_div_by_zero` call site to divert to",
+                )?;
+                stop = m.divert_in_thread_mode(site);
+                if stop.is_some() {
+                    break;
+                }
+            }
+        }
+    }
+    if stop.is_none() {
+        stop = m.run_until(end);
+    }
+    let per_sample =
+        def.adc_oversample as usize / if opts.board == BoardKind::G474 { 16 } else { 1 };
+    let s = m.sim();
+    let raw_log = s.log.clone();
+    let log = decode(&opts.elf, &raw_log)?;
+    let triggers = s
+        .events
+        .iter()
+        .filter(|(_, e)| *e == Event::Trgo { timer: 3 })
+        .map(|&(t, _)| t)
+        .collect();
+    let out = Outcome {
+        stop,
+        end: m.now(),
+        t0: t0.get(),
+        log,
+        raw_log,
+        pins: s.pins.clone(),
+        writes: s.writes.clone(),
+        triggers,
+        conversions: conversions.get(),
+        sample_completions: s
+            .dma_reads
+            .iter()
+            .skip(per_sample - 1)
+            .step_by(per_sample)
+            .copied()
+            .collect(),
+        resets: s.resets.clone(),
+        instructions: s.instructions,
+        sleeping: s.sleeping_ticks,
+        exceptions: s.exceptions_taken,
+        wall_s: started.elapsed().as_secs_f64(),
+    };
+    Ok((out, m))
+}
+
+/// The defmt decoder the project installs (scripts/setup.sh).
+fn defmt_print() -> PathBuf {
+    if let Ok(p) = std::env::var("DEFMT_PRINT") {
+        return PathBuf::from(p);
+    }
+    let home = std::env::var("HOME").unwrap_or_default();
+    let local = Path::new(&home).join(".cargo/bin/defmt-print");
+    if local.exists() {
+        local
+    } else {
+        PathBuf::from("defmt-print")
+    }
+}
+
+/// Decodes the RTT bytes with `defmt-print -e ELF`, one line per frame: "<t> <LEVEL> <text>".
+pub fn decode(elf: &Path, raw: &[u8]) -> Result<Vec<LogLine>, String> {
+    use std::io::Write;
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(defmt_print())
+        .arg("-e")
+        .arg(elf)
+        .args(["--log-format", "{t} {L} {s}"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("defmt-print: {e} (scripts/setup.sh installs it)"))?;
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(raw)
+        .map_err(|e| format!("defmt-print: {e}"))?;
+    let out = child
+        .wait_with_output()
+        .map_err(|e| format!("defmt-print: {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let mut lines = Vec::new();
+    for l in text.lines() {
+        let mut it = l.splitn(3, ' ');
+        let (Some(t), Some(level), Some(rest)) = (it.next(), it.next(), it.next()) else {
+            continue;
+        };
+        let Ok(t_s) = t.parse::<f64>() else { continue };
+        lines.push(LogLine {
+            t_s,
+            level: level.to_string(),
+            text: rest.to_string(),
+        });
+    }
+    Ok(lines)
+}

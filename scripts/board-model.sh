@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# The real firmware images on the board model (board-model/: Unicorn + STM32 peripheral models,
+# GPL-2.0-or-later, test-only — nothing that ships links it).
+#
+#   scripts/board-model.sh                 # both boards; ELFs from scripts/build-firmware.sh
+#   scripts/board-model.sh nucleo-g474re
+#
+# 1. the model's own tests (peripheral models against the reference manuals, the NVIC, the
+#    machine), and its tests on the firmware images (faults, panic path, findings of issue #9);
+# 2. `board-model check` per board: boot log, clock tree, 15 MHz carrier from registers and
+#    edges, 10 000 samples/s, the closed loop against host-sim, duty/on-time caps, sensor-to-gate
+#    latency, rail fault, watchdog reset. JSON summaries in target/board-model/<board>.json.
+# Needs firmware/target/<board>.elf (scripts/build-firmware.sh) and defmt-print (scripts/setup.sh).
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+OUT="$ROOT/target/board-model"
+mkdir -p "$OUT"
+BOARDS=("$@")
+[ "${#BOARDS[@]}" -eq 0 ] && BOARDS=(nucleo-f446re nucleo-g474re)
+export SAW_FIRMWARE_DIR="${SAW_FIRMWARE_DIR:-$ROOT/firmware/target}"
+for b in "${BOARDS[@]}"; do
+    [ -f "$SAW_FIRMWARE_DIR/$b.elf" ] || { echo "board-model: $SAW_FIRMWARE_DIR/$b.elf is missing: run scripts/build-firmware.sh first" >&2; exit 1; }
+done
+# The model shares the host workspace's target directory (host-sim and its dependencies are
+# built once).
+export CARGO_TARGET_DIR="$ROOT/target"
+cd "$ROOT/board-model"
+echo "== board model: tests"
+cargo test --release
+cargo build --release --bin board-model
+fail=0
+for b in "${BOARDS[@]}"; do
+    echo "== board model: $b"
+    "$ROOT/target/release/board-model" check --board "$b" --elf "$SAW_FIRMWARE_DIR/$b.elf" \
+        --json-file "$OUT/$b.json" || fail=1
+done
+exit "$fail"
