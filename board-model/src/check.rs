@@ -40,7 +40,7 @@ pub fn waveform(edges: &[PinEdge], t0: Time, from: Time, end: Time, clk_hz: u64)
     let mut out = Vec::new();
     for e in edges.iter().filter(|e| e.at >= from && e.at >= t0) {
         let t = (e.at - t0) / per;
-        if out.last().map_or(!e.high, |l: &Edge| l.high != e.high) {
+        if out.last().map_or(e.high, |l: &Edge| l.high != e.high) {
             out.push(Edge { t, high: e.high });
         }
     }
@@ -51,26 +51,34 @@ pub fn waveform(edges: &[PinEdge], t0: Time, from: Time, end: Time, clk_hz: u64)
     }
 }
 
-/// A run of pulses with one period (rise to rise, within one tick) and on-time.
+/// A run of pulses with one period and on-time.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Segment {
     /// First rise, timer clocks.
     pub start: u64,
+    /// Fall to fall, timer clocks.
     pub period: u64,
+    /// On-time of the segment's second pulse (the first after a Start rises when the firmware
+    /// switches the channel to PWM mode, a few ticks after the counter starts).
     pub on: u64,
     pub pulses: usize,
 }
 
-/// Groups the waveform's pulses into segments of equal period (±1 tick).
+/// Groups the waveform's pulses into segments of equal period (±1 tick). The period is taken
+/// fall to fall: in PWM mode 1 a fall is the CCR match, exact in every period, while the first
+/// rise after a Start comes when the firmware selects PWM mode, after the counter started.
 pub fn segments(w: &Waveform) -> Vec<Segment> {
+    let pulses = w.pulses();
     let mut out: Vec<Segment> = Vec::new();
-    for p in w.pulses() {
-        let Some(period) = p.period() else { continue };
+    for (i, p) in pulses.iter().enumerate() {
+        let Some(next) = pulses.get(i + 1) else { break };
+        // A gap of more than one period is not this segment any more (Off, restart).
+        let period = next.fall - p.fall;
         match out.last_mut() {
-            Some(s)
-                if s.period.abs_diff(period) <= 1
-                    && s.start + s.period * s.pulses as u64 + 2 >= p.rise =>
-            {
+            Some(s) if s.period.abs_diff(period) <= 1 => {
+                if s.pulses == 1 {
+                    s.on = p.on();
+                }
                 s.pulses += 1;
             }
             _ => out.push(Segment {
@@ -307,6 +315,14 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
     params.adc = opts.adc.clone();
     let host = host_sim::sim::run(&params).map_err(|e| format!("host-sim: {e}"))?;
     let (ms, hs) = (segments(&model_w), segments(&host.waveform));
+    if std::env::var("BOARD_MODEL_TRACE").is_ok_and(|v| v == "segments") {
+        for (i, s) in ms.iter().enumerate() {
+            eprintln!("model {i}: {s:?}");
+        }
+        for (i, s) in hs.iter().enumerate() {
+            eprintln!("host  {i}: {s:?}");
+        }
+    }
     let pos = |t_clk: u64| opts.trajectory.state(t_clk as f64 / clk as f64).position_um / 1000.0;
     let mut worst_pos: f64 = 0.0;
     let mut worst_ticks = 0u64;

@@ -856,7 +856,7 @@ impl Machine {
                 .unwrap_or(Time::MAX);
             s.deadline = next.min(until).min(s.now + MAX_SLICE).max(s.now + 1);
             let pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0);
-            if std::env::var_os("BOARD_MODEL_TRACE").is_some() {
+            if std::env::var("BOARD_MODEL_TRACE").is_ok_and(|v| v == "slices") {
                 let s = self.uc.get_data();
                 let evs: Vec<String> = s
                     .periphs
@@ -1105,7 +1105,7 @@ impl Machine {
                         }
                     },
                 };
-                if std::env::var_os("BOARD_MODEL_TRACE").is_some() {
+                if std::env::var("BOARD_MODEL_TRACE").is_ok_and(|v| v == "slices") {
                     eprintln!("dma write 0x{to:08X} <- 0x{value:X} ({size} B)");
                 }
                 if let Err(e) = self.write_any(to, size, value) {

@@ -149,6 +149,36 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
                     .collect();
                 eprintln!("stack code addresses from sp 0x{sp:08X}: {}", ra.join(" "));
             }
+            if std::env::var("BOARD_MODEL_TRACE").is_ok_and(|v| v == "writes") {
+                for w in o.writes.iter().filter(|w| w.addr < 0x4000_0400) {
+                    let k = o.triggers.partition_point(|&t| t <= w.at);
+                    let last = if k > 0 { o.triggers[k - 1] } else { 0 };
+                    eprintln!(
+                        "{:12.3} µs TIM2+0x{:02X} = 0x{:08X} (mask {:08X}); {:.3} µs after TRGO #{k}",
+                        w.at as f64 / 3600.0,
+                        w.addr & 0x3FF,
+                        w.value,
+                        w.mask,
+                        (w.at - last) as f64 / 3600.0
+                    );
+                }
+                let dr: Vec<String> = o
+                    .sample_completions
+                    .iter()
+                    .take(5)
+                    .map(|t| format!("{:.3}", *t as f64 / 3600.0))
+                    .collect();
+                let tr: Vec<String> = o
+                    .triggers
+                    .iter()
+                    .take(5)
+                    .map(|t| format!("{:.3}", *t as f64 / 3600.0))
+                    .collect();
+                eprintln!(
+                    "first triggers {tr:?} µs, first sample completions {dr:?} µs, t0 {:?}",
+                    o.t0.map(|t| t as f64 / 3600.0)
+                );
+            }
             for l in &o.log {
                 println!("{:10.6} {:5} {}", l.t_s, l.level, l.text);
             }

@@ -172,10 +172,15 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
     let s = m.sim();
     let raw_log = s.log.clone();
     let log = decode(&opts.elf, &raw_log)?;
+    // The ADC's triggers: TIM3 TRGO pulses from the first conversion on (a configuration UG
+    // before the ADC is on also pulses TRGO, and converts nothing).
+    let first = t0
+        .get()
+        .map_or(Time::MAX, |t| t.saturating_sub(TICKS_PER_S / 100_000));
     let triggers = s
         .events
         .iter()
-        .filter(|(_, e)| *e == Event::Trgo { timer: 3 })
+        .filter(|(t, e)| *e == Event::Trgo { timer: 3 } && *t >= first)
         .map(|&(t, _)| t)
         .collect();
     let out = Outcome {
@@ -251,7 +256,7 @@ pub fn decode(elf: &Path, raw: &[u8]) -> Result<Vec<LogLine>, String> {
         lines.push(LogLine {
             t_s,
             level: level.to_string(),
-            text: rest.to_string(),
+            text: rest.trim_start().to_string(),
         });
     }
     Ok(lines)

@@ -1722,4 +1722,23 @@ mod tests {
             .why
             .contains("does not divide"));
     }
+
+    #[test]
+    fn probe_bug() {
+        let mut h = H::new(1, 180 * MHZ);
+        carrier_start(&mut h, true);
+        h.trgos();
+        let now = 36_000_000;
+        h.t.record_channel(1, true);
+        eprintln!("next {:?} level {}", h.t.next_event(), h.t.channel_level(1));
+        h.adv(now);
+        eprintln!(
+            "edges {} first {:?}",
+            h.log.levels.len(),
+            h.log.levels.first()
+        );
+        let e = h.edges(1);
+        eprintln!("{:?}", &e[e.len().saturating_sub(4)..]);
+        eprintln!("next {:?}", h.t.next_event());
+    }
 }
