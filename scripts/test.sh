@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs every test: installs what is missing (no-op when present), the host workspace's tests
-# (core, boards, host simulation, scenario tests), then both boards' firmware release builds with
-# their flash/RAM sizes checked against the 64 KiB budget.
+# (core, boards, host simulation, scenario tests), both boards' firmware release builds with
+# their flash/RAM sizes checked against the 64 KiB budget, the core on an emulated Cortex-M4F
+# (scripts/emu.sh), and the firmware images on the board model (scripts/board-model.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/setup.sh
@@ -10,3 +11,4 @@ cargo test --workspace
 echo "== firmware builds"
 ./scripts/build-firmware.sh
 ./scripts/emu.sh
+./scripts/board-model.sh

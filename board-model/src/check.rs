@@ -427,20 +427,21 @@ pub fn latency(o: &Outcome, board: BoardKind) -> Vec<f64> {
     out
 }
 
-/// Sensor fault: the wiper opens (reads 0) from 1.0 to 1.2 s of trajectory time. The enables
-/// must be low from the first faulted sample's processing on, through the fault window.
+/// Sensor fault: the wiper opens (reads 0) from 105 to 305 ms of trajectory time — 5 ms into a
+/// 20 ms burst of the 20 Hz region, so the line is high when the fault begins. The enables must
+/// be low from the first faulted sample's processing on, through the fault window.
 pub fn rail_fault(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
-    let mut opts = Options::new(board, elf, 1.5);
+    let mut opts = Options::new(board, elf, 0.5);
     opts.adc.faults = vec![FaultWindow {
         kind: FaultKind::Open,
-        start_us: 1_000_000,
-        end_us: 1_200_000,
+        start_us: 105_000,
+        end_us: 305_000,
     }];
     let (o, _m) = run::run(&opts)?;
     let mut out = Vec::new();
     let t0 = o.t0.unwrap_or(0);
-    let start = t0 + TICKS_PER_S;
-    let stop = t0 + TICKS_PER_S * 12 / 10;
+    let start = t0 + TICKS_PER_S * 105 / 1000;
+    let stop = t0 + TICKS_PER_S * 305 / 1000;
     // The first trigger inside the window and the sample period.
     let first = o
         .triggers
@@ -453,16 +454,25 @@ pub fn rail_fault(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     let high_before = high_within(&o.pins[PIN_BURST_A], start - TICKS_PER_S / 10, start);
     let a = high_within(&o.pins[PIN_BURST_A], deadline, stop);
     let b = high_within(&o.pins[PIN_BURST_B], deadline, stop);
-    let off_at = o.pins[PIN_BURST_A]
-        .iter()
-        .find(|e| e.at >= first && !e.high)
-        .map(|e| us(e.at - first));
+    // When each line went low for the fault, from the fault's onset (a sample whose later
+    // conversions are already faulted may turn RF off before the first fully faulted trigger).
+    let low_after_onset_us = |pin: usize| {
+        let e = &o.pins[pin];
+        if !level_at(e, start) {
+            return Some(0.0);
+        }
+        e.iter()
+            .find(|x| x.at > start && !x.high)
+            .map(|x| us(x.at - start))
+    };
     out.push(check(
         "rail fault: enables low by the next sample",
         high_before && !a && !b && o.stop.is_none(),
         format!(
-            "bursts before the fault: {high_before}; after the first faulted trigger, PA0 high again before the fault ends: {a}, PB10: {b}; PA0 low {:?} µs after that trigger",
-            off_at.or(Some(0.0))
+            "bursts in the 100 ms before the fault: {high_before}; PA0 low {:?} µs and PB10 low {:?} µs after the fault began, first fully faulted trigger {:.1} µs after it, deadline one sample later; high again before the fault ends (200 ms): PA0 {a}, PB10 {b}",
+            low_after_onset_us(PIN_BURST_A),
+            low_after_onset_us(PIN_BURST_B),
+            us(first - start),
         ),
     ));
     out.push(check(

@@ -47,8 +47,10 @@ fn burst_updates_are_written_under_udis() {
                 _ => {}
             }
         }
+        // The built-in scene changes f_b at its two region switches in this run:
+        // 2 updates × (PSC, ARR, CCR1, CCR3).
         assert!(
-            updates > 10,
+            updates >= 8,
             "{board:?}: only {updates} running-burst register writes seen"
         );
     }
