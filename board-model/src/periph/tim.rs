@@ -423,6 +423,8 @@ impl State {
 
     /// Carry out the step found by `next_step`. Returns whether it was an overflow (ARR → 0).
     fn apply_step(&mut self, t: Time, s: u64, out: &mut Signals) -> bool {
+        #[cfg(test)]
+        tests::STEPS.with(|n| n.set(n.get() + 1));
         let before = self.results();
         let c = self.core.cnt as u64;
         let a = self.core.arr_sh as u64;
@@ -602,8 +604,11 @@ impl Timer {
         }
     }
 
-    /// Emit `ChannelLevel` edges for `channel` (1..=4) from now on, or stop. Call after
-    /// `advance(now)`; the level at that moment is `channel_level`.
+    /// Emit `ChannelLevel` edges for `channel` (1..=4), or stop, from the moment the timer was
+    /// last brought to (the last access, `advance` or clock change). Exact only when that moment
+    /// is the present: before the run starts, or right after `advance(now)`. A timer left behind
+    /// (nothing observable, so nothing advanced it) would otherwise emit the edges since then, in
+    /// the past: use `record_channel_at` while running.
     pub fn record_channel(&mut self, channel: u8, on: bool) {
         assert!(
             (1..=4).contains(&channel),
@@ -611,6 +616,16 @@ impl Timer {
             self.cfg.name
         );
         self.st.recording[channel as usize - 1] = on;
+    }
+
+    /// `record_channel` at `now`: first catch up to `now` (whatever happens until then, with the
+    /// recording as it was, goes to `out`), then switch. Edges are emitted only for output changes
+    /// after `now`; the level at `now` is `channel_level`. Sets `out.replan` (the next event moves).
+    pub fn record_channel_at(&mut self, now: Time, channel: u8, on: bool, out: &mut Signals) {
+        self.flush_pending(out);
+        self.st.run(now, out);
+        self.record_channel(channel, on);
+        out.replan = true;
     }
 
     /// The output level of `channel` (1..=4) as of the last access or `advance`.
@@ -1108,6 +1123,14 @@ mod tests {
     //! kernel cycle is 3.6 GHz / f master ticks: 40 at 90 MHz, 20 at 180 MHz, 80 at 45 MHz.
     use super::*;
 
+    thread_local! {
+        /// Counter steps carried out (`apply_step`), real or looked ahead: the cost measure.
+        pub(super) static STEPS: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+    }
+    fn steps() -> u64 {
+        STEPS.with(|n| n.replace(0))
+    }
+
     const ALL: u32 = 0xFFFF_FFFF;
     const MHZ: u64 = 1_000_000;
     /// Master ticks per microsecond.
@@ -1542,20 +1565,95 @@ mod tests {
 
     /// firmware Carrier::start on TIM1 at 180 MHz: PSC 0, ARR 11, CCR1 6 → 15 MHz, 50 %.
     fn carrier_start(h: &mut H, moe: bool) {
-        h.w(0, PSC, 0);
-        h.w(0, CR1, CR1_ARPE);
-        h.w(0, CCMR1, PWM1);
-        h.w(0, CCMR1, PWM1 | OCPE);
-        h.w(0, CCR1, 6);
-        h.w(0, ARR, 11);
-        h.w(0, CR1, CR1_ARPE | CR1_URS);
-        h.w(0, EGR, EGR_UG);
-        h.w(0, CR1, CR1_ARPE);
-        h.w(0, CCER, 1);
+        carrier_start_at(h, 0, moe);
+    }
+
+    /// The same at `now`: ends with CR1 = 0x81, CCMR1 = 0x68, CCER = 0x1, BDTR = 0x8000 (MOE).
+    fn carrier_start_at(h: &mut H, now: Time, moe: bool) {
+        h.w(now, PSC, 0);
+        h.w(now, CR1, CR1_ARPE);
+        h.w(now, CCMR1, PWM1);
+        h.w(now, CCMR1, PWM1 | OCPE);
+        h.w(now, CCR1, 6);
+        h.w(now, ARR, 11);
+        h.w(now, CR1, CR1_ARPE | CR1_URS);
+        h.w(now, EGR, EGR_UG);
+        h.w(now, CR1, CR1_ARPE);
+        h.w(now, CCER, 1);
         if moe {
-            h.w(0, BDTR, BDTR_MOE);
+            h.w(now, BDTR, BDTR_MOE);
         }
-        h.w(0, CR1, CR1_ARPE | CR1_CEN);
+        h.w(now, CR1, CR1_ARPE | CR1_CEN);
+    }
+
+    /// Drives the timer as the board does: to each `next_event` up to `end`, then to `end`.
+    /// Returns the number of `advance` calls.
+    fn board_advance(h: &mut H, end: Time) -> u64 {
+        let mut calls = 1;
+        while let Some(n) = h.t.next_event().filter(|&n| n <= end) {
+            h.adv(n);
+            calls += 1;
+        }
+        h.adv(end);
+        calls
+    }
+
+    #[test]
+    fn recording_switched_on_late_starts_at_the_present() {
+        // The board's carrier window: TIM1 started long before and never advanced (nothing
+        // observable), recording switched on at 10 ms = 36 000 000 ticks. The kernel edges are
+        // 20 ticks apart; CEN at 1 234 570 counts from the next edge, 1 234 580. CNT(t) =
+        // ⌊(t − 1 234 580) / 20⌋ mod 12: at 36 000 000 that is 1 738 271 changes, the last exactly
+        // then, 1 738 271 mod 12 = 11 ≥ CCR1 = 6 → low. Then CNT 0 at +20 (high), CNT 6 at +140
+        // (low), … an edge every 120 ticks. With `record_channel` the timer, caught up only at the
+        // next advance, emitted its edges since 1 234 580 — in the past.
+        let mut h = H::new(1, 180 * MHZ);
+        carrier_start_at(&mut h, 1_234_570, true);
+        h.trgos();
+        assert_eq!(h.t.next_event(), None, "unrecorded: nothing observable");
+        let on = 36_000_000;
+        let mut s = Signals::default();
+        h.t.record_channel_at(on, 1, true, &mut s);
+        assert!(s.replan);
+        h.take(s);
+        assert!(h.log.levels.is_empty(), "nothing emitted up to the switch");
+        assert!(!h.t.channel_level(1));
+        assert_eq!(h.t.next_event(), Some(on + 20));
+        // 20 µs = 72 000 ticks: edges at on + 20 + 120 k ≤ on + 72 000, k = 0..=599.
+        let off = on + 72_000;
+        steps();
+        let calls = board_advance(&mut h, off);
+        let cost = steps();
+        let expect: Vec<(Time, bool)> = (0..600).map(|k| (on + 20 + 120 * k, k % 2 == 0)).collect();
+        assert_eq!(h.edges(1), expect);
+        let mut s = Signals::default();
+        h.t.record_channel_at(off, 1, false, &mut s);
+        h.take(s);
+        assert!(h.log.levels.is_empty());
+        // Switched off: no carrier edge is reported or emitted any more.
+        assert_eq!(h.t.next_event(), None);
+        h.adv(on + super::super::TICKS_PER_S);
+        assert!(h.log.levels.is_empty() && h.log.events.is_empty());
+        eprintln!("20 µs recorded 15 MHz carrier: {calls} advance calls, {cost} steps");
+    }
+
+    #[test]
+    fn cost_of_an_unrecorded_second() {
+        use super::super::TICKS_PER_S;
+        let mut h = H::new(1, 180 * MHZ);
+        carrier_start(&mut h, true);
+        steps();
+        assert_eq!(h.t.next_event(), None);
+        let lookahead = steps();
+        let calls = board_advance(&mut h, TICKS_PER_S);
+        let cost = steps();
+        assert_eq!(calls, 1);
+        // 180 000 000 kernel edges by 1 s, a multiple of 12: CNT 0.
+        assert_eq!(h.r(TICKS_PER_S, CNT), 0);
+        assert!(cost < 100 && lookahead < 100, "{cost} / {lookahead} steps");
+        eprintln!(
+            "1 s unrecorded carrier: {calls} advance call, {cost} steps (+{lookahead} per next_event)"
+        );
     }
 
     #[test]
@@ -1721,24 +1819,5 @@ mod tests {
             .unwrap_err()
             .why
             .contains("does not divide"));
-    }
-
-    #[test]
-    fn probe_bug() {
-        let mut h = H::new(1, 180 * MHZ);
-        carrier_start(&mut h, true);
-        h.trgos();
-        let now = 36_000_000;
-        h.t.record_channel(1, true);
-        eprintln!("next {:?} level {}", h.t.next_event(), h.t.channel_level(1));
-        h.adv(now);
-        eprintln!(
-            "edges {} first {:?}",
-            h.log.levels.len(),
-            h.log.levels.first()
-        );
-        let e = h.edges(1);
-        eprintln!("{:?}", &e[e.len().saturating_sub(4)..]);
-        eprintln!("next {:?}", h.t.next_event());
     }
 }
