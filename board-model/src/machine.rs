@@ -144,6 +144,8 @@ pub struct Sim {
     trace_blocks: bool,
     /// The block a slice was stopped in front of (its address is the PC to resume at).
     stopped_at: Option<u32>,
+    /// End of the current `run_until`.
+    run_end: Time,
 }
 
 /// A DMA transfer that touches RAM.
@@ -334,13 +336,16 @@ impl Sim {
 
     /// Turns recording of a timer channel's output on or off.
     pub fn record(&mut self, timer: &str, channel: u8, on: bool) {
-        for m in &mut self.periphs {
+        let now = self.now;
+        let Sim { periphs, sig, .. } = self;
+        for m in periphs.iter_mut() {
             if let Some(t) = m.p.as_any_mut().downcast_mut::<crate::periph::tim::Timer>() {
                 if t.name() == timer {
-                    t.record_channel(channel, on);
+                    t.record_channel_at(now, channel, on, sig);
                 }
             }
         }
+        self.settle_local();
     }
 
     /// A CPU read of a peripheral register, now.
@@ -527,6 +532,7 @@ impl Machine {
             ram_copies: Vec::new(),
             trace_blocks: std::env::var("BOARD_MODEL_TRACE").is_ok_and(|v| v == "blocks"),
             stopped_at: None,
+            run_end: 0,
         };
         let mut uc =
             Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, sim).map_err(uc_err)?;
@@ -839,6 +845,7 @@ impl Machine {
 
     /// Runs until virtual time `until`, or until something stops the run (returned).
     pub fn run_until(&mut self, until: Time) -> Option<Stop> {
+        self.uc.get_data_mut().run_end = until;
         while self.now() < until {
             if let Some(s) = self.uc.get_data_mut().stop.take() {
                 return Some(s);
@@ -970,16 +977,20 @@ impl Machine {
                 return Err(format!("{stop:?}"));
             }
             let next = s.periphs.iter().filter_map(|m| m.p.next_event()).min();
-            let Some(t) = next else {
-                return Err("the core sleeps with nothing scheduled to wake it (a hang)".into());
-            };
-            let t = t.max(s.now);
+            // Never sleep past the end of this run: the caller may change something then
+            // (record a pin, inject a fault). The core wakes there as from a spurious event
+            // (ARMv7-M B1.5.18 allows WFE to return at any time) and sleeps again.
+            let limit = s.run_end;
+            let t = next.unwrap_or(limit).min(limit).max(s.now);
             s.sleeping_ticks += t - s.now;
             s.now = t;
             s.advance_periphs(t);
             self.copy_dma();
             self.drain_rtt();
             let s = self.uc.get_data_mut();
+            if next.is_none_or(|n| n > limit) {
+                return Ok(());
+            }
             if s.pending_reset.is_some() || s.scs.reset_requested {
                 return Ok(());
             }
