@@ -106,6 +106,21 @@ pub fn after_rcc_or_pwr_write(periphs: &mut [Mapped], rcc: usize, now: Time) {
     }
 }
 
+/// A debug halt starts or ends at `now`: the IWDG freezes while halted only if DBGMCU's
+/// DBG_IWDG_STOP is set.
+pub fn debug_halt(periphs: &mut [Mapped], now: Time, halted: bool) {
+    let stop = periphs.iter().find_map(|m| {
+        m.p.as_any()
+            .downcast_ref::<misc::DbgMcu>()
+            .map(|d| d.iwdg_stop())
+    });
+    for m in periphs.iter_mut() {
+        if let Some(w) = m.p.as_any_mut().downcast_mut::<iwdg::Iwdg>() {
+            w.set_frozen(now, halted && stop == Some(true));
+        }
+    }
+}
+
 fn map(base: u32, size: u32, p: impl Peripheral + 'static) -> Mapped {
     Mapped {
         base,
@@ -155,6 +170,26 @@ fn index(periphs: &[Mapped], base: u32) -> usize {
 /// Builds the machine for `kind` running `elf`, the wiper read through `wiper`.
 pub fn build(kind: BoardKind, elf: &Path, mut wiper: Wiper) -> Result<Machine, String> {
     let image = crate::elf::Image::load(elf)?;
+    // The image must be this board's and carry what the model reads: the defmt table and the
+    // RTT control block (a stripped image has neither).
+    let other = match kind {
+        BoardKind::F446 => BoardKind::G474,
+        BoardKind::G474 => BoardKind::F446,
+    };
+    if !image.contains(kind.name().as_bytes()) && image.contains(other.name().as_bytes()) {
+        return Err(format!(
+            "--elf {}: the image is built for {}, not --board {}",
+            elf.display(),
+            other.name(),
+            kind.name()
+        ));
+    }
+    if image.symbol("_SEGGER_RTT").is_none() || !image.has_defmt {
+        return Err(format!(
+            "--elf {}: no RTT control block or defmt table (stripped?); use the image scripts/build-firmware.sh leaves in firmware/target/",
+            elf.display()
+        ));
+    }
     let wiper_channel = kind.def().adc.channel;
     let input = Box::new(move |t: Time, ch: u8| {
         if ch == wiper_channel {

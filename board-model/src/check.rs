@@ -154,6 +154,10 @@ fn high_within(edges: &[PinEdge], from: Time, to: Time) -> bool {
     level_at(edges, from) || edges.iter().any(|e| e.at > from && e.at < to && e.high)
 }
 
+fn fmt_us(v: Option<f64>) -> String {
+    v.map_or("never".to_string(), |v| format!("{v:.1} µs"))
+}
+
 fn us(t: Time) -> f64 {
     t as f64 * 1e6 / TICKS_PER_S as f64
 }
@@ -161,6 +165,8 @@ fn us(t: Time) -> f64 {
 /// Summary of one board's checks.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
+    /// Every check passed.
+    pub passed: bool,
     pub board: String,
     pub elf: String,
     pub checks: Vec<Check>,
@@ -178,6 +184,12 @@ impl Report {
     pub fn passed(&self) -> bool {
         self.checks.iter().all(|c| c.pass)
     }
+
+    /// Adds checks and updates `passed`.
+    pub fn extend(&mut self, checks: Vec<Check>) {
+        self.checks.extend(checks);
+        self.passed = self.passed();
+    }
 }
 
 /// Runs every check for `board` on `elf`.
@@ -192,7 +204,7 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
             "runs to the end",
             false,
             format!(
-                "the run stopped at {:.6} s: {s:?}",
+                "the run stopped at {:.6} s: {s}",
                 o.end as f64 / TICKS_PER_S as f64
             ),
         ));
@@ -235,7 +247,7 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
         "clock tree",
         ok,
         format!(
-            "SYSCLK {} Hz, PCLK1 {} Hz, PCLK2 {} Hz, APB1 timers {} Hz, APB2 timers {} Hz (plan: {} / {} / {})",
+            "SYSCLK {} Hz, PCLK1 {} Hz, PCLK2 {} Hz, APB1 timers {} Hz, APB2 timers {} Hz; expected the board plan SYSCLK {} Hz, PCLK1 {} Hz, PCLK2 {} Hz",
             c.sysclk_hz, c.pclk1_hz, c.pclk2_hz, c.tim_apb1_hz, c.tim_apb2_hz, want.sysclk_hz, want.pclk1_hz(), want.pclk2_hz()
         ),
     ));
@@ -269,10 +281,13 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
         "carrier from edges",
         uniform && f_edges == Some(15e6) && periods.len() >= 100,
         format!(
-            "{} periods recorded on PA8, all {:?} ticks → {:?} Hz",
+            "{} periods recorded on PA8 in 20 µs, {}; expected ≥ 100 periods of exactly 66.67 ns (15 MHz)",
             periods.len(),
-            periods.first(),
-            f_edges
+            match (periods.first(), uniform) {
+                (Some(&p), true) => format!("every one {:.2} ns → {} Hz", p as f64 * 1e9 / TICKS_PER_S as f64, TICKS_PER_S / p),
+                (Some(_), false) => "not all the same length".to_string(),
+                (None, _) => "none".to_string(),
+            }
         ),
     ));
 
@@ -285,12 +300,11 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
         "ADC trigger period",
         trig_ok && o.triggers.len() > 1000,
         format!(
-            "{} TIM3 TRGO pulses, {}",
+            "{} TIM3 TRGO pulses from the first conversion on, {}; expected > 1000, each 100 µs after the last",
             o.triggers.len(),
-            if trig_ok {
-                "every one 100 µs after the last"
-            } else {
-                "spacing not uniform"
+            match o.triggers.windows(2).find(|w| w[1] - w[0] != TICKS_PER_S / def.sample_rate_hz as u64) {
+                None => "each 100 µs after the last".to_string(),
+                Some(w) => format!("but one at {:.3} ms came {:.3} µs after the one before", us(w[1]) / 1e3, us(w[1] - w[0])),
             }
         ),
     ));
@@ -303,7 +317,14 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
     checks.push(check(
         "ADC samples reach the control loop",
         samples_per_s == Some(def.sample_rate_hz as u64),
-        format!("telemetry lines {:?} → {:?} samples/s", tele, samples_per_s),
+        format!(
+            "{}; expected exactly {} samples/s between the telemetry lines at 1 s and 2 s",
+            match samples_per_s {
+                Some(r) => format!("{r} samples/s ({} telemetry lines)", tele.len()),
+                None => format!("{} telemetry lines, two are needed", tele.len()),
+            },
+            def.sample_rate_hz
+        ),
     ));
 
     // Closed loop against host-sim for the same trajectory, noise and seed.
@@ -336,7 +357,7 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
         "closed loop: same bursts as host-sim",
         !ms.is_empty() && ms.len() == hs.len() && worst_ticks <= 1 && worst_pos <= 0.2,
         format!(
-            "{} segments on the model, {} on host-sim; worst period/on-time difference {worst_ticks} ticks, worst switch position difference {:.3} mm",
+            "{} burst segments on the model, {} on host-sim; worst period/on-time difference {worst_ticks} timer clocks (limit 1), worst switch position difference {:.3} mm (limit 0.2)",
             ms.len(),
             hs.len(),
             worst_pos
@@ -365,10 +386,17 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
     checks.push(check(
         "sensor-to-gate latency ≤ 100 µs",
         worst.map_or(false, |w| w <= 100.0),
-        format!("{} burst-timer updates: median {:?} µs, worst {:?} µs (1 instruction = 1 HCLK cycle, ART on)", lat.len(), median, worst),
+        match (median, worst) {
+            (Some(md), Some(w)) => format!(
+                "{} burst-timer updates: median {md:.1} µs, worst {w:.1} µs (model CPU: 1 instruction = 1 HCLK cycle, ART on)",
+                lat.len()
+            ),
+            _ => "no burst-timer update acted on a sample: no latency to measure".to_string(),
+        },
     ));
 
     let rep = Report {
+        passed: false,
         board: board.name().into(),
         elf: elf.display().to_string(),
         carrier_hz_registers: Some(f_reg),
@@ -469,16 +497,20 @@ pub fn rail_fault(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         "rail fault: enables low by the next sample",
         high_before && !a && !b && o.stop.is_none(),
         format!(
-            "bursts in the 100 ms before the fault: {high_before}; PA0 low {:?} µs and PB10 low {:?} µs after the fault began, first fully faulted trigger {:.1} µs after it, deadline one sample later; high again before the fault ends (200 ms): PA0 {a}, PB10 {b}",
-            low_after_onset_us(PIN_BURST_A),
-            low_after_onset_us(PIN_BURST_B),
-            us(first - start),
+            "bursts in the 100 ms before the fault: {high_before}; PA0 low {} and PB10 low {} after the fault began; first fully faulted trigger {:.1} µs after the onset; expected both low one sample after it and until the fault ends (200 ms): PA0 high then: {a}, PB10 high then: {b}",
+            fmt_us(low_after_onset_us(PIN_BURST_A)),
+            fmt_us(low_after_onset_us(PIN_BURST_B)),
+            (first as f64 - start as f64) * 1e6 / TICKS_PER_S as f64,
         ),
     ));
     out.push(check(
         "rail fault: logged",
         log_has(&o, "sensor fault"),
-        "the log names the sensor fault",
+        if log_has(&o, "sensor fault") {
+            "the log names the sensor fault"
+        } else {
+            "no \"sensor fault\" line in the log"
+        },
     ));
     Ok(out)
 }
@@ -505,8 +537,11 @@ pub fn watchdog(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         "stalled loop: IWDG resets the chip",
         reset.is_some() && after_ms.map_or(false, |ms| ms > 0.0 && ms <= 60.0),
         format!(
-            "IWDG reset {:?} ms after the interrupt storm began (timeout 50 ms)",
-            after_ms
+            "{}; expected 50 ms after the last pet (the IWDG timeout), so within 60 ms of the storm",
+            match after_ms {
+                Some(ms) => format!("IWDG reset {ms:.1} ms after the interrupt storm began"),
+                None => "no IWDG reset".to_string(),
+            }
         ),
     ));
     if let Some(r) = reset {
@@ -535,5 +570,5 @@ pub fn watchdog(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
 
 /// Whether a stop is the firmware halting at its own breakpoint (panic/HardFault path).
 pub fn halted(s: &Option<Stop>) -> bool {
-    matches!(s, Some(Stop::Breakpoint { .. }) | Some(Stop::Lockup { .. }))
+    matches!(s, Some(Stop::Breakpoint { .. }))
 }

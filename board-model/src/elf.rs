@@ -16,6 +16,8 @@ pub struct Segment {
 pub struct Image {
     pub segments: Vec<Segment>,
     pub symbols: Vec<(String, u32, u32)>,
+    /// The image has a `.defmt` section (defmt-print needs it to decode the log).
+    pub has_defmt: bool,
 }
 
 impl Image {
@@ -44,7 +46,12 @@ impl Image {
                 let len = ph.p_filesz(endian) as usize;
                 segments.push(Segment {
                     addr: ph.p_paddr(endian),
-                    bytes: data[off..off + len].to_vec(),
+                    bytes: data
+                        .get(off..off.saturating_add(len))
+                        .ok_or_else(|| {
+                            format!("{}: a program header points past the end of the file (corrupt ELF)", path.display())
+                        })?
+                        .to_vec(),
                 });
             }
         } else {
@@ -71,7 +78,20 @@ impl Image {
                 ))
             })
             .collect();
-        Ok(Self { segments, symbols })
+        use object::ObjectSection;
+        let has_defmt = obj.sections().any(|s| s.name() == Ok(".defmt"));
+        Ok(Self {
+            segments,
+            symbols,
+            has_defmt,
+        })
+    }
+
+    /// Whether the loaded bytes contain `needle` (e.g. the board name the firmware logs).
+    pub fn contains(&self, needle: &[u8]) -> bool {
+        self.segments
+            .iter()
+            .any(|s| s.bytes.windows(needle.len()).any(|w| w == needle))
     }
 
     /// Address of a symbol by exact name.

@@ -94,10 +94,19 @@ pub struct BusWrite {
 pub enum Stop {
     /// The firmware touched something the model does not implement, or the emulator failed.
     Fault(String),
-    /// A breakpoint (BKPT): a debugger would halt here.
+    /// A breakpoint (BKPT) with a debugger attached: the core halts here.
     Breakpoint { pc: u32 },
-    /// The core locked up (a fault inside HardFault or NMI).
-    Lockup { pc: u32 },
+}
+
+impl std::fmt::Display for Stop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Stop::Fault(s) => write!(f, "{s}"),
+            Stop::Breakpoint { pc } => {
+                write!(f, "halted by the debugger at a breakpoint, pc 0x{pc:08X}")
+            }
+        }
+    }
 }
 
 /// Everything the Unicorn hooks reach: the board's state.
@@ -146,6 +155,25 @@ pub struct Sim {
     stopped_at: Option<u32>,
     /// End of the current `run_until`.
     run_end: Time,
+    /// Accesses to peripherals whose clock was off (ignored, as on the chip).
+    pub unclocked: Vec<String>,
+    /// What the core is doing.
+    pub core: CoreState,
+    /// A BKPT executed with no debugger attached: escalates to HardFault.
+    bkpt_escalate: bool,
+    /// Lockups: time and PC.
+    pub lockups: Vec<(Time, u32)>,
+}
+
+/// The core's state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CoreState {
+    Running,
+    /// Halted by a debugger (a BKPT with DHCSR.C_DEBUGEN = 1): peripherals run on, the IWDG
+    /// stops only if DBGMCU says so.
+    Halted,
+    /// Locked up (a fault inside HardFault, ARMv7-M B1.5.15): no instruction runs until a reset.
+    Locked,
 }
 
 /// A DMA transfer that touches RAM.
@@ -244,18 +272,30 @@ impl Sim {
         }
         let now = self.now;
         self.read_copy_sources(now);
+        if self.sample_irq_lines() {
+            self.replan = true;
+        }
+    }
+
+    /// Samples every interrupt line (peripheral flags and enables, and lines a fault injection
+    /// holds high): a line that is high latches its NVIC pending bit unless the exception is
+    /// active; one still high when its handler returns pends again (PM0214 §4.3, level-sensitive
+    /// interrupts). Returns true if an exception became pending.
+    pub(crate) fn sample_irq_lines(&mut self) -> bool {
         let Sim {
             periphs,
             scs,
             stuck_irqs,
             ..
         } = self;
+        let mut new = false;
         for m in periphs.iter() {
-            m.p.irq_lines(&mut |n| scs.raise_irq(n));
+            m.p.irq_lines(&mut |n| new |= scs.raise_irq(n));
         }
         for &n in stuck_irqs.iter() {
-            scs.raise_irq(n);
+            new |= scs.raise_irq(n);
         }
+        new
     }
 
     /// DMA copies whose source is a peripheral register are read at once, at the moment of the
@@ -359,7 +399,9 @@ impl Sim {
         let i = self
             .find(addr)
             .ok_or_else(|| format!("read of unmapped peripheral address 0x{addr:08X}"))?;
-        self.check_clock(i, addr, None)?;
+        if !self.clocked(i, addr, None) {
+            return Ok(0);
+        }
         let m = &mut self.periphs[i];
         let off = addr - m.base;
         let word =
@@ -379,7 +421,9 @@ impl Sim {
         let i = self.find(addr).ok_or_else(|| {
             format!("write of 0x{value:X} to unmapped peripheral address 0x{addr:08X}")
         })?;
-        self.check_clock(i, addr, Some(value))?;
+        if !self.clocked(i, addr, Some(value)) {
+            return Ok(());
+        }
         let now = self.now;
         let off = addr - self.periphs[i].base;
         let shift = 8 * (off & 3);
@@ -414,24 +458,27 @@ impl Sim {
         Ok(())
     }
 
-    /// A real chip ignores writes to (and reads 0 from) a peripheral whose bus clock is off: a
-    /// firmware that does this has a bug the model must show (RM0390 §6.3.13; RM0440 §7.4.16).
-    fn check_clock(&self, i: usize, addr: u32, write: Option<u32>) -> Result<(), String> {
+    /// Whether block `i` has its bus clock on. A real chip ignores writes to, and reads 0 from, a
+    /// peripheral whose clock is off (RM0390 §6.3.13; RM0440 §7.4.16); the model does the same
+    /// and records the access, which the checks treat as a firmware defect.
+    fn clocked(&mut self, i: usize, addr: u32, write: Option<u32>) -> bool {
         if i == self.chip.rcc {
-            return Ok(());
+            return true;
         }
         let base = self.periphs[i].base;
-        if (self.chip.clock_enabled)(&*self.periphs[self.chip.rcc].p, base) == Some(false) {
-            let what = match write {
-                Some(v) => format!("write of 0x{v:X} to"),
-                None => "read of".into(),
-            };
-            return Err(format!(
-                "{what} {} at 0x{addr:08X} while its clock is disabled in RCC (the access would be lost on the chip)",
-                self.periphs[i].p.name()
-            ));
+        if (self.chip.clock_enabled)(&*self.periphs[self.chip.rcc].p, base) != Some(false) {
+            return true;
         }
-        Ok(())
+        let what = match write {
+            Some(v) => format!("write of 0x{v:X} to"),
+            None => "read of".into(),
+        };
+        self.unclocked.push(format!(
+            "{what} {} at 0x{addr:08X} at {} µs while its clock is off in RCC (lost on the chip)",
+            self.periphs[i].p.name(),
+            micros(self.now)
+        ));
+        false
     }
 
     /// Cycles a translated block of `insns` instructions and `bytes` bytes costs. With the ART
@@ -533,6 +580,10 @@ impl Machine {
             trace_blocks: std::env::var("BOARD_MODEL_TRACE").is_ok_and(|v| v == "blocks"),
             stopped_at: None,
             run_end: 0,
+            unclocked: Vec::new(),
+            core: CoreState::Running,
+            bkpt_escalate: false,
+            lockups: Vec::new(),
         };
         let mut uc =
             Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, sim).map_err(uc_err)?;
@@ -758,8 +809,16 @@ impl Machine {
                     }
                 }
                 7 => {
+                    // BKPT: a debugger halts the core (C1.6); without one it is a debug event
+                    // that escalates to HardFault (B1.5.14), handled by the run loop.
                     let pc = uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
-                    uc.get_data_mut().stop = Some(Stop::Breakpoint { pc });
+                    let s = uc.get_data_mut();
+                    if s.scs.debugger_attached {
+                        s.core = CoreState::Halted;
+                        s.stop = Some(Stop::Breakpoint { pc });
+                    } else {
+                        s.bkpt_escalate = true;
+                    }
                     // The run ends here: PC precision does not matter, and the CPU would
                     // otherwise re-raise the exception without reaching a block hook.
                     let _ = uc.emu_stop();
@@ -819,6 +878,8 @@ impl Machine {
         crate::board::note_reset(&mut *s.periphs[s.chip.rcc].p, cause);
         s.scs.reset();
         s.stuck_irqs.clear();
+        s.core = CoreState::Running;
+        s.bkpt_escalate = false;
         s.channel_levels.clear();
         s.event_register = false;
         s.pending_reset = None;
@@ -849,6 +910,12 @@ impl Machine {
         while self.now() < until {
             if let Some(s) = self.uc.get_data_mut().stop.take() {
                 return Some(s);
+            }
+            if self.uc.get_data().core != CoreState::Running {
+                if let Err(e) = self.idle_until(until) {
+                    return Some(Stop::Fault(e));
+                }
+                continue;
             }
             if let Err(e) = self.take_exceptions() {
                 return Some(Stop::Fault(e));
@@ -885,6 +952,14 @@ impl Machine {
             if let Err(e) = r {
                 if let Some(stop) = self.on_cpu_error(e) {
                     return Some(stop);
+                }
+            }
+            if std::mem::take(&mut self.uc.get_data_mut().bkpt_escalate) {
+                let pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
+                // HFSR.DEBUGEVT: a debug event escalated to HardFault.
+                self.uc.get_data_mut().scs.hfsr |= 1 << 31;
+                if let Err(e) = self.fault(exc::HARD_FAULT, pc, 0) {
+                    return Some(Stop::Fault(e));
                 }
             }
             self.copy_dma();
@@ -951,13 +1026,36 @@ impl Machine {
         let s = self.uc.get_data_mut();
         s.scs.cfsr |= cfsr;
         s.scs.hfsr |= 1 << 30; // FORCED: escalated to HardFault
-        if s.scs.active_stack.contains(&exc::HARD_FAULT) {
-            s.stop = Some(Stop::Lockup { pc });
+        if s.scs.active_stack.contains(&exc::HARD_FAULT) || s.scs.active_stack.contains(&exc::NMI) {
+            // Lockup (ARMv7-M B1.5.15): the core stops executing; only a reset (the IWDG)
+            // brings it back. Peripherals run on.
+            s.core = CoreState::Locked;
+            s.lockups.push((s.now, pc));
             return Ok(());
         }
         let _ = e;
         s.scs.set_pending(exc::HARD_FAULT);
         self.enter(exc::HARD_FAULT)
+    }
+
+    /// The core is halted or locked up: no instruction runs, peripherals go on until `until` or
+    /// a reset. Under a debug halt the IWDG stops only if DBGMCU's DBG_IWDG_STOP is set
+    /// (RM0390 §33.16.4; RM0440 §46.16.4).
+    fn idle_until(&mut self, until: Time) -> Result<(), String> {
+        let s = self.uc.get_data_mut();
+        let halted = s.core == CoreState::Halted;
+        let now = s.now;
+        crate::board::debug_halt(&mut s.periphs, now, halted);
+        let next = s.periphs.iter().filter_map(|m| m.p.next_event()).min();
+        let t = next.unwrap_or(until).min(until).max(s.now);
+        s.now = t;
+        s.advance_periphs(t);
+        self.copy_dma();
+        self.drain_rtt();
+        if let Some(cause) = self.uc.get_data_mut().pending_reset.take() {
+            self.system_reset(cause)?;
+        }
+        Ok(())
     }
 
     /// WFE/WFI: sleep until something would wake the core (ARMv7-M B1.5.18/19).
@@ -1001,14 +1099,7 @@ impl Machine {
     }
 
     fn takeable(&mut self) -> Result<Option<u16>, String> {
-        {
-            let Sim {
-                scs, stuck_irqs, ..
-            } = self.uc.get_data_mut();
-            for &n in stuck_irqs.iter() {
-                scs.raise_irq(n);
-            }
-        }
+        self.uc.get_data_mut().sample_irq_lines();
         let uc = &self.uc;
         let primask = uc.reg_read(RegisterARM::PRIMASK).map_err(uc_err)? & 1 != 0;
         let basepri = uc.reg_read(RegisterARM::BASEPRI).map_err(uc_err)? as u8;
@@ -1336,14 +1427,7 @@ fn exception_return(uc: &mut Unicorn<'_, Sim>) -> Result<(), String> {
     // Tail-chaining: whatever can be taken now is taken before returning to the interrupted code.
     let primask = uc.reg_read(RegisterARM::PRIMASK).map_err(uc_err)? & 1 != 0;
     let basepri = uc.reg_read(RegisterARM::BASEPRI).map_err(uc_err)? as u8;
-    {
-        let Sim {
-            scs, stuck_irqs, ..
-        } = uc.get_data_mut();
-        for &n in stuck_irqs.iter() {
-            scs.raise_irq(n);
-        }
-    }
+    uc.get_data_mut().sample_irq_lines();
     let s = uc.get_data();
     if s.scs
         .next_to_take(s.scs.execution_priority(primask, basepri, false))

@@ -245,6 +245,14 @@ pub fn decode(elf: &Path, raw: &[u8]) -> Result<Vec<LogLine>, String> {
     let out = child
         .wait_with_output()
         .map_err(|e| format!("defmt-print: {e}"))?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        return Err(format!(
+            "defmt-print could not decode the log of {}: {}",
+            elf.display(),
+            err.lines().last().unwrap_or("no message")
+        ));
+    }
     let text = String::from_utf8_lossy(&out.stdout);
     let mut lines = Vec::new();
     for l in text.lines() {

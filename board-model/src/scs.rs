@@ -189,11 +189,14 @@ impl Scs {
 
     /// Marks a peripheral interrupt line high: the NVIC latches it pending unless it is active
     /// (a level that stays high re-pends on return; B3.4.1, "level-sensitive interrupts").
-    pub fn raise_irq(&mut self, irq: u16) {
+    /// Returns true when this made it pending (it was neither pending nor active).
+    pub fn raise_irq(&mut self, irq: u16) -> bool {
         let e = (exc::IRQ0 + irq) as usize;
         if e < MAX_EXC && !self.active[e] && !self.pending[e] {
             self.pending[e] = true;
+            return true;
         }
+        false
     }
 
     /// Sets an exception pending (faults, PendSV, SysTick).

@@ -6,7 +6,7 @@
 
 use saw_board_model::board::{BoardKind, PIN_BURST_A, PIN_BURST_B, PIN_RF_ARM};
 use saw_board_model::machine::Stop;
-use saw_board_model::periph::{Time, TICKS_PER_S};
+use saw_board_model::periph::{ResetCause, Time, TICKS_PER_S};
 use saw_board_model::run::{self, Options};
 use std::path::PathBuf;
 
@@ -74,46 +74,94 @@ fn f446_flash_accelerator_is_on() {
 /// The panic path: at 0.5 s, while bursts run, the model diverts the core into one of the
 /// image's own panic call sites (a division by zero's `bl panic_const_div_by_zero` with its real
 /// `&Location`), so the firmware's panic handler runs as after a real panic. The enables and RF
-/// arm must be low before the first byte of the panic's log line is written.
+/// arm must be low before the first byte of the panic's log line is written. With no debugger,
+/// the handler's `udf` and the HardFault handler's `bkpt` end in lockup (ARMv7-M B1.5.15), and the
+/// IWDG must reset the chip with the lines low throughout until the new boot arms RF.
 #[test]
-fn panic_turns_rf_off_before_logging() {
+fn panic_turns_rf_off_before_logging_and_the_watchdog_restarts() {
     for board in BOARDS {
-        let mut opts = Options::new(board, &elf(board), 1.0);
+        let mut opts = Options::new(board, &elf(board), 0.7);
         opts.force_panic_s = Some(0.5);
         let (o, _m) = run::run(&opts).unwrap();
-        assert!(
-            matches!(
-                o.stop,
-                Some(Stop::Breakpoint { .. }) | Some(Stop::Lockup { .. })
-            ),
-            "{board:?}: expected a halt, got {:?}",
-            o.stop
-        );
-        let panic_line = o
-            .log
-            .iter()
-            .position(|l| l.text.contains("panic"))
-            .unwrap_or_else(|| panic!("{board:?}: no panic line in {:?}", o.log));
-        let _ = panic_line;
+        assert!(o.stop.is_none(), "{board:?}: {:?}", o.stop);
         let t_fault: Time = TICKS_PER_S / 2;
+        assert!(
+            o.log.iter().any(|l| l.text.contains("panic")),
+            "{board:?}: no panic line in {:?}",
+            o.log
+        );
         // Bursts were running before the fault.
         assert!(
             o.pins[PIN_BURST_A].iter().any(|e| e.high && e.at < t_fault),
             "{board:?}: no burst before the fault"
         );
-        // The last edge of each line is low, and at that edge no byte of the panic line had been
-        // written: decode the log up to that point.
+        // The lockup is ended by the IWDG: about 50 ms after the last pet.
+        let reset = o
+            .resets
+            .iter()
+            .find(|r| r.1 == ResetCause::IndependentWatchdog)
+            .map(|r| r.0);
+        let reset = reset
+            .unwrap_or_else(|| panic!("{board:?}: no IWDG reset after the panic: {:?}", o.resets));
+        let ms = (reset - t_fault) as f64 * 1e3 / TICKS_PER_S as f64;
+        assert!(
+            (49.0..=51.0).contains(&ms),
+            "{board:?}: IWDG reset {ms:.2} ms after the panic"
+        );
         for pin in [PIN_BURST_A, PIN_BURST_B, PIN_RF_ARM] {
-            let last = o.pins[pin].last().unwrap();
-            assert!(!last.high, "{board:?}: pin {pin} ends high");
+            let e = &o.pins[pin];
+            // The line's state through the lockup is its last edge before the reset: it must be
+            // low, and written before the panic line (emergency_off runs first) — or a natural
+            // fall between bursts before the panic.
+            let low = *e.iter().take_while(|x| x.at < reset).last().unwrap();
+            assert!(!low.high, "{board:?}: pin {pin} high through the lockup");
             let before = run::decode(
                 &elf(board),
-                &o.raw_log[..last.log_bytes.min(o.raw_log.len())],
+                &o.raw_log[..low.log_bytes.min(o.raw_log.len())],
             )
             .unwrap();
             assert!(
                 !before.iter().any(|l| l.text.contains("panic")),
                 "{board:?}: pin {pin} went low after the panic was logged"
+            );
+        }
+        assert_eq!(
+            o.log
+                .iter()
+                .filter(|l| l.text.contains("saw-firmware v"))
+                .count(),
+            2,
+            "{board:?}: no second boot"
+        );
+    }
+}
+
+/// The same panic with a debugger attached (DHCSR.C_DEBUGEN = 1): the core halts at the HardFault
+/// handler's breakpoint, and the fault path has frozen the IWDG for the halt (DBGMCU
+/// DBG_IWDG_STOP) so probe-rs can print the backtrace: no reset in the next 200 ms, RF off.
+#[test]
+fn under_a_debugger_the_panic_halts_with_the_watchdog_frozen() {
+    for board in BOARDS {
+        let mut opts = Options::new(board, &elf(board), 0.7);
+        opts.force_panic_s = Some(0.5);
+        opts.debugger = true;
+        let (o, mut m) = run::run(&opts).unwrap();
+        assert!(
+            matches!(o.stop, Some(Stop::Breakpoint { .. })),
+            "{board:?}: expected a breakpoint halt, got {:?}",
+            o.stop
+        );
+        let halted = m.now();
+        assert_eq!(m.run_until(halted + TICKS_PER_S / 5), None);
+        assert!(
+            m.sim().resets.is_empty(),
+            "{board:?}: reset during the debug halt: {:?}",
+            m.sim().resets
+        );
+        for pin in [PIN_BURST_A, PIN_BURST_B, PIN_RF_ARM] {
+            assert!(
+                !m.sim().pins[pin].last().unwrap().high,
+                "{board:?}: pin {pin} high while halted"
             );
         }
     }
