@@ -380,6 +380,18 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
         },
     ));
 
+    checks.push(check(
+        "no access to an unclocked peripheral",
+        m.sim().unclocked.is_empty(),
+        match m.sim().unclocked.first() {
+            None => "every register access found its peripheral clocked".to_string(),
+            Some(u) => format!(
+                "{} such accesses (ignored on the chip), the first: {u}",
+                m.sim().unclocked.len()
+            ),
+        },
+    ));
+
     // Sensor-to-gate latency.
     let lat = latency(&o, board);
     let (median, worst) = (lat.get(lat.len() / 2).copied(), lat.last().copied());

@@ -24,6 +24,8 @@ pub struct Options {
     /// From this virtual time on (s), the NVIC line of this IRQ is held high: an interrupt storm
     /// that starves the control loop (the IWDG must reset the chip).
     pub stuck_irq: Option<(f64, u16)>,
+    /// How long the interrupt line stays stuck, s (None: until the end or a reset).
+    pub stuck_for_s: Option<f64>,
     /// DHCSR.C_DEBUGEN as the firmware reads it.
     pub debugger: bool,
     /// At this virtual time (s), record the carrier pin (TIM1 CH1) for 20 µs: 300 periods at
@@ -50,6 +52,7 @@ impl Options {
             duration_s,
             adc: AdcParams::default(),
             stuck_irq: None,
+            stuck_for_s: None,
             debugger: false,
             carrier_window_s: None,
             force_panic_s: None,
@@ -132,6 +135,9 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
     }
     if let Some((s, _)) = opts.stuck_irq {
         plan.push((at(s), 2));
+        if let Some(d) = opts.stuck_for_s {
+            plan.push((at(s + d), 4));
+        }
     }
     if let Some(s) = opts.force_panic_s {
         plan.push((at(s), 3));
@@ -153,6 +159,7 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
                 let irq = opts.stuck_irq.unwrap().1;
                 m.sim_mut().stuck_irqs.push(irq);
             }
+            4 => m.sim_mut().stuck_irqs.clear(),
             _ => {
                 let site = m.image.call_site("panic_const_div_by_zero").ok_or(
                     "the image has no `bl panic_const_div_by_zero` call site to divert to",

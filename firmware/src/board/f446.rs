@@ -150,8 +150,8 @@ impl Sampler {
         tim: Peri<'static, TIM3>,
     ) -> Self {
         // TIM3 first, completely, counter stopped. Every UG it takes is a TRGO pulse (with
-        // MMS = 000 after its reset, UG *is* TRGO: RM0390 §17.4.2 TIMx_CR2.MMS), and embassy's
-        // `set_max_compare_value` writes one. Had ADC1 been armed already (EXTEN rising, EXTSEL
+        // MMS = 000 UG itself is TRGO; with MMS = 010, set first here, UG is an update event and
+        // so TRGO: RM0390 §17.4.2 TIMx_CR2.MMS), and embassy's `set_max_compare_value` writes one. Had ADC1 been armed already (EXTEN rising, EXTSEL
         // TIM3_TRGO, DMA = 1), that pulse would start a sequence into a DMA stream that is not
         // running yet: overrun, after which the ADC blocks DMA requests and ignores regular
         // triggers until OVR is cleared and the DMA re-initialised (RM0390 §13.8.1) — no sample,
@@ -228,6 +228,9 @@ impl Sampler {
     /// off, stream stopped and reloaded with the whole buffer, flags cleared, ring buffer emptied,
     /// then the order of `start`. TIM3 keeps running throughout.
     fn restart(&mut self) {
+        // Triggers stop first: `start` restarts TIM3 only after the ADC's stabilisation time
+        // (t_STAB), so no sequence can begin on an ADC that is still powering up (RM0390 §13.3.1).
+        self.trigger.stop();
         let adc = pac::ADC1;
         adc.cr2().modify(|w| {
             w.set_adon(false);
