@@ -1,8 +1,8 @@
 //! Independent watchdog (IWDG, one per chip): the key register, the write-protected prescaler,
 //! reload and (G4) window registers with their LSI-domain update delay, the 12-bit down-counter
 //! clocked by the LSI in virtual time, and the chip reset at the end of count
-//! (RM0390 §19 for the STM32F446; RM0440's IWDG chapter for the STM32G474 — §41 in the
-//! numbering used here, §42 in RM0440 Rev 4).
+//! (RM0390's IWDG chapter for the STM32F446, cited §19 here from memory — a review could not
+//! confirm the number; RM0440 Rev 4 §42 for the STM32G474, confirmed).
 //!
 //! What embassy-stm32 0.6 (`wdg::IndependentWatchdog`) does with it: `new` writes KR = 0x5555,
 //! PR, RLR (without waiting for PVU/RVU), `unleash` writes KR = 0xCCCC, `pet` writes
@@ -10,10 +10,10 @@
 //!
 //! Timing model (all exact in master ticks):
 //! - The LSI runs at 32 kHz (`LSI_HZ`, overridable with `set_lsi_hz`); starting the IWDG forces
-//!   it on (RM0390 §19.3.1, RM0440 §41.3.1), so the counter never depends on RCC_CSR.LSION.
+//!   it on (RM0390 §19.3.1, RM0440 §42.3.1), so the counter never depends on RCC_CSR.LSION.
 //! - The counter decrements once every 4·2^PR LSI periods (PR = 7 divides by 256 like PR = 6,
-//!   RM0390 §19.4.2 / RM0440 §41.4.2).
-//! - Start (0xCCCC) loads 0xFFF, "the reset value", not RLR (RM0390 §19.3.1, RM0440 §41.3.1
+//!   RM0390 §19.4.2 / RM0440 §42.4.2).
+//! - Start (0xCCCC) loads 0xFFF, "the reset value", not RLR (RM0390 §19.3.1, RM0440 §42.3.1
 //!   "the counter starts counting down from the reset value of 0xFFF"). A reload (0xAAAA) loads
 //!   RLR. From a load of value N at time t the reset happens at t + (N + 1) counter periods: the
 //!   manuals' timeout tables (RM0390 table 107: RL = 0 gives one period, RL = 0xFFF gives 4096)
@@ -33,7 +33,7 @@ pub const LSI_HZ: u64 = 32_000;
 /// LSI periods a PR/RLR/WINR write takes to reach the counter's (VDD/LSI) domain.
 pub const UPDATE_LSI_CYCLES: u64 = 5;
 
-/// Key values (RM0390 §19.4.1 / RM0440 §41.4.1).
+/// Key values (RM0390 §19.4.1 / RM0440 §42.4.1).
 pub const KEY_UNLOCK: u32 = 0x5555;
 pub const KEY_RELOAD: u32 = 0xAAAA;
 pub const KEY_START: u32 = 0xCCCC;
@@ -85,7 +85,7 @@ pub struct Iwdg {
 }
 
 impl Iwdg {
-    /// `has_winr`: the G474's IWDG has the window register (RM0440 §41.4.6); the F446's does
+    /// `has_winr`: the G474's IWDG has the window register (RM0440 §42.4.6); the F446's does
     /// not.
     pub fn new(has_winr: bool) -> Self {
         Iwdg {
@@ -326,7 +326,7 @@ impl Peripheral for Iwdg {
                     sr |= 1 << 1; // RVU
                 }
                 if self.has_winr && Self::busy(&self.winr_pending, now) {
-                    sr |= 1 << 2; // WVU (RM0440 §41.4.4)
+                    sr |= 1 << 2; // WVU (RM0440 §42.4.4)
                 }
                 Ok(sr)
             }
@@ -347,7 +347,7 @@ impl Peripheral for Iwdg {
         out: &mut Signals,
     ) -> Result<(), Unmodelled> {
         self.settle(now);
-        // RM0390 §19.4 / RM0440 §41.4: half-word or word access only.
+        // RM0390 §19.4 / RM0440 §42.4: half-word or word access only.
         if mask & 0xFFFF != 0xFFFF {
             return Err(Unmodelled::write(
                 offset,
@@ -371,7 +371,7 @@ impl Peripheral for Iwdg {
                     KEY_RELOAD if self.running && !self.fired => {
                         let count = self.counter(now).unwrap_or(0);
                         if self.has_winr && count > self.winr_eff {
-                            // RM0440 §41.3.5: a reload while the counter is above the window
+                            // RM0440 §42.3.5: a reload while the counter is above the window
                             // resets the chip.
                             self.fired = true;
                             out.reset = Some(ResetCause::IndependentWatchdog);
@@ -418,7 +418,7 @@ impl Peripheral for Iwdg {
                         at: now + UPDATE_LSI_CYCLES * self.lsi_period_ticks(),
                         value: v,
                     });
-                    // RM0440 §41.3.5 step 6: writing WINR refreshes the counter with RLR. Done at
+                    // RM0440 §42.3.5 step 6: writing WINR refreshes the counter with RLR. Done at
                     // the write with the RLR the counter has (when exactly the LSI domain does it
                     // is not specified).
                     if self.running && !self.fired {
