@@ -169,7 +169,7 @@ fn index(periphs: &[Mapped], base: u32) -> usize {
 
 /// Builds the machine for `kind` running `elf`, the wiper read through `wiper`.
 pub fn build(kind: BoardKind, elf: &Path, mut wiper: Wiper) -> Result<Machine, String> {
-    let image = crate::elf::Image::load(elf)?;
+    let image = crate::elf::Image::load(elf).map_err(|e| format!("--elf {e}"))?;
     // The image must be this board's and carry what the model reads: the defmt table and the
     // RTT control block (a stripped image has neither).
     let other = match kind {

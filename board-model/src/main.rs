@@ -54,22 +54,24 @@ enum Cmd {
     },
 }
 
-fn range(s: &str, lo: f64, hi: f64, flag: &str) -> Result<f64, String> {
+/// clap prints "invalid value '<v>' for '--duration <DURATION>': " before these, so they state
+/// only the rule.
+fn range(s: &str, lo: f64, hi: f64) -> Result<f64, String> {
     let v: f64 = s
         .parse()
-        .map_err(|_| format!("{flag} {s:?}: not a number of seconds"))?;
+        .map_err(|_| "not a number of seconds".to_string())?;
     if !v.is_finite() || v < lo || v > hi {
-        return Err(format!("{flag} {s}: must be between {lo} and {hi} s"));
+        return Err(format!("must be between {lo} and {hi} s"));
     }
     Ok(v)
 }
 
 fn duration(s: &str) -> Result<f64, String> {
-    range(s, 1.1, 60.0, "--duration")
+    range(s, 2.1, 60.0)
 }
 
 fn run_duration(s: &str) -> Result<f64, String> {
-    range(s, 0.001, 60.0, "--duration")
+    range(s, 0.001, 60.0)
 }
 
 fn main() -> ExitCode {
