@@ -1,7 +1,10 @@
 //! Property tests (fuzzing in CI's budget): scene files and sample streams from an adversary.
 //! Whatever comes in, nothing panics, a file either reads into a configuration that loads or is
 //! refused with a located error, and the carrier caps hold on every gate action.
-#![cfg(feature = "scene-file")]
+//!
+//! Needs the `scene-file` feature, which core/Cargo.toml's self dev-dependency turns on for every
+//! test build: no `cfg` gate here, so a build without it fails to compile rather than passing
+//! with nothing run.
 
 use proptest::prelude::*;
 use saw_core::burst::{BurstTimer, SafetyLimits};
