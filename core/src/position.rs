@@ -174,6 +174,53 @@ mod tests {
         assert_eq!(m.position_um(&s(65_520)), Err(SensorFault::RailHigh));
     }
 
+    /// The rail bands of the default calibration, at each threshold from both sides. Expected
+    /// values are literals from the documented thresholds, not from the mapper: the margin is 1 %
+    /// of the 65 536-code full scale, 655 codes; a code at or below 655 is the low rail, and a
+    /// code at or above 65 535 − 655 = 64 880 (the top code less the margin) is the high rail.
+    /// Just inside, the reading is mechanical slack beyond the calibrated ends (1 310 and
+    /// 64 225) and clamps to the ends, 0 and 63 000 µm.
+    #[test]
+    fn rail_thresholds_from_both_sides() {
+        let m = PositionMapper::new(Calibration::default()).unwrap();
+        assert_eq!(DEFAULT_RAIL_MARGIN_CODE, 655);
+        assert_eq!(m.position_um(&s(655)), Err(SensorFault::RailLow));
+        assert_eq!(m.position_um(&s(656)), Ok(0));
+        assert_eq!(m.position_um(&s(64_879)), Ok(63_000));
+        assert_eq!(m.position_um(&s(64_880)), Err(SensorFault::RailHigh));
+        // The top of the real range: 16 conversions of 4095.
+        assert_eq!(m.position_um(&s(65_520)), Err(SensorFault::RailHigh));
+    }
+
+    /// The bands follow the calibration's own margin, not the default: 1 000 codes.
+    #[test]
+    fn rail_thresholds_follow_the_margin() {
+        let m = PositionMapper::new(Calibration {
+            rail_margin_code: 1_000,
+            ..Calibration::default()
+        })
+        .unwrap();
+        assert_eq!(m.position_um(&s(1_000)), Err(SensorFault::RailLow));
+        assert_eq!(m.position_um(&s(1_001)), Ok(0));
+        assert_eq!(m.position_um(&s(64_534)), Ok(63_000));
+        assert_eq!(m.position_um(&s(64_535)), Err(SensorFault::RailHigh));
+    }
+
+    /// An open wiper is pulled down by the board's resistor, but the ADC still reads its offset
+    /// and noise: a few LSB of each conversion, so 3 – 40 codes of the 16-conversion sum. All of
+    /// them are the low rail, not position 0.
+    #[test]
+    fn open_wiper_reading_a_few_codes_is_the_low_rail() {
+        let m = PositionMapper::new(Calibration::default()).unwrap();
+        for code in 3..=40 {
+            assert_eq!(
+                m.position_um(&s(code)),
+                Err(SensorFault::RailLow),
+                "code {code}"
+            );
+        }
+    }
+
     #[test]
     fn bad_calibrations_rejected() {
         let ok = Calibration::default();
