@@ -1276,7 +1276,14 @@ mod tests {
         let outs = stroke(&mut c, 5_000.0, 40_000.0, &mut t, 400);
         let s = last_settings(&outs).unwrap();
         let hz = s.produced_millihz(TIMER.clock_hz) as f32 / 1000.0;
-        let want = m.stick_slip_hz(0.04);
+        // [N] eq. 10–12 by hand, fig. 5's finger (P = 1 N, m = 1 g, k = 500 N/m), Δμ = 0.3,
+        // U = 40 mm/s = 0.04 m/s:
+        //   ω0 = √(500/0.001) = √500 000 = 707.107 rad/s
+        //   R  = Δμ P/(m ω0 U) = 0.3/(0.001 · 707.107 · 0.04) = 0.3/0.028284 = 10.6066
+        //   atan R = π/2 − atan(1/R) = 1.570796 − 0.094003 = 1.476793
+        //   π − atan R + R = 3.141593 − 1.476793 + 10.606602 = 12.271401
+        //   f⁻¹ = (2/ω0)(π − atan R + R) = 0.0028284 · 12.271401 = 0.0347088 s → f = 28.811 Hz
+        let want = 28.811f32;
         assert!((hz - want).abs() / want < 0.02, "{hz} vs {want}");
     }
 
