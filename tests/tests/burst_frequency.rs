@@ -1,5 +1,10 @@
 //! Produced burst frequency within ±0.1 % of commanded across 1 Hz – 2 kHz, measured from the
 //! timer model's edges, on both boards' burst timers and a 16-bit one (prescaler path).
+//!
+//! README.md states the measured worst error, 7 ppm (7.1 ppm, on the 16-bit timer at
+//! 23.737 Hz). It is asserted at ≤ 7.5 ppm: the figure is deterministic (no noise, no seed), and
+//! the 0.4 ppm margin only covers the rounding of the stated figure, so a change that makes any
+//! frequency coarser fails here.
 
 use host_sim::timer::TimerModel;
 use saw_core::burst::{BurstCommand, BurstTimer};
@@ -46,6 +51,9 @@ fn produced_hz(timer: BurstTimer, millihz: u32, periods: u32) -> f64 {
     w.measured_hz(0, w.end).unwrap()
 }
 
+/// Worst error asserted, ppm (README: "worst error 7 ppm", measured 7.1).
+const STATED_WORST_PPM: f64 = 7.5;
+
 #[test]
 fn burst_frequency_within_0_1_percent_from_1_hz_to_2_khz() {
     let sweep = log_sweep_millihz(25);
@@ -62,15 +70,20 @@ fn burst_frequency_within_0_1_percent_from_1_hz_to_2_khz() {
                 err.abs() <= 0.1,
                 "{name}: {want} Hz commanded, {got} Hz produced ({err:+.4} %)"
             );
+            assert!(
+                err.abs() * 1e4 <= STATED_WORST_PPM,
+                "{name}: {want} Hz commanded, {got} Hz produced ({:+.2} ppm, README states ≤ 7)",
+                err * 1e4
+            );
             if err.abs() >= worst.0 {
                 worst = (err.abs(), format!("{name} at {want} Hz: {got:.6} Hz"));
             }
         }
     }
     eprintln!(
-        "worst f_b error over {} frequencies × 3 timers: {:.6} % ({})",
+        "worst f_b error over {} frequencies × 3 timers: {:.2} ppm ({})",
         sweep.len(),
-        worst.0,
+        worst.0 * 1e4,
         worst.1
     );
 }
