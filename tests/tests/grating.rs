@@ -48,25 +48,50 @@ fn placement(r: &SimResult) -> (f64, usize, u64) {
     (worst, hits.len(), metrics::ridges_crossed(r, LAMBDA_UM))
 }
 
+/// Seeds of the ADC noise each speed is run with. The placement varies with the noise, so the
+/// figure README.md and docs/estimators.md state is the worst over these 12 seeds.
+const SEEDS: std::ops::Range<u64> = 0..12;
+/// Worst |placement error| stated for position phase at 20–200 mm/s, worst of [`SEEDS`], µm,
+/// asserted as is (no margin: it is two samples' travel at 200 mm/s, 2 × 20 µm, and the error
+/// moves in whole samples' travel there; seeds 10, 18, 22, 33, 36 and 37 of 0..40 reach it,
+/// none goes beyond). The requirement is λ/20 = 50 µm. Per speed, worst of 12: 20 µm at
+/// 20 mm/s, 15 at 50, 20 at 100, 40 at 200.
+const STATED_WORST_UM: f64 = 40.0;
+
 #[test]
 fn position_phase_bursts_land_within_a_twentieth_of_the_period() {
-    for (k, mm_s) in [20.0, 50.0, 100.0, 200.0].into_iter().enumerate() {
-        let (traj, d) = stroke(mm_s * 1_000.0);
-        let r = run(
-            grating_config(GratingRender::PositionPhase),
-            traj,
-            d,
-            2.0,
-            40 + k as u64,
-        );
-        let (worst, bursts, ridges) = placement(&r);
-        eprintln!(
-            "position phase {mm_s} mm/s: {bursts} bursts / {ridges} ridges, worst {worst:.1} µm"
-        );
-        assert!(worst <= LAMBDA_UM / 20.0, "{mm_s} mm/s: worst {worst} µm");
-        assert_eq!(bursts as u64, ridges, "{mm_s} mm/s: one burst per ridge");
-        assert_eq!(r.telemetry.ridges_skipped, 0);
-        assert_eq!(r.timer_protocol_errors, 0);
+    let mut worst_all = (0.0f64, String::new());
+    let mut runs = 0;
+    for mm_s in [20.0, 50.0, 100.0, 200.0] {
+        for seed in SEEDS {
+            let (traj, d) = stroke(mm_s * 1_000.0);
+            let r = run(
+                grating_config(GratingRender::PositionPhase),
+                traj,
+                d,
+                2.0,
+                seed,
+            );
+            let (worst, bursts, ridges) = placement(&r);
+            let case = format!("{mm_s} mm/s, seed {seed}");
+            eprintln!(
+                "position phase {case}: {bursts} bursts / {ridges} ridges, worst {worst:.1} µm"
+            );
+            assert!(worst <= LAMBDA_UM / 20.0, "{case}: worst {worst} µm");
+            assert!(
+                worst <= STATED_WORST_UM,
+                "{case}: worst {worst} µm, docs say ≤ {STATED_WORST_UM}"
+            );
+            // 20 mm each way over λ = 1 mm: 40 ridges, every one fired once.
+            assert_eq!(ridges, 40, "{case}");
+            assert_eq!(bursts as u64, ridges, "{case}: one burst per ridge");
+            assert_eq!(r.telemetry.ridges_skipped, 0);
+            assert_eq!(r.timer_protocol_errors, 0);
+            if worst >= worst_all.0 {
+                worst_all = (worst, case);
+            }
+            runs += 1;
+        }
 
         // The same motion through velocity synthesis: right frequency, free phase.
         let (traj, d) = stroke(mm_s * 1_000.0);
@@ -75,25 +100,35 @@ fn position_phase_bursts_land_within_a_twentieth_of_the_period() {
             traj,
             d,
             2.0,
-            40 + k as u64,
+            SEEDS.start,
         );
         let (worst, bursts, ridges) = placement(&r);
-        eprintln!("velocity synthesis {mm_s} mm/s: {bursts} bursts / {ridges} ridges, worst {worst:.1} µm");
+        eprintln!(
+            "velocity synthesis {mm_s} mm/s: {bursts} / {ridges} ridges, worst {worst:.1} µm"
+        );
         assert!(
             worst > LAMBDA_UM / 20.0,
             "{mm_s} mm/s: synthesis placed within λ/20?"
         );
     }
+    eprintln!(
+        "position phase, {runs} strokes: worst {:.1} µm ({})",
+        worst_all.0, worst_all.1
+    );
 }
 
+/// 0 bursts in 10 s at rest on a ridge with 3 LSB: position phase (the default) on three noise
+/// seeds, velocity synthesis (15 mm/s start threshold) on the first.
 #[test]
 fn ten_seconds_at_rest_on_a_ridge_fire_nothing() {
-    for render in [
-        GratingRender::PositionPhase,
-        GratingRender::VelocitySynthesis,
+    for (render, seed) in [
+        (GratingRender::PositionPhase, 77),
+        (GratingRender::PositionPhase, 78),
+        (GratingRender::PositionPhase, 79),
+        (GratingRender::VelocitySynthesis, 77),
     ] {
         let rest = Trajectory::Rest { at_um: 30_000.0 };
-        let r = run(grating_config(render), rest, 10.0, 3.0, 77);
+        let r = run(grating_config(render), rest, 10.0, 3.0, seed);
         // The reading really does cross the ridge back and forth (the test is not vacuous).
         let below = r
             .trace
@@ -102,11 +137,11 @@ fn ten_seconds_at_rest_on_a_ridge_fire_nothing() {
             .count();
         assert!(
             below > 20_000 && below < 80_000,
-            "{render:?}: {below} below"
+            "{render:?}, seed {seed}: {below} below"
         );
         assert!(
             r.waveform.edges.is_empty(),
-            "{render:?}: {} edges",
+            "{render:?}, seed {seed}: {} edges",
             r.waveform.edges.len()
         );
     }
