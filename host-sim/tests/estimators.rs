@@ -4,9 +4,10 @@
 //! (finite by construction: the trait returns integers) and recovers. The streams are made
 //! deterministically (seeded ADC model, or exact integer ramps), no wall time is involved.
 
-use host_sim::bench::measure::replay;
+use host_sim::bench::measure::{errors, pool, replay};
 use host_sim::bench::methods::{all, Method};
-use host_sim::bench::scenario::{Input, Obs, Spec};
+use host_sim::bench::reference_spec;
+use host_sim::bench::scenario::{self, Input, Obs, Spec};
 use host_sim::trajectory::{Piece, Trajectory};
 
 const T_US: u32 = 100;
@@ -318,7 +319,9 @@ fn outlier_spike() {
                 m.name
             );
         } else if is(&m, "std") {
-            assert!(worst <= 30_000.0, "{}: {worst} µm/s from one spike", m.name);
+            // Measured 2.0 mm/s (L = 1 m/s²) and 12.3 mm/s (L = 10 m/s²); noiseless, so the
+            // bound is the larger plus 0.7 mm/s.
+            assert!(worst <= 13_000.0, "{}: {worst} µm/s from one spike", m.name);
         } else {
             assert!(
                 worst <= 2_000.0 * 1e6 / T_US as f64 + 1.0,
@@ -330,6 +333,17 @@ fn outlier_spike() {
                 "{}: a 2 mm spike must show ({worst})",
                 m.name
             );
+        }
+        // The figures docs/estimators.md gives, worked by hand: diff1 and the collapsed FOAW
+        // windows read 2 mm / 100 µs = 20 m/s; lsq32 weighs its newest sample by
+        // 6·31/(32·1023) per period, 2 mm × 6·31/(32·1023) / 100 µs = 113.64 mm/s (output in
+        // whole µm/s, hence ± 1).
+        if m.name == "diff1" || is(&m, "foaw") {
+            assert_eq!(worst, 20_000_000.0, "{}", m.name);
+        }
+        if m.name == "lsq32" {
+            let want = 2_000.0 * 6.0 * 31.0 / (32.0 * 1023.0) / (T_US as f64 * 1e-6);
+            assert!((worst - want).abs() <= 1.0, "lsq32: {worst} against {want}");
         }
         let n = settle_samples(&s, &out, 1_000, 5_000.0)
             .unwrap_or_else(|| panic!("{}: never recovers from the spike", m.name));
@@ -457,4 +471,123 @@ fn speed_beyond_the_grating_nyquist_rate() {
         let ridges_per_sample = 1_000_000.0 * T_US as f64 * 1e-6 / 100.0;
         assert!(ridges_per_sample >= 1.0);
     }
+}
+
+/// The 40 delay-probe streams the bench (`host-sim bench --seed base_seed`, "lag @20") makes:
+/// 5 mm/s, then 0.5 m/s² up to 35 mm/s, 2 LSB, 10 kHz, scored only while the true speed passes
+/// 15–25 mm/s accelerating.
+fn delay_probe_streams(base_seed: u64) -> Vec<Vec<Obs>> {
+    (0..40)
+        .map(|i| {
+            let (t, d) = scenario::delay_probe();
+            let mut s = Spec::new(t, d, 2.0, 10_000);
+            s.seed = base_seed.wrapping_mul(31).wrapping_add(200 + i);
+            let mut st = s.generate();
+            for o in &mut st {
+                o.scored = (15_000.0..=25_000.0).contains(&o.v_true) && o.a_true > 0.0;
+            }
+            st
+        })
+        .collect()
+}
+
+/// The 2 streams of the bench's outliers-and-drops scenario ("outl+drop"): the reference motion
+/// with ±2 mm single-sample outliers (p = 10⁻³) and dropped samples (p = 2·10⁻³), 2 LSB, 10 kHz.
+fn outlier_streams(base_seed: u64) -> Vec<Vec<Obs>> {
+    (0..2)
+        .map(|i| {
+            let mut s = reference_spec(0);
+            s.seed = base_seed.wrapping_mul(31).wrapping_add(400 + i);
+            s.outlier_prob = 1e-3;
+            s.drop_prob = 2e-3;
+            s.generate()
+        })
+        .collect()
+}
+
+fn method(name: &str) -> Method {
+    all().into_iter().find(|m| m.name == name).unwrap()
+}
+
+/// Base seeds the bench figures below are measured over: the bench's default (2026), 1 and 2.
+/// README.md and docs/estimators.md state the range, or the worst, over these three. Three, not
+/// more, to keep this file under 10 s in debug (each seed costs about 1 s here). The stated
+/// figures are worst-of-3, not bounds: seeds 3–7 (`host-sim bench --seed N`, measured once while
+/// writing this) stay inside the 2 ms target but reach a lag of 1.57–1.70 ms, 24.1 mm/s with the
+/// median (seed 5) and 180.5 mm/s without it (seed 3).
+const BENCH_SEEDS: [u64; 3] = [2026, 1, 2];
+
+/// Lag of the default estimator at 20 mm/s, pooled over each base seed's 40 delay-probe streams.
+/// Expected (worked by hand, not by the code under test): the 32-sample least-squares slope is
+/// centred (32 − 1)/2 = 15.5 samples back and the median of 3 adds one sample, 16.5 × 100 µs =
+/// 1.65 ms. Measured 1.61–1.65 ms over the three seeds (1.65 ms on 2026, the bench's table);
+/// asserted: each seed within 1.60–1.66 ms (the stated range ± 0.01 ms of rounding), their mean
+/// within 0.03 ms of 1.65 ms (measured 1.633), and each under the 2 ms target.
+#[test]
+fn default_estimator_lag_at_20_mm_s() {
+    let m = method(saw_core_default());
+    let mut lags = Vec::new();
+    for seed in BENCH_SEEDS {
+        let parts: Vec<_> = delay_probe_streams(seed)
+            .iter()
+            .map(|s| errors(s, &replay(&m, s, T_US)))
+            .collect();
+        let lag_ms = pool(&parts).lag_us / 1_000.0;
+        eprintln!("seed {seed}: lag {lag_ms:.3} ms");
+        assert!(
+            (1.60..=1.66).contains(&lag_ms) && lag_ms <= 2.0,
+            "seed {seed}: lag {lag_ms:.3} ms, docs say 1.61–1.65"
+        );
+        lags.push(lag_ms);
+    }
+    let mean = lags.iter().sum::<f64>() / lags.len() as f64;
+    eprintln!("mean lag over {} seeds: {mean:.3} ms", lags.len());
+    assert!((mean - 1.65).abs() <= 0.03, "mean lag {mean:.3} ms");
+}
+
+/// Worst velocity error under single-sample ±2 mm outliers and dropped samples (the bench's
+/// "outl+drop"), worst of the two streams per base seed, with and without the median. Measured
+/// over the three seeds: default 21.0–22.1 mm/s (22.1 on 2026), `LsqSlope<32>` alone
+/// 130.4–167.3 mm/s (130.4 on 2026); the median cuts the worst by 5.9–8.0× per seed. Asserted on
+/// every seed: default ≤ 22.5 mm/s and bare slope ≤ 168 mm/s (the stated worst-of-3, 22.1 and
+/// 167.3 mm/s, plus rounding), and at least 5.5× between them.
+#[test]
+fn median_keeps_outliers_out_of_the_slope() {
+    let med = method(saw_core_default());
+    let lsq = method("lsq32");
+    let (mut worst_med, mut worst_lsq) = (0.0f64, 0.0f64);
+    for seed in BENCH_SEEDS {
+        let streams = outlier_streams(seed);
+        let worst = |m: &Method| {
+            streams
+                .iter()
+                .map(|s| errors(s, &replay(m, s, T_US)).worst_um_s / 1_000.0)
+                .fold(0.0, f64::max)
+        };
+        let (w_med, w_lsq) = (worst(&med), worst(&lsq));
+        eprintln!("seed {seed}: worst {w_med:.1} mm/s with the median, {w_lsq:.1} without");
+        assert!(
+            w_med <= 22.5,
+            "seed {seed}: {w_med:.1} mm/s with the median"
+        );
+        assert!(
+            w_lsq <= 168.0,
+            "seed {seed}: {w_lsq:.1} mm/s without the median"
+        );
+        assert!(
+            w_lsq >= 5.5 * w_med,
+            "seed {seed}: {w_lsq:.1} against {w_med:.1}"
+        );
+        worst_med = worst_med.max(w_med);
+        worst_lsq = worst_lsq.max(w_lsq);
+    }
+    eprintln!(
+        "worst of {}: {worst_med:.1} mm/s with the median, {worst_lsq:.1} without",
+        BENCH_SEEDS.len()
+    );
+}
+
+/// The bench's name of the controller's default estimator, `Median3<LsqSlope<32>>`.
+fn saw_core_default() -> &'static str {
+    host_sim::bench::methods::DEFAULT
 }
