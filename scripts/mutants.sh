@@ -14,4 +14,9 @@ cd "$(dirname "$0")/.."
 if ! cargo mutants --version >/dev/null 2>&1; then
     cargo install cargo-mutants --locked
 fi
-exec cargo mutants -p saw-core "$@"
+# Mutants come from core/ only; the tests are the whole workspace's (with `-p`, cargo-mutants
+# would test only the mutated package).
+case " $* " in
+    *" --file "*|*" -f "*|*" --in-diff "*|*" -D "*) exec cargo mutants --test-workspace=true "$@" ;;
+    *) exec cargo mutants --test-workspace=true --file 'core/src/**/*.rs' "$@" ;;
+esac
