@@ -3,7 +3,7 @@
 //! host-sim, duty and on-time caps, sensor-to-gate latency, and the fault paths.
 
 use crate::board::{BoardKind, PIN_BURST_A, PIN_BURST_B, PIN_CARRIER, PIN_RF_ARM};
-use crate::machine::{PinEdge, Stop};
+use crate::machine::PinEdge;
 use crate::periph::{ticks_per_cycle, ResetCause, Time, TICKS_PER_S};
 use crate::run::{self, Options, Outcome};
 use host_sim::adc::{FaultKind, FaultWindow};
@@ -127,7 +127,7 @@ fn log_has(o: &Outcome, part: &str) -> bool {
 }
 
 /// Samples processed, from the firmware's 1 Hz telemetry lines ("samples: N").
-fn telemetry_samples(o: &Outcome) -> Vec<(f64, u64)> {
+pub fn telemetry_samples(o: &Outcome) -> Vec<(f64, u64)> {
     o.log
         .iter()
         .filter(|l| l.text.starts_with("telemetry"))
@@ -578,9 +578,4 @@ pub fn watchdog(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         ));
     }
     Ok(out)
-}
-
-/// Whether a stop is the firmware halting at its own breakpoint (panic/HardFault path).
-pub fn halted(s: &Option<Stop>) -> bool {
-    matches!(s, Some(Stop::Breakpoint { .. }))
 }

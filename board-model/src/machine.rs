@@ -968,6 +968,16 @@ impl Machine {
             s.advance_periphs(now);
             self.copy_dma();
             self.drain_rtt();
+            // A behaviour a model found but cannot represent (e.g. an ADC DMA mode) ends the run.
+            if let Some(f) = self
+                .uc
+                .get_data()
+                .periphs
+                .iter()
+                .find_map(|m| crate::board::model_fault(&*m.p))
+            {
+                return Some(Stop::Fault(f));
+            }
             if let Some(cause) = self.uc.get_data_mut().pending_reset.take() {
                 if let Err(e) = self.system_reset(cause) {
                     return Some(Stop::Fault(e));

@@ -190,14 +190,9 @@ fn acquisition_recovers_from_an_overrun() {
             .filter(|l| l.text.contains("acquisition restarted"))
             .collect();
         assert_eq!(restarts.len(), 1, "{board:?}: {:?}", o.log);
-        let samples: Vec<u64> = o
-            .log
-            .iter()
-            .filter(|l| l.text.starts_with("telemetry"))
-            .filter_map(|l| {
-                let i = l.text.find("samples: ")? + 9;
-                l.text[i..].split(',').next()?.parse().ok()
-            })
+        let samples: Vec<u64> = saw_board_model::check::telemetry_samples(&o)
+            .into_iter()
+            .map(|(_, n)| n)
             .collect();
         assert_eq!(samples.len(), 2, "{board:?}");
         let lost = 10_000 - (samples[1] - samples[0]);
