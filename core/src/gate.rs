@@ -311,6 +311,41 @@ mod tests {
         assert!(g.request(Some(short), 80_100, &T, &l).is_some());
     }
 
+    /// The gate keeps time as wrapping µs, so a deadline can be at most 2^31 − 1 µs (35.8 min)
+    /// ahead. Limits a scene file accepts never come near it (1 s on at a 0.1 % cap rests
+    /// 999 s), but `SafetyLimits` built in code can: a 3 s pulse at 1 ‰ would rest 50 min. The
+    /// rest is clamped to 2^31 − 1 µs rather than wrapping into the past, which would let the
+    /// line on again at once.
+    #[test]
+    fn rest_beyond_the_clock_range_is_clamped_not_wrapped() {
+        let l = SafetyLimits {
+            max_duty_permille: 1,
+            max_on_time_us: 10_000_000,
+        };
+        // 3 s at 90 MHz.
+        let p = TimerSettings {
+            psc: 0,
+            arr: 270_000_000,
+            ccr: 270_000_000,
+        };
+        let small = TimerSettings {
+            psc: 0,
+            arr: 89_999,
+            ccr: 80,
+        };
+        let mut g = Gate::default();
+        assert_eq!(g.pulse(p, 0, &T, &l), Some(GateAction::Pulse(p)));
+        let end_us = 3_000_000u32;
+        assert_eq!(g.request(Some(small), end_us + 1_000, &T, &l), None);
+        assert_eq!(g.request(Some(small), 1_000_000_000, &T, &l), None);
+        let clamp_us = (1u32 << 31) - 1;
+        assert_eq!(g.request(Some(small), end_us + clamp_us - 1, &T, &l), None);
+        assert_eq!(
+            g.request(Some(small), end_us + clamp_us, &T, &l),
+            Some(GateAction::Start(small))
+        );
+    }
+
     #[test]
     fn pulses_end_by_themselves_but_faults_cut_them() {
         let l = SafetyLimits::default();

@@ -153,6 +153,12 @@ mod tests {
         assert_eq!(m.track(0, 20_100), 1);
         assert_eq!(m.track(1, 19_901), 1);
         assert_eq!(m.track(1, 19_899), 0);
+        // The band's edges exactly: forward switches at b + h, back only below b − h.
+        assert_eq!(m.track(1, 19_900), 1);
+        assert_eq!(m.track(2, 39_900), 2);
+        assert_eq!(m.track(2, 39_899), 1);
+        assert_eq!(m.track(1, 40_099), 1);
+        assert_eq!(m.track(1, 40_100), 2);
         // A jump over several regions lands in the right one.
         assert_eq!(m.track(0, 50_000), 2);
         assert_eq!(m.track(2, 100), 0);
