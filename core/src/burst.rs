@@ -328,6 +328,75 @@ mod tests {
         }
     }
 
+    /// A timer description a board crate could get wrong is refused before any planning: a
+    /// zero clock, or a counter width that is neither 16 nor 32 (each alone).
+    #[test]
+    fn impossible_timers_are_refused() {
+        for (clock_hz, counter_bits) in [(0, 32), (0, 16), (90_000_000, 24), (90_000_000, 0)] {
+            let t = BurstTimer {
+                clock_hz,
+                counter_bits,
+                max_burst_hz: 5_000,
+            };
+            let l = SafetyLimits::default();
+            assert_eq!(plan(&t, &l, &cmd(80)), Err(BurstError::BadTimer), "{t:?}");
+            assert_eq!(
+                FastPlanner::new(&t, &l, 400).err(),
+                Some(BurstError::BadTimer),
+                "{t:?}"
+            );
+        }
+    }
+
+    /// Caps: 100 % duty is a valid cap (a scene may lift the duty limit entirely), 100.1 % and
+    /// zero are not, nor is a zero on-time.
+    #[test]
+    fn cap_validation_edges() {
+        let l = |max_duty_permille, max_on_time_us| SafetyLimits {
+            max_duty_permille,
+            max_on_time_us,
+        };
+        assert_eq!(l(1000, 1).validate(), Ok(()));
+        assert_eq!(l(1, 1).validate(), Ok(()));
+        assert_eq!(l(1001, 1).validate(), Err(BurstError::BadDuty));
+        assert_eq!(l(0, 1).validate(), Err(BurstError::BadDuty));
+        assert_eq!(l(500, 0).validate(), Err(BurstError::NoOnTime));
+    }
+
+    /// One-pulse settings up to the prescaler's last value (65 535) and refused past it.
+    #[test]
+    fn one_pulse_prescaler_range() {
+        let span = 1u64 << 16;
+        let last = 65_535 * span + (span - 1);
+        let p = T16.one_pulse(last).unwrap();
+        assert_eq!(p.psc, 65_535);
+        assert_eq!(p.on_clocks(), (last / 65_536) * 65_536);
+        assert_eq!(
+            T16.one_pulse(65_536 * span),
+            Err(BurstError::BelowTimerRange)
+        );
+        assert_eq!(
+            T16.one_pulse(u64::MAX >> 8),
+            Err(BurstError::BelowTimerRange)
+        );
+        // The smallest pulse is one tick.
+        let one = T16.one_pulse(0).unwrap();
+        assert_eq!((one.psc, one.arr, one.ccr), (0, 1, 1));
+    }
+
+    /// The frequency a setting produces, rounded to the nearest mHz (hand-worked).
+    #[test]
+    fn produced_frequency_rounds_to_the_nearest_millihertz() {
+        let s = |psc, arr| TimerSettings { psc, arr, ccr: 1 };
+        // 90 MHz / 90 000 = 1 kHz exactly.
+        assert_eq!(s(1, 44_999).produced_millihz(90_000_000), 1_000_000);
+        // 1 kHz / 3 = 333.333 Hz → 333 333 mHz; 1 kHz / 6 = 166.667 Hz → 166 667 mHz.
+        assert_eq!(s(0, 2).produced_millihz(1_000), 333_333);
+        assert_eq!(s(1, 2).produced_millihz(1_000), 166_667);
+        // 20 Hz on the F446's 90 MHz timer: 4 500 000 clocks.
+        assert_eq!(s(0, 4_499_999).produced_millihz(90_000_000), 20_000);
+    }
+
     #[test]
     fn forty_percent_at_80_hz() {
         let (s, capped) = plan(&T32, &SafetyLimits::default(), &cmd(80)).unwrap();
