@@ -384,6 +384,24 @@ mod tests {
         assert_eq!((one.psc, one.arr, one.ccr), (0, 1, 1));
     }
 
+    /// A duty exactly at the cap is rendered exactly: the cap is taken over the whole period
+    /// (arr + 1 ticks), not cut a tick short and reported as capped.
+    #[test]
+    fn duty_at_the_cap_is_not_cut() {
+        let t = BurstTimer {
+            clock_hz: 1_000_000,
+            counter_bits: 32,
+            max_burst_hz: 5_000,
+        };
+        let at_cap = BurstCommand {
+            burst_millihz: 1_000_000,
+            duty_permille: 500,
+        };
+        let (s, capped) = plan(&t, &SafetyLimits::default(), &at_cap).unwrap();
+        assert_eq!((s.psc, s.arr, s.ccr, capped), (0, 999, 500, false));
+        assert_eq!(SafetyLimits::default().max_ccr(&t, 0, 999), 500);
+    }
+
     /// The frequency a setting produces, rounded to the nearest mHz (hand-worked).
     #[test]
     fn produced_frequency_rounds_to_the_nearest_millihertz() {
