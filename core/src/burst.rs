@@ -223,11 +223,6 @@ impl FastPlanner {
         })
     }
 
-    /// The highest f_b this planner renders, Hz.
-    pub fn max_hz(&self) -> f32 {
-        self.clock_hz / self.min_period_clocks as f32
-    }
-
     /// Settings for bursts at `hz`, or None below the timer's range. Frequencies above the board
     /// limit are clamped to it; the flag says so, so the caller can log it (never alias silently).
     // Negated comparisons on purpose: a NaN fails them and is refused like zero.
@@ -237,7 +232,8 @@ impl FastPlanner {
             return None;
         }
         let period_f = self.clock_hz / hz;
-        if !(period_f < self.max_period_clocks as f32) {
+        // The longest period, psc = 65 535 with a full counter, is itself representable.
+        if !(period_f <= self.max_period_clocks as f32) {
             return None;
         }
         let mut period = period_f as u64;
@@ -491,9 +487,88 @@ mod tests {
                     s.arr.abs_diff(exact.arr) <= 1,
                     "{hz} Hz: {s:?} vs {exact:?}"
                 );
+                // The duty is a Q16 fraction floored (never above the request): the on-time
+                // is short by at most one 65 536th of the period and a tick.
+                assert!(
+                    s.ccr <= exact.ccr + 1
+                        && exact.ccr - s.ccr.min(exact.ccr) <= s.arr / 65_536 + 1,
+                    "{hz} Hz: on-time {s:?} vs {exact:?}"
+                );
                 assert!(limits.allows(&timer, &s), "{hz} Hz: {s:?}");
             }
         }
+    }
+
+    /// The fast planner's edges, each hand-worked: the board limit itself is not clamped, the
+    /// longest representable period is planned and one past it refused, a period of exactly
+    /// 2^16 ticks needs no prescaler, −0 Hz is refused like 0.
+    #[test]
+    fn fast_planner_edges() {
+        let l = SafetyLimits::default();
+        // 5 kHz on 90 MHz: 18 000 clocks, the board's shortest period, not a clamped one.
+        let fast = FastPlanner::new(&T32, &l, 400).unwrap();
+        let (s, clamped) = fast.plan_hz(5_000.0).unwrap();
+        assert_eq!((s.psc, s.arr, s.ccr, clamped), (0, 17_999, 7_199, false));
+        assert_eq!(fast.plan_hz(-0.0), None);
+        // 16-bit at 180 MHz: 180e6 / 2^32 Hz is exactly 2^32 clocks = 65 536 × 65 536.
+        let slow = FastPlanner::new(
+            &T16,
+            &SafetyLimits {
+                max_on_time_us: 100_000_000,
+                ..l
+            },
+            400,
+        )
+        .unwrap();
+        let lowest = 180e6f32 / 4_294_967_296.0;
+        let (s, _) = slow.plan_hz(lowest).unwrap();
+        assert_eq!((s.psc, s.arr), (65_535, 65_535));
+        assert_eq!(slow.plan_hz(lowest * 0.999), None);
+        // 180e6 / 65 536 Hz: exactly 65 536 clocks, the whole counter at prescaler 0.
+        let fast16 = FastPlanner::new(&T16, &l, 400).unwrap();
+        let (s, _) = fast16.plan_hz(180e6 / 65_536.0).unwrap();
+        assert_eq!((s.psc, s.arr, s.ccr), (0, 65_535, 26_214));
+    }
+
+    /// Duty exactly at the cap passes; one ‰ over it, or over 100 %, is refused.
+    #[test]
+    fn duty_check_edges() {
+        let l = SafetyLimits::default();
+        assert_eq!(l.check_duty(500), Ok(()));
+        assert_eq!(l.check_duty(501), Err(BurstError::DutyAboveCap));
+        assert_eq!(l.check_duty(1), Ok(()));
+        let open = SafetyLimits {
+            max_duty_permille: 1000,
+            ..l
+        };
+        assert_eq!(open.check_duty(1000), Ok(()));
+        assert_eq!(open.check_duty(1001), Err(BurstError::BadDuty));
+    }
+
+    /// A period too short to hold any on-time under the duty cap is refused rather than given
+    /// the one-tick minimum: at a 1 ‰ cap a 2-tick period would otherwise run at 50 %.
+    #[test]
+    fn unresolvable_duty_is_refused_not_rounded_up() {
+        let tiny = BurstTimer {
+            clock_hz: 1_000,
+            counter_bits: 16,
+            max_burst_hz: 500,
+        };
+        let l = SafetyLimits {
+            max_duty_permille: 1,
+            max_on_time_us: 50_000,
+        };
+        let fast = FastPlanner::new(&tiny, &l, 1).unwrap();
+        assert_eq!(fast.plan_hz(500.0), None);
+        let exact = BurstCommand {
+            burst_millihz: 500_000,
+            duty_permille: 1,
+        };
+        assert_eq!(plan(&tiny, &l, &exact), Err(BurstError::NoOnTime));
+        // At a 2 000-tick period the same cap holds one tick (the planner's Q16 cap, floored,
+        // is 65/65 536 of a period: 1 000 ticks hold 0.99 of a tick, so 2 000 are needed).
+        let (s, _) = fast.plan_hz(0.5).unwrap();
+        assert_eq!((s.arr, s.ccr), (1_999, 1));
     }
 
     #[test]
