@@ -2,7 +2,8 @@
 # Runs every test: installs what is missing (no-op when present), the host workspace's tests
 # (core, boards, host simulation, scenario tests), both boards' firmware release builds with
 # their flash/RAM sizes checked against the 64 KiB budget, the core on an emulated Cortex-M4F
-# (scripts/emu.sh), and the firmware images on the board model (scripts/board-model.sh).
+# (scripts/emu.sh), the firmware images on the board model (scripts/board-model.sh), and the
+# cargo-mutants mutants of the core lines changed since the last landing (scripts/mutants-ci.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/setup.sh
@@ -12,3 +13,5 @@ echo "== firmware builds"
 ./scripts/build-firmware.sh
 ./scripts/emu.sh
 ./scripts/board-model.sh
+echo "== mutants of the core lines changed since the last landing (.ci/mutants-base)"
+./scripts/mutants-ci.sh
