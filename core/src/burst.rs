@@ -398,6 +398,28 @@ mod tests {
         assert_eq!(SafetyLimits::default().max_ccr(&t, 0, 999), 500);
     }
 
+    /// The prescaler is chosen on the period rounded the same way as the period itself: at
+    /// clock / f_b = 65 536.5 ticks the period rounds to 65 537, which a 16-bit counter cannot
+    /// hold at prescaler 0. A planner that truncated here would write ARR = 65 536 (a counter
+    /// that never reaches it: no update events, the line stuck high).
+    #[test]
+    fn period_half_a_tick_past_the_counter_takes_the_prescaler() {
+        let t = BurstTimer {
+            clock_hz: 131_073,
+            counter_bits: 16,
+            max_burst_hz: 5_000,
+        };
+        let (s, _) = plan(&t, &SafetyLimits::default(), &cmd(2)).unwrap();
+        assert_eq!((s.psc, s.arr), (1, 32_767));
+        // Round to nearest below the edge: 65 535.5 ticks → 65 536, prescaler 0.
+        let t = BurstTimer {
+            clock_hz: 131_071,
+            ..t
+        };
+        let (s, _) = plan(&t, &SafetyLimits::default(), &cmd(2)).unwrap();
+        assert_eq!((s.psc, s.arr), (0, 65_535));
+    }
+
     /// The frequency a setting produces, rounded to the nearest mHz (hand-worked).
     #[test]
     fn produced_frequency_rounds_to_the_nearest_millihertz() {
