@@ -420,6 +420,22 @@ mod tests {
         assert_eq!((s.psc, s.arr), (0, 65_535));
     }
 
+    /// The lowest f_b a 16-bit counter at 180 MHz reaches: 2^32 clocks = 41.91 mHz. 42 mHz is
+    /// planned (4 285 714 286 clocks: prescaler 65 394), 41 mHz refused rather than wrapping the prescaler.
+    #[test]
+    fn lowest_frequency_on_a_16_bit_counter() {
+        let at = |burst_millihz| BurstCommand {
+            burst_millihz,
+            duty_permille: 400,
+        };
+        let (s, _) = plan(&T16, &SafetyLimits::default(), &at(42)).unwrap();
+        assert_eq!(s.psc, 65_394);
+        assert_eq!(
+            plan(&T16, &SafetyLimits::default(), &at(41)),
+            Err(BurstError::BelowTimerRange)
+        );
+    }
+
     /// The frequency a setting produces, rounded to the nearest mHz (hand-worked).
     #[test]
     fn produced_frequency_rounds_to_the_nearest_millihertz() {
