@@ -434,6 +434,13 @@ mod tests {
             plan(&T16, &SafetyLimits::default(), &at(41)),
             Err(BurstError::BelowTimerRange)
         );
+        // The last prescaler value itself: 1 Hz on a 65 535 × 65 536 + 1 Hz clock.
+        let t = BurstTimer {
+            clock_hz: 65_535 * 65_536 + 1,
+            ..T16
+        };
+        let (s, _) = plan(&t, &SafetyLimits::default(), &at(1_000)).unwrap();
+        assert_eq!((s.psc, s.arr), (65_535, 65_534));
     }
 
     /// The frequency a setting produces, rounded to the nearest mHz (hand-worked).
