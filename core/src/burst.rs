@@ -443,6 +443,23 @@ mod tests {
         assert_eq!((s.psc, s.arr), (65_535, 65_534));
     }
 
+    /// The shortest period is two ticks (one on, one off); a board whose burst limit reaches
+    /// its timer clock gets AboveBoardLimit for one-tick periods, not a malformed setting.
+    #[test]
+    fn two_tick_period_is_the_shortest() {
+        let t = BurstTimer {
+            clock_hz: 10_000,
+            counter_bits: 16,
+            max_burst_hz: 10_000,
+        };
+        let (s, capped) = plan(&t, &SafetyLimits::default(), &cmd(5_000)).unwrap();
+        assert_eq!((s.psc, s.arr, s.ccr, capped), (0, 1, 1, false));
+        assert_eq!(
+            plan(&t, &SafetyLimits::default(), &cmd(10_000)),
+            Err(BurstError::AboveBoardLimit)
+        );
+    }
+
     /// The frequency a setting produces, rounded to the nearest mHz (hand-worked).
     #[test]
     fn produced_frequency_rounds_to_the_nearest_millihertz() {

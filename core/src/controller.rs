@@ -1371,6 +1371,38 @@ mod tests {
     /// Position phase: a pulse on the first sample past each ridge, lasting duty·λ/V, in both
     /// directions, from the very first ridge (before the estimator has a speed, position ends
     /// the pulse); nothing at rest on a ridge; a fault cuts a pulse.
+    /// A sensor fault forgets where the finger was: recovering at rest 7 mm (seven ridges)
+    /// from where the fault began fires no pulse, since the finger crossed nothing the sensor
+    /// saw.
+    #[test]
+    fn position_phase_forgets_the_ridge_cell_across_faults() {
+        let mut c = single(Texture::Grating(crate::texture::Grating::new(1_000)), &[]);
+        let mut t = 0;
+        let (_, actions) = feed(&mut c, 5_500.0, &mut t, 200);
+        assert_eq!(actions, 0);
+        for _ in 0..50 {
+            let out = c.on_sample(Sample { code: 0, t_us: t });
+            assert!(out.fault.is_some());
+            t += 100;
+        }
+        let outs: std::vec::Vec<Output> = (0..2_000)
+            .map(|_| {
+                let out = c.on_sample(Sample {
+                    code: code_at(&c, 12_500.0),
+                    t_us: t,
+                });
+                t += 100;
+                out
+            })
+            .collect();
+        assert_eq!(
+            pulses(&outs),
+            [],
+            "a pulse after recovering elsewhere at rest"
+        );
+        assert_eq!(c.telemetry().ridge_pulses, 0);
+    }
+
     #[test]
     fn position_phase_grating_pulses_at_each_ridge() {
         for speed in [20_000.0f32, 50_000.0, 200_000.0] {
