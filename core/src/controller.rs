@@ -1371,6 +1371,32 @@ mod tests {
     /// Position phase: a pulse on the first sample past each ridge, lasting duty·λ/V, in both
     /// directions, from the very first ridge (before the estimator has a speed, position ends
     /// the pulse); nothing at rest on a ridge; a fault cuts a pulse.
+    /// The span a ridge pulse stays on over, to the µm: going up over the ridge at 6 mm it is
+    /// [6 mm − rearm, 6 mm + duty·λ]; the pulse is cut one µm outside either end, not on it.
+    #[test]
+    fn ridge_pulse_span_edges() {
+        let g = crate::texture::Grating::new(1_000);
+        let lo = 6_000 - g.rearm_um as i32;
+        let hi = 6_000 + 400;
+        for (edge, outside) in [(lo, lo - 1), (hi, hi + 1)] {
+            let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
+            let mut t = 0;
+            let mut step = |r: &mut Ridges, um: i32| {
+                t += 100;
+                r.step(um, Some(20_000), t, &TIMER).0
+            };
+            assert_eq!(step(&mut r, 5_500), Want::Periodic);
+            assert_eq!(step(&mut r, 5_800), Want::Periodic);
+            assert_eq!(step(&mut r, 6_000), Want::Pulse);
+            // Past the shortest pulse, still on the ridge.
+            for _ in 0..10 {
+                assert_eq!(step(&mut r, 6_010), Want::Periodic);
+            }
+            assert_eq!(step(&mut r, edge), Want::Periodic, "at {edge} um");
+            assert_eq!(step(&mut r, outside), Want::EndPulse, "at {outside} um");
+        }
+    }
+
     /// A sensor fault forgets where the finger was: recovering at rest 7 mm (seven ridges)
     /// from where the fault began fires no pulse, since the finger crossed nothing the sensor
     /// saw.
