@@ -1395,6 +1395,58 @@ mod tests {
             assert_eq!(step(&mut r, edge), Want::Periodic, "at {edge} um");
             assert_eq!(step(&mut r, outside), Want::EndPulse, "at {outside} um");
         }
+        // Going down over the same ridge the span is mirrored: [6 mm − duty·λ, 6 mm + rearm].
+        let (lo, hi) = (6_000 - 400, 6_000 + g.rearm_um as i32);
+        for (edge, outside) in [(lo, lo - 1), (hi, hi + 1)] {
+            let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
+            let mut t = 0;
+            let mut step = |r: &mut Ridges, um: i32| {
+                t += 100;
+                r.step(um, Some(-20_000), t, &TIMER).0
+            };
+            assert_eq!(step(&mut r, 6_500), Want::Periodic);
+            assert_eq!(step(&mut r, 6_200), Want::Periodic);
+            assert_eq!(step(&mut r, 6_000), Want::Periodic);
+            assert_eq!(step(&mut r, 5_999), Want::Pulse);
+            for _ in 0..10 {
+                assert_eq!(step(&mut r, 5_990), Want::Periodic);
+            }
+            assert_eq!(step(&mut r, edge), Want::Periodic, "at {edge} um");
+            assert_eq!(step(&mut r, outside), Want::EndPulse, "at {outside} um");
+        }
+    }
+
+    /// Ridge pulses may start as close as the board's shortest burst period (200 µs at 5 kHz),
+    /// not closer: two ridges crossed 200 µs apart both fire; 150 µs apart, the second is
+    /// counted as skipped.
+    #[test]
+    fn ridge_pulses_as_close_as_the_board_allows() {
+        let g = crate::texture::Grating::new(1_000);
+        let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
+        let fired: std::vec::Vec<_> = [(100, 5_500), (200, 6_000), (300, 6_500), (400, 7_000)]
+            .into_iter()
+            .map(|(t, um)| {
+                let (want, _, skipped) = r.step(um, Some(5_000_000), t, &TIMER);
+                (want, skipped)
+            })
+            .collect();
+        assert_eq!(
+            fired,
+            [
+                (Want::Periodic, 0),
+                (Want::Pulse, 0),
+                // Past the ridge's 400 µm share: the first pulse is cut by position.
+                (Want::EndPulse, 0),
+                (Want::Pulse, 0)
+            ]
+        );
+        let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
+        r.step(5_500, Some(5_000_000), 100, &TIMER);
+        r.step(6_000, Some(5_000_000), 200, &TIMER);
+        r.step(6_600, Some(5_000_000), 275, &TIMER);
+        let (want, _, skipped) = r.step(7_000, Some(5_000_000), 350, &TIMER);
+        // The first pulse is cut here too (past its share, and on for its 80 µs minimum).
+        assert_eq!((want, skipped), (Want::EndPulse, 1));
     }
 
     /// A sensor fault forgets where the finger was: recovering at rest 7 mm (seven ridges)
