@@ -1318,7 +1318,10 @@ mod tests {
         // 2 s at ~80 Hz: one draw per burst.
         assert!((140..=180).contains(&changes), "{changes}");
         // Between draws the running burst is kept: the line never goes off.
-        let offs = a.iter().filter(|o| o.action == Some(GateAction::Off)).count();
+        let offs = a
+            .iter()
+            .filter(|o| o.action == Some(GateAction::Off))
+            .count();
         assert_eq!(offs, 0, "the line went off between draws");
     }
 
