@@ -1068,6 +1068,9 @@ mod tests {
     #[test]
     fn nothing_runs_before_a_scene_loads() {
         let mut c = Controller::new(TIMER, 100).unwrap();
+        // Telemetry says "no position, no region" (-1, 255), not "at 0 µm in region 0".
+        let t = c.telemetry();
+        assert_eq!((t.position_um, t.region), (-1, u8::MAX));
         let out = c.on_sample(Sample {
             code: 30_000,
             t_us: 0,
