@@ -609,4 +609,44 @@ mod tests {
         b.carrier_divider = 12;
         assert!(!b.is_consistent());
     }
+
+    /// Timer-name comparison: whole, case-sensitive names only (TIM1 is neither TIM12 nor TIM2).
+    #[test]
+    fn eq_compares_whole_names() {
+        assert!(eq("TIM1", "TIM1"));
+        assert!(eq("", ""));
+        assert!(!eq("TIM1", "TIM2"));
+        assert!(!eq("TIM1", "TIM12"));
+        assert!(!eq("TIM12", "TIM1"));
+        assert!(!eq("TIM1", "tim1"));
+        assert!(!eq("", "TIM1"));
+    }
+
+    /// Two pins are the same when port and number both match, whatever their AF or connector.
+    #[test]
+    fn same_needs_port_and_number() {
+        let p = |port, pin, af| Pin {
+            port,
+            pin,
+            af,
+            header: "",
+        };
+        assert!(same(&p('A', 8, Some(1)), &p('A', 8, None)));
+        assert!(!same(&p('A', 8, None), &p('A', 9, None)));
+        assert!(!same(&p('A', 8, None), &p('B', 8, None)));
+        assert!(!same(&p('A', 8, None), &p('B', 9, None)));
+    }
+
+    /// Bus prescalers: 1, 2, 4, … up to the maximum; 0, non-powers of two and max × 2 refused.
+    #[test]
+    fn is_pow2_le_bounds() {
+        for x in [1, 2, 4, 8, 16] {
+            assert!(is_pow2_le(x, 16), "{x}");
+        }
+        for x in [0, 3, 6, 12, 32] {
+            assert!(!is_pow2_le(x, 16), "{x}");
+        }
+        assert!(is_pow2_le(512, 512));
+        assert!(!is_pow2_le(1024, 512));
+    }
 }

@@ -1110,6 +1110,10 @@ mod tests {
         let (out, actions) = feed(&mut c, 5_000.0, &mut t, RECOVERY_SAMPLES as usize - 1);
         assert_eq!(actions, 0);
         assert_eq!(out.fault, Some(SensorFault::RailLow));
+        // While recovering the position is reported (the sensor reads again), nothing else.
+        let p = out.position_um.expect("position while recovering");
+        assert!((4_900..=5_100).contains(&p), "{p} um");
+        assert_eq!((out.region, out.velocity_um_s), (None, None));
         let (out, _) = feed(&mut c, 5_000.0, &mut t, 1);
         assert_eq!(out.fault, None);
         // The 20 Hz region's 20 ms on-time may have run right up to the fault: at a 50 % cap the
@@ -1148,7 +1152,7 @@ mod tests {
         let mut t = 0;
         let (before, _) = feed(&mut c, 30_000.0, &mut t, 1);
         let good = default_config();
-        let mut cases: heapless::Vec<(Config, ConfigError), 12> = heapless::Vec::new();
+        let mut cases: heapless::Vec<(Config, ConfigError), 16> = heapless::Vec::new();
         let mut cfg = good.clone();
         cfg.calibration = Calibration {
             code_at_start: good.calibration.code_at_end,
@@ -1187,6 +1191,12 @@ mod tests {
         let mut cfg = good.clone();
         cfg.limits.max_duty_permille = 1001;
         let _ = cases.push((cfg, ConfigError::Limits(BurstError::BadDuty)));
+        // The stale-sensor limit: at least two sample periods (200 µs here), at most 1 s.
+        for stale_after_us in [199, 1_000_001] {
+            let mut cfg = good.clone();
+            cfg.stale_after_us = stale_after_us;
+            let _ = cases.push((cfg, ConfigError::StaleLimit));
+        }
         for (cfg, err) in cases.iter() {
             assert_eq!(c.load(cfg), Err(*err));
             // Same input, same output: the old scene is still the one running.
@@ -1199,6 +1209,11 @@ mod tests {
             assert_eq!(out.action, None, "gate changed after rejected {err:?}");
         }
         assert_eq!(c.telemetry().burst_millihz, 80_000);
+        for stale_after_us in [200, 1_000_000] {
+            let mut cfg = good.clone();
+            cfg.stale_after_us = stale_after_us;
+            assert_eq!(c.load(&cfg), Ok(()), "stale_after_us {stale_after_us}");
+        }
     }
 
     /// A one-region scene with `texture` (and optional lines).
@@ -1342,6 +1357,15 @@ mod tests {
         assert_eq!(pulses, 4);
         let fired: std::vec::Vec<u8> = outs.iter().filter_map(|o| o.line).collect();
         assert_eq!(fired, [0, 1, 1, 0]);
+        // Each is the scene's 10 ms pulse: 900 000 clocks of the 90 MHz timer, one tick low.
+        for o in &outs {
+            if let Some(GateAction::Pulse(s)) = o.action {
+                assert_eq!((s.psc, s.arr, s.ccr), (0, 900_000, 900_000));
+            }
+        }
+        // Outputs carry the estimate: 100 mm/s mid-stroke (within the 16 µm quantization).
+        let v = outs[2_000].velocity_um_s.expect("velocity mid-stroke");
+        assert!((95_000..=105_000).contains(&v), "{v} um/s");
         // Arriving on a line is a crossing (one pulse); resting there fires nothing more.
         let rest = stroke(&mut c, 20_000.0, 0.0, &mut t, 5_000);
         assert_eq!(rest[0].line, Some(0));
