@@ -89,3 +89,49 @@ fn region_lines_are_rate_limited_and_count_what_they_leave_out() {
     );
     assert_eq!(ctrl.telemetry().region_switches, 199);
 }
+
+/// Ridges the duty cap will not let fire are counted and logged, and a steady stroke logs
+/// nothing of the kind. A position-phase grating (λ = 1 mm, 40 %, default caps of 50 %): the
+/// finger crosses the 6 mm ridge at 20 mm/s at 25 ms and stays on it, so the pulse runs its
+/// whole 0.4 mm / 20 mm/s = 20 ms and the cap's rest another 20 ms, to 65 ms. From 50 ms it
+/// moves at 200 mm/s: the 7, 8 and 9 mm ridges come at 54.5, 59.5 and 64.5 ms, inside the rest
+/// (three skipped, a log line each); the 10 mm ridge at 69.5 ms fires.
+#[test]
+fn ridges_the_duty_cap_refuses_are_counted_and_logged() {
+    capture_logs();
+    let board = &ALL[0];
+    let mut cfg = saw_core::default_config();
+    cfg.scene.boundaries_um.clear();
+    cfg.scene.textures.clear();
+    let _ = cfg.scene.textures.push(saw_core::texture::Texture::Grating(
+        saw_core::texture::Grating::new(1_000),
+    ));
+    let run = |path: &dyn Fn(u32) -> f32| {
+        let mut ctrl = Controller::new(host_sim::sim::burst_timer(board), 100).unwrap();
+        ctrl.load(&cfg).unwrap();
+        let mapper = *ctrl.mapper().unwrap();
+        take_logs();
+        for i in 0..2_000u32 {
+            let code = mapper.code_at_um(path(i)) as u16;
+            ctrl.on_sample(Sample {
+                code,
+                t_us: i * 100,
+            });
+        }
+        let skipped_lines = take_logs()
+            .iter()
+            .filter(|l| l.message.contains("ridge crossings without a pulse"))
+            .count();
+        (ctrl.telemetry(), skipped_lines)
+    };
+    // Steady 20 mm/s from 5.5 mm: four ridges, each fired.
+    let (t, lines) = run(&|i| 5_500.0 + 2.0 * i as f32);
+    assert_eq!((t.ridge_pulses, t.ridges_skipped, lines), (4, 0, 0));
+    // 20 mm/s to 6.1 mm (30 ms), rest there 20 ms, then 200 mm/s.
+    let (t, lines) = run(&|i| match i {
+        0..300 => 5_500.0 + 2.0 * i as f32,
+        300..500 => 6_100.0,
+        _ => 6_100.0 + 20.0 * (i - 500) as f32,
+    });
+    assert_eq!((t.ridges_skipped, lines), (3, 3), "{t:?}");
+}
