@@ -1106,6 +1106,8 @@ mod tests {
         t += 100;
         assert_eq!(out.action, Some(GateAction::Off));
         assert_eq!(out.fault, Some(SensorFault::RailLow));
+        let tm = c.telemetry();
+        assert_eq!((tm.position_um, tm.region), (-1, u8::MAX));
         // Good samples shorter than the recovery run keep it off.
         let (out, actions) = feed(&mut c, 5_000.0, &mut t, RECOVERY_SAMPLES as usize - 1);
         assert_eq!(actions, 0);
@@ -1140,9 +1142,51 @@ mod tests {
         let mut c = loaded();
         let mut t = 0;
         feed(&mut c, 5_000.0, &mut t, 10);
+        let last = t - 100;
         assert_eq!(c.on_tick(t + 1_000), None);
-        assert_eq!(c.on_tick(t + 6_000), Some(GateAction::Off));
+        // Stale after exactly 5 ms of silence: not at 5 ms, at 5 ms + 1 µs.
+        assert_eq!(c.on_tick(last + 5_000), None);
+        assert_eq!(c.on_tick(last + 5_001), Some(GateAction::Off));
         assert_eq!(c.on_tick(t + 7_000), None);
+        assert_eq!(c.telemetry().faults, 1);
+    }
+
+    /// The ports: `poll` takes one sample from a source, runs it and applies the action to the
+    /// output, and returns what `on_sample` would have (the same as a second controller fed
+    /// directly); with no sample ready it does nothing.
+    #[test]
+    fn poll_joins_the_ports() {
+        struct Source(std::vec::Vec<Sample>);
+        impl PositionSource for Source {
+            fn next_sample(&mut self) -> Option<Sample> {
+                (!self.0.is_empty()).then(|| self.0.remove(0))
+            }
+        }
+        #[derive(Default)]
+        struct Out(std::vec::Vec<GateAction>);
+        impl BurstOutput for Out {
+            fn apply(&mut self, action: GateAction) {
+                self.0.push(action);
+            }
+        }
+        let mut direct = loaded();
+        let code = code_at(&direct, 5_000.0);
+        let samples: std::vec::Vec<Sample> = (0..100)
+            .map(|i| Sample {
+                code,
+                t_us: i * 100,
+            })
+            .collect();
+        let mut polled = loaded();
+        let mut src = Source(samples.clone());
+        let mut out = Out::default();
+        for s in &samples {
+            assert_eq!(polled.poll(&mut src, &mut out), Some(direct.on_sample(*s)));
+        }
+        assert_eq!(polled.poll(&mut src, &mut out), None);
+        // The 20 Hz region starts once, and that is all the output saw.
+        assert_eq!(out.0.len(), 1);
+        assert!(matches!(out.0[0], GateAction::Start(_)));
     }
 
     /// Each bad configuration is rejected with its own error and the running scene is untouched.
@@ -1379,6 +1423,44 @@ mod tests {
             .any(|o| matches!(o.action, Some(GateAction::Pulse(_)))));
         let out = c.on_sample(Sample { code: 0, t_us: t });
         assert_eq!(out.action, Some(GateAction::Off));
+    }
+
+    /// A line's pulse owns the enable line for its window: the 10 ms pulse plus the cap's
+    /// 10 ms rest (50 %). Inside it the triangular envelope is reported (half way up at
+    /// 2.5 ms, the peak at 5 ms) and a second line crossed is skipped and counted; crossed at
+    /// exactly 20 ms it fires.
+    #[test]
+    fn line_window_holds_the_envelope_and_skips_inside_it() {
+        for (cross_at_us, fires) in [(19_900u32, false), (20_000, true)] {
+            let mut c = single(Texture::Off, &[20_000, 21_000]);
+            let mut outs = std::vec::Vec::new();
+            // Below line 0 (arming both), over it at 1 ms, then between the lines until the
+            // second crossing `cross_at_us` after the first.
+            for t in (0..=40_000u32).step_by(100) {
+                let um = match t {
+                    0..1_000 => 19_500.0,
+                    _ if t < 1_000 + cross_at_us => 20_500.0,
+                    _ => 21_100.0,
+                };
+                outs.push(c.on_sample(Sample {
+                    code: code_at(&c, um),
+                    t_us: t,
+                }));
+            }
+            let at = |t_us: u32| outs[(t_us / 100) as usize];
+            assert_eq!(at(1_000).line, Some(0));
+            assert_eq!(at(1_000 + 2_500).amplitude_permille, Some(500));
+            assert_eq!(at(1_000 + 5_000).amplitude_permille, Some(1_000));
+            let second = at(1_000 + cross_at_us);
+            let tm = c.telemetry();
+            if fires {
+                assert_eq!(second.line, Some(1));
+                assert_eq!((tm.line_pulses, tm.lines_skipped), (2, 0));
+            } else {
+                assert_eq!(second.line, None);
+                assert_eq!((tm.line_pulses, tm.lines_skipped), (1, 1));
+            }
+        }
     }
 
     /// The pulses of `outs` as (sample index, on-time in µs): the timer's length, or less when
