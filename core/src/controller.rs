@@ -1451,6 +1451,10 @@ mod tests {
             assert_eq!(at(1_000).line, Some(0));
             assert_eq!(at(1_000 + 2_500).amplitude_permille, Some(500));
             assert_eq!(at(1_000 + 5_000).amplitude_permille, Some(1_000));
+            // After the pulse, through the rest, the drive stays at 0 (the region's texture does
+            // not take the amplitude back before the window ends).
+            let rest = &outs[(1_000 + 10_000) / 100..(1_000 + 19_900) / 100];
+            assert!(rest.iter().all(|o| o.amplitude_permille.unwrap_or(0) == 0));
             let second = at(1_000 + cross_at_us);
             let tm = c.telemetry();
             if fires {
