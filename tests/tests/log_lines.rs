@@ -11,18 +11,19 @@ use saw_tests::{capture_logs, take_logs};
 #[test]
 fn load_line_counts_each_scene_files_regions_and_lines() {
     capture_logs();
-    // (file, regions, lines): `[[region]]` tables and `lines.positions_mm` entries in the file.
+    // (file, regions, lines, kinds): `[[region]]` tables, `lines.positions_mm` entries and each
+    // region's `kind` in the file.
     let scenes = [
-        ("default.toml", 3, 0),
-        ("grating.toml", 3, 0),
-        ("lines.toml", 1, 5),
-        ("material.toml", 2, 0),
-        ("random.toml", 2, 0),
+        ("default.toml", 3, 0, &["constant"; 3][..]),
+        ("grating.toml", 3, 0, &["grating"; 3][..]),
+        ("lines.toml", 1, 5, &["off"][..]),
+        ("material.toml", 2, 0, &["material"; 2][..]),
+        ("random.toml", 2, 0, &["random"; 2][..]),
     ];
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/");
     for board in ALL {
         let timer = host_sim::sim::burst_timer(board);
-        for (file, regions, lines) in scenes {
+        for (file, regions, lines, kinds) in scenes {
             let text = std::fs::read_to_string(format!("{dir}{file}")).unwrap();
             let doc = scene_file::parse(file, &text).unwrap();
             let mut ctrl = Controller::new(timer, 100).unwrap();
@@ -41,6 +42,18 @@ fn load_line_counts_each_scene_files_regions_and_lines() {
                 board.name,
                 loaded[0].message
             );
+            // One line per region naming its texture.
+            let named: Vec<String> = logs
+                .iter()
+                .map(|l| l.message.clone())
+                .filter(|m| m.starts_with("region ") && !m.contains(" at "))
+                .collect();
+            let want: Vec<String> = kinds
+                .iter()
+                .enumerate()
+                .map(|(i, k)| format!("region {i}: {k}"))
+                .collect();
+            assert_eq!(named, want, "{file}");
         }
     }
 }

@@ -87,11 +87,6 @@ impl Grating {
         }
         Ok(())
     }
-
-    /// f_b in Hz at speed `speed_um_s` (≥ 0), before the threshold.
-    pub fn burst_hz(&self, speed_um_s: f32) -> f32 {
-        speed_um_s / self.wavelength_um as f32
-    }
 }
 
 /// Position-phase ridge tracking: which cell of the grating the finger is in and which ridge
@@ -259,5 +254,35 @@ mod tests {
             Grating::new(0).validate(63_000),
             Err(TextureError::BadWavelength)
         );
+        // Each limit from both sides: a wavelength up to the substrate's length, a start
+        // threshold up to 1 m/s, amplitude 1–1000 ‰, rearm below half a wavelength.
+        assert!(Grating::new(63_000).validate(63_000).is_ok());
+        assert_eq!(
+            Grating::new(63_001).validate(63_000),
+            Err(TextureError::BadWavelength)
+        );
+        let speed = |min_speed_um_s| {
+            Grating {
+                min_speed_um_s,
+                ..g
+            }
+            .validate(63_000)
+        };
+        assert_eq!(speed(1_000_000), Ok(()));
+        assert_eq!(speed(1_000_001), Err(TextureError::BadSpeedThreshold));
+        let amp = |amplitude_permille| {
+            Grating {
+                amplitude_permille,
+                ..g
+            }
+            .validate(63_000)
+        };
+        assert_eq!(amp(1), Ok(()));
+        assert_eq!(amp(1_000), Ok(()));
+        assert_eq!(amp(0), Err(TextureError::BadSpread));
+        assert_eq!(amp(1_001), Err(TextureError::BadSpread));
+        let rearm = |rearm_um| Grating { rearm_um, ..g }.validate(63_000);
+        assert_eq!(rearm(499), Ok(()));
+        assert_eq!(rearm(500), Err(TextureError::BadRearm));
     }
 }
