@@ -237,6 +237,31 @@ mod tests {
         assert_eq!(fired + skipped, 32);
     }
 
+    /// Re-arming to the µm: a ridge that fired stays disarmed while the finger is within
+    /// `rearm` (100 µm) of it, inclusive, and re-arms one µm further. Crossings say their
+    /// direction, and a jump over two ridges fires even when the nearer one is disarmed.
+    #[test]
+    fn rearm_edge_direction_and_jumps() {
+        for (away, fires_back) in [(1_100, false), (1_101, true)] {
+            let mut t = RidgeTracker::default();
+            assert_eq!(t.update(500, 1_000, 100), None);
+            let up = t.update(1_000, 1_000, 100).unwrap();
+            assert_eq!((up.ridge, up.up, up.skipped), (1, true, 0));
+            assert_eq!(t.update(away, 1_000, 100), None);
+            let back = t.update(999, 1_000, 100);
+            assert_eq!(back.is_some(), fires_back, "away to {away} um");
+            if let Some(c) = back {
+                assert_eq!((c.ridge, c.up), (1, false));
+            }
+        }
+        let mut t = RidgeTracker::default();
+        t.update(500, 1_000, 100);
+        t.update(1_000, 1_000, 100);
+        // Ridge 1 is disarmed; one sample later the finger is at -0.5 mm: ridges 1 and 0.
+        let c = t.update(-500, 1_000, 100).unwrap();
+        assert_eq!((c.ridge, c.skipped, c.up), (1, 1, false));
+    }
+
     #[test]
     fn validation() {
         let g = Grating::new(1_000);

@@ -190,6 +190,10 @@ mod tests {
         assert_eq!(l.amplitude_at(5_000), 1000);
         assert_eq!(l.amplitude_at(2_500), 500);
         assert_eq!(l.amplitude_at(10_000), 0);
+        // The falling half mirrors the rising one.
+        assert_eq!(l.amplitude_at(7_500), 500);
+        assert_eq!(l.amplitude_at(9_000), 200);
+        assert_eq!(l.amplitude_at(1_000), 200);
         let r = Lines {
             envelope: Envelope::Rectangular,
             ..lines()
@@ -209,5 +213,70 @@ mod tests {
             ..lines()
         };
         assert_eq!(l.validate(63_000, 50_000), Err(TextureError::BadPulse));
+    }
+
+    /// Each rule alone, at its limit and one past it.
+    #[test]
+    fn validation_limits() {
+        let check = |l: Lines| l.validate(63_000, 50_000);
+        let at = |positions: &[u32]| {
+            let mut l = lines();
+            l.positions_um.clear();
+            for &p in positions {
+                let _ = l.positions_um.push(p);
+            }
+            check(l)
+        };
+        assert_eq!(at(&[1, 62_999]), Ok(()));
+        assert_eq!(at(&[0, 20_000]), Err(TextureError::BadLines));
+        assert_eq!(at(&[10_000, 63_000]), Err(TextureError::BadLines));
+        assert_eq!(at(&[10_000, 10_000]), Err(TextureError::BadLines));
+        let pulse = |pulse_us| {
+            check(Lines {
+                pulse_us,
+                ..lines()
+            })
+        };
+        assert_eq!(pulse(50_000), Ok(()));
+        assert_eq!(pulse(50_001), Err(TextureError::BadPulse));
+        assert_eq!(pulse(0), Err(TextureError::BadPulse));
+        let amp = |amplitude_permille| {
+            check(Lines {
+                amplitude_permille,
+                ..lines()
+            })
+        };
+        assert_eq!(amp(1), Ok(()));
+        assert_eq!(amp(1_000), Ok(()));
+        assert_eq!(amp(0), Err(TextureError::BadLines));
+        assert_eq!(amp(1_001), Err(TextureError::BadLines));
+        let hyst = |hysteresis_um| {
+            check(Lines {
+                hysteresis_um,
+                ..lines()
+            })
+        };
+        assert_eq!(hyst(5_000), Ok(()));
+        assert_eq!(hyst(5_001), Err(TextureError::BadLines));
+        // No lines: nothing else is checked (the defaults of an unused section never refuse).
+        let mut none = Lines {
+            pulse_us: 0,
+            ..lines()
+        };
+        none.positions_um.clear();
+        assert_eq!(check(none), Ok(()));
+    }
+
+    /// After a reset (a fault, a new scene) the tracker has no side for any line: arriving
+    /// beyond a line is not a crossing of it.
+    #[test]
+    fn reset_forgets_the_side() {
+        let l = lines();
+        let mut t = LineTracker::default();
+        assert_eq!(t.update(&l, 9_000), None);
+        t.reset();
+        assert_eq!(t.update(&l, 10_500), None);
+        // Armed again from the new side: going back down over the line fires it.
+        assert_eq!(t.update(&l, 10_000), Some(0));
     }
 }
