@@ -267,6 +267,27 @@ mod tests {
         assert_eq!(check(none), Ok(()));
     }
 
+    /// A line arms once the finger is more than the re-arm distance (200 µm) clear of it, on
+    /// either side: from exactly 200 µm away arriving on the line is not a crossing, from
+    /// 201 µm it is.
+    #[test]
+    fn arming_distance_to_the_um() {
+        for (from, fires) in [
+            (9_800, false),
+            (9_799, true),
+            (10_200, false),
+            (10_201, true),
+        ] {
+            let mut t = LineTracker::default();
+            assert_eq!(t.update(&lines(), from), None);
+            assert_eq!(
+                t.update(&lines(), 10_000).is_some(),
+                fires,
+                "from {from} um"
+            );
+        }
+    }
+
     /// After a reset (a fault, a new scene) the tracker has no side for any line: arriving
     /// beyond a line is not a crossing of it.
     #[test]
