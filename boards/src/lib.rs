@@ -187,7 +187,10 @@ impl ClockPlan {
             && self.vco_out_hz() % self.pll_out_div == 0
             && self.pll_sysclk_hz() == self.sysclk_hz
             && self.sysclk_hz <= l.sysclk_max_hz
+            // HPRE (RM0390 §6.3.3 RCC_CFGR, RM0440 §7.4.3 RCC_CFGR): 1, 2, 4, 8, 16, 64, 128,
+            // 256, 512 — a power of two up to 512 except 32, which the field cannot encode.
             && is_pow2_le(self.ahb_div, 512)
+            && self.ahb_div != 32
             && is_pow2_le(self.apb1_div, 16)
             && is_pow2_le(self.apb2_div, 16)
             && self.sysclk_hz % self.ahb_div == 0

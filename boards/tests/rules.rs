@@ -417,7 +417,8 @@ fn sysclk_maximum() {
     assert!(!g.is_valid());
 }
 
-/// The AHB prescaler must be a power of two up to 512: /3 and /1024 refused, /512 accepted.
+/// The AHB prescaler must be one HPRE encodes: a power of two up to 512 but not 32. /3, /32
+/// and /1024 refused, /16, /64 and /512 accepted.
 #[test]
 fn ahb_prescaler_power_of_two_up_to_512() {
     assert!(!ClockPlan {
@@ -435,6 +436,9 @@ fn ahb_prescaler_power_of_two_up_to_512() {
     let g = g474(16_384_000, 4, 50, 2, 102_400_000);
     for c in [f, g] {
         assert!(ClockPlan { ahb_div: 512, ..c }.is_valid());
+        assert!(ClockPlan { ahb_div: 16, ..c }.is_valid());
+        assert!(ClockPlan { ahb_div: 64, ..c }.is_valid());
+        assert!(!ClockPlan { ahb_div: 32, ..c }.is_valid());
         assert!(!ClockPlan { ahb_div: 1024, ..c }.is_valid());
         assert!(!ClockPlan { ahb_div: 0, ..c }.is_valid());
     }
