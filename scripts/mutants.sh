@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Mutation testing of the portable core with cargo-mutants: each plausible one-line bug in
-# core/src, then the whole workspace test suite; a mutant the suite does not catch "survives".
-# Not part of CI (the full run over core/ takes hours: 1 341 mutants); see docs/mutants.md for the
-# last full results and the reasons survivors are left.
+# Mutation testing of the portable core and the board definitions with cargo-mutants: each
+# plausible one-line bug in core/src or boards/src, then the whole workspace test suite; a mutant
+# the suite does not catch "survives". The full run is not part of CI (about 1 640 mutants, a
+# few hours on 2 cores); CI runs scripts/mutants-ci.sh on the lines a change touches. See
+# docs/mutants.md for the results and the reasons survivors are left.
 #
 #   scripts/mutants.sh                                   # every mutant in core/
 #   scripts/mutants.sh --file core/src/gate.rs           # one file (any cargo-mutants flags pass through)
@@ -14,9 +15,9 @@ cd "$(dirname "$0")/.."
 if ! cargo mutants --version >/dev/null 2>&1; then
     cargo install cargo-mutants --locked
 fi
-# Mutants come from core/ only; the tests are the whole workspace's (with `-p`, cargo-mutants
-# would test only the mutated package).
+# Mutants come from core/ and boards/; the tests are the whole workspace's (with `-p`,
+# cargo-mutants would test only the mutated package).
 case " $* " in
     *" --file "*|*" -f "*|*" --in-diff "*|*" -D "*) exec cargo mutants --test-workspace=true "$@" ;;
-    *) exec cargo mutants --test-workspace=true --file 'core/src/**/*.rs' "$@" ;;
+    *) exec cargo mutants --test-workspace=true --file 'core/src/**/*.rs' --file 'boards/src/*.rs' "$@" ;;
 esac
