@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# CI's mutation check (issue #10): the mutants of the lines in core/src that changed since the
+# CI's mutation check (issue #10): the mutants of the lines in core/src and boards/src changed since the
 # last full run (the commit in .ci/mutants-base, whose results docs/mutants.md records), each
 # tested against the whole workspace suite. A missed mutant fails CI: add the test that catches
 # it, or, when it is equivalent, an exclude_re with its reason in .cargo/mutants.toml.
@@ -31,9 +31,9 @@ if ! git cat-file -e "$base^{commit}" 2>/dev/null; then
 fi
 mkdir -p target/mutants-ci
 diff=target/mutants-ci/core.diff
-git diff "$base" -- core/src > "$diff"
+git diff "$base" -- core/src boards/src > "$diff"
 if [ ! -s "$diff" ]; then
-    echo "mutants: core/src unchanged since $(git rev-parse --short "$base") (the last full run): nothing to test"
+    echo "mutants: core/src and boards/src unchanged since $(git rev-parse --short "$base") (the last full run): nothing to test"
     exit 0
 fi
 if ! cargo mutants --version >/dev/null 2>&1; then

@@ -5,7 +5,7 @@
 # few hours on 2 cores); CI runs scripts/mutants-ci.sh on the lines a change touches. See
 # docs/mutants.md for the results and the reasons survivors are left.
 #
-#   scripts/mutants.sh                                   # every mutant in core/
+#   scripts/mutants.sh                                   # every mutant in core/ and boards/
 #   scripts/mutants.sh --file core/src/gate.rs           # one file (any cargo-mutants flags pass through)
 #   scripts/mutants.sh --in-diff <(git diff origin/main) # only lines a change touches
 #
