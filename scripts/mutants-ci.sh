@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# CI's mutation check (issue #10): the mutants of the lines in core/src and boards/src changed since the
-# last full run (the commit in .ci/mutants-base, whose results docs/mutants.md records), each
+# CI's mutation check (issue #10): the mutants of the lines in core/src and boards/src changed
+# since the last landing (the commit in .ci/mutants-base, moved forward at each landing), each
 # tested against the whole workspace suite. A missed mutant fails CI: add the test that catches
 # it, or, when it is equivalent, an exclude_re with its reason in .cargo/mutants.toml.
 #
