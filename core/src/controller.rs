@@ -291,12 +291,9 @@ impl Ridges {
         else {
             return (want, None, 0);
         };
-        if self
+        let too_soon = self
             .last_pulse_us
-            .is_some_and(|last| t_us.wrapping_sub(last) < self.min_spacing_us)
-        {
-            return (want, None, c.skipped + 1);
-        }
+            .is_some_and(|last| t_us.wrapping_sub(last) < self.min_spacing_us);
         let on = match velocity_um_s {
             Some(v) => self
                 .on_clock_um_s
@@ -305,7 +302,14 @@ impl Ridges {
             None => u64::MAX,
         }
         .clamp(self.min_on_clocks, self.max_on_clocks);
-        let Ok(settings) = timer.one_pulse(on) else {
+        // `new` checked that both ends of the clamp render, so one_pulse cannot fail here; if it
+        // did, the ridge would be skipped like one that comes too soon.
+        let settings = if too_soon {
+            None
+        } else {
+            timer.one_pulse(on).ok()
+        };
+        let Some(settings) = settings else {
             return (want, None, c.skipped + 1);
         };
         let ridge = c.ridge * self.wavelength_um;
@@ -754,14 +758,10 @@ impl<E: VelocityEstimator> Controller<E> {
         self.telemetry.samples = self.telemetry.samples.wrapping_add(1);
         self.last_sample_us = Some(sample.t_us);
         let t_us = sample.t_us;
+        // Without a scene nothing has ever driven the gate (a load only replaces a scene), so
+        // there is nothing to switch off.
         let Some(active) = self.active.as_ref() else {
-            let action = self
-                .gate
-                .force_off(t_us, &self.timer, &SafetyLimits::default());
-            return Output {
-                action,
-                ..Output::default()
-            };
+            return Output::default();
         };
         let position_um = match active.mapper.position_um(&sample) {
             Ok(p) => p,
