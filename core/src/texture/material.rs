@@ -161,4 +161,67 @@ mod tests {
         .is_err());
         assert!(Material::fig5(0.0).validate().is_ok());
     }
+
+    /// Each parameter alone: Δμ finite and ≥ 0; P, m, k finite and > 0; start threshold up to
+    /// 1 m/s.
+    #[test]
+    fn each_parameter_checked_alone() {
+        let m = Material::fig5(0.5);
+        let bad = Err(TextureError::BadMaterial);
+        for d in [-0.01, f32::INFINITY, f32::NAN] {
+            assert_eq!(
+                Material { delta_mu: d, ..m }.validate(),
+                bad,
+                "delta_mu {d}"
+            );
+        }
+        for x in [0.0, -1.0, f32::INFINITY, f32::NAN] {
+            assert_eq!(
+                Material {
+                    normal_force_n: x,
+                    ..m
+                }
+                .validate(),
+                bad,
+                "P {x}"
+            );
+            assert_eq!(Material { mass_kg: x, ..m }.validate(), bad, "m {x}");
+            assert_eq!(
+                Material {
+                    stiffness_n_per_m: x,
+                    ..m
+                }
+                .validate(),
+                bad,
+                "k {x}"
+            );
+        }
+        let tiny = f32::MIN_POSITIVE;
+        assert_eq!(
+            Material {
+                normal_force_n: tiny,
+                mass_kg: tiny,
+                stiffness_n_per_m: tiny,
+                ..m
+            }
+            .validate(),
+            Ok(())
+        );
+        assert_eq!(
+            Material {
+                min_speed_um_s: 1_000_000,
+                ..m
+            }
+            .validate(),
+            Ok(())
+        );
+        assert_eq!(
+            Material {
+                min_speed_um_s: 1_000_001,
+                ..m
+            }
+            .validate(),
+            Err(TextureError::BadSpeedThreshold)
+        );
+    }
 }
