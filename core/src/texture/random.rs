@@ -110,6 +110,92 @@ mod tests {
         assert!(lo < 61.0 && hi > 99.0, "{lo}..{hi}");
     }
 
+    /// The amplitude spread is used too, and a draw above full drive is clamped to it: 900 ‰
+    /// ± 20 % reaches 1 000 ‰ (often) and never more, down to 720 ‰.
+    #[test]
+    fn amplitude_spreads_and_clamps_at_full_drive() {
+        let q = RandomBurst {
+            amplitude_permille: 900,
+            ..p()
+        };
+        let mut s = RandomState::new(3);
+        let amps: std::vec::Vec<u16> = (0..10_000).map(|_| s.draw(&q).1).collect();
+        let (lo, hi) = (*amps.iter().min().unwrap(), *amps.iter().max().unwrap());
+        assert!((720..730).contains(&lo), "{lo}");
+        assert_eq!(hi, 1_000);
+        let at_full = amps.iter().filter(|&&a| a == 1_000).count();
+        // P(draw > 1000) = (1080 − 1000) / 360 ≈ 22 %.
+        assert!((1_900..2_600).contains(&at_full), "{at_full}");
+    }
+
+    /// The f_b extremes the scene is checked against at load: 80 Hz ± 25 % → 60 and 100 Hz.
+    #[test]
+    fn extremes() {
+        assert_eq!((p().min_millihz(), p().max_millihz()), (60_000, 100_000));
+        let r = RandomBurst {
+            spread_permille: 0,
+            ..p()
+        };
+        assert_eq!((r.min_millihz(), r.max_millihz()), (80_000, 80_000));
+    }
+
+    /// Each limit alone: f_b spread below 100 %, amplitude spread up to 100 %, amplitude
+    /// 1–1000 ‰.
+    #[test]
+    fn validation_limits() {
+        let v = |r: RandomBurst| r.validate();
+        let bad = Err(TextureError::BadSpread);
+        assert_eq!(
+            v(RandomBurst {
+                spread_permille: 999,
+                ..p()
+            }),
+            Ok(())
+        );
+        assert_eq!(
+            v(RandomBurst {
+                spread_permille: 1000,
+                ..p()
+            }),
+            bad
+        );
+        assert_eq!(
+            v(RandomBurst {
+                amplitude_spread_permille: 1000,
+                ..p()
+            }),
+            Ok(())
+        );
+        assert_eq!(
+            v(RandomBurst {
+                amplitude_spread_permille: 1001,
+                ..p()
+            }),
+            bad
+        );
+        assert_eq!(
+            v(RandomBurst {
+                amplitude_permille: 1,
+                ..p()
+            }),
+            Ok(())
+        );
+        assert_eq!(
+            v(RandomBurst {
+                amplitude_permille: 1000,
+                ..p()
+            }),
+            Ok(())
+        );
+        assert_eq!(
+            v(RandomBurst {
+                amplitude_permille: 1001,
+                ..p()
+            }),
+            bad
+        );
+    }
+
     #[test]
     fn bad_spread_rejected() {
         assert!(RandomBurst {
