@@ -1236,3 +1236,40 @@ fn lookup_by_exact_name() {
     assert!(by_name("nucleo-f446rf").is_none());
     assert!(by_name("").is_none());
 }
+
+/// The memory each board definition states is what its linker script (`boards/<name>/memory.x`,
+/// copied by the firmware's build.rs) gives the linker: origin and length of FLASH and RAM.
+#[test]
+fn memory_matches_each_boards_linker_script() {
+    for b in saw_boards::ALL {
+        let path = format!("{}/{}/memory.x", env!("CARGO_MANIFEST_DIR"), b.name);
+        let text = std::fs::read_to_string(&path).unwrap();
+        let region = |name: &str| -> (u32, u32) {
+            let line = text
+                .lines()
+                .find(|l| l.trim_start().starts_with(&format!("{name} ")))
+                .unwrap_or_else(|| panic!("{path}: no {name} region"));
+            let field = |key: &str| {
+                line.split(key)
+                    .nth(1)
+                    .unwrap()
+                    .split(',')
+                    .next()
+                    .unwrap()
+                    .trim()
+            };
+            let origin =
+                u32::from_str_radix(field("ORIGIN =").trim_start_matches("0x"), 16).unwrap();
+            let len = field("LENGTH =");
+            let kib: u32 = len.strip_suffix('K').unwrap().parse().unwrap();
+            (origin, kib * 1024)
+        };
+        assert_eq!(
+            region("FLASH"),
+            (b.flash_origin, b.flash_bytes),
+            "{}",
+            b.name
+        );
+        assert_eq!(region("RAM"), (b.ram_origin, b.ram_bytes), "{}", b.name);
+    }
+}
