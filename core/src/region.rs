@@ -96,14 +96,9 @@ impl RegionMap {
         })
     }
 
-    /// Number of regions.
-    pub fn len(&self) -> usize {
+    /// Number of regions (at least one: the crate's own log line reads it, so no `is_empty`).
+    pub(crate) fn len(&self) -> usize {
         self.boundaries_um.len() + 1
-    }
-
-    /// Always false: a map has at least one region.
-    pub fn is_empty(&self) -> bool {
-        false
     }
 
     /// Boundaries, µm.
