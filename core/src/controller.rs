@@ -1495,43 +1495,45 @@ mod tests {
     #[test]
     fn ridge_pulse_span_edges() {
         let g = crate::texture::Grating::new(1_000);
-        let lo = 6_000 - g.rearm_um as i32;
-        let hi = 6_000 + 400;
-        for (edge, outside) in [(lo, lo - 1), (hi, hi + 1)] {
-            let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
-            let mut t = 0;
-            let mut step = |r: &mut Ridges, um: i32| {
-                t += 100;
-                r.step(um, Some(20_000), t, &TIMER).0
-            };
-            assert_eq!(step(&mut r, 5_500), Want::Periodic);
-            assert_eq!(step(&mut r, 5_800), Want::Periodic);
-            assert_eq!(step(&mut r, 6_000), Want::Pulse);
-            // Past the shortest pulse, still on the ridge.
-            for _ in 0..10 {
-                assert_eq!(step(&mut r, 6_010), Want::Periodic);
-            }
-            assert_eq!(step(&mut r, edge), Want::Periodic, "at {edge} um");
-            assert_eq!(step(&mut r, outside), Want::EndPulse, "at {outside} um");
-        }
+        let rearm = g.rearm_um as i32;
+        // (speed, approach: the last sample fires, a sample on the ridge, the span).
+        let up: (i32, &[i32], i32, (i32, i32)) = (
+            20_000,
+            &[5_500, 5_800, 6_000],
+            6_010,
+            (6_000 - rearm, 6_000 + 400),
+        );
         // Going down over the same ridge the span is mirrored: [6 mm − duty·λ, 6 mm + rearm].
-        let (lo, hi) = (6_000 - 400, 6_000 + g.rearm_um as i32);
-        for (edge, outside) in [(lo, lo - 1), (hi, hi + 1)] {
-            let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
-            let mut t = 0;
-            let mut step = |r: &mut Ridges, um: i32| {
-                t += 100;
-                r.step(um, Some(-20_000), t, &TIMER).0
-            };
-            assert_eq!(step(&mut r, 6_500), Want::Periodic);
-            assert_eq!(step(&mut r, 6_200), Want::Periodic);
-            assert_eq!(step(&mut r, 6_000), Want::Periodic);
-            assert_eq!(step(&mut r, 5_999), Want::Pulse);
-            for _ in 0..10 {
-                assert_eq!(step(&mut r, 5_990), Want::Periodic);
+        let down: (i32, &[i32], i32, (i32, i32)) = (
+            -20_000,
+            &[6_500, 6_200, 6_000, 5_999],
+            5_990,
+            (6_000 - 400, 6_000 + rearm),
+        );
+        for (v, approach, on_ridge, (lo, hi)) in [up, down] {
+            for (edge, outside) in [(lo, lo - 1), (hi, hi + 1)] {
+                let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
+                let mut t = 0;
+                let mut step = |r: &mut Ridges, um: i32| {
+                    t += 100;
+                    r.step(um, Some(v), t, &TIMER).0
+                };
+                let (&last, before) = approach.split_last().unwrap();
+                for &um in before {
+                    assert_eq!(step(&mut r, um), Want::Periodic, "{v} um/s at {um} um");
+                }
+                assert_eq!(step(&mut r, last), Want::Pulse, "{v} um/s at {last} um");
+                // Past the shortest pulse, still on the ridge.
+                for _ in 0..10 {
+                    assert_eq!(step(&mut r, on_ridge), Want::Periodic);
+                }
+                assert_eq!(step(&mut r, edge), Want::Periodic, "{v} um/s at {edge} um");
+                assert_eq!(
+                    step(&mut r, outside),
+                    Want::EndPulse,
+                    "{v} um/s at {outside} um"
+                );
             }
-            assert_eq!(step(&mut r, edge), Want::Periodic, "at {edge} um");
-            assert_eq!(step(&mut r, outside), Want::EndPulse, "at {outside} um");
         }
     }
 
