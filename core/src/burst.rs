@@ -34,9 +34,25 @@ impl BurstTimer {
     /// Rejects an impossible timer description (zero clock, width not 16 or 32).
     fn validate(&self) -> Result<(), BurstError> {
         if self.clock_hz == 0 || !(self.counter_bits == 16 || self.counter_bits == 32) {
-            return Err(BurstError::BadTimer);
+            return Err(self.bad());
         }
         Ok(())
+    }
+
+    /// This timer refused as impossible, its description in the error.
+    pub(crate) fn bad(&self) -> BurstError {
+        BurstError::BadTimer {
+            clock_hz: self.clock_hz,
+            counter_bits: self.counter_bits,
+            max_burst_hz: self.max_burst_hz,
+        }
+    }
+
+    /// Lowest f_b the timer reaches, mHz, rounded up: its longest period is a full counter at
+    /// the last prescaler value, 2^bits · 65 536 clocks.
+    fn min_millihz(&self) -> u32 {
+        let longest = (1u64 << self.counter_bits.min(32)) * 65_536;
+        (self.clock_hz as u64 * 1000).div_ceil(longest) as u32
     }
 
     /// One-pulse settings with the line high for `on_clocks` kernel clocks (rounded down to a
@@ -45,7 +61,12 @@ impl BurstTimer {
         let span = 1u64 << self.counter_bits.min(32);
         let psc = on_clocks / span;
         if psc > u16::MAX as u64 {
-            return Err(BurstError::BelowTimerRange);
+            let to_us =
+                |clocks: u64| clocks.saturating_mul(1_000_000) / self.clock_hz.max(1) as u64;
+            return Err(BurstError::PulseTooLong {
+                pulse_us: to_us(on_clocks),
+                max_us: to_us(span * 65_536 - 1),
+            });
         }
         // psc + 1 > on_clocks / span, so ticks < span: it fits the counter.
         let ticks = (on_clocks / (psc + 1)).max(1) as u32;
@@ -117,7 +138,8 @@ impl Default for SafetyLimits {
     }
 }
 
-/// Why a burst command cannot be rendered.
+/// Why a burst command cannot be rendered. Each variant carries the value and the limit its
+/// sentence (`Display`) names, so a refusal reads without the code at hand.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
@@ -125,27 +147,150 @@ pub enum BurstError {
     /// f_b is zero.
     ZeroFrequency,
     /// f_b above the board's limit.
-    AboveBoardLimit,
+    AboveBoardLimit {
+        /// The f_b asked for, mHz.
+        burst_millihz: u32,
+        /// The highest f_b the board renders, mHz.
+        max_millihz: u32,
+    },
     /// f_b so low the prescaler overflows.
-    BelowTimerRange,
+    BelowTimerRange {
+        /// The f_b asked for, mHz.
+        burst_millihz: u32,
+        /// The lowest f_b the burst timer reaches, mHz (rounded up).
+        min_millihz: u32,
+    },
     /// Duty is zero or above 1000 ‰.
-    BadDuty,
+    BadDuty {
+        /// The duty asked for, ‰.
+        duty_permille: u16,
+    },
     /// Duty above the configured cap.
-    DutyAboveCap,
+    DutyAboveCap {
+        /// The duty asked for, ‰.
+        duty_permille: u16,
+        /// The duty cap, ‰.
+        cap_permille: u16,
+    },
     /// The caps leave no on-time at all.
-    NoOnTime,
-    /// The timer description itself is impossible (zero clock, width not 16 or 32).
-    BadTimer,
+    NoOnTime {
+        /// The f_b whose period holds no on-time, mHz; 0 when the on-time cap itself is zero.
+        burst_millihz: u32,
+        /// The duty cap, ‰.
+        max_duty_permille: u16,
+        /// The on-time cap, µs.
+        max_on_time_us: u32,
+    },
+    /// The timer description itself is impossible (zero clock, width not 16 or 32, or no top
+    /// f_b).
+    BadTimer {
+        /// Timer kernel clock, Hz.
+        clock_hz: u32,
+        /// Counter width.
+        counter_bits: u8,
+        /// Highest burst frequency, Hz.
+        max_burst_hz: u32,
+    },
+    /// A single pulse longer than the burst timer can count (prescaler overflow).
+    PulseTooLong {
+        /// The pulse asked for, µs.
+        pulse_us: u64,
+        /// The longest pulse the timer counts, µs.
+        max_us: u64,
+    },
+}
+
+impl core::fmt::Display for BurstError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use crate::fmt::{Deci, Milli};
+        match *self {
+            BurstError::ZeroFrequency => {
+                write!(f, "f_b is 0 Hz, and a burst needs a frequency above 0 Hz")
+            }
+            BurstError::AboveBoardLimit {
+                burst_millihz,
+                max_millihz,
+            } => write!(
+                f,
+                "f_b {} Hz is above this board's limit of {} Hz",
+                Milli(burst_millihz as u64),
+                Milli(max_millihz as u64)
+            ),
+            BurstError::BelowTimerRange {
+                burst_millihz,
+                min_millihz,
+            } => write!(
+                f,
+                "f_b {} Hz is below the lowest the burst timer reaches, {} Hz",
+                Milli(burst_millihz as u64),
+                Milli(min_millihz as u64)
+            ),
+            BurstError::BadDuty { duty_permille } => write!(
+                f,
+                "duty {} % must be above 0 % and at most 100 %",
+                Deci(duty_permille as u64)
+            ),
+            BurstError::DutyAboveCap {
+                duty_permille,
+                cap_permille,
+            } => write!(
+                f,
+                "duty {} % is above the carrier's cap of {} %",
+                Deci(duty_permille as u64),
+                Deci(cap_permille as u64)
+            ),
+            // Zero f_b marks the caps' own check: no burst is involved, only the cap.
+            BurstError::NoOnTime {
+                burst_millihz: 0,
+                max_on_time_us,
+                ..
+            } => write!(
+                f,
+                "on-time cap {} ms must be above 0 ms",
+                Milli(max_on_time_us as u64)
+            ),
+            BurstError::NoOnTime {
+                burst_millihz,
+                max_duty_permille,
+                max_on_time_us,
+            } => write!(
+                f,
+                "at f_b {} Hz the carrier's caps (duty {} %, on-time {} ms) leave less than one \
+                 timer tick of on-time",
+                Milli(burst_millihz as u64),
+                Deci(max_duty_permille as u64),
+                Milli(max_on_time_us as u64)
+            ),
+            BurstError::BadTimer {
+                clock_hz,
+                counter_bits,
+                max_burst_hz,
+            } => write!(
+                f,
+                "the burst timer (clock {clock_hz} Hz, {counter_bits}-bit counter, top f_b \
+                 {max_burst_hz} Hz) is impossible: it needs a clock above 0 Hz, a 16- or 32-bit \
+                 counter and a top f_b above 0 Hz"
+            ),
+            BurstError::PulseTooLong { pulse_us, max_us } => write!(
+                f,
+                "a pulse of {} ms is longer than the burst timer's longest, {} ms",
+                Milli(pulse_us),
+                Milli(max_us)
+            ),
+        }
+    }
 }
 
 impl SafetyLimits {
     /// Rejects caps that are zero or above 100 %.
     pub fn validate(&self) -> Result<(), BurstError> {
         if self.max_duty_permille == 0 || self.max_duty_permille > 1000 {
-            return Err(BurstError::BadDuty);
+            return Err(BurstError::BadDuty {
+                duty_permille: self.max_duty_permille,
+            });
         }
         if self.max_on_time_us == 0 {
-            return Err(BurstError::NoOnTime);
+            return Err(self.no_on_time(0));
         }
         Ok(())
     }
@@ -161,12 +306,24 @@ impl SafetyLimits {
     /// Rejects a burst duty that is zero, above 100 % or above the duty cap.
     pub fn check_duty(&self, duty_permille: u16) -> Result<(), BurstError> {
         if duty_permille == 0 || duty_permille > 1000 {
-            return Err(BurstError::BadDuty);
+            return Err(BurstError::BadDuty { duty_permille });
         }
         if duty_permille > self.max_duty_permille {
-            return Err(BurstError::DutyAboveCap);
+            return Err(BurstError::DutyAboveCap {
+                duty_permille,
+                cap_permille: self.max_duty_permille,
+            });
         }
         Ok(())
+    }
+
+    /// The caps leave no on-time for bursts at `burst_millihz` (0: the on-time cap is zero).
+    fn no_on_time(&self, burst_millihz: u32) -> BurstError {
+        BurstError::NoOnTime {
+            burst_millihz,
+            max_duty_permille: self.max_duty_permille,
+            max_on_time_us: self.max_on_time_us,
+        }
     }
 
     /// The on-time cap in kernel-clock cycles.
@@ -268,8 +425,15 @@ pub fn plan(
     if cmd.burst_millihz == 0 {
         return Err(BurstError::ZeroFrequency);
     }
+    // The board's top f_b in mHz, or the timer's own (a two-tick period) if that is lower.
+    let above = || BurstError::AboveBoardLimit {
+        burst_millihz: cmd.burst_millihz,
+        max_millihz: (timer.max_burst_hz as u64 * 1000)
+            .min(timer.clock_hz as u64 * 1000 / 2)
+            .min(u32::MAX as u64) as u32,
+    };
     if cmd.burst_millihz as u64 > timer.max_burst_hz as u64 * 1000 {
-        return Err(BurstError::AboveBoardLimit);
+        return Err(above());
     }
     limits.check_duty(cmd.duty_permille)?;
     let clock_millihz = timer.clock_hz as u64 * 1000;
@@ -278,18 +442,21 @@ pub fn plan(
     let ticks = (clock_millihz + f / 2) / f;
     let psc = ticks.saturating_sub(1) / counter_span;
     if psc > u16::MAX as u64 {
-        return Err(BurstError::BelowTimerRange);
+        return Err(BurstError::BelowTimerRange {
+            burst_millihz: cmd.burst_millihz,
+            min_millihz: timer.min_millihz(),
+        });
     }
     let step = f * (psc + 1);
     let period = (clock_millihz + step / 2) / step;
     if period < 2 {
-        return Err(BurstError::AboveBoardLimit);
+        return Err(above());
     }
     let arr = (period - 1) as u32;
     let wanted = ((period * cmd.duty_permille as u64 + 500) / 1000).max(1) as u32;
     let cap = limits.max_ccr(timer, psc as u16, arr);
     if cap == 0 {
-        return Err(BurstError::NoOnTime);
+        return Err(limits.no_on_time(cmd.burst_millihz));
     }
     let ccr = wanted.min(cap);
     Ok((
@@ -335,12 +502,13 @@ mod tests {
                 max_burst_hz: 5_000,
             };
             let l = SafetyLimits::default();
-            assert_eq!(plan(&t, &l, &cmd(80)), Err(BurstError::BadTimer), "{t:?}");
-            assert_eq!(
-                FastPlanner::new(&t, &l, 400).err(),
-                Some(BurstError::BadTimer),
-                "{t:?}"
-            );
+            let bad = BurstError::BadTimer {
+                clock_hz,
+                counter_bits,
+                max_burst_hz: 5_000,
+            };
+            assert_eq!(plan(&t, &l, &cmd(80)), Err(bad), "{t:?}");
+            assert_eq!(FastPlanner::new(&t, &l, 400).err(), Some(bad), "{t:?}");
         }
     }
 
@@ -354,9 +522,17 @@ mod tests {
         };
         assert_eq!(l(1000, 1).validate(), Ok(()));
         assert_eq!(l(1, 1).validate(), Ok(()));
-        assert_eq!(l(1001, 1).validate(), Err(BurstError::BadDuty));
-        assert_eq!(l(0, 1).validate(), Err(BurstError::BadDuty));
-        assert_eq!(l(500, 0).validate(), Err(BurstError::NoOnTime));
+        let bad_duty = |duty_permille| Err(BurstError::BadDuty { duty_permille });
+        assert_eq!(l(1001, 1).validate(), bad_duty(1001));
+        assert_eq!(l(0, 1).validate(), bad_duty(0));
+        assert_eq!(
+            l(500, 0).validate(),
+            Err(BurstError::NoOnTime {
+                burst_millihz: 0,
+                max_duty_permille: 500,
+                max_on_time_us: 0
+            })
+        );
     }
 
     /// One-pulse settings up to the prescaler's last value (65 535) and refused past it.
@@ -367,14 +543,14 @@ mod tests {
         let p = T16.one_pulse(last).unwrap();
         assert_eq!(p.psc, 65_535);
         assert_eq!(p.on_clocks(), (last / 65_536) * 65_536);
-        assert_eq!(
+        assert!(matches!(
             T16.one_pulse(65_536 * span),
-            Err(BurstError::BelowTimerRange)
-        );
-        assert_eq!(
+            Err(BurstError::PulseTooLong { .. })
+        ));
+        assert!(matches!(
             T16.one_pulse(u64::MAX >> 8),
-            Err(BurstError::BelowTimerRange)
-        );
+            Err(BurstError::PulseTooLong { .. })
+        ));
         // The smallest pulse is one tick.
         let one = T16.one_pulse(0).unwrap();
         assert_eq!((one.psc, one.arr, one.ccr), (0, 1, 1));
@@ -432,7 +608,10 @@ mod tests {
         assert_eq!(s.psc, 65_394);
         assert_eq!(
             plan(&T16, &SafetyLimits::default(), &at(41)),
-            Err(BurstError::BelowTimerRange)
+            Err(BurstError::BelowTimerRange {
+                burst_millihz: 41,
+                min_millihz: 42
+            })
         );
         // The last prescaler value itself: 1 Hz on a 65 535 × 65 536 + 1 Hz clock.
         let t = BurstTimer {
@@ -456,7 +635,10 @@ mod tests {
         assert_eq!((s.psc, s.arr, s.ccr, capped), (0, 1, 1, false));
         assert_eq!(
             plan(&t, &SafetyLimits::default(), &cmd(10_000)),
-            Err(BurstError::AboveBoardLimit)
+            Err(BurstError::AboveBoardLimit {
+                burst_millihz: 10_000_000,
+                max_millihz: 5_000_000
+            })
         );
     }
 
@@ -512,18 +694,30 @@ mod tests {
         );
         assert_eq!(
             plan(&T32, &l, &cmd(5_001)).err(),
-            Some(BurstError::AboveBoardLimit)
+            Some(BurstError::AboveBoardLimit {
+                burst_millihz: 5_001_000,
+                max_millihz: 5_000_000
+            })
         );
         let c = BurstCommand {
             burst_millihz: 80_000,
             duty_permille: 0,
         };
-        assert_eq!(plan(&T32, &l, &c).err(), Some(BurstError::BadDuty));
+        assert_eq!(
+            plan(&T32, &l, &c).err(),
+            Some(BurstError::BadDuty { duty_permille: 0 })
+        );
         let c = BurstCommand {
             burst_millihz: 80_000,
             duty_permille: 600,
         };
-        assert_eq!(plan(&T32, &l, &c).err(), Some(BurstError::DutyAboveCap));
+        assert_eq!(
+            plan(&T32, &l, &c).err(),
+            Some(BurstError::DutyAboveCap {
+                duty_permille: 600,
+                cap_permille: 500
+            })
+        );
     }
 
     /// The fast planner agrees with the exact one to the rounding of one tick, on both widths.
@@ -597,14 +791,25 @@ mod tests {
     fn duty_check_edges() {
         let l = SafetyLimits::default();
         assert_eq!(l.check_duty(500), Ok(()));
-        assert_eq!(l.check_duty(501), Err(BurstError::DutyAboveCap));
+        assert_eq!(
+            l.check_duty(501),
+            Err(BurstError::DutyAboveCap {
+                duty_permille: 501,
+                cap_permille: 500
+            })
+        );
         assert_eq!(l.check_duty(1), Ok(()));
         let open = SafetyLimits {
             max_duty_permille: 1000,
             ..l
         };
         assert_eq!(open.check_duty(1000), Ok(()));
-        assert_eq!(open.check_duty(1001), Err(BurstError::BadDuty));
+        assert_eq!(
+            open.check_duty(1001),
+            Err(BurstError::BadDuty {
+                duty_permille: 1001
+            })
+        );
     }
 
     /// A period too short to hold any on-time under the duty cap is refused rather than given
@@ -626,7 +831,14 @@ mod tests {
             burst_millihz: 500_000,
             duty_permille: 1,
         };
-        assert_eq!(plan(&tiny, &l, &exact), Err(BurstError::NoOnTime));
+        assert_eq!(
+            plan(&tiny, &l, &exact),
+            Err(BurstError::NoOnTime {
+                burst_millihz: 500_000,
+                max_duty_permille: 1,
+                max_on_time_us: 50_000
+            })
+        );
         // At a 2 000-tick period the same cap holds one tick (the planner's Q16 cap, floored,
         // is 65/65 536 of a period: 1 000 ticks hold 0.99 of a tick, so 2 000 are needed).
         let (s, _) = fast.plan_hz(0.5).unwrap();
@@ -642,5 +854,104 @@ mod tests {
         assert_eq!(fast.plan_hz(0.0), None);
         assert_eq!(fast.plan_hz(f32::NAN), None);
         assert_eq!(fast.plan_hz(-3.0), None);
+    }
+
+    /// Each refusal reads as one sentence in the units a scene file uses (Hz, %, ms).
+    #[test]
+    fn errors_read_as_sentences() {
+        let cases = [
+            (
+                BurstError::ZeroFrequency,
+                "f_b is 0 Hz, and a burst needs a frequency above 0 Hz",
+            ),
+            (
+                BurstError::AboveBoardLimit {
+                    burst_millihz: 9_000_000,
+                    max_millihz: 5_000_000,
+                },
+                "f_b 9000 Hz is above this board's limit of 5000 Hz",
+            ),
+            (
+                BurstError::BelowTimerRange {
+                    burst_millihz: 41,
+                    min_millihz: 42,
+                },
+                "f_b 0.041 Hz is below the lowest the burst timer reaches, 0.042 Hz",
+            ),
+            (
+                BurstError::BadDuty { duty_permille: 0 },
+                "duty 0 % must be above 0 % and at most 100 %",
+            ),
+            (
+                BurstError::BadDuty {
+                    duty_permille: 1001,
+                },
+                "duty 100.1 % must be above 0 % and at most 100 %",
+            ),
+            (
+                BurstError::DutyAboveCap {
+                    duty_permille: 1000,
+                    cap_permille: 500,
+                },
+                "duty 100 % is above the carrier's cap of 50 %",
+            ),
+            (
+                BurstError::NoOnTime {
+                    burst_millihz: 0,
+                    max_duty_permille: 500,
+                    max_on_time_us: 0,
+                },
+                "on-time cap 0 ms must be above 0 ms",
+            ),
+            (
+                BurstError::NoOnTime {
+                    burst_millihz: 500_000,
+                    max_duty_permille: 1,
+                    max_on_time_us: 50_000,
+                },
+                "at f_b 500 Hz the carrier's caps (duty 0.1 %, on-time 50 ms) leave less than \
+                 one timer tick of on-time",
+            ),
+            (
+                BurstError::BadTimer {
+                    clock_hz: 90_000_000,
+                    counter_bits: 24,
+                    max_burst_hz: 5_000,
+                },
+                "the burst timer (clock 90000000 Hz, 24-bit counter, top f_b 5000 Hz) is \
+                 impossible: it needs a clock above 0 Hz, a 16- or 32-bit counter and a top f_b \
+                 above 0 Hz",
+            ),
+            (
+                BurstError::PulseTooLong {
+                    pulse_us: 30_000_000,
+                    max_us: 23_860_929,
+                },
+                "a pulse of 30000 ms is longer than the burst timer's longest, 23860.929 ms",
+            ),
+        ];
+        for (e, sentence) in cases {
+            assert_eq!(std::format!("{e}"), sentence, "{e:?}");
+        }
+    }
+
+    /// The limits in the sentences are the timer's own: the lowest f_b of a 16-bit counter at
+    /// 180 MHz (42 mHz, rounded up) and the longest pulse it counts.
+    #[test]
+    fn error_limits_are_the_timers() {
+        let at = BurstCommand {
+            burst_millihz: 41,
+            duty_permille: 400,
+        };
+        let e = plan(&T16, &SafetyLimits::default(), &at).unwrap_err();
+        assert_eq!(
+            std::format!("{e}"),
+            "f_b 0.041 Hz is below the lowest the burst timer reaches, 0.042 Hz"
+        );
+        let e = T16.one_pulse(180_000_000 * 30).unwrap_err();
+        assert_eq!(
+            std::format!("{e}"),
+            "a pulse of 30000 ms is longer than the burst timer's longest, 23860.929 ms"
+        );
     }
 }

@@ -63,11 +63,66 @@ pub enum ConfigError {
     /// The line pulse cannot be rendered on this board.
     LinePulse(BurstError),
     /// Textures must number one more than boundaries.
-    TextureCount,
+    TextureCount {
+        /// Textures given.
+        textures: usize,
+        /// Boundaries given.
+        boundaries: usize,
+    },
     /// Stale limit shorter than two sample periods or above one second.
-    StaleLimit,
+    StaleLimit {
+        /// The limit asked for, µs.
+        stale_after_us: u32,
+        /// Two sample periods, µs.
+        min_us: u32,
+    },
     /// The velocity estimator rejected the sample period.
     Estimator(EstimatorError),
+}
+
+/// Longest stale limit, µs.
+const MAX_STALE_US: u32 = 1_000_000;
+
+/// One sentence per refusal, for hosts (the scene-file reader, host-sim). The firmware logs the
+/// defmt form instead, so this is never linked on target.
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use crate::fmt::{Deci, Milli};
+        match *self {
+            ConfigError::Calibration(e) => e.fmt(f),
+            ConfigError::Region(e) => e.fmt(f),
+            // The caps' own checks reuse the burst errors; named here as the caps they are.
+            ConfigError::Limits(BurstError::BadDuty { duty_permille }) => write!(
+                f,
+                "duty cap {} % must be above 0 % and at most 100 %",
+                Deci(duty_permille as u64)
+            ),
+            ConfigError::Limits(e) => e.fmt(f),
+            ConfigError::Texture { region, error } => write!(f, "region {region}: {error}"),
+            ConfigError::TextureParams { region, error } => write!(f, "region {region}: {error}"),
+            ConfigError::Lines(e) => e.fmt(f),
+            ConfigError::LinePulse(e) => write!(f, "line pulse: {e}"),
+            ConfigError::TextureCount {
+                textures,
+                boundaries,
+            } => write!(
+                f,
+                "{textures} textures for {boundaries} boundaries, and a scene needs one texture \
+                 more than boundaries"
+            ),
+            ConfigError::StaleLimit {
+                stale_after_us,
+                min_us,
+            } => write!(
+                f,
+                "stale limit {} ms must be at least two sample periods ({} ms) and at most {} ms",
+                Milli(stale_after_us as u64),
+                Milli(min_us as u64),
+                Milli(MAX_STALE_US as u64)
+            ),
+            ConfigError::Estimator(e) => e.fmt(f),
+        }
+    }
 }
 
 /// What one sample produced (for logs, host analyses and the firmware's telemetry).
@@ -203,7 +258,7 @@ impl Ridges {
         sample_period_us: u32,
     ) -> Result<Self, BurstError> {
         if timer.max_burst_hz == 0 {
-            return Err(BurstError::BadTimer);
+            return Err(timer.bad());
         }
         limits.check_duty(g.duty_permille)?;
         let duty = g.duty_permille as u64;
@@ -665,7 +720,8 @@ impl<E: VelocityEstimator> Controller<E> {
                 Ok(())
             }
             Err(e) => {
-                warn!("scene rejected, previous kept: {:?}", e);
+                // `{}`: the sentence on a host (`log`), the same defmt `Format` on target.
+                warn!("scene rejected, previous kept: {}", e);
                 Err(e)
             }
         }
@@ -675,7 +731,10 @@ impl<E: VelocityEstimator> Controller<E> {
         let mapper = PositionMapper::new(config.calibration).map_err(ConfigError::Calibration)?;
         let scene = &config.scene;
         if scene.textures.len() != scene.boundaries_um.len() + 1 {
-            return Err(ConfigError::TextureCount);
+            return Err(ConfigError::TextureCount {
+                textures: scene.textures.len(),
+                boundaries: scene.boundaries_um.len(),
+            });
         }
         let regions = RegionMap::new(
             scene.textures.len(),
@@ -685,8 +744,12 @@ impl<E: VelocityEstimator> Controller<E> {
         )
         .map_err(ConfigError::Region)?;
         config.limits.validate().map_err(ConfigError::Limits)?;
-        if config.stale_after_us < 2 * self.sample_period_us || config.stale_after_us > 1_000_000 {
-            return Err(ConfigError::StaleLimit);
+        if config.stale_after_us < 2 * self.sample_period_us || config.stale_after_us > MAX_STALE_US
+        {
+            return Err(ConfigError::StaleLimit {
+                stale_after_us: config.stale_after_us,
+                min_us: 2 * self.sample_period_us,
+            });
         }
         let mut compiled = Vec::new();
         for (i, texture) in scene.textures.iter().enumerate() {
@@ -1203,21 +1266,47 @@ mod tests {
             code_at_end: good.calibration.code_at_start,
             ..good.calibration
         };
-        let _ = cases.push((cfg, ConfigError::Calibration(CalibrationError::EndsSwapped)));
+        let swapped = CalibrationError::EndsSwapped {
+            code_at_start: good.calibration.code_at_end,
+            code_at_end: good.calibration.code_at_start,
+        };
+        let _ = cases.push((cfg, ConfigError::Calibration(swapped)));
         let mut cfg = good.clone();
         cfg.calibration.code_at_end = cfg.calibration.code_at_start + 100;
         let _ = cases.push((
             cfg,
-            ConfigError::Calibration(CalibrationError::EndsTooClose),
+            ConfigError::Calibration(CalibrationError::EndsTooClose {
+                span_code: 100,
+                min_span_code: crate::position::MIN_SPAN_CODE,
+            }),
         ));
         let mut cfg = good.clone();
         cfg.scene.boundaries_um[1] = cfg.scene.boundaries_um[0] - 1;
-        let _ = cases.push((cfg, ConfigError::Region(RegionError::Unsorted { index: 1 })));
+        let unsorted = RegionError::Unsorted {
+            index: 1,
+            at_um: good.scene.boundaries_um[0] - 1,
+            previous_um: good.scene.boundaries_um[0],
+        };
+        let _ = cases.push((cfg, ConfigError::Region(unsorted)));
         for (hz_milli, duty, err) in [
             (0, 400, BurstError::ZeroFrequency),
-            (5_000_001, 400, BurstError::AboveBoardLimit),
-            (80_000, 0, BurstError::BadDuty),
-            (80_000, 501, BurstError::DutyAboveCap),
+            (
+                5_000_001,
+                400,
+                BurstError::AboveBoardLimit {
+                    burst_millihz: 5_000_001,
+                    max_millihz: 5_000_000,
+                },
+            ),
+            (80_000, 0, BurstError::BadDuty { duty_permille: 0 }),
+            (
+                80_000,
+                501,
+                BurstError::DutyAboveCap {
+                    duty_permille: 501,
+                    cap_permille: 500,
+                },
+            ),
         ] {
             let mut cfg = good.clone();
             cfg.scene.textures[1] = Texture::Constant(BurstCommand {
@@ -1234,12 +1323,23 @@ mod tests {
         }
         let mut cfg = good.clone();
         cfg.limits.max_duty_permille = 1001;
-        let _ = cases.push((cfg, ConfigError::Limits(BurstError::BadDuty)));
+        let _ = cases.push((
+            cfg,
+            ConfigError::Limits(BurstError::BadDuty {
+                duty_permille: 1001,
+            }),
+        ));
         // The stale-sensor limit: at least two sample periods (200 µs here), at most 1 s.
         for stale_after_us in [199, 1_000_001] {
             let mut cfg = good.clone();
             cfg.stale_after_us = stale_after_us;
-            let _ = cases.push((cfg, ConfigError::StaleLimit));
+            let _ = cases.push((
+                cfg,
+                ConfigError::StaleLimit {
+                    stale_after_us,
+                    min_us: 200,
+                },
+            ));
         }
         for (cfg, err) in cases.iter() {
             assert_eq!(c.load(cfg), Err(*err));
@@ -1799,6 +1899,99 @@ mod tests {
             let back = last_settings(&outs[turn..]).expect("bursts after the reversal");
             let hz = back.produced_millihz(TIMER.clock_hz) as f32 / 1000.0;
             assert!(hz > 1.0, "{}: {hz}", texture.kind());
+        }
+    }
+
+    /// Each configuration refusal reads as one sentence; a region's names the region, the
+    /// caps' name the cap.
+    #[test]
+    fn config_errors_read_as_sentences() {
+        let cases = [
+            (
+                ConfigError::Calibration(CalibrationError::BadLength { length_um: 0 }),
+                "length 0 mm must be above 0 mm and at most 1000 mm",
+            ),
+            (
+                ConfigError::Region(RegionError::HysteresisTooLarge {
+                    hysteresis_um: 6_000,
+                }),
+                "hysteresis 6 mm is above the limit of 5 mm",
+            ),
+            (
+                ConfigError::Limits(BurstError::BadDuty {
+                    duty_permille: 1001,
+                }),
+                "duty cap 100.1 % must be above 0 % and at most 100 %",
+            ),
+            (
+                ConfigError::Limits(BurstError::NoOnTime {
+                    burst_millihz: 0,
+                    max_duty_permille: 500,
+                    max_on_time_us: 0,
+                }),
+                "on-time cap 0 ms must be above 0 ms",
+            ),
+            (
+                ConfigError::Texture {
+                    region: 2,
+                    error: BurstError::DutyAboveCap {
+                        duty_permille: 1000,
+                        cap_permille: 500,
+                    },
+                },
+                "region 2: duty 100 % is above the carrier's cap of 50 %",
+            ),
+            (
+                ConfigError::TextureParams {
+                    region: 0,
+                    error: TextureError::BadWavelength {
+                        wavelength_um: 0,
+                        length_um: 63_000,
+                    },
+                },
+                "region 0: wavelength 0 mm must be above 0 mm and at most the substrate's \
+                 length, 63 mm",
+            ),
+            (
+                ConfigError::Lines(TextureError::BadPulse {
+                    pulse_us: 0,
+                    max_on_time_us: 50_000,
+                }),
+                "line pulse 0 ms must be above 0 ms and at most the on-time cap of 50 ms",
+            ),
+            (
+                ConfigError::LinePulse(BurstError::PulseTooLong {
+                    pulse_us: 30_000_000,
+                    max_us: 23_860_929,
+                }),
+                "line pulse: a pulse of 30000 ms is longer than the burst timer's longest, \
+                 23860.929 ms",
+            ),
+            (
+                ConfigError::TextureCount {
+                    textures: 3,
+                    boundaries: 1,
+                },
+                "3 textures for 1 boundaries, and a scene needs one texture more than \
+                 boundaries",
+            ),
+            (
+                ConfigError::StaleLimit {
+                    stale_after_us: 150,
+                    min_us: 200,
+                },
+                "stale limit 0.15 ms must be at least two sample periods (0.2 ms) and at most \
+                 1000 ms",
+            ),
+            (
+                ConfigError::Estimator(EstimatorError::BadSamplePeriod {
+                    sample_period_us: 0,
+                }),
+                "sample period 0 µs is outside the estimators' 10 µs to 100000 µs",
+            ),
+        ];
+        for (e, sentence) in cases {
+            assert_eq!(std::format!("{e}"), sentence, "{e:?}");
         }
     }
 }

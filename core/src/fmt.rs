@@ -41,3 +41,39 @@ macro_rules! error {
         #[cfg(not(any(feature = "defmt", feature = "log")))] { let _ = ::core::format_args!($($t)*); }
     }};
 }
+
+/// A count of thousandths shown in the unit the user wrote: 63 000 µm as `63` mm, 42 mHz as
+/// `0.042` Hz, 1 500 µs as `1.5` ms (trailing zeros dropped, so `20` rather than `20.000`).
+/// For the error sentences' `Display`, which only the host formats (the firmware logs errors
+/// through defmt), so on target it is never linked.
+pub(crate) struct Milli(pub u64);
+
+impl core::fmt::Display for Milli {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        frac(f, self.0, 1000)
+    }
+}
+
+/// A count of tenths shown in the unit the user wrote: 505 ‰ as `50.5` %.
+pub(crate) struct Deci(pub u64);
+
+impl core::fmt::Display for Deci {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        frac(f, self.0, 10)
+    }
+}
+
+/// `x / scale` in decimal, the fraction's trailing zeros dropped (`scale` a power of ten).
+fn frac(f: &mut core::fmt::Formatter<'_>, x: u64, scale: u64) -> core::fmt::Result {
+    write!(f, "{}", x / scale)?;
+    let (mut rest, mut digit) = (x % scale, scale / 10);
+    if rest != 0 {
+        f.write_str(".")?;
+        while rest != 0 {
+            write!(f, "{}", rest / digit)?;
+            rest %= digit;
+            digit /= 10;
+        }
+    }
+    Ok(())
+}

@@ -40,21 +40,102 @@ impl Default for Calibration {
     }
 }
 
-/// Why a calibration was rejected.
+/// Why a calibration was rejected. Each variant carries the values its sentence (`Display`)
+/// names, in the scene file's terms (`code_at_start`, `code_at_end`, `rail_margin_code`, mm).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum CalibrationError {
     /// `code_at_end` ≤ `code_at_start`: the ends are swapped (or equal).
-    EndsSwapped,
+    EndsSwapped {
+        /// `code_at_start`.
+        code_at_start: u16,
+        /// `code_at_end`.
+        code_at_end: u16,
+    },
     /// The ends are closer than [`MIN_SPAN_CODE`].
-    EndsTooClose,
+    EndsTooClose {
+        /// `code_at_end − code_at_start`.
+        span_code: u16,
+        /// [`MIN_SPAN_CODE`].
+        min_span_code: u16,
+    },
     /// An end lies inside a rail band, so a reading there would be taken for a fault.
-    EndInRail,
+    EndInRail {
+        /// The start end (low rail) rather than the far end (high rail).
+        at_start: bool,
+        /// The end's code.
+        code: u16,
+        /// The band's edge: codes at or below it (low rail), or at or above it (high rail).
+        rail_code: u16,
+    },
     /// `length_um` is zero or above 1 m.
-    BadLength,
+    BadLength {
+        /// The length asked for, µm.
+        length_um: u32,
+    },
     /// The rail margin is zero (no rail detection) or covers half the range.
-    BadRailMargin,
+    BadRailMargin {
+        /// The margin asked for, codes.
+        margin_code: u16,
+        /// The first margin refused above zero, codes (a quarter of full scale).
+        limit_code: u32,
+    },
+}
+
+/// Longest substrate, µm.
+const MAX_LENGTH_UM: u32 = 1_000_000;
+
+impl core::fmt::Display for CalibrationError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use crate::fmt::Milli;
+        match *self {
+            CalibrationError::EndsSwapped {
+                code_at_start,
+                code_at_end,
+            } => write!(
+                f,
+                "code_at_end {code_at_end} must be above code_at_start {code_at_start}"
+            ),
+            CalibrationError::EndsTooClose {
+                span_code,
+                min_span_code,
+            } => write!(
+                f,
+                "the ends are {span_code} codes apart, fewer than the {min_span_code} a \
+                 calibration needs"
+            ),
+            CalibrationError::EndInRail {
+                at_start: true,
+                code,
+                rail_code,
+            } => write!(
+                f,
+                "code_at_start {code} is inside the low rail band (at or below {rail_code})"
+            ),
+            CalibrationError::EndInRail {
+                at_start: false,
+                code,
+                rail_code,
+            } => write!(
+                f,
+                "code_at_end {code} is inside the high rail band (at or above {rail_code})"
+            ),
+            CalibrationError::BadLength { length_um } => write!(
+                f,
+                "length {} mm must be above 0 mm and at most {} mm",
+                Milli(length_um as u64),
+                Milli(MAX_LENGTH_UM as u64)
+            ),
+            CalibrationError::BadRailMargin {
+                margin_code,
+                limit_code,
+            } => write!(
+                f,
+                "rail_margin_code {margin_code} must be above 0 and below {limit_code}"
+            ),
+        }
+    }
 }
 
 /// A sensor reading that carries no position.
@@ -86,22 +167,44 @@ impl PositionMapper {
     pub fn new(cal: Calibration) -> Result<Self, CalibrationError> {
         let fs = CODE_FULL_SCALE;
         if cal.rail_margin_code == 0 || cal.rail_margin_code as u32 >= fs / 4 {
-            return Err(CalibrationError::BadRailMargin);
+            return Err(CalibrationError::BadRailMargin {
+                margin_code: cal.rail_margin_code,
+                limit_code: fs / 4,
+            });
         }
-        if cal.length_um == 0 || cal.length_um > 1_000_000 {
-            return Err(CalibrationError::BadLength);
+        if cal.length_um == 0 || cal.length_um > MAX_LENGTH_UM {
+            return Err(CalibrationError::BadLength {
+                length_um: cal.length_um,
+            });
         }
         if cal.code_at_end <= cal.code_at_start {
-            return Err(CalibrationError::EndsSwapped);
+            return Err(CalibrationError::EndsSwapped {
+                code_at_start: cal.code_at_start,
+                code_at_end: cal.code_at_end,
+            });
         }
         let span = cal.code_at_end - cal.code_at_start;
         if span < MIN_SPAN_CODE {
-            return Err(CalibrationError::EndsTooClose);
+            return Err(CalibrationError::EndsTooClose {
+                span_code: span,
+                min_span_code: MIN_SPAN_CODE,
+            });
         }
         let rail_low = cal.rail_margin_code;
         let rail_high = (fs - 1 - cal.rail_margin_code as u32) as u16;
-        if cal.code_at_start <= rail_low || cal.code_at_end >= rail_high {
-            return Err(CalibrationError::EndInRail);
+        if cal.code_at_start <= rail_low {
+            return Err(CalibrationError::EndInRail {
+                at_start: true,
+                code: cal.code_at_start,
+                rail_code: rail_low,
+            });
+        }
+        if cal.code_at_end >= rail_high {
+            return Err(CalibrationError::EndInRail {
+                at_start: false,
+                code: cal.code_at_end,
+                rail_code: rail_high,
+            });
         }
         // Rounded, so the far end maps to length_um within one µm.
         let um_per_code_q16 = (((cal.length_um as u64) << 16) + span as u64 / 2) / span as u64;
@@ -231,7 +334,10 @@ mod tests {
         };
         assert_eq!(
             PositionMapper::new(swapped),
-            Err(CalibrationError::EndsSwapped)
+            Err(CalibrationError::EndsSwapped {
+                code_at_start: ok.code_at_end,
+                code_at_end: ok.code_at_start
+            })
         );
         let close = Calibration {
             code_at_end: ok.code_at_start + 1000,
@@ -239,14 +345,80 @@ mod tests {
         };
         assert_eq!(
             PositionMapper::new(close),
-            Err(CalibrationError::EndsTooClose)
+            Err(CalibrationError::EndsTooClose {
+                span_code: 1000,
+                min_span_code: MIN_SPAN_CODE
+            })
         );
         let rail = Calibration {
             code_at_start: 10,
             ..ok
         };
-        assert_eq!(PositionMapper::new(rail), Err(CalibrationError::EndInRail));
+        assert_eq!(
+            PositionMapper::new(rail),
+            Err(CalibrationError::EndInRail {
+                at_start: true,
+                code: 10,
+                rail_code: DEFAULT_RAIL_MARGIN_CODE
+            })
+        );
         let len = Calibration { length_um: 0, ..ok };
-        assert_eq!(PositionMapper::new(len), Err(CalibrationError::BadLength));
+        assert_eq!(
+            PositionMapper::new(len),
+            Err(CalibrationError::BadLength { length_um: 0 })
+        );
+    }
+
+    /// Each refusal reads as one sentence naming the scene file's fields.
+    #[test]
+    fn errors_read_as_sentences() {
+        let cases = [
+            (
+                CalibrationError::EndsSwapped {
+                    code_at_start: 3000,
+                    code_at_end: 100,
+                },
+                "code_at_end 100 must be above code_at_start 3000",
+            ),
+            (
+                CalibrationError::EndsTooClose {
+                    span_code: 1000,
+                    min_span_code: 16_384,
+                },
+                "the ends are 1000 codes apart, fewer than the 16384 a calibration needs",
+            ),
+            (
+                CalibrationError::EndInRail {
+                    at_start: true,
+                    code: 10,
+                    rail_code: 655,
+                },
+                "code_at_start 10 is inside the low rail band (at or below 655)",
+            ),
+            (
+                CalibrationError::EndInRail {
+                    at_start: false,
+                    code: 65_000,
+                    rail_code: 64_880,
+                },
+                "code_at_end 65000 is inside the high rail band (at or above 64880)",
+            ),
+            (
+                CalibrationError::BadLength {
+                    length_um: 1_000_500,
+                },
+                "length 1000.5 mm must be above 0 mm and at most 1000 mm",
+            ),
+            (
+                CalibrationError::BadRailMargin {
+                    margin_code: 0,
+                    limit_code: 16_384,
+                },
+                "rail_margin_code 0 must be above 0 and below 16384",
+            ),
+        ];
+        for (e, sentence) in cases {
+            assert_eq!(std::format!("{e}"), sentence, "{e:?}");
+        }
     }
 }

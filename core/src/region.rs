@@ -15,32 +15,118 @@ pub const MAX_REGIONS: usize = 8;
 /// and a crossing at 300 mm/s (30 µm per sample) still switches within 0.13 mm of the boundary.
 pub const DEFAULT_HYSTERESIS_UM: u32 = 100;
 
-/// Why a region layout was rejected.
+/// Why a region layout was rejected. Each variant carries the values its sentence (`Display`)
+/// names. Boundary `i` is where region `i` ends (a scene file's `region[i].until_mm`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum RegionError {
     /// No regions, or more than [`MAX_REGIONS`].
-    BadCount,
+    BadCount {
+        /// Regions asked for.
+        regions: usize,
+    },
     /// Boundaries must number one less than the regions.
-    BoundaryCount,
+    BoundaryCount {
+        /// Regions asked for.
+        regions: usize,
+        /// Boundaries given.
+        boundaries: usize,
+    },
     /// Boundary `index` is not strictly greater than the one before it (unsorted or overlapping).
     Unsorted {
         /// Index of the offending boundary.
         index: u8,
+        /// Where it is, µm.
+        at_um: u32,
+        /// Where the boundary before it is, µm.
+        previous_um: u32,
     },
     /// Boundary `index` is at or beyond an end of the substrate.
     OutOfRange {
         /// Index of the offending boundary.
         index: u8,
+        /// Where it is, µm.
+        at_um: u32,
+        /// Substrate length, µm.
+        length_um: u32,
     },
     /// Region `index` is narrower than twice the hysteresis, so it could never be entered cleanly.
     TooNarrow {
         /// Index of the offending region.
         index: u8,
+        /// Its width, µm.
+        width_um: u32,
+        /// Twice the hysteresis, µm.
+        min_width_um: u32,
     },
     /// Hysteresis above 5 mm: the boundaries would be felt far from where they are drawn.
-    HysteresisTooLarge,
+    HysteresisTooLarge {
+        /// The hysteresis asked for, µm.
+        hysteresis_um: u32,
+    },
+}
+
+/// Largest hysteresis, µm.
+const MAX_HYSTERESIS_UM: u32 = 5_000;
+
+impl core::fmt::Display for RegionError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use crate::fmt::Milli;
+        let mm = |um: u32| Milli(um as u64);
+        match *self {
+            RegionError::BadCount { regions } => write!(
+                f,
+                "a scene has {regions} regions and needs 1 to {MAX_REGIONS}"
+            ),
+            RegionError::BoundaryCount {
+                regions,
+                boundaries,
+            } => write!(
+                f,
+                "{regions} regions need {} boundaries, not {boundaries}",
+                regions.saturating_sub(1)
+            ),
+            RegionError::Unsorted {
+                index,
+                at_um,
+                previous_um,
+            } => write!(
+                f,
+                "region {index} ends at {} mm, not after region {} ({} mm)",
+                mm(at_um),
+                index.saturating_sub(1),
+                mm(previous_um)
+            ),
+            RegionError::OutOfRange {
+                index,
+                at_um,
+                length_um,
+            } => write!(
+                f,
+                "region {index} ends at {} mm, not strictly between 0 mm and the substrate's \
+                 end at {} mm",
+                mm(at_um),
+                mm(length_um)
+            ),
+            RegionError::TooNarrow {
+                index,
+                width_um,
+                min_width_um,
+            } => write!(
+                f,
+                "region {index} is {} mm wide, narrower than twice the hysteresis ({} mm)",
+                mm(width_um),
+                mm(min_width_um)
+            ),
+            RegionError::HysteresisTooLarge { hysteresis_um } => write!(
+                f,
+                "hysteresis {} mm is above the limit of {} mm",
+                mm(hysteresis_um),
+                mm(MAX_HYSTERESIS_UM)
+            ),
+        }
+    }
 }
 
 /// Validated boundaries along the substrate.
@@ -60,26 +146,41 @@ impl RegionMap {
         hysteresis_um: u32,
     ) -> Result<Self, RegionError> {
         if regions == 0 || regions > MAX_REGIONS {
-            return Err(RegionError::BadCount);
+            return Err(RegionError::BadCount { regions });
         }
         if boundaries_um.len() + 1 != regions {
-            return Err(RegionError::BoundaryCount);
+            return Err(RegionError::BoundaryCount {
+                regions,
+                boundaries: boundaries_um.len(),
+            });
         }
-        if hysteresis_um > 5_000 {
-            return Err(RegionError::HysteresisTooLarge);
+        if hysteresis_um > MAX_HYSTERESIS_UM {
+            return Err(RegionError::HysteresisTooLarge { hysteresis_um });
         }
         let mut edges: Vec<i32, { MAX_REGIONS - 1 }> = Vec::new();
         let mut prev = 0u32;
         for (i, &b) in boundaries_um.iter().enumerate() {
             let index = i as u8;
             if b == 0 || b >= length_um {
-                return Err(RegionError::OutOfRange { index });
+                return Err(RegionError::OutOfRange {
+                    index,
+                    at_um: b,
+                    length_um,
+                });
             }
             if i > 0 && b <= prev {
-                return Err(RegionError::Unsorted { index });
+                return Err(RegionError::Unsorted {
+                    index,
+                    at_um: b,
+                    previous_um: prev,
+                });
             }
             if b - prev < 2 * hysteresis_um {
-                return Err(RegionError::TooNarrow { index });
+                return Err(RegionError::TooNarrow {
+                    index,
+                    width_um: b - prev,
+                    min_width_um: 2 * hysteresis_um,
+                });
             }
             prev = b;
             // Cannot fail: length checked against MAX_REGIONS above.
@@ -88,6 +189,8 @@ impl RegionMap {
         if length_um - prev < 2 * hysteresis_um {
             return Err(RegionError::TooNarrow {
                 index: boundaries_um.len() as u8,
+                width_um: length_um - prev,
+                min_width_um: 2 * hysteresis_um,
             });
         }
         Ok(Self {
@@ -163,31 +266,102 @@ mod tests {
     fn bad_layouts_rejected() {
         assert_eq!(
             RegionMap::new(3, &[40_000, 20_000], 63_000, 100),
-            Err(RegionError::Unsorted { index: 1 })
+            Err(RegionError::Unsorted {
+                index: 1,
+                at_um: 20_000,
+                previous_um: 40_000
+            })
         );
         assert_eq!(
             RegionMap::new(3, &[20_000, 20_000], 63_000, 100),
-            Err(RegionError::Unsorted { index: 1 })
+            Err(RegionError::Unsorted {
+                index: 1,
+                at_um: 20_000,
+                previous_um: 20_000
+            })
         );
         assert_eq!(
             RegionMap::new(3, &[20_000], 63_000, 100),
-            Err(RegionError::BoundaryCount)
+            Err(RegionError::BoundaryCount {
+                regions: 3,
+                boundaries: 1
+            })
         );
         assert_eq!(
             RegionMap::new(2, &[63_000], 63_000, 100),
-            Err(RegionError::OutOfRange { index: 0 })
+            Err(RegionError::OutOfRange {
+                index: 0,
+                at_um: 63_000,
+                length_um: 63_000
+            })
         );
         assert_eq!(
             RegionMap::new(3, &[20_000, 20_150], 63_000, 100),
-            Err(RegionError::TooNarrow { index: 1 })
+            Err(RegionError::TooNarrow {
+                index: 1,
+                width_um: 150,
+                min_width_um: 200
+            })
         );
         assert_eq!(
             RegionMap::new(0, &[], 63_000, 100),
-            Err(RegionError::BadCount)
+            Err(RegionError::BadCount { regions: 0 })
         );
         assert_eq!(
             RegionMap::new(9, &[1, 2, 3, 4, 5, 6, 7, 8], 63_000, 0),
-            Err(RegionError::BadCount)
+            Err(RegionError::BadCount { regions: 9 })
         );
+    }
+
+    /// Each refusal reads as one sentence, positions in mm as a scene file writes them.
+    #[test]
+    fn errors_read_as_sentences() {
+        let cases = [
+            (
+                RegionError::BadCount { regions: 9 },
+                "a scene has 9 regions and needs 1 to 8",
+            ),
+            (
+                RegionError::BoundaryCount {
+                    regions: 3,
+                    boundaries: 1,
+                },
+                "3 regions need 2 boundaries, not 1",
+            ),
+            (
+                RegionError::Unsorted {
+                    index: 2,
+                    at_um: 10_000,
+                    previous_um: 30_000,
+                },
+                "region 2 ends at 10 mm, not after region 1 (30 mm)",
+            ),
+            (
+                RegionError::OutOfRange {
+                    index: 0,
+                    at_um: 63_000,
+                    length_um: 63_000,
+                },
+                "region 0 ends at 63 mm, not strictly between 0 mm and the substrate's end at \
+                 63 mm",
+            ),
+            (
+                RegionError::TooNarrow {
+                    index: 1,
+                    width_um: 150,
+                    min_width_um: 200,
+                },
+                "region 1 is 0.15 mm wide, narrower than twice the hysteresis (0.2 mm)",
+            ),
+            (
+                RegionError::HysteresisTooLarge {
+                    hysteresis_um: 5_001,
+                },
+                "hysteresis 5.001 mm is above the limit of 5 mm",
+            ),
+        ];
+        for (e, sentence) in cases {
+            assert_eq!(std::format!("{e}"), sentence, "{e:?}");
+        }
     }
 }

@@ -664,17 +664,17 @@ impl SceneDoc {
                 self.spans.substrate.clone().unwrap_or(0..0),
                 "substrate".to_string(),
             ),
-            ConfigError::Limits(_) | ConfigError::StaleLimit => (
+            ConfigError::Limits(_) | ConfigError::StaleLimit { .. } => (
                 self.spans.limits.clone().unwrap_or(0..0),
                 "limits".to_string(),
             ),
             ConfigError::Region(re) => {
                 use crate::region::RegionError as R;
                 match re {
-                    R::Unsorted { index } | R::OutOfRange { index } => {
+                    R::Unsorted { index, .. } | R::OutOfRange { index, .. } => {
                         (region(*index), std::format!("region[{index}].until_mm"))
                     }
-                    R::TooNarrow { index } => (region(*index), std::format!("region[{index}]")),
+                    R::TooNarrow { index, .. } => (region(*index), std::format!("region[{index}]")),
                     _ => (0..0, "hysteresis_mm".to_string()),
                 }
             }
@@ -688,7 +688,15 @@ impl SceneDoc {
             ),
             _ => (0..0, "(file)".to_string()),
         };
-        cx.err(span, &field, format_args!("{e:?}"))
+        // The located field already names the region (or the lines), so the sentence is the
+        // inner error's; every other refusal reads whole.
+        match e {
+            ConfigError::Texture { error, .. } | ConfigError::LinePulse(error) => {
+                cx.err(span, &field, error)
+            }
+            ConfigError::TextureParams { error, .. } => cx.err(span, &field, error),
+            _ => cx.err(span, &field, e),
+        }
     }
 }
 
@@ -745,7 +753,7 @@ mod tests {
         let text = "[[region]]\nkind = \"constant\"\nuntil_mm = 20\nf_b_hz = 80\n\n[[region]]\nkind = \"constant\"\nf_b_hz = 9000\n";
         let e = err(text);
         assert_eq!((e.line, e.field.as_str()), (6, "region[1]"), "{e}");
-        assert!(e.message.contains("AboveBoardLimit"), "{e}");
+        assert!(e.message.contains("above this board's limit"), "{e}");
     }
 
     #[test]

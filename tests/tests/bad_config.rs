@@ -24,28 +24,43 @@ fn bad_configs(max_burst_hz: u32) -> Vec<(&'static str, Config, ConfigError)> {
     v.push((
         "calibration ends swapped",
         c,
-        ConfigError::Calibration(CalibrationError::EndsSwapped),
+        ConfigError::Calibration(CalibrationError::EndsSwapped {
+            code_at_start: good.calibration.code_at_end,
+            code_at_end: good.calibration.code_at_start,
+        }),
     ));
     let mut c = good.clone();
     c.calibration.code_at_end = c.calibration.code_at_start + 4_000;
     v.push((
         "calibration ends too close",
         c,
-        ConfigError::Calibration(CalibrationError::EndsTooClose),
+        ConfigError::Calibration(CalibrationError::EndsTooClose {
+            span_code: 4_000,
+            min_span_code: saw_core::position::MIN_SPAN_CODE,
+        }),
     ));
     let mut c = good.clone();
     c.scene.boundaries_um[1] = c.scene.boundaries_um[0];
+    let b = good.scene.boundaries_um.clone();
     v.push((
         "overlapping boundaries",
         c,
-        ConfigError::Region(RegionError::Unsorted { index: 1 }),
+        ConfigError::Region(RegionError::Unsorted {
+            index: 1,
+            at_um: b[0],
+            previous_um: b[0],
+        }),
     ));
     let mut c = good.clone();
     c.scene.boundaries_um.swap(0, 1);
     v.push((
         "unsorted boundaries",
         c,
-        ConfigError::Region(RegionError::Unsorted { index: 1 }),
+        ConfigError::Region(RegionError::Unsorted {
+            index: 1,
+            at_um: b[0],
+            previous_um: b[1],
+        }),
     ));
     for (what, millihz, duty, error) in [
         ("f_b = 0", 0, 400, BurstError::ZeroFrequency),
@@ -53,14 +68,25 @@ fn bad_configs(max_burst_hz: u32) -> Vec<(&'static str, Config, ConfigError)> {
             "f_b above the board limit",
             max_burst_hz * 1000 + 1,
             400,
-            BurstError::AboveBoardLimit,
+            BurstError::AboveBoardLimit {
+                burst_millihz: max_burst_hz * 1000 + 1,
+                max_millihz: max_burst_hz * 1000,
+            },
         ),
-        ("duty 0", 80_000, 0, BurstError::BadDuty),
+        (
+            "duty 0",
+            80_000,
+            0,
+            BurstError::BadDuty { duty_permille: 0 },
+        ),
         (
             "duty above the cap",
             80_000,
             good.limits.max_duty_permille + 1,
-            BurstError::DutyAboveCap,
+            BurstError::DutyAboveCap {
+                duty_permille: good.limits.max_duty_permille + 1,
+                cap_permille: good.limits.max_duty_permille,
+            },
         ),
     ] {
         let mut c = good.clone();

@@ -13,7 +13,7 @@
 //!   v × 3.3 ms behind the ridges. Below `min_speed_um_s` no bursts are made (at rest the
 //!   velocity estimate is noise); the threshold has hysteresis (off below half of it).
 
-use super::TextureError;
+use super::{SpreadParam, TextureError};
 
 /// How a grating turns motion into bursts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -72,18 +72,29 @@ impl Grating {
     /// Checks the parameters against a substrate of `length_um`.
     pub fn validate(&self, length_um: u32) -> Result<(), TextureError> {
         if self.wavelength_um == 0 || self.wavelength_um > length_um {
-            return Err(TextureError::BadWavelength);
+            return Err(TextureError::BadWavelength {
+                wavelength_um: self.wavelength_um,
+                length_um,
+            });
         }
         if self.min_speed_um_s > 1_000_000 {
-            return Err(TextureError::BadSpeedThreshold);
+            return Err(TextureError::BadSpeedThreshold {
+                min_speed_um_s: self.min_speed_um_s,
+            });
         }
         if self.amplitude_permille == 0 || self.amplitude_permille > 1000 {
-            return Err(TextureError::BadSpread);
+            return Err(TextureError::BadSpread {
+                param: SpreadParam::Amplitude,
+                permille: self.amplitude_permille,
+            });
         }
         if self.render == GratingRender::PositionPhase
             && self.rearm_um.saturating_mul(2) >= self.wavelength_um
         {
-            return Err(TextureError::BadRearm);
+            return Err(TextureError::BadRearm {
+                rearm_um: self.rearm_um,
+                wavelength_um: self.wavelength_um,
+            });
         }
         Ok(())
     }
@@ -269,7 +280,13 @@ mod tests {
         assert!(g.validate(63_000).is_ok());
         assert_eq!(Grating::new(200).rearm_um, 50);
         let bad = Grating { rearm_um: 500, ..g };
-        assert_eq!(bad.validate(63_000), Err(TextureError::BadRearm));
+        assert_eq!(
+            bad.validate(63_000),
+            Err(TextureError::BadRearm {
+                rearm_um: 500,
+                wavelength_um: 1_000
+            })
+        );
         let synth = Grating {
             render: GratingRender::VelocitySynthesis,
             ..bad
@@ -277,14 +294,20 @@ mod tests {
         assert!(synth.validate(63_000).is_ok());
         assert_eq!(
             Grating::new(0).validate(63_000),
-            Err(TextureError::BadWavelength)
+            Err(TextureError::BadWavelength {
+                wavelength_um: 0,
+                length_um: 63_000
+            })
         );
         // Each limit from both sides: a wavelength up to the substrate's length, a start
         // threshold up to 1 m/s, amplitude 1–1000 ‰, rearm below half a wavelength.
         assert!(Grating::new(63_000).validate(63_000).is_ok());
         assert_eq!(
             Grating::new(63_001).validate(63_000),
-            Err(TextureError::BadWavelength)
+            Err(TextureError::BadWavelength {
+                wavelength_um: 63_001,
+                length_um: 63_000
+            })
         );
         let speed = |min_speed_um_s| {
             Grating {
@@ -294,7 +317,12 @@ mod tests {
             .validate(63_000)
         };
         assert_eq!(speed(1_000_000), Ok(()));
-        assert_eq!(speed(1_000_001), Err(TextureError::BadSpeedThreshold));
+        assert_eq!(
+            speed(1_000_001),
+            Err(TextureError::BadSpeedThreshold {
+                min_speed_um_s: 1_000_001
+            })
+        );
         let amp = |amplitude_permille| {
             Grating {
                 amplitude_permille,
@@ -304,10 +332,22 @@ mod tests {
         };
         assert_eq!(amp(1), Ok(()));
         assert_eq!(amp(1_000), Ok(()));
-        assert_eq!(amp(0), Err(TextureError::BadSpread));
-        assert_eq!(amp(1_001), Err(TextureError::BadSpread));
+        let bad_amp = |permille| {
+            Err(TextureError::BadSpread {
+                param: SpreadParam::Amplitude,
+                permille,
+            })
+        };
+        assert_eq!(amp(0), bad_amp(0));
+        assert_eq!(amp(1_001), bad_amp(1_001));
         let rearm = |rearm_um| Grating { rearm_um, ..g }.validate(63_000);
         assert_eq!(rearm(499), Ok(()));
-        assert_eq!(rearm(500), Err(TextureError::BadRearm));
+        assert_eq!(
+            rearm(500),
+            Err(TextureError::BadRearm {
+                rearm_um: 500,
+                wavelength_um: 1_000
+            })
+        );
     }
 }

@@ -7,7 +7,7 @@
 
 use heapless::Vec;
 
-use super::TextureError;
+use super::{LineFault, TextureError, MAX_LINE_REARM_UM};
 
 /// Most lines a scene may draw.
 pub const MAX_LINES: usize = 16;
@@ -55,9 +55,21 @@ impl Lines {
     /// Checks positions against a substrate of `length_um` and the pulse against the on-time cap.
     pub fn validate(&self, length_um: u32, max_on_time_us: u32) -> Result<(), TextureError> {
         let mut prev: Option<u32> = None;
-        for &p in &self.positions_um {
-            if p == 0 || p >= length_um || prev.is_some_and(|q| p <= q) {
-                return Err(TextureError::BadLines);
+        for (i, &p) in self.positions_um.iter().enumerate() {
+            let index = i as u8;
+            if p == 0 || p >= length_um {
+                return Err(TextureError::BadLines(LineFault::OutOfRange {
+                    index,
+                    at_um: p,
+                    length_um,
+                }));
+            }
+            if let Some(q) = prev.filter(|&q| p <= q) {
+                return Err(TextureError::BadLines(LineFault::Unsorted {
+                    index,
+                    at_um: p,
+                    previous_um: q,
+                }));
             }
             prev = Some(p);
         }
@@ -65,13 +77,20 @@ impl Lines {
             return Ok(());
         }
         if self.pulse_us == 0 || self.pulse_us > max_on_time_us {
-            return Err(TextureError::BadPulse);
+            return Err(TextureError::BadPulse {
+                pulse_us: self.pulse_us,
+                max_on_time_us,
+            });
         }
-        if self.amplitude_permille == 0
-            || self.amplitude_permille > 1000
-            || self.hysteresis_um > 5_000
-        {
-            return Err(TextureError::BadLines);
+        if self.amplitude_permille == 0 || self.amplitude_permille > 1000 {
+            return Err(TextureError::BadLines(LineFault::Amplitude {
+                permille: self.amplitude_permille,
+            }));
+        }
+        if self.hysteresis_um > MAX_LINE_REARM_UM {
+            return Err(TextureError::BadLines(LineFault::Rearm {
+                rearm_um: self.hysteresis_um,
+            }));
         }
         Ok(())
     }
@@ -207,12 +226,21 @@ mod tests {
         let mut l = lines();
         assert!(l.validate(63_000, 50_000).is_ok());
         l.positions_um[1] = 5_000;
-        assert_eq!(l.validate(63_000, 50_000), Err(TextureError::BadLines));
+        assert!(matches!(
+            l.validate(63_000, 50_000),
+            Err(TextureError::BadLines(LineFault::Unsorted { index: 1, .. }))
+        ));
         let l = Lines {
             pulse_us: 60_000,
             ..lines()
         };
-        assert_eq!(l.validate(63_000, 50_000), Err(TextureError::BadPulse));
+        assert_eq!(
+            l.validate(63_000, 50_000),
+            Err(TextureError::BadPulse {
+                pulse_us: 60_000,
+                max_on_time_us: 50_000
+            })
+        );
     }
 
     /// Each rule alone, at its limit and one past it.
@@ -228,9 +256,23 @@ mod tests {
             check(l)
         };
         assert_eq!(at(&[1, 62_999]), Ok(()));
-        assert_eq!(at(&[0, 20_000]), Err(TextureError::BadLines));
-        assert_eq!(at(&[10_000, 63_000]), Err(TextureError::BadLines));
-        assert_eq!(at(&[10_000, 10_000]), Err(TextureError::BadLines));
+        let outside = |index, at_um| {
+            Err(TextureError::BadLines(LineFault::OutOfRange {
+                index,
+                at_um,
+                length_um: 63_000,
+            }))
+        };
+        assert_eq!(at(&[0, 20_000]), outside(0, 0));
+        assert_eq!(at(&[10_000, 63_000]), outside(1, 63_000));
+        assert_eq!(
+            at(&[10_000, 10_000]),
+            Err(TextureError::BadLines(LineFault::Unsorted {
+                index: 1,
+                at_um: 10_000,
+                previous_um: 10_000
+            }))
+        );
         let pulse = |pulse_us| {
             check(Lines {
                 pulse_us,
@@ -238,8 +280,14 @@ mod tests {
             })
         };
         assert_eq!(pulse(50_000), Ok(()));
-        assert_eq!(pulse(50_001), Err(TextureError::BadPulse));
-        assert_eq!(pulse(0), Err(TextureError::BadPulse));
+        let bad_pulse = |pulse_us| {
+            Err(TextureError::BadPulse {
+                pulse_us,
+                max_on_time_us: 50_000,
+            })
+        };
+        assert_eq!(pulse(50_001), bad_pulse(50_001));
+        assert_eq!(pulse(0), bad_pulse(0));
         let amp = |amplitude_permille| {
             check(Lines {
                 amplitude_permille,
@@ -248,8 +296,9 @@ mod tests {
         };
         assert_eq!(amp(1), Ok(()));
         assert_eq!(amp(1_000), Ok(()));
-        assert_eq!(amp(0), Err(TextureError::BadLines));
-        assert_eq!(amp(1_001), Err(TextureError::BadLines));
+        let bad_amp = |permille| Err(TextureError::BadLines(LineFault::Amplitude { permille }));
+        assert_eq!(amp(0), bad_amp(0));
+        assert_eq!(amp(1_001), bad_amp(1_001));
         let hyst = |hysteresis_um| {
             check(Lines {
                 hysteresis_um,
@@ -257,7 +306,10 @@ mod tests {
             })
         };
         assert_eq!(hyst(5_000), Ok(()));
-        assert_eq!(hyst(5_001), Err(TextureError::BadLines));
+        assert_eq!(
+            hyst(5_001),
+            Err(TextureError::BadLines(LineFault::Rearm { rearm_um: 5_001 }))
+        );
         // No lines: nothing else is checked (the defaults of an unused section never refuse).
         let mut none = Lines {
             pulse_us: 0,

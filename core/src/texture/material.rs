@@ -10,7 +10,7 @@
 //! multiplies and one divide. Δμ itself comes from the material parameters of eq. 12
 //! (μs − μc = π(s − s')β/(E σ)), resolved when the scene file is read.
 
-use super::TextureError;
+use super::{MaterialParam, ParamValue, TextureError};
 
 /// A material region's parameters (SI units).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -54,16 +54,28 @@ impl Material {
     /// Checks the parameters.
     pub fn validate(&self) -> Result<(), TextureError> {
         let positive = |x: f32| x.is_finite() && x > 0.0;
-        let friction_ok = self.delta_mu.is_finite() && self.delta_mu >= 0.0;
-        if !friction_ok
-            || !positive(self.normal_force_n)
-            || !positive(self.mass_kg)
-            || !positive(self.stiffness_n_per_m)
-        {
-            return Err(TextureError::BadMaterial);
+        let bad = |param, x| {
+            Err(TextureError::BadMaterial {
+                param,
+                value: ParamValue(x),
+            })
+        };
+        if !(self.delta_mu.is_finite() && self.delta_mu >= 0.0) {
+            return bad(MaterialParam::DeltaMu, self.delta_mu);
+        }
+        if !positive(self.normal_force_n) {
+            return bad(MaterialParam::NormalForce, self.normal_force_n);
+        }
+        if !positive(self.mass_kg) {
+            return bad(MaterialParam::Mass, self.mass_kg);
+        }
+        if !positive(self.stiffness_n_per_m) {
+            return bad(MaterialParam::Stiffness, self.stiffness_n_per_m);
         }
         if self.min_speed_um_s > 1_000_000 {
-            return Err(TextureError::BadSpeedThreshold);
+            return Err(TextureError::BadSpeedThreshold {
+                min_speed_um_s: self.min_speed_um_s,
+            });
         }
         Ok(())
     }
@@ -167,11 +179,16 @@ mod tests {
     #[test]
     fn each_parameter_checked_alone() {
         let m = Material::fig5(0.5);
-        let bad = Err(TextureError::BadMaterial);
+        let bad = |param, x| {
+            Err(TextureError::BadMaterial {
+                param,
+                value: ParamValue(x),
+            })
+        };
         for d in [-0.01, f32::INFINITY, f32::NAN] {
             assert_eq!(
                 Material { delta_mu: d, ..m }.validate(),
-                bad,
+                bad(MaterialParam::DeltaMu, d),
                 "delta_mu {d}"
             );
         }
@@ -182,17 +199,21 @@ mod tests {
                     ..m
                 }
                 .validate(),
-                bad,
+                bad(MaterialParam::NormalForce, x),
                 "P {x}"
             );
-            assert_eq!(Material { mass_kg: x, ..m }.validate(), bad, "m {x}");
+            assert_eq!(
+                Material { mass_kg: x, ..m }.validate(),
+                bad(MaterialParam::Mass, x),
+                "m {x}"
+            );
             assert_eq!(
                 Material {
                     stiffness_n_per_m: x,
                     ..m
                 }
                 .validate(),
-                bad,
+                bad(MaterialParam::Stiffness, x),
                 "k {x}"
             );
         }
@@ -221,7 +242,9 @@ mod tests {
                 ..m
             }
             .validate(),
-            Err(TextureError::BadSpeedThreshold)
+            Err(TextureError::BadSpeedThreshold {
+                min_speed_um_s: 1_000_001
+            })
         );
     }
 }

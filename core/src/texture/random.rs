@@ -5,7 +5,7 @@
 use rand_core::{Rng, SeedableRng};
 use rand_pcg::Pcg32;
 
-use super::TextureError;
+use super::{SpreadParam, TextureError};
 
 /// A random region's parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -28,12 +28,15 @@ pub struct RandomBurst {
 impl RandomBurst {
     /// Checks the spreads; the f_b extremes are checked against the board when the scene loads.
     pub fn validate(&self) -> Result<(), TextureError> {
-        if self.spread_permille >= 1000
-            || self.amplitude_spread_permille > 1000
-            || self.amplitude_permille == 0
-            || self.amplitude_permille > 1000
-        {
-            return Err(TextureError::BadSpread);
+        let bad = |param, permille| Err(TextureError::BadSpread { param, permille });
+        if self.spread_permille >= 1000 {
+            return bad(SpreadParam::Spread, self.spread_permille);
+        }
+        if self.amplitude_spread_permille > 1000 {
+            return bad(SpreadParam::AmplitudeSpread, self.amplitude_spread_permille);
+        }
+        if self.amplitude_permille == 0 || self.amplitude_permille > 1000 {
+            return bad(SpreadParam::Amplitude, self.amplitude_permille);
         }
         Ok(())
     }
@@ -144,7 +147,7 @@ mod tests {
     #[test]
     fn validation_limits() {
         let v = |r: RandomBurst| r.validate();
-        let bad = Err(TextureError::BadSpread);
+        let bad = |param, permille| Err(TextureError::BadSpread { param, permille });
         assert_eq!(
             v(RandomBurst {
                 spread_permille: 999,
@@ -157,7 +160,7 @@ mod tests {
                 spread_permille: 1000,
                 ..p()
             }),
-            bad
+            bad(SpreadParam::Spread, 1000)
         );
         assert_eq!(
             v(RandomBurst {
@@ -171,7 +174,7 @@ mod tests {
                 amplitude_spread_permille: 1001,
                 ..p()
             }),
-            bad
+            bad(SpreadParam::AmplitudeSpread, 1001)
         );
         assert_eq!(
             v(RandomBurst {
@@ -192,7 +195,7 @@ mod tests {
                 amplitude_permille: 1001,
                 ..p()
             }),
-            bad
+            bad(SpreadParam::Amplitude, 1001)
         );
     }
 

@@ -27,6 +27,20 @@ pub enum TuningError {
     BadGain,
 }
 
+impl core::fmt::Display for TuningError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            TuningError::Estimator(e) => e.fmt(f),
+            // Set in code by the bench, never from a scene file: the caller holds the value.
+            TuningError::BadGain => write!(
+                f,
+                "a gain, pole or threshold is outside its stable range (pole in 0 to 1, α-β \
+                 inside 0 < α < 2, 0 < β < 4 − 2α, thresholds finite and at least 0)"
+            ),
+        }
+    }
+}
+
 impl From<EstimatorError> for TuningError {
     fn from(e: EstimatorError) -> Self {
         TuningError::Estimator(e)
@@ -38,7 +52,7 @@ pub(crate) fn check_period(sample_period_us: u32) -> Result<(), EstimatorError> 
     if (10..=100_000).contains(&sample_period_us) {
         Ok(())
     } else {
-        Err(EstimatorError::BadSamplePeriod)
+        Err(EstimatorError::BadSamplePeriod { sample_period_us })
     }
 }
 
@@ -384,5 +398,19 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A tuning refusal reads as one sentence; a window or period one reads as the estimator's.
+    #[test]
+    fn tuning_errors_read_as_sentences() {
+        assert_eq!(
+            std::format!("{}", TuningError::BadGain),
+            "a gain, pole or threshold is outside its stable range (pole in 0 to 1, α-β inside \
+             0 < α < 2, 0 < β < 4 − 2α, thresholds finite and at least 0)"
+        );
+        assert_eq!(
+            std::format!("{}", TuningError::from(check_period(5).unwrap_err())),
+            "sample period 5 µs is outside the estimators' 10 µs to 100000 µs"
+        );
     }
 }

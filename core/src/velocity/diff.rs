@@ -28,7 +28,7 @@ impl<const K: usize> BackwardDifference<K> {
     /// An estimator for samples every `sample_period_us`.
     pub fn new(sample_period_us: u32) -> Result<Self, EstimatorError> {
         if K < 1 {
-            return Err(EstimatorError::WindowTooShort);
+            return Err(EstimatorError::WindowTooShort { window: K, min: 1 });
         }
         check_period(sample_period_us)?;
         Ok(Self {
@@ -138,11 +138,13 @@ mod tests {
     fn rejects_bad_config() {
         assert_eq!(
             BackwardDifference::<0>::new(100).err(),
-            Some(EstimatorError::WindowTooShort)
+            Some(EstimatorError::WindowTooShort { window: 0, min: 1 })
         );
         assert_eq!(
             OneSampleDifference::new(5).err(),
-            Some(EstimatorError::BadSamplePeriod)
+            Some(EstimatorError::BadSamplePeriod {
+                sample_period_us: 5
+            })
         );
     }
 }

@@ -55,7 +55,7 @@ impl<const N: usize> Foaw<N> {
     /// FOAW with band `band_um` for samples every `sample_period_us`.
     pub fn new(fit: FoawFit, band_um: f32, sample_period_us: u32) -> Result<Self, TuningError> {
         if N < 2 {
-            return Err(super::EstimatorError::WindowTooShort.into());
+            return Err(super::EstimatorError::WindowTooShort { window: N, min: 2 }.into());
         }
         check_period(sample_period_us)?;
         if !(band_um.is_finite() && band_um >= 0.0) {

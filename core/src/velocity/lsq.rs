@@ -30,7 +30,7 @@ impl<const N: usize> LsqSlope<N> {
     /// An estimator for samples every `sample_period_us`.
     pub fn new(sample_period_us: u32) -> Result<Self, EstimatorError> {
         if N < 2 {
-            return Err(EstimatorError::WindowTooShort);
+            return Err(EstimatorError::WindowTooShort { window: N, min: 2 });
         }
         check_period(sample_period_us)?;
         let n = N as i64;
@@ -193,11 +193,28 @@ mod tests {
     fn rejects_bad_config() {
         assert_eq!(
             LsqSlope::<1>::new(100).err(),
-            Some(EstimatorError::WindowTooShort)
+            Some(EstimatorError::WindowTooShort { window: 1, min: 2 })
         );
         assert_eq!(
             LsqSlope::<4>::new(0).err(),
-            Some(EstimatorError::BadSamplePeriod)
+            Some(EstimatorError::BadSamplePeriod {
+                sample_period_us: 0
+            })
+        );
+    }
+
+    /// Both refusals read as sentences naming the value and the limit.
+    #[test]
+    fn errors_read_as_sentences() {
+        let e = LsqSlope::<1>::new(100).unwrap_err();
+        assert_eq!(
+            std::format!("{e}"),
+            "a velocity window of 1 samples is shorter than the 2 the estimator needs"
+        );
+        let e = LsqSlope::<4>::new(100_001).unwrap_err();
+        assert_eq!(
+            std::format!("{e}"),
+            "sample period 100001 µs is outside the estimators' 10 µs to 100000 µs"
         );
     }
 }

@@ -43,13 +43,38 @@ pub trait VelocityEstimator {
     fn group_delay_us(&self) -> u32;
 }
 
-/// Why an estimator could not be configured.
+/// Why an estimator could not be configured (the values its sentence, `Display`, names).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum EstimatorError {
-    /// Window shorter than 2 samples.
-    WindowTooShort,
+    /// Window shorter than the estimator needs (2 samples for a slope, 1 for a difference).
+    WindowTooShort {
+        /// The window asked for, samples.
+        window: usize,
+        /// The shortest this estimator takes, samples.
+        min: usize,
+    },
     /// Sample period outside 10 µs ..= 100 ms.
-    BadSamplePeriod,
+    BadSamplePeriod {
+        /// The period asked for, µs.
+        sample_period_us: u32,
+    },
+}
+
+impl core::fmt::Display for EstimatorError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            EstimatorError::WindowTooShort { window, min } => write!(
+                f,
+                "a velocity window of {window} samples is shorter than the {min} the estimator \
+                 needs"
+            ),
+            EstimatorError::BadSamplePeriod { sample_period_us } => write!(
+                f,
+                "sample period {sample_period_us} µs is outside the estimators' 10 µs to \
+                 100000 µs"
+            ),
+        }
+    }
 }
