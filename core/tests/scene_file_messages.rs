@@ -1,0 +1,126 @@
+//! What a user reads when a scene file is refused: one line, `file:line:column: `field`: ` and
+//! then a sentence naming the value and the rule in the file's units (mm, Hz, %, ms). One or
+//! more whole-message checks per section of the file (substrate, limits, regions and their
+//! textures, lines), each run through the same path host-sim takes (`load_for_board`).
+//! Expected messages are written out by hand.
+
+use saw_core::burst::BurstTimer;
+use saw_core::scene_file::load_for_board;
+
+/// A 90 MHz 32-bit burst timer with a 5 kHz top f_b (the G474's).
+const TIMER: BurstTimer = BurstTimer {
+    clock_hz: 90_000_000,
+    counter_bits: 32,
+    max_burst_hz: 5_000,
+};
+
+/// A 180 MHz 16-bit burst timer (the F446's): its lowest f_b is 42 mHz.
+const T16: BurstTimer = BurstTimer {
+    clock_hz: 180_000_000,
+    counter_bits: 16,
+    max_burst_hz: 5_000,
+};
+
+/// The refusal of `text` (named `file`) on [`TIMER`] sampled every `period_us`, as displayed.
+fn refusal(file: &str, text: &str, period_us: u32) -> String {
+    refusal_on(TIMER, file, text, period_us)
+}
+
+fn refusal_on(timer: BurstTimer, file: &str, text: &str, period_us: u32) -> String {
+    let e = load_for_board(file, text, timer, period_us).expect_err("the file must be refused");
+    let shown = e.to_string();
+    assert!(!shown.contains('\n'), "{shown}");
+    shown
+}
+
+#[test]
+fn substrate_calibration_refusal_reads_as_a_sentence() {
+    let text = "[substrate]\nlength_mm = 63\ncode_at_start = 3000\ncode_at_end = 100\n\n\
+                [[region]]\nkind = \"off\"\n";
+    assert_eq!(
+        refusal("cal.toml", text, 100),
+        "cal.toml:1:1: `substrate`: code_at_end 100 must be above code_at_start 3000"
+    );
+}
+
+/// The stale limit is checked against the board's sample period: 1 ms is under two periods of
+/// a 1 kHz board.
+#[test]
+fn limits_refusal_reads_as_a_sentence() {
+    let text = "[limits]\nstale_after_ms = 1\n\n[[region]]\nkind = \"off\"\n";
+    assert_eq!(
+        refusal("limits.toml", text, 1_000),
+        "limits.toml:1:1: `limits`: stale limit 1 ms must be at least two sample periods (2 ms) \
+         and at most 1000 ms"
+    );
+}
+
+#[test]
+fn region_layout_refusals_read_as_sentences() {
+    let unsorted = "[[region]]\nkind = \"off\"\nuntil_mm = 30\n\n\
+                    [[region]]\nkind = \"off\"\nuntil_mm = 20\n\n\
+                    [[region]]\nkind = \"off\"\n";
+    assert_eq!(
+        refusal("regions.toml", unsorted, 100),
+        "regions.toml:5:1: `region[1].until_mm`: region 1 ends at 20 mm, not after region 0 \
+         (30 mm)"
+    );
+    let at_end = "[[region]]\nkind = \"off\"\nuntil_mm = 63\n\n[[region]]\nkind = \"off\"\n";
+    assert_eq!(
+        refusal("end.toml", at_end, 100),
+        "end.toml:1:1: `region[0].until_mm`: region 0 ends at 63 mm, not strictly between 0 mm \
+         and the substrate's end at 63 mm"
+    );
+    let narrow = "hysteresis_mm = 0.5\n\n\
+                  [[region]]\nkind = \"off\"\nuntil_mm = 20\n\n\
+                  [[region]]\nkind = \"off\"\nuntil_mm = 20.6\n\n\
+                  [[region]]\nkind = \"off\"\n";
+    assert_eq!(
+        refusal("narrow.toml", narrow, 100),
+        "narrow.toml:7:1: `region[1]`: region 1 is 0.6 mm wide, narrower than twice the \
+         hysteresis (1 mm)"
+    );
+}
+
+#[test]
+fn texture_refusals_read_as_sentences() {
+    let above = "[[region]]\nkind = \"constant\"\nuntil_mm = 20\nf_b_hz = 80\n\n\
+                 [[region]]\nkind = \"constant\"\nf_b_hz = 9000\n";
+    assert_eq!(
+        refusal("f_b.toml", above, 100),
+        "f_b.toml:6:1: `region[1]`: f_b 9000 Hz is above this board's limit of 5000 Hz"
+    );
+    let below = "[[region]]\nkind = \"constant\"\nf_b_hz = 0.041\n";
+    assert_eq!(
+        refusal_on(T16, "low.toml", below, 100),
+        "low.toml:1:1: `region[0]`: f_b 0.041 Hz is below the lowest the burst timer reaches, \
+         0.042 Hz"
+    );
+    let wide = "[[region]]\nkind = \"grating\"\nridge_mm = 40\ngroove_mm = 40\n";
+    assert_eq!(
+        refusal("grating.toml", wide, 100),
+        "grating.toml:1:1: `region[0]`: wavelength 80 mm must be above 0 mm and at most the \
+         substrate's length, 63 mm"
+    );
+}
+
+#[test]
+fn lines_refusals_read_as_sentences() {
+    let unsorted = "[[region]]\nkind = \"off\"\n\n[lines]\npositions_mm = [30, 20]\n";
+    assert_eq!(
+        refusal("lines.toml", unsorted, 100),
+        "lines.toml:4:1: `lines`: line 1 at 20 mm must be after line 0 (30 mm)"
+    );
+    let outside = "[[region]]\nkind = \"off\"\n\n[lines]\npositions_mm = [30, 70]\n";
+    assert_eq!(
+        refusal("lines.toml", outside, 100),
+        "lines.toml:4:1: `lines`: line 1 at 70 mm must be strictly between 0 mm and the \
+         substrate's end at 63 mm"
+    );
+    let long = "[[region]]\nkind = \"off\"\n\n[lines]\npositions_mm = [30]\npulse_ms = 60\n";
+    assert_eq!(
+        refusal("pulse.toml", long, 100),
+        "pulse.toml:4:1: `lines`: line pulse 60 ms must be above 0 ms and at most the on-time cap \
+         of 50 ms"
+    );
+}
