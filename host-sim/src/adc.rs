@@ -86,19 +86,42 @@ pub enum AdcError {
     /// The calibration is invalid.
     Calibration(saw_core::position::CalibrationError),
     /// Negative or non-finite noise.
-    BadNoise,
+    BadNoise {
+        /// The noise asked for, LSB RMS.
+        noise_lsb_rms: f64,
+    },
 }
+
+impl std::fmt::Display for AdcError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            AdcError::Calibration(e) => e.fmt(f),
+            AdcError::BadNoise { noise_lsb_rms } => write!(
+                f,
+                "ADC noise {noise_lsb_rms} LSB RMS must be finite and at least 0 LSB"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for AdcError {}
 
 impl AdcModel {
     /// A model of the rheostat calibrated as `cal`.
     pub fn new(cal: Calibration, params: AdcParams) -> Result<Self, AdcError> {
         let mapper = PositionMapper::new(cal).map_err(AdcError::Calibration)?;
         let noise = if params.noise_lsb_rms > 0.0 {
-            Some(Normal::new(0.0, params.noise_lsb_rms).map_err(|_| AdcError::BadNoise)?)
+            Some(
+                Normal::new(0.0, params.noise_lsb_rms).map_err(|_| AdcError::BadNoise {
+                    noise_lsb_rms: params.noise_lsb_rms,
+                })?,
+            )
         } else if params.noise_lsb_rms == 0.0 {
             None
         } else {
-            return Err(AdcError::BadNoise);
+            return Err(AdcError::BadNoise {
+                noise_lsb_rms: params.noise_lsb_rms,
+            });
         };
         let rng = ChaCha8Rng::seed_from_u64(params.seed);
         Ok(Self {
@@ -229,5 +252,32 @@ mod tests {
         let sd = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / xs.len() as f64).sqrt();
         // 16 conversions of σ = 3 LSB summed: σ = 3 × √16 = 12 codes.
         assert!((sd - 12.0).abs() < 1.0, "{sd}");
+    }
+
+    /// The ADC model's refusals read as sentences (the calibration's is the core's own).
+    #[test]
+    fn errors_read_as_sentences() {
+        let e = AdcModel::new(
+            Calibration::default(),
+            AdcParams {
+                noise_lsb_rms: -1.0,
+                ..AdcParams::default()
+            },
+        )
+        .err()
+        .unwrap();
+        assert_eq!(
+            e.to_string(),
+            "ADC noise -1 LSB RMS must be finite and at least 0 LSB"
+        );
+        let cal = Calibration {
+            length_um: 0,
+            ..Calibration::default()
+        };
+        let e = AdcModel::new(cal, AdcParams::default()).err().unwrap();
+        assert_eq!(
+            e.to_string(),
+            "length 0 mm must be above 0 mm and at most 1000 mm"
+        );
     }
 }

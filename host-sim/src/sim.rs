@@ -140,7 +140,12 @@ pub enum SimError {
 
 impl std::fmt::Display for SimError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{self:?}")
+        // The inner errors read as sentences; which stage refused them goes first.
+        match self {
+            SimError::Controller(e) => write!(f, "the controller refused the board: {e}"),
+            SimError::Config(e) => write!(f, "the scene was refused: {e}"),
+            SimError::Adc(e) => write!(f, "the ADC model was refused: {e}"),
+        }
     }
 }
 
@@ -252,4 +257,26 @@ fn run_controller<E: VelocityEstimator>(
         region_settings,
         timer_protocol_errors,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A refused scene reads as the stage that refused it and the core's sentence, one line.
+    #[test]
+    fn refused_scene_reads_as_a_sentence() {
+        let mut params = SimParams::new(
+            &saw_boards::ALL[0],
+            Trajectory::Rest { at_um: 30_000.0 },
+            0.01,
+        );
+        params.config.stale_after_us = 100;
+        let e = run(&params).err().unwrap();
+        assert_eq!(
+            e.to_string(),
+            "the scene was refused: stale limit 0.1 ms must be at least two sample periods \
+             (0.2 ms) and at most 1000 ms"
+        );
+    }
 }
