@@ -151,7 +151,9 @@ impl RidgeTracker {
                     self.disarmed = Some(near);
                 }
             }
-            Some(prev) if prev != cell => {
+            // Same cell: no ridge passed.
+            Some(prev) if prev == cell => {}
+            Some(prev) => {
                 // Moving up the last ridge passed is `cell`'s lower edge; moving down, `prev`'s:
                 // the higher cell's either way.
                 let (ridge, passed) = (cell.max(prev), cell.abs_diff(prev));
@@ -159,12 +161,12 @@ impl RidgeTracker {
                     crossing = Some(Crossing {
                         ridge,
                         skipped: passed - 1,
-                        up: cell > prev,
+                        // The cells differ here, so the higher one being `cell` means up.
+                        up: ridge == cell,
                     });
                     self.disarmed = Some(ridge);
                 }
             }
-            Some(_) => {}
         }
         self.cell = Some(cell);
         if let Some(r) = self.disarmed {
