@@ -7,9 +7,9 @@
 #   scripts/mutants-ci.sh              # what CI runs (scripts/test.sh calls it)
 #   MUTANTS_MAX=400 scripts/mutants-ci.sh
 #
-# MUTANTS_MAX (default 24: about 3 min on 2 cores after a 2–3 min baseline build) bounds the mutants tested, to keep CI
-# under its budget: a larger change is tested on an evenly spread sample of that size, and the
-# script says so (the full run, scripts/mutants.sh, covers the rest).
+# MUTANTS_MAX (default 24: about 3 min on 2 cores after a 2–3 min baseline build) bounds the
+# mutants tested, to keep CI under its budget: a larger change is tested on an evenly spread
+# sample of that size, and the script says so (the full run, scripts/mutants.sh, covers the rest).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 max=${MUTANTS_MAX:-24}
