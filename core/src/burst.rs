@@ -551,6 +551,19 @@ mod tests {
             T16.one_pulse(u64::MAX >> 8),
             Err(BurstError::PulseTooLong { .. })
         ));
+        // The refusal names the pulse and the longest count, 2^32 − 1 clocks: on a 1 MHz
+        // timer, µs for clock.
+        let slow = BurstTimer {
+            clock_hz: 1_000_000,
+            ..T16
+        };
+        assert_eq!(
+            slow.one_pulse(5_000_000_000),
+            Err(BurstError::PulseTooLong {
+                pulse_us: 5_000_000_000,
+                max_us: 4_294_967_295
+            })
+        );
         // The smallest pulse is one tick.
         let one = T16.one_pulse(0).unwrap();
         assert_eq!((one.psc, one.arr, one.ccr), (0, 1, 1));
