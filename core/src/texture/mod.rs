@@ -312,6 +312,15 @@ impl core::fmt::Display for TextureError {
 mod tests {
     use super::*;
 
+    /// Errors compare their float values bit for bit: a NaN equals itself (so an error holding
+    /// one equals itself), different values differ, and so do 0 and −0.
+    #[test]
+    fn param_values_compare_bit_for_bit() {
+        assert_eq!(ParamValue(f32::NAN), ParamValue(f32::NAN));
+        assert_ne!(ParamValue(1.0), ParamValue(2.0));
+        assert_ne!(ParamValue(0.0), ParamValue(-0.0));
+    }
+
     /// Each refusal reads as one sentence in the scene file's units.
     #[test]
     fn errors_read_as_sentences() {
