@@ -7,14 +7,15 @@
 use saw_core::burst::BurstTimer;
 use saw_core::scene_file::load_for_board;
 
-/// A 90 MHz 32-bit burst timer with a 5 kHz top f_b (the G474's).
+/// A 90 MHz 32-bit burst timer with a 5 kHz top f_b (the F446's TIM2).
 const TIMER: BurstTimer = BurstTimer {
     clock_hz: 90_000_000,
     counter_bits: 32,
     max_burst_hz: 5_000,
 };
 
-/// A 180 MHz 16-bit burst timer (the F446's): its lowest f_b is 42 mHz.
+/// A 180 MHz 16-bit burst timer (no board's: a 16-bit counter on a 180 MHz bus): its lowest f_b
+/// is 42 mHz.
 const T16: BurstTimer = BurstTimer {
     clock_hz: 180_000_000,
     counter_bits: 16,
