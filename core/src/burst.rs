@@ -48,11 +48,15 @@ impl BurstTimer {
         }
     }
 
-    /// Lowest f_b the timer reaches, mHz, rounded up: its longest period is a full counter at
-    /// the last prescaler value, 2^bits · 65 536 clocks.
+    /// The longest period the timer counts, clocks: a full counter at the last value of the
+    /// 16-bit prescaler, 2^bits · 65 536.
+    fn longest_period_clocks(&self) -> u64 {
+        (1u64 << self.counter_bits.min(32)) * 65_536
+    }
+
+    /// Lowest f_b the timer reaches, mHz, rounded up.
     fn min_millihz(&self) -> u32 {
-        let longest = (1u64 << self.counter_bits.min(32)) * 65_536;
-        (self.clock_hz as u64 * 1000).div_ceil(longest) as u32
+        (self.clock_hz as u64 * 1000).div_ceil(self.longest_period_clocks()) as u32
     }
 
     /// One-pulse settings with the line high for `on_clocks` kernel clocks (rounded down to a
@@ -65,7 +69,7 @@ impl BurstTimer {
                 |clocks: u64| clocks.saturating_mul(1_000_000) / self.clock_hz.max(1) as u64;
             return Err(BurstError::PulseTooLong {
                 pulse_us: to_us(on_clocks),
-                max_us: to_us(span * 65_536 - 1),
+                max_us: to_us(self.longest_period_clocks() - 1),
             });
         }
         // psc + 1 > on_clocks / span, so ticks < span: it fits the counter.
@@ -373,7 +377,7 @@ impl FastPlanner {
             clock_hz: timer.clock_hz as f32,
             counter_bits: timer.counter_bits,
             min_period_clocks: min_period.min(u32::MAX as u64) as u32,
-            max_period_clocks: (1u64 << timer.counter_bits) * 65_536,
+            max_period_clocks: timer.longest_period_clocks(),
             duty_q16: (duty_permille as u64 * 65_536) / 1000,
             cap_duty_q16: (limits.max_duty_permille as u64 * 65_536) / 1000,
             max_on_clocks: limits.max_on_time_clocks(timer),

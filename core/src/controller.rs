@@ -744,11 +744,11 @@ impl<E: VelocityEstimator> Controller<E> {
         )
         .map_err(ConfigError::Region)?;
         config.limits.validate().map_err(ConfigError::Limits)?;
-        if config.stale_after_us < 2 * self.sample_period_us || config.stale_after_us > MAX_STALE_US
-        {
+        let min_stale_us = 2 * self.sample_period_us;
+        if config.stale_after_us < min_stale_us || config.stale_after_us > MAX_STALE_US {
             return Err(ConfigError::StaleLimit {
                 stale_after_us: config.stale_after_us,
-                min_us: 2 * self.sample_period_us,
+                min_us: min_stale_us,
             });
         }
         let mut compiled = Vec::new();
