@@ -1,4 +1,5 @@
-//! Logging shim: the core logs through defmt on target, through `log` on the host, or not at all.
+//! Logging shim: the core logs through defmt on target, through `log` on the host, or not at all;
+//! and the rate limit of its repeated lines.
 //!
 //! Same idea as embassy's `fmt.rs`: callers write `info!("…", x)` with `{}` for integers and
 //! `{:?}` for enums, which defmt, `log` and `core::format_args!` all accept, so every log line
@@ -76,4 +77,34 @@ fn frac(f: &mut core::fmt::Formatter<'_>, x: u64, scale: u64) -> core::fmt::Resu
         }
     }
     Ok(())
+}
+
+/// Region changes and clamps are logged at most this often; the rest are counted.
+pub const LOG_INTERVAL_US: u32 = 100_000;
+
+/// A rate limit for log lines, on the sample clock (the core reads no clock of its own).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct LogLimit {
+    last_us: Option<u32>,
+    suppressed: u32,
+}
+
+impl LogLimit {
+    /// True when a line may be logged now; otherwise counts it as suppressed.
+    pub(crate) fn due(&mut self, t_us: u32) -> bool {
+        let due = self
+            .last_us
+            .is_none_or(|last| t_us.wrapping_sub(last) >= LOG_INTERVAL_US);
+        if due {
+            self.last_us = Some(t_us);
+        } else {
+            self.suppressed += 1;
+        }
+        due
+    }
+
+    /// Lines suppressed since the last logged one; resets the count.
+    pub(crate) fn take_suppressed(&mut self) -> u32 {
+        core::mem::take(&mut self.suppressed)
+    }
 }

@@ -13,6 +13,10 @@
 //!   v × 3.3 ms behind the ridges. Below `min_speed_um_s` no bursts are made (at rest the
 //!   velocity estimate is noise); the threshold has hysteresis (off below half of it).
 
+use crate::burst::{BurstError, BurstTimer, FastPlanner, SafetyLimits, TimerSettings};
+
+use super::compiled::{Moment, Render, Request, Want};
+use super::motion::MotionGate;
 use super::{SpreadParam, TextureError};
 
 /// How a grating turns motion into bursts.
@@ -175,6 +179,229 @@ impl RidgeTracker {
             }
         }
         crossing
+    }
+}
+
+/// A position-phase grating, compiled: one pulse per ridge crossing (texture::grating).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Ridges {
+    wavelength_um: i32,
+    rearm_um: i32,
+    /// The ridge's share of the period, duty · λ, µm.
+    ridge_um: i32,
+    /// duty · λ · timer clock: the pulse's on-time in clocks is this over |V| in µm/s.
+    on_clock_um_s: u64,
+    /// Shortest pulse: the on-time of a burst at the board's top f_b.
+    min_on_clocks: u64,
+    /// Longest pulse: the on-time cap.
+    max_on_clocks: u64,
+    /// Pulses start at least this far apart, µs (the board's top f_b).
+    min_spacing_us: u32,
+    /// A pulse is not cut before it has been on this long, µs (the shortest pulse).
+    min_on_us: u32,
+    amplitude: u16,
+    tracker: RidgeTracker,
+    last_pulse_us: Option<u32>,
+    /// While a pulse may be on: the span of positions it stays on over, µm (lo ..hi).
+    on_span_um: Option<(i32, i32)>,
+    /// Largest step between two samples the slider can make, µm; a larger one is a glitch
+    /// until the next sample confirms it.
+    max_step_um: i32,
+    /// The last position accepted, and a jump waiting for confirmation.
+    last_um: Option<i32>,
+    jump_um: Option<i32>,
+}
+
+/// The fastest the slider is taken to move, µm/s: a step between two samples that would need
+/// more (over up to four sample periods, to bridge dropped samples) is a sensor glitch.
+pub const MAX_SLIDER_SPEED_UM_S: u32 = 2_000_000;
+
+impl Ridges {
+    pub(crate) fn new(
+        g: &Grating,
+        timer: &BurstTimer,
+        limits: &SafetyLimits,
+        sample_period_us: u32,
+    ) -> Result<Self, BurstError> {
+        if timer.max_burst_hz == 0 {
+            return Err(timer.bad());
+        }
+        limits.check_duty(g.duty_permille)?;
+        let duty = g.duty_permille as u64;
+        let clock = timer.clock_hz as u64;
+        let max_on_clocks = limits.max_on_time_clocks(timer);
+        let min_on_clocks =
+            (clock * duty / (1000 * timer.max_burst_hz as u64)).clamp(1, max_on_clocks.max(1));
+        // Both extremes must be renderable, so no crossing is ever refused by the timer.
+        timer.one_pulse(max_on_clocks)?;
+        timer.one_pulse(min_on_clocks)?;
+        Ok(Self {
+            wavelength_um: g.wavelength_um as i32,
+            rearm_um: g.rearm_um as i32,
+            ridge_um: (g.wavelength_um as u64 * duty / 1000) as i32,
+            on_clock_um_s: duty * g.wavelength_um as u64 * clock / 1000,
+            min_on_clocks,
+            max_on_clocks,
+            min_spacing_us: 1_000_000u32.div_ceil(timer.max_burst_hz),
+            min_on_us: timer.clocks_to_us_ceil(min_on_clocks) as u32,
+            amplitude: g.amplitude_permille,
+            tracker: RidgeTracker::default(),
+            last_pulse_us: None,
+            on_span_um: None,
+            max_step_um: (4 * MAX_SLIDER_SPEED_UM_S as u64 * sample_period_us as u64 / 1_000_000)
+                .min(i32::MAX as u64) as i32,
+            last_um: None,
+            jump_um: None,
+        })
+    }
+
+    pub(crate) fn reset(&mut self) {
+        self.tracker.reset();
+        self.on_span_um = None;
+        self.last_um = None;
+        self.jump_um = None;
+    }
+
+    /// False for a single-sample glitch: a step the slider cannot make, not (yet) confirmed by
+    /// a second sample near it. A real jump (after a gap) costs one sample.
+    fn plausible(&mut self, position_um: i32) -> bool {
+        let near = |a: i32, b: i32| a.abs_diff(b) <= self.max_step_um as u32;
+        let ok = self.last_um.is_none_or(|last| near(last, position_um))
+            || self.jump_um.is_some_and(|j| near(j, position_um));
+        if ok {
+            self.last_um = Some(position_um);
+            self.jump_um = None;
+        } else {
+            self.jump_um = Some(position_um);
+        }
+        ok
+    }
+
+    /// What to do on this sample, the pulse's settings, and the ridges passed without a pulse.
+    ///
+    /// A pulse's length is set from the speed, duty·λ/|V|, so at a steady speed the timer ends
+    /// it on time to the clock. It is also ended by position: once the finger leaves the
+    /// ridge's share of the period (forward past it, or back beyond the re-arm distance) the
+    /// pulse is cut, so an estimate that lags an acceleration or a reversal cannot stretch it
+    /// (and its duty rest) over the next ridge. With the speed unknown (the estimator's first
+    /// window after a start or a fault) the timer is set to the on-time cap and position alone
+    /// ends the pulse.
+    pub(crate) fn step(
+        &mut self,
+        position_um: i32,
+        velocity_um_s: Option<i32>,
+        t_us: u32,
+        timer: &BurstTimer,
+    ) -> (Want, Option<TimerSettings>, u32) {
+        let mut want = Want::Periodic;
+        if !self.plausible(position_um) {
+            return (want, None, 0);
+        }
+        if let Some((lo, hi)) = self.on_span_um {
+            let long_enough = self
+                .last_pulse_us
+                .is_some_and(|t0| t_us.wrapping_sub(t0) >= self.min_on_us);
+            if (position_um < lo || position_um > hi) && long_enough {
+                self.on_span_um = None;
+                want = Want::EndPulse;
+            }
+        }
+        let Some(c) = self
+            .tracker
+            .update(position_um, self.wavelength_um, self.rearm_um)
+        else {
+            return (want, None, 0);
+        };
+        let too_soon = self
+            .last_pulse_us
+            .is_some_and(|last| t_us.wrapping_sub(last) < self.min_spacing_us);
+        let on = match velocity_um_s {
+            Some(v) => self
+                .on_clock_um_s
+                .checked_div(v.unsigned_abs() as u64)
+                .unwrap_or(u64::MAX),
+            None => u64::MAX,
+        }
+        .clamp(self.min_on_clocks, self.max_on_clocks);
+        // `new` checked that both ends of the clamp render, so one_pulse cannot fail here; if it
+        // did, the ridge would be skipped like one that comes too soon.
+        let settings = if too_soon {
+            None
+        } else {
+            timer.one_pulse(on).ok()
+        };
+        let Some(settings) = settings else {
+            return (want, None, c.skipped + 1);
+        };
+        let ridge = c.ridge * self.wavelength_um;
+        self.on_span_um = Some(if c.up {
+            (ridge - self.rearm_um, ridge + self.ridge_um)
+        } else {
+            (ridge - self.ridge_um, ridge + self.rearm_um)
+        });
+        self.last_pulse_us = Some(t_us);
+        (Want::Pulse, Some(settings), c.skipped)
+    }
+}
+
+impl Render for Ridges {
+    fn reset(&mut self) {
+        Ridges::reset(self);
+    }
+
+    #[inline]
+    fn request(&mut self, now: &Moment<'_>) -> Request {
+        let (want, settings, skipped) =
+            self.step(now.position_um, now.velocity_um_s, now.t_us, now.timer);
+        Request {
+            settings,
+            skipped,
+            amplitude: self.amplitude,
+            want,
+            clamped: false,
+        }
+    }
+}
+
+/// A velocity-synthesis grating, compiled: periodic bursts at f = |V|/λ above the speed
+/// threshold.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Synthesis {
+    inv_wavelength_per_um: f32,
+    motion: MotionGate,
+    planner: FastPlanner,
+    amplitude: u16,
+}
+
+impl Synthesis {
+    pub(crate) fn new(
+        g: &Grating,
+        timer: &BurstTimer,
+        limits: &SafetyLimits,
+    ) -> Result<Self, BurstError> {
+        Ok(Self {
+            inv_wavelength_per_um: 1.0 / g.wavelength_um as f32,
+            motion: MotionGate::new(g.min_speed_um_s),
+            planner: FastPlanner::new(timer, limits, g.duty_permille)?,
+            amplitude: g.amplitude_permille,
+        })
+    }
+}
+
+impl Render for Synthesis {
+    fn reset(&mut self) {
+        self.motion.reset();
+    }
+
+    #[inline]
+    fn request(&mut self, now: &Moment<'_>) -> Request {
+        match self.motion.speed(now.velocity_um_s) {
+            Some(speed) => Request::planned(
+                self.planner.plan_hz(speed * self.inv_wavelength_per_um),
+                self.amplitude,
+            ),
+            None => Request::OFF,
+        }
     }
 }
 
@@ -351,5 +578,91 @@ mod tests {
                 wavelength_um: 1_000
             })
         );
+    }
+
+    const TIMER: BurstTimer = BurstTimer {
+        clock_hz: 90_000_000,
+        counter_bits: 32,
+        max_burst_hz: 5_000,
+    };
+
+    /// The span a ridge pulse stays on over, to the µm: going up over the ridge at 6 mm it is
+    /// [6 mm − rearm, 6 mm + duty·λ]; the pulse is cut one µm outside either end, not on it.
+    #[test]
+    fn ridge_pulse_span_edges() {
+        let g = Grating::new(1_000);
+        let rearm = g.rearm_um as i32;
+        // (speed, approach: the last sample fires, a sample on the ridge, the span).
+        let up: (i32, &[i32], i32, (i32, i32)) = (
+            20_000,
+            &[5_500, 5_800, 6_000],
+            6_010,
+            (6_000 - rearm, 6_000 + 400),
+        );
+        // Going down over the same ridge the span is mirrored: [6 mm − duty·λ, 6 mm + rearm].
+        let down: (i32, &[i32], i32, (i32, i32)) = (
+            -20_000,
+            &[6_500, 6_200, 6_000, 5_999],
+            5_990,
+            (6_000 - 400, 6_000 + rearm),
+        );
+        for (v, approach, on_ridge, (lo, hi)) in [up, down] {
+            for (edge, outside) in [(lo, lo - 1), (hi, hi + 1)] {
+                let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
+                let mut t = 0;
+                let mut step = |r: &mut Ridges, um: i32| {
+                    t += 100;
+                    r.step(um, Some(v), t, &TIMER).0
+                };
+                let (&last, before) = approach.split_last().unwrap();
+                for &um in before {
+                    assert_eq!(step(&mut r, um), Want::Periodic, "{v} um/s at {um} um");
+                }
+                assert_eq!(step(&mut r, last), Want::Pulse, "{v} um/s at {last} um");
+                // Past the shortest pulse, still on the ridge.
+                for _ in 0..10 {
+                    assert_eq!(step(&mut r, on_ridge), Want::Periodic);
+                }
+                assert_eq!(step(&mut r, edge), Want::Periodic, "{v} um/s at {edge} um");
+                assert_eq!(
+                    step(&mut r, outside),
+                    Want::EndPulse,
+                    "{v} um/s at {outside} um"
+                );
+            }
+        }
+    }
+
+    /// Ridge pulses may start as close as the board's shortest burst period (200 µs at 5 kHz),
+    /// not closer: two ridges crossed 200 µs apart both fire; 150 µs apart, the second is
+    /// counted as skipped.
+    #[test]
+    fn ridge_pulses_as_close_as_the_board_allows() {
+        let g = Grating::new(1_000);
+        let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
+        let fired: std::vec::Vec<_> = [(100, 5_500), (200, 6_000), (300, 6_500), (400, 7_000)]
+            .into_iter()
+            .map(|(t, um)| {
+                let (want, _, skipped) = r.step(um, Some(5_000_000), t, &TIMER);
+                (want, skipped)
+            })
+            .collect();
+        assert_eq!(
+            fired,
+            [
+                (Want::Periodic, 0),
+                (Want::Pulse, 0),
+                // Past the ridge's 400 µm share: the first pulse is cut by position.
+                (Want::EndPulse, 0),
+                (Want::Pulse, 0)
+            ]
+        );
+        let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
+        r.step(5_500, Some(5_000_000), 100, &TIMER);
+        r.step(6_000, Some(5_000_000), 200, &TIMER);
+        r.step(6_600, Some(5_000_000), 275, &TIMER);
+        let (want, _, skipped) = r.step(7_000, Some(5_000_000), 350, &TIMER);
+        // The first pulse is cut here too (past its share, and on for its 80 µs minimum).
+        assert_eq!((want, skipped), (Want::EndPulse, 1));
     }
 }

@@ -7,6 +7,9 @@
 
 use heapless::Vec;
 
+use crate::burst::{BurstTimer, SafetyLimits, TimerSettings};
+
+use super::compiled::CompileError;
 use super::{LineFault, TextureError, MAX_LINE_REARM_UM};
 
 /// Most lines a scene may draw.
@@ -119,16 +122,114 @@ enum Side {
     Above,
 }
 
-/// Per-line arming state.
+/// A scene's lines, compiled: the pulse's one-pulse settings and the rest after it.
+#[derive(Clone, Debug)]
+pub(crate) struct LinePulses {
+    lines: Lines,
+    pulse: TimerSettings,
+    /// Pulse plus the rest after it, µs: the line owns the gate this long after it fires, so
+    /// pulse / (pulse + rest) keeps the duty cap.
+    window_us: u32,
+}
+
+impl LinePulses {
+    /// Validates `lines` on a substrate of `length_um` and prepares their pulse; None when the
+    /// scene draws no lines.
+    pub(crate) fn compile(
+        lines: &Lines,
+        timer: &BurstTimer,
+        limits: &SafetyLimits,
+        length_um: u32,
+    ) -> Result<Option<Self>, CompileError> {
+        lines.validate(length_um, limits.max_on_time_us)?;
+        if lines.positions_um.is_empty() {
+            return Ok(None);
+        }
+        // High for the whole count, one tick low at the end.
+        let clocks = lines.pulse_us as u64 * timer.clock_hz as u64 / 1_000_000;
+        let pulse = timer.one_pulse(clocks)?;
+        Ok(Some(Self {
+            lines: lines.clone(),
+            pulse,
+            window_us: lines.pulse_us + refractory_us(lines, limits),
+        }))
+    }
+}
+
+/// Rest after a line pulse so that pulse / (pulse + rest) ≤ the duty cap.
+fn refractory_us(lines: &Lines, limits: &SafetyLimits) -> u32 {
+    let cap = limits.max_duty_permille as u64;
+    (lines.pulse_us as u64 * (1000 - cap)).div_ceil(cap) as u32
+}
+
+/// What the lines do on one sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum LineStep {
+    /// No line pulse owns the gate: the region's texture does.
+    Free,
+    /// Inside a pulse or its rest: the line owns the gate and the amplitude. `skipped`: a line
+    /// was crossed now and gets no pulse, to keep the duty cap.
+    Window {
+        amplitude_permille: u16,
+        skipped: bool,
+    },
+    /// Line `line` was crossed: fire `pulse` at `amplitude_permille`, and call
+    /// [`LineTracker::started`] if the gate takes it.
+    Fire {
+        line: u8,
+        pulse: TimerSettings,
+        amplitude_permille: u16,
+    },
+}
+
+/// Per-line arming state, and the window of the running line pulse.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct LineTracker {
     armed: [Option<Side>; MAX_LINES],
+    /// Start of the running line pulse, while in its pulse + rest window.
+    pulse_start_us: Option<u32>,
 }
 
 impl LineTracker {
-    /// Forgets which side the finger was on (after a fault or a scene load).
+    /// Forgets which side the finger was on (after a fault or a scene load). A running pulse's
+    /// window is kept: the gate may still be in its rest.
     pub(crate) fn reset(&mut self) {
         self.armed = [None; MAX_LINES];
+    }
+
+    /// Forgets everything, the running pulse's window too (a fault has cut the line).
+    pub(crate) fn cut(&mut self) {
+        self.reset();
+        self.pulse_start_us = None;
+    }
+
+    /// The gate took the pulse of [`LineStep::Fire`] at `t_us`: its window starts.
+    pub(crate) fn started(&mut self, t_us: u32) {
+        self.pulse_start_us = Some(t_us);
+    }
+
+    /// One sample of the lines at `position_um`, `t_us`.
+    #[inline]
+    pub(crate) fn step(&mut self, lines: &LinePulses, position_um: i32, t_us: u32) -> LineStep {
+        let fired = self.update(&lines.lines, position_um);
+        if let Some(start) = self.pulse_start_us {
+            let dt = t_us.wrapping_sub(start);
+            if dt < lines.window_us {
+                return LineStep::Window {
+                    amplitude_permille: lines.lines.amplitude_at(dt),
+                    skipped: fired.is_some(),
+                };
+            }
+            self.pulse_start_us = None;
+        }
+        match fired {
+            Some(line) => LineStep::Fire {
+                line,
+                pulse: lines.pulse,
+                amplitude_permille: lines.lines.amplitude_at(0),
+            },
+            None => LineStep::Free,
+        }
     }
 
     /// Updates with a new position; returns the index of a line crossed, if any.

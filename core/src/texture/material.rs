@@ -10,7 +10,11 @@
 //! multiplies and one divide. Δμ itself comes from the material parameters of eq. 12
 //! (μs − μc = π(s − s')β/(E σ)), resolved when the scene file is read.
 
-use super::{MaterialParam, ParamValue, TextureError};
+use crate::burst::{BurstTimer, FastPlanner, SafetyLimits};
+
+use super::compiled::{CompileError, Moment, Render, Request};
+use super::motion::MotionGate;
+use super::{MaterialParam, ParamValue, TextureError, FULL_AMPLITUDE};
 
 /// A material region's parameters (SI units).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -121,6 +125,48 @@ impl MaterialConsts {
 #[inline]
 fn atan(x: f32) -> f32 {
     micromath::F32Ext::atan(x)
+}
+
+/// A material region, compiled: the stick-slip frequency at the hand speed, above the speed
+/// threshold.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct StickSlip {
+    consts: MaterialConsts,
+    motion: MotionGate,
+    planner: FastPlanner,
+}
+
+impl StickSlip {
+    pub(crate) fn new(
+        m: &Material,
+        timer: &BurstTimer,
+        limits: &SafetyLimits,
+    ) -> Result<Self, CompileError> {
+        m.validate()?;
+        Ok(Self {
+            consts: m.prepare(),
+            motion: MotionGate::new(m.min_speed_um_s),
+            planner: FastPlanner::new(timer, limits, m.duty_permille)?,
+        })
+    }
+}
+
+impl Render for StickSlip {
+    fn reset(&mut self) {
+        self.motion.reset();
+    }
+
+    #[inline]
+    fn request(&mut self, now: &Moment<'_>) -> Request {
+        match self.motion.speed(now.velocity_um_s) {
+            Some(speed) => Request::planned(
+                self.planner
+                    .plan_hz(self.consts.stick_slip_hz(speed * 1e-6)),
+                FULL_AMPLITUDE,
+            ),
+            None => Request::OFF,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -11,12 +11,19 @@
 //!   "Randomness button"), from a seeded PRNG so runs reproduce.
 //!
 //! Tangible lines (fig. 12) overlay any region: see [`lines`].
+//!
+//! At scene load each region's texture is compiled (`compiled.rs`: validated, its constants
+//! prepared, its per-sample state created); per sample the controller asks the region under
+//! the finger what it wants from the gate. Each kind's compiled form lives in its own file with
+//! its parameters; the speed threshold of the velocity-driven kinds in `motion.rs`.
 
 use crate::burst::BurstCommand;
 
+pub(crate) mod compiled;
 pub mod grating;
 pub mod lines;
 pub mod material;
+mod motion;
 pub mod random;
 
 pub use grating::{Grating, GratingRender};

@@ -5,6 +5,9 @@
 use rand_core::{Rng, SeedableRng};
 use rand_pcg::Pcg32;
 
+use crate::burst::{self, BurstCommand, BurstTimer, FastPlanner, SafetyLimits};
+
+use super::compiled::{CompileError, Moment, Render, Request};
 use super::{SpreadParam, TextureError};
 
 /// A random region's parameters.
@@ -78,6 +81,64 @@ impl RandomState {
         let a = p.amplitude_permille as f32
             * (1.0 + self.unit() * p.amplitude_spread_permille as f32 * 1e-3);
         (f, a.clamp(1.0, 1000.0) as u16)
+    }
+}
+
+/// A random region, compiled: a new draw once the running burst has had its whole period.
+#[derive(Clone, Debug)]
+pub(crate) struct RandomDraws {
+    params: RandomBurst,
+    state: RandomState,
+    planner: FastPlanner,
+    next_draw_us: Option<u32>,
+}
+
+impl RandomDraws {
+    pub(crate) fn new(
+        r: &RandomBurst,
+        timer: &BurstTimer,
+        limits: &SafetyLimits,
+    ) -> Result<Self, CompileError> {
+        r.validate()?;
+        // Both extremes of the draw must be renderable, so no draw is ever refused.
+        for millihz in [r.min_millihz(), r.max_millihz()] {
+            let cmd = BurstCommand {
+                burst_millihz: millihz as u32,
+                duty_permille: r.duty_permille,
+            };
+            burst::plan(timer, limits, &cmd)?;
+        }
+        Ok(Self {
+            params: *r,
+            state: RandomState::new(r.seed),
+            planner: FastPlanner::new(timer, limits, r.duty_permille)?,
+            next_draw_us: None,
+        })
+    }
+}
+
+impl Render for RandomDraws {
+    fn reset(&mut self) {
+        self.next_draw_us = None;
+    }
+
+    #[inline]
+    fn request(&mut self, now: &Moment<'_>) -> Request {
+        // A new draw once the running burst has had its whole period; until then keep it.
+        let due = self
+            .next_draw_us
+            .is_none_or(|next| now.t_us.wrapping_sub(next) as i32 >= 0);
+        if !due {
+            return Request {
+                settings: now.gate.running(),
+                amplitude: u16::MAX,
+                ..Request::OFF
+            };
+        }
+        let (hz, amplitude) = self.state.draw(&self.params);
+        let r = Request::planned(self.planner.plan_hz(hz), amplitude);
+        self.next_draw_us = Some(now.t_us.wrapping_add((1e6 / hz) as u32));
+        r
     }
 }
 

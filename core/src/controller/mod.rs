@@ -1,25 +1,32 @@
 //! Controller: runs the stages in order for each sample and owns the fault state.
 //!
-//! Loading a configuration is a compile step: everything is validated, per-region constants are
-//! prepared (timer settings of constant textures, 1/λ, stick-slip constants, fast planners, line
-//! pulses) before anything is replaced, so a bad configuration changes nothing and the
-//! per-sample path computes only what the active region's texture needs:
-//! map → fault check → velocity → region → texture → burst → gate.
+//! Loading a configuration is a compile step: everything is validated and each region's
+//! texture compiled (texture::compiled) before anything is replaced, so a bad configuration
+//! changes nothing and the per-sample path computes only what the active region's texture
+//! needs. Per sample: map → fault check → velocity → region → lines, else the region's texture
+//! → gate. What a texture does lives with the texture; this file only keeps the order, the
+//! fault state, the swap and the telemetry.
 
 use heapless::Vec;
 
-use crate::burst::{self, BurstError, BurstTimer, FastPlanner, SafetyLimits, TimerSettings};
+use crate::burst::{BurstTimer, SafetyLimits, TimerSettings};
+use crate::fmt::LogLimit;
+pub use crate::fmt::LOG_INTERVAL_US;
 use crate::gate::{BurstOutput, DriveMode, Gate, GateAction};
-use crate::position::{CalibrationError, PositionMapper, SensorFault};
-use crate::region::{RegionError, RegionMap, MAX_REGIONS};
+use crate::position::{PositionMapper, SensorFault};
+use crate::region::{RegionMap, MAX_REGIONS};
 use crate::sample::{PositionSource, Sample};
 use crate::scene::Config;
-use crate::texture::grating::{GratingRender, RidgeTracker};
-use crate::texture::lines::LineTracker;
-use crate::texture::material::MaterialConsts;
-use crate::texture::random::RandomState;
-use crate::texture::{Lines, RandomBurst, Texture, TextureError, FULL_AMPLITUDE};
-use crate::velocity::{EstimatorError, LsqSlope, Median3, VelocityEstimator};
+use crate::texture::compiled::{CompileError, Compiled, Moment, Render, Request, Want};
+use crate::texture::lines::{LinePulses, LineStep, LineTracker};
+use crate::velocity::{LsqSlope, Median3, VelocityEstimator};
+
+mod error;
+mod telemetry;
+
+pub use error::ConfigError;
+use error::MAX_STALE_US;
+pub use telemetry::{Output, Telemetry};
 
 /// Samples in the default least-squares window: 3.2 ms at 10 kHz, 1.55 ms group delay.
 pub const DEFAULT_WINDOW: usize = 32;
@@ -30,598 +37,6 @@ pub type DefaultEstimator = Median3<LsqSlope<DEFAULT_WINDOW>>;
 /// Consecutive good samples needed to leave a sensor fault (1.6 ms at 10 kHz): a wiper bouncing
 /// on a worn track must not flash the carrier on between bounces.
 pub const RECOVERY_SAMPLES: u16 = 16;
-/// Region changes and clamps are logged at most this often; the rest are counted.
-pub const LOG_INTERVAL_US: u32 = 100_000;
-
-/// Why a configuration was rejected (the previous one stays active).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[non_exhaustive]
-pub enum ConfigError {
-    /// The rheostat calibration.
-    Calibration(CalibrationError),
-    /// The region layout.
-    Region(RegionError),
-    /// The carrier caps.
-    Limits(BurstError),
-    /// Region `region`'s burst cannot be rendered on this board.
-    Texture {
-        /// Index of the region.
-        region: u8,
-        /// What is wrong with its burst.
-        error: BurstError,
-    },
-    /// Region `region`'s texture parameters are invalid.
-    TextureParams {
-        /// Index of the region.
-        region: u8,
-        /// What is wrong.
-        error: TextureError,
-    },
-    /// The lines are invalid.
-    Lines(TextureError),
-    /// The line pulse cannot be rendered on this board.
-    LinePulse(BurstError),
-    /// Textures must number one more than boundaries.
-    TextureCount {
-        /// Textures given.
-        textures: usize,
-        /// Boundaries given.
-        boundaries: usize,
-    },
-    /// Stale limit shorter than two sample periods or above one second.
-    StaleLimit {
-        /// The limit asked for, µs.
-        stale_after_us: u32,
-        /// Two sample periods, µs.
-        min_us: u32,
-    },
-    /// The velocity estimator rejected the sample period.
-    Estimator(EstimatorError),
-}
-
-/// Longest stale limit, µs.
-const MAX_STALE_US: u32 = 1_000_000;
-
-/// One sentence per refusal, for hosts (the scene-file reader, host-sim). The firmware logs the
-/// defmt form instead, so this is never linked on target.
-impl core::fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        use crate::fmt::{Deci, Milli};
-        match *self {
-            ConfigError::Calibration(e) => e.fmt(f),
-            ConfigError::Region(e) => e.fmt(f),
-            // The caps' own checks reuse the burst errors; named here as the caps they are.
-            ConfigError::Limits(BurstError::BadDuty { duty_permille }) => write!(
-                f,
-                "duty cap {} % must be above 0 % and at most 100 %",
-                Deci(duty_permille as u64)
-            ),
-            ConfigError::Limits(e) => e.fmt(f),
-            ConfigError::Texture { region, error } => write!(f, "region {region}: {error}"),
-            ConfigError::TextureParams { region, error } => write!(f, "region {region}: {error}"),
-            ConfigError::Lines(e) => e.fmt(f),
-            ConfigError::LinePulse(e) => write!(f, "line pulse: {e}"),
-            ConfigError::TextureCount {
-                textures,
-                boundaries,
-            } => write!(
-                f,
-                "{textures} textures for {boundaries} boundaries, and a scene needs one texture \
-                 more than boundaries"
-            ),
-            ConfigError::StaleLimit {
-                stale_after_us,
-                min_us,
-            } => write!(
-                f,
-                "stale limit {} ms must be at least two sample periods ({} ms) and at most {} ms",
-                Milli(stale_after_us as u64),
-                Milli(min_us as u64),
-                Milli(MAX_STALE_US as u64)
-            ),
-            ConfigError::Estimator(e) => e.fmt(f),
-        }
-    }
-}
-
-/// What one sample produced (for logs, host analyses and the firmware's telemetry).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Output {
-    /// Position, µm, when the sensor is healthy.
-    pub position_um: Option<i32>,
-    /// Velocity, µm/s, once the estimator has a full window.
-    pub velocity_um_s: Option<i32>,
-    /// Region under the finger.
-    pub region: Option<u8>,
-    /// The action for the burst-timer port, when the line must change.
-    pub action: Option<GateAction>,
-    /// The new drive amplitude, ‰, when it changes.
-    pub amplitude_permille: Option<u16>,
-    /// The drive mode, on the first sample after a scene loads.
-    pub drive: Option<DriveMode>,
-    /// The index of a line crossed on this sample (its pulse fired).
-    pub line: Option<u8>,
-    /// The sensor fault in force, if any.
-    pub fault: Option<SensorFault>,
-}
-
-/// Counters for the low-rate telemetry log.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Telemetry {
-    /// Samples processed.
-    pub samples: u32,
-    /// Fault onsets.
-    pub faults: u32,
-    /// Region switches.
-    pub region_switches: u32,
-    /// Gate actions issued.
-    pub gate_actions: u32,
-    /// Samples whose f_b was clamped to the board's limit.
-    pub clamped: u32,
-    /// Line pulses fired.
-    pub line_pulses: u32,
-    /// Line crossings dropped to keep the duty cap.
-    pub lines_skipped: u32,
-    /// Grating ridge pulses fired (position phase).
-    pub ridge_pulses: u32,
-    /// Ridge crossings without a pulse: several in one sample, faster than the board's f_b
-    /// limit, or inside the duty cap's rest.
-    pub ridges_skipped: u32,
-    /// Last position, µm (−1 when unknown).
-    pub position_um: i32,
-    /// Last velocity, µm/s.
-    pub velocity_um_s: i32,
-    /// Region under the finger (255 when none).
-    pub region: u8,
-    /// Burst frequency on the line, mHz (0 when off).
-    pub burst_millihz: u32,
-}
-
-/// A region's texture, compiled: only what its per-sample path needs.
-#[derive(Clone, Debug)]
-enum Compiled {
-    Off,
-    Fixed(TimerSettings),
-    Grating {
-        inv_wavelength_per_um: f32,
-        motion: MotionGate,
-        planner: FastPlanner,
-        amplitude: u16,
-    },
-    Ridges(Ridges),
-    Material {
-        consts: MaterialConsts,
-        motion: MotionGate,
-        planner: FastPlanner,
-    },
-    Random {
-        params: RandomBurst,
-        state: RandomState,
-        planner: FastPlanner,
-        next_draw_us: Option<u32>,
-    },
-}
-
-/// A position-phase grating, compiled: one pulse per ridge crossing (texture::grating).
-#[derive(Clone, Copy, Debug)]
-struct Ridges {
-    wavelength_um: i32,
-    rearm_um: i32,
-    /// The ridge's share of the period, duty · λ, µm.
-    ridge_um: i32,
-    /// duty · λ · timer clock: the pulse's on-time in clocks is this over |V| in µm/s.
-    on_clock_um_s: u64,
-    /// Shortest pulse: the on-time of a burst at the board's top f_b.
-    min_on_clocks: u64,
-    /// Longest pulse: the on-time cap.
-    max_on_clocks: u64,
-    /// Pulses start at least this far apart, µs (the board's top f_b).
-    min_spacing_us: u32,
-    /// A pulse is not cut before it has been on this long, µs (the shortest pulse).
-    min_on_us: u32,
-    amplitude: u16,
-    tracker: RidgeTracker,
-    last_pulse_us: Option<u32>,
-    /// While a pulse may be on: the span of positions it stays on over, µm (lo ..hi).
-    on_span_um: Option<(i32, i32)>,
-    /// Largest step between two samples the slider can make, µm; a larger one is a glitch
-    /// until the next sample confirms it.
-    max_step_um: i32,
-    /// The last position accepted, and a jump waiting for confirmation.
-    last_um: Option<i32>,
-    jump_um: Option<i32>,
-}
-
-/// The fastest the slider is taken to move, µm/s: a step between two samples that would need
-/// more (over up to four sample periods, to bridge dropped samples) is a sensor glitch.
-pub const MAX_SLIDER_SPEED_UM_S: u32 = 2_000_000;
-
-/// What a texture wants from the gate on one sample.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Want {
-    /// Periodic bursts of `settings`, or off when None.
-    Periodic,
-    /// One pulse of `settings` now.
-    Pulse,
-    /// End the running pulse now (the finger has left its ridge).
-    EndPulse,
-}
-
-impl Ridges {
-    fn new(
-        g: &crate::texture::Grating,
-        timer: &BurstTimer,
-        limits: &SafetyLimits,
-        sample_period_us: u32,
-    ) -> Result<Self, BurstError> {
-        if timer.max_burst_hz == 0 {
-            return Err(timer.bad());
-        }
-        limits.check_duty(g.duty_permille)?;
-        let duty = g.duty_permille as u64;
-        let clock = timer.clock_hz as u64;
-        let max_on_clocks = limits.max_on_time_clocks(timer);
-        let min_on_clocks =
-            (clock * duty / (1000 * timer.max_burst_hz as u64)).clamp(1, max_on_clocks.max(1));
-        // Both extremes must be renderable, so no crossing is ever refused by the timer.
-        timer.one_pulse(max_on_clocks)?;
-        timer.one_pulse(min_on_clocks)?;
-        Ok(Self {
-            wavelength_um: g.wavelength_um as i32,
-            rearm_um: g.rearm_um as i32,
-            ridge_um: (g.wavelength_um as u64 * duty / 1000) as i32,
-            on_clock_um_s: duty * g.wavelength_um as u64 * clock / 1000,
-            min_on_clocks,
-            max_on_clocks,
-            min_spacing_us: 1_000_000u32.div_ceil(timer.max_burst_hz),
-            min_on_us: timer.clocks_to_us_ceil(min_on_clocks) as u32,
-            amplitude: g.amplitude_permille,
-            tracker: RidgeTracker::default(),
-            last_pulse_us: None,
-            on_span_um: None,
-            max_step_um: (4 * MAX_SLIDER_SPEED_UM_S as u64 * sample_period_us as u64 / 1_000_000)
-                .min(i32::MAX as u64) as i32,
-            last_um: None,
-            jump_um: None,
-        })
-    }
-
-    fn reset(&mut self) {
-        self.tracker.reset();
-        self.on_span_um = None;
-        self.last_um = None;
-        self.jump_um = None;
-    }
-
-    /// False for a single-sample glitch: a step the slider cannot make, not (yet) confirmed by
-    /// a second sample near it. A real jump (after a gap) costs one sample.
-    fn plausible(&mut self, position_um: i32) -> bool {
-        let near = |a: i32, b: i32| a.abs_diff(b) <= self.max_step_um as u32;
-        let ok = self.last_um.is_none_or(|last| near(last, position_um))
-            || self.jump_um.is_some_and(|j| near(j, position_um));
-        if ok {
-            self.last_um = Some(position_um);
-            self.jump_um = None;
-        } else {
-            self.jump_um = Some(position_um);
-        }
-        ok
-    }
-
-    /// What to do on this sample, the pulse's settings, and the ridges passed without a pulse.
-    ///
-    /// A pulse's length is set from the speed, duty·λ/|V|, so at a steady speed the timer ends
-    /// it on time to the clock. It is also ended by position: once the finger leaves the
-    /// ridge's share of the period (forward past it, or back beyond the re-arm distance) the
-    /// pulse is cut, so an estimate that lags an acceleration or a reversal cannot stretch it
-    /// (and its duty rest) over the next ridge. With the speed unknown (the estimator's first
-    /// window after a start or a fault) the timer is set to the on-time cap and position alone
-    /// ends the pulse.
-    fn step(
-        &mut self,
-        position_um: i32,
-        velocity_um_s: Option<i32>,
-        t_us: u32,
-        timer: &BurstTimer,
-    ) -> (Want, Option<TimerSettings>, u32) {
-        let mut want = Want::Periodic;
-        if !self.plausible(position_um) {
-            return (want, None, 0);
-        }
-        if let Some((lo, hi)) = self.on_span_um {
-            let long_enough = self
-                .last_pulse_us
-                .is_some_and(|t0| t_us.wrapping_sub(t0) >= self.min_on_us);
-            if (position_um < lo || position_um > hi) && long_enough {
-                self.on_span_um = None;
-                want = Want::EndPulse;
-            }
-        }
-        let Some(c) = self
-            .tracker
-            .update(position_um, self.wavelength_um, self.rearm_um)
-        else {
-            return (want, None, 0);
-        };
-        let too_soon = self
-            .last_pulse_us
-            .is_some_and(|last| t_us.wrapping_sub(last) < self.min_spacing_us);
-        let on = match velocity_um_s {
-            Some(v) => self
-                .on_clock_um_s
-                .checked_div(v.unsigned_abs() as u64)
-                .unwrap_or(u64::MAX),
-            None => u64::MAX,
-        }
-        .clamp(self.min_on_clocks, self.max_on_clocks);
-        // `new` checked that both ends of the clamp render, so one_pulse cannot fail here; if it
-        // did, the ridge would be skipped like one that comes too soon.
-        let settings = if too_soon {
-            None
-        } else {
-            timer.one_pulse(on).ok()
-        };
-        let Some(settings) = settings else {
-            return (want, None, c.skipped + 1);
-        };
-        let ridge = c.ridge * self.wavelength_um;
-        self.on_span_um = Some(if c.up {
-            (ridge - self.rearm_um, ridge + self.ridge_um)
-        } else {
-            (ridge - self.ridge_um, ridge + self.rearm_um)
-        });
-        self.last_pulse_us = Some(t_us);
-        (Want::Pulse, Some(settings), c.skipped)
-    }
-}
-
-/// Speed threshold with hysteresis: on at `on_um_s`, off below half of it.
-#[derive(Clone, Copy, Debug)]
-struct MotionGate {
-    on_um_s: f32,
-    moving: bool,
-}
-
-impl MotionGate {
-    fn new(min_speed_um_s: u32) -> Self {
-        Self {
-            on_um_s: min_speed_um_s as f32,
-            moving: false,
-        }
-    }
-
-    /// The speed to render, or None while below the threshold (or velocity unknown).
-    fn speed(&mut self, velocity_um_s: Option<i32>) -> Option<f32> {
-        let Some(v) = velocity_um_s else {
-            self.moving = false;
-            return None;
-        };
-        let speed = (v as f32).abs();
-        self.moving = if self.moving {
-            speed >= 0.5 * self.on_um_s
-        } else {
-            speed >= self.on_um_s
-        };
-        self.moving.then_some(speed)
-    }
-}
-
-/// What a texture asks for on one sample.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Request {
-    /// Periodic settings (off when None), or the pulse's when `want` is [`Want::Pulse`].
-    settings: Option<TimerSettings>,
-    /// Ridge crossings passed without a pulse on this sample.
-    skipped: u32,
-    amplitude: u16,
-    want: Want,
-    clamped: bool,
-}
-
-impl Request {
-    /// Line off at full amplitude.
-    const OFF: Request = Request {
-        settings: None,
-        skipped: 0,
-        amplitude: FULL_AMPLITUDE,
-        want: Want::Periodic,
-        clamped: false,
-    };
-}
-
-impl Compiled {
-    fn compile(
-        texture: &Texture,
-        region: u8,
-        timer: &BurstTimer,
-        limits: &SafetyLimits,
-        length_um: u32,
-        sample_period_us: u32,
-    ) -> Result<(Self, bool), ConfigError> {
-        let params = |error| ConfigError::TextureParams { region, error };
-        let burst = |error| ConfigError::Texture { region, error };
-        Ok(match texture {
-            Texture::Off => (Compiled::Off, false),
-            Texture::Constant(cmd) => {
-                let (s, capped) = burst::plan(timer, limits, cmd).map_err(burst)?;
-                (Compiled::Fixed(s), capped)
-            }
-            Texture::Grating(g) if g.render == GratingRender::PositionPhase => {
-                g.validate(length_um).map_err(params)?;
-                (
-                    Compiled::Ridges(
-                        Ridges::new(g, timer, limits, sample_period_us).map_err(burst)?,
-                    ),
-                    false,
-                )
-            }
-            Texture::Grating(g) => {
-                g.validate(length_um).map_err(params)?;
-                let planner = FastPlanner::new(timer, limits, g.duty_permille).map_err(burst)?;
-                let c = Compiled::Grating {
-                    inv_wavelength_per_um: 1.0 / g.wavelength_um as f32,
-                    motion: MotionGate::new(g.min_speed_um_s),
-                    planner,
-                    amplitude: g.amplitude_permille,
-                };
-                (c, false)
-            }
-            Texture::Material(m) => {
-                m.validate().map_err(params)?;
-                let planner = FastPlanner::new(timer, limits, m.duty_permille).map_err(burst)?;
-                (
-                    Compiled::Material {
-                        consts: m.prepare(),
-                        motion: MotionGate::new(m.min_speed_um_s),
-                        planner,
-                    },
-                    false,
-                )
-            }
-            Texture::Random(r) => {
-                r.validate().map_err(params)?;
-                // Both extremes of the draw must be renderable, so no draw is ever refused.
-                for millihz in [r.min_millihz(), r.max_millihz()] {
-                    let cmd = burst::BurstCommand {
-                        burst_millihz: millihz as u32,
-                        duty_permille: r.duty_permille,
-                    };
-                    burst::plan(timer, limits, &cmd).map_err(burst)?;
-                }
-                let planner = FastPlanner::new(timer, limits, r.duty_permille).map_err(burst)?;
-                (
-                    Compiled::Random {
-                        params: *r,
-                        state: RandomState::new(r.seed),
-                        planner,
-                        next_draw_us: None,
-                    },
-                    false,
-                )
-            }
-        })
-    }
-
-    /// Forgets motion and draw state (region change, fault).
-    fn reset(&mut self) {
-        match self {
-            Compiled::Grating { motion, .. } | Compiled::Material { motion, .. } => {
-                motion.moving = false
-            }
-            Compiled::Random { next_draw_us, .. } => *next_draw_us = None,
-            Compiled::Ridges(r) => r.reset(),
-            Compiled::Off | Compiled::Fixed(_) => {}
-        }
-    }
-
-    /// The request of this texture for one sample.
-    fn request(
-        &mut self,
-        position_um: i32,
-        velocity_um_s: Option<i32>,
-        t_us: u32,
-        running: Option<TimerSettings>,
-        timer: &BurstTimer,
-    ) -> Request {
-        let off = Request::OFF;
-        let planned = |p: Option<(TimerSettings, bool)>, amplitude| match p {
-            Some((s, clamped)) => Request {
-                settings: Some(s),
-                amplitude,
-                clamped,
-                ..off
-            },
-            None => off,
-        };
-        match self {
-            Compiled::Off => off,
-            Compiled::Fixed(s) => Request {
-                settings: Some(*s),
-                ..off
-            },
-            Compiled::Grating {
-                inv_wavelength_per_um,
-                motion,
-                planner,
-                amplitude,
-            } => match motion.speed(velocity_um_s) {
-                Some(speed) => planned(planner.plan_hz(speed * *inv_wavelength_per_um), *amplitude),
-                None => off,
-            },
-            Compiled::Ridges(r) => {
-                let (want, settings, skipped) = r.step(position_um, velocity_um_s, t_us, timer);
-                Request {
-                    settings,
-                    skipped,
-                    amplitude: r.amplitude,
-                    want,
-                    clamped: false,
-                }
-            }
-            Compiled::Material {
-                consts,
-                motion,
-                planner,
-            } => match motion.speed(velocity_um_s) {
-                Some(speed) => planned(
-                    planner.plan_hz(consts.stick_slip_hz(speed * 1e-6)),
-                    FULL_AMPLITUDE,
-                ),
-                None => off,
-            },
-            Compiled::Random {
-                params,
-                state,
-                planner,
-                next_draw_us,
-            } => {
-                // A new draw once the running burst has had its whole period; until then keep it.
-                let due = next_draw_us.is_none_or(|next| t_us.wrapping_sub(next) as i32 >= 0);
-                if !due {
-                    return Request {
-                        settings: running,
-                        amplitude: u16::MAX,
-                        ..off
-                    };
-                }
-                let (hz, amplitude) = state.draw(params);
-                let r = planned(planner.plan_hz(hz), amplitude);
-                *next_draw_us = Some(t_us.wrapping_add((1e6 / hz) as u32));
-                r
-            }
-        }
-    }
-}
-
-/// A rate limit for log lines, on the sample clock.
-#[derive(Clone, Copy, Debug, Default)]
-struct LogLimit {
-    last_us: Option<u32>,
-    suppressed: u32,
-}
-
-impl LogLimit {
-    /// True when a line may be logged now; otherwise counts it as suppressed.
-    fn due(&mut self, t_us: u32) -> bool {
-        let due = self
-            .last_us
-            .is_none_or(|last| t_us.wrapping_sub(last) >= LOG_INTERVAL_US);
-        if due {
-            self.last_us = Some(t_us);
-        } else {
-            self.suppressed += 1;
-        }
-        due
-    }
-
-    /// Lines suppressed since the last logged one; resets the count.
-    fn take_suppressed(&mut self) -> u32 {
-        core::mem::take(&mut self.suppressed)
-    }
-}
 
 /// A validated, compiled configuration.
 #[derive(Clone, Debug)]
@@ -629,11 +44,8 @@ struct Active {
     mapper: PositionMapper,
     regions: RegionMap,
     compiled: Vec<Compiled, MAX_REGIONS>,
-    lines: Lines,
-    /// The pulse of a line (one-pulse settings), when the scene has lines.
-    line_pulse: Option<TimerSettings>,
-    /// After a line pulse the line stays low this long, so the duty over pulse + rest keeps the cap.
-    line_refractory_us: u32,
+    /// The scene's lines, when it draws any.
+    lines: Option<LinePulses>,
     limits: SafetyLimits,
     stale_after_us: u32,
     drive: DriveMode,
@@ -654,8 +66,6 @@ pub struct Controller<E: VelocityEstimator = DefaultEstimator> {
     region_log: LogLimit,
     clamp_log: LogLimit,
     lines: LineTracker,
-    /// Start of the running line pulse, while in its pulse + refractory window.
-    pulse_start_us: Option<u32>,
     amplitude: Option<u16>,
     drive_pending: bool,
     telemetry: Telemetry,
@@ -686,7 +96,6 @@ impl<E: VelocityEstimator> Controller<E> {
             region_log: LogLimit::default(),
             clamp_log: LogLimit::default(),
             lines: LineTracker::default(),
-            pulse_start_us: None,
             amplitude: None,
             drive_pending: false,
             telemetry: Telemetry {
@@ -704,7 +113,7 @@ impl<E: VelocityEstimator> Controller<E> {
                 info!(
                     "scene loaded: {} regions, {} lines, hysteresis {} um, duty cap {} permille, on-time cap {} us",
                     active.regions.len(),
-                    active.lines.positions_um.len(),
+                    config.scene.lines.positions_um.len(),
                     config.scene.hysteresis_um,
                     active.limits.max_duty_permille,
                     active.limits.max_on_time_us
@@ -713,7 +122,8 @@ impl<E: VelocityEstimator> Controller<E> {
                     debug!("region {}: {}", i, t.kind());
                 }
                 self.active = Some(active);
-                // The old region index and line arming mean nothing in the new layout.
+                // The old region index and line arming mean nothing in the new layout (a
+                // running line pulse keeps its window: the gate may be in its rest).
                 self.region = None;
                 self.lines.reset();
                 self.drive_pending = true;
@@ -736,10 +146,11 @@ impl<E: VelocityEstimator> Controller<E> {
                 boundaries: scene.boundaries_um.len(),
             });
         }
+        let length_um = mapper.length_um();
         let regions = RegionMap::new(
             scene.textures.len(),
             &scene.boundaries_um,
-            mapper.length_um(),
+            length_um,
             scene.hysteresis_um,
         )
         .map_err(ConfigError::Region)?;
@@ -753,14 +164,18 @@ impl<E: VelocityEstimator> Controller<E> {
         }
         let mut compiled = Vec::new();
         for (i, texture) in scene.textures.iter().enumerate() {
+            let region = i as u8;
             let (c, capped) = Compiled::compile(
                 texture,
-                i as u8,
                 &self.timer,
                 &config.limits,
-                mapper.length_um(),
+                length_um,
                 self.sample_period_us,
-            )?;
+            )
+            .map_err(|e| match e {
+                CompileError::Params(error) => ConfigError::TextureParams { region, error },
+                CompileError::Burst(error) => ConfigError::Texture { region, error },
+            })?;
             if capped {
                 warn!(
                     "region {}: on-time capped to {} us",
@@ -770,35 +185,20 @@ impl<E: VelocityEstimator> Controller<E> {
             // Cannot fail: the region map holds at most MAX_REGIONS.
             let _ = compiled.push(c);
         }
-        scene
-            .lines
-            .validate(mapper.length_um(), config.limits.max_on_time_us)
-            .map_err(ConfigError::Lines)?;
-        let (line_pulse, line_refractory_us) = if scene.lines.positions_um.is_empty() {
-            (None, 0)
-        } else {
-            (
-                Some(self.pulse_settings(scene.lines.pulse_us)?),
-                line_refractory_us(&scene.lines, &config.limits),
-            )
-        };
+        let lines = LinePulses::compile(&scene.lines, &self.timer, &config.limits, length_um)
+            .map_err(|e| match e {
+                CompileError::Params(e) => ConfigError::Lines(e),
+                CompileError::Burst(e) => ConfigError::LinePulse(e),
+            })?;
         Ok(Active {
             mapper,
             regions,
             compiled,
-            lines: scene.lines.clone(),
-            line_pulse,
-            line_refractory_us,
+            lines,
             limits: config.limits,
             stale_after_us: config.stale_after_us,
             drive: scene.drive,
         })
-    }
-
-    /// One-pulse settings of `pulse_us`: high for the whole count, one tick low at the end.
-    fn pulse_settings(&self, pulse_us: u32) -> Result<TimerSettings, ConfigError> {
-        let clocks = pulse_us as u64 * self.timer.clock_hz as u64 / 1_000_000;
-        self.timer.one_pulse(clocks).map_err(ConfigError::LinePulse)
     }
 
     /// The burst timer this controller plans for.
@@ -858,63 +258,9 @@ impl<E: VelocityEstimator> Controller<E> {
             drive,
             ..Output::default()
         };
-        let crossed = self.lines_step(position_um, t_us);
-        if let Some((amplitude, action, line)) = crossed {
-            // Inside a line pulse or its rest: the pulse owns the line and the amplitude.
-            out.action = action;
-            out.line = line;
-            out.amplitude_permille = self.set_amplitude(amplitude);
-        } else {
-            let Some(active) = self.active.as_mut() else {
-                return out;
-            };
-            let running = self.gate.running();
-            let request = match active.compiled.get_mut(region as usize) {
-                Some(c) => c.request(position_um, velocity_um_s, t_us, running, &self.timer),
-                None => Request::OFF,
-            };
-            if request.clamped {
-                self.telemetry.clamped = self.telemetry.clamped.wrapping_add(1);
-                if self.clamp_log.due(t_us) {
-                    warn!(
-                        "region {}: f_b above the board limit {} Hz, clamped ({} more)",
-                        region,
-                        self.timer.max_burst_hz,
-                        self.clamp_log.take_suppressed()
-                    );
-                }
-            }
-            let mut skipped = request.skipped;
-            out.action = match (request.want, request.settings) {
-                (Want::Pulse, Some(p)) => {
-                    let limits = self.limits();
-                    let action = self.gate.pulse(p, t_us, &self.timer, &limits);
-                    if matches!(action, Some(GateAction::Pulse(_))) {
-                        self.telemetry.ridge_pulses = self.telemetry.ridge_pulses.wrapping_add(1);
-                    } else {
-                        // Inside the duty cap's rest after the previous pulse.
-                        skipped += 1;
-                    }
-                    self.count_action(action);
-                    action
-                }
-                (Want::EndPulse, _) => {
-                    let action = self.gate.end_pulse(t_us, &self.limits());
-                    self.count_action(action);
-                    action
-                }
-                _ => self.drive(request.settings, t_us),
-            };
-            if skipped > 0 {
-                self.telemetry.ridges_skipped = self.telemetry.ridges_skipped.wrapping_add(skipped);
-                debug!(
-                    "region {}: {} ridge crossings without a pulse",
-                    region, skipped
-                );
-            }
-            if request.amplitude != u16::MAX {
-                out.amplitude_permille = self.set_amplitude(request.amplitude);
-            }
+        // Lines overlay every region: inside a line pulse or its rest the pulse owns the gate.
+        if !self.lines_step(position_um, t_us, &mut out) {
+            self.texture_step(region, position_um, velocity_um_s, t_us, &mut out);
         }
         let t = &mut self.telemetry;
         t.position_um = position_um;
@@ -923,46 +269,123 @@ impl<E: VelocityEstimator> Controller<E> {
         out
     }
 
-    /// Lines: fires a pulse on a crossing, and owns the gate during a pulse and its rest.
-    /// Returns (amplitude, action, line fired) while the pulse window is open.
-    fn lines_step(
-        &mut self,
-        position_um: i32,
-        t_us: u32,
-    ) -> Option<(u16, Option<GateAction>, Option<u8>)> {
-        let active = self.active.as_ref()?;
-        let pulse = active.line_pulse?;
-        let fired = self.lines.update(&active.lines, position_um);
-        let window_us = active.lines.pulse_us + active.line_refractory_us;
-        if let Some(start) = self.pulse_start_us {
-            let dt = t_us.wrapping_sub(start);
-            if dt < window_us {
-                if fired.is_some() {
+    /// Lines: fires a pulse on a crossing, and owns the gate and the amplitude during a pulse
+    /// and its rest. True while they own them (the region's texture is not asked).
+    #[inline(always)]
+    fn lines_step(&mut self, position_um: i32, t_us: u32, out: &mut Output) -> bool {
+        let Some(active) = self.active.as_ref() else {
+            return false;
+        };
+        let Some(lines) = active.lines.as_ref() else {
+            return false;
+        };
+        let limits = active.limits;
+        match self.lines.step(lines, position_um, t_us) {
+            LineStep::Free => false,
+            LineStep::Window {
+                amplitude_permille,
+                skipped,
+            } => {
+                if skipped {
                     self.telemetry.lines_skipped = self.telemetry.lines_skipped.wrapping_add(1);
                     debug!("line crossed during a pulse's rest: skipped to keep the duty cap");
                 }
-                return Some((active.lines.amplitude_at(dt), None, None));
+                out.amplitude_permille = self.set_amplitude(amplitude_permille);
+                true
             }
-            self.pulse_start_us = None;
+            LineStep::Fire {
+                line,
+                pulse,
+                amplitude_permille,
+            } => {
+                let action = self.gate.pulse(pulse, t_us, &self.timer, &limits);
+                self.count_action(action);
+                if !matches!(action, Some(GateAction::Pulse(_))) {
+                    // A burst is running or resting: a pulse now would break the duty cap.
+                    self.telemetry.lines_skipped = self.telemetry.lines_skipped.wrapping_add(1);
+                    debug!(
+                        "line {} crossed at {} um while the duty cap is spent: skipped",
+                        line, position_um
+                    );
+                    return false;
+                }
+                self.lines.started(t_us);
+                self.telemetry.line_pulses = self.telemetry.line_pulses.wrapping_add(1);
+                debug!("line {} crossed at {} um: pulse", line, position_um);
+                out.action = action;
+                out.line = Some(line);
+                out.amplitude_permille = self.set_amplitude(amplitude_permille);
+                true
+            }
         }
-        let line = fired?;
-        let amplitude = active.lines.amplitude_at(0);
-        let action = self.gate.pulse(pulse, t_us, &self.timer, &active.limits);
-        if !matches!(action, Some(GateAction::Pulse(_))) {
-            // A burst is running or resting: a pulse now would break the duty cap.
-            self.telemetry.lines_skipped = self.telemetry.lines_skipped.wrapping_add(1);
+    }
+
+    /// The region's texture asks; the gate answers within the caps.
+    #[inline(always)]
+    fn texture_step(
+        &mut self,
+        region: u8,
+        position_um: i32,
+        velocity_um_s: Option<i32>,
+        t_us: u32,
+        out: &mut Output,
+    ) {
+        let Some(active) = self.active.as_mut() else {
+            return;
+        };
+        let now = Moment {
+            position_um,
+            velocity_um_s,
+            t_us,
+            gate: &self.gate,
+            timer: &self.timer,
+        };
+        let request = match active.compiled.get_mut(region as usize) {
+            Some(c) => c.request(&now),
+            None => Request::OFF,
+        };
+        if request.clamped {
+            self.telemetry.clamped = self.telemetry.clamped.wrapping_add(1);
+            if self.clamp_log.due(t_us) {
+                warn!(
+                    "region {}: f_b above the board limit {} Hz, clamped ({} more)",
+                    region,
+                    self.timer.max_burst_hz,
+                    self.clamp_log.take_suppressed()
+                );
+            }
+        }
+        let mut skipped = request.skipped;
+        out.action = match (request.want, request.settings) {
+            (Want::Pulse, Some(p)) => {
+                let limits = self.limits();
+                let action = self.gate.pulse(p, t_us, &self.timer, &limits);
+                if matches!(action, Some(GateAction::Pulse(_))) {
+                    self.telemetry.ridge_pulses = self.telemetry.ridge_pulses.wrapping_add(1);
+                } else {
+                    // Inside the duty cap's rest after the previous pulse.
+                    skipped += 1;
+                }
+                self.count_action(action);
+                action
+            }
+            (Want::EndPulse, _) => {
+                let action = self.gate.end_pulse(t_us, &self.limits());
+                self.count_action(action);
+                action
+            }
+            _ => self.drive(request.settings, t_us),
+        };
+        if skipped > 0 {
+            self.telemetry.ridges_skipped = self.telemetry.ridges_skipped.wrapping_add(skipped);
             debug!(
-                "line {} crossed at {} um while the duty cap is spent: skipped",
-                line, position_um
+                "region {}: {} ridge crossings without a pulse",
+                region, skipped
             );
-            self.count_action(action);
-            return None;
         }
-        self.pulse_start_us = Some(t_us);
-        self.telemetry.line_pulses = self.telemetry.line_pulses.wrapping_add(1);
-        debug!("line {} crossed at {} um: pulse", line, position_um);
-        self.count_action(action);
-        Some((amplitude, action, Some(line)))
+        if request.amplitude != u16::MAX {
+            out.amplitude_permille = self.set_amplitude(request.amplitude);
+        }
     }
 
     /// Checks the stale-sensor watchdog at `now_us`; call it from a timer at least every few
@@ -997,14 +420,13 @@ impl<E: VelocityEstimator> Controller<E> {
         self.good_run = 0;
         self.estimator.reset();
         self.region = None;
-        self.lines.reset();
-        self.pulse_start_us = None;
+        self.lines.cut();
         if let Some(active) = self.active.as_mut() {
-            active.compiled.iter_mut().for_each(Compiled::reset);
+            active.compiled.iter_mut().for_each(Render::reset);
         }
         self.telemetry.position_um = -1;
         self.telemetry.region = u8::MAX;
-        let limits = self.active.as_ref().map(|a| a.limits).unwrap_or_default();
+        let limits = self.limits();
         let action = self.gate.force_off(t_us, &self.timer, &limits);
         self.count_action(action);
         Output {
@@ -1085,19 +507,17 @@ pub fn apply<B: BurstOutput>(output: &Output, out: &mut B) {
     }
 }
 
-/// Rest after a line pulse so that pulse / (pulse + rest) ≤ the duty cap.
-fn line_refractory_us(lines: &Lines, limits: &SafetyLimits) -> u32 {
-    let cap = limits.max_duty_permille as u64;
-    (lines.pulse_us as u64 * (1000 - cap)).div_ceil(cap) as u32
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::burst::BurstCommand;
+    use crate::burst::{BurstCommand, BurstError};
     use crate::position::Calibration;
+    use crate::position::CalibrationError;
+    use crate::region::RegionError;
     use crate::scene::default_config;
-    use crate::texture::Texture;
+    use crate::texture::TextureError;
+    use crate::texture::{GratingRender, Texture};
+    use crate::velocity::EstimatorError;
 
     const TIMER: BurstTimer = BurstTimer {
         clock_hz: 90_000_000,
@@ -1587,89 +1007,6 @@ mod tests {
             .collect()
     }
 
-    /// Position phase: a pulse on the first sample past each ridge, lasting duty·λ/V, in both
-    /// directions, from the very first ridge (before the estimator has a speed, position ends
-    /// the pulse); nothing at rest on a ridge; a fault cuts a pulse.
-    /// The span a ridge pulse stays on over, to the µm: going up over the ridge at 6 mm it is
-    /// [6 mm − rearm, 6 mm + duty·λ]; the pulse is cut one µm outside either end, not on it.
-    #[test]
-    fn ridge_pulse_span_edges() {
-        let g = crate::texture::Grating::new(1_000);
-        let rearm = g.rearm_um as i32;
-        // (speed, approach: the last sample fires, a sample on the ridge, the span).
-        let up: (i32, &[i32], i32, (i32, i32)) = (
-            20_000,
-            &[5_500, 5_800, 6_000],
-            6_010,
-            (6_000 - rearm, 6_000 + 400),
-        );
-        // Going down over the same ridge the span is mirrored: [6 mm − duty·λ, 6 mm + rearm].
-        let down: (i32, &[i32], i32, (i32, i32)) = (
-            -20_000,
-            &[6_500, 6_200, 6_000, 5_999],
-            5_990,
-            (6_000 - 400, 6_000 + rearm),
-        );
-        for (v, approach, on_ridge, (lo, hi)) in [up, down] {
-            for (edge, outside) in [(lo, lo - 1), (hi, hi + 1)] {
-                let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
-                let mut t = 0;
-                let mut step = |r: &mut Ridges, um: i32| {
-                    t += 100;
-                    r.step(um, Some(v), t, &TIMER).0
-                };
-                let (&last, before) = approach.split_last().unwrap();
-                for &um in before {
-                    assert_eq!(step(&mut r, um), Want::Periodic, "{v} um/s at {um} um");
-                }
-                assert_eq!(step(&mut r, last), Want::Pulse, "{v} um/s at {last} um");
-                // Past the shortest pulse, still on the ridge.
-                for _ in 0..10 {
-                    assert_eq!(step(&mut r, on_ridge), Want::Periodic);
-                }
-                assert_eq!(step(&mut r, edge), Want::Periodic, "{v} um/s at {edge} um");
-                assert_eq!(
-                    step(&mut r, outside),
-                    Want::EndPulse,
-                    "{v} um/s at {outside} um"
-                );
-            }
-        }
-    }
-
-    /// Ridge pulses may start as close as the board's shortest burst period (200 µs at 5 kHz),
-    /// not closer: two ridges crossed 200 µs apart both fire; 150 µs apart, the second is
-    /// counted as skipped.
-    #[test]
-    fn ridge_pulses_as_close_as_the_board_allows() {
-        let g = crate::texture::Grating::new(1_000);
-        let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
-        let fired: std::vec::Vec<_> = [(100, 5_500), (200, 6_000), (300, 6_500), (400, 7_000)]
-            .into_iter()
-            .map(|(t, um)| {
-                let (want, _, skipped) = r.step(um, Some(5_000_000), t, &TIMER);
-                (want, skipped)
-            })
-            .collect();
-        assert_eq!(
-            fired,
-            [
-                (Want::Periodic, 0),
-                (Want::Pulse, 0),
-                // Past the ridge's 400 µm share: the first pulse is cut by position.
-                (Want::EndPulse, 0),
-                (Want::Pulse, 0)
-            ]
-        );
-        let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
-        r.step(5_500, Some(5_000_000), 100, &TIMER);
-        r.step(6_000, Some(5_000_000), 200, &TIMER);
-        r.step(6_600, Some(5_000_000), 275, &TIMER);
-        let (want, _, skipped) = r.step(7_000, Some(5_000_000), 350, &TIMER);
-        // The first pulse is cut here too (past its share, and on for its 80 µs minimum).
-        assert_eq!((want, skipped), (Want::EndPulse, 1));
-    }
-
     /// A sensor fault forgets where the finger was: recovering at rest 7 mm (seven ridges)
     /// from where the fault began fires no pulse, since the finger crossed nothing the sensor
     /// saw.
@@ -1702,6 +1039,9 @@ mod tests {
         assert_eq!(c.telemetry().ridge_pulses, 0);
     }
 
+    /// Position phase: a pulse on the first sample past each ridge, lasting duty·λ/V, in both
+    /// directions, from the very first ridge (before the estimator has a speed, position ends
+    /// the pulse); nothing at rest on a ridge; a fault cuts a pulse.
     #[test]
     fn position_phase_grating_pulses_at_each_ridge() {
         for speed in [20_000.0f32, 50_000.0, 200_000.0] {

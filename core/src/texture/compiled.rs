@@ -1,0 +1,183 @@
+//! Compiled textures: what a region does per sample. At scene load each region's [`Texture`]
+//! is validated and turned into its prepared constants and its per-sample state; per sample the
+//! controller asks the region under the finger for a [`Request`] through one interface
+//! ([`Render`]). A new texture kind adds a variant here and its own file; the controller does
+//! not change.
+
+use crate::burst::{self, BurstError, BurstTimer, SafetyLimits, TimerSettings};
+use crate::gate::Gate;
+
+use super::grating::{GratingRender, Ridges, Synthesis};
+use super::material::StickSlip;
+use super::random::RandomDraws;
+use super::{Texture, TextureError, FULL_AMPLITUDE};
+
+/// What a texture wants from the gate on one sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Want {
+    /// Periodic bursts of the request's settings, or off when None.
+    Periodic,
+    /// One pulse of the request's settings now.
+    Pulse,
+    /// End the running pulse now (the finger has left its ridge).
+    EndPulse,
+}
+
+/// What a texture asks for on one sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Request {
+    /// Periodic settings (off when None), or the pulse's when `want` is [`Want::Pulse`].
+    pub settings: Option<TimerSettings>,
+    /// Ridge crossings passed without a pulse on this sample.
+    pub skipped: u32,
+    /// Drive amplitude, ‰; `u16::MAX` leaves it as it is.
+    pub amplitude: u16,
+    pub want: Want,
+    /// The f_b asked for was above the board's limit and was clamped to it.
+    pub clamped: bool,
+}
+
+impl Request {
+    /// Line off at full amplitude.
+    pub const OFF: Request = Request {
+        settings: None,
+        skipped: 0,
+        amplitude: FULL_AMPLITUDE,
+        want: Want::Periodic,
+        clamped: false,
+    };
+
+    /// Periodic bursts from a fast planner's result (off when it planned none).
+    #[inline]
+    pub fn planned(plan: Option<(TimerSettings, bool)>, amplitude: u16) -> Request {
+        match plan {
+            Some((settings, clamped)) => Request {
+                settings: Some(settings),
+                amplitude,
+                clamped,
+                ..Request::OFF
+            },
+            None => Request::OFF,
+        }
+    }
+}
+
+/// What a texture sees of one sample.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Moment<'a> {
+    pub position_um: i32,
+    /// None until the estimator has a full window.
+    pub velocity_um_s: Option<i32>,
+    pub t_us: u32,
+    /// The gate: what the line is doing now.
+    pub gate: &'a Gate,
+    pub timer: &'a BurstTimer,
+}
+
+/// The interface of a compiled texture.
+pub(crate) trait Render {
+    /// Forgets motion and draw state (region change, fault).
+    fn reset(&mut self);
+    /// What the texture asks of the gate on this sample.
+    fn request(&mut self, now: &Moment<'_>) -> Request;
+}
+
+/// Why a texture (or the lines) did not compile; the controller names the region.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum CompileError {
+    /// The parameters are invalid.
+    Params(TextureError),
+    /// The bursts cannot be rendered on this board within the caps.
+    Burst(BurstError),
+}
+
+impl From<TextureError> for CompileError {
+    fn from(e: TextureError) -> Self {
+        CompileError::Params(e)
+    }
+}
+
+impl From<BurstError> for CompileError {
+    fn from(e: BurstError) -> Self {
+        CompileError::Burst(e)
+    }
+}
+
+/// A region's texture, compiled: only what its per-sample path needs.
+#[derive(Clone, Debug)]
+pub(crate) enum Compiled {
+    Off,
+    /// A constant texture: its timer settings, planned once.
+    Fixed(TimerSettings),
+    Ridges(Ridges),
+    Synthesis(Synthesis),
+    StickSlip(StickSlip),
+    Random(RandomDraws),
+}
+
+impl Compiled {
+    /// Validates `texture` and prepares it for this board and these caps, on a substrate of
+    /// `length_um` sampled every `sample_period_us`. The flag is true when a constant burst's
+    /// on-time was capped.
+    pub fn compile(
+        texture: &Texture,
+        timer: &BurstTimer,
+        limits: &SafetyLimits,
+        length_um: u32,
+        sample_period_us: u32,
+    ) -> Result<(Self, bool), CompileError> {
+        Ok(match texture {
+            Texture::Off => (Compiled::Off, false),
+            Texture::Constant(cmd) => {
+                let (s, capped) = burst::plan(timer, limits, cmd)?;
+                (Compiled::Fixed(s), capped)
+            }
+            Texture::Grating(g) => {
+                g.validate(length_um)?;
+                let c = match g.render {
+                    GratingRender::PositionPhase => {
+                        Compiled::Ridges(Ridges::new(g, timer, limits, sample_period_us)?)
+                    }
+                    GratingRender::VelocitySynthesis => {
+                        Compiled::Synthesis(Synthesis::new(g, timer, limits)?)
+                    }
+                };
+                (c, false)
+            }
+            Texture::Material(m) => (
+                Compiled::StickSlip(StickSlip::new(m, timer, limits)?),
+                false,
+            ),
+            Texture::Random(r) => (Compiled::Random(RandomDraws::new(r, timer, limits)?), false),
+        })
+    }
+}
+
+impl Render for Compiled {
+    fn reset(&mut self) {
+        match self {
+            Compiled::Off | Compiled::Fixed(_) => {}
+            Compiled::Ridges(r) => r.reset(),
+            Compiled::Synthesis(s) => s.reset(),
+            Compiled::StickSlip(m) => m.reset(),
+            Compiled::Random(r) => r.reset(),
+        }
+    }
+
+    // Inlined into the controller's one call site, so the sample's fields stay in registers
+    // and a kind that reads none of them (off, constant) pays for none.
+    #[inline(always)]
+    fn request(&mut self, now: &Moment<'_>) -> Request {
+        match self {
+            Compiled::Off => Request::OFF,
+            Compiled::Fixed(s) => Request {
+                settings: Some(*s),
+                ..Request::OFF
+            },
+            Compiled::Ridges(r) => r.request(now),
+            Compiled::Synthesis(s) => s.request(now),
+            Compiled::StickSlip(m) => m.request(now),
+            Compiled::Random(r) => r.request(now),
+        }
+    }
+}
