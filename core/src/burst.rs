@@ -473,6 +473,14 @@ pub fn plan(
     ))
 }
 
+/// The unit tests' burst timer: 90 MHz, 32 bits (the F446's), a 5 kHz f_b limit.
+#[cfg(test)]
+pub(crate) const TEST_TIMER: BurstTimer = BurstTimer {
+    clock_hz: 90_000_000,
+    counter_bits: 32,
+    max_burst_hz: 5_000,
+};
+
 #[cfg(test)]
 mod tests {
     use super::*;

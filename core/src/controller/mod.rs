@@ -519,11 +519,7 @@ mod tests {
     use crate::texture::{GratingRender, Texture};
     use crate::velocity::EstimatorError;
 
-    const TIMER: BurstTimer = BurstTimer {
-        clock_hz: 90_000_000,
-        counter_bits: 32,
-        max_burst_hz: 5_000,
-    };
+    const TIMER: BurstTimer = crate::burst::TEST_TIMER;
 
     fn loaded() -> Controller {
         let mut c = Controller::new(TIMER, 100).unwrap();

@@ -395,13 +395,11 @@ impl Render for Synthesis {
 
     #[inline]
     fn request(&mut self, now: &Moment<'_>) -> Request {
-        match self.motion.speed(now.velocity_um_s) {
-            Some(speed) => Request::planned(
-                self.planner.plan_hz(speed * self.inv_wavelength_per_um),
-                self.amplitude,
-            ),
-            None => Request::OFF,
-        }
+        let inv_wavelength_per_um = self.inv_wavelength_per_um;
+        self.motion
+            .request(now.velocity_um_s, &self.planner, self.amplitude, |speed| {
+                speed * inv_wavelength_per_um
+            })
     }
 }
 
@@ -580,11 +578,7 @@ mod tests {
         );
     }
 
-    const TIMER: BurstTimer = BurstTimer {
-        clock_hz: 90_000_000,
-        counter_bits: 32,
-        max_burst_hz: 5_000,
-    };
+    const TIMER: BurstTimer = crate::burst::TEST_TIMER;
 
     /// The span a ridge pulse stays on over, to the µm: going up over the ridge at 6 mm it is
     /// [6 mm − rearm, 6 mm + duty·λ]; the pulse is cut one µm outside either end, not on it.

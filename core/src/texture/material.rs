@@ -158,14 +158,11 @@ impl Render for StickSlip {
 
     #[inline]
     fn request(&mut self, now: &Moment<'_>) -> Request {
-        match self.motion.speed(now.velocity_um_s) {
-            Some(speed) => Request::planned(
-                self.planner
-                    .plan_hz(self.consts.stick_slip_hz(speed * 1e-6)),
-                FULL_AMPLITUDE,
-            ),
-            None => Request::OFF,
-        }
+        let consts = &self.consts;
+        self.motion
+            .request(now.velocity_um_s, &self.planner, FULL_AMPLITUDE, |speed| {
+                consts.stick_slip_hz(speed * 1e-6)
+            })
     }
 }
 

@@ -1,6 +1,10 @@
 //! Motion threshold: the speed gate of the textures rendered from velocity (a velocity-synthesis
 //! grating, a material), so that the estimate's noise at rest makes no bursts.
 
+use crate::burst::FastPlanner;
+
+use super::compiled::Request;
+
 /// Speed threshold with hysteresis: on at `on_um_s`, off below half of it.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct MotionGate {
@@ -34,5 +38,21 @@ impl MotionGate {
             speed >= self.on_um_s
         };
         self.moving.then_some(speed)
+    }
+
+    /// Periodic bursts at `hz_at(speed)` (speed in µm/s) while moving, at `amplitude` ‰; off
+    /// below the threshold.
+    #[inline]
+    pub(crate) fn request(
+        &mut self,
+        velocity_um_s: Option<i32>,
+        planner: &FastPlanner,
+        amplitude: u16,
+        hz_at: impl FnOnce(f32) -> f32,
+    ) -> Request {
+        match self.speed(velocity_um_s) {
+            Some(speed) => Request::planned(planner.plan_hz(hz_at(speed)), amplitude),
+            None => Request::OFF,
+        }
     }
 }
