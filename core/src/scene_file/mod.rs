@@ -722,7 +722,7 @@ mod tests {
         counter_bits: 32,
         max_burst_hz: 5_000,
     };
-    const DEFAULT: &str = include_str!("../../scenes/default.toml");
+    const DEFAULT: &str = include_str!("../../../scenes/default.toml");
 
     #[test]
     fn default_file_is_the_built_in_default() {
