@@ -1,0 +1,244 @@
+//! The shape of a scene file: the TOML tables and keys it may hold, as read by serde before any
+//! value is converted, and which fields each region kind takes. Every value keeps its span
+//! (`Spanned`) so a later refusal can point at it.
+
+extern crate std;
+
+use core::ops::Range;
+use std::string::String;
+use std::vec::Vec as StdVec;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use super::ctx::Ctx;
+use super::SceneFileError;
+
+/// The whole file: every table optional but `[[region]]`, which [`super::regions`] requires.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct File {
+    pub(super) substrate: Option<Spanned<Substrate>>,
+    pub(super) limits: Option<Spanned<Limits>>,
+    pub(super) drive: Option<Spanned<Drive>>,
+    pub(super) hysteresis_mm: Option<Spanned<f64>>,
+    #[serde(default)]
+    pub(super) region: StdVec<Spanned<RegionSpec>>,
+    pub(super) lines: Option<Spanned<LinesSpec>>,
+}
+
+/// Reads the TOML into a [`File`]. A syntax error, an unknown key or a value of the wrong type is
+/// located where the `toml` crate points.
+pub(super) fn read(cx: &Ctx<'_>) -> Result<File, SceneFileError> {
+    let text = cx.text;
+    toml::from_str(text).map_err(|e| {
+        let span = e.span().unwrap_or(0..0);
+        // The whole line holding the error: its key names the field.
+        let start = span.start.min(text.len());
+        let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+        let line_text = text[line_start..].split('\n').next().unwrap_or("");
+        let field = line_text.split('=').next().unwrap_or("").trim();
+        let field = if field.is_empty() { "(file)" } else { field };
+        cx.err(span, field, e.message())
+    })
+}
+
+/// `[substrate]`: the rheostat calibration.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct Substrate {
+    pub(super) length_mm: Spanned<f64>,
+    pub(super) code_at_start: u16,
+    pub(super) code_at_end: u16,
+    pub(super) rail_margin_code: Option<u16>,
+}
+
+/// `[limits]`: the carrier caps and the stale-sensor limit.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct Limits {
+    pub(super) max_duty_percent: Option<Spanned<f64>>,
+    pub(super) max_on_time_ms: Option<Spanned<f64>>,
+    pub(super) stale_after_ms: Option<Spanned<f64>>,
+}
+
+/// `drive = "standing"` (the default) or `"progressive"`.
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "kebab-case")]
+pub(super) enum Drive {
+    Standing,
+    Progressive,
+}
+
+/// How a grating is rendered (`render = "position"`, the default, or `"velocity"`).
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "kebab-case")]
+pub(super) enum RenderSpec {
+    Position,
+    Velocity,
+}
+
+/// The lines' pulse shape (`envelope = "triangle"`, the default, or `"rectangle"`).
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "kebab-case")]
+pub(super) enum EnvelopeSpec {
+    Triangle,
+    Rectangle,
+}
+
+/// One `[[region]]` table. Flat rather than a tagged enum so every value keeps its span; which
+/// fields a kind takes is checked by hand ([`RegionSpec::check_fields`]).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RegionSpec {
+    pub(super) kind: Spanned<String>,
+    pub(super) until_mm: Option<Spanned<f64>>,
+    pub(super) f_b_hz: Option<Spanned<f64>>,
+    pub(super) duty_percent: Option<Spanned<f64>>,
+    pub(super) wavelength_mm: Option<Spanned<f64>>,
+    pub(super) ridge_mm: Option<Spanned<f64>>,
+    pub(super) groove_mm: Option<Spanned<f64>>,
+    pub(super) min_speed_mm_s: Option<Spanned<f64>>,
+    pub(super) amplitude_percent: Option<Spanned<f64>>,
+    pub(super) render: Option<Spanned<RenderSpec>>,
+    pub(super) rearm_mm: Option<Spanned<f64>>,
+    pub(super) delta_mu: Option<Spanned<f64>>,
+    // Eq. 12 parameters, used when `delta_mu` is absent.
+    pub(super) e_object_pa: Option<Spanned<f64>>,
+    pub(super) nu_object: Option<Spanned<f64>>,
+    pub(super) e_skin_pa: Option<Spanned<f64>>,
+    pub(super) nu_skin: Option<Spanned<f64>>,
+    pub(super) sigma_um: Option<Spanned<f64>>,
+    pub(super) beta_um: Option<Spanned<f64>>,
+    pub(super) shear_strength_diff_pa: Option<Spanned<f64>>,
+    pub(super) normal_force_n: Option<Spanned<f64>>,
+    pub(super) mass_g: Option<Spanned<f64>>,
+    pub(super) stiffness_n_per_m: Option<Spanned<f64>>,
+    pub(super) spread_percent: Option<Spanned<f64>>,
+    pub(super) amplitude_spread_percent: Option<Spanned<f64>>,
+    pub(super) seed: Option<Spanned<u64>>,
+}
+
+/// The region kinds and the fields each takes (besides `kind` and `until_mm`).
+const KINDS: &[(&str, &[&str])] = &[
+    ("off", &[]),
+    ("constant", &["f_b_hz", "duty_percent"]),
+    (
+        "grating",
+        &[
+            "wavelength_mm",
+            "ridge_mm",
+            "groove_mm",
+            "duty_percent",
+            "min_speed_mm_s",
+            "amplitude_percent",
+            "render",
+            "rearm_mm",
+        ],
+    ),
+    (
+        "material",
+        &[
+            "delta_mu",
+            "e_object_pa",
+            "nu_object",
+            "e_skin_pa",
+            "nu_skin",
+            "sigma_um",
+            "beta_um",
+            "shear_strength_diff_pa",
+            "normal_force_n",
+            "mass_g",
+            "stiffness_n_per_m",
+            "duty_percent",
+            "min_speed_mm_s",
+        ],
+    ),
+    (
+        "random",
+        &[
+            "f_b_hz",
+            "spread_percent",
+            "amplitude_percent",
+            "amplitude_spread_percent",
+            "duty_percent",
+            "seed",
+        ],
+    ),
+];
+
+impl RegionSpec {
+    /// Every optional field that is present, with its span.
+    fn present(&self) -> StdVec<(&'static str, Range<usize>)> {
+        let f = |name: &'static str, v: &Option<Spanned<f64>>| v.as_ref().map(|v| (name, v.span()));
+        [
+            f("f_b_hz", &self.f_b_hz),
+            f("duty_percent", &self.duty_percent),
+            f("wavelength_mm", &self.wavelength_mm),
+            f("ridge_mm", &self.ridge_mm),
+            f("groove_mm", &self.groove_mm),
+            f("min_speed_mm_s", &self.min_speed_mm_s),
+            f("amplitude_percent", &self.amplitude_percent),
+            f("delta_mu", &self.delta_mu),
+            f("e_object_pa", &self.e_object_pa),
+            f("nu_object", &self.nu_object),
+            f("e_skin_pa", &self.e_skin_pa),
+            f("nu_skin", &self.nu_skin),
+            f("sigma_um", &self.sigma_um),
+            f("beta_um", &self.beta_um),
+            f("shear_strength_diff_pa", &self.shear_strength_diff_pa),
+            f("normal_force_n", &self.normal_force_n),
+            f("mass_g", &self.mass_g),
+            f("stiffness_n_per_m", &self.stiffness_n_per_m),
+            f("spread_percent", &self.spread_percent),
+            f("amplitude_spread_percent", &self.amplitude_spread_percent),
+            self.seed.as_ref().map(|v| ("seed", v.span())),
+            self.render.as_ref().map(|v| ("render", v.span())),
+            f("rearm_mm", &self.rearm_mm),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
+    }
+
+    /// The kind, checked, with a field that does not belong to it refused at its span.
+    pub(super) fn check_fields(
+        &self,
+        cx: &Ctx<'_>,
+        i: usize,
+    ) -> Result<&'static str, SceneFileError> {
+        let kind = self.kind.get_ref().as_str();
+        let Some((name, allowed)) = KINDS.iter().find(|(k, _)| *k == kind) else {
+            let names: StdVec<&str> = KINDS.iter().map(|(k, _)| *k).collect();
+            return Err(cx.err(
+                self.kind.span(),
+                &std::format!("region[{i}].kind"),
+                format_args!(
+                    "unknown kind `{kind}`, expected one of {}",
+                    names.join(", ")
+                ),
+            ));
+        };
+        for (field, span) in self.present() {
+            if !allowed.contains(&field) {
+                return Err(cx.err(
+                    span,
+                    &std::format!("region[{i}].{field}"),
+                    format_args!("`{field}` is not a field of kind `{kind}`"),
+                ));
+            }
+        }
+        Ok(name)
+    }
+}
+
+/// `[lines]`: tangible lines drawn over the regions.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct LinesSpec {
+    pub(super) positions_mm: Spanned<StdVec<f64>>,
+    pub(super) pulse_ms: Option<Spanned<f64>>,
+    pub(super) envelope: Option<EnvelopeSpec>,
+    pub(super) amplitude_percent: Option<Spanned<f64>>,
+    pub(super) rearm_mm: Option<Spanned<f64>>,
+}
