@@ -7,9 +7,10 @@
 //!
 //! `saw_core::texture::Material::stick_slip_hz` (the load-time constants and the per-sample
 //! formula the controller runs) is compared with `host_sim::models::stick_slip::stick_slip` over a
-//! grid of U, Δμ, P, m, k spanning the ranges the scene file accepts (core/src/scene_file.rs:
-//! Δμ 0 ..= 100, P 1 mN ..= 100 N, m 1 mg ..= 10 kg, k 1 mN/m ..= 10 MN/m) and every speed the
-//! controller can pass (0, then 1 µm/s — the resolution of `velocity_um_s` — up to i32::MAX µm/s),
+//! grid of U, Δμ, P, m, k spanning the ranges the scene file accepts
+//! (core/src/scene_file/regions.rs: Δμ 0 ..= 100, P 1 mN ..= 100 N, m 1 mg ..= 10 kg,
+//! k 1 mN/m ..= 10 MN/m) and every speed the controller can pass (0, then 1 µm/s — the
+//! resolution of `velocity_um_s` — up to i32::MAX µm/s),
 //! plus the edges docs/models.md names: U → 0 (R → ∞), Δμ = 0 (R = 0), large U (R → 0).
 //! The f64 model gets exactly the f32 inputs (widened), so the comparison measures the core's
 //! arithmetic and atan only.
