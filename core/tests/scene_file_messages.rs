@@ -125,3 +125,39 @@ fn lines_refusals_read_as_sentences() {
          of 50 ms"
     );
 }
+
+/// A number out of its range names its unit, taken from the field's name, on the value and on
+/// both ends of the range; a value that is no number at all (TOML's `nan`, `inf`) says so.
+#[test]
+fn range_refusals_name_the_unit() {
+    let cases = [
+        (
+            "[[region]]\nkind = \"constant\"\nf_b_hz = 50\nduty_percent = 120\n",
+            "duty.toml:4:16: `region[0].duty_percent`: 120 % is outside the allowed 0.1 % to 100 %",
+        ),
+        (
+            "[[region]]\nkind = \"grating\"\nwavelength_mm = -1\n",
+            "neg.toml:3:17: `region[0].wavelength_mm`: -1 mm is outside the allowed 0.001 mm to \
+             63 mm",
+        ),
+        (
+            "[[region]]\nkind = \"grating\"\nwavelength_mm = 1\nrender = \"velocity\"\n\
+             min_speed_mm_s = 5000\n",
+            "speed.toml:5:18: `region[0].min_speed_mm_s`: 5000 mm/s is outside the allowed 0 mm/s \
+             to 1000 mm/s",
+        ),
+        (
+            "[limits]\nmax_on_time_ms = nan\n\n[[region]]\nkind = \"off\"\n",
+            "nan.toml:2:18: `limits.max_on_time_ms`: NaN is not a number; it must be from 0.001 ms \
+             to 1000 ms",
+        ),
+        (
+            "[[region]]\nkind = \"material\"\ndelta_mu = inf\n",
+            "mu.toml:3:12: `region[0].delta_mu`: inf is not a number; it must be from 0 to 100",
+        ),
+    ];
+    for (text, expected) in cases {
+        let file = expected.split(':').next().unwrap();
+        assert_eq!(refusal(file, text, 100), expected);
+    }
+}

@@ -46,11 +46,19 @@ impl Ctx<'_> {
         hi: f64,
     ) -> Result<f64, SceneFileError> {
         let x = *v.get_ref();
-        if !(x.is_finite() && lo <= x && x <= hi) {
+        let u = unit(field);
+        if !x.is_finite() {
             return Err(self.err(
                 v.span(),
                 field,
-                format_args!("{x} is outside {lo} ..= {hi}"),
+                format_args!("{x} is not a number; it must be from {lo}{u} to {hi}{u}"),
+            ));
+        }
+        if !(lo <= x && x <= hi) {
+            return Err(self.err(
+                v.span(),
+                field,
+                format_args!("{x}{u} is outside the allowed {lo}{u} to {hi}{u}"),
             ));
         }
         Ok(x)
@@ -79,6 +87,26 @@ impl Ctx<'_> {
     ) -> Result<u16, SceneFileError> {
         Ok((self.opt(v, field, lo, 100.0, default)? * 10.0).round() as u16)
     }
+}
+
+/// The unit a field's name ends in, as a message shows it after a number (" mm", " %"); empty
+/// for a dimensionless field (`delta_mu`).
+pub(super) fn unit(field: &str) -> &'static str {
+    const UNITS: [(&str, &str); 9] = [
+        ("_percent", " %"),
+        ("_mm_s", " mm/s"),
+        ("_n_per_m", " N/m"),
+        ("_mm", " mm"),
+        ("_ms", " ms"),
+        ("_hz", " Hz"),
+        ("_pa", " Pa"),
+        ("_g", " g"),
+        ("_n", " N"),
+    ];
+    UNITS
+        .iter()
+        .find(|(suffix, _)| field.ends_with(suffix))
+        .map_or("", |(_, u)| u)
 }
 
 /// A value in mm, ms or Hz as the whole µm, µs or mHz the core counts in. Callers range-check

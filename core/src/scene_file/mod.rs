@@ -198,11 +198,7 @@ mod tests {
     use super::*;
     use crate::texture::{GratingRender, Texture};
 
-    const TIMER: BurstTimer = BurstTimer {
-        clock_hz: 90_000_000,
-        counter_bits: 32,
-        max_burst_hz: 5_000,
-    };
+    const TIMER: BurstTimer = crate::burst::TEST_TIMER;
     const DEFAULT: &str = include_str!("../../../scenes/default.toml");
 
     #[test]

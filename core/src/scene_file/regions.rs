@@ -287,7 +287,7 @@ impl Region<'_> {
             return Err(self.cx.err(
                 self.span.clone(),
                 &self.field("delta_mu"),
-                format_args!("eq. 12 gives μs − μc = {d}, outside 0 ..= 100"),
+                format_args!("eq. 12 gives μs − μc = {d}, outside the allowed 0 to 100"),
             ));
         }
         Ok(d)
