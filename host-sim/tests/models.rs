@@ -2,12 +2,13 @@
 
 use core::f64::consts::{FRAC_PI_2, PI};
 use host_sim::models::atan::{atan_errors, AtanImpl};
-use host_sim::models::cli::{run_model, run_tile_to_scene, solver_stats};
+use host_sim::models::cli::{run_model, run_tile_to_scene};
 use host_sim::models::grooved::{
     geometry, grooved, solve_theta, theta_minus_sin, Eq4, GroovedError, GroovedInput, SolveOptions,
     Solver,
 };
 use host_sim::models::sandpaper::{from_f_b, from_grit, TABLE1};
+use host_sim::models::solvers::solver_stats;
 use host_sim::models::stick_slip::{
     large_r_asymptote_hz, stick_slip, Material, StickSlipError, StickSlipParams,
 };
@@ -802,8 +803,8 @@ fn model_charts_cli_writes_the_four_pngs_and_tables() {
 
 #[test]
 fn model_charts_only_one_and_atan_cost_axis() {
+    use host_sim::models::atan::atan_curve;
     use host_sim::models::charts::{draw_atan, AtanCost, Chart};
-    use host_sim::models::cli::atan_curve;
     let dir = scratch_dir("only");
     let one = dir.join("one");
     run_model(&[
@@ -836,7 +837,10 @@ fn model_charts_only_one_and_atan_cost_axis() {
 
 #[test]
 fn chart_series_have_the_shapes_the_models_predict() {
-    use host_sim::models::cli::{atan_curve, fig5_curve, solver_sweep, tile_rows};
+    use host_sim::models::atan::atan_curve;
+    use host_sim::models::solvers::solver_sweep;
+    use host_sim::models::stick_slip::fig5_curve;
+    use host_sim::models::tile::tile_rows;
     // Fig. 5: Δμ log-spaced over 1e-3…10; f_ss strictly falling in Δμ, below the ω0/2π plateau
     // and approaching the kU/(2ΔμP) asymptote from below.
     let c = fig5_curve(400).unwrap();

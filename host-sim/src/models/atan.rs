@@ -109,6 +109,50 @@ pub fn atan_errors(imp: AtanImpl) -> AtanError {
     }
 }
 
+/// One point of the atan error curve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AtanCurvePoint {
+    /// R = Δμ P/(m ω0 U) (an f32 grid value).
+    pub r: f32,
+    /// Implementation.
+    pub imp: AtanImpl,
+    /// |atan_impl(R) − atan(R)|, rad (reference in f64).
+    pub abs_err_rad: f64,
+    /// Relative error of eq. 10 in f32 with this atan against the f64 model.
+    pub rel_err_f_ss: f64,
+}
+
+/// Error against R for each implementation (every 10th point of the R grid, R > 0; all
+/// implementations at one R before the next R).
+pub fn atan_curve() -> Vec<AtanCurvePoint> {
+    let p = StickSlipParams::fig5(1.0);
+    let Ok(reference) = stick_slip(&p) else {
+        return Vec::new();
+    };
+    let (w0, a) = (reference.omega0_rad_s, reference.a_m_s);
+    let mut v = Vec::new();
+    for (i, &x) in r_grid().iter().enumerate() {
+        if i % 10 != 0 || x <= 0.0 {
+            continue;
+        }
+        let u = a / x as f64;
+        let Ok(fr) = stick_slip(&StickSlipParams { speed_m_s: u, ..p }) else {
+            continue;
+        };
+        for imp in AtanImpl::ALL {
+            let e = (imp.eval(x) as f64 - (x as f64).atan()).abs();
+            let f = stick_slip_f32(w0 as f32, a as f32, u as f32, |r| imp.eval(r)) as f64;
+            v.push(AtanCurvePoint {
+                r: x,
+                imp,
+                abs_err_rad: e,
+                rel_err_f_ss: ((f - fr.f_ss_hz) / fr.f_ss_hz).abs(),
+            });
+        }
+    }
+    v
+}
+
 /// ω0 of fig. 5 (√(500/0.001)), rad/s.
 pub const FIG5_OMEGA0: f32 = 707.106_8;
 /// A = Δμ P/(m ω0) of fig. 5 with Δμ = 1, m/s (= √2).

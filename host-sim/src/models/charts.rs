@@ -14,14 +14,11 @@ use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::atan::{atan_errors, AtanError, AtanImpl, R_MAX};
-use super::cli::{
-    atan_curve, fig5_curve, solver_sweep, tile_rows, AtanCurvePoint, Fig5Point, SolverStats,
-    TileRow, SWEEP_RTOL_EXPONENTS,
-};
+use super::atan::{atan_curve, atan_errors, AtanCurvePoint, AtanError, AtanImpl, R_MAX};
 use super::grooved::{GroovedInput, Solver};
-use super::stick_slip::StickSlipParams;
-use super::tile::OZ_G;
+use super::solvers::{solver_sweep, SolverStats, SWEEP_RTOL_EXPONENTS};
+use super::stick_slip::{fig5_curve, Fig5Point, StickSlipParams};
+use super::tile::{tile_rows, TileRow, OZ_G};
 
 /// The four charts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -2,11 +2,13 @@
 //! `host-sim tile-to-scene [--flags]`. Arguments are plain strings so that any CLI parser can
 //! forward them; output is returned as text (the caller prints it).
 
-use super::atan::{atan_errors, run_bench, AtanImpl};
+use super::atan::{atan_curve, atan_errors, run_bench, AtanImpl};
+use super::charts::{write_charts, AtanCostSource, Chart};
 use super::grooved::{grooved, Eq4, GroovedInput, Pad, SolveOptions, Solver};
 use super::sandpaper;
-use super::stick_slip::{large_r_asymptote_hz, stick_slip, Material, StickSlipParams};
-use super::tile::{a_max_mm2, paper_tiles, tile_to_region, Tile, PAPER_FORCES_G};
+use super::solvers::solver_sweep;
+use super::stick_slip::{fig5_curve, stick_slip, Material, StickSlipParams};
+use super::tile::{a_max_mm2, tile_rows, tile_to_region};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
@@ -265,40 +267,6 @@ fn cmd_stick_slip(fl: &mut Flags) -> Result<String, String> {
     }
 }
 
-/// One point of fig. 5's curve (P, m, k, U of [`StickSlipParams::fig5`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Fig5Point {
-    /// μs − μc.
-    pub delta_mu: f64,
-    /// R of eq. 11.
-    pub r: f64,
-    /// f_ss of eq. 10, Hz.
-    pub f_ss_hz: f64,
-    /// Large-R asymptote kU/(2ΔμP), Hz.
-    pub asymptote_hz: f64,
-    /// ω0/2π (the Δμ → 0 limit), Hz.
-    pub f0_hz: f64,
-}
-
-/// Fig. 5's curve at `points + 1` values of Δμ, log-spaced over 1e-3…10 (the paper prints no
-/// axis range; this one shows both the plateau and the asymptote).
-pub fn fig5_curve(points: usize) -> Result<Vec<Fig5Point>, String> {
-    (0..=points)
-        .map(|i| {
-            let dm = 1e-3 * 1e4f64.powf(i as f64 / points.max(1) as f64);
-            let p = StickSlipParams::fig5(dm);
-            let r = stick_slip(&p).map_err(|e| e.to_string())?;
-            Ok(Fig5Point {
-                delta_mu: dm,
-                r: r.r,
-                f_ss_hz: r.f_ss_hz,
-                asymptote_hz: large_r_asymptote_hz(&p),
-                f0_hz: r.omega0_rad_s / (2.0 * core::f64::consts::PI),
-            })
-        })
-        .collect()
-}
-
 fn cmd_fig5(fl: &mut Flags) -> Result<String, String> {
     let n = fl.f64_or("points", 200.0)? as usize;
     let mut s = String::from("delta_mu,r,f_ss_hz,asymptote_hz,f0_hz\n");
@@ -393,112 +361,6 @@ fn cmd_grooved(fl: &mut Flags) -> Result<String, String> {
     }
 }
 
-/// The case set of the solver comparison: paper tiles × forces × k ∈ {0.008, 0.08, 0.8} ×
-/// μ ∈ {0, 0.5, 2}, keeping the cases that have a resolvable root (bisection to machine precision
-/// succeeds; this drops the k = 0.8 cases past the half circle). Returns (Eq4, k f_g) pairs.
-pub fn solver_cases() -> Vec<(Eq4, f64)> {
-    let mut v = Vec::new();
-    for t in paper_tiles() {
-        for f in PAPER_FORCES_G {
-            for k in [0.008, 0.08, 0.8] {
-                for mu in [0.0, 0.5, 2.0] {
-                    let eq = Eq4 {
-                        g: t.groove_mm,
-                        l: t.land_mm,
-                        mu,
-                    };
-                    let pad = Pad::default();
-                    let kfg = k * f * t.groove_mm / pad.area_mm2(f);
-                    let refopt = SolveOptions {
-                        rtol: 1e-300,
-                        max_iter: 5000,
-                        ..SolveOptions::default()
-                    };
-                    if super::grooved::solve_theta(&eq, kfg, Solver::Bisection, &refopt).is_ok() {
-                        v.push((eq, kfg));
-                    }
-                }
-            }
-        }
-    }
-    v
-}
-
-/// One row of the solver comparison.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SolverStats {
-    /// Solver.
-    pub solver: Solver,
-    /// Requested relative residual.
-    pub rtol: f64,
-    /// Cases solved / total.
-    pub solved: usize,
-    /// Cases.
-    pub cases: usize,
-    /// Mean iterations over solved cases.
-    pub mean_iterations: f64,
-    /// Max iterations.
-    pub max_iterations: u32,
-    /// Mean evaluations of eq. 4 plus its derivative.
-    pub mean_evaluations: f64,
-    /// Max |θ − θ_ref|/θ_ref over solved cases.
-    pub max_rel_theta_error: f64,
-}
-
-/// Runs the comparison over [`solver_cases`] at one tolerance; θ_ref is bisection to machine
-/// precision.
-pub fn solver_stats(solver: Solver, rtol: f64) -> SolverStats {
-    let cases = solver_cases();
-    let refopt = SolveOptions {
-        rtol: 1e-300,
-        max_iter: 5000,
-        ..SolveOptions::default()
-    };
-    let opt = SolveOptions {
-        rtol,
-        ..SolveOptions::default()
-    };
-    let (mut solved, mut it_sum, mut it_max, mut ev_sum, mut err_max) = (0, 0u64, 0, 0u64, 0.0f64);
-    for (eq, t) in &cases {
-        let reference = super::grooved::solve_theta(eq, *t, Solver::Bisection, &refopt)
-            .expect("bisection")
-            .theta;
-        if let Ok(s) = super::grooved::solve_theta(eq, *t, solver, &opt) {
-            solved += 1;
-            it_sum += s.iterations as u64;
-            it_max = it_max.max(s.iterations);
-            ev_sum += (s.evaluations + s.derivative_evaluations) as u64;
-            err_max = err_max.max(((s.theta - reference) / reference).abs());
-        }
-    }
-    let n = solved.max(1) as f64;
-    SolverStats {
-        solver,
-        rtol,
-        solved,
-        cases: cases.len(),
-        mean_iterations: it_sum as f64 / n,
-        max_iterations: it_max,
-        mean_evaluations: ev_sum as f64 / n,
-        max_rel_theta_error: err_max,
-    }
-}
-
-/// Exponents n of the swept tolerances rtol = 10⁻ⁿ in [`solver_sweep`].
-pub const SWEEP_RTOL_EXPONENTS: core::ops::RangeInclusive<i32> = 1..=15;
-
-/// [`solver_stats`] for every solver (in [`Solver::ALL`] order) at every rtol = 10⁻ⁿ,
-/// n ∈ [`SWEEP_RTOL_EXPONENTS`] (loosest first).
-pub fn solver_sweep() -> Vec<SolverStats> {
-    let mut v = Vec::new();
-    for solver in Solver::ALL {
-        for e in SWEEP_RTOL_EXPONENTS {
-            v.push(solver_stats(solver, 10f64.powi(-e)));
-        }
-    }
-    v
-}
-
 fn cmd_theta_solvers(fl: &mut Flags) -> Result<String, String> {
     fl.switch("csv");
     let mut s = String::from("solver,rtol,solved,cases,mean_iterations,max_iterations,mean_evaluations,max_rel_theta_error\n");
@@ -517,51 +379,6 @@ fn cmd_theta_solvers(fl: &mut Flags) -> Result<String, String> {
         );
     }
     Ok(s)
-}
-
-/// One tile of the paper's sets at one force, with the paper's k and μ.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TileRow {
-    /// The tile.
-    pub tile: Tile,
-    /// Finger force, g.
-    pub force_g: f64,
-    /// θ of eq. 4, rad.
-    pub theta_rad: f64,
-    /// D of eq. 1, mm.
-    pub d_mm: f64,
-    /// A_c summed over the pad, mm².
-    pub a_c_mm2: f64,
-    /// A summed over the pad, mm².
-    pub a_mm2: f64,
-    /// λ = G + L of the grating region, µm.
-    pub wavelength_um: u32,
-    /// Drive amplitude of the grating region, ‰ (1000·A/A_max).
-    pub amplitude_permille: u16,
-}
-
-/// [`paper_tiles`] × [`PAPER_FORCES_G`] (tile-major), solved with safeguarded Newton.
-pub fn tile_rows() -> Result<Vec<TileRow>, String> {
-    let mut v = Vec::new();
-    for t in paper_tiles() {
-        for f in PAPER_FORCES_G {
-            let inp = GroovedInput::paper(t.groove_mm, t.land_mm, f);
-            let r = grooved(&inp, Solver::Safeguarded, &SolveOptions::default())
-                .map_err(|e| e.to_string())?;
-            let reg = tile_to_region(&inp).map_err(|e| e.to_string())?;
-            v.push(TileRow {
-                tile: t,
-                force_g: f,
-                theta_rad: r.theta_rad,
-                d_mm: r.d_mm,
-                a_c_mm2: r.a_c_mm2,
-                a_mm2: r.a_mm2,
-                wavelength_um: reg.wavelength_um,
-                amplitude_permille: reg.amplitude_permille,
-            });
-        }
-    }
-    Ok(v)
 }
 
 fn cmd_tiles(fl: &mut Flags) -> Result<String, String> {
@@ -650,69 +467,23 @@ fn cmd_atan(fl: &mut Flags) -> Result<String, String> {
     Ok(s)
 }
 
-/// One point of the atan error curve.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AtanCurvePoint {
-    /// R = Δμ P/(m ω0 U) (an f32 grid value).
-    pub r: f32,
-    /// Implementation.
-    pub imp: AtanImpl,
-    /// |atan_impl(R) − atan(R)|, rad (reference in f64).
-    pub abs_err_rad: f64,
-    /// Relative error of eq. 10 in f32 with this atan against the f64 model.
-    pub rel_err_f_ss: f64,
-}
-
-/// Error against R for each implementation (every 10th point of the R grid, R > 0; all
-/// implementations at one R before the next R).
-pub fn atan_curve() -> Vec<AtanCurvePoint> {
-    let p = StickSlipParams::fig5(1.0);
-    let Ok(reference) = stick_slip(&p) else {
-        return Vec::new();
-    };
-    let (w0, a) = (reference.omega0_rad_s, reference.a_m_s);
-    let mut v = Vec::new();
-    for (i, &x) in super::atan::r_grid().iter().enumerate() {
-        if i % 10 != 0 || x <= 0.0 {
-            continue;
-        }
-        let u = a / x as f64;
-        let Ok(fr) = stick_slip(&StickSlipParams { speed_m_s: u, ..p }) else {
-            continue;
-        };
-        for imp in AtanImpl::ALL {
-            let e = (imp.eval(x) as f64 - (x as f64).atan()).abs();
-            let f =
-                super::stick_slip::stick_slip_f32(w0 as f32, a as f32, u as f32, |r| imp.eval(r))
-                    as f64;
-            v.push(AtanCurvePoint {
-                r: x,
-                imp,
-                abs_err_rad: e,
-                rel_err_f_ss: ((f - fr.f_ss_hz) / fr.f_ss_hz).abs(),
-            });
-        }
-    }
-    v
-}
-
 fn cmd_charts(fl: &mut Flags) -> Result<String, String> {
     let out = fl.opt_str("out").unwrap_or_else(|| "docs/charts".into());
     let only = match fl.opt_str("only") {
         None => None,
         Some(s) => Some(
-            super::charts::Chart::parse(&s)
+            Chart::parse(&s)
                 .ok_or_else(|| format!("--only: unknown chart {s:?} (fig5|solvers|tiles|atan)"))?,
         ),
     };
     let cost = if fl.switch("no-cost") {
-        super::charts::AtanCostSource::Skip
+        AtanCostSource::Skip
     } else {
         let exe = std::env::current_exe().map_err(|e| format!("current executable: {e}"))?;
-        super::charts::AtanCostSource::Callgrind { exe }
+        AtanCostSource::Callgrind { exe }
     };
     fl.finish()?;
-    super::charts::write_charts(std::path::Path::new(&out), only, &cost)
+    write_charts(std::path::Path::new(&out), only, &cost)
 }
 
 /// `host-sim tile-to-scene <args>`; returns the TOML snippet.

@@ -209,3 +209,37 @@ pub fn stick_slip_f32(omega0: f32, a_m_s: f32, speed_m_s: f32, atan: impl Fn(f32
     };
     omega0 * speed_m_s / (2.0 * ((PI - at) * speed_m_s + a_m_s))
 }
+
+/// One point of fig. 5's curve (P, m, k, U of [`StickSlipParams::fig5`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fig5Point {
+    /// μs − μc.
+    pub delta_mu: f64,
+    /// R of eq. 11.
+    pub r: f64,
+    /// f_ss of eq. 10, Hz.
+    pub f_ss_hz: f64,
+    /// Large-R asymptote kU/(2ΔμP), Hz.
+    pub asymptote_hz: f64,
+    /// ω0/2π (the Δμ → 0 limit), Hz.
+    pub f0_hz: f64,
+}
+
+/// Fig. 5's curve at `points + 1` values of Δμ, log-spaced over 1e-3…10 (the paper prints no
+/// axis range; this one shows both the plateau and the asymptote).
+pub fn fig5_curve(points: usize) -> Result<Vec<Fig5Point>, String> {
+    (0..=points)
+        .map(|i| {
+            let dm = 1e-3 * 1e4f64.powf(i as f64 / points.max(1) as f64);
+            let p = StickSlipParams::fig5(dm);
+            let r = stick_slip(&p).map_err(|e| e.to_string())?;
+            Ok(Fig5Point {
+                delta_mu: dm,
+                r: r.r,
+                f_ss_hz: r.f_ss_hz,
+                asymptote_hz: large_r_asymptote_hz(&p),
+                f0_hz: r.omega0_rad_s / (2.0 * core::f64::consts::PI),
+            })
+        })
+        .collect()
+}

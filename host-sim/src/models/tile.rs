@@ -126,3 +126,48 @@ impl GratingRegion {
         )
     }
 }
+
+/// One tile of the paper's sets at one force, with the paper's k and μ.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TileRow {
+    /// The tile.
+    pub tile: Tile,
+    /// Finger force, g.
+    pub force_g: f64,
+    /// θ of eq. 4, rad.
+    pub theta_rad: f64,
+    /// D of eq. 1, mm.
+    pub d_mm: f64,
+    /// A_c summed over the pad, mm².
+    pub a_c_mm2: f64,
+    /// A summed over the pad, mm².
+    pub a_mm2: f64,
+    /// λ = G + L of the grating region, µm.
+    pub wavelength_um: u32,
+    /// Drive amplitude of the grating region, ‰ (1000·A/A_max).
+    pub amplitude_permille: u16,
+}
+
+/// [`paper_tiles`] × [`PAPER_FORCES_G`] (tile-major), solved with safeguarded Newton.
+pub fn tile_rows() -> Result<Vec<TileRow>, String> {
+    let mut v = Vec::new();
+    for t in paper_tiles() {
+        for f in PAPER_FORCES_G {
+            let inp = GroovedInput::paper(t.groove_mm, t.land_mm, f);
+            let r = grooved(&inp, Solver::Safeguarded, &SolveOptions::default())
+                .map_err(|e| e.to_string())?;
+            let reg = tile_to_region(&inp).map_err(|e| e.to_string())?;
+            v.push(TileRow {
+                tile: t,
+                force_g: f,
+                theta_rad: r.theta_rad,
+                d_mm: r.d_mm,
+                a_c_mm2: r.a_c_mm2,
+                a_mm2: r.a_mm2,
+                wavelength_um: reg.wavelength_um,
+                amplitude_permille: reg.amplitude_permille,
+            });
+        }
+    }
+    Ok(v)
+}
