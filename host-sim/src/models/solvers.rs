@@ -5,10 +5,20 @@
 use super::grooved::{solve_theta, Eq4, Pad, SolveOptions, Solver};
 use super::tile::{paper_tiles, PAPER_FORCES_G};
 
+/// The options of θ_ref (with [`Solver::Bisection`]): to machine precision.
+fn reference_options() -> SolveOptions {
+    SolveOptions {
+        rtol: 1e-300,
+        max_iter: 5000,
+        ..SolveOptions::default()
+    }
+}
+
 /// The case set of the solver comparison: paper tiles × forces × k ∈ {0.008, 0.08, 0.8} ×
 /// μ ∈ {0, 0.5, 2}, keeping the cases that have a resolvable root (bisection to machine precision
 /// succeeds; this drops the k = 0.8 cases past the half circle). Returns (Eq4, k f_g) pairs.
 pub fn solver_cases() -> Vec<(Eq4, f64)> {
+    let refopt = reference_options();
     let mut v = Vec::new();
     for t in paper_tiles() {
         for f in PAPER_FORCES_G {
@@ -21,11 +31,6 @@ pub fn solver_cases() -> Vec<(Eq4, f64)> {
                     };
                     let pad = Pad::default();
                     let kfg = k * f * t.groove_mm / pad.area_mm2(f);
-                    let refopt = SolveOptions {
-                        rtol: 1e-300,
-                        max_iter: 5000,
-                        ..SolveOptions::default()
-                    };
                     if solve_theta(&eq, kfg, Solver::Bisection, &refopt).is_ok() {
                         v.push((eq, kfg));
                     }
@@ -61,11 +66,7 @@ pub struct SolverStats {
 /// precision.
 pub fn solver_stats(solver: Solver, rtol: f64) -> SolverStats {
     let cases = solver_cases();
-    let refopt = SolveOptions {
-        rtol: 1e-300,
-        max_iter: 5000,
-        ..SolveOptions::default()
-    };
+    let refopt = reference_options();
     let opt = SolveOptions {
         rtol,
         ..SolveOptions::default()
