@@ -6,11 +6,13 @@
 //! the atan chart plots the errors per implementation instead and the cost columns print `—`.
 
 use std::fmt::Write as _;
+use std::ops::Add;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use plotters::chart::MeshStyle;
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::element::{Drawable, PointCollection};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
@@ -502,8 +504,6 @@ struct Marker {
 /// Draws one marker per point and, if `label` is given, labels the series with a legend entry
 /// (`legend_line` drawn through the marker when given). A hollow marker is the filled one with
 /// a white one inside (plotters' stroked circles are ragged and its triangles are always filled).
-/// One match arm per shape because plotters' type-erased element (`DynElement`) cannot be
-/// drawn on a backend that borrows its file path.
 fn draw_markers<'a, DB: DrawingBackend + 'a, CT: CoordTranslate<From = (f64, f64)>>(
     c: &mut ChartContext<'a, DB, CT>,
     points: &[(f64, f64)],
@@ -511,78 +511,60 @@ fn draw_markers<'a, DB: DrawingBackend + 'a, CT: CoordTranslate<From = (f64, f64
     label: Option<String>,
     legend_line: Option<ShapeStyle>,
 ) -> Result<(), String> {
-    let Marker {
-        shape,
-        size_px,
-        colour,
-        hollow,
-    } = marker;
-    let outer = colour.filled();
-    let inner = if hollow { WHITE.filled() } else { outer };
     // Ring width 2 px; a triangle's edges move in by half the change of its circumradius.
-    let inset = match shape {
-        Shape::Triangle => 4,
-        _ => 2,
-    };
-    // Legend entries are 24 px wide; the marker sits in the middle.
-    let line = legend_line.unwrap_or_else(|| TRANSPARENT.stroke_width(0));
-    let path = move || PathElement::new(vec![(0, 0), (24, 0)], line);
-    let lpx = size_px.min(6);
-    match shape {
-        Shape::Circle => {
-            let one = move |at, s: i32| {
-                EmptyElement::at(at)
-                    + Circle::new((0, 0), s, outer)
-                    + Circle::new((0, 0), s - inset, inner)
-            };
-            let anno = c
-                .draw_series(points.iter().map(|&p| one(p, size_px)))
-                .map_err(err)?;
-            if let Some(l) = label {
-                anno.label(l).legend(move |(x, y)| {
-                    EmptyElement::at((x, y))
-                        + path()
-                        + Circle::new((12, 0), lpx, outer)
-                        + Circle::new((12, 0), lpx - inset, inner)
-                });
-            }
-        }
-        Shape::Square => {
-            let sq =
-                |cx: i32, s: i32, st: ShapeStyle| Rectangle::new([(cx - s, -s), (cx + s, s)], st);
-            let anno = c
-                .draw_series(points.iter().map(|&p| {
-                    EmptyElement::at(p) + sq(0, size_px, outer) + sq(0, size_px - inset, inner)
-                }))
-                .map_err(err)?;
-            if let Some(l) = label {
-                anno.label(l).legend(move |(x, y)| {
-                    EmptyElement::at((x, y))
-                        + path()
-                        + sq(12, lpx, outer)
-                        + sq(12, lpx - inset, inner)
-                });
-            }
-        }
-        Shape::Triangle => {
-            // A triangle's size is its circumradius: one pixel more to match the others' area.
-            let one = move |at, s: i32| {
-                EmptyElement::at(at)
-                    + TriangleMarker::new((0, 0), s + 1, outer)
-                    + TriangleMarker::new((0, 0), s + 1 - inset, inner)
-            };
-            let anno = c
-                .draw_series(points.iter().map(|&p| one(p, size_px)))
-                .map_err(err)?;
-            if let Some(l) = label {
-                anno.label(l).legend(move |(x, y)| {
-                    EmptyElement::at((x, y))
-                        + path()
-                        + TriangleMarker::new((12, 0), lpx + 1, outer)
-                        + TriangleMarker::new((12, 0), lpx + 1 - inset, inner)
-                });
-            }
-        }
+    match marker.shape {
+        Shape::Circle => marker_series(c, points, marker, label, legend_line, 2, |cx, s, st| {
+            Circle::new((cx, 0), s, st)
+        }),
+        Shape::Square => marker_series(c, points, marker, label, legend_line, 2, |cx, s, st| {
+            Rectangle::new([(cx - s, -s), (cx + s, s)], st)
+        }),
+        // A triangle's size is its circumradius: one pixel more to match the others' area.
+        Shape::Triangle => marker_series(c, points, marker, label, legend_line, 4, |cx, s, st| {
+            TriangleMarker::new((cx, 0), s + 1, st)
+        }),
+    }
+}
+
+/// [`draw_markers`] for one shape: `shape(x offset, half-width, style)` is the marker's element
+/// (centred `x offset` px right of its point), drawn twice, the inner one `inset` px smaller.
+/// Generic over the element because plotters' type-erased element (`DynElement`) cannot be
+/// drawn on a backend that borrows its file path.
+fn marker_series<'a, DB, CT, E>(
+    c: &mut ChartContext<'a, DB, CT>,
+    points: &[(f64, f64)],
+    marker: Marker,
+    label: Option<String>,
+    legend_line: Option<ShapeStyle>,
+    inset: i32,
+    shape: impl Fn(i32, i32, ShapeStyle) -> E + Copy + 'a,
+) -> Result<(), String>
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate<From = (f64, f64)>,
+    E: Drawable<DB> + 'a,
+    for<'b> &'b E: PointCollection<'b, (i32, i32)>,
+{
+    let outer = marker.colour.filled();
+    let inner = if marker.hollow { WHITE.filled() } else { outer };
+    let size_px = marker.size_px;
+    let anno = c
+        .draw_series(points.iter().map(|&p| {
+            EmptyElement::at(p) + shape(0, size_px, outer) + shape(0, size_px - inset, inner)
+        }))
+        .map_err(err)?;
+    if let Some(l) = label {
+        // Legend entries are 24 px wide; the marker sits in the middle.
+        let line = legend_line.unwrap_or_else(|| TRANSPARENT.stroke_width(0));
+        let lpx = size_px.min(6);
+        anno.label(l).legend(move |(x, y)| {
+            // Spelled out: with `E`'s bounds in scope, `EmptyElement + PathElement` would be
+            // inferred as `EmptyElement + E`.
+            let path = PathElement::new(vec![(0, 0), (24, 0)], line);
+            <EmptyElement<_, DB> as Add<PathElement<_>>>::add(EmptyElement::at((x, y)), path)
+                + shape(12, lpx, outer)
+                + shape(12, lpx - inset, inner)
+        });
     }
     Ok(())
 }
