@@ -71,6 +71,15 @@ impl Default for AdcParams {
     }
 }
 
+impl AdcParams {
+    /// The same model with `noise_lsb_rms` of noise per conversion, drawn from `seed`.
+    pub fn with_noise(mut self, noise_lsb_rms: f64, seed: u64) -> Self {
+        self.noise_lsb_rms = noise_lsb_rms;
+        self.seed = seed;
+        self
+    }
+}
+
 /// The rheostat and ADC.
 #[derive(Clone, Debug)]
 pub struct AdcModel {

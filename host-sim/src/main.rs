@@ -5,7 +5,6 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::{Parser, ValueEnum};
-use host_sim::adc::AdcParams;
 use host_sim::scenario::Scenario;
 use host_sim::sim::{self, SimParams};
 use host_sim::trajectory::Trajectory;
@@ -156,13 +155,9 @@ fn run(args: &Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
                     v_max_um_s: v,
                 },
             };
-            let mut p = SimParams::new(board, trajectory, args.duration);
-            p.adc = AdcParams {
-                noise_lsb_rms: args.noise,
-                offset_lsb: args.offset,
-                seed: args.seed,
-                ..AdcParams::default()
-            };
+            let mut p = SimParams::new(board, trajectory, args.duration)
+                .with_noise(args.noise, args.seed)
+                .with_offset(args.offset);
             p.preload = !args.no_preload;
             if let Some(path) = &args.scene {
                 let text = std::fs::read_to_string(path)

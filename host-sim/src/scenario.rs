@@ -34,7 +34,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use crate::adc::{AdcParams, FaultKind, FaultWindow};
+use crate::adc::{FaultKind, FaultWindow};
 use crate::metrics::{self, Metrics};
 use crate::sim::{self, SimParams, SimResult};
 use crate::trajectory::{Piece, Trajectory};
@@ -284,23 +284,19 @@ impl Scenario {
             pieces: self.segments.iter().map(Segment::piece).collect(),
         };
         let duration_s = self.duration_s.or(trajectory.duration_s()).unwrap_or(1.0);
-        let mut p = SimParams::new(board, trajectory, duration_s);
-        p.adc = AdcParams {
-            offset_lsb: self.offset_lsb,
-            noise_lsb_rms: self.noise_lsb,
-            seed: self.seed,
-            faults: self
-                .faults
-                .iter()
-                .map(|f| FaultWindow {
-                    kind: f.kind,
-                    start_us: (f.start_s * 1e6).round() as u64,
-                    end_us: (f.end_s * 1e6).round() as u64,
-                })
-                .collect(),
-            ..AdcParams::default()
-        };
-        Ok(p)
+        let faults = self
+            .faults
+            .iter()
+            .map(|f| FaultWindow {
+                kind: f.kind,
+                start_us: (f.start_s * 1e6).round() as u64,
+                end_us: (f.end_s * 1e6).round() as u64,
+            })
+            .collect();
+        Ok(SimParams::new(board, trajectory, duration_s)
+            .with_noise(self.noise_lsb, self.seed)
+            .with_offset(self.offset_lsb)
+            .with_faults(faults))
     }
 
     /// Runs the scenario.

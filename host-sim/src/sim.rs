@@ -13,7 +13,7 @@ use saw_core::sample::Sample;
 use saw_core::velocity::VelocityEstimator;
 use saw_core::{Config, ConfigError, Controller, Telemetry};
 
-use crate::adc::{AdcError, AdcModel, AdcParams};
+use crate::adc::{AdcError, AdcModel, AdcParams, FaultWindow};
 use crate::timer::{TimerModel, Waveform};
 use crate::trajectory::{State, Trajectory};
 
@@ -48,6 +48,31 @@ impl SimParams {
             preload: true,
             action_latency_us: 0,
         }
+    }
+
+    /// The same run with `config` in the controller instead of the default scene.
+    pub fn with_config(mut self, config: Config) -> Self {
+        self.config = config;
+        self
+    }
+
+    /// The same run with `noise_lsb_rms` of ADC noise drawn from `seed`
+    /// ([`AdcParams::with_noise`]).
+    pub fn with_noise(mut self, noise_lsb_rms: f64, seed: u64) -> Self {
+        self.adc = self.adc.with_noise(noise_lsb_rms, seed);
+        self
+    }
+
+    /// The same run with an ADC offset of `offset_lsb`.
+    pub fn with_offset(mut self, offset_lsb: f64) -> Self {
+        self.adc.offset_lsb = offset_lsb;
+        self
+    }
+
+    /// The same run with the ADC faulty in `faults`.
+    pub fn with_faults(mut self, faults: Vec<FaultWindow>) -> Self {
+        self.adc.faults = faults;
+        self
     }
 }
 

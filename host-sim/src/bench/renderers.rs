@@ -18,7 +18,6 @@ use saw_core::texture::{Grating, GratingRender, Texture};
 use super::methods::Dyn;
 
 use super::scenario::{self, constant, Input, Spec};
-use crate::adc::AdcParams;
 use crate::metrics;
 use crate::sim::{self, SimParams};
 use crate::trajectory::Trajectory;
@@ -111,13 +110,9 @@ pub fn core_run_with(
     seed: u64,
     estimator: Option<Dyn>,
 ) -> RenderStats {
-    let mut p = SimParams::new(&NUCLEO_F446RE, trajectory, duration_s);
-    p.config = grating_config(render);
-    p.adc = AdcParams {
-        noise_lsb_rms: noise_lsb,
-        seed,
-        ..AdcParams::default()
-    };
+    let p = SimParams::new(&NUCLEO_F446RE, trajectory, duration_s)
+        .with_config(grating_config(render))
+        .with_noise(noise_lsb, seed);
     let r = match estimator {
         Some(e) => sim::run_with(&p, e),
         None => sim::run(&p),

@@ -83,15 +83,8 @@ impl Spec {
     pub fn generate(&self) -> Vec<Obs> {
         let cal = Calibration::default();
         let mapper = PositionMapper::new(cal).expect("default calibration");
-        let mut adc = AdcModel::new(
-            cal,
-            AdcParams {
-                noise_lsb_rms: self.noise_lsb,
-                seed: self.seed,
-                ..AdcParams::default()
-            },
-        )
-        .expect("adc model");
+        let adc_params = AdcParams::default().with_noise(self.noise_lsb, self.seed);
+        let mut adc = AdcModel::new(cal, adc_params).expect("adc model");
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x5A5A_0F0F_1234_8765);
         let period = self.period_us();
         let n = (self.duration_s * self.rate_hz as f64).round() as u64;
