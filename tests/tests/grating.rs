@@ -4,7 +4,7 @@
 //! fail — ridges faster than the board or than half the sample rate, a rail mid-stroke — the
 //! line stays inside its caps and goes off.
 
-use host_sim::adc::{AdcParams, FaultKind, FaultWindow};
+use host_sim::adc::{FaultKind, FaultWindow};
 use host_sim::bench::renderers::grating_config;
 use host_sim::metrics;
 use host_sim::sim::{self, SimParams, SimResult};
@@ -21,13 +21,9 @@ fn run(
     noise: f64,
     seed: u64,
 ) -> SimResult {
-    let mut p = SimParams::new(&NUCLEO_F446RE, trajectory, s);
-    p.config = config;
-    p.adc = AdcParams {
-        noise_lsb_rms: noise,
-        seed,
-        ..AdcParams::default()
-    };
+    let p = SimParams::new(&NUCLEO_F446RE, trajectory, s)
+        .with_config(config)
+        .with_noise(noise, seed);
     sim::run(&p).unwrap()
 }
 
@@ -229,14 +225,14 @@ fn a_rail_mid_stroke_cuts_the_grating() {
         from_um: 10_500.0,
         speed_um_s: 100_000.0,
     };
-    let mut p = SimParams::new(&NUCLEO_F446RE, traj, 0.3);
-    p.config = grating_config(GratingRender::PositionPhase);
     // 20 ms of open wiper starting 0.1 ms after the ridge at 20 mm (t = 95 ms).
-    p.adc.faults = vec![FaultWindow {
-        kind: FaultKind::Open,
-        start_us: 95_100,
-        end_us: 115_100,
-    }];
+    let p = SimParams::new(&NUCLEO_F446RE, traj, 0.3)
+        .with_config(grating_config(GratingRender::PositionPhase))
+        .with_faults(vec![FaultWindow {
+            kind: FaultKind::Open,
+            start_us: 95_100,
+            end_us: 115_100,
+        }]);
     let r = sim::run(&p).unwrap();
     let clk = |us: f64| r.waveform.us_to_clocks(us);
     assert!(

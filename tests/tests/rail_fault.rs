@@ -1,7 +1,7 @@
 //! A sensor at either rail turns the gate off on the very sample that reads it, and the core
 //! logs an error naming the fault.
 
-use host_sim::adc::{AdcParams, FaultKind, FaultWindow};
+use host_sim::adc::{FaultKind, FaultWindow};
 use host_sim::scenario::region_sequence;
 use host_sim::sim::{self, burst_timer, SimParams};
 use host_sim::timer::TimerModel;
@@ -88,24 +88,21 @@ fn rail_turns_the_gate_off_on_the_same_sample_and_logs_an_error() {
 fn rail_fault_mid_stroke_in_the_closed_loop() {
     capture_logs();
     for kind in [FaultKind::Open, FaultKind::Short] {
-        let mut p = SimParams::new(
+        // 0.5 s: the finger is at 30 mm, region 1, 80 Hz bursts running. The window starts
+        // between two samples (0.50005 s), so the first faulty sample is at 0.5001 s.
+        let p = SimParams::new(
             &saw_boards::NUCLEO_G474RE,
             Trajectory::Constant {
                 from_um: 5_000.0,
                 speed_um_s: 50_000.0,
             },
             1.1,
-        );
-        // 0.5 s: the finger is at 30 mm, region 1, 80 Hz bursts running. The window starts
-        // between two samples (0.50005 s), so the first faulty sample is at 0.5001 s.
-        p.adc = AdcParams {
-            faults: vec![FaultWindow {
-                kind,
-                start_us: 500_050,
-                end_us: 600_000,
-            }],
-            ..AdcParams::default()
-        };
+        )
+        .with_faults(vec![FaultWindow {
+            kind,
+            start_us: 500_050,
+            end_us: 600_000,
+        }]);
         take_logs();
         let r = sim::run(&p).unwrap();
         let first = r.trace.iter().position(|t| t.t_us >= 500_050).unwrap();

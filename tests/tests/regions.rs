@@ -5,20 +5,13 @@
 //! noise seeds at 200 and 300 mm/s and of 8 at 20–100 mm/s (the 100 µm hysteresis plus up to
 //! two samples' travel, 2 × 30 µm at 300 mm/s; one sample's, 130 µm, on most seeds).
 
-use host_sim::adc::AdcParams;
 use host_sim::metrics;
 use host_sim::sim::{self, SimParams};
 use host_sim::trajectory::Trajectory;
 use saw_boards::NUCLEO_F446RE;
 
 fn params(trajectory: Trajectory, duration_s: f64, noise: f64, seed: u64) -> SimParams {
-    let mut p = SimParams::new(&NUCLEO_F446RE, trajectory, duration_s);
-    p.adc = AdcParams {
-        noise_lsb_rms: noise,
-        seed,
-        ..AdcParams::default()
-    };
-    p
+    SimParams::new(&NUCLEO_F446RE, trajectory, duration_s).with_noise(noise, seed)
 }
 
 /// 0 switches in 10 s at rest on each boundary with 3 LSB, on two noise seeds per boundary.

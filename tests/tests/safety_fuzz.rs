@@ -18,7 +18,7 @@
 //! Each seed also counts pulses per texture kind and asserts every kind produced some, so the
 //! fuzz cannot quietly shrink back to the easy cases.
 
-use host_sim::adc::{AdcParams, FaultKind, FaultWindow};
+use host_sim::adc::{FaultKind, FaultWindow};
 use host_sim::sim::{self, SimParams, SimResult};
 use host_sim::trajectory::{Piece, Trajectory};
 use rand::{Rng, SeedableRng};
@@ -400,15 +400,14 @@ fn fuzz(seed: u64, cases: usize) {
     for case in 0..cases {
         let board = &saw_boards::ALL[case % saw_boards::ALL.len()];
         let cfg = random_config(&mut rng, board.max_burst_hz);
-        let mut p = SimParams::new(board, random_trajectory(&mut rng), duration_s);
-        p.config = cfg.clone();
+        // The draws keep their order (scene, trajectory, faults, noise, its seed): a seed's cases
+        // stay the same.
+        let trajectory = random_trajectory(&mut rng);
         let faults = random_faults(&mut rng, (duration_s * 1e6) as u64);
-        p.adc = AdcParams {
-            noise_lsb_rms: rng.random_range(0.0..4.0),
-            seed: rng.random(),
-            faults: faults.clone(),
-            ..AdcParams::default()
-        };
+        let p = SimParams::new(board, trajectory, duration_s)
+            .with_config(cfg.clone())
+            .with_faults(faults.clone())
+            .with_noise(rng.random_range(0.0..4.0), rng.random());
         let r = match sim::run(&p) {
             Ok(r) => r,
             Err(sim::SimError::Config(_)) => {
