@@ -303,7 +303,7 @@ pub fn run(opts: &BenchOptions) -> Result<Vec<MethodResult>, String> {
         let (mixed, d) = scenario::mixed();
         let period_us = crate::sim::sample_period_us(&saw_boards::NUCLEO_F446RE);
         let grating = |render| {
-            renderers::core_run_with(
+            renderers::core_run(
                 render,
                 "mixed".into(),
                 mixed.clone(),

@@ -88,20 +88,9 @@ pub fn grating_config(render: GratingRender) -> saw_core::Config {
     cfg
 }
 
-/// Runs the core's renderer `render` over `trajectory` and scores its bursts.
+/// Runs the core's renderer `render` over `trajectory` and scores its bursts; `estimator` in the
+/// controller if given, the default one otherwise.
 pub fn core_run(
-    render: GratingRender,
-    case: String,
-    trajectory: Trajectory,
-    duration_s: f64,
-    noise_lsb: f64,
-    seed: u64,
-) -> RenderStats {
-    core_run_with(render, case, trajectory, duration_s, noise_lsb, seed, None)
-}
-
-/// As [`core_run`], with `estimator` in the controller instead of the default.
-pub fn core_run_with(
     render: GratingRender,
     case: String,
     trajectory: Trajectory,
@@ -234,6 +223,7 @@ pub fn run(seed: u64) -> Vec<RenderStats> {
                 duration,
                 2.0,
                 s,
+                None,
             ));
         }
         out.push(hybrid(v, s));
@@ -247,6 +237,7 @@ pub fn run(seed: u64) -> Vec<RenderStats> {
             d,
             2.0,
             seed,
+            None,
         ));
     }
     for render in renders {
@@ -258,6 +249,7 @@ pub fn run(seed: u64) -> Vec<RenderStats> {
             10.0,
             3.0,
             seed,
+            None,
         ));
     }
     out
