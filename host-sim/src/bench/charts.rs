@@ -96,14 +96,8 @@ pub fn scatter(
             )))
             .map_err(|e| e.to_string())?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| e.to_string())?;
-    root.present().map_err(|e| e.to_string())?;
-    Ok(())
+    // plotters' default place for the legend.
+    finish(chart, &root, SeriesLabelPosition::MiddleRight)
 }
 
 /// A log–log chart on both axes.
@@ -132,6 +126,22 @@ fn log_log_panel<'a, 'b>(
         .draw()
         .map_err(|e| e.to_string())?;
     Ok(chart)
+}
+
+/// Draws the legend of `chart` at `position` in the bench's box and writes `root`'s PNG.
+fn finish<'a, 'b: 'a>(
+    mut chart: LogLog<'a, 'b>,
+    root: &DrawingArea<BitMapBackend<'b>, Shift>,
+    position: SeriesLabelPosition,
+) -> Result<(), String> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| e.to_string())?;
+    root.present().map_err(|e| e.to_string())
 }
 
 /// One curve.
@@ -181,15 +191,7 @@ pub fn curves(
             .draw_series(pts.iter().map(|&p| Circle::new(p, 3, base.filled())))
             .map_err(|e| e.to_string())?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| e.to_string())?;
-    root.present().map_err(|e| e.to_string())?;
-    Ok(())
+    finish(chart, &root, SeriesLabelPosition::UpperLeft)
 }
 
 #[cfg(test)]
