@@ -353,6 +353,25 @@ fn interpolate(curve: &[(f64, f64)], x: f64) -> Option<f64> {
     })
 }
 
+/// Draws `pts` (RMS error against `x_label`) as a scatter with its Pareto front into `path` and
+/// lists the front's methods in `w` as `- {what}: …`.
+fn pareto_chart(
+    w: &mut String,
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    pts: &[charts::Point],
+    what: &str,
+) -> Result<(), String> {
+    charts::scatter(path, title, x_label, "RMS error, mm/s (log)", pts)?;
+    let front: Vec<String> = charts::pareto(pts)
+        .into_iter()
+        .map(|i| pts[i].name.clone())
+        .collect();
+    let _ = writeln!(w, "- {what}: {}", front.join(", "));
+    Ok(())
+}
+
 fn write_report(
     opts: &BenchOptions,
     all: &[Method],
@@ -666,36 +685,28 @@ fn write_report(
             .filter(|r| r.delay.lag_us > 0.0)
             .map(|r| point(r, r.delay.lag_us / 1_000.0, y_of(r) / 1_000.0))
             .collect();
-        charts::scatter(
+        pareto_chart(
+            w,
             &charts_dir.join(file),
             title,
             "lag at 20 mm/s, ms (log; methods with a negative mean lag left out)",
-            "RMS error, mm/s (log)",
             &pts,
+            what,
         )?;
-        let front: Vec<String> = charts::pareto(&pts)
-            .into_iter()
-            .map(|i| pts[i].name.clone())
-            .collect();
-        let _ = writeln!(w, "- {what}: {}", front.join(", "));
     }
     if results.iter().all(|r| r.cost_ir.is_some()) {
         let cost_pts: Vec<_> = results
             .iter()
             .map(|r| point(r, r.cost_ir.unwrap(), r.mixed.rms_um_s / 1_000.0))
             .collect();
-        charts::scatter(
+        pareto_chart(
+            w,
             &charts_dir.join("estimators-error-vs-cost.png"),
             "Velocity RMS error (mixed, 2 LSB, 10 kHz) against cost — * = Pareto",
             "x86-64 instructions per sample (callgrind, log)",
-            "RMS error, mm/s (log)",
             &cost_pts,
+            "RMS mixed against cost",
         )?;
-        let front: Vec<String> = charts::pareto(&cost_pts)
-            .into_iter()
-            .map(|i| cost_pts[i].name.clone())
-            .collect();
-        let _ = writeln!(w, "- RMS mixed against cost: {}", front.join(", "));
     }
     let pick = [
         "diff4",
