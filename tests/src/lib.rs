@@ -1,10 +1,14 @@
 //! System tests live in `tests/tests/`; this crate holds what they share: a `log` capture (so a
-//! test can assert on the core's log lines) and small builders.
+//! test can assert on the core's log lines), [`feed`] (a controller and timer model driven one
+//! sample at a time) and small builders.
 
 use std::sync::{Mutex, Once};
 use std::thread::ThreadId;
 
+use host_sim::timer::TimerModel;
 use saw_core::burst::BurstTimer;
+use saw_core::sample::Sample;
+use saw_core::{Controller, Output};
 
 /// One captured log record.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -57,6 +61,20 @@ pub fn take_logs() -> Vec<Line> {
     let (mine, rest): (Vec<_>, Vec<_>) = all.drain(..).partition(|(id, _)| *id == me);
     *all = rest;
     mine.into_iter().map(|(_, l)| l).collect()
+}
+
+/// One sample by hand: `code` at `t_us` into `ctrl`, and its gate action, if any, applied to `tm`
+/// at that time (`sim::run`'s loop without a trajectory, an ADC or a latency). Returns the
+/// controller's output.
+pub fn feed(ctrl: &mut Controller, tm: &mut TimerModel, code: u16, t_us: u64) -> Output {
+    let out = ctrl.on_sample(Sample {
+        code,
+        t_us: t_us as u32,
+    });
+    if let Some(a) = out.action {
+        tm.apply(t_us * tm.clock_hz() as u64 / 1_000_000, a);
+    }
+    out
 }
 
 /// A 16-bit burst timer at 180 MHz (an APB2 timer on the F446 at full clock), for the prescaler

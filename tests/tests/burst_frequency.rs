@@ -8,10 +8,9 @@
 
 use host_sim::timer::TimerModel;
 use saw_core::burst::{BurstCommand, BurstTimer};
-use saw_core::sample::Sample;
 use saw_core::texture::Texture;
 use saw_core::Controller;
-use saw_tests::{log_sweep_millihz, timers};
+use saw_tests::{feed, log_sweep_millihz, timers};
 
 /// Runs a one-region scene at `millihz` through the controller at rest for `periods` whole burst
 /// periods (at least 20 ms) and returns the frequency measured from the rising edges.
@@ -34,13 +33,7 @@ fn produced_hz(timer: BurstTimer, millihz: u32, periods: u32) -> f64 {
     let clk = |t_us: u64| t_us * timer.clock_hz as u64 / 1_000_000;
     let mut t_us = 0u64;
     while t_us < duration_us {
-        let out = ctrl.on_sample(Sample {
-            code,
-            t_us: t_us as u32,
-        });
-        if let Some(a) = out.action {
-            tm.apply(clk(t_us), a);
-        }
+        feed(&mut ctrl, &mut tm, code, t_us);
         t_us += 100;
     }
     let w = tm.finish(clk(duration_us));

@@ -10,7 +10,7 @@ use saw_core::gate::GateAction;
 use saw_core::position::SensorFault;
 use saw_core::sample::Sample;
 use saw_core::Controller;
-use saw_tests::{capture_logs, take_logs};
+use saw_tests::{capture_logs, feed, take_logs};
 
 #[test]
 fn rail_turns_the_gate_off_on_the_same_sample_and_logs_an_error() {
@@ -28,15 +28,7 @@ fn rail_turns_the_gate_off_on_the_same_sample_and_logs_an_error() {
             let clk = |t_us: u64| t_us * timer.clock_hz as u64 / 1_000_000;
             let mut t = 0u64;
             for _ in 0..200 {
-                if let Some(a) = ctrl
-                    .on_sample(Sample {
-                        code: good,
-                        t_us: t as u32,
-                    })
-                    .action
-                {
-                    tm.apply(clk(t), a);
-                }
+                feed(&mut ctrl, &mut tm, good, t);
                 t += 100;
             }
             // Run until the line is high, so Off has something to cut.

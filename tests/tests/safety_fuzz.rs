@@ -487,7 +487,6 @@ fn caps_hold_on_the_waveform_seed_3() {
 /// on × (1000 − cap)/cap before it may start again.
 #[test]
 fn restart_after_off_respects_the_duty_cap() {
-    use saw_core::sample::Sample;
     let board = &saw_boards::NUCLEO_F446RE;
     let timer = sim::burst_timer(board);
     let mut ctrl = saw_core::Controller::new(timer, 100).unwrap();
@@ -501,15 +500,7 @@ fn restart_after_off_respects_the_duty_cap() {
     // samples: the restart comes ~3 ms after the fall instead of 30 ms.
     for k in 0..1_000u64 {
         let c = if (210..220).contains(&k) { 0 } else { code };
-        if let Some(a) = ctrl
-            .on_sample(Sample {
-                code: c,
-                t_us: t as u32,
-            })
-            .action
-        {
-            tm.apply(clk(t), a);
-        }
+        saw_tests::feed(&mut ctrl, &mut tm, c, t);
         t += 100;
     }
     let w = tm.finish(clk(t));
