@@ -6,8 +6,7 @@
 
 use host_sim::bench::measure::{errors, pool, replay};
 use host_sim::bench::methods::{all, Method};
-use host_sim::bench::reference_spec;
-use host_sim::bench::scenario::{self, Input, Obs, Spec};
+use host_sim::bench::scenario::{self, reference_spec, Input, Obs, Spec};
 use host_sim::trajectory::{Piece, Trajectory};
 
 const T_US: u32 = 100;

@@ -16,7 +16,7 @@ use std::process::Command;
 use saw_core::velocity::VelocityEstimator;
 
 use super::methods::Method;
-use super::scenario::Input;
+use super::scenario::{reference_spec, Input};
 
 /// Environment variable that switches the executable into cost-kernel mode.
 pub const COST_ENV: &str = "SAW_BENCH_COST";
@@ -37,7 +37,7 @@ pub fn cost_kernel(e: &mut dyn VelocityEstimator, xs: &[(i32, u32)]) -> i64 {
 
 /// Cost-kernel mode: run `method` over the reference stream once.
 pub fn run_kernel(method: &Method, seed: u64) {
-    let spec = super::reference_spec(seed);
+    let spec = reference_spec(seed);
     let period = spec.period_us();
     let xs: Vec<(i32, u32)> = spec
         .generate()

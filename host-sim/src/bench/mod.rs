@@ -25,7 +25,7 @@ use std::sync::Mutex;
 use measure::{bursts, errors, pool, replay, Errors};
 use methods::{Method, DEFAULT, FOAW_CANDIDATES};
 use saw_core::texture::GratingRender;
-use scenario::{Obs, Spec};
+use scenario::{reference_spec, Obs, Spec};
 
 /// Bench options.
 #[derive(Clone, Debug)]
@@ -63,14 +63,6 @@ pub const LAMBDA_UM: f64 = 1_000.0;
 pub const GRATING_START_UM_S: f64 = 5_000.0;
 /// A raised start threshold evaluated alongside (the report's proposal for target 3).
 pub const GRATING_START_HIGH_UM_S: f64 = 15_000.0;
-
-/// The reference stream: the mixed motion at 2 LSB and 10 kHz.
-pub fn reference_spec(seed: u64) -> Spec {
-    let (t, d) = scenario::mixed();
-    let mut s = Spec::new(t, d, 2.0, 10_000);
-    s.seed = seed;
-    s
-}
 
 /// Everything measured for one method.
 #[derive(Clone, Debug, Default)]

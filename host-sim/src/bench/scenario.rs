@@ -165,6 +165,14 @@ pub fn mixed() -> (Trajectory, f64) {
     (Trajectory::Piecewise { pieces }, d)
 }
 
+/// The reference stream: the mixed motion at 2 LSB and 10 kHz.
+pub fn reference_spec(seed: u64) -> Spec {
+    let (t, d) = mixed();
+    let mut s = Spec::new(t, d, 2.0, 10_000);
+    s.seed = seed;
+    s
+}
+
 /// Constant speed `v` (µm/s) from 10 mm, long enough for ≥ 0.1 s and ≤ 40 mm of travel.
 pub fn constant(v: f64) -> (Trajectory, f64) {
     let d = (40_000.0 / v).clamp(0.1, 0.5);
