@@ -152,6 +152,12 @@ fn range_refusals_name_the_unit() {
              to 1000 ms",
         ),
         (
+            "[[region]]\nkind = \"material\"\ne_object_pa = 2e9\nnu_object = 0.3\n\
+             e_skin_pa = 1e6\nnu_skin = 0.5\nsigma_um = 0\n",
+            "sigma.toml:7:12: `region[0].sigma_um`: 0 µm is outside the allowed 0.001 µm to \
+             10000 µm",
+        ),
+        (
             "[[region]]\nkind = \"material\"\ndelta_mu = inf\n",
             "mu.toml:3:12: `region[0].delta_mu`: inf is not a number; it must be from 0 to 100",
         ),

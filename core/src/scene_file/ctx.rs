@@ -92,11 +92,12 @@ impl Ctx<'_> {
 /// The unit a field's name ends in, as a message shows it after a number (" mm", " %"); empty
 /// for a dimensionless field (`delta_mu`).
 pub(super) fn unit(field: &str) -> &'static str {
-    const UNITS: [(&str, &str); 9] = [
+    const UNITS: [(&str, &str); 10] = [
         ("_percent", " %"),
         ("_mm_s", " mm/s"),
         ("_n_per_m", " N/m"),
         ("_mm", " mm"),
+        ("_um", " µm"),
         ("_ms", " ms"),
         ("_hz", " Hz"),
         ("_pa", " Pa"),

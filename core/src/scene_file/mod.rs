@@ -284,6 +284,22 @@ mod tests {
     }
 
     /// Every shipped scene loads on a 16-bit and a 32-bit burst timer.
+    /// A material region's values arrive in the core's SI units: grams to kilograms, the rest
+    /// as written (expected values converted by hand).
+    #[test]
+    fn material_values_in_si_units() {
+        let text = "[[region]]\nkind = \"material\"\ndelta_mu = 0.5\nnormal_force_n = 2\n\
+                    mass_g = 10\nstiffness_n_per_m = 800\n";
+        let cfg = load_for_board("m.toml", text, TIMER, 100).unwrap();
+        let Texture::Material(m) = cfg.scene.textures[0] else {
+            panic!("{:?}", cfg.scene.textures[0]);
+        };
+        assert_eq!(
+            (m.delta_mu, m.normal_force_n, m.mass_kg, m.stiffness_n_per_m),
+            (0.5, 2.0, 0.01, 800.0)
+        );
+    }
+
     #[test]
     fn shipped_scenes_load() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
