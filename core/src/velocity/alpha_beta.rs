@@ -13,7 +13,7 @@
 
 use super::common::{
     alpha_beta_group_delay_us, alpha_beta_stable, alpha_beta_warmup, check_period,
-    critically_damped_gains, to_um_s, SlotClock, Tick, TuningError,
+    critically_damped_gains, to_um_s, Sampler, Step, TuningError,
 };
 use super::VelocityEstimator;
 
@@ -28,11 +28,10 @@ pub struct AlphaBeta {
     last_x: i32,
     /// Velocity estimate, µm per slot.
     v: f32,
-    clock: SlotClock,
+    sampler: Sampler,
     /// Samples seen since (re)start, saturating.
     seen: u32,
     warmup: u32,
-    last_out: Option<i32>,
 }
 
 impl AlphaBeta {
@@ -57,10 +56,9 @@ impl AlphaBeta {
             e: 0.0,
             last_x: 0,
             v: 0.0,
-            clock: SlotClock::new(sample_period_us),
+            sampler: Sampler::new(sample_period_us),
             seen: 0,
             warmup,
-            last_out: None,
         })
     }
 
@@ -68,16 +66,23 @@ impl AlphaBeta {
     pub fn gains(&self) -> (f32, f32) {
         (self.alpha, self.beta)
     }
+
+    /// Forgets the state (the sampler is the caller's).
+    fn clear(&mut self) {
+        self.e = 0.0;
+        self.last_x = 0;
+        self.v = 0.0;
+        self.seen = 0;
+    }
 }
 
 impl VelocityEstimator for AlphaBeta {
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
-        let m = match self.clock.tick(t_us) {
-            Tick::Duplicate => return self.last_out,
-            Tick::Slots(m) => m,
-            Tick::First | Tick::Gap => {
-                self.reset();
-                self.clock.tick(t_us);
+        let m = match self.sampler.step(t_us) {
+            Step::Repeat => return self.sampler.last_out(),
+            Step::Slots(m) => m,
+            Step::Start => {
+                self.clear();
                 self.last_x = position_um;
                 self.seen = 1;
                 return None;
@@ -92,22 +97,17 @@ impl VelocityEstimator for AlphaBeta {
         self.v += self.beta * r / mf;
         self.seen = self.seen.saturating_add(1);
         let out = (self.seen > self.warmup)
-            .then(|| to_um_s(self.v * 1e6 / self.clock.period_us() as f32));
-        self.last_out = out;
-        out
+            .then(|| to_um_s(self.v * 1e6 / self.sampler.period_us() as f32));
+        self.sampler.answer(out)
     }
 
     fn reset(&mut self) {
-        self.e = 0.0;
-        self.last_x = 0;
-        self.v = 0.0;
-        self.seen = 0;
-        self.clock.reset();
-        self.last_out = None;
+        self.clear();
+        self.sampler.reset();
     }
 
     fn group_delay_us(&self) -> u32 {
-        alpha_beta_group_delay_us(self.alpha, self.beta, self.clock.period_us())
+        alpha_beta_group_delay_us(self.alpha, self.beta, self.sampler.period_us())
     }
 }
 

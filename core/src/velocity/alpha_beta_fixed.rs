@@ -23,7 +23,7 @@ use fixed::types::I16F16;
 
 use super::common::{
     alpha_beta_group_delay_us, alpha_beta_stable, alpha_beta_warmup, check_period,
-    critically_damped_gains, SlotClock, Tick, TuningError,
+    critically_damped_gains, Sampler, Step, TuningError,
 };
 use super::VelocityEstimator;
 
@@ -37,10 +37,9 @@ pub struct AlphaBetaFixed {
     /// Velocity, µm per slot.
     v: I16F16,
     last_x: i32,
-    clock: SlotClock,
+    sampler: Sampler,
     seen: u32,
     warmup: u32,
-    last_out: Option<i32>,
 }
 
 /// a·b rounded to nearest (ties up), saturating.
@@ -72,10 +71,9 @@ impl AlphaBetaFixed {
             e: I16F16::ZERO,
             v: I16F16::ZERO,
             last_x: 0,
-            clock: SlotClock::new(sample_period_us),
+            sampler: Sampler::new(sample_period_us),
             seen: 0,
             warmup,
-            last_out: None,
         })
     }
 
@@ -83,16 +81,23 @@ impl AlphaBetaFixed {
     pub fn velocity_per_slot(&self) -> I16F16 {
         self.v
     }
+
+    /// Forgets the state (the sampler is the caller's).
+    fn clear(&mut self) {
+        self.e = I16F16::ZERO;
+        self.v = I16F16::ZERO;
+        self.last_x = 0;
+        self.seen = 0;
+    }
 }
 
 impl VelocityEstimator for AlphaBetaFixed {
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
-        let m = match self.clock.tick(t_us) {
-            Tick::Duplicate => return self.last_out,
-            Tick::Slots(m) => m,
-            Tick::First | Tick::Gap => {
-                self.reset();
-                self.clock.tick(t_us);
+        let m = match self.sampler.step(t_us) {
+            Step::Repeat => return self.sampler.last_out(),
+            Step::Slots(m) => m,
+            Step::Start => {
+                self.clear();
                 self.last_x = position_um;
                 self.seen = 1;
                 return None;
@@ -118,25 +123,20 @@ impl VelocityEstimator for AlphaBetaFixed {
         let out = (self.seen > self.warmup).then(|| {
             // µm/slot (Q16) × slots per second, rounded.
             // u32 division (one udiv on the M4); the period is at least 10 µs.
-            let per_s = (1_000_000 / self.clock.period_us()) as i64;
+            let per_s = (1_000_000 / self.sampler.period_us()) as i64;
             ((self.v.to_bits() as i64 * per_s + (1 << 15)) >> 16) as i32
         });
-        self.last_out = out;
-        out
+        self.sampler.answer(out)
     }
 
     fn reset(&mut self) {
-        self.e = I16F16::ZERO;
-        self.v = I16F16::ZERO;
-        self.last_x = 0;
-        self.seen = 0;
-        self.clock.reset();
-        self.last_out = None;
+        self.clear();
+        self.sampler.reset();
     }
 
     fn group_delay_us(&self) -> u32 {
         let alpha = 1.0 - self.one_minus_alpha.to_num::<f32>();
-        alpha_beta_group_delay_us(alpha, self.beta.to_num::<f32>(), self.clock.period_us())
+        alpha_beta_group_delay_us(alpha, self.beta.to_num::<f32>(), self.sampler.period_us())
     }
 }
 

@@ -6,7 +6,7 @@
 //! 113 mm/s of velocity noise — the reason it is only a reference point.
 //! Group delay: K·T_s / 2.
 
-use super::common::{check_period, to_um_s, SlotClock, Tick};
+use super::common::{check_period, to_um_s, Sampler, Step};
 use super::{EstimatorError, VelocityEstimator};
 
 /// K-sample backward difference.
@@ -17,8 +17,7 @@ pub struct BackwardDifference<const K: usize> {
     head: usize,
     len: usize,
     slot: u32,
-    clock: SlotClock,
-    last_out: Option<i32>,
+    sampler: Sampler,
 }
 
 /// The one-sample difference.
@@ -36,27 +35,29 @@ impl<const K: usize> BackwardDifference<K> {
             head: 0,
             len: 0,
             slot: 0,
-            clock: SlotClock::new(sample_period_us),
-            last_out: None,
+            sampler: Sampler::new(sample_period_us),
         })
+    }
+
+    /// Forgets the positions (the sampler is the caller's).
+    fn clear(&mut self) {
+        self.head = 0;
+        self.len = 0;
+        self.slot = 0;
     }
 }
 
 impl<const K: usize> VelocityEstimator for BackwardDifference<K> {
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
-        match self.clock.tick(t_us) {
-            Tick::Duplicate => return self.last_out,
-            Tick::First => {}
-            Tick::Gap => {
-                self.reset();
-                self.clock.tick(t_us);
-            }
-            Tick::Slots(m) => self.slot = self.slot.wrapping_add(m),
+        match self.sampler.step(t_us) {
+            Step::Repeat => return self.sampler.last_out(),
+            Step::Start => self.clear(),
+            Step::Slots(m) => self.slot = self.slot.wrapping_add(m),
         }
         let out = if self.len == K {
             let (x_old, s_old) = self.ring[self.head];
             let span_s =
-                self.slot.wrapping_sub(s_old) as f32 * self.clock.period_us() as f32 * 1e-6;
+                self.slot.wrapping_sub(s_old) as f32 * self.sampler.period_us() as f32 * 1e-6;
             let v = (position_um as f32 - x_old as f32) / span_s;
             self.ring[self.head] = (position_um, self.slot);
             self.head = (self.head + 1) % K;
@@ -66,20 +67,16 @@ impl<const K: usize> VelocityEstimator for BackwardDifference<K> {
             self.len += 1;
             None
         };
-        self.last_out = out;
-        out
+        self.sampler.answer(out)
     }
 
     fn reset(&mut self) {
-        self.head = 0;
-        self.len = 0;
-        self.slot = 0;
-        self.clock.reset();
-        self.last_out = None;
+        self.clear();
+        self.sampler.reset();
     }
 
     fn group_delay_us(&self) -> u32 {
-        K as u32 * self.clock.period_us() / 2
+        K as u32 * self.sampler.period_us() / 2
     }
 }
 

@@ -23,7 +23,7 @@
 //! Group delay: n·T_s/2 of the window in use ([`VelocityEstimator::group_delay_us`] reports the
 //! current one; it is n_max·T_s/2 at a steady speed whose noise stays inside the band).
 
-use super::common::{check_period, to_um_s, SlotClock, Tick, TuningError};
+use super::common::{check_period, to_um_s, Sampler, Step, TuningError};
 use super::VelocityEstimator;
 
 /// Which line FOAW fits.
@@ -46,9 +46,8 @@ pub struct Foaw<const N: usize> {
     newest: usize,
     len: usize,
     slot: u32,
-    clock: SlotClock,
+    sampler: Sampler,
     window: usize,
-    last_out: Option<i32>,
 }
 
 impl<const N: usize> Foaw<N> {
@@ -68,10 +67,16 @@ impl<const N: usize> Foaw<N> {
             newest: 0,
             len: 0,
             slot: 0,
-            clock: SlotClock::new(sample_period_us),
+            sampler: Sampler::new(sample_period_us),
             window: 0,
-            last_out: None,
         })
+    }
+
+    /// Forgets the samples and the window (the sampler is the caller's).
+    fn clear(&mut self) {
+        self.len = 0;
+        self.slot = 0;
+        self.window = 0;
     }
 
     /// Steps back of the window used for the last estimate (0 before the first).
@@ -136,38 +141,30 @@ impl<const N: usize> Foaw<N> {
 
 impl<const N: usize> VelocityEstimator for Foaw<N> {
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
-        match self.clock.tick(t_us) {
-            Tick::Duplicate => return self.last_out,
-            Tick::First => {}
-            Tick::Gap => {
-                self.reset();
-                self.clock.tick(t_us);
-            }
-            Tick::Slots(m) => self.slot = self.slot.wrapping_add(m),
+        match self.sampler.step(t_us) {
+            Step::Repeat => return self.sampler.last_out(),
+            Step::Start => self.clear(),
+            Step::Slots(m) => self.slot = self.slot.wrapping_add(m),
         }
         self.newest = (self.newest + 1) % N;
         self.ring[self.newest] = (position_um, self.slot);
         self.len = (self.len + 1).min(N);
         let out = if self.len >= 2 {
-            let per_s = 1e6 / self.clock.period_us() as f32;
+            let per_s = 1e6 / self.sampler.period_us() as f32;
             Some(to_um_s(self.slope() * per_s))
         } else {
             None
         };
-        self.last_out = out;
-        out
+        self.sampler.answer(out)
     }
 
     fn reset(&mut self) {
-        self.len = 0;
-        self.slot = 0;
-        self.window = 0;
-        self.clock.reset();
-        self.last_out = None;
+        self.clear();
+        self.sampler.reset();
     }
 
     fn group_delay_us(&self) -> u32 {
-        self.window as u32 * self.clock.period_us() / 2
+        self.window as u32 * self.sampler.period_us() / 2
     }
 }
 

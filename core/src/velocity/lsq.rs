@@ -5,7 +5,7 @@
 //! the straight line between its neighbours, so a ramp stays exact through it, and only a longer
 //! silence or time running backwards restarts the window.
 
-use super::common::{check_period, SlotClock, Tick};
+use super::common::{check_period, Sampler, Tick};
 use super::{EstimatorError, VelocityEstimator};
 
 /// Least-squares slope over the last `N` samples, integer arithmetic.
@@ -19,9 +19,7 @@ pub struct LsqSlope<const N: usize> {
     sum: i64,
     /// Σ k·x_k with k = 0 for the oldest entry.
     weighted: i64,
-    clock: SlotClock,
-    /// The last estimate (a duplicate reading returns it).
-    last_out: Option<i32>,
+    sampler: Sampler,
     /// µm/s per unit of 2·Σ(k − (N−1)/2)·x_k, Q32: 6·10⁶ / (N (N²−1) T_s).
     gain_q32: i64,
 }
@@ -43,8 +41,7 @@ impl<const N: usize> LsqSlope<N> {
             len: 0,
             sum: 0,
             weighted: 0,
-            clock: SlotClock::new(sample_period_us),
-            last_out: None,
+            sampler: Sampler::new(sample_period_us),
             gain_q32,
         })
     }
@@ -92,24 +89,23 @@ impl<const N: usize> LsqSlope<N> {
         Some(v.clamp(i32::MIN as i64, i32::MAX as i64) as i32)
     }
 
-    /// Empties the window (the clock is left as it is).
+    /// Empties the window (the sampler is the caller's).
     fn clear(&mut self) {
         self.head = 0;
         self.len = 0;
         self.sum = 0;
         self.weighted = 0;
-        self.last_out = None;
     }
 }
 
 impl<const N: usize> VelocityEstimator for LsqSlope<N> {
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
-        match self.clock.tick(t_us) {
-            Tick::Duplicate => return self.last_out,
-            Tick::Gap => {
-                self.clear();
-                // The clock restarted on this sample already; only the window is cleared.
-            }
+        // The clock's own tick, not `Sampler::step`: on a gap the clock has restarted on this
+        // sample already, keeping its sub-µs grid phase (`step` would restart it from scratch, as
+        // the other estimators do), and only the window is cleared.
+        match self.sampler.tick(t_us) {
+            Tick::Duplicate => return self.sampler.last_out(),
+            Tick::Gap => self.clear(),
             Tick::Slots(m) if m > 1 && self.len > 0 => {
                 // Lost samples: fill their slots on the line between the neighbours.
                 let newest = self.window[(self.head + self.len - 1) % N];
@@ -121,17 +117,16 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
             Tick::First | Tick::Slots(_) => {}
         }
         self.push(position_um);
-        self.last_out = self.estimate();
-        self.last_out
+        self.sampler.answer(self.estimate())
     }
 
     fn reset(&mut self) {
         self.clear();
-        self.clock.reset();
+        self.sampler.reset();
     }
 
     fn group_delay_us(&self) -> u32 {
-        (N as u32 - 1) * self.clock.period_us() / 2
+        (N as u32 - 1) * self.sampler.period_us() / 2
     }
 }
 

@@ -14,7 +14,7 @@
 //! against noise. Group delay: declared as one sample (the Euler step); there is no linear lag to
 //! speak of — the bench measures the effective one.
 
-use super::common::{check_period, to_um_s, SlotClock, Tick, TuningError};
+use super::common::{check_period, to_um_s, Sampler, Step, TuningError};
 use super::VelocityEstimator;
 
 /// λ₁ (Levant 2003).
@@ -35,8 +35,7 @@ pub struct SuperTwisting {
     /// Velocity estimate, µm/s.
     z1: f32,
     origin: i32,
-    clock: SlotClock,
-    last_out: Option<i32>,
+    sampler: Sampler,
 }
 
 impl SuperTwisting {
@@ -53,20 +52,25 @@ impl SuperTwisting {
             z0: 0.0,
             z1: 0.0,
             origin: 0,
-            clock: SlotClock::new(sample_period_us),
-            last_out: None,
+            sampler: Sampler::new(sample_period_us),
         })
+    }
+
+    /// Forgets the state (the sampler is the caller's).
+    fn clear(&mut self) {
+        self.z0 = 0.0;
+        self.z1 = 0.0;
+        self.origin = 0;
     }
 }
 
 impl VelocityEstimator for SuperTwisting {
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
-        let m = match self.clock.tick(t_us) {
-            Tick::Duplicate => return self.last_out,
-            Tick::Slots(m) => m,
-            Tick::First | Tick::Gap => {
-                self.reset();
-                self.clock.tick(t_us);
+        let m = match self.sampler.step(t_us) {
+            Step::Repeat => return self.sampler.last_out(),
+            Step::Slots(m) => m,
+            Step::Start => {
+                self.clear();
                 // Relative coordinates keep f32 resolution on the 63 mm stroke.
                 self.origin = position_um;
                 return None;
@@ -85,21 +89,16 @@ impl VelocityEstimator for SuperTwisting {
             self.z0 += self.h * (self.z1 - self.k1 * libm::sqrtf(e.abs()) * s);
             self.z1 -= self.h * self.k0 * s;
         }
-        let out = Some(to_um_s(self.z1));
-        self.last_out = out;
-        out
+        self.sampler.answer(Some(to_um_s(self.z1)))
     }
 
     fn reset(&mut self) {
-        self.z0 = 0.0;
-        self.z1 = 0.0;
-        self.origin = 0;
-        self.clock.reset();
-        self.last_out = None;
+        self.clear();
+        self.sampler.reset();
     }
 
     fn group_delay_us(&self) -> u32 {
-        self.clock.period_us()
+        self.sampler.period_us()
     }
 }
 
