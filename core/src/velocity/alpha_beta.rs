@@ -46,7 +46,7 @@ impl AlphaBeta {
     pub fn with_gains(sample_period_us: u32, alpha: f32, beta: f32) -> Result<Self, TuningError> {
         check_period(sample_period_us)?;
         if !alpha_beta_stable(alpha, beta) {
-            return Err(TuningError::BadGain);
+            return Err(TuningError::UnstableGains { alpha, beta });
         }
         // No output until the start transient (from v̂ = 0) has had about two group delays.
         let warmup = alpha_beta_warmup(alpha, beta);
@@ -176,11 +176,14 @@ mod tests {
         assert_eq!(e.update(0, 10_000), None);
         assert_eq!(
             AlphaBeta::critically_damped(100, 1.0).err(),
-            Some(TuningError::BadGain)
+            Some(TuningError::BadPole { pole: 1.0 })
         );
         assert_eq!(
             AlphaBeta::with_gains(100, 1.5, 1.1).err(),
-            Some(TuningError::BadGain)
+            Some(TuningError::UnstableGains {
+                alpha: 1.5,
+                beta: 1.1
+            })
         );
     }
 }

@@ -23,7 +23,7 @@ use fixed::types::I16F16;
 
 use super::common::{
     alpha_beta_group_delay_us, alpha_beta_stable, alpha_beta_warmup, check_period,
-    critically_damped_gains, Sampler, Step, TuningError,
+    critically_damped_gains, Sampler, Step, TuningError, MIN_FIXED_BETA,
 };
 use super::VelocityEstimator;
 
@@ -58,8 +58,11 @@ impl AlphaBetaFixed {
     /// Explicit gains, inside the stability triangle and not below the I16F16 resolution.
     pub fn with_gains(sample_period_us: u32, alpha: f32, beta: f32) -> Result<Self, TuningError> {
         check_period(sample_period_us)?;
-        if !(alpha_beta_stable(alpha, beta) && beta >= 1.0 / 8_192.0) {
-            return Err(TuningError::BadGain);
+        if !alpha_beta_stable(alpha, beta) {
+            return Err(TuningError::UnstableGains { alpha, beta });
+        }
+        if beta < MIN_FIXED_BETA {
+            return Err(TuningError::BetaBelowResolution { beta });
         }
         let one_minus_alpha = I16F16::from_num(1.0 - alpha);
         let beta_q = I16F16::from_num(beta);
@@ -215,5 +218,23 @@ mod tests {
         e.reset();
         assert_eq!(e.update(0, 50_000), None);
         assert_eq!(e.group_delay_us(), 850);
+    }
+
+    /// Gains are refused with their values: outside the stability triangle, or a β below the
+    /// I16F16 resolution (1/8192 = 0.0001220703125 is the smallest taken).
+    #[test]
+    fn refuses_gains_with_their_values() {
+        assert_eq!(
+            AlphaBetaFixed::with_gains(100, 2.0, 0.5).err(),
+            Some(TuningError::UnstableGains {
+                alpha: 2.0,
+                beta: 0.5
+            })
+        );
+        assert_eq!(
+            AlphaBetaFixed::with_gains(100, 0.5, 0.000_122).err(),
+            Some(TuningError::BetaBelowResolution { beta: 0.000_122 })
+        );
+        assert!(AlphaBetaFixed::with_gains(100, 0.5, 1.0 / 8_192.0).is_ok());
     }
 }

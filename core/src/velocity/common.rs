@@ -21,26 +21,71 @@ use super::EstimatorError;
 /// Longest step between two samples that is bridged (1 = no sample lost, 4 = three lost).
 pub const MAX_BRIDGED_SLOTS: u32 = 4;
 
-/// Why an estimator with gains or thresholds could not be configured.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Why an estimator with gains or thresholds could not be configured. Each variant carries the
+/// value its sentence (`Display`) names.
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum TuningError {
     /// Window or sample period (shared with the baseline).
     Estimator(EstimatorError),
-    /// A gain, pole or threshold outside its stable / meaningful range.
-    BadGain,
+    /// The α-β double pole outside 0 < pole < 1.
+    BadPole {
+        /// The pole asked for.
+        pole: f32,
+    },
+    /// α-β gains outside the stability triangle 0 < α < 2, 0 < β < 4 − 2α.
+    UnstableGains {
+        /// α asked for.
+        alpha: f32,
+        /// β asked for.
+        beta: f32,
+    },
+    /// The fixed-point α-β's β below its I16F16 resolution ([`MIN_FIXED_BETA`]).
+    BetaBelowResolution {
+        /// β asked for.
+        beta: f32,
+    },
+    /// FOAW's noise band not finite or negative.
+    BadBand {
+        /// The band asked for, µm.
+        band_um: f32,
+    },
+    /// The super-twisting Lipschitz constant not finite or not above 0.
+    BadLipschitz {
+        /// The constant asked for, µm/s².
+        lipschitz_um_s2: f32,
+    },
 }
+
+/// Smallest β the fixed-point α-β takes: below it β rounds to a handful of I16F16 steps.
+pub const MIN_FIXED_BETA: f32 = 1.0 / 8_192.0;
 
 impl core::fmt::Display for TuningError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
+        match *self {
             TuningError::Estimator(e) => e.fmt(f),
-            // Set in code by the bench, never from a scene file: the caller holds the value.
-            TuningError::BadGain => write!(
+            TuningError::BadPole { pole } => {
+                write!(f, "pole {pole} must be between 0 and 1, both excluded")
+            }
+            TuningError::UnstableGains { alpha, beta } => write!(
                 f,
-                "a gain, pole or threshold is outside its stable range (pole in 0 to 1, α-β \
-                 inside 0 < α < 2, 0 < β < 4 − 2α, thresholds finite and at least 0)"
+                "gains α = {alpha}, β = {beta} are outside the stability triangle \
+                 0 < α < 2, 0 < β < 4 − 2α"
+            ),
+            TuningError::BetaBelowResolution { beta } => write!(
+                f,
+                "gain β = {beta} is below the fixed-point filter's resolution of 1/8192"
+            ),
+            TuningError::BadBand { band_um } => {
+                write!(
+                    f,
+                    "noise band {band_um} µm must be a finite number of at least 0 µm"
+                )
+            }
+            TuningError::BadLipschitz { lipschitz_um_s2 } => write!(
+                f,
+                "Lipschitz constant {lipschitz_um_s2} µm/s² must be a finite number above 0"
             ),
         }
     }
@@ -65,7 +110,7 @@ pub(crate) fn check_period(sample_period_us: u32) -> Result<(), EstimatorError> 
 /// α = 1 − p², β = (1 − p)².
 pub(crate) fn critically_damped_gains(pole: f32) -> Result<(f32, f32), TuningError> {
     if !(pole > 0.0 && pole < 1.0) {
-        return Err(TuningError::BadGain);
+        return Err(TuningError::BadPole { pole });
     }
     Ok((1.0 - pole * pole, (1.0 - pole) * (1.0 - pole)))
 }
@@ -497,17 +542,44 @@ mod tests {
         }
     }
 
-    /// A tuning refusal reads as one sentence; a window or period one reads as the estimator's.
+    /// A tuning refusal reads as one sentence naming the value and the rule; a window or
+    /// period one reads as the estimator's.
     #[test]
     fn tuning_errors_read_as_sentences() {
-        assert_eq!(
-            std::format!("{}", TuningError::BadGain),
-            "a gain, pole or threshold is outside its stable range (pole in 0 to 1, α-β inside \
-             0 < α < 2, 0 < β < 4 − 2α, thresholds finite and at least 0)"
-        );
-        assert_eq!(
-            std::format!("{}", TuningError::from(check_period(5).unwrap_err())),
-            "sample period 5 µs is outside the estimators' 10 µs to 100000 µs"
-        );
+        let cases = [
+            (
+                TuningError::BadPole { pole: 1.0 },
+                "pole 1 must be between 0 and 1, both excluded",
+            ),
+            (
+                TuningError::UnstableGains {
+                    alpha: 1.5,
+                    beta: 1.1,
+                },
+                "gains α = 1.5, β = 1.1 are outside the stability triangle 0 < α < 2, \
+                 0 < β < 4 − 2α",
+            ),
+            (
+                TuningError::BetaBelowResolution { beta: 0.0001 },
+                "gain β = 0.0001 is below the fixed-point filter's resolution of 1/8192",
+            ),
+            (
+                TuningError::BadBand { band_um: f32::NAN },
+                "noise band NaN µm must be a finite number of at least 0 µm",
+            ),
+            (
+                TuningError::BadLipschitz {
+                    lipschitz_um_s2: 0.0,
+                },
+                "Lipschitz constant 0 µm/s² must be a finite number above 0",
+            ),
+            (
+                TuningError::from(check_period(5).unwrap_err()),
+                "sample period 5 µs is outside the estimators' 10 µs to 100000 µs",
+            ),
+        ];
+        for (e, sentence) in cases {
+            assert_eq!(std::format!("{e}"), sentence);
+        }
     }
 }

@@ -58,7 +58,7 @@ impl<const N: usize> Foaw<N> {
         }
         check_period(sample_period_us)?;
         if !(band_um.is_finite() && band_um >= 0.0) {
-            return Err(TuningError::BadGain);
+            return Err(TuningError::BadBand { band_um });
         }
         Ok(Self {
             fit,
@@ -249,9 +249,13 @@ mod tests {
     #[test]
     fn rejects_bad_config() {
         assert!(Foaw::<1>::new(FoawFit::EndFit, 1.0, 100).is_err());
+        assert!(matches!(
+            Foaw::<8>::new(FoawFit::BestFit, f32::NAN, 100),
+            Err(TuningError::BadBand { band_um }) if band_um.is_nan()
+        ));
         assert_eq!(
-            Foaw::<8>::new(FoawFit::BestFit, f32::NAN, 100).err(),
-            Some(TuningError::BadGain)
+            Foaw::<8>::new(FoawFit::BestFit, -1.0, 100).err(),
+            Some(TuningError::BadBand { band_um: -1.0 })
         );
     }
 }

@@ -25,7 +25,7 @@ mod super_twisting;
 
 pub use alpha_beta::AlphaBeta;
 pub use alpha_beta_fixed::AlphaBetaFixed;
-pub use common::{TuningError, MAX_BRIDGED_SLOTS};
+pub use common::{TuningError, MAX_BRIDGED_SLOTS, MIN_FIXED_BETA};
 pub use diff::{BackwardDifference, OneSampleDifference};
 pub use foaw::{Foaw, FoawFit};
 pub use lsq::LsqSlope;

@@ -43,7 +43,7 @@ impl SuperTwisting {
     pub fn new(sample_period_us: u32, lipschitz_um_s2: f32) -> Result<Self, TuningError> {
         check_period(sample_period_us)?;
         if !(lipschitz_um_s2.is_finite() && lipschitz_um_s2 > 0.0) {
-            return Err(TuningError::BadGain);
+            return Err(TuningError::BadLipschitz { lipschitz_um_s2 });
         }
         Ok(Self {
             k1: STD_LAMBDA1 * libm::sqrtf(lipschitz_um_s2),
@@ -146,7 +146,9 @@ mod tests {
         assert_eq!(e.group_delay_us(), 100);
         assert_eq!(
             SuperTwisting::new(100, 0.0).err(),
-            Some(TuningError::BadGain)
+            Some(TuningError::BadLipschitz {
+                lipschitz_um_s2: 0.0
+            })
         );
     }
 }
