@@ -300,6 +300,65 @@ mod tests {
         );
     }
 
+    /// Eq. 12 of the SAW display paper: μs − μc = π (s − s') β / (E σ) with
+    /// 1/E = (1 − ν_s²)/E_s + (1 − ν_o²)/E_o. Worked by hand for E_s = 1 MPa, ν_s = 0.5,
+    /// E_o = 2 MPa, ν_o = 0.3: 1/E = 0.75e-6 + 0.455e-6 = 1.205e-6 /Pa; with s − s' = 0.1 MPa and
+    /// β/σ = 20 µm / 10 µm, μs − μc = π · 1e5 · 2 · 1.205e-6 = 0.241 π.
+    #[test]
+    fn material_delta_mu_from_eq_12() {
+        let text = "[[region]]\nkind = \"material\"\ne_skin_pa = 1e6\nnu_skin = 0.5\n\
+                    e_object_pa = 2e6\nnu_object = 0.3\nsigma_um = 10\nbeta_um = 20\n\
+                    shear_strength_diff_pa = 1e5\n";
+        let cfg = load_for_board("m.toml", text, TIMER, 100).unwrap();
+        let Texture::Material(m) = cfg.scene.textures[0] else {
+            panic!("{:?}", cfg.scene.textures[0]);
+        };
+        let expected = 0.241 * core::f32::consts::PI;
+        assert!(
+            (m.delta_mu - expected).abs() < 1e-6,
+            "{} vs {expected}",
+            m.delta_mu
+        );
+        // Ten thousand times the shear strength difference: μs − μc = 2410 π, above 100.
+        let e = err(&text.replace("= 1e5", "= 1e9"));
+        assert_eq!(e.field, "region[0].delta_mu", "{e}");
+        assert!(
+            e.message.starts_with("eq. 12 gives μs − μc = 7571.")
+                && e.message.ends_with(", outside the allowed 0 to 100"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn drive_mode_is_read() {
+        let text = "drive = \"progressive\"\n\n[[region]]\nkind = \"off\"\n";
+        let cfg = load_for_board("d.toml", text, TIMER, 100).unwrap();
+        assert_eq!(cfg.scene.drive, crate::gate::DriveMode::Progressive);
+        let cfg = load_for_board("d.toml", "[[region]]\nkind = \"off\"\n", TIMER, 100).unwrap();
+        assert_eq!(cfg.scene.drive, crate::gate::DriveMode::Standing);
+    }
+
+    /// A line position must be a number of mm at or after 0; one the u32 µm count cannot hold
+    /// is refused here too, before the substrate check.
+    #[test]
+    fn line_positions_that_are_no_position_are_refused() {
+        for (p, shown) in [("-1", "-1"), ("5e9", "5000000000")] {
+            let e = err(&std::format!(
+                "[lines]\npositions_mm = [10, {p}]\n\n[[region]]\nkind = \"off\"\n"
+            ));
+            assert_eq!(
+                (e.line, e.field.as_str(), e.message.as_str()),
+                (
+                    2,
+                    "lines.positions_mm",
+                    &*std::format!(
+                        "{shown} mm is not a position: it must be a finite number of mm, at least 0"
+                    )
+                ),
+            );
+        }
+    }
+
     #[test]
     fn shipped_scenes_load() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");

@@ -101,7 +101,9 @@ pub(super) fn lines(
             return Err(cx.err(
                 at.clone(),
                 "lines.positions_mm",
-                format_args!("{p} is not a position"),
+                format_args!(
+                    "{p} mm is not a position: it must be a finite number of mm, at least 0"
+                ),
             ));
         }
         out.positions_um
