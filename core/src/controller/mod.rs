@@ -1003,6 +1003,103 @@ mod tests {
             .collect()
     }
 
+    /// Two regions split at 30 mm.
+    fn two(below: Texture, above: Texture) -> Controller {
+        let mut cfg = default_config();
+        cfg.scene.boundaries_um.clear();
+        cfg.scene.textures.clear();
+        let _ = cfg.scene.boundaries_um.push(30_000);
+        let _ = cfg.scene.textures.push(below);
+        let _ = cfg.scene.textures.push(above);
+        let mut c = Controller::new(TIMER, 100).unwrap();
+        c.load(&cfg).unwrap();
+        c
+    }
+
+    /// Entering a region starts its speed threshold over: having moved at 20 mm/s (above the
+    /// 15 mm/s threshold) in a velocity region, left it and come back at 10 mm/s (above half
+    /// the threshold, below the threshold), the region stays silent. Both velocity kinds.
+    #[test]
+    fn motion_threshold_starts_over_on_region_entry() {
+        let material = crate::texture::Material {
+            min_speed_um_s: 15_000,
+            ..crate::texture::Material::fig5(0.3)
+        };
+        for texture in [synth(1_000), Texture::Material(material)] {
+            let mut c = two(texture, Texture::Off);
+            let mut t = 0;
+            // 25 → 33 mm at 20 mm/s: bursts below 30 mm.
+            let out = stroke(&mut c, 25_000.0, 20_000.0, &mut t, 4_000);
+            assert!(last_settings(&out[..2_000]).is_some(), "{texture:?}");
+            // 33 → 27 mm at 10 mm/s: back in the region below half way.
+            let back = stroke(&mut c, 33_000.0, -10_000.0, &mut t, 6_000);
+            assert_eq!(back.last().unwrap().region, Some(0));
+            assert_eq!(last_settings(&back), None, "{texture:?}");
+        }
+    }
+
+    /// Entering a random region draws at once: the burst of the region left behind is not
+    /// kept until the random texture's next draw.
+    #[test]
+    fn random_region_draws_anew_on_entry() {
+        let random = Texture::Random(crate::texture::RandomBurst {
+            center_millihz: 100_000,
+            spread_permille: 100,
+            amplitude_permille: 1000,
+            amplitude_spread_permille: 0,
+            duty_permille: 400,
+            seed: 7,
+        });
+        let mut c = two(random, Texture::constant_hz(500));
+        let mut t = 0;
+        let hz = |outs: &[Output]| {
+            last_settings(outs).map(|s| s.produced_millihz(TIMER.clock_hz) as f32 / 1000.0)
+        };
+        let mut outs = std::vec::Vec::new();
+        // 40 mm (500 Hz), 20 mm (a draw), 40 mm again, and back to 20 mm 0.3 ms later, well
+        // inside the ~10 ms of the first draw's period.
+        for (um, n) in [(40_000.0, 50), (20_000.0, 5), (40_000.0, 3)] {
+            outs.extend((0..n).map(|_| feed(&mut c, um, &mut t, 1).0));
+        }
+        assert_eq!(hz(&outs), Some(500.0));
+        let back = feed(&mut c, 20_000.0, &mut t, 1).0;
+        let f = hz(&[back]).expect("a new draw on entry");
+        assert!((90.0..=110.0).contains(&f), "{f} Hz");
+    }
+
+    /// A fault ends a line pulse's window with the pulse: after recovering inside what would
+    /// have been the window, the region's texture owns the amplitude again (full drive for
+    /// `off`), not the envelope of a pulse no longer running; the gate still keeps the cut
+    /// pulse's rest, so a line crossed then gets no pulse.
+    #[test]
+    fn a_fault_ends_the_line_window() {
+        let mut c = single(Texture::Off, &[20_000, 22_000]);
+        let mut t = 0;
+        let outs = stroke(&mut c, 19_500.0, 100_000.0, &mut t, 60);
+        let fired = outs
+            .iter()
+            .position(|o| o.line == Some(0))
+            .expect("line 0 fires");
+        let fired_us = fired as u32 * 100;
+        // 1 ms into the triangular pulse: the envelope is a fifth of the way up.
+        let envelope = outs.last().unwrap().amplitude_permille;
+        assert!(envelope.is_some_and(|a| a < 1000), "{envelope:?}");
+        let fault = c.on_sample(Sample { code: 0, t_us: t });
+        t += 100;
+        assert_eq!(fault.action, Some(GateAction::Off));
+        // 16 good samples to recover; the first output after them is the texture's.
+        let after: std::vec::Vec<Output> = (0..20)
+            .map(|_| feed(&mut c, 21_000.0, &mut t, 1).0)
+            .collect();
+        let amplitudes: std::vec::Vec<u16> =
+            after.iter().filter_map(|o| o.amplitude_permille).collect();
+        assert_eq!(amplitudes, [1000]);
+        let (cross, _) = feed(&mut c, 22_500.0, &mut t, 1);
+        assert!(t - fired_us < 20_000, "{} us", t - fired_us);
+        assert_eq!((cross.line, cross.action), (None, None));
+        assert_eq!(c.telemetry().lines_skipped, 1);
+    }
+
     /// A sensor fault forgets where the finger was: recovering at rest 7 mm (seven ridges)
     /// from where the fault began fires no pulse, since the finger crossed nothing the sensor
     /// saw.

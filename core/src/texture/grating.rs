@@ -255,13 +255,6 @@ impl Ridges {
         })
     }
 
-    pub(crate) fn reset(&mut self) {
-        self.tracker.reset();
-        self.on_span_um = None;
-        self.last_um = None;
-        self.jump_um = None;
-    }
-
     /// False for a single-sample glitch: a step the slider cannot make, not (yet) confirmed by
     /// a second sample near it. A real jump (after a gap) costs one sample.
     fn plausible(&mut self, position_um: i32) -> bool {
@@ -345,8 +338,13 @@ impl Ridges {
 }
 
 impl Render for Ridges {
+    /// Forgets the finger's place and the pulse's span (region change, fault): the first
+    /// sample after is an arrival, not a crossing.
     fn reset(&mut self) {
-        Ridges::reset(self);
+        self.tracker.reset();
+        self.on_span_um = None;
+        self.last_um = None;
+        self.jump_um = None;
     }
 
     #[inline]
