@@ -203,4 +203,21 @@ mod tests {
             })
         );
     }
+
+    /// `reset` forgets the clock too: the very next slot is a first sample (no estimate), then
+    /// the outputs are a new filter's.
+    #[test]
+    fn reset_forgets_the_clock_and_the_state() {
+        let mut e = AlphaBeta::critically_damped(100, 0.8).unwrap();
+        for i in 0..1_000u32 {
+            e.update(i as i32 * 10, i * 100);
+        }
+        assert!(e.update(10_000, 100_000).is_some());
+        e.reset();
+        let mut fresh = AlphaBeta::critically_damped(100, 0.8).unwrap();
+        for i in 1..200u32 {
+            let t = 100_000 + i * 100;
+            assert_eq!(e.update(10_000, t), fresh.update(10_000, t), "sample {i}");
+        }
+    }
 }
