@@ -582,4 +582,18 @@ mod tests {
             assert_eq!(std::format!("{e}"), sentence);
         }
     }
+
+    /// α = 1 − p², β = (1 − p)², by hand at p = 0.5: (0.75, 0.25); the open interval's ends
+    /// are refused.
+    #[test]
+    fn critically_damped_gains_and_their_edges() {
+        assert_eq!(critically_damped_gains(0.5), Ok((0.75, 0.25)));
+        for pole in [0.0, 1.0, -0.1, f32::INFINITY] {
+            assert_eq!(
+                critically_damped_gains(pole),
+                Err(TuningError::BadPole { pole })
+            );
+        }
+        assert!(critically_damped_gains(f32::NAN).is_err());
+    }
 }

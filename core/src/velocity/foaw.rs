@@ -258,4 +258,17 @@ mod tests {
             Some(TuningError::BadBand { band_um: -1.0 })
         );
     }
+
+    /// `reset` forgets the clock too: a sample on the very next slot is a first sample.
+    #[test]
+    fn reset_forgets_the_clock() {
+        for mut e in both(0.5) {
+            for i in 0..30u32 {
+                e.update(5 * i as i32, i * 100);
+            }
+            e.reset();
+            assert_eq!(e.update(150, 3_000), None);
+            assert_eq!(e.window(), 0);
+        }
+    }
 }
