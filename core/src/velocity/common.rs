@@ -596,4 +596,38 @@ mod tests {
         }
         assert!(critically_damped_gains(f32::NAN).is_err());
     }
+
+    /// Every estimator's `reset` makes it a new one: fed the same samples from the next slot
+    /// on, it answers exactly what a freshly made estimator answers (nothing of the 1 s ramp
+    /// before, nor of the clock's phase, survives).
+    #[test]
+    fn reset_makes_every_estimator_new() {
+        use crate::velocity::*;
+        fn check<E: VelocityEstimator>(name: &str, make: impl Fn() -> E) {
+            let mut e = make();
+            for i in 0..10_000u32 {
+                e.update(i as i32 * 10, i * 100);
+            }
+            e.reset();
+            let mut fresh = make();
+            for i in 0..300u32 {
+                let t = 1_000_000 + i * 100;
+                let x = 100_000 - i as i32 * 5;
+                assert_eq!(e.update(x, t), fresh.update(x, t), "{name}, sample {i}");
+            }
+        }
+        check("lsq32", || LsqSlope::<32>::new(100).unwrap());
+        check("med3+lsq32", || {
+            Median3::new(LsqSlope::<32>::new(100).unwrap(), 100)
+        });
+        check("diff4", || BackwardDifference::<4>::new(100).unwrap());
+        check("foaw", || {
+            Foaw::<32>::new(FoawFit::EndFit, 24.0, 100).unwrap()
+        });
+        check("ab", || AlphaBeta::critically_damped(100, 0.9).unwrap());
+        check("abq16", || {
+            AlphaBetaFixed::critically_damped(100, 0.9).unwrap()
+        });
+        check("std", || SuperTwisting::new(100, 1e6).unwrap());
+    }
 }
