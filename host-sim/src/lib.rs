@@ -8,11 +8,14 @@
 //! - [`metrics`]: f_b produced vs commanded, region switches, velocity error and delay;
 //! - [`chart`]: a PNG of a run;
 //! - [`scenario`]: TOML scenario files with expectations;
-//! - [`report`]: the human summary the CLI prints.
+//! - [`report`]: the human summary the CLI prints;
+//! - [`cli`]: the simulator's command line; [`door`]: the value parsers of every command's flags.
 
 pub mod adc;
 pub mod bench;
 pub mod chart;
+pub mod cli;
+pub mod door;
 pub mod metrics;
 pub mod models;
 pub mod report;

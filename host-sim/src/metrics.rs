@@ -60,6 +60,15 @@ pub struct VelocityStats {
     pub samples: usize,
 }
 
+/// Where the finger left the calibrated travel (0 … the scene's length).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct OffTravel {
+    /// Samples with the true position outside the travel.
+    pub samples: usize,
+    /// Time of the first of them, µs.
+    pub first_us: Option<u64>,
+}
+
 /// All figures of one run.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Metrics {
@@ -81,6 +90,8 @@ pub struct Metrics {
     /// doubled or stretched pulses. Pulses ended by an Off or followed by a restart are judged on
     /// on-time only.
     pub malformed_pulses: usize,
+    /// Samples with the finger off the travel.
+    pub off_travel: OffTravel,
 }
 
 /// Computes the metrics of a run.
@@ -193,6 +204,18 @@ pub fn compute(r: &SimResult) -> Metrics {
         samples: r.trace.len(),
         pulses: pulses.len(),
         malformed_pulses,
+        off_travel: off_travel(r),
+    }
+}
+
+/// The samples of `r` whose true position lies outside the calibrated travel.
+pub fn off_travel(r: &SimResult) -> OffTravel {
+    let len = r.params.config.calibration.length_um as f64;
+    let mut off = r.trace.iter().filter(|p| !(0.0..=len).contains(&p.true_um));
+    let first_us = off.next().map(|p| p.t_us);
+    OffTravel {
+        samples: off.count() + usize::from(first_us.is_some()),
+        first_us,
     }
 }
 

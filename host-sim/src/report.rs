@@ -27,6 +27,18 @@ pub fn summary(r: &SimResult, m: &Metrics) -> String {
         p.adc.offset_lsb,
         p.adc.seed
     );
+    if let Some(first_us) = m.off_travel.first_us {
+        let period_s = r.sample_period_us as f64 * 1e-6;
+        let _ = writeln!(
+            s,
+            "warning: the finger is off the {} mm travel for {:.2} s of the {:.2} s ({:.1} % of the samples), first at t = {:.4} s",
+            p.config.calibration.length_um as f64 / 1e3,
+            m.off_travel.samples as f64 * period_s,
+            p.duration_s,
+            100.0 * m.off_travel.samples as f64 / m.samples.max(1) as f64,
+            first_us as f64 * 1e-6
+        );
+    }
     let b: Vec<String> = p
         .config
         .scene

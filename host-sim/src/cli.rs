@@ -1,0 +1,433 @@
+//! The simulator's command line (`host-sim [flags]`): its flags, each checked at the door
+//! ([`crate::door`]), the combinations it refuses, and the run the flags describe.
+//!
+//! What is checked where:
+//! - by clap, while parsing: every number (unit, range, NaN/inf), the board, the trajectory kind,
+//!   the chart's extension;
+//! - by [`plan`], before anything runs: flags that contradict each other or would be ignored
+//!   (`--scenario` with run flags, `--accel` without a ramp, `--to`/`--speed` at rest, `--from` =
+//!   `--to` for a motion), and `--from`/`--to` against the travel of the scene actually loaded.
+//!
+//! Both refuse with exit code 2 and one line: `error: invalid value 'V' for '--flag <UNIT>':
+//! <rule>` or `error: <sentence>`.
+
+use std::path::PathBuf;
+
+use clap::builder::{PossibleValuesParser, TypedValueParser};
+use clap::parser::ValueSource;
+use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, ValueEnum};
+use saw_boards::BoardDef;
+
+use crate::door::{fmt_num, png_path, Range, Whole};
+use crate::scenario::Scenario;
+use crate::sim::{self, SimParams};
+use crate::trajectory::Trajectory;
+
+/// Finger speed (peak speed for the sine, top speed for the ramp).
+pub const SPEED: Range = Range::new(0.1, 1000.0, "mm/s");
+/// Acceleration of the ramp.
+pub const ACCEL: Range = Range::new(0.01, 100.0, "m/s²");
+/// ADC noise per conversion: up to 100 LSB RMS (2.4 % of full scale on every conversion).
+pub const NOISE: Range = Range::new(0.0, 100.0, "LSB RMS");
+/// ADC offset per conversion: at most the 12-bit span either way.
+pub const OFFSET: Range = Range::new(-4095.0, 4095.0, "LSB");
+/// Simulated time: ten minutes at 10 kHz is 6 million trace points (about 0.7 GB).
+pub const DURATION: Range = Range::new(0.01, 600.0, "s");
+/// Noise seed.
+pub const SEED: Whole = Whole::new(0, u64::MAX);
+/// The default run's time when the motion has no end of its own, s.
+pub const DEFAULT_DURATION_S: f64 = 3.0;
+/// Default distance of `--from` and `--to` from the ends of the travel, mm.
+pub const END_MARGIN_MM: f64 = 1.5;
+
+/// Trajectory kinds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Kind {
+    /// Triangle back and forth between --from and --to.
+    BackAndForth,
+    /// Sine back and forth between --from and --to (peak speed = --speed).
+    Sine,
+    /// At rest at --from.
+    Rest,
+    /// Constant speed from --from towards --to (and beyond if --duration outlasts the trip).
+    Constant,
+    /// From --from to --to and back (and beyond --from if --duration outlasts the trip).
+    Reversal,
+    /// From rest at --from, accelerating at --accel up to --speed towards --to (and beyond if
+    /// --duration outlasts the trip).
+    Ramp,
+}
+
+impl Kind {
+    /// The name the command line uses (`back-and-forth`).
+    pub fn name(self) -> String {
+        self.to_possible_value()
+            .map(|v| v.get_name().to_string())
+            .unwrap_or_default()
+    }
+}
+
+/// The travel of the default scene, mm.
+fn default_travel_mm() -> f64 {
+    saw_core::default_config().calibration.length_um as f64 / 1e3
+}
+
+fn position_help(what: &str, default: &str) -> String {
+    format!(
+        "{what}, mm (0 to the end of the travel: {} for the default scene) [default: {default}]",
+        fmt_num(default_travel_mm())
+    )
+}
+
+/// A position: any finite number at the door; [`plan`] checks it against the scene's travel.
+fn finite_mm(s: &str) -> Result<f64, String> {
+    let rule = "a position on the travel, from 0 mm to its end";
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(format!("must be a finite number: {rule}")),
+        Err(_) => Err(format!("not a number; must be {rule}")),
+    }
+}
+
+fn board_parser() -> impl TypedValueParser<Value = &'static BoardDef> {
+    PossibleValuesParser::new(saw_boards::ALL.iter().map(|b| b.name)).map(|name| {
+        saw_boards::by_name(&name).unwrap_or(&saw_boards::NUCLEO_F446RE) // listed above
+    })
+}
+
+fn parse_level(s: &str) -> Result<log::LevelFilter, String> {
+    s.parse().map_err(|_| format!("unknown log level {s:?}"))
+}
+
+/// Host simulation of the SAW tactile display: trajectory → rheostat/ADC → saw-core → burst timer.
+#[derive(Parser, Debug, Clone)]
+#[command(
+    name = "host-sim",
+    version,
+    after_help = "Other commands of this binary: host-sim model --help, host-sim tile-to-scene \
+                  --help, host-sim bench --help."
+)]
+pub struct Args {
+    /// Trajectory kind.
+    #[arg(long, value_enum, default_value_t = Kind::BackAndForth)]
+    pub trajectory: Kind,
+    #[arg(long, value_name = "MM_S", default_value_t = 60.0, allow_hyphen_values = true,
+          help = SPEED.help("Finger speed (peak for sine, top for ramp)"), value_parser = SPEED.parser())]
+    pub speed: f64,
+    #[arg(long, value_name = "MM", allow_hyphen_values = true,
+          help = position_help("Start (or rest) position", "1.5"), value_parser = finite_mm)]
+    pub from: Option<f64>,
+    #[arg(long, value_name = "MM", allow_hyphen_values = true,
+          help = position_help("Far turning point (the direction for constant and ramp)",
+                               "the end of the travel minus 1.5"),
+          value_parser = finite_mm)]
+    pub to: Option<f64>,
+    #[arg(long, value_name = "M_S2", default_value_t = 2.0, allow_hyphen_values = true,
+          help = ACCEL.help("Acceleration of --trajectory ramp"), value_parser = ACCEL.parser())]
+    pub accel: f64,
+    #[arg(long, value_name = "LSB_RMS", default_value_t = 2.0, allow_hyphen_values = true,
+          help = NOISE.help("ADC noise per conversion (12-bit)"), value_parser = NOISE.parser())]
+    pub noise: f64,
+    #[arg(long, value_name = "LSB", default_value_t = 0.0, allow_hyphen_values = true,
+          help = OFFSET.help("ADC offset per conversion (12-bit)"), value_parser = OFFSET.parser())]
+    pub offset: f64,
+    #[arg(long, value_name = "S", allow_hyphen_values = true,
+          help = format!("{} [default: 3; constant and ramp: until the finger reaches --to; \
+                          reversal: until it is back at --from]", DURATION.help("Simulated time")),
+          value_parser = DURATION.parser())]
+    pub duration: Option<f64>,
+    #[arg(long, value_name = "SEED", default_value_t = 1, allow_hyphen_values = true,
+          help = SEED.help("Noise seed"), value_parser = SEED.parser())]
+    pub seed: u64,
+    /// Board.
+    #[arg(long, default_value = saw_boards::NUCLEO_F446RE.name, value_parser = board_parser())]
+    pub board: &'static BoardDef,
+    /// Disable timer preload (shows the runts preload prevents).
+    #[arg(long)]
+    pub no_preload: bool,
+    /// Scene file (TOML, see scenes/); default: the built-in default scene.
+    #[arg(long, value_name = "FILE")]
+    pub scene: Option<PathBuf>,
+    /// Run a scenario file instead (its expectations are checked too); it sets the board,
+    /// trajectory, noise, seed and duration, so none of those flags go with it.
+    #[arg(long, value_name = "FILE")]
+    pub scenario: Option<PathBuf>,
+    /// Chart path (PNG).
+    #[arg(long, short, value_name = "PNG", default_value = "out/sim-default.png",
+          value_parser = png_path)]
+    pub output: PathBuf,
+    /// Log level of the core's log lines (error, warn, info, debug, trace, off).
+    #[arg(long, default_value = "warn", value_parser = parse_level)]
+    pub log: log::LevelFilter,
+}
+
+/// Parses a command line (`argv[0]` first); clap's error on a refused value.
+pub fn parse_from<I, T>(argv: I) -> Result<(Args, ArgMatches), clap::Error>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let m = Args::command().try_get_matches_from(argv)?;
+    let a = Args::from_arg_matches(&m)?;
+    Ok((a, m))
+}
+
+/// A finger motion as the flags give it, defaults filled in.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Motion {
+    /// Kind.
+    pub kind: Kind,
+    /// `--from`, mm.
+    pub from_mm: f64,
+    /// `--to`, mm.
+    pub to_mm: f64,
+    /// `--speed`, mm/s.
+    pub speed_mm_s: f64,
+    /// `--accel`, m/s².
+    pub accel_m_s2: f64,
+}
+
+impl Motion {
+    /// The trajectory (µm) of this motion.
+    pub fn trajectory(&self) -> Trajectory {
+        let (a, b, v) = (self.from_mm * 1e3, self.to_mm * 1e3, self.speed_mm_s * 1e3);
+        match self.kind {
+            Kind::BackAndForth => Trajectory::Triangle {
+                a_um: a,
+                b_um: b,
+                speed_um_s: v,
+            },
+            Kind::Sine => Trajectory::Sine {
+                a_um: a,
+                b_um: b,
+                period_s: std::f64::consts::PI * (b - a).abs() / v,
+            },
+            Kind::Rest => Trajectory::Rest { at_um: a },
+            Kind::Constant => Trajectory::Constant {
+                from_um: a,
+                speed_um_s: v * (b - a).signum(),
+            },
+            Kind::Reversal => Trajectory::Reversal {
+                from_um: a,
+                turn_um: b,
+                speed_um_s: v,
+            },
+            Kind::Ramp => Trajectory::Ramp {
+                from_um: a,
+                v0_um_s: 0.0,
+                accel_um_s2: self.accel_m_s2 * 1e6 * (b - a).signum(),
+                v_max_um_s: v,
+            },
+        }
+    }
+
+    /// How long the motion lasts on its own, s: constant and ramp until the finger reaches
+    /// `--to`, reversal until it is back at `--from`; `None` for the periodic kinds and rest.
+    pub fn trip_s(&self) -> Option<f64> {
+        let d = (self.to_mm - self.from_mm).abs();
+        let v = self.speed_mm_s;
+        match self.kind {
+            Kind::BackAndForth | Kind::Sine | Kind::Rest => None,
+            Kind::Constant => Some(d / v),
+            Kind::Reversal => Some(2.0 * d / v),
+            Kind::Ramp => {
+                let a = self.accel_m_s2 * 1e3; // mm/s²
+                let d_acc = v * v / (2.0 * a);
+                Some(if d <= d_acc {
+                    (2.0 * d / a).sqrt()
+                } else {
+                    v / a + (d - d_acc) / v
+                })
+            }
+        }
+    }
+
+    /// The run's time when `--duration` is not given: the trip (at least [`DURATION`]'s
+    /// smallest), or [`DEFAULT_DURATION_S`].
+    pub fn default_duration_s(&self) -> f64 {
+        self.trip_s()
+            .map_or(DEFAULT_DURATION_S, |t| t.clamp(DURATION.lo, DURATION.hi))
+    }
+}
+
+/// Why the flags do not make a run.
+#[derive(Debug)]
+pub enum Refusal {
+    /// A value or a combination refused at the door (exit code 2); the sentence after `error: `.
+    Door(String),
+    /// A file the flags name could not be used (exit code 1).
+    Run(Box<dyn std::error::Error>),
+}
+
+impl Refusal {
+    fn value(flag: &str, m: &ArgMatches, id: &str, rule: String) -> Self {
+        Refusal::Door(format!(
+            "invalid value '{}' for '{flag}': {rule}",
+            raw(m, id).unwrap_or_default()
+        ))
+    }
+}
+
+/// What the user typed for flag `id` (None when it came from a default).
+fn raw(m: &ArgMatches, id: &str) -> Option<String> {
+    if m.value_source(id) != Some(ValueSource::CommandLine) {
+        return None;
+    }
+    m.get_raw(id)
+        .and_then(|mut v| v.next_back())
+        .map(|v| v.to_string_lossy().into_owned())
+}
+
+/// `--flag V` as typed (`--flag` alone for a switch), for the sentences of refused combinations;
+/// None when the flag was not given.
+fn given(m: &ArgMatches, id: &str) -> Option<String> {
+    let flag = format!("--{}", id.replace('_', "-"));
+    let v = raw(m, id)?;
+    Some(if SWITCHES.contains(&id) {
+        flag
+    } else {
+        format!("{flag} {v}")
+    })
+}
+
+/// The flags without a value.
+const SWITCHES: [&str; 1] = ["no_preload"];
+
+/// A run the flags describe: its parameters, and the scenario it checks (if `--scenario`).
+#[derive(Debug)]
+pub struct Plan {
+    /// What to simulate.
+    pub params: SimParams,
+    /// The scenario file's expectations.
+    pub scenario: Option<Scenario>,
+}
+
+/// The flags [`Args::scenario`] sets itself.
+const SCENARIO_SETS: [&str; 12] = [
+    "trajectory",
+    "speed",
+    "from",
+    "to",
+    "accel",
+    "noise",
+    "offset",
+    "duration",
+    "seed",
+    "board",
+    "no_preload",
+    "scene",
+];
+
+/// The run the flags describe, or why there is none.
+pub fn plan(args: &Args, m: &ArgMatches) -> Result<Plan, Refusal> {
+    if let Some(path) = &args.scenario {
+        let ignored: Vec<String> = SCENARIO_SETS.iter().filter_map(|id| given(m, id)).collect();
+        if !ignored.is_empty() {
+            return Err(Refusal::Door(format!(
+                "--scenario takes the board, trajectory, noise, seed, duration and scene from \
+                 its file; {} would be ignored: give one or the other",
+                ignored.join(", ")
+            )));
+        }
+        let sc = Scenario::from_file(path)
+            .map_err(|e| Refusal::Run(format!("{}: {e}", path.display()).into()))?;
+        let params = sc
+            .params()
+            .map_err(|e| Refusal::Run(format!("{}: {e}", path.display()).into()))?;
+        if !(DURATION.lo..=DURATION.hi).contains(&params.duration_s) {
+            return Err(Refusal::Run(
+                format!(
+                    "{}: the scenario lasts {} s; it must last {}",
+                    path.display(),
+                    params.duration_s,
+                    DURATION.span()
+                )
+                .into(),
+            ));
+        }
+        return Ok(Plan {
+            params,
+            scenario: Some(sc),
+        });
+    }
+    let kind = args.trajectory;
+    if args.trajectory != Kind::Ramp {
+        if let Some(a) = given(m, "accel") {
+            return Err(Refusal::Door(format!(
+                "{a} is the acceleration of --trajectory ramp; --trajectory {} would ignore it",
+                kind.name()
+            )));
+        }
+    }
+    if kind == Kind::Rest {
+        let ignored: Vec<String> = ["to", "speed"]
+            .iter()
+            .filter_map(|id| given(m, id))
+            .collect();
+        if !ignored.is_empty() {
+            return Err(Refusal::Door(format!(
+                "--trajectory rest stays at --from; {} would be ignored",
+                ignored.join(", ")
+            )));
+        }
+    }
+    let board = args.board;
+    let (config, scene_name) = match &args.scene {
+        None => (saw_core::default_config(), "the default scene".to_string()),
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| Refusal::Run(format!("{}: {e}", path.display()).into()))?;
+            let config = saw_core::scene_file::load_for_board(
+                &path.display().to_string(),
+                &text,
+                sim::burst_timer(board),
+                sim::sample_period_us(board),
+            )
+            .map_err(|e| Refusal::Run(e.into()))?;
+            (config, path.display().to_string())
+        }
+    };
+    let travel_mm = config.calibration.length_um as f64 / 1e3;
+    let margin = END_MARGIN_MM.min(travel_mm / 4.0);
+    let motion = Motion {
+        kind,
+        from_mm: args.from.unwrap_or(margin),
+        to_mm: args.to.unwrap_or(travel_mm - margin),
+        speed_mm_s: args.speed,
+        accel_m_s2: args.accel,
+    };
+    for (id, flag, v) in [
+        ("from", "--from <MM>", motion.from_mm),
+        ("to", "--to <MM>", motion.to_mm),
+    ] {
+        if !(0.0..=travel_mm).contains(&v) {
+            let rule = format!(
+                "must be from 0 to {} mm, the travel of {scene_name}",
+                fmt_num(travel_mm)
+            );
+            return Err(Refusal::value(flag, m, id, rule));
+        }
+    }
+    if kind != Kind::Rest && motion.from_mm == motion.to_mm {
+        let show = |id: &str, v: f64| match raw(m, id) {
+            Some(r) => format!("--{id} {r}"),
+            None => format!("--{id} {} (its default)", fmt_num(v)),
+        };
+        return Err(Refusal::Door(format!(
+            "{} and {} are the same point; --trajectory {} moves between them, so they must differ",
+            show("from", motion.from_mm),
+            show("to", motion.to_mm),
+            kind.name()
+        )));
+    }
+    let duration_s = args.duration.unwrap_or_else(|| motion.default_duration_s());
+    let mut params = SimParams::new(board, motion.trajectory(), duration_s)
+        .with_config(config)
+        .with_noise(args.noise, args.seed)
+        .with_offset(args.offset);
+    params.preload = !args.no_preload;
+    Ok(Plan {
+        params,
+        scenario: None,
+    })
+}
