@@ -539,7 +539,7 @@ fn grooved_cli_json() {
     }
     assert!(!out.contains("NaN") && !out.contains('\n'));
     let e = run_model(&args(
-        "grooved --groove-mm 0.5 --land-mm 0.25 --force-g 100000 --mu 0 --json",
+        "grooved --groove-mm 0.5 --land-mm 0.25 --force-g 10000 --mu 0 --json",
     ))
     .unwrap_err();
     assert!(e.contains("no solution"), "{e}");

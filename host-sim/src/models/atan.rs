@@ -224,6 +224,16 @@ pub fn bench_fss_libm(us: &[f32]) -> f32 {
     s
 }
 
+/// The loops [`run_bench`] runs (`model atan-bench --impl`).
+pub const BENCH_IMPLS: [&str; 6] = [
+    "none",
+    "micromath",
+    "libm",
+    "f64",
+    "fss-micromath",
+    "fss-libm",
+];
+
 /// Runs one bench loop over `n` inputs; `what` is `none`, `micromath`, `libm`, `f64`,
 /// `fss-micromath` or `fss-libm`.
 pub fn run_bench(what: &str, n: usize) -> Result<f32, String> {

@@ -1,120 +1,316 @@
 //! Command-line front end of the models: `host-sim model <name> [--flags]` and
-//! `host-sim tile-to-scene [--flags]`. Arguments are plain strings so that any CLI parser can
-//! forward them; output is returned as text (the caller prints it).
+//! `host-sim tile-to-scene [--flags]`, parsed by clap with every number checked at the door
+//! ([`crate::door`]: unit, range, NaN/inf refused, exit code 2). Output is returned as text (the
+//! caller prints it).
 
-use super::atan::{atan_curve, atan_errors, run_bench, AtanImpl};
+use super::atan::{atan_curve, atan_errors, run_bench, AtanImpl, BENCH_IMPLS};
 use super::charts::{write_charts, AtanCostSource, Chart};
 use super::grooved::{grooved, Eq4, GroovedInput, Pad, SolveOptions, Solver};
 use super::sandpaper;
 use super::solvers::solver_sweep;
 use super::stick_slip::{fig5_curve, stick_slip, Material, StickSlipParams};
 use super::tile::{a_max_mm2, tile_rows, tile_to_region};
-use std::collections::BTreeMap;
+use crate::door::{fmt_num, Range, Whole};
+use clap::builder::{PossibleValuesParser, TypedValueParser};
+use clap::{ArgGroup, Parser, Subcommand};
 use std::fmt::Write as _;
+use std::path::PathBuf;
 
-/// Usage of `model`.
-pub const MODEL_USAGE: &str = "\
-usage: host-sim model <name> [flags]
-  stick-slip   (--delta-mu X | --e-object-pa --nu-object --e-skin-pa --nu-skin --sigma-um --beta-um
-                --shear-strength-diff-pa) [--normal-force-n 1] [--mass-g 1] [--stiffness-n-per-m 500]
-                [--speed-mm-s 40] [--json]
-  fig5         [--points 200] : CSV of f_ss against mu_s - mu_c with fig. 5's P, m, k, U
-  grooved      --groove-mm G --land-mm L --force-g F [--k-mm-per-g 0.08] [--mu 0.5]
-               [--solver newton|bisection|safeguarded] [--rtol 1e-13] [--theta0 0.785]
-               [--pad-area-mm2 150] [--pad-ref-force-g 112] [--pad-exponent 0.15] [--json]
-  theta-solvers : CSV of iterations against accuracy for the three solvers
-  tiles        : CSV of the paper's tile sets (D, A_c, A, grating region)
-  sandpaper    (--grit N | --f-b-hz F) [--json]
-  atan         [--curve] : CSV of atan / f_ss errors (micromath, libm, f64); --curve: against R
-  atan-bench   --impl none|micromath|libm|f64|fss-micromath|fss-libm [--n 100000]
-  charts       [--out docs/charts] [--only fig5|solvers|tiles|atan] [--no-cost] : writes the
-               models-*.png charts and prints the tables of docs/models.md; the atan cost axis
-               runs this binary under valgrind (callgrind), skipped if valgrind is missing
-usage: host-sim tile-to-scene --groove-mm G --land-mm L --force-g F [--k-mm-per-g 0.08] [--mu 0.5]
-               [--pad-area-mm2 150] [--pad-ref-force-g 112] [--pad-exponent 0.15] [--speed-mm-s V]
-               [--scene-file]  (keys of scenes/*.toml: wavelength_mm, amplitude_percent)";
+/// Δμ = μs − μc.
+const DELTA_MU: Range = Range::new(0.0, 10.0, "");
+/// Young's moduli: from a gel (1 kPa) to diamond (about 1 TPa).
+const MODULUS: Range = Range::new(1e3, 1e12, "Pa");
+/// Poisson's ratios (the model needs −1 < ν ≤ 0.5).
+const POISSON: Range = Range::new(-0.99, 0.5, "");
+/// RMS roughness of the asperity heights.
+const SIGMA: Range = Range::new(0.001, 1000.0, "µm");
+/// Mean radius of the asperities.
+const BETA: Range = Range::new(0.001, 10_000.0, "µm");
+/// s − s′.
+const SHEAR_DIFF: Range = Range::new(0.0, 1e9, "Pa");
+/// Normal force P.
+const NORMAL_FORCE: Range = Range::new(0.0, 100.0, "N");
+/// Moving mass m.
+const MASS: Range = Range::new(0.001, 1000.0, "g");
+/// Spring stiffness k.
+const STIFFNESS: Range = Range::new(0.001, 1e6, "N/m");
+/// Sliding speed U (and the finger speed of `tile-to-scene`).
+const SLIDE_SPEED: Range = Range::new(0.0, 1000.0, "mm/s");
+/// Points of fig. 5's curve.
+const POINTS: Whole = Whole::new(1, 100_000);
+/// Groove width G.
+const GROOVE: Range = Range::new(0.01, 10.0, "mm");
+/// Land width L.
+const LAND: Range = Range::new(0.0, 10.0, "mm");
+/// Fingertip force F: up to 10 kg, beyond any touch (the paper's largest is 448 g).
+const FORCE: Range = Range::new(0.0, 10_000.0, "g");
+/// Skin compliance k.
+const COMPLIANCE: Range = Range::new(0.001, 1.0, "mm/g");
+/// Friction coefficient μ.
+const MU: Range = Range::new(0.0, 10.0, "");
+/// Pad area at the reference force.
+const PAD_AREA: Range = Range::new(1.0, 10_000.0, "mm²");
+/// Pad reference force.
+const PAD_FORCE: Range = Range::new(0.1, 10_000.0, "g");
+/// Pad power-law exponent.
+const PAD_EXPONENT: Range = Range::new(0.0, 1.0, "");
+/// Relative tolerance of the θ solvers.
+const RTOL: Range = Range::new(1e-16, 0.1, "");
+/// Newton's starting θ: inside (0, π/2].
+const THETA0: Range = Range::new(0.001, core::f64::consts::FRAC_PI_2, "rad");
+/// Grit number of a sandpaper.
+const GRIT: Range = Range::new(1.0, 10_000.0, "");
+/// Burst frequency: the boards' f_b range.
+const F_B: Range = Range::new(
+    saw_boards::MIN_BURST_HZ as f64,
+    saw_boards::MAX_BURST_HZ as f64,
+    "Hz",
+);
+/// Iterations of one `atan-bench` run.
+const BENCH_N: Whole = Whole::new(1, 100_000_000);
 
-/// Parsed `--name value` / `--flag` arguments; every flag must be consumed.
-struct Flags {
-    values: BTreeMap<String, String>,
-    switches: Vec<String>,
-    used: Vec<String>,
+/// `host-sim model <name>`.
+#[derive(Parser, Debug)]
+#[command(
+    name = "host-sim model",
+    bin_name = "host-sim model",
+    about = "Physical models of the display (docs/models.md)",
+    arg_required_else_help = true
+)]
+struct ModelCli {
+    #[command(subcommand)]
+    model: Model,
 }
 
-const SWITCHES: [&str; 6] = ["json", "csv", "help", "curve", "scene-file", "no-cost"];
+#[derive(Subcommand, Debug)]
+enum Model {
+    /// Stick-slip frequency, [N] eqs. 9–12: give --delta-mu, or all seven material parameters.
+    StickSlip(StickSlipArgs),
+    /// CSV of f_ss against mu_s - mu_c with fig. 5's P, m, k, U.
+    Fig5 {
+        #[arg(long, value_name = "N", default_value_t = 200, allow_hyphen_values = true,
+              help = POINTS.help("Points of the curve"), value_parser = POINTS.parser_usize())]
+        points: usize,
+    },
+    /// Taylor & Lederman's static skin model over a grooved tile, θ solved three ways.
+    Grooved(GroovedArgs),
+    /// CSV of iterations against accuracy for the three solvers.
+    ThetaSolvers {
+        /// CSV output (the only output; accepted for symmetry).
+        #[arg(long, hide = true)]
+        csv: bool,
+    },
+    /// CSV of the paper's tile sets (D, A_c, A, grating region).
+    Tiles {
+        /// CSV output (the only output; accepted for symmetry).
+        #[arg(long, hide = true)]
+        csv: bool,
+    },
+    /// Table 1's grit ↔ f_b scale: give --grit or --f-b-hz.
+    #[command(group(ArgGroup::new("scale").required(true).args(["grit", "f_b_hz"])))]
+    Sandpaper {
+        #[arg(long, allow_hyphen_values = true, help = GRIT.help("Grit number"),
+              value_parser = GRIT.parser())]
+        grit: Option<f64>,
+        #[arg(long, value_name = "HZ", allow_hyphen_values = true,
+              help = F_B.help("Burst frequency"), value_parser = F_B.parser())]
+        f_b_hz: Option<f64>,
+        /// One JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// CSV of atan / f_ss errors (micromath, libm, f64).
+    Atan {
+        /// Against R instead.
+        #[arg(long)]
+        curve: bool,
+        /// CSV output (the only output; accepted for symmetry).
+        #[arg(long, hide = true)]
+        csv: bool,
+    },
+    /// One atan loop, for callgrind (model charts measures the cost with it).
+    AtanBench {
+        /// The loop.
+        #[arg(long = "impl", value_name = "IMPL", value_parser = PossibleValuesParser::new(BENCH_IMPLS))]
+        imp: String,
+        #[arg(long, default_value_t = 100_000, allow_hyphen_values = true,
+              help = BENCH_N.help("Iterations"), value_parser = BENCH_N.parser_usize())]
+        n: usize,
+    },
+    /// Writes the models-*.png charts and prints the tables of docs/models.md; the atan cost
+    /// axis runs this binary under valgrind (callgrind), skipped if valgrind is missing.
+    Charts {
+        /// Output directory.
+        #[arg(long, value_name = "DIR", default_value = "docs/charts")]
+        out: PathBuf,
+        /// Only this chart.
+        #[arg(long, value_parser = PossibleValuesParser::new(Chart::ALL.map(Chart::name))
+              .map(|s| Chart::parse(&s).unwrap_or(Chart::Fig5)))] // listed above
+        only: Option<Chart>,
+        /// Skip the callgrind cost axis.
+        #[arg(long)]
+        no_cost: bool,
+    },
+}
 
-impl Flags {
-    fn parse(args: &[String]) -> Result<Self, String> {
-        let mut values = BTreeMap::new();
-        let mut switches = Vec::new();
-        let mut i = 0;
-        while i < args.len() {
-            let a = &args[i];
-            let name = a
-                .strip_prefix("--")
-                .ok_or_else(|| format!("unexpected argument {a:?}"))?;
-            if let Some((k, v)) = name.split_once('=') {
-                values.insert(k.to_string(), v.to_string());
-            } else if SWITCHES.contains(&name) {
-                switches.push(name.to_string());
-            } else {
-                let v = args
-                    .get(i + 1)
-                    .ok_or_else(|| format!("--{name} needs a value"))?;
-                values.insert(name.to_string(), v.clone());
-                i += 1;
-            }
-            i += 1;
+#[derive(clap::Args, Debug)]
+struct StickSlipArgs {
+    #[arg(long, value_name = "X", allow_hyphen_values = true,
+          help = DELTA_MU.help("Friction difference mu_s - mu_c"), value_parser = DELTA_MU.parser())]
+    delta_mu: Option<f64>,
+    #[command(flatten)]
+    material: MaterialArgs,
+    #[arg(long, value_name = "N", default_value_t = 1.0, allow_hyphen_values = true,
+          help = NORMAL_FORCE.help("Normal force P"), value_parser = NORMAL_FORCE.parser())]
+    normal_force_n: f64,
+    #[arg(long, value_name = "G", default_value_t = 1.0, allow_hyphen_values = true,
+          help = MASS.help("Moving mass m"), value_parser = MASS.parser())]
+    mass_g: f64,
+    #[arg(long, value_name = "N_PER_M", default_value_t = 500.0, allow_hyphen_values = true,
+          help = STIFFNESS.help("Spring stiffness k"), value_parser = STIFFNESS.parser())]
+    stiffness_n_per_m: f64,
+    #[arg(long, value_name = "MM_S", default_value_t = 40.0, allow_hyphen_values = true,
+          help = SLIDE_SPEED.help("Sliding speed U"), value_parser = SLIDE_SPEED.parser())]
+    speed_mm_s: f64,
+    /// One JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Eq. 12's material parameters: all seven, or none (then --delta-mu).
+#[derive(clap::Args, Debug)]
+struct MaterialArgs {
+    #[arg(long, value_name = "PA", allow_hyphen_values = true, required_unless_present = "delta_mu",
+          conflicts_with = "delta_mu",
+          help = MODULUS.help("Young's modulus of the object E_o"), value_parser = MODULUS.parser())]
+    e_object_pa: Option<f64>,
+    #[arg(long, value_name = "NU", allow_hyphen_values = true, required_unless_present = "delta_mu",
+          conflicts_with = "delta_mu",
+          help = POISSON.help("Poisson's ratio of the object nu_o"), value_parser = POISSON.parser())]
+    nu_object: Option<f64>,
+    #[arg(long, value_name = "PA", allow_hyphen_values = true, required_unless_present = "delta_mu",
+          conflicts_with = "delta_mu",
+          help = MODULUS.help("Young's modulus of the skin E_s"), value_parser = MODULUS.parser())]
+    e_skin_pa: Option<f64>,
+    #[arg(long, value_name = "NU", allow_hyphen_values = true, required_unless_present = "delta_mu",
+          conflicts_with = "delta_mu",
+          help = POISSON.help("Poisson's ratio of the skin nu_s"), value_parser = POISSON.parser())]
+    nu_skin: Option<f64>,
+    #[arg(long, value_name = "UM", allow_hyphen_values = true, required_unless_present = "delta_mu",
+          conflicts_with = "delta_mu",
+          help = SIGMA.help("RMS asperity height sigma"), value_parser = SIGMA.parser())]
+    sigma_um: Option<f64>,
+    #[arg(long, value_name = "UM", allow_hyphen_values = true, required_unless_present = "delta_mu",
+          conflicts_with = "delta_mu",
+          help = BETA.help("Mean asperity radius beta"), value_parser = BETA.parser())]
+    beta_um: Option<f64>,
+    #[arg(long, value_name = "PA", allow_hyphen_values = true, required_unless_present = "delta_mu",
+          conflicts_with = "delta_mu",
+          help = SHEAR_DIFF.help("Shear strength difference s - s'"), value_parser = SHEAR_DIFF.parser())]
+    shear_strength_diff_pa: Option<f64>,
+}
+
+/// The tile and the finger of `grooved` and `tile-to-scene`.
+#[derive(clap::Args, Debug)]
+struct TileArgs {
+    #[arg(long, value_name = "G", allow_hyphen_values = true,
+          help = GROOVE.help("Groove width G"), value_parser = GROOVE.parser())]
+    groove_mm: f64,
+    #[arg(long, value_name = "L", allow_hyphen_values = true,
+          help = LAND.help("Land width L"), value_parser = LAND.parser())]
+    land_mm: f64,
+    #[arg(long, value_name = "F", allow_hyphen_values = true,
+          help = FORCE.help("Fingertip force F"), value_parser = FORCE.parser())]
+    force_g: f64,
+    #[arg(long, value_name = "K", default_value_t = 0.08, allow_hyphen_values = true,
+          help = COMPLIANCE.help("Skin compliance k"), value_parser = COMPLIANCE.parser())]
+    k_mm_per_g: f64,
+    #[arg(long, default_value_t = 0.5, allow_hyphen_values = true,
+          help = MU.help("Friction coefficient mu"), value_parser = MU.parser())]
+    mu: f64,
+    #[arg(long, value_name = "MM2", default_value_t = 150.0, allow_hyphen_values = true,
+          help = PAD_AREA.help("Pad area at the reference force"), value_parser = PAD_AREA.parser())]
+    pad_area_mm2: f64,
+    #[arg(long, value_name = "G", default_value_t = 112.0, allow_hyphen_values = true,
+          help = PAD_FORCE.help("Pad reference force"), value_parser = PAD_FORCE.parser())]
+    pad_ref_force_g: f64,
+    #[arg(long, value_name = "X", default_value_t = 0.15, allow_hyphen_values = true,
+          help = PAD_EXPONENT.help("Pad power-law exponent"), value_parser = PAD_EXPONENT.parser())]
+    pad_exponent: f64,
+}
+
+impl TileArgs {
+    fn input(&self) -> GroovedInput {
+        GroovedInput {
+            groove_mm: self.groove_mm,
+            land_mm: self.land_mm,
+            force_g: self.force_g,
+            k_mm_per_g: self.k_mm_per_g,
+            mu: self.mu,
+            pad: Pad {
+                area_ref_mm2: self.pad_area_mm2,
+                force_ref_g: self.pad_ref_force_g,
+                exponent: self.pad_exponent,
+            },
         }
-        Ok(Self {
-            values,
-            switches,
-            used: Vec::new(),
-        })
     }
+}
 
-    fn switch(&mut self, name: &str) -> bool {
-        self.used.push(name.to_string());
-        self.switches.iter().any(|s| s == name)
-    }
+#[derive(clap::Args, Debug)]
+struct GroovedArgs {
+    #[command(flatten)]
+    tile: TileArgs,
+    /// Root finder of eq. 4.
+    #[arg(long, default_value = "safeguarded",
+          value_parser = PossibleValuesParser::new(Solver::ALL.map(Solver::name))
+              .map(|s| Solver::parse(&s).unwrap_or(Solver::Safeguarded)))] // listed above
+    solver: Solver,
+    #[arg(long, default_value_t = SolveOptions::default().rtol, hide_default_value = true,
+          allow_hyphen_values = true, value_parser = RTOL.parser(),
+          help = format!("{} [default: {}]", RTOL.help("Relative tolerance"),
+                         fmt_num(SolveOptions::default().rtol)))]
+    rtol: f64,
+    #[arg(long, value_name = "RAD", default_value_t = SolveOptions::default().theta0,
+          allow_hyphen_values = true, help = THETA0.help("Newton's starting theta"),
+          value_parser = THETA0.parser())]
+    theta0: f64,
+    /// One JSON object.
+    #[arg(long)]
+    json: bool,
+}
 
-    fn opt_str(&mut self, name: &str) -> Option<String> {
-        self.used.push(name.to_string());
-        self.values.get(name).cloned()
-    }
+/// `host-sim tile-to-scene`.
+#[derive(Parser, Debug)]
+#[command(
+    name = "host-sim tile-to-scene",
+    bin_name = "host-sim tile-to-scene",
+    about = "A grooved tile as a grating region (keys of scenes/*.toml with --scene-file: \
+             wavelength_mm, amplitude_percent)"
+)]
+struct TileToSceneCli {
+    #[command(flatten)]
+    tile: TileArgs,
+    #[arg(long, value_name = "V", allow_hyphen_values = true,
+          help = SLIDE_SPEED.help("Finger speed, for the comment f = V/lambda"),
+          value_parser = SLIDE_SPEED.parser())]
+    speed_mm_s: Option<f64>,
+    /// Print the keys of a scene file (scenes/*.toml).
+    #[arg(long)]
+    scene_file: bool,
+}
 
-    fn opt_f64(&mut self, name: &str) -> Result<Option<f64>, String> {
-        match self.opt_str(name) {
-            None => Ok(None),
-            Some(s) => {
-                let v: f64 = s
-                    .parse()
-                    .map_err(|_| format!("--{name}: not a number: {s:?}"))?;
-                if v.is_finite() {
-                    Ok(Some(v))
-                } else {
-                    Err(format!("--{name}: must be finite"))
-                }
-            }
-        }
-    }
+/// Parses `args` (without the program name) as command `name`; help and errors as clap
+/// renders them.
+fn parse<P: Parser>(name: &str, args: &[String]) -> Result<P, clap::Error> {
+    P::try_parse_from(std::iter::once(name.to_string()).chain(args.iter().cloned()))
+}
 
-    fn f64_or(&mut self, name: &str, default: f64) -> Result<f64, String> {
-        Ok(self.opt_f64(name)?.unwrap_or(default))
-    }
-
-    fn req_f64(&mut self, name: &str) -> Result<f64, String> {
-        self.opt_f64(name)?
-            .ok_or_else(|| format!("--{name} is required"))
-    }
-
-    fn finish(&self) -> Result<(), String> {
-        for k in self.values.keys().chain(self.switches.iter()) {
-            if !self.used.contains(k) {
-                return Err(format!("unknown flag --{k}"));
-            }
-        }
-        Ok(())
+/// A clap refusal as `run_model`'s result: help text is output, anything else an error.
+fn rendered(e: clap::Error) -> Result<String, String> {
+    let text = e.render().to_string();
+    match e.kind() {
+        clap::error::ErrorKind::DisplayHelp | clap::error::ErrorKind::DisplayVersion => Ok(text),
+        _ => Err(text.trim_end().trim_start_matches("error: ").to_string()),
     }
 }
 
@@ -135,105 +331,78 @@ fn json(fields: &[(&str, String)]) -> String {
 
 /// Hook for a binary's `main`: if the process arguments start with `model` or `tile-to-scene`,
 /// runs that subcommand, prints its output (or `error: …` on stderr) and returns the exit code;
-/// otherwise returns `None` and the caller parses its own CLI.
+/// otherwise returns `None` and the caller parses its own CLI. A refused flag exits with clap's
+/// one-line error and code 2, like a model's refusal.
 pub fn run_from_env() -> Option<std::process::ExitCode> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let out = match args.split_first() {
-        Some((c, rest)) if c == "model" => run_model(rest),
-        Some((c, rest)) if c == "tile-to-scene" => run_tile_to_scene(rest),
+        Some((c, rest)) if c == "model" => parse::<ModelCli>("model", rest).map(exec_model),
+        Some((c, rest)) if c == "tile-to-scene" => {
+            parse::<TileToSceneCli>("tile-to-scene", rest).map(exec_tile_to_scene)
+        }
         _ => return None,
     };
     Some(match out {
-        Ok(s) => {
+        Err(e) => e.exit(),
+        Ok(Ok(s)) => {
             println!("{}", s.trim_end());
             std::process::ExitCode::SUCCESS
         }
-        Err(e) => {
+        Ok(Err(e)) => {
             eprintln!("error: {e}");
             std::process::ExitCode::from(2)
         }
     })
 }
 
-/// `host-sim model <args>`; returns the text to print.
+/// `host-sim model <args>`; returns the text to print (the help for `--help`).
 pub fn run_model(args: &[String]) -> Result<String, String> {
-    let Some((name, rest)) = args.split_first() else {
-        return Err(MODEL_USAGE.into());
-    };
-    let mut fl = Flags::parse(rest)?;
-    if fl.switch("help") {
-        return Ok(MODEL_USAGE.into());
-    }
-    let out = match name.as_str() {
-        "stick-slip" => cmd_stick_slip(&mut fl)?,
-        "fig5" => cmd_fig5(&mut fl)?,
-        "grooved" => cmd_grooved(&mut fl)?,
-        "theta-solvers" => cmd_theta_solvers(&mut fl)?,
-        "tiles" => cmd_tiles(&mut fl)?,
-        "sandpaper" => cmd_sandpaper(&mut fl)?,
-        "atan" => cmd_atan(&mut fl)?,
-        "charts" => cmd_charts(&mut fl)?,
-        "atan-bench" => {
-            let what = fl.opt_str("impl").ok_or("--impl is required")?;
-            let n = fl.f64_or("n", 100_000.0)? as usize;
-            fl.finish()?;
-            let s = run_bench(&what, n)?;
-            format!("{what} n={n} sum={s}")
-        }
-        "help" | "--help" => MODEL_USAGE.into(),
-        other => return Err(format!("unknown model {other:?}\n{MODEL_USAGE}")),
-    };
-    fl.finish()?;
-    Ok(out)
+    parse::<ModelCli>("model", args).map_or_else(rendered, exec_model)
 }
 
-fn cmd_stick_slip(fl: &mut Flags) -> Result<String, String> {
-    let as_json = fl.switch("json");
-    let delta = fl.opt_f64("delta-mu")?;
-    let names = [
-        "e-object-pa",
-        "nu-object",
-        "e-skin-pa",
-        "nu-skin",
-        "sigma-um",
-        "beta-um",
-        "shear-strength-diff-pa",
-    ];
-    let mut mat = Vec::new();
-    for n in names {
-        mat.push(fl.opt_f64(n)?);
-    }
-    let given = mat.iter().filter(|m| m.is_some()).count();
-    let (delta_mu, material) = match (delta, given) {
-        (Some(_), g) if g > 0 => {
-            return Err("give either --delta-mu or the material parameters, not both".into())
+fn exec_model(cli: ModelCli) -> Result<String, String> {
+    match cli.model {
+        Model::StickSlip(a) => cmd_stick_slip(&a),
+        Model::Fig5 { points } => cmd_fig5(points),
+        Model::Grooved(a) => cmd_grooved(&a),
+        Model::ThetaSolvers { .. } => Ok(cmd_theta_solvers()),
+        Model::Tiles { .. } => cmd_tiles(),
+        Model::Sandpaper { grit, f_b_hz, json } => cmd_sandpaper(grit, f_b_hz, json),
+        Model::Atan { curve, .. } => Ok(cmd_atan(curve)),
+        Model::AtanBench { imp, n } => {
+            let s = run_bench(&imp, n)?;
+            Ok(format!("{imp} n={n} sum={s}"))
         }
-        (Some(d), _) => (d, None),
-        (None, 7) => {
+        Model::Charts { out, only, no_cost } => cmd_charts(&out, only, no_cost),
+    }
+}
+
+fn cmd_stick_slip(a: &StickSlipArgs) -> Result<String, String> {
+    let as_json = a.json;
+    let m = &a.material;
+    let (delta_mu, material) = match a.delta_mu {
+        Some(d) => (d, None),
+        None => {
+            // clap has required all seven when --delta-mu is absent.
+            let v = |x: Option<f64>| x.unwrap_or_default();
             let m = Material {
-                e_object_pa: mat[0].unwrap_or_default(),
-                nu_object: mat[1].unwrap_or_default(),
-                e_skin_pa: mat[2].unwrap_or_default(),
-                nu_skin: mat[3].unwrap_or_default(),
-                sigma_m: mat[4].unwrap_or_default() * 1e-6,
-                beta_m: mat[5].unwrap_or_default() * 1e-6,
-                shear_strength_diff_pa: mat[6].unwrap_or_default(),
+                e_object_pa: v(m.e_object_pa),
+                nu_object: v(m.nu_object),
+                e_skin_pa: v(m.e_skin_pa),
+                nu_skin: v(m.nu_skin),
+                sigma_m: v(m.sigma_um) * 1e-6,
+                beta_m: v(m.beta_um) * 1e-6,
+                shear_strength_diff_pa: v(m.shear_strength_diff_pa),
             };
             (m.delta_mu().map_err(|e| e.to_string())?, Some(m))
-        }
-        (None, _) => {
-            return Err(format!(
-                "give --delta-mu, or all of --{}",
-                names.join(" --")
-            ));
         }
     };
     let p = StickSlipParams {
         delta_mu,
-        normal_force_n: fl.f64_or("normal-force-n", 1.0)?,
-        mass_kg: fl.f64_or("mass-g", 1.0)? * 1e-3,
-        stiffness_n_per_m: fl.f64_or("stiffness-n-per-m", 500.0)?,
-        speed_m_s: fl.f64_or("speed-mm-s", 40.0)? * 1e-3,
+        normal_force_n: a.normal_force_n,
+        mass_kg: a.mass_g * 1e-3,
+        stiffness_n_per_m: a.stiffness_n_per_m,
+        speed_m_s: a.speed_mm_s * 1e-3,
     };
     let r = stick_slip(&p).map_err(|e| e.to_string())?;
     if as_json {
@@ -267,8 +436,7 @@ fn cmd_stick_slip(fl: &mut Flags) -> Result<String, String> {
     }
 }
 
-fn cmd_fig5(fl: &mut Flags) -> Result<String, String> {
-    let n = fl.f64_or("points", 200.0)? as usize;
+fn cmd_fig5(n: usize) -> Result<String, String> {
     let mut s = String::from("delta_mu,r,f_ss_hz,asymptote_hz,f0_hz\n");
     for p in fig5_curve(n)? {
         let _ = writeln!(
@@ -280,32 +448,14 @@ fn cmd_fig5(fl: &mut Flags) -> Result<String, String> {
     Ok(s)
 }
 
-fn grooved_input(fl: &mut Flags) -> Result<GroovedInput, String> {
-    Ok(GroovedInput {
-        groove_mm: fl.req_f64("groove-mm")?,
-        land_mm: fl.req_f64("land-mm")?,
-        force_g: fl.req_f64("force-g")?,
-        k_mm_per_g: fl.f64_or("k-mm-per-g", 0.08)?,
-        mu: fl.f64_or("mu", 0.5)?,
-        pad: Pad {
-            area_ref_mm2: fl.f64_or("pad-area-mm2", 150.0)?,
-            force_ref_g: fl.f64_or("pad-ref-force-g", 112.0)?,
-            exponent: fl.f64_or("pad-exponent", 0.15)?,
-        },
-    })
-}
-
-fn cmd_grooved(fl: &mut Flags) -> Result<String, String> {
-    let as_json = fl.switch("json");
-    let inp = grooved_input(fl)?;
-    let solver_name = fl.opt_str("solver").unwrap_or_else(|| "safeguarded".into());
-    let solver =
-        Solver::parse(&solver_name).ok_or_else(|| format!("unknown solver {solver_name:?}"))?;
-    let d = SolveOptions::default();
+fn cmd_grooved(a: &GroovedArgs) -> Result<String, String> {
+    let as_json = a.json;
+    let inp = a.tile.input();
+    let solver = a.solver;
     let opt = SolveOptions {
-        rtol: fl.f64_or("rtol", d.rtol)?,
-        max_iter: d.max_iter,
-        theta0: fl.f64_or("theta0", d.theta0)?,
+        rtol: a.rtol,
+        max_iter: SolveOptions::default().max_iter,
+        theta0: a.theta0,
     };
     let r = grooved(&inp, solver, &opt).map_err(|e| e.to_string())?;
     let eq = Eq4::new(inp.groove_mm, inp.land_mm, inp.mu).map_err(|e| e.to_string())?;
@@ -361,8 +511,7 @@ fn cmd_grooved(fl: &mut Flags) -> Result<String, String> {
     }
 }
 
-fn cmd_theta_solvers(fl: &mut Flags) -> Result<String, String> {
-    fl.switch("csv");
+fn cmd_theta_solvers() -> String {
     let mut s = String::from("solver,rtol,solved,cases,mean_iterations,max_iterations,mean_evaluations,max_rel_theta_error\n");
     for st in solver_sweep() {
         let _ = writeln!(
@@ -378,11 +527,10 @@ fn cmd_theta_solvers(fl: &mut Flags) -> Result<String, String> {
             st.max_rel_theta_error
         );
     }
-    Ok(s)
+    s
 }
 
-fn cmd_tiles(fl: &mut Flags) -> Result<String, String> {
-    fl.switch("csv");
+fn cmd_tiles() -> Result<String, String> {
     let mut s = String::from("set,label,groove_mm,land_mm,force_g,theta_rad,d_mm,a_c_mm2,a_mm2,wavelength_um,amplitude_permille\n");
     for r in tile_rows()? {
         let _ = writeln!(
@@ -404,12 +552,11 @@ fn cmd_tiles(fl: &mut Flags) -> Result<String, String> {
     Ok(s)
 }
 
-fn cmd_sandpaper(fl: &mut Flags) -> Result<String, String> {
-    let as_json = fl.switch("json");
-    let r = match (fl.opt_f64("grit")?, fl.opt_f64("f-b-hz")?) {
-        (Some(g), None) => sandpaper::from_grit(g)?,
-        (None, Some(f)) => sandpaper::from_f_b(f)?,
-        _ => return Err("give exactly one of --grit or --f-b-hz".into()),
+fn cmd_sandpaper(grit: Option<f64>, f_b_hz: Option<f64>, as_json: bool) -> Result<String, String> {
+    // clap's group has required exactly one of them.
+    let r = match (grit, f_b_hz) {
+        (Some(g), _) => sandpaper::from_grit(g)?,
+        (None, f) => sandpaper::from_f_b(f.unwrap_or_default())?,
     };
     if as_json {
         Ok(json(&[
@@ -435,9 +582,8 @@ fn cmd_sandpaper(fl: &mut Flags) -> Result<String, String> {
     }
 }
 
-fn cmd_atan(fl: &mut Flags) -> Result<String, String> {
-    fl.switch("csv");
-    if fl.switch("curve") {
+fn cmd_atan(curve: bool) -> String {
+    if curve {
         let mut s = String::from("r,impl,abs_err_rad,rel_err_f_ss\n");
         for p in atan_curve() {
             let _ = writeln!(
@@ -449,7 +595,7 @@ fn cmd_atan(fl: &mut Flags) -> Result<String, String> {
                 p.rel_err_f_ss
             );
         }
-        return Ok(s);
+        return s;
     }
     let mut s = String::from("impl,max_abs_rad,mean_abs_rad,max_rel_f_ss,mean_rel_f_ss\n");
     for imp in AtanImpl::ALL {
@@ -464,38 +610,27 @@ fn cmd_atan(fl: &mut Flags) -> Result<String, String> {
             e.mean_rel_f_ss
         );
     }
-    Ok(s)
+    s
 }
 
-fn cmd_charts(fl: &mut Flags) -> Result<String, String> {
-    let out = fl.opt_str("out").unwrap_or_else(|| "docs/charts".into());
-    let only = match fl.opt_str("only") {
-        None => None,
-        Some(s) => Some(
-            Chart::parse(&s)
-                .ok_or_else(|| format!("--only: unknown chart {s:?} (fig5|solvers|tiles|atan)"))?,
-        ),
-    };
-    let cost = if fl.switch("no-cost") {
+fn cmd_charts(out: &std::path::Path, only: Option<Chart>, no_cost: bool) -> Result<String, String> {
+    let cost = if no_cost {
         AtanCostSource::Skip
     } else {
         let exe = std::env::current_exe().map_err(|e| format!("current executable: {e}"))?;
         AtanCostSource::Callgrind { exe }
     };
-    fl.finish()?;
-    write_charts(std::path::Path::new(&out), only, &cost)
+    write_charts(out, only, &cost)
 }
 
-/// `host-sim tile-to-scene <args>`; returns the TOML snippet.
+/// `host-sim tile-to-scene <args>`; returns the TOML snippet (the help for `--help`).
 pub fn run_tile_to_scene(args: &[String]) -> Result<String, String> {
-    let mut fl = Flags::parse(args)?;
-    if fl.switch("help") {
-        return Ok(MODEL_USAGE.into());
-    }
-    let inp = grooved_input(&mut fl)?;
-    let speed = fl.opt_f64("speed-mm-s")?;
-    let scene_file = fl.switch("scene-file");
-    fl.finish()?;
+    parse::<TileToSceneCli>("tile-to-scene", args).map_or_else(rendered, exec_tile_to_scene)
+}
+
+fn exec_tile_to_scene(cli: TileToSceneCli) -> Result<String, String> {
+    let inp = cli.tile.input();
+    let (speed, scene_file) = (cli.speed_mm_s, cli.scene_file);
     let reg = tile_to_region(&inp).map_err(|e| e.to_string())?;
     let a_max = a_max_mm2().map_err(|e| e.to_string())?;
     let mut s = format!(
