@@ -790,21 +790,27 @@ fn write_report(
     Ok(())
 }
 
+/// Worker threads of the bench.
+const THREADS: crate::door::Whole = crate::door::Whole::new(1, 256);
+/// Seed of the bench's scenarios.
+const SEED: crate::door::Whole = crate::door::Whole::new(0, u64::MAX);
+
 /// `host-sim bench [--seed N] [--out DIR] [--threads N] [--skip-cost]`.
 #[derive(clap::Parser, Debug)]
 #[command(
     name = "host-sim bench",
+    bin_name = "host-sim bench",
     about = "Velocity estimators measured, charted and broken"
 )]
 struct BenchArgs {
-    /// Seed of every scenario.
-    #[arg(long, default_value_t = 2026)]
+    #[arg(long, default_value_t = 2026, allow_hyphen_values = true,
+          help = SEED.help("Seed of every scenario"), value_parser = SEED.parser())]
     seed: u64,
     /// Output directory for bench-results.md and charts/ (default: the repository's docs/).
-    #[arg(long)]
+    #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
-    /// Worker threads.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, value_name = "N", default_value_t = 2, allow_hyphen_values = true,
+          help = THREADS.help("Worker threads"), value_parser = THREADS.parser_usize())]
     threads: usize,
     /// Skip the callgrind cost runs.
     #[arg(long)]
