@@ -81,10 +81,13 @@ fn position_help(what: &str, default: &str) -> String {
 
 /// A position: any finite number at the door; [`plan`] checks it against the scene's travel.
 fn finite_mm(s: &str) -> Result<f64, String> {
-    let rule = "a position on the travel, from 0 mm to its end";
+    let rule = format!(
+        "from 0 to the end of the travel, {} mm for the default scene",
+        fmt_num(default_travel_mm())
+    );
     match s.trim().parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        Ok(_) => Err(format!("must be a finite number: {rule}")),
+        Ok(_) => Err(format!("must be a finite number {rule}")),
         Err(_) => Err(format!("not a number; must be {rule}")),
     }
 }
