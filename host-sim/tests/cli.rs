@@ -1,0 +1,533 @@
+//! The `host-sim` binary as a user meets it: every numeric flag of every command refused at the
+//! door when out of range, NaN or infinite (exit code 2, one line naming the flag, the value and
+//! the rule); contradictory flags refused with a sentence; no input reaches a panic (property
+//! tests over random flag values); the default trajectories stay on the travel, and the summary
+//! warns when flags take the finger off it.
+//!
+//! The expected messages are written out by hand here, not computed by the code under test.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+use host_sim::cli::{self, Kind};
+use host_sim::trajectory::Trajectory;
+use host_sim::{metrics, sim};
+use proptest::prelude::*;
+
+const EXE: &str = env!("CARGO_BIN_EXE_host-sim");
+const TIP: &str = "For more information, try '--help'.";
+
+fn run(args: &[&str]) -> Output {
+    Command::new(EXE)
+        .args(args)
+        .current_dir(scratch())
+        .output()
+        .expect("host-sim runs")
+}
+
+/// A folder for the charts and scene files of these tests (never `out/` of the repository).
+fn scratch() -> PathBuf {
+    let d = std::env::temp_dir().join("host-sim-cli-tests");
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// `args` are refused before anything runs: exit code 2, nothing on stdout, and stderr is the
+/// one line `want` followed by clap's tip (and, for clap's own conflict errors, its usage).
+fn refused(args: &[&str], want: &str) {
+    let out = run(args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+    assert!(out.stdout.is_empty(), "{args:?} printed to stdout");
+    assert!(!err.contains("panicked"), "{args:?}: {err}");
+    let mut lines = err.lines();
+    assert_eq!(lines.next(), Some(want), "{args:?}");
+    let rest: Vec<&str> = lines.filter(|l| !l.is_empty()).collect();
+    assert_eq!(rest.last(), Some(&TIP), "{args:?}: {err}");
+    assert!(
+        rest.iter().all(|l| *l == TIP || l.starts_with("Usage: ")),
+        "{args:?}: more than one line of message: {err}"
+    );
+}
+
+/// One test per flag: each `args => expected first line of stderr`.
+macro_rules! flag_test {
+    ($name:ident: $($args:expr => $want:expr),+ $(,)?) => {
+        #[test]
+        fn $name() {
+            $(refused(&$args, $want);)+
+        }
+    };
+}
+
+// ---------------------------------------------------------------- the simulator's flags
+
+flag_test!(speed:
+    ["--speed", "-10"] => "error: invalid value '-10' for '--speed <MM_S>': must be from 0.1 to 1000 mm/s",
+    ["--speed=0"] => "error: invalid value '0' for '--speed <MM_S>': must be from 0.1 to 1000 mm/s",
+    ["--speed", "1001"] => "error: invalid value '1001' for '--speed <MM_S>': must be from 0.1 to 1000 mm/s",
+    ["--speed", "nan"] => "error: invalid value 'nan' for '--speed <MM_S>': must be a finite number from 0.1 to 1000 mm/s",
+    ["--speed", "inf"] => "error: invalid value 'inf' for '--speed <MM_S>': must be a finite number from 0.1 to 1000 mm/s",
+    ["--speed", "fast"] => "error: invalid value 'fast' for '--speed <MM_S>': not a number; must be from 0.1 to 1000 mm/s",
+);
+
+flag_test!(from:
+    ["--from", "-1"] => "error: invalid value '-1' for '--from <MM>': must be from 0 to 63 mm, the travel of the default scene",
+    ["--from", "63.5"] => "error: invalid value '63.5' for '--from <MM>': must be from 0 to 63 mm, the travel of the default scene",
+    ["--from", "NaN"] => "error: invalid value 'NaN' for '--from <MM>': must be a finite number from 0 to the end of the travel, 63 mm for the default scene",
+    ["--from", "-inf"] => "error: invalid value '-inf' for '--from <MM>': must be a finite number from 0 to the end of the travel, 63 mm for the default scene",
+    ["--from", "x"] => "error: invalid value 'x' for '--from <MM>': not a number; must be from 0 to the end of the travel, 63 mm for the default scene",
+);
+
+flag_test!(to:
+    ["--to", "-0.5"] => "error: invalid value '-0.5' for '--to <MM>': must be from 0 to 63 mm, the travel of the default scene",
+    ["--to", "100"] => "error: invalid value '100' for '--to <MM>': must be from 0 to 63 mm, the travel of the default scene",
+    ["--to", "nan"] => "error: invalid value 'nan' for '--to <MM>': must be a finite number from 0 to the end of the travel, 63 mm for the default scene",
+    ["--to", "inf"] => "error: invalid value 'inf' for '--to <MM>': must be a finite number from 0 to the end of the travel, 63 mm for the default scene",
+);
+
+flag_test!(accel:
+    ["--trajectory", "ramp", "--accel", "-2"] => "error: invalid value '-2' for '--accel <M_S2>': must be from 0.01 to 100 m/s²",
+    ["--trajectory", "ramp", "--accel", "0"] => "error: invalid value '0' for '--accel <M_S2>': must be from 0.01 to 100 m/s²",
+    ["--trajectory", "ramp", "--accel", "101"] => "error: invalid value '101' for '--accel <M_S2>': must be from 0.01 to 100 m/s²",
+    ["--trajectory", "ramp", "--accel", "nan"] => "error: invalid value 'nan' for '--accel <M_S2>': must be a finite number from 0.01 to 100 m/s²",
+    ["--trajectory", "ramp", "--accel", "inf"] => "error: invalid value 'inf' for '--accel <M_S2>': must be a finite number from 0.01 to 100 m/s²",
+);
+
+flag_test!(noise:
+    ["--noise=-3"] => "error: invalid value '-3' for '--noise <LSB_RMS>': must be from 0 to 100 LSB RMS",
+    ["--noise", "100.5"] => "error: invalid value '100.5' for '--noise <LSB_RMS>': must be from 0 to 100 LSB RMS",
+    ["--noise", "nan"] => "error: invalid value 'nan' for '--noise <LSB_RMS>': must be a finite number from 0 to 100 LSB RMS",
+    ["--noise", "inf"] => "error: invalid value 'inf' for '--noise <LSB_RMS>': must be a finite number from 0 to 100 LSB RMS",
+);
+
+flag_test!(offset:
+    ["--offset", "-4096"] => "error: invalid value '-4096' for '--offset <LSB>': must be from -4095 to 4095 LSB",
+    ["--offset", "5000"] => "error: invalid value '5000' for '--offset <LSB>': must be from -4095 to 4095 LSB",
+    ["--offset=nan"] => "error: invalid value 'nan' for '--offset <LSB>': must be a finite number from -4095 to 4095 LSB",
+    ["--offset", "-inf"] => "error: invalid value '-inf' for '--offset <LSB>': must be a finite number from -4095 to 4095 LSB",
+);
+
+flag_test!(duration:
+    ["--duration", "0"] => "error: invalid value '0' for '--duration <S>': must be from 0.01 to 600 s",
+    ["--duration=-1"] => "error: invalid value '-1' for '--duration <S>': must be from 0.01 to 600 s",
+    ["--duration", "601"] => "error: invalid value '601' for '--duration <S>': must be from 0.01 to 600 s",
+    ["--duration=nan"] => "error: invalid value 'nan' for '--duration <S>': must be a finite number from 0.01 to 600 s",
+    ["--duration=inf"] => "error: invalid value 'inf' for '--duration <S>': must be a finite number from 0.01 to 600 s",
+    ["--duration", "1e400"] => "error: invalid value '1e400' for '--duration <S>': must be a finite number from 0.01 to 600 s",
+);
+
+flag_test!(seed:
+    ["--seed", "-1"] => "error: invalid value '-1' for '--seed <SEED>': must be a whole number from 0 to 18446744073709551615",
+    ["--seed", "18446744073709551616"] => "error: invalid value '18446744073709551616' for '--seed <SEED>': must be a whole number from 0 to 18446744073709551615",
+    ["--seed", "1.5"] => "error: invalid value '1.5' for '--seed <SEED>': must be a whole number from 0 to 18446744073709551615",
+    ["--seed", "nan"] => "error: invalid value 'nan' for '--seed <SEED>': must be a whole number from 0 to 18446744073709551615",
+    ["--seed", "inf"] => "error: invalid value 'inf' for '--seed <SEED>': must be a whole number from 0 to 18446744073709551615",
+);
+
+flag_test!(output:
+    ["-o", "x.svg"] => "error: invalid value 'x.svg' for '--output <PNG>': the chart is a PNG file: the path must end in .png",
+    ["--output", "out/"] => "error: invalid value 'out/' for '--output <PNG>': the chart is a PNG file: the path must end in .png",
+);
+
+#[test]
+fn board_lists_the_boards() {
+    let out = run(&["--board", "foo"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.starts_with(
+            "error: invalid value 'foo' for '--board <BOARD>'\n  \
+             [possible values: nucleo-f446re, nucleo-g474re]\n"
+        ),
+        "{err}"
+    );
+    // The list is saw_boards::ALL's.
+    let names: Vec<&str> = saw_boards::ALL.iter().map(|b| b.name).collect();
+    assert_eq!(names, ["nucleo-f446re", "nucleo-g474re"]);
+}
+
+// ---------------------------------------------------------------- contradictions
+
+flag_test!(from_equal_to:
+    ["--trajectory", "sine", "--from", "30", "--to", "30"] => "error: --from 30 and --to 30 are the same point; --trajectory sine moves between them, so they must differ",
+    ["--from", "20", "--to", "20"] => "error: --from 20 and --to 20 are the same point; --trajectory back-and-forth moves between them, so they must differ",
+    ["--trajectory", "constant", "--from", "61.5"] => "error: --from 61.5 and --to 61.5 (its default) are the same point; --trajectory constant moves between them, so they must differ",
+    ["--trajectory", "reversal", "--to", "1.5"] => "error: --from 1.5 (its default) and --to 1.5 are the same point; --trajectory reversal moves between them, so they must differ",
+    ["--trajectory", "ramp", "--from", "10", "--to", "10.0"] => "error: --from 10 and --to 10.0 are the same point; --trajectory ramp moves between them, so they must differ",
+);
+
+flag_test!(ignored_flags:
+    ["--accel", "3"] => "error: --accel 3 is the acceleration of --trajectory ramp; --trajectory back-and-forth would ignore it",
+    ["--trajectory", "sine", "--accel=5"] => "error: --accel 5 is the acceleration of --trajectory ramp; --trajectory sine would ignore it",
+    ["--trajectory", "rest", "--to", "30"] => "error: --trajectory rest stays at --from; --to 30 would be ignored",
+    ["--trajectory", "rest", "--speed", "20", "--to", "30"] => "error: --trajectory rest stays at --from; --to 30, --speed 20 would be ignored",
+);
+
+flag_test!(scenario_with_run_flags:
+    ["--scenario", "s.toml", "--speed", "20"] => "error: --scenario takes the board, trajectory, noise, seed, duration and scene from its file; --speed 20 would be ignored: give one or the other",
+    ["--scenario", "s.toml", "--scene", "x.toml", "--no-preload"] => "error: --scenario takes the board, trajectory, noise, seed, duration and scene from its file; --no-preload, --scene x.toml would be ignored: give one or the other",
+    ["--trajectory", "sine", "--scenario", "s.toml", "--board", "nucleo-g474re"] => "error: --scenario takes the board, trajectory, noise, seed, duration and scene from its file; --trajectory sine, --board nucleo-g474re would be ignored: give one or the other",
+);
+
+/// A scene of a 40 mm substrate.
+fn short_scene() -> PathBuf {
+    let path = scratch().join("short.toml");
+    std::fs::write(
+        &path,
+        "[substrate]\nlength_mm = 40.0\ncode_at_start = 1310\ncode_at_end = 64225\n\n\
+         [[region]]\nkind = \"constant\"\nf_b_hz = 80\n",
+    )
+    .unwrap();
+    path
+}
+
+#[test]
+fn from_and_to_are_checked_against_the_scene_loaded() {
+    let scene = short_scene();
+    let s = scene.to_str().unwrap();
+    refused(
+        &["--scene", s, "--to", "50"],
+        &format!(
+            "error: invalid value '50' for '--to <MM>': must be from 0 to 40 mm, the travel of {s}"
+        ),
+    );
+    // Without --from/--to the motion spans that scene's travel, 1.5 mm in from either end.
+    let (args, m) = cli::parse_from(["host-sim", "--scene", s]).unwrap();
+    let plan = cli::plan(&args, &m).unwrap();
+    assert_eq!(
+        plan.params.trajectory,
+        Trajectory::Triangle {
+            a_um: 1_500.0,
+            b_um: 38_500.0,
+            speed_um_s: 60_000.0
+        }
+    );
+}
+
+// ---------------------------------------------------------------- model, tile-to-scene, bench
+
+flag_test!(model_stick_slip_flags:
+    ["model", "stick-slip", "--delta-mu", "-0.1"] => "error: invalid value '-0.1' for '--delta-mu <X>': must be from 0 to 10",
+    ["model", "stick-slip", "--delta-mu", "nan"] => "error: invalid value 'nan' for '--delta-mu <X>': must be a finite number from 0 to 10",
+    ["model", "stick-slip", "--e-object-pa", "10"] => "error: invalid value '10' for '--e-object-pa <PA>': must be from 1000 to 1e12 Pa",
+    ["model", "stick-slip", "--e-object-pa", "inf"] => "error: invalid value 'inf' for '--e-object-pa <PA>': must be a finite number from 1000 to 1e12 Pa",
+    ["model", "stick-slip", "--nu-object", "-1"] => "error: invalid value '-1' for '--nu-object <NU>': must be from -0.99 to 0.5",
+    ["model", "stick-slip", "--nu-object", "nan"] => "error: invalid value 'nan' for '--nu-object <NU>': must be a finite number from -0.99 to 0.5",
+    ["model", "stick-slip", "--e-skin-pa", "2e12"] => "error: invalid value '2e12' for '--e-skin-pa <PA>': must be from 1000 to 1e12 Pa",
+    ["model", "stick-slip", "--e-skin-pa", "nan"] => "error: invalid value 'nan' for '--e-skin-pa <PA>': must be a finite number from 1000 to 1e12 Pa",
+    ["model", "stick-slip", "--nu-skin", "0.7"] => "error: invalid value '0.7' for '--nu-skin <NU>': must be from -0.99 to 0.5",
+    ["model", "stick-slip", "--nu-skin", "inf"] => "error: invalid value 'inf' for '--nu-skin <NU>': must be a finite number from -0.99 to 0.5",
+    ["model", "stick-slip", "--sigma-um", "0"] => "error: invalid value '0' for '--sigma-um <UM>': must be from 0.001 to 1000 µm",
+    ["model", "stick-slip", "--sigma-um", "nan"] => "error: invalid value 'nan' for '--sigma-um <UM>': must be a finite number from 0.001 to 1000 µm",
+    ["model", "stick-slip", "--beta-um", "-5"] => "error: invalid value '-5' for '--beta-um <UM>': must be from 0.001 to 10000 µm",
+    ["model", "stick-slip", "--beta-um", "inf"] => "error: invalid value 'inf' for '--beta-um <UM>': must be a finite number from 0.001 to 10000 µm",
+    ["model", "stick-slip", "--shear-strength-diff-pa", "-1"] => "error: invalid value '-1' for '--shear-strength-diff-pa <PA>': must be from 0 to 1e9 Pa",
+    ["model", "stick-slip", "--shear-strength-diff-pa", "nan"] => "error: invalid value 'nan' for '--shear-strength-diff-pa <PA>': must be a finite number from 0 to 1e9 Pa",
+    ["model", "stick-slip", "--normal-force-n", "-1"] => "error: invalid value '-1' for '--normal-force-n <N>': must be from 0 to 100 N",
+    ["model", "stick-slip", "--normal-force-n", "inf"] => "error: invalid value 'inf' for '--normal-force-n <N>': must be a finite number from 0 to 100 N",
+    ["model", "stick-slip", "--mass-g", "0"] => "error: invalid value '0' for '--mass-g <G>': must be from 0.001 to 1000 g",
+    ["model", "stick-slip", "--mass-g", "nan"] => "error: invalid value 'nan' for '--mass-g <G>': must be a finite number from 0.001 to 1000 g",
+    ["model", "stick-slip", "--stiffness-n-per-m", "-500"] => "error: invalid value '-500' for '--stiffness-n-per-m <N_PER_M>': must be from 0.001 to 1e6 N/m",
+    ["model", "stick-slip", "--stiffness-n-per-m", "inf"] => "error: invalid value 'inf' for '--stiffness-n-per-m <N_PER_M>': must be a finite number from 0.001 to 1e6 N/m",
+    ["model", "stick-slip", "--speed-mm-s", "-40"] => "error: invalid value '-40' for '--speed-mm-s <MM_S>': must be from 0 to 1000 mm/s",
+    ["model", "stick-slip", "--speed-mm-s", "nan"] => "error: invalid value 'nan' for '--speed-mm-s <MM_S>': must be a finite number from 0 to 1000 mm/s",
+);
+
+flag_test!(model_stick_slip_contradiction:
+    ["model", "stick-slip", "--delta-mu", "0.1", "--beta-um", "5"] => "error: the argument '--delta-mu <X>' cannot be used with '--beta-um <UM>'",
+);
+
+flag_test!(model_fig5_points:
+    ["model", "fig5", "--points", "0"] => "error: invalid value '0' for '--points <N>': must be a whole number from 1 to 100000",
+    ["model", "fig5", "--points", "-3"] => "error: invalid value '-3' for '--points <N>': must be a whole number from 1 to 100000",
+    ["model", "fig5", "--points", "nan"] => "error: invalid value 'nan' for '--points <N>': must be a whole number from 1 to 100000",
+    ["model", "fig5", "--points", "inf"] => "error: invalid value 'inf' for '--points <N>': must be a whole number from 1 to 100000",
+);
+
+/// The tile flags, as `grooved` and `tile-to-scene` both take them.
+fn tile_flag_refusals(cmd: &[&str]) {
+    let cases: [(&[&str], &str); 16] = [
+        (&["--groove-mm", "0"], "error: invalid value '0' for '--groove-mm <G>': must be from 0.01 to 10 mm"),
+        (&["--groove-mm", "nan"], "error: invalid value 'nan' for '--groove-mm <G>': must be a finite number from 0.01 to 10 mm"),
+        (&["--land-mm", "-0.25"], "error: invalid value '-0.25' for '--land-mm <L>': must be from 0 to 10 mm"),
+        (&["--land-mm", "inf"], "error: invalid value 'inf' for '--land-mm <L>': must be a finite number from 0 to 10 mm"),
+        (&["--force-g", "-1"], "error: invalid value '-1' for '--force-g <F>': must be from 0 to 10000 g"),
+        (&["--force-g", "100000"], "error: invalid value '100000' for '--force-g <F>': must be from 0 to 10000 g"),
+        (&["--force-g", "nan"], "error: invalid value 'nan' for '--force-g <F>': must be a finite number from 0 to 10000 g"),
+        (&["--k-mm-per-g", "0"], "error: invalid value '0' for '--k-mm-per-g <K>': must be from 0.001 to 1 mm/g"),
+        (&["--k-mm-per-g", "inf"], "error: invalid value 'inf' for '--k-mm-per-g <K>': must be a finite number from 0.001 to 1 mm/g"),
+        (&["--mu", "-0.5"], "error: invalid value '-0.5' for '--mu <MU>': must be from 0 to 10"),
+        (&["--mu", "nan"], "error: invalid value 'nan' for '--mu <MU>': must be a finite number from 0 to 10"),
+        (&["--pad-area-mm2", "0"], "error: invalid value '0' for '--pad-area-mm2 <MM2>': must be from 1 to 10000 mm²"),
+        (&["--pad-area-mm2", "inf"], "error: invalid value 'inf' for '--pad-area-mm2 <MM2>': must be a finite number from 1 to 10000 mm²"),
+        (&["--pad-ref-force-g", "-112"], "error: invalid value '-112' for '--pad-ref-force-g <G>': must be from 0.1 to 10000 g"),
+        (&["--pad-ref-force-g", "nan"], "error: invalid value 'nan' for '--pad-ref-force-g <G>': must be a finite number from 0.1 to 10000 g"),
+        (&["--pad-exponent", "1.5"], "error: invalid value '1.5' for '--pad-exponent <X>': must be from 0 to 1"),
+    ];
+    for (flags, want) in cases {
+        refused(&[cmd, flags].concat(), want);
+    }
+    refused(
+        &[cmd, &["--pad-exponent", "-inf"]].concat(),
+        "error: invalid value '-inf' for '--pad-exponent <X>': must be a finite number from 0 to 1",
+    );
+}
+
+#[test]
+fn model_grooved_flags() {
+    tile_flag_refusals(&["model", "grooved"]);
+    let g = ["model", "grooved", "--groove-mm", "1", "--land-mm", "0.25"];
+    for (flags, want) in [
+        (["--rtol", "0"], "error: invalid value '0' for '--rtol <RTOL>': must be from 1e-16 to 0.1"),
+        (["--rtol", "nan"], "error: invalid value 'nan' for '--rtol <RTOL>': must be a finite number from 1e-16 to 0.1"),
+        (["--theta0", "-1"], "error: invalid value '-1' for '--theta0 <RAD>': must be from 0.001 to 1.5707963267948966 rad"),
+        (["--theta0", "inf"], "error: invalid value 'inf' for '--theta0 <RAD>': must be a finite number from 0.001 to 1.5707963267948966 rad"),
+    ] {
+        refused(&[&g[..], &flags[..]].concat(), want);
+    }
+    let out = run(&[&g[..], &["--solver", "secant"]].concat());
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).starts_with(
+        "error: invalid value 'secant' for '--solver <SOLVER>'\n  \
+         [possible values: newton, bisection, safeguarded]"
+    ));
+}
+
+#[test]
+fn tile_to_scene_flags() {
+    tile_flag_refusals(&["tile-to-scene"]);
+    refused(
+        &["tile-to-scene", "--speed-mm-s", "-1"],
+        "error: invalid value '-1' for '--speed-mm-s <V>': must be from 0 to 1000 mm/s",
+    );
+    refused(
+        &["tile-to-scene", "--speed-mm-s", "inf"],
+        "error: invalid value 'inf' for '--speed-mm-s <V>': must be a finite number from 0 to 1000 mm/s",
+    );
+}
+
+flag_test!(model_sandpaper_flags:
+    ["model", "sandpaper", "--grit", "0"] => "error: invalid value '0' for '--grit <GRIT>': must be from 1 to 10000",
+    ["model", "sandpaper", "--grit", "nan"] => "error: invalid value 'nan' for '--grit <GRIT>': must be a finite number from 1 to 10000",
+    ["model", "sandpaper", "--f-b-hz", "0"] => "error: invalid value '0' for '--f-b-hz <HZ>': must be from 1 to 2000 Hz",
+    ["model", "sandpaper", "--f-b-hz", "2001"] => "error: invalid value '2001' for '--f-b-hz <HZ>': must be from 1 to 2000 Hz",
+    ["model", "sandpaper", "--f-b-hz", "inf"] => "error: invalid value 'inf' for '--f-b-hz <HZ>': must be a finite number from 1 to 2000 Hz",
+    ["model", "sandpaper", "--grit", "180", "--f-b-hz", "60"] => "error: the argument '--grit <GRIT>' cannot be used with '--f-b-hz <HZ>'",
+);
+
+flag_test!(model_atan_bench_n:
+    ["model", "atan-bench", "--impl", "libm", "--n", "0"] => "error: invalid value '0' for '--n <N>': must be a whole number from 1 to 100000000",
+    ["model", "atan-bench", "--impl", "libm", "--n", "1e9"] => "error: invalid value '1e9' for '--n <N>': must be a whole number from 1 to 100000000",
+    ["model", "atan-bench", "--impl", "libm", "--n", "nan"] => "error: invalid value 'nan' for '--n <N>': must be a whole number from 1 to 100000000",
+);
+
+flag_test!(bench_flags:
+    ["bench", "--threads", "0"] => "error: invalid value '0' for '--threads <N>': must be a whole number from 1 to 256",
+    ["bench", "--threads", "-2"] => "error: invalid value '-2' for '--threads <N>': must be a whole number from 1 to 256",
+    ["bench", "--threads", "inf"] => "error: invalid value 'inf' for '--threads <N>': must be a whole number from 1 to 256",
+    ["bench", "--seed", "-1"] => "error: invalid value '-1' for '--seed <SEED>': must be a whole number from 0 to 18446744073709551615",
+    ["bench", "--seed", "nan"] => "error: invalid value 'nan' for '--seed <SEED>': must be a whole number from 0 to 18446744073709551615",
+);
+
+#[test]
+fn subcommands_name_themselves_in_usage() {
+    for (args, usage) in [
+        (&["bench", "--help"][..], "Usage: host-sim bench [OPTIONS]"),
+        (&["model", "--help"][..], "Usage: host-sim model <COMMAND>"),
+        (
+            &["model", "sandpaper", "--help"][..],
+            "Usage: host-sim model sandpaper [OPTIONS] <--grit <GRIT>|--f-b-hz <HZ>>",
+        ),
+        (
+            &["tile-to-scene", "--help"][..],
+            "Usage: host-sim tile-to-scene [OPTIONS] --groove-mm <G> --land-mm <L> --force-g <F>",
+        ),
+        (&["--help"][..], "Usage: host-sim [OPTIONS]"),
+    ] {
+        let out = run(args);
+        assert_eq!(out.status.code(), Some(0), "{args:?}");
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(text.lines().any(|l| l == usage), "{args:?}:\n{text}");
+    }
+}
+
+#[test]
+fn help_states_unit_and_range_of_every_simulator_flag() {
+    let out = run(&["--help"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    for line in [
+        "Finger speed (peak for sine, top for ramp), mm/s (0.1 to 1000)",
+        "Start (or rest) position, mm (0 to the end of the travel: 63 for the default scene) [default: 1.5]",
+        "Far turning point (the direction for constant and ramp), mm (0 to the end of the travel: 63 for the default scene) [default: the end of the travel minus 1.5]",
+        "Acceleration of --trajectory ramp, m/s² (0.01 to 100)",
+        "ADC noise per conversion (12-bit), LSB RMS (0 to 100)",
+        "ADC offset per conversion (12-bit), LSB (-4095 to 4095)",
+        "Simulated time, s (0.01 to 600) [default: 3; constant and ramp: until the finger reaches --to; reversal: until it is back at --from]",
+        "Noise seed (0 to 18446744073709551615)",
+    ] {
+        assert!(text.lines().any(|l| l.trim() == line), "missing {line:?} in\n{text}");
+    }
+}
+
+// ---------------------------------------------------------------- the travel
+
+/// Every trajectory kind with its default flags stays on the 63 mm travel: no sample off it, no
+/// rail fault, and the constant, ramp and reversal runs last as long as their trip.
+#[test]
+fn default_trajectories_stay_on_the_travel() {
+    for (kind, duration_s) in [
+        (Kind::BackAndForth, 3.0),
+        (Kind::Sine, 3.0),
+        (Kind::Rest, 3.0),
+        (Kind::Constant, 1.0), // 60 mm at 60 mm/s
+        (Kind::Reversal, 2.0), // there and back
+        (Kind::Ramp, 1.015),   // 30 ms to 60 mm/s (0.9 mm), then 59.1 mm at 60 mm/s
+    ] {
+        let (args, m) = cli::parse_from(["host-sim", "--trajectory", &kind.name()]).unwrap();
+        let plan = cli::plan(&args, &m).unwrap();
+        assert!(
+            (plan.params.duration_s - duration_s).abs() < 1e-9,
+            "{kind:?}: {} s",
+            plan.params.duration_s
+        );
+        let r = sim::run(&plan.params).unwrap();
+        let mt = metrics::compute(&r);
+        assert_eq!(mt.off_travel, metrics::OffTravel::default(), "{kind:?}");
+        assert_eq!(mt.fault_onsets, 0, "{kind:?}");
+        let ends = r.trace.iter().map(|p| p.true_um);
+        let (lo, hi) = ends.fold((f64::MAX, f64::MIN), |(l, h), x| (l.min(x), h.max(x)));
+        assert!(
+            lo >= 1_500.0 - 1e-6 && hi <= 61_500.0 + 1e-6,
+            "{kind:?}: {lo}…{hi}"
+        );
+    }
+}
+
+/// Flags that take the finger off the travel are run, and the summary says so: 60 mm/s from
+/// 1.5 mm leaves the 63 mm travel after 1.025 s, so 1.975 s of a 3 s run are off it.
+#[test]
+fn summary_warns_when_the_flags_leave_the_travel() {
+    let out = run(&["--trajectory", "constant", "--duration", "3", "-o", "c.png"]);
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.lines().any(|l| l
+            == "warning: the finger is off the 63 mm travel for 1.97 s of the 3.00 s \
+                (65.8 % of the samples), first at t = 1.0251 s"),
+        "{text}"
+    );
+    let out = run(&["--trajectory", "constant", "-o", "d.png"]);
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(!text.contains("warning"), "{text}");
+    assert!(text.contains("for 1.00 s;"), "{text}");
+}
+
+// ---------------------------------------------------------------- no panic, whatever the input
+
+/// A value for a numeric flag: mostly inside `valid` (so that whole command lines pass and run),
+/// else any float, a special or a random string.
+fn value(valid: std::ops::Range<f64>) -> impl Strategy<Value = String> {
+    prop_oneof![
+        6 => valid.prop_map(|v| v.to_string()),
+        1 => any::<f64>().prop_map(|v| v.to_string()),
+        1 => prop::sample::select(vec![
+            "nan", "NaN", "inf", "-inf", "", "-0", "1e309", "-1e-320", "0x10", "--", "-", "1,5",
+        ])
+        .prop_map(String::from),
+        1 => "[-+0-9.eEa-z]{0,8}",
+    ]
+}
+
+/// A duration: short when valid (a run takes about a second in the debug build), anything
+/// outside the range otherwise.
+fn short_duration() -> impl Strategy<Value = String> {
+    value(0.01..0.05).prop_filter("valid runs stay short", |s| {
+        s.trim()
+            .parse::<f64>()
+            .map_or(true, |d| !(0.05..=600.0).contains(&d))
+    })
+}
+
+/// `flag v` with probability `p`, else nothing.
+fn maybe(
+    p: f64,
+    flag: &'static str,
+    v: impl Strategy<Value = String>,
+) -> impl Strategy<Value = Vec<String>> {
+    prop::option::weighted(p, v).prop_map(move |v| match v {
+        Some(v) => vec![flag.to_string(), v],
+        None => Vec::new(),
+    })
+}
+
+/// Exit code 0 or 2, never a panic; a refusal is one `error:` line.
+fn never_panics(args: &[String]) -> Result<(), TestCaseError> {
+    let out = Command::new(EXE)
+        .args(args)
+        .current_dir(scratch())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    prop_assert!(!err.contains("panicked"), "{args:?}: {err}");
+    match out.status.code() {
+        Some(0) => {}
+        Some(2) => prop_assert!(err.starts_with("error: "), "{args:?}: {err}"),
+        c => prop_assert!(false, "{args:?}: exit {c:?}: {err}"),
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, failure_persistence: None, ..ProptestConfig::default() })]
+
+    #[test]
+    fn the_simulator_never_panics(
+        kind in prop::sample::select(vec!["back-and-forth", "sine", "rest", "constant", "reversal", "ramp", "zigzag"]),
+        speed in maybe(0.5, "--speed", value(0.1..1000.0)),
+        from in maybe(0.5, "--from", value(0.0..63.0)),
+        to in maybe(0.5, "--to", value(0.0..63.0)),
+        accel in maybe(0.2, "--accel", value(0.01..100.0)),
+        noise in maybe(0.5, "--noise", value(0.0..100.0)),
+        offset in maybe(0.5, "--offset", value(-4095.0..4095.0)),
+        duration in short_duration(),
+        seed in maybe(0.5, "--seed", prop_oneof![any::<u64>().prop_map(|s| s.to_string()), "[-0-9.a-z]{0,6}"]),
+        board in prop::sample::select(vec!["nucleo-f446re", "nucleo-g474re", "nucleo-g474re", "nucleo-h743zi"]),
+    ) {
+        let mut args: Vec<String> = ["--trajectory", kind, "--board", board, "-o", "p.png"]
+            .map(String::from)
+            .to_vec();
+        for flag in [speed, from, to, accel, noise, offset, seed] {
+            args.extend(flag);
+        }
+        // Always a duration: without one, constant/ramp/reversal last their trip (up to 600 s).
+        args.push(format!("--duration={duration}"));
+        never_panics(&args)?;
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, failure_persistence: None, ..ProptestConfig::default() })]
+
+    #[test]
+    fn the_models_never_panic(
+        cmd in prop::sample::select(vec![0usize, 1, 2, 3, 4]),
+        a in value(0.0..10.0),
+        b in value(0.0..10.0),
+        c in value(0.0..1000.0),
+        d in value(0.0..1.0),
+    ) {
+        let args: Vec<String> = match cmd {
+            0 => ["model", "stick-slip", "--delta-mu", a.as_str(), "--speed-mm-s", c.as_str(),
+                  "--mass-g", b.as_str(), "--json"].map(String::from).to_vec(),
+            1 => ["model", "grooved", "--groove-mm", a.as_str(), "--land-mm", b.as_str(),
+                  "--force-g", c.as_str(), "--mu", d.as_str()].map(String::from).to_vec(),
+            2 => ["tile-to-scene", "--groove-mm", a.as_str(), "--land-mm", b.as_str(),
+                  "--force-g", c.as_str(), "--pad-exponent", d.as_str()].map(String::from).to_vec(),
+            3 => ["model", "sandpaper", "--grit", c.as_str()].map(String::from).to_vec(),
+            _ => ["model", "fig5", "--points", c.as_str()].map(String::from).to_vec(),
+        };
+        never_panics(&args)?;
+    }
+}
