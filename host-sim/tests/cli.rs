@@ -370,6 +370,30 @@ fn help_states_unit_and_range_of_every_simulator_flag() {
     }
 }
 
+/// The README's flag table gives the ranges `--help` gives (so the two cannot drift apart).
+#[test]
+fn readme_flag_table_matches_help() {
+    use clap::CommandFactory;
+    let readme = include_str!("../../README.md");
+    let cmd = cli::Args::command();
+    for id in ["speed", "accel", "noise", "offset", "duration", "seed"] {
+        let arg = cmd.get_arguments().find(|a| a.get_id() == id).unwrap();
+        let help = arg.get_help().unwrap().to_string();
+        // "Finger speed (…), mm/s (0.1 to 1000)" → "0.1 to 1000"
+        let range = help
+            .rsplit_once(" (")
+            .and_then(|(_, r)| r.split_once(')'))
+            .map(|(r, _)| r)
+            .unwrap();
+        let row = readme
+            .lines()
+            .find(|l| l.starts_with(&format!("| `--{id}`")))
+            .unwrap_or_else(|| panic!("README has no row for --{id}"));
+        let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+        assert_eq!(cells[3], range, "README row for --{id}: {row}");
+    }
+}
+
 // ---------------------------------------------------------------- the travel
 
 /// Every trajectory kind with its default flags stays on the 63 mm travel: no sample off it, no
