@@ -162,23 +162,15 @@ mod tests {
         assert_eq!(r.check("60"), Ok(60.0));
         assert_eq!(r.check("0.1"), Ok(0.1));
         assert_eq!(r.check("1000"), Ok(1000.0));
-        assert_eq!(r.check("-10").unwrap_err(), "must be from 0.1 to 1000 mm/s");
-        assert_eq!(
-            r.check("1000.001").unwrap_err(),
-            "must be from 0.1 to 1000 mm/s"
-        );
-        assert_eq!(
-            r.check("NaN").unwrap_err(),
-            "must be a finite number from 0.1 to 1000 mm/s"
-        );
-        assert_eq!(
-            r.check("-inf").unwrap_err(),
-            "must be a finite number from 0.1 to 1000 mm/s"
-        );
-        assert_eq!(
-            r.check("ten").unwrap_err(),
-            "not a number; must be from 0.1 to 1000 mm/s"
-        );
+        for (input, want) in [
+            ("-10", "must be from 0.1 to 1000 mm/s"),
+            ("1000.001", "must be from 0.1 to 1000 mm/s"),
+            ("NaN", "must be a finite number from 0.1 to 1000 mm/s"),
+            ("-inf", "must be a finite number from 0.1 to 1000 mm/s"),
+            ("ten", "not a number; must be from 0.1 to 1000 mm/s"),
+        ] {
+            assert_eq!(r.check(input).unwrap_err(), want, "{input}");
+        }
         let ratio = Range::new(0.0, 10.0, "");
         assert_eq!(
             ratio.help("Friction coefficient"),
