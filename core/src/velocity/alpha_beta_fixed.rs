@@ -237,36 +237,4 @@ mod tests {
         );
         assert!(AlphaBetaFixed::with_gains(100, 0.5, 1.0 / 8_192.0).is_ok());
     }
-
-    /// After a silence longer than the bridged slots the filter starts over: its outputs on
-    /// the samples after the gap are those of a new filter.
-    #[test]
-    fn a_gap_starts_the_filter_over() {
-        let mut e = AlphaBetaFixed::critically_damped(100, 0.8).unwrap();
-        for i in 0..10_000u32 {
-            e.update(i as i32 * 10, i * 100);
-        }
-        let mut fresh = AlphaBetaFixed::critically_damped(100, 0.8).unwrap();
-        for i in 0..200u32 {
-            let t = 2_000_000 + i * 100;
-            assert_eq!(e.update(50_000, t), fresh.update(50_000, t), "sample {i}");
-        }
-    }
-
-    /// `reset` forgets the clock too: the very next slot is a first sample (no estimate), then
-    /// the outputs are a new filter's.
-    #[test]
-    fn reset_forgets_the_clock_and_the_state() {
-        let mut e = AlphaBetaFixed::critically_damped(100, 0.8).unwrap();
-        for i in 0..1_000u32 {
-            e.update(i as i32 * 10, i * 100);
-        }
-        assert!(e.update(10_000, 100_000).is_some());
-        e.reset();
-        let mut fresh = AlphaBetaFixed::critically_damped(100, 0.8).unwrap();
-        for i in 1..200u32 {
-            let t = 100_000 + i * 100;
-            assert_eq!(e.update(10_000, t), fresh.update(10_000, t), "sample {i}");
-        }
-    }
 }

@@ -597,23 +597,31 @@ mod tests {
         assert!(critically_damped_gains(f32::NAN).is_err());
     }
 
-    /// Every estimator's `reset` makes it a new one: fed the same samples from the next slot
-    /// on, it answers exactly what a freshly made estimator answers (nothing of the 1 s ramp
-    /// before, nor of the clock's phase, survives).
+    /// Every estimator's `reset` makes it a new one, and so does a silence longer than the
+    /// bridged slots: fed the same samples afterwards, it answers exactly what a freshly made
+    /// estimator answers (nothing of the 1 s ramp before, nor of the clock's phase, survives).
     #[test]
-    fn reset_makes_every_estimator_new() {
+    fn reset_and_gaps_make_every_estimator_new() {
         use crate::velocity::*;
         fn check<E: VelocityEstimator>(name: &str, make: impl Fn() -> E) {
-            let mut e = make();
-            for i in 0..10_000u32 {
-                e.update(i as i32 * 10, i * 100);
-            }
-            e.reset();
-            let mut fresh = make();
-            for i in 0..300u32 {
-                let t = 1_000_000 + i * 100;
-                let x = 100_000 - i as i32 * 5;
-                assert_eq!(e.update(x, t), fresh.update(x, t), "{name}, sample {i}");
+            for (how, t0) in [("reset", 1_000_000), ("gap", 2_000_000)] {
+                let mut e = make();
+                for i in 0..10_000u32 {
+                    e.update(i as i32 * 10, i * 100);
+                }
+                if how == "reset" {
+                    e.reset();
+                }
+                let mut fresh = make();
+                for i in 0..300u32 {
+                    let t = t0 + i * 100;
+                    let x = 100_000 - i as i32 * 5;
+                    assert_eq!(
+                        e.update(x, t),
+                        fresh.update(x, t),
+                        "{name} after a {how}, sample {i}"
+                    );
+                }
             }
         }
         check("lsq32", || LsqSlope::<32>::new(100).unwrap());

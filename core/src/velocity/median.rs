@@ -5,8 +5,10 @@
 //! ramp passes unchanged (the median of three samples of a monotone ramp is the middle one).
 //! Cost: two or three compares per sample. Group delay: the inner estimator's plus one sample.
 //! Not removed: two consecutive outliers, and the corner of a reversal is clipped by one sample.
+//! After a silence the inner estimator restarts on (its slot clock's gap rule), the window
+//! starts over too, so no position from before the silence is mixed into the ones after.
 
-use super::VelocityEstimator;
+use super::{VelocityEstimator, MAX_BRIDGED_SLOTS};
 
 /// Median-of-3 pre-filter around `E`.
 #[derive(Clone, Debug)]
@@ -21,6 +23,10 @@ pub struct Median3<E> {
     /// Samples seen since the last reset, saturating at 2.
     len: u8,
     period_us: u32,
+    /// ⌊period/2⌋, so that an offset rounds to the nearest whole period as the slot clock does.
+    half_us: u32,
+    /// (MAX_BRIDGED_SLOTS + 1) periods: a rounded offset from here on is a gap.
+    gap_us: u32,
 }
 
 impl<E: VelocityEstimator> Median3<E> {
@@ -33,6 +39,8 @@ impl<E: VelocityEstimator> Median3<E> {
             t_mid: 0,
             len: 0,
             period_us: sample_period_us,
+            half_us: sample_period_us / 2,
+            gap_us: sample_period_us.saturating_mul(MAX_BRIDGED_SLOTS + 1),
         }
     }
 
@@ -48,6 +56,10 @@ fn median3(a: i32, b: i32, c: i32) -> i32 {
 
 impl<E: VelocityEstimator> VelocityEstimator for Median3<E> {
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
+        // A gap (or time run backwards, which wraps to a huge offset): start the window over.
+        if t_us.wrapping_sub(self.t_mid).wrapping_add(self.half_us) >= self.gap_us {
+            self.len = 0;
+        }
         let (a, b, t) = (self.x_old, self.x_mid, self.t_mid);
         self.x_old = b;
         self.x_mid = position_um;
