@@ -222,13 +222,10 @@ pub fn write_png(
             .scene
             .textures
             .iter()
-            .map(|t| match t.fixed_command() {
-                Some(c) => format!("{:.0} Hz", c.burst_millihz as f64 / 1e3),
-                None => "—".into(),
-            })
+            .map(region_label)
             .collect();
         c.configure_mesh()
-            .y_desc("region (f_b)")
+            .y_desc("region")
             .axis_desc_style(label_font)
             .label_style(("sans-serif", 15))
             .y_labels(n as usize + 2)
@@ -292,4 +289,17 @@ pub fn write_png(
     }
     root.present()?;
     Ok(())
+}
+
+/// A region's short label on the region panel: what its texture is, in the scene file's units
+/// (f_b for constant bursts, λ for a grating, Δμ for a material, the central f_b of random draws).
+fn region_label(t: &saw_core::texture::Texture) -> String {
+    use saw_core::texture::Texture;
+    match t {
+        Texture::Constant(c) => format!("{} Hz", c.burst_millihz as f64 / 1e3),
+        Texture::Grating(g) => format!("λ {} mm", g.wavelength_um as f64 / 1e3),
+        Texture::Material(m) => format!("Δμ {:.2}", m.delta_mu),
+        Texture::Random(r) => format!("~{} Hz", r.center_millihz as f64 / 1e3),
+        _ => "off".into(),
+    }
 }

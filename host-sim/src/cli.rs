@@ -155,10 +155,10 @@ pub struct Args {
     /// trajectory, noise, seed and duration, so none of those flags go with it.
     #[arg(long, value_name = "FILE")]
     pub scenario: Option<PathBuf>,
-    /// Chart path (PNG).
-    #[arg(long, short, value_name = "PNG", default_value = "out/sim-default.png",
-          value_parser = png_path)]
-    pub output: PathBuf,
+    /// Chart path (PNG) [default: out/sim-<scene>.png, named after the scene file (out/sim-default.png
+    /// for the built-in scene) or the scenario (out/scenario-<name>.png)].
+    #[arg(long, short, value_name = "PNG", value_parser = png_path)]
+    pub output: Option<PathBuf>,
     /// Log level of the core's log lines (error, warn, info, debug, trace, off).
     #[arg(long, default_value = "warn", value_parser = parse_level)]
     pub log: log::LevelFilter,
@@ -303,6 +303,38 @@ pub struct Plan {
     pub params: SimParams,
     /// The scenario file's expectations.
     pub scenario: Option<Scenario>,
+}
+
+/// The chart's path: `-o` as given, else named after what runs, so a run of one scene never
+/// overwrites another's chart: `out/sim-<scene file stem>.png`, `out/sim-default.png` for the
+/// built-in scene, `out/scenario-<file stem>.png` for a scenario.
+pub fn chart_path(args: &Args) -> PathBuf {
+    if let Some(p) = &args.output {
+        return p.clone();
+    }
+    let stem = |p: &PathBuf| {
+        p.file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    PathBuf::from("out").join(match (&args.scenario, &args.scene) {
+        (Some(sc), _) => format!("scenario-{}.png", stem(sc)),
+        (None, Some(scene)) => format!("sim-{}.png", stem(scene)),
+        (None, None) => "sim-default.png".to_string(),
+    })
+}
+
+/// The name a chart title gives the scene: the file's stem, or "default scene".
+pub fn scene_label(args: &Args) -> String {
+    match &args.scene {
+        Some(p) => format!(
+            "scene {}",
+            p.file_stem()
+                .map(|s| s.to_string_lossy())
+                .unwrap_or_default()
+        ),
+        None => "default scene".to_string(),
+    }
 }
 
 /// The flags [`Args::scenario`] sets itself.

@@ -61,7 +61,8 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
     let r = sim::run(&params)?;
     let m = metrics::compute(&r);
     print!("{}", report::summary(&r, &m));
-    if let Some(dir) = args.output.parent() {
+    let output = cli::chart_path(args);
+    if let Some(dir) = output.parent() {
         if !dir.as_os_str().is_empty() {
             std::fs::create_dir_all(dir)?;
         }
@@ -69,7 +70,8 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
     let mut title = match &scenario {
         Some(sc) => format!("scenario: {}", sc.name),
         None => format!(
-            "{} — {} — noise {} LSB RMS",
+            "{} — {} — {} — noise {} LSB RMS",
+            cli::scene_label(args),
             params.board.name,
             params.trajectory.describe(),
             params.adc.noise_lsb_rms
@@ -81,8 +83,8 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
             100.0 * m.off_travel.samples as f64 / m.samples.max(1) as f64
         ));
     }
-    chart::write_png(&r, &args.output, &title)?;
-    println!("chart: {}", args.output.display());
+    chart::write_png(&r, &output, &title)?;
+    println!("chart: {}", output.display());
     println!(
         "simulated {:.2} s in {:.2} s",
         params.duration_s,

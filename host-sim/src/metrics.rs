@@ -4,7 +4,35 @@
 use saw_core::burst::TimerSettings;
 use saw_core::gate::GateAction;
 
+use saw_core::texture::Texture;
+
 use crate::sim::SimResult;
+
+/// The f_b a texture asks for with the finger at `true_vel_um_s`, Hz, by the models the core
+/// uses: f = |V|/λ for a grating (one pulse per ridge crossed, or periodic bursts at that rate),
+/// the stick-slip frequency for a material. None for `off`, a
+/// constant texture (it has a commanded f_b) and a finger at rest. For random draws it is the
+/// rate the draws give (a harmonic mean), which is what the gate's period count measures.
+pub fn expected_hz(texture: &Texture, true_vel_um_s: f64) -> Option<f64> {
+    let speed_um_s = true_vel_um_s.abs();
+    match texture {
+        Texture::Grating(g) if speed_um_s > 0.0 => Some(speed_um_s / g.wavelength_um as f64),
+        Texture::Material(m) if speed_um_s > 0.0 => {
+            Some(m.stick_slip_hz((speed_um_s * 1e-6) as f32) as f64)
+        }
+        Texture::Random(r) => {
+            // f uniform on c(1 ± s): the rate of bursts is 1/E[1/f] = c·2s / ln((1 + s)/(1 − s)).
+            let c = r.center_millihz as f64 / 1000.0;
+            let spread = r.spread_permille as f64 / 1000.0;
+            Some(if spread > 0.0 {
+                c * 2.0 * spread / ((1.0 + spread) / (1.0 - spread)).ln()
+            } else {
+                c
+            })
+        }
+        _ => None,
+    }
+}
 
 /// Burst figures of one region.
 #[derive(Clone, Debug, PartialEq)]
@@ -17,6 +45,10 @@ pub struct RegionStats {
     pub produced_hz: Option<f64>,
     /// (produced − commanded) / commanded, %.
     pub error_pct: Option<f64>,
+    /// For a texture driven by motion or chance (grating, material, random): the f_b its model
+    /// gives at the finger's true speed, over the measured intervals (the number of intervals
+    /// over the sum of the expected periods, as `produced_hz` is over the measured ones), Hz.
+    pub expected_hz: Option<f64>,
     /// Pulses that started in this region.
     pub pulses: usize,
     /// Rise-to-rise intervals used for the measurement (whole intervals inside the region).
@@ -113,6 +145,8 @@ pub fn compute(r: &SimResult) -> Metrics {
 
     let pulses = r.waveform.pulses();
     let mut per_region_intervals: Vec<Vec<(u64, u64)>> = vec![Vec::new(); n_regions];
+    // Σ expected period (s) and its count, per region, over the same intervals.
+    let mut per_region_expected = vec![(0.0f64, 0usize); n_regions];
     let mut per_region_pulses = vec![0usize; n_regions];
     for p in &pulses {
         // The sample before the rise decided the settings that the rise latched.
@@ -126,6 +160,12 @@ pub fn compute(r: &SimResult) -> Metrics {
             let last = index_at(next).min(r.trace.len() - 1);
             if r.trace[before].region == Some(region) && seg_end[before] >= last {
                 per_region_intervals[region as usize].push((next - p.rise, p.on()));
+                let texture = &r.params.config.scene.textures[region as usize];
+                if let Some(f) = expected_hz(texture, r.trace[idx].true_vel_um_s) {
+                    let e = &mut per_region_expected[region as usize];
+                    e.0 += 1.0 / f;
+                    e.1 += 1;
+                }
             }
         }
     }
@@ -152,6 +192,8 @@ pub fn compute(r: &SimResult) -> Metrics {
                     Some(100.0 * on as f64 / total as f64),
                 )
             };
+            let (sum_s, n) = per_region_expected[i];
+            let expected_hz = (n > 0).then(|| n as f64 / sum_s);
             let error_pct = match (commanded_hz, produced_hz) {
                 (Some(c), Some(p)) => Some(100.0 * (p - c) / c),
                 _ => None,
@@ -159,6 +201,7 @@ pub fn compute(r: &SimResult) -> Metrics {
             RegionStats {
                 region: i as u8,
                 commanded_hz,
+                expected_hz,
                 produced_hz,
                 error_pct,
                 pulses: per_region_pulses[i],
@@ -381,4 +424,37 @@ pub fn ridges_crossed(r: &SimResult, wavelength_um: f64) -> u64 {
         .zip(cells.skip(1))
         .map(|(a, b)| a.abs_diff(b))
         .sum()
+}
+
+#[cfg(test)]
+mod expected_tests {
+    use super::*;
+    use saw_core::texture::{Grating, Material, RandomBurst};
+
+    /// Hand-worked: 60 mm/s over a 1 mm grating is 60 Hz, either direction; fig. 5's finger
+    /// (Δμ 0.3) at 40 mm/s is 28.811 Hz (worked in the core's controller tests); draws uniform
+    /// on 40 Hz ± 30 % come at 40 · 0.6 / ln(13/7) = 24 / (2.564949 − 1.945910) = 38.770 Hz; a constant texture and a
+    /// finger at rest have none.
+    #[test]
+    fn expected_rates_by_hand() {
+        let g = Texture::Grating(Grating::new(1_000));
+        assert_eq!(expected_hz(&g, 60_000.0), Some(60.0));
+        assert_eq!(expected_hz(&g, -60_000.0), Some(60.0));
+        assert_eq!(expected_hz(&g, 0.0), None);
+        let m = Texture::Material(Material::fig5(0.3));
+        let f = expected_hz(&m, 40_000.0).unwrap();
+        assert!((f - 28.811).abs() < 0.01, "{f}");
+        let r = Texture::Random(RandomBurst {
+            center_millihz: 40_000,
+            spread_permille: 300,
+            amplitude_permille: 1000,
+            amplitude_spread_permille: 0,
+            duty_permille: 400,
+            seed: 1,
+        });
+        let f = expected_hz(&r, 0.0).unwrap();
+        assert!((f - 38.770).abs() < 0.001, "{f}");
+        assert_eq!(expected_hz(&Texture::constant_hz(80), 60_000.0), None);
+        assert_eq!(expected_hz(&Texture::Off, 60_000.0), None);
+    }
 }

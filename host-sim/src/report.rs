@@ -63,15 +63,28 @@ pub fn summary(r: &SimResult, m: &Metrics) -> String {
     );
     for g in &m.regions {
         let fmt_hz = |x: Option<f64>| x.map(|v| format!("{v:.4} Hz")).unwrap_or("—".into());
+        // A motion- or chance-driven texture has no commanded f_b: its model's, marked "~".
+        let (asked, error) = match (g.commanded_hz, g.expected_hz) {
+            (None, Some(e)) => (
+                format!("~{}", fmt_hz(Some(e))),
+                g.produced_hz
+                    .map(|p| format!("~{:+.2} %", 100.0 * (p - e) / e))
+                    .unwrap_or("—".into()),
+            ),
+            _ => (
+                fmt_hz(g.commanded_hz),
+                g.error_pct
+                    .map(|e| format!("{e:+.5} %"))
+                    .unwrap_or("—".into()),
+            ),
+        };
         let _ = writeln!(
             s,
-            "  {:>6}  {:>11}  {:>13}  {:>10}  {:>6}  {:>6}  {:>7}  {:.2} s",
+            "  {:>6}  {:>12}  {:>13}  {:>10}  {:>6}  {:>6}  {:>7}  {:.2} s",
             g.region,
-            fmt_hz(g.commanded_hz),
+            asked,
             fmt_hz(g.produced_hz),
-            g.error_pct
-                .map(|e| format!("{e:+.5} %"))
-                .unwrap_or("—".into()),
+            error,
             g.duty_pct
                 .map(|d| format!("{d:.1} %"))
                 .unwrap_or("—".into()),

@@ -6,7 +6,7 @@
 //!
 //! The expected messages are written out by hand here, not computed by the code under test.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use host_sim::cli::{self, Kind};
@@ -554,4 +554,19 @@ proptest! {
         };
         never_panics(&args)?;
     }
+}
+
+/// Without `-o` the chart is named after what runs, so one scene's chart never overwrites
+/// another's: `out/sim-<scene file>.png`, and the title names the scene.
+#[test]
+fn the_chart_is_named_after_the_scene() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/grating.toml");
+    let out = run(&["--scene", scene.to_str().unwrap(), "--duration", "0.05"]);
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        stdout.lines().any(|l| l == "chart: out/sim-grating.png"),
+        "{stdout}"
+    );
+    assert!(scratch().join("out/sim-grating.png").is_file());
 }
