@@ -145,7 +145,9 @@ pub struct Args {
     /// Board.
     #[arg(long, default_value = saw_boards::NUCLEO_F446RE.name, value_parser = board_parser())]
     pub board: &'static BoardDef,
-    /// Disable timer preload (shows the runts preload prevents).
+    /// Disable timer preload (ARPE, OCxPE = 0): a new ARR/CCR acts at once, so a 16-bit timer
+    /// makes runts and a 32-bit one whose counter has passed a shortened ARR stalls until the
+    /// counter wraps (47.7 s at 90 MHz); the summary reports malformed pulses and stalls.
     #[arg(long)]
     pub no_preload: bool,
     /// Scene file (TOML, see scenes/); default: the built-in default scene.

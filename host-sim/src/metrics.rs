@@ -122,8 +122,76 @@ pub struct Metrics {
     /// doubled or stretched pulses. Pulses ended by an Off or followed by a restart are judged on
     /// on-time only.
     pub malformed_pulses: usize,
+    /// How long the line stayed without a rising edge while the core had periodic bursts
+    /// running, beyond two of their periods.
+    pub stall: Stall,
     /// Samples with the finger off the travel.
     pub off_travel: OffTravel,
+}
+
+/// A gate that stopped making the bursts the core asked for (without preload, a 32-bit counter
+/// that has passed a shortened ARR counts on to 2^32 before it wraps: with ARPE = 0 the new ARR
+/// takes effect at once, RM0390 §18.3.1 time-base unit for TIM2–5, §17.3.1 for TIM1/8).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Stall {
+    /// Total time the line was silent longer than two burst periods while a burst ran, s.
+    pub total_s: f64,
+    /// The longest such silence, s.
+    pub longest_s: f64,
+}
+
+/// The silences of the line while the core had a periodic burst running: from the trace's
+/// actions (what the core asked) and the timer model's rising edges (what the line did).
+fn stall(r: &SimResult) -> Stall {
+    let clock = r.timer.clock_hz as f64;
+    let mut rises = r.waveform.pulses().into_iter().map(|p| p.rise).peekable();
+    let mut last_rise_clk: Option<u64> = None;
+    let mut running_period_clk: Option<u64> = None;
+    // With preload an update acts at the next update event: until the next rise the period
+    // replaced still runs, so it counts for the allowance too.
+    let mut replaced_period_clk = 0u64;
+    let (mut total, mut longest, mut current) = (0u64, 0u64, 0u64);
+    let step_clk = r.clocks(r.sample_period_us as u64);
+    for t in &r.trace {
+        let now = r.clocks(t.t_us);
+        while let Some(&rise) = rises.peek() {
+            if rise > now {
+                break;
+            }
+            last_rise_clk = Some(rise);
+            replaced_period_clk = 0;
+            rises.next();
+        }
+        match t.action {
+            Some(GateAction::Start(s)) => {
+                running_period_clk = Some(s.period_clocks());
+                last_rise_clk = Some(now);
+            }
+            Some(GateAction::Update(s)) => {
+                replaced_period_clk = replaced_period_clk.max(running_period_clk.unwrap_or(0));
+                running_period_clk = Some(s.period_clocks());
+            }
+            Some(GateAction::Off | GateAction::Pulse(_)) => running_period_clk = None,
+            _ => {}
+        }
+        let silent = match (running_period_clk, last_rise_clk) {
+            (Some(period), Some(rise)) => {
+                now.saturating_sub(rise) > 2 * period.max(replaced_period_clk)
+            }
+            _ => false,
+        };
+        if silent {
+            current += step_clk;
+            total += step_clk;
+            longest = longest.max(current);
+        } else {
+            current = 0;
+        }
+    }
+    Stall {
+        total_s: total as f64 / clock,
+        longest_s: longest as f64 / clock,
+    }
 }
 
 /// Computes the metrics of a run.
@@ -247,6 +315,7 @@ pub fn compute(r: &SimResult) -> Metrics {
         samples: r.trace.len(),
         pulses: pulses.len(),
         malformed_pulses,
+        stall: stall(r),
         off_travel: off_travel(r),
     }
 }

@@ -142,6 +142,20 @@ pub fn summary(r: &SimResult, m: &Metrics) -> String {
         "gate: {} pulses, {} malformed (runt/doubled/stretched), {} gate actions",
         m.pulses, m.malformed_pulses, r.telemetry.gate_actions
     );
+    if m.stall.total_s > 0.0 {
+        let _ = writeln!(
+            s,
+            "warning: the gate stalled: no burst edge for {:.3} s in all (longest {:.3} s) while \
+             the core had bursts running{}",
+            m.stall.total_s,
+            m.stall.longest_s,
+            if r.params.preload {
+                ""
+            } else {
+                " (without preload a counter past a shortened ARR runs on to its wrap)"
+            }
+        );
+    }
     let _ = writeln!(s, "samples: {}", m.samples);
     s
 }

@@ -570,3 +570,31 @@ fn the_chart_is_named_after_the_scene() {
     );
     assert!(scratch().join("out/sim-grating.png").is_file());
 }
+
+/// `--no-preload` on a 32-bit burst timer: a counter past a shortened ARR runs on to its wrap,
+/// so the gate falls silent while the core asks for bursts, and the summary says so. With
+/// preload, every shipped scene runs without such a warning (an update waits for the period
+/// it replaces, which is not a stall).
+#[test]
+fn the_summary_reports_a_stalled_gate() {
+    let stalled = |args: &[&str]| {
+        let out = run(args);
+        assert_eq!(out.status.code(), Some(0), "{out:?}");
+        String::from_utf8(out.stdout)
+            .unwrap()
+            .lines()
+            .find(|l| l.starts_with("warning: the gate stalled"))
+            .map(str::to_string)
+    };
+    let line = stalled(&["--no-preload", "-o", "np.png"]).expect("a stall without preload");
+    assert!(
+        line.ends_with("(without preload a counter past a shortened ARR runs on to its wrap)"),
+        "{line}"
+    );
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    for scene in ["default", "grating", "material", "random", "lines"] {
+        let path = scenes.join(format!("{scene}.toml"));
+        let args = ["--scene", path.to_str().unwrap(), "-o", "p.png"];
+        assert_eq!(stalled(&args), None, "{scene}");
+    }
+}
