@@ -79,39 +79,64 @@ fn truth_and_core(
     (truth, runs(r.trace.iter().map(|p| (t_s(p), core(p)))))
 }
 
-/// Draws what the core saw (red, in runs broken by faults) over the truth (blue), decimated to
-/// the panel's width, and the legend: `(runs, label, line width)` and `(truth, line width)`.
+/// Draws what the core saw (red, thin, in runs broken by faults) over the truth (pale blue,
+/// wide), decimated to the panel's width, and the legend beside the plot: `(runs, label, line
+/// width)` and `(truth, line width)`.
 fn core_against_truth<'a, DB: DrawingBackend + 'a>(
     c: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     (core, label, core_width): (&[Vec<(f64, f64)>], &str, u32),
     (truth, truth_width): (&[(f64, f64)], u32),
     t_end: f64,
+) -> Result<Vec<Entry>, Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    // The truth first, wide and pale, so the core's thin line stays visible on top of it.
+    c.draw_series(LineSeries::new(
+        decimate(truth, 0.0, t_end, BUCKETS),
+        BLUE.mix(0.35).stroke_width(truth_width),
+    ))?;
+    for run in core {
+        c.draw_series(LineSeries::new(
+            decimate(run, 0.0, t_end, BUCKETS),
+            RED.stroke_width(core_width),
+        ))?;
+    }
+    Ok(vec![
+        ("true".into(), BLUE.mix(0.35), truth_width),
+        (label.into(), RED.to_rgba(), core_width.max(2)),
+    ])
+}
+
+/// Room right of every panel's plot for its legend, px (the same on every panel, so the time
+/// axes line up).
+const LEGEND_PX: u32 = 230;
+
+/// One entry of a panel's legend: its label and the colour and width of its line.
+type Entry = (String, RGBAColor, u32);
+
+/// A panel's legend, in the room right of its plot, never over the data: a short line in each
+/// entry's style and its label, one under the other.
+fn side_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    entries: &[Entry],
 ) -> Result<(), Box<dyn std::error::Error>>
 where
     DB::ErrorType: 'static,
 {
-    for (i, run) in core.iter().enumerate() {
-        let s = c.draw_series(LineSeries::new(
-            decimate(run, 0.0, t_end, BUCKETS),
-            RED.stroke_width(core_width),
+    let x0 = area.dim_in_pixel().0 as i32 - LEGEND_PX as i32 + 10;
+    for (i, (label, color, width)) in entries.iter().enumerate() {
+        let y = 20 + 22 * i as i32;
+        area.draw(&PathElement::new(
+            vec![(x0, y), (x0 + 24, y)],
+            color.stroke_width(*width),
         ))?;
-        if i == 0 {
-            s.label(label)
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-        }
+        area.draw(&Text::new(
+            label.clone(),
+            (x0 + 32, y - 8),
+            ("sans-serif", 15).into_font(),
+        ))?;
     }
-    c.draw_series(LineSeries::new(
-        decimate(truth, 0.0, t_end, BUCKETS),
-        BLUE.stroke_width(truth_width),
-    ))?
-    .label("true")
-    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 15))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()?;
     Ok(())
 }
 
@@ -142,6 +167,7 @@ pub fn write_png(
         let len_mm = r.params.config.calibration.length_um as f64 / 1e3;
         let mut c = ChartBuilder::on(&panels[0])
             .margin(10)
+            .margin_right(LEGEND_PX)
             .x_label_area_size(30)
             .y_label_area_size(80)
             .build_cartesian_2d(0.0..t_end, -1.0..len_mm + 1.0)?;
@@ -151,6 +177,7 @@ pub fn write_png(
             .label_style(("sans-serif", 15))
             .light_line_style(WHITE.mix(0.0))
             .draw()?;
+        let mut legend: Vec<Entry> = Vec::new();
         for &b in r.params.config.scene.boundaries_um.iter() {
             let b = b as f64 / 1e3;
             c.draw_series(DashedLineSeries::new(
@@ -158,11 +185,28 @@ pub fn write_png(
                 6,
                 4,
                 BLACK.mix(0.5).stroke_width(1),
-            ))?
-            .label(format!("boundary {b:.3} mm"))
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
+            ))?;
+            legend.push((format!("boundary {b:.3} mm"), BLACK.mix(0.5), 1));
         }
-        core_against_truth(&mut c, (&meas, "measured", 2), (&tp, 1), t_end)?;
+        for (i, &l) in r.params.config.scene.lines.positions_um.iter().enumerate() {
+            let l = l as f64 / 1e3;
+            c.draw_series(DashedLineSeries::new(
+                vec![(0.0, l), (t_end, l)],
+                2,
+                3,
+                MAGENTA.mix(0.7).stroke_width(1),
+            ))?;
+            if i == 0 {
+                legend.push(("tangible line".into(), MAGENTA.mix(0.7), 1));
+            }
+        }
+        legend.extend(core_against_truth(
+            &mut c,
+            (&meas, "measured", 1),
+            (&tp, 5),
+            t_end,
+        )?);
+        side_legend(&panels[0], &legend)?;
     }
 
     // Velocity.
@@ -180,6 +224,7 @@ pub fn write_png(
             * 1.15;
         let mut c = ChartBuilder::on(&panels[1])
             .margin(10)
+            .margin_right(LEGEND_PX)
             .x_label_area_size(30)
             .y_label_area_size(80)
             .build_cartesian_2d(0.0..t_end, -vmax..vmax)?;
@@ -189,7 +234,8 @@ pub fn write_png(
             .label_style(("sans-serif", 15))
             .light_line_style(WHITE.mix(0.0))
             .draw()?;
-        core_against_truth(&mut c, (&est, "estimated (core)", 1), (&tv, 2), t_end)?;
+        let legend = core_against_truth(&mut c, (&est, "estimated (core)", 1), (&tv, 5), t_end)?;
+        side_legend(&panels[1], &legend)?;
     }
 
     // Region (−1 = none: fault or no scene).
@@ -213,6 +259,7 @@ pub fn write_png(
         }
         let mut c = ChartBuilder::on(&panels[2])
             .margin(10)
+            .margin_right(LEGEND_PX)
             .x_label_area_size(30)
             .y_label_area_size(80)
             .build_cartesian_2d(0.0..t_end, -1.5..n - 0.5)?;
@@ -262,6 +309,7 @@ pub fn write_png(
         pts.push((t_end, level));
         let mut c = ChartBuilder::on(&panels[3])
             .margin(10)
+            .margin_right(LEGEND_PX)
             .x_label_area_size(45)
             .y_label_area_size(80)
             .build_cartesian_2d(0.0..t_end, -0.2..1.2)?;
@@ -286,6 +334,21 @@ pub fn write_png(
             decimate(&pts, 0.0, t_end, 3 * BUCKETS),
             BLACK.stroke_width(1),
         ))?;
+        // Where bursts are denser than pixels the line is a solid band: there the share of
+        // each pixel column's time it was on is drawn over it (the duty, and where it drops).
+        let orange = RGBColor(230, 120, 0);
+        for run in dense_duty(&pts, t_end, BUCKETS) {
+            c.draw_series(LineSeries::new(run, orange.stroke_width(2)))?;
+        }
+        side_legend(
+            &panels[3],
+            &[
+                ("gate line".into(), BLACK.to_rgba(), 1),
+                ("on-time share where".into(), orange.to_rgba(), 2),
+                ("  bursts are denser".into(), WHITE.to_rgba(), 0),
+                ("  than pixels".into(), WHITE.to_rgba(), 0),
+            ],
+        )?;
     }
     root.present()?;
     Ok(())
@@ -301,5 +364,82 @@ fn region_label(t: &saw_core::texture::Texture) -> String {
         Texture::Material(m) => format!("Δμ {:.2}", m.delta_mu),
         Texture::Random(r) => format!("~{} Hz", r.center_millihz as f64 / 1e3),
         _ => "off".into(),
+    }
+}
+
+/// The share of each of `bins` equal slices of 0..`t_end` that the step curve `pts` (t, 0 or 1,
+/// a value holding until the next point) spent at 1, at each slice's middle, in runs of slices
+/// with at least two rising edges (where the line is denser than the slices).
+fn dense_duty(pts: &[(f64, f64)], t_end: f64, bins: usize) -> Vec<Vec<(f64, f64)>> {
+    let width = t_end / bins as f64;
+    let slice = |t: f64| ((t.max(0.0) / width) as usize).min(bins - 1);
+    let mut on = vec![0.0f64; bins];
+    let mut rises = vec![0u32; bins];
+    for w in pts.windows(2) {
+        let ((t0, level), (t1, next)) = (w[0], w[1]);
+        if level < 0.5 && next > 0.5 && t1 == t0 {
+            rises[slice(t0)] += 1;
+        }
+        if level < 0.5 || t1 <= t0 {
+            continue;
+        }
+        // Spread [t0, t1) over the slices it overlaps.
+        let (a, b) = (t0.max(0.0), t1.min(t_end));
+        for (k, share) in on.iter_mut().enumerate().take(slice(b) + 1).skip(slice(a)) {
+            let (lo, hi) = (k as f64 * width, (k + 1) as f64 * width);
+            *share += (b.min(hi) - a.max(lo)).max(0.0);
+        }
+    }
+    let mut runs: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut open = false;
+    for k in 0..bins {
+        if rises[k] >= 2 {
+            if !open {
+                runs.push(Vec::new());
+                open = true;
+            }
+            let run = runs.last_mut().expect("a run was opened");
+            run.push(((k as f64 + 0.5) * width, on[k] / width));
+        } else {
+            open = false;
+        }
+    }
+    runs
+}
+
+#[cfg(test)]
+mod duty_tests {
+    use super::dense_duty;
+
+    /// A step curve of `hz` bursts at 40 % duty over 1 s, as the gate panel builds it.
+    fn square(hz: f64) -> Vec<(f64, f64)> {
+        let mut pts = vec![(0.0, 0.0)];
+        let period = 1.0 / hz;
+        let mut t = 0.0;
+        while t + period <= 1.0 + 1e-12 {
+            pts.extend([
+                (t, 0.0),
+                (t, 1.0),
+                (t + 0.4 * period, 1.0),
+                (t + 0.4 * period, 0.0),
+            ]);
+            t += period;
+        }
+        pts.push((1.0, 0.0));
+        pts
+    }
+
+    /// 1 kHz bursts (ten per 10 ms slice) read as one run at 0.4 everywhere; 20 Hz bursts (one
+    /// per 50 ms, wider than a slice) draw no duty at all: there the line itself is readable.
+    #[test]
+    fn duty_only_where_bursts_are_denser_than_slices() {
+        let runs = dense_duty(&square(1000.0), 1.0, 100);
+        assert_eq!(runs.len(), 1);
+        assert_eq!(runs[0].len(), 100);
+        assert!(
+            runs[0].iter().all(|&(_, d)| (d - 0.4).abs() < 1e-6),
+            "{runs:?}"
+        );
+        assert!(dense_duty(&square(20.0), 1.0, 100).is_empty());
     }
 }
