@@ -114,6 +114,7 @@ impl TimerSettings {
 /// A burst as a texture asks for it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct BurstCommand {
     /// Burst frequency f_b, mHz.
     pub burst_millihz: u32,
@@ -124,6 +125,7 @@ pub struct BurstCommand {
 /// Caps the carrier must never exceed, whatever a scene asks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct SafetyLimits {
     /// Highest duty, ‰.
     pub max_duty_permille: u16,
@@ -147,6 +149,7 @@ impl Default for SafetyLimits {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum BurstError {
     /// f_b is zero.
     ZeroFrequency,

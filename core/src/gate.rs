@@ -23,6 +23,7 @@ pub enum GateAction {
 /// Which IDTs are driven (SAW display paper: standing waves need 2–3 W, progressive ~100 W).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum DriveMode {
     /// Both IDTs driven: a standing wave (both enable outputs follow the burst).
     #[default]

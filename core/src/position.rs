@@ -17,6 +17,7 @@ pub const MIN_SPAN_CODE: u16 = (CODE_FULL_SCALE / 4) as u16;
 /// Two-point calibration of the slide rheostat.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Calibration {
     /// Code read with the slider at the start (0 µm) end.
     pub code_at_start: u16,
@@ -45,6 +46,7 @@ impl Default for Calibration {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum CalibrationError {
     /// `code_at_end` ≤ `code_at_start`: the ends are swapped (or equal).
     EndsSwapped {

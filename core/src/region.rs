@@ -20,6 +20,7 @@ pub const DEFAULT_HYSTERESIS_UM: u32 = 100;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum RegionError {
     /// No regions, or more than [`MAX_REGIONS`].
     BadCount {

@@ -11,6 +11,7 @@ use crate::texture::{Lines, Texture};
 /// Regions and textures, left to right.
 #[derive(Clone, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Scene {
     /// Boundaries between regions, µm from the start end, strictly increasing.
     pub boundaries_um: Vec<u32, { MAX_REGIONS - 1 }>,
@@ -27,6 +28,7 @@ pub struct Scene {
 /// Everything the controller needs besides the board.
 #[derive(Clone, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Config {
     /// Rheostat calibration.
     pub calibration: Calibration,

@@ -22,6 +22,7 @@ use super::{SpreadParam, TextureError};
 /// How a grating turns motion into bursts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum GratingRender {
     /// One pulse per ridge crossing, placed by position (see the module doc).
     #[default]
@@ -37,6 +38,7 @@ pub const DEFAULT_REARM_UM: u32 = 100;
 /// A grating region's parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Grating {
     /// Spatial period λ, µm (grooved tile: ridge width + groove width).
     pub wavelength_um: u32,

@@ -18,6 +18,7 @@ pub const MAX_LINES: usize = 16;
 /// Amplitude envelope of a line pulse.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum Envelope {
     /// Full amplitude for the whole pulse (felt as two strings when long).
     Rectangular,
@@ -28,6 +29,7 @@ pub enum Envelope {
 /// The lines of a scene.
 #[derive(Clone, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Lines {
     /// Line positions, µm, strictly increasing.
     pub positions_um: Vec<u32, MAX_LINES>,

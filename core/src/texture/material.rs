@@ -19,6 +19,7 @@ use super::{MaterialParam, ParamValue, TextureError, FULL_AMPLITUDE};
 /// A material region's parameters (SI units).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Material {
     /// μs − μc, the static minus kinetic friction coefficient (eq. 12), ≥ 0.
     pub delta_mu: f32,

@@ -38,6 +38,7 @@ pub const FULL_AMPLITUDE: u16 = 1000;
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum Texture {
     /// No SAW: the bare substrate's friction.
     Off,
@@ -85,6 +86,7 @@ impl Texture {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum TextureError {
     /// Grating period zero or above the substrate.
     BadWavelength {
@@ -136,6 +138,7 @@ pub enum TextureError {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum MaterialParam {
     /// `delta_mu`, μs − μc.
     DeltaMu,
@@ -151,6 +154,7 @@ pub enum MaterialParam {
 /// still equals itself and the error types keep `Eq`.
 #[derive(Clone, Copy, Debug)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct ParamValue(pub f32);
 
 impl PartialEq for ParamValue {
@@ -165,6 +169,7 @@ impl Eq for ParamValue {}
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum SpreadParam {
     /// A random texture's f_b spread (below 1000 ‰).
     Spread,
@@ -178,6 +183,7 @@ pub enum SpreadParam {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum LineFault {
     /// Line `index` is at 0 or at or beyond the substrate's far end.
     OutOfRange {

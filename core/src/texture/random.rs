@@ -13,6 +13,7 @@ use super::{SpreadParam, TextureError};
 /// A random region's parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct RandomBurst {
     /// Central burst frequency, mHz.
     pub center_millihz: u32,

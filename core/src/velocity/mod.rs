@@ -47,6 +47,7 @@ pub trait VelocityEstimator {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum EstimatorError {
     /// Window shorter than the estimator needs (2 samples for a slope, 1 for a difference).
     WindowTooShort {
