@@ -144,6 +144,7 @@ impl core::fmt::Display for CalibrationError {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum SensorFault {
     /// Code at the low rail: open wiper or short to ground.
     RailLow,

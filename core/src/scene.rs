@@ -3,6 +3,7 @@
 use heapless::Vec;
 
 use crate::burst::SafetyLimits;
+use crate::controller::ConfigError;
 use crate::gate::DriveMode;
 use crate::position::{Calibration, DEFAULT_LENGTH_UM};
 use crate::region::{DEFAULT_HYSTERESIS_UM, MAX_REGIONS};
@@ -40,6 +41,49 @@ pub struct Config {
     pub stale_after_us: u32,
 }
 
+impl Config {
+    /// This configuration with boundary `index` (where region `index` ends) moved to `at_um`:
+    /// a live edit (fig. 11's sliders). Only the index is checked here; the layout is checked
+    /// when the result is loaded, like any configuration.
+    pub fn with_boundary(&self, index: u8, at_um: u32) -> Result<Config, ConfigError> {
+        let mut next = self.clone();
+        let boundaries = next.scene.boundaries_um.len();
+        match next.scene.boundaries_um.get_mut(index as usize) {
+            Some(b) => *b = at_um,
+            None => {
+                return Err(ConfigError::NoSuchBoundary {
+                    index,
+                    boundaries: boundaries as u8,
+                })
+            }
+        }
+        Ok(next)
+    }
+
+    /// This configuration with region `index`'s texture replaced (checked when loaded).
+    pub fn with_texture(&self, index: u8, texture: Texture) -> Result<Config, ConfigError> {
+        let mut next = self.clone();
+        let regions = next.scene.textures.len();
+        match next.scene.textures.get_mut(index as usize) {
+            Some(t) => *t = texture,
+            None => {
+                return Err(ConfigError::NoSuchRegion {
+                    index,
+                    regions: regions as u8,
+                })
+            }
+        }
+        Ok(next)
+    }
+
+    /// This configuration with another drive mode.
+    pub fn with_drive(&self, drive: DriveMode) -> Config {
+        let mut next = self.clone();
+        next.scene.drive = drive;
+        next
+    }
+}
+
 /// Fig. 11's screen ran 0–5000 across the substrate with boundaries at 1505 and 3495.
 const FIG11_SCALE: u32 = 5_000;
 
@@ -70,5 +114,40 @@ pub fn default_config() -> Config {
         scene: default_scene(),
         limits: SafetyLimits::default(),
         stale_after_us: 5_000,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn live_edits_change_one_thing_and_refuse_a_missing_index() {
+        let base = default_config();
+        // The default scene: boundaries at 18.963 and 44.037 mm, 20 / 80 / 1000 Hz.
+        let moved = base.with_boundary(1, 50_000).unwrap();
+        assert_eq!(moved.scene.boundaries_um.as_slice(), &[18_963, 50_000]);
+        assert_eq!(moved.scene.textures, base.scene.textures);
+        assert_eq!(
+            base.with_boundary(2, 50_000),
+            Err(ConfigError::NoSuchBoundary {
+                index: 2,
+                boundaries: 2
+            })
+        );
+        let retextured = base.with_texture(2, Texture::Off).unwrap();
+        assert_eq!(retextured.scene.textures[2], Texture::Off);
+        assert_eq!(retextured.scene.textures[..2], base.scene.textures[..2]);
+        assert_eq!(retextured.scene.boundaries_um, base.scene.boundaries_um);
+        assert_eq!(
+            base.with_texture(3, Texture::Off),
+            Err(ConfigError::NoSuchRegion {
+                index: 3,
+                regions: 3
+            })
+        );
+        let progressive = base.with_drive(DriveMode::Progressive);
+        assert_eq!(progressive.scene.drive, DriveMode::Progressive);
+        assert_eq!(progressive.scene.textures, base.scene.textures);
     }
 }

@@ -53,6 +53,20 @@ pub enum ConfigError {
     },
     /// The velocity estimator rejected the sample period.
     Estimator(EstimatorError),
+    /// A live edit named a region the scene does not have.
+    NoSuchRegion {
+        /// The region asked for.
+        index: u8,
+        /// Regions in the scene.
+        regions: u8,
+    },
+    /// A live edit named a boundary the scene does not have.
+    NoSuchBoundary {
+        /// The boundary asked for.
+        index: u8,
+        /// Boundaries in the scene.
+        boundaries: u8,
+    },
 }
 
 /// Longest stale limit, µs.
@@ -96,6 +110,23 @@ impl core::fmt::Display for ConfigError {
                 Milli(MAX_STALE_US as u64)
             ),
             ConfigError::Estimator(e) => e.fmt(f),
+            ConfigError::NoSuchRegion { index, regions } => write!(
+                f,
+                "region {index} does not exist: the scene has {regions} regions (0 to {})",
+                regions.saturating_sub(1)
+            ),
+            ConfigError::NoSuchBoundary {
+                index,
+                boundaries: 0,
+            } => write!(
+                f,
+                "boundary {index} does not exist: the scene is one region with no boundaries"
+            ),
+            ConfigError::NoSuchBoundary { index, boundaries } => write!(
+                f,
+                "boundary {index} does not exist: the scene has {boundaries} boundaries (0 to {})",
+                boundaries - 1
+            ),
         }
     }
 }

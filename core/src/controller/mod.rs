@@ -1409,6 +1409,27 @@ mod tests {
                  boundaries",
             ),
             (
+                ConfigError::NoSuchRegion {
+                    index: 5,
+                    regions: 3,
+                },
+                "region 5 does not exist: the scene has 3 regions (0 to 2)",
+            ),
+            (
+                ConfigError::NoSuchBoundary {
+                    index: 2,
+                    boundaries: 2,
+                },
+                "boundary 2 does not exist: the scene has 2 boundaries (0 to 1)",
+            ),
+            (
+                ConfigError::NoSuchBoundary {
+                    index: 0,
+                    boundaries: 0,
+                },
+                "boundary 0 does not exist: the scene is one region with no boundaries",
+            ),
+            (
                 ConfigError::StaleLimit {
                     stale_after_us: 150,
                     min_us: 200,

@@ -28,6 +28,7 @@ pub struct Output {
 /// Counters for the low-rate telemetry log.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Telemetry {
     /// Samples processed.
     pub samples: u32,
