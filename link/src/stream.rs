@@ -1,0 +1,72 @@
+//! The telemetry stream's two halves: [`Decimator`] in the sample path picks which samples
+//! become records (one compare per sample, nothing when stopped), [`Batcher`] on the link side
+//! packs records into frames and numbers them. Between them the board puts a bounded queue
+//! that drops (and counts) when full, so the stream never stalls the sample path.
+
+use heapless::Vec;
+
+use crate::msg::{Header, Record, Reply, Stream, PROTOCOL_VERSION, RECORDS_PER_FRAME};
+
+/// One record every `every` samples.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Decimator {
+    every: u16,
+    left: u16,
+}
+
+impl Decimator {
+    /// Streams every `every` samples from the next one on (0: stop).
+    pub fn set(&mut self, every: u16) {
+        self.every = every;
+        self.left = 0;
+    }
+
+    /// Whether this sample becomes a record.
+    #[inline]
+    pub fn take(&mut self) -> bool {
+        if self.every == 0 {
+            return false;
+        }
+        if self.left == 0 {
+            self.left = self.every - 1;
+            true
+        } else {
+            self.left -= 1;
+            false
+        }
+    }
+}
+
+/// Packs records into stream frames.
+#[derive(Clone, Debug, Default)]
+pub struct Batcher {
+    records: Vec<Record, RECORDS_PER_FRAME>,
+    frames: u32,
+}
+
+impl Batcher {
+    /// Adds a record; returns a full frame to send (`dropped`: the queue's drop count so far).
+    pub fn push(&mut self, record: Record, dropped: u32) -> Option<(Header, Reply)> {
+        // Never full here: a full batch is handed out below before the next push.
+        let _ = self.records.push(record);
+        if self.records.is_full() {
+            self.flush(dropped)
+        } else {
+            None
+        }
+    }
+
+    /// The records gathered so far as a frame, if any (the stream stopping, or a quiet link).
+    pub fn flush(&mut self, dropped: u32) -> Option<(Header, Reply)> {
+        if self.records.is_empty() {
+            return None;
+        }
+        let header = Header {
+            version: PROTOCOL_VERSION,
+            seq: self.frames,
+        };
+        self.frames = self.frames.wrapping_add(1);
+        let records = core::mem::take(&mut self.records);
+        Some((header, Reply::Stream(Stream { dropped, records })))
+    }
+}

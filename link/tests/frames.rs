@@ -1,0 +1,251 @@
+//! The framing under bad input: every flipped bit, dropped byte, truncation, oversize frame,
+//! junk between frames, unknown request and wrong version is refused with a typed error, never
+//! decoded as another request, and the next good frame decodes at once.
+
+use proptest::prelude::*;
+use saw_core::gate::DriveMode;
+use saw_core::scene::default_config;
+use saw_core::texture::lines::MAX_LINES;
+use saw_core::texture::Texture;
+use saw_link::frame::{self, Receiver, MAX_ENCODED, MAX_PAYLOAD};
+use saw_link::msg::{Header, LinkError, Request, PROTOCOL_VERSION};
+
+fn header(seq: u32) -> Header {
+    Header {
+        version: PROTOCOL_VERSION,
+        seq,
+    }
+}
+
+fn encode(seq: u32, req: &Request) -> Vec<u8> {
+    let mut out = [0u8; MAX_ENCODED];
+    let n = frame::encode(&header(seq), req, &mut out).unwrap();
+    out[..n].to_vec()
+}
+
+/// Feeds `bytes`; returns each frame's outcome: the request decoded, or the error.
+fn feed(bytes: &[u8]) -> Vec<Result<(u32, Request), LinkError>> {
+    let mut rx = Receiver::<MAX_ENCODED>::default();
+    let mut out = Vec::new();
+    for &b in bytes {
+        match rx.push(b) {
+            None => {}
+            Some(Ok(len)) => out.push(
+                frame::request(rx.payload(len))
+                    .map(|(h, r)| (h.seq, r))
+                    .map_err(|r| r.error),
+            ),
+            Some(Err(e)) => out.push(Err(e)),
+        }
+    }
+    out
+}
+
+fn requests() -> Vec<Request> {
+    vec![
+        Request::Hello,
+        Request::GetScene,
+        Request::LoadScene(default_config()),
+        Request::MoveBoundary {
+            index: 1,
+            at_um: 40_000,
+        },
+        Request::SetTexture {
+            region: 2,
+            texture: Texture::constant_hz(250),
+        },
+        Request::SetDrive(DriveMode::Progressive),
+        Request::Counters { reset: true },
+        Request::Stream { every_samples: 10 },
+        Request::Save,
+    ]
+}
+
+#[test]
+fn every_request_round_trips() {
+    let reqs = requests();
+    // One per variant: VARIANTS must count them, or "unknown request" would refuse a real one.
+    assert_eq!(reqs.len() as u32, Request::VARIANTS);
+    for (i, req) in reqs.iter().enumerate() {
+        let got = feed(&encode(i as u32 + 7, req));
+        assert_eq!(got, vec![Ok((i as u32 + 7, req.clone()))]);
+    }
+}
+
+#[test]
+fn every_scene_file_round_trips_and_the_largest_scene_fits() {
+    let timer = saw_core::burst::BurstTimer {
+        clock_hz: 90_000_000,
+        counter_bits: 32,
+        max_burst_hz: 2_000,
+    };
+    let mut n = 0;
+    for entry in std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes")).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let config =
+            saw_core::scene_file::load_for_board(&path.display().to_string(), &text, timer, 100)
+                .unwrap();
+        let req = Request::LoadScene(config);
+        assert_eq!(feed(&encode(1, &req)), vec![Ok((1, req))], "{}", path.display());
+        n += 1;
+    }
+    assert!(n >= 5, "{n} scene files");
+
+    // The largest a Config gets: 8 random regions (the widest texture), every line.
+    let mut big = default_config();
+    big.scene.textures.clear();
+    big.scene.boundaries_um.clear();
+    for i in 0..8u32 {
+        big.scene
+            .textures
+            .push(Texture::Random(saw_core::texture::RandomBurst {
+                center_millihz: u32::MAX,
+                spread_permille: u16::MAX,
+                amplitude_permille: u16::MAX,
+                amplitude_spread_permille: u16::MAX,
+                duty_permille: u16::MAX,
+                seed: u64::MAX,
+            }))
+            .unwrap();
+        if i < 7 {
+            big.scene.boundaries_um.push(u32::MAX - i).unwrap();
+        }
+    }
+    for _ in 0..MAX_LINES {
+        big.scene.lines.positions_um.push(u32::MAX).unwrap();
+    }
+    let len = postcard::to_allocvec(&Request::LoadScene(big.clone())).unwrap().len();
+    assert!(len + 16 < MAX_PAYLOAD, "largest scene {len} bytes");
+    let req = Request::LoadScene(big);
+    assert_eq!(feed(&encode(3, &req)), vec![Ok((3, req))]);
+}
+
+#[test]
+fn a_flipped_bit_anywhere_is_refused_and_the_next_frame_decodes() {
+    let good = encode(2, &Request::Hello);
+    let victim = encode(
+        1,
+        &Request::MoveBoundary {
+            index: 0,
+            at_um: 20_000,
+        },
+    );
+    for bit in 0..victim.len() * 8 {
+        let mut bytes = victim.clone();
+        bytes[bit / 8] ^= 1 << (bit % 8);
+        bytes.push(0); // as a host sends: a zero before each frame
+        bytes.extend_from_slice(&good);
+        let got = feed(&bytes);
+        // The flipped frame never decodes (a flip to or from zero may split it in two or join
+        // it to the next; each piece is refused), and the good one always does.
+        assert_eq!(got.last(), Some(&Ok((2, Request::Hello))), "bit {bit}: {got:?}");
+        for r in &got[..got.len() - 1] {
+            assert!(r.is_err(), "bit {bit} decoded as {r:?}");
+        }
+    }
+}
+
+#[test]
+fn a_dropped_byte_or_a_truncated_frame_is_refused() {
+    let good = encode(2, &Request::Hello);
+    let victim = encode(1, &Request::LoadScene(default_config()));
+    for i in 0..victim.len() - 1 {
+        let mut dropped = victim.clone();
+        dropped.remove(i);
+        let mut truncated = victim[..i].to_vec();
+        truncated.push(0);
+        for bytes in [dropped, truncated] {
+            let mut bytes = bytes;
+            bytes.push(0);
+            bytes.extend_from_slice(&good);
+            let got = feed(&bytes);
+            assert_eq!(got.last(), Some(&Ok((2, Request::Hello))), "byte {i}: {got:?}");
+            assert!(got[..got.len() - 1].iter().all(|r| r.is_err()), "byte {i}: {got:?}");
+        }
+    }
+}
+
+#[test]
+fn an_oversize_frame_is_skipped_to_its_end() {
+    let mut bytes = vec![0x55; MAX_ENCODED + 100];
+    bytes.push(0);
+    bytes.extend_from_slice(&encode(9, &Request::Save));
+    assert_eq!(
+        feed(&bytes),
+        vec![
+            Err(LinkError::Oversize {
+                max_bytes: MAX_ENCODED as u16
+            }),
+            Ok((9, Request::Save))
+        ]
+    );
+}
+
+/// A frame with a valid CRC around `body` (bytes after the header).
+fn raw_frame(version: u16, seq: u32, body: &[u8]) -> Vec<u8> {
+    let mut payload = postcard::to_allocvec(&Header { version, seq }).unwrap();
+    payload.extend_from_slice(body);
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&payload);
+    payload.extend_from_slice(&crc.to_le_bytes());
+    let mut out = cobs::encode_vec(&payload);
+    out.push(0);
+    out
+}
+
+#[test]
+fn unknown_request_wrong_version_and_bad_fields_are_typed() {
+    assert_eq!(
+        feed(&raw_frame(PROTOCOL_VERSION, 4, &[42])),
+        vec![Err(LinkError::UnknownRequest { variant: 42 })]
+    );
+    let hello = postcard::to_allocvec(&Request::Hello).unwrap();
+    assert_eq!(
+        feed(&raw_frame(PROTOCOL_VERSION + 1, 5, &hello)),
+        vec![Err(LinkError::WrongVersion {
+            ours: PROTOCOL_VERSION,
+            theirs: PROTOCOL_VERSION + 1
+        })]
+    );
+    // MoveBoundary with its fields cut off.
+    assert_eq!(
+        feed(&raw_frame(PROTOCOL_VERSION, 6, &[3])),
+        vec![Err(LinkError::Malformed)]
+    );
+    // Too short to hold a header and a CRC.
+    let mut short = cobs::encode_vec(&[1, 2, 3]);
+    short.push(0);
+    assert_eq!(feed(&short), vec![Err(LinkError::Truncated { bytes: 3 })]);
+    // The wrong-version refusal keeps the request's number, so the reply matches it.
+    let r = frame::request(&{
+        let mut p = postcard::to_allocvec(&Header {
+            version: 9,
+            seq: 77,
+        })
+        .unwrap();
+        p.push(0);
+        p
+    })
+    .unwrap_err();
+    assert_eq!(r.seq, Some(77));
+}
+
+proptest! {
+    /// Junk of any kind between frames costs only itself: every good frame after a zero decodes.
+    #[test]
+    fn junk_between_frames_never_costs_a_good_frame(junk in proptest::collection::vec(any::<u8>(), 0..300)) {
+        let mut bytes = encode(1, &Request::Hello);
+        bytes.extend_from_slice(&junk);
+        bytes.push(0);
+        bytes.extend_from_slice(&encode(2, &Request::Save));
+        let got = feed(&bytes);
+        prop_assert_eq!(got.first(), Some(&Ok((1, Request::Hello))));
+        prop_assert_eq!(got.last(), Some(&Ok((2, Request::Save))));
+    }
+
+    /// Any bytes at all: the receiver never panics, and whatever decodes is a well-formed frame.
+    #[test]
+    fn any_bytes_are_answered_without_a_panic(bytes in proptest::collection::vec(any::<u8>(), 0..2000)) {
+        let _ = feed(&bytes);
+    }
+}
