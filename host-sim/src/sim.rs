@@ -193,17 +193,112 @@ pub fn run_with<E: VelocityEstimator>(
     run_controller(params, ctrl)
 }
 
+/// The controller between the ADC model and the timer model, stepped one sample period at a
+/// time: what [`run`] loops over and what the virtual board (`host-sim serve`) runs in real
+/// time.
+#[derive(Clone, Debug)]
+pub struct ClosedLoop<E: VelocityEstimator> {
+    /// The control core.
+    pub ctrl: Controller<E>,
+    /// The rheostat and ADC.
+    pub adc: AdcModel,
+    /// The burst timer.
+    pub tm: TimerModel,
+    clock_hz: u64,
+    period_us: u32,
+    action_latency_us: u32,
+    fault: Option<SensorFault>,
+    region: Option<u8>,
+}
+
+impl<E: VelocityEstimator> ClosedLoop<E> {
+    /// `ctrl` with `params.config` loaded, the ADC and timer models of `params`.
+    pub fn new(params: &SimParams, mut ctrl: Controller<E>) -> Result<Self, SimError> {
+        let timer = burst_timer(params.board);
+        ctrl.load(&params.config).map_err(SimError::Config)?;
+        let adc =
+            AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
+        Ok(Self {
+            ctrl,
+            adc,
+            tm: TimerModel::new(timer.clock_hz, timer.counter_bits, params.preload),
+            clock_hz: timer.clock_hz as u64,
+            period_us: sample_period_us(params.board),
+            action_latency_us: params.action_latency_us,
+            fault: None,
+            region: None,
+        })
+    }
+
+    /// Kernel-clock ticks at `t_us`.
+    pub fn clk(&self, t_us: u64) -> u64 {
+        t_us * self.clock_hz / 1_000_000
+    }
+
+    /// Sample period `k`: the finger at `state`, the sample (unless the ADC model drops it),
+    /// its gate action, and the stale watchdog's tick half a period later.
+    pub fn step(&mut self, k: u64, state: State) -> TracePoint {
+        let t_us = k * self.period_us as u64;
+        let latency = self.action_latency_us as u64;
+        let State {
+            position_um,
+            velocity_um_s,
+        } = state;
+        let sample: Option<Sample> = self.adc.sample(position_um, t_us);
+        let mut point = TracePoint {
+            t_us,
+            true_um: position_um,
+            true_vel_um_s: velocity_um_s,
+            sampled: sample.is_some(),
+            code: sample.map(|s| s.code),
+            meas_um: None,
+            est_vel_um_s: None,
+            region: None,
+            gate: false,
+            fault: self.fault,
+            action: None,
+        };
+        if let Some(s) = sample {
+            let out = self.ctrl.on_sample(s);
+            if let Some(a) = out.action {
+                self.tm.apply(self.clk(t_us + latency), a);
+                point.action = Some(a);
+            }
+            point.meas_um = out.position_um;
+            point.est_vel_um_s = out.velocity_um_s;
+            point.region = out.region;
+            self.fault = out.fault;
+            self.region = out.region;
+        } else {
+            point.region = if self.fault.is_some() {
+                None
+            } else {
+                self.region
+            };
+        }
+        self.tm.advance_to(self.clk(t_us + latency));
+        point.gate = self.tm.is_high();
+        let tick_us = t_us + (self.period_us as u64 / 2).max(latency);
+        if let Some(a) = self.ctrl.on_tick(tick_us as u32) {
+            self.tm.apply(self.clk(tick_us), a);
+            point.action = Some(a);
+            self.fault = Some(SensorFault::Stale);
+            self.region = None;
+            point.region = None;
+            point.gate = self.tm.is_high();
+        }
+        point.fault = self.fault;
+        point
+    }
+}
+
 fn run_controller<E: VelocityEstimator>(
     params: &SimParams,
-    mut ctrl: Controller<E>,
+    ctrl: Controller<E>,
 ) -> Result<SimResult, SimError> {
     let timer = burst_timer(params.board);
     let period_us = sample_period_us(params.board);
-    ctrl.load(&params.config).map_err(SimError::Config)?;
-    let mut adc =
-        AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
-    let mut tm = TimerModel::new(timer.clock_hz, timer.counter_bits, params.preload);
-    let clk = |t_us: u64| t_us * timer.clock_hz as u64 / 1_000_000;
+    let mut lp = ClosedLoop::new(params, ctrl)?;
 
     let region_settings = params
         .config
@@ -219,66 +314,21 @@ fn run_controller<E: VelocityEstimator>(
 
     let n = (params.duration_s * 1e6 / period_us as f64).round() as u64;
     let mut trace = Vec::with_capacity(n as usize);
-    let mut fault: Option<SensorFault> = None;
-    let mut region: Option<u8> = None;
     for k in 0..n {
         let t_us = k * period_us as u64;
-        let State {
-            position_um,
-            velocity_um_s,
-        } = params.trajectory.state(t_us as f64 * 1e-6);
-        let sample: Option<Sample> = adc.sample(position_um, t_us);
-        let mut point = TracePoint {
-            t_us,
-            true_um: position_um,
-            true_vel_um_s: velocity_um_s,
-            sampled: sample.is_some(),
-            code: sample.map(|s| s.code),
-            meas_um: None,
-            est_vel_um_s: None,
-            region: None,
-            gate: false,
-            fault,
-            action: None,
-        };
-        if let Some(s) = sample {
-            let out = ctrl.on_sample(s);
-            if let Some(a) = out.action {
-                tm.apply(clk(t_us + params.action_latency_us as u64), a);
-                point.action = Some(a);
-            }
-            point.meas_um = out.position_um;
-            point.est_vel_um_s = out.velocity_um_s;
-            point.region = out.region;
-            fault = out.fault;
-            region = out.region;
-        } else {
-            point.region = if fault.is_some() { None } else { region };
-        }
-        tm.advance_to(clk(t_us + params.action_latency_us as u64));
-        point.gate = tm.is_high();
-        let tick_us = t_us + (period_us as u64 / 2).max(params.action_latency_us as u64);
-        if let Some(a) = ctrl.on_tick(tick_us as u32) {
-            tm.apply(clk(tick_us), a);
-            point.action = Some(a);
-            fault = Some(SensorFault::Stale);
-            region = None;
-            point.region = None;
-            point.gate = tm.is_high();
-        }
-        point.fault = fault;
-        trace.push(point);
+        trace.push(lp.step(k, params.trajectory.state(t_us as f64 * 1e-6)));
     }
-    let end = clk(n * period_us as u64);
-    let timer_protocol_errors = tm.protocol_errors;
-    let waveform = tm.finish(end);
+    let end = lp.clk(n * period_us as u64);
+    let timer_protocol_errors = lp.tm.protocol_errors;
+    let telemetry = lp.ctrl.telemetry();
+    let waveform = lp.tm.finish(end);
     Ok(SimResult {
         params: params.clone(),
         timer,
         sample_period_us: period_us,
         trace,
         waveform,
-        telemetry: ctrl.telemetry(),
+        telemetry,
         region_settings,
         timer_protocol_errors,
     })
