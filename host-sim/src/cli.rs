@@ -92,7 +92,7 @@ fn finite_mm(s: &str) -> Result<f64, String> {
     }
 }
 
-fn board_parser() -> impl TypedValueParser<Value = &'static BoardDef> {
+pub fn board_parser() -> impl TypedValueParser<Value = &'static BoardDef> {
     PossibleValuesParser::new(saw_boards::ALL.iter().map(|b| b.name)).map(|name| {
         saw_boards::by_name(&name).unwrap_or(&saw_boards::NUCLEO_F446RE) // listed above
     })

@@ -20,6 +20,7 @@ pub mod metrics;
 pub mod models;
 pub mod report;
 pub mod scenario;
+pub mod serve;
 pub mod sim;
 pub mod timer;
 pub mod trajectory;

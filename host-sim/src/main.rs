@@ -25,6 +25,15 @@ fn main() -> ExitCode {
     if let Some(code) = host_sim::bench::run_from_env() {
         return code;
     }
+    // `host-sim serve …`: a virtual board behind a pty, for `saw` (docs/link.md). It logs
+    // what the firmware logs (boot scene, refusals) at info.
+    if std::env::args().nth(1).as_deref() == Some("serve") {
+        let _ = log::set_logger(&StderrLog);
+        log::set_max_level(log::LevelFilter::Info);
+    }
+    if let Some(code) = host_sim::serve::run_from_env() {
+        return code;
+    }
     // `host-sim model …` and `host-sim tile-to-scene …`: physical models (docs/models.md).
     if let Some(code) = host_sim::models::cli::run_from_env() {
         return code;

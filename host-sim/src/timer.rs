@@ -299,6 +299,13 @@ impl TimerModel {
         }
     }
 
+    /// Drops the recorded edges and actions (the level and the running period stay): a run
+    /// that never ends (the virtual board) keeps constant memory.
+    pub fn forget_history(&mut self) {
+        self.edges.clear();
+        self.actions.clear();
+    }
+
     /// Finishes the recording at `t` and returns the waveform.
     pub fn finish(mut self, t: u64) -> Waveform {
         self.advance_to(t);

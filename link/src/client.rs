@@ -145,7 +145,10 @@ impl<P: Read + Write> Client<P> {
     }
 
     /// The next stream frame, waiting until `deadline`; `None` when none came.
-    pub fn next_stream(&mut self, deadline: Instant) -> Result<Option<(Header, Stream)>, ClientError> {
+    pub fn next_stream(
+        &mut self,
+        deadline: Instant,
+    ) -> Result<Option<(Header, Stream)>, ClientError> {
         if let Some(s) = self.streams.pop_front() {
             return Ok(Some(s));
         }
@@ -198,7 +201,9 @@ impl<P: Read + Write> Client<P> {
                 Err(e)
                     if matches!(
                         e.kind(),
-                        io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+                        io::ErrorKind::TimedOut
+                            | io::ErrorKind::WouldBlock
+                            | io::ErrorKind::Interrupted
                     ) =>
                 {
                     self.inbox.clear();

@@ -36,19 +36,35 @@ pub enum EncodeError {
 impl core::fmt::Display for EncodeError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            EncodeError::TooLarge => write!(f, "the message is longer than the {MAX_PAYLOAD}-byte frame limit"),
-            EncodeError::OutputTooSmall => write!(f, "the output buffer is smaller than a frame ({MAX_ENCODED} bytes)"),
+            EncodeError::TooLarge => write!(
+                f,
+                "the message is longer than the {MAX_PAYLOAD}-byte frame limit"
+            ),
+            EncodeError::OutputTooSmall => write!(
+                f,
+                "the output buffer is smaller than a frame ({MAX_ENCODED} bytes)"
+            ),
         }
     }
 }
 
 /// Frames `body` behind `header` into `out`, ending with the zero delimiter. Returns the bytes
 /// written.
-pub fn encode<T: Serialize>(header: &Header, body: &T, out: &mut [u8]) -> Result<usize, EncodeError> {
+pub fn encode<T: Serialize>(
+    header: &Header,
+    body: &T,
+    out: &mut [u8],
+) -> Result<usize, EncodeError> {
     let mut raw = [0u8; MAX_PAYLOAD];
-    let head = postcard::to_slice(header, &mut raw).map_err(|_| EncodeError::TooLarge)?.len();
-    let rest = raw.get_mut(head..MAX_PAYLOAD - CRC_BYTES).ok_or(EncodeError::TooLarge)?;
-    let body_len = postcard::to_slice(body, rest).map_err(|_| EncodeError::TooLarge)?.len();
+    let head = postcard::to_slice(header, &mut raw)
+        .map_err(|_| EncodeError::TooLarge)?
+        .len();
+    let rest = raw
+        .get_mut(head..MAX_PAYLOAD - CRC_BYTES)
+        .ok_or(EncodeError::TooLarge)?;
+    let body_len = postcard::to_slice(body, rest)
+        .map_err(|_| EncodeError::TooLarge)?
+        .len();
     let len = head + body_len;
     let crc = CRC.checksum(&raw[..len]);
     raw[len..len + CRC_BYTES].copy_from_slice(&crc.to_le_bytes());
@@ -142,10 +158,11 @@ pub struct Refusal {
 
 /// Reads the header of a whole frame's payload and checks its version; returns it and the body.
 pub fn header(payload: &[u8]) -> Result<(Header, &[u8]), Refusal> {
-    let (header, body): (Header, &[u8]) = postcard::take_from_bytes(payload).map_err(|_| Refusal {
-        seq: None,
-        error: LinkError::Malformed,
-    })?;
+    let (header, body): (Header, &[u8]) =
+        postcard::take_from_bytes(payload).map_err(|_| Refusal {
+            seq: None,
+            error: LinkError::Malformed,
+        })?;
     if header.version != PROTOCOL_VERSION {
         return Err(Refusal {
             seq: Some(header.seq),
@@ -167,7 +184,8 @@ pub fn request(payload: &[u8]) -> Result<(Header, Request), Refusal> {
     };
     // postcard numbers enum variants with a leading varint: read it first so a request from a
     // newer host reads as "unknown request N", not as a decoding failure.
-    let (variant, _): (u32, &[u8]) = postcard::take_from_bytes(body).map_err(|_| refuse(LinkError::Malformed))?;
+    let (variant, _): (u32, &[u8]) =
+        postcard::take_from_bytes(body).map_err(|_| refuse(LinkError::Malformed))?;
     if variant >= Request::VARIANTS {
         return Err(refuse(LinkError::UnknownRequest { variant }));
     }

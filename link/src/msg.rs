@@ -37,6 +37,9 @@ pub struct Header {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+// A whole scene rides inline: the board has no allocator to box it, and one message is held
+// at a time.
+#[allow(clippy::large_enum_variant)]
 pub enum Request {
     /// Who is there: protocol and firmware version, board, active scene.
     Hello,
@@ -169,6 +172,9 @@ pub struct Stream {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+// A whole scene rides inline: the board has no allocator to box it, and one message is held
+// at a time.
+#[allow(clippy::large_enum_variant)]
 pub enum Reply {
     /// To [`Request::Hello`].
     Hello(Hello),
@@ -295,7 +301,10 @@ impl core::fmt::Display for StoreFault {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             StoreFault::NoStore => write!(f, "this board has no scene store"),
-            StoreFault::Flash => write!(f, "the flash refused a write or an erase; the scene saved before is kept"),
+            StoreFault::Flash => write!(
+                f,
+                "the flash refused a write or an erase; the scene saved before is kept"
+            ),
             StoreFault::TooLarge => write!(f, "the scene does not fit the store's item"),
         }
     }

@@ -123,7 +123,8 @@ impl Session {
                 config: self.active.clone(),
             },
             Request::LoadScene(config) => self.apply(board, config).await,
-            Request::MoveBoundary { index, at_um } => match self.active.with_boundary(index, at_um) {
+            Request::MoveBoundary { index, at_um } => match self.active.with_boundary(index, at_um)
+            {
                 Ok(next) => self.apply(board, next).await,
                 Err(e) => Reply::Refused(e),
             },
@@ -228,7 +229,10 @@ fn since(now: &Counters, base: &Counters) -> Counters {
         link: LinkCounters {
             frames_ok: now.link.frames_ok.wrapping_sub(base.link.frames_ok),
             frames_bad: now.link.frames_bad.wrapping_sub(base.link.frames_bad),
-            records_dropped: now.link.records_dropped.wrapping_sub(base.link.records_dropped),
+            records_dropped: now
+                .link
+                .records_dropped
+                .wrapping_sub(base.link.records_dropped),
             records_sent: now.link.records_sent.wrapping_sub(base.link.records_sent),
         },
     }

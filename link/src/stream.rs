@@ -5,6 +5,11 @@
 
 use heapless::Vec;
 
+/// Records the board queues between the sample path and the link: 64 records are 6.4 ms of
+/// every-sample streaming at 10 kHz, several frames' worth, so a link that keeps up never drops
+/// and one that does not drops (and counts) instead of stalling anything.
+pub const QUEUE_RECORDS: usize = 64;
+
 use crate::msg::{Header, Record, Reply, Stream, PROTOCOL_VERSION, RECORDS_PER_FRAME};
 
 /// One record every `every` samples.

@@ -87,7 +87,12 @@ fn every_scene_file_round_trips_and_the_largest_scene_fits() {
             saw_core::scene_file::load_for_board(&path.display().to_string(), &text, timer, 100)
                 .unwrap();
         let req = Request::LoadScene(config);
-        assert_eq!(feed(&encode(1, &req)), vec![Ok((1, req))], "{}", path.display());
+        assert_eq!(
+            feed(&encode(1, &req)),
+            vec![Ok((1, req))],
+            "{}",
+            path.display()
+        );
         n += 1;
     }
     assert!(n >= 5, "{n} scene files");
@@ -115,7 +120,9 @@ fn every_scene_file_round_trips_and_the_largest_scene_fits() {
     for _ in 0..MAX_LINES {
         big.scene.lines.positions_um.push(u32::MAX).unwrap();
     }
-    let len = postcard::to_allocvec(&Request::LoadScene(big.clone())).unwrap().len();
+    let len = postcard::to_allocvec(&Request::LoadScene(big.clone()))
+        .unwrap()
+        .len();
     assert!(len + 16 < MAX_PAYLOAD, "largest scene {len} bytes");
     let req = Request::LoadScene(big);
     assert_eq!(feed(&encode(3, &req)), vec![Ok((3, req))]);
@@ -139,7 +146,11 @@ fn a_flipped_bit_anywhere_is_refused_and_the_next_frame_decodes() {
         let got = feed(&bytes);
         // The flipped frame never decodes (a flip to or from zero may split it in two or join
         // it to the next; each piece is refused), and the good one always does.
-        assert_eq!(got.last(), Some(&Ok((2, Request::Hello))), "bit {bit}: {got:?}");
+        assert_eq!(
+            got.last(),
+            Some(&Ok((2, Request::Hello))),
+            "bit {bit}: {got:?}"
+        );
         for r in &got[..got.len() - 1] {
             assert!(r.is_err(), "bit {bit} decoded as {r:?}");
         }
@@ -160,8 +171,15 @@ fn a_dropped_byte_or_a_truncated_frame_is_refused() {
             bytes.push(0);
             bytes.extend_from_slice(&good);
             let got = feed(&bytes);
-            assert_eq!(got.last(), Some(&Ok((2, Request::Hello))), "byte {i}: {got:?}");
-            assert!(got[..got.len() - 1].iter().all(|r| r.is_err()), "byte {i}: {got:?}");
+            assert_eq!(
+                got.last(),
+                Some(&Ok((2, Request::Hello))),
+                "byte {i}: {got:?}"
+            );
+            assert!(
+                got[..got.len() - 1].iter().all(|r| r.is_err()),
+                "byte {i}: {got:?}"
+            );
         }
     }
 }

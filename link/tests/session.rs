@@ -10,9 +10,7 @@ use saw_core::sample::Sample;
 use saw_core::scene::{default_config, Config};
 use saw_core::texture::Texture;
 use saw_link::frame::{self, Receiver, MAX_ENCODED};
-use saw_link::msg::{
-    Header, LinkError, Reply, Request, SceneSource, StoreFault, PROTOCOL_VERSION,
-};
+use saw_link::msg::{Header, LinkError, Reply, Request, SceneSource, StoreFault, PROTOCOL_VERSION};
 use saw_link::scene_id;
 use saw_link::session::{Board, Identity, Session};
 
@@ -106,7 +104,9 @@ fn hello_names_the_board_and_the_scene() {
     let (mut s, mut b) = (session(), CoreBoard::new());
     let (h, r) = ask(&mut s, &mut b, 5, &Request::Hello);
     assert_eq!(h.seq, 5);
-    let Reply::Hello(hello) = r else { panic!("{r:?}") };
+    let Reply::Hello(hello) = r else {
+        panic!("{r:?}")
+    };
     assert_eq!(hello.protocol, PROTOCOL_VERSION);
     assert_eq!(hello.board.as_str(), "nucleo-f446re");
     assert_eq!(hello.firmware.as_str(), "saw-firmware 0.1.0");
@@ -163,7 +163,9 @@ fn a_boundary_move_runs_and_a_bad_one_changes_nothing() {
             at_um: 50_000,
         },
     );
-    let Reply::Refused(e) = r else { panic!("{r:?}") };
+    let Reply::Refused(e) = r else {
+        panic!("{r:?}")
+    };
     assert!(matches!(e, ConfigError::Region(_)), "{e}");
     assert_eq!(s.active(), &before);
     // A boundary the scene does not have.
@@ -195,7 +197,9 @@ fn a_refused_scene_reads_as_the_scene_file_sentence() {
     let doc = saw_core::scene_file::parse("fast.toml", text).unwrap();
     let (mut s, mut b) = (session(), CoreBoard::new());
     let (_, r) = ask(&mut s, &mut b, 1, &Request::LoadScene(doc.config.clone()));
-    let Reply::Refused(e) = r else { panic!("{r:?}") };
+    let Reply::Refused(e) = r else {
+        panic!("{r:?}")
+    };
     // Located in the file by the host tool, the board's refusal is the host's error exactly.
     assert_eq!(doc.locate(&e), host);
     assert_eq!(s.active(), &default_config());
@@ -215,7 +219,12 @@ fn texture_and_drive_edits_and_get_scene() {
         },
     );
     assert!(matches!(r, Reply::Applied { .. }), "{r:?}");
-    let (_, r) = ask(&mut s, &mut b, 2, &Request::SetDrive(DriveMode::Progressive));
+    let (_, r) = ask(
+        &mut s,
+        &mut b,
+        2,
+        &Request::SetDrive(DriveMode::Progressive),
+    );
     assert!(matches!(r, Reply::Applied { .. }), "{r:?}");
     let (_, r) = ask(&mut s, &mut b, 3, &Request::GetScene);
     let Reply::Scene {
@@ -258,7 +267,9 @@ fn counters_count_and_reset() {
         });
     }
     let (_, r) = ask(&mut s, &mut b, 1, &Request::Counters { reset: true });
-    let Reply::Counters(c) = r else { panic!("{r:?}") };
+    let Reply::Counters(c) = r else {
+        panic!("{r:?}")
+    };
     assert_eq!(c.core.samples, 25);
     assert_eq!((c.link.records_dropped, c.link.records_sent), (3, 40));
     // This frame is the first one answered (counted before it is handled).
@@ -270,7 +281,9 @@ fn counters_count_and_reset() {
         });
     }
     let (_, r) = ask(&mut s, &mut b, 2, &Request::Counters { reset: false });
-    let Reply::Counters(c) = r else { panic!("{r:?}") };
+    let Reply::Counters(c) = r else {
+        panic!("{r:?}")
+    };
     assert_eq!(c.core.samples, 5);
     assert_eq!(c.link.frames_ok, 1);
     assert_eq!((c.link.records_dropped, c.link.records_sent), (0, 0));
@@ -323,12 +336,17 @@ fn a_bad_frame_gets_a_typed_error_and_the_next_request_is_answered() {
     }
     assert_eq!(replies.len(), 1);
     assert_eq!(replies[0].0.seq, 0);
-    assert!(matches!(replies[0].1, Reply::Error(LinkError::Crc { .. })), "{replies:?}");
+    assert!(
+        matches!(replies[0].1, Reply::Error(LinkError::Crc { .. })),
+        "{replies:?}"
+    );
     assert_eq!(b.saved, None);
     let (h, r) = ask(&mut s, &mut b, 9, &Request::Hello);
     assert_eq!(h.seq, 9);
     assert!(matches!(r, Reply::Hello(_)));
     let (_, r) = ask(&mut s, &mut b, 10, &Request::Counters { reset: false });
-    let Reply::Counters(c) = r else { panic!("{r:?}") };
+    let Reply::Counters(c) = r else {
+        panic!("{r:?}")
+    };
     assert_eq!((c.link.frames_ok, c.link.frames_bad), (2, 1));
 }

@@ -1,0 +1,309 @@
+//! `host-sim serve --pty PATH`: a virtual board behind a pseudo-terminal. The same core, the same
+//! link code (`saw_link`) and a simulated finger run in real time, so `saw` (and any script
+//! speaking the frame format) drives it exactly as it drives a Nucleo on `/dev/ttyACM0`.
+//!
+//! The link is paced at the board's UART rate (`--baud`, 10 bits a byte): replies always go
+//! out, stream frames only when the line has room, and records that find the queue full are
+//! dropped and counted, as on the firmware.
+
+pub mod board;
+pub mod pty;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use clap::Parser;
+use embassy_futures::block_on;
+use saw_boards::BoardDef;
+use saw_core::velocity::VelocityEstimator;
+use saw_core::Controller;
+use saw_link::frame::{self, Receiver, MAX_ENCODED};
+use saw_link::msg::{Header, Reply, SceneSource};
+use saw_link::session::{Identity, Session};
+use saw_link::stream::Batcher;
+
+use crate::door::{Range, Whole};
+use crate::sim::{burst_timer, sample_period_us, SimParams};
+use crate::trajectory::Trajectory;
+use board::{Persist, VirtualBoard};
+use pty::Pty;
+
+/// The ST-LINK virtual COM port's rate the firmware uses (boards/README.md): 921 600 baud.
+pub const LINK_BAUD: u32 = 921_600;
+const SPEED: Range = Range::new(0.1, 1000.0, "mm/s");
+const AT: Range = Range::new(0.0, 1000.0, "mm");
+const NOISE: Range = Range::new(0.0, 100.0, "LSB RMS");
+const SECONDS: Range = Range::new(0.01, 1e6, "s");
+const BAUD: Whole = Whole::new(9_600, 16_000_000);
+const SEED: Whole = Whole::new(0, u64::MAX);
+/// A partial stream frame goes out after this long, so a slow stream still arrives steadily.
+const FLUSH_AFTER: Duration = Duration::from_millis(20);
+
+/// `host-sim serve`: a virtual board on a pseudo-terminal.
+#[derive(Parser, Debug, Clone)]
+#[command(
+    name = "host-sim serve",
+    about = "Run a virtual board behind a pseudo-terminal: the core, the link and a simulated finger in real time, for `saw --port PATH`."
+)]
+pub struct ServeArgs {
+    /// Where to put the link to the pty's slave (`saw --port` takes this path).
+    #[arg(long, value_name = "PATH")]
+    pub pty: PathBuf,
+    /// The board to stand for.
+    #[arg(long, default_value = saw_boards::NUCLEO_F446RE.name, value_parser = crate::cli::board_parser())]
+    pub board: &'static BoardDef,
+    /// The scene to run when no saved scene is stored (the built-in default without it).
+    #[arg(long, value_name = "FILE")]
+    pub scene: Option<PathBuf>,
+    /// A file standing for the board's flash: `saw save` writes the scene there and a restart
+    /// boots into it. Without it the board has no scene store.
+    #[arg(long, value_name = "FILE")]
+    pub flash: Option<PathBuf>,
+    #[arg(long, value_name = "MM_S", default_value_t = 60.0, help = SPEED.help("Finger speed, back and forth over the travel"), value_parser = SPEED.parser())]
+    pub speed: f64,
+    #[arg(long, value_name = "MM", conflicts_with = "speed", help = AT.help("Finger at rest here instead (within the scene's travel)"), value_parser = AT.parser())]
+    pub rest_at: Option<f64>,
+    #[arg(long, value_name = "LSB", default_value_t = 2.0, help = NOISE.help("ADC noise per conversion"), value_parser = NOISE.parser())]
+    pub noise: f64,
+    #[arg(long, default_value_t = 1, help = SEED.help("Noise seed"), value_parser = SEED.parser())]
+    pub seed: u64,
+    #[arg(long, value_name = "BAUD", default_value_t = LINK_BAUD as u64, help = BAUD.help("The link's rate, baud (10 bits a byte)"), value_parser = BAUD.parser())]
+    pub baud: u64,
+    #[arg(long, value_name = "S", help = SECONDS.help("Stop after this long (default: run until interrupted)"), value_parser = SECONDS.parser())]
+    pub seconds: Option<f64>,
+}
+
+/// What a serve run did.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ServeStats {
+    /// Requests answered (bad frames included).
+    pub replies: u64,
+    /// Stream frames sent.
+    pub stream_frames: u64,
+    /// Records dropped.
+    pub dropped: u32,
+}
+
+/// `host-sim serve …` from the command line, if that is the command.
+pub fn run_from_env() -> Option<ExitCode> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (cmd, rest) = args.split_first()?;
+    if cmd != "serve" {
+        return None;
+    }
+    let argv = std::iter::once("host-sim serve".to_string()).chain(rest.iter().cloned());
+    let a = match ServeArgs::try_parse_from(argv) {
+        Ok(a) => a,
+        Err(e) => e.exit(),
+    };
+    let stop = AtomicBool::new(false);
+    Some(
+        match serve(&a, &stop, |p| {
+            eprintln!(
+                "virtual board on {} ({})",
+                a.pty.display(),
+                p.slave_path().display()
+            )
+        }) {
+            Ok(s) => {
+                eprintln!(
+                    "stopped: {} replies, {} stream frames, {} records dropped",
+                    s.replies, s.stream_frames, s.dropped
+                );
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(2)
+            }
+        },
+    )
+}
+
+/// Opens the file store named by `--flash`.
+pub type StoreOpener = fn(&std::path::Path) -> Result<Box<dyn Persist + Send>, String>;
+
+/// Runs the virtual board until `stop` is set or `--seconds` pass. `ready` is called once the
+/// pty exists.
+pub fn serve(
+    a: &ServeArgs,
+    stop: &AtomicBool,
+    ready: impl FnOnce(&Pty),
+) -> Result<ServeStats, String> {
+    let board = a.board;
+    let (params, source) = params(a, board)?;
+    let store = match &a.flash {
+        Some(path) => Some(open_store(path)?),
+        None => None,
+    };
+    let ctrl =
+        Controller::new(burst_timer(board), sample_period_us(board)).map_err(|e| e.to_string())?;
+    let boot = VirtualBoard::boot(&params, ctrl, source, store).map_err(|e| e.to_string())?;
+    let identity = Identity {
+        firmware: concat!("host-sim serve ", env!("CARGO_PKG_VERSION")),
+        board: board.name,
+        sample_rate_hz: board.sample_rate_hz,
+    };
+    let session = Session::new(identity, boot.config, boot.source);
+    let pty = Pty::open(&a.pty)?;
+    ready(&pty);
+    run(&pty, boot.board, session, a.baud as u32, a.seconds, stop)
+}
+
+fn params(a: &ServeArgs, board: &'static BoardDef) -> Result<(SimParams, SceneSource), String> {
+    let (config, source) = match &a.scene {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| format!("--scene {}: {e}", path.display()))?;
+            let c = saw_core::scene_file::load_for_board(
+                &path.display().to_string(),
+                &text,
+                burst_timer(board),
+                sample_period_us(board),
+            )
+            .map_err(|e| e.to_string())?;
+            (c, SceneSource::BuildTime)
+        }
+        None => (saw_core::default_config(), SceneSource::Default),
+    };
+    let length_mm = config.calibration.length_um as f64 / 1000.0;
+    let trajectory = match a.rest_at {
+        Some(at) if at > length_mm => {
+            return Err(format!(
+                "--rest-at {at} mm is past the scene's travel of {length_mm} mm"
+            ))
+        }
+        Some(at) => Trajectory::Rest { at_um: at * 1000.0 },
+        None => Trajectory::Triangle {
+            a_um: crate::cli::END_MARGIN_MM * 1000.0,
+            b_um: (length_mm - crate::cli::END_MARGIN_MM) * 1000.0,
+            speed_um_s: a.speed * 1000.0,
+        },
+    };
+    let p = SimParams::new(board, trajectory, f64::INFINITY)
+        .with_config(config)
+        .with_noise(a.noise, a.seed);
+    Ok((p, source))
+}
+
+fn open_store(path: &std::path::Path) -> Result<Box<dyn Persist + Send>, String> {
+    Err(format!(
+        "--flash {}: the scene store is not built yet",
+        path.display()
+    ))
+}
+
+fn run<E: VelocityEstimator>(
+    pty: &Pty,
+    mut board: VirtualBoard<E>,
+    mut session: Session,
+    baud: u32,
+    seconds: Option<f64>,
+    stop: &AtomicBool,
+) -> Result<ServeStats, String> {
+    let start = Instant::now();
+    let bytes_per_s = baud as f64 / 10.0;
+    let mut line = Line {
+        budget: 0.0,
+        last: start,
+        bytes_per_s,
+    };
+    let mut rx = Receiver::<MAX_ENCODED>::default();
+    let mut batcher = Batcher::default();
+    let mut pending: Option<Vec<u8>> = None;
+    let mut last_flush = start;
+    let mut stats = ServeStats::default();
+    let mut inbuf = [0u8; 4096];
+    let end = seconds.map(|s| start + Duration::from_secs_f64(s));
+    while !stop.load(Ordering::Relaxed) && end.is_none_or(|e| Instant::now() < e) {
+        let n = pty.read(&mut inbuf).map_err(|e| format!("pty: {e}"))?;
+        for &byte in &inbuf[..n] {
+            let reply = match rx.push(byte) {
+                None => continue,
+                Some(Ok(len)) => block_on(session.on_frame(&mut board, rx.payload(len))),
+                Some(Err(e)) => session.on_bad_frame(None, e),
+            };
+            if session.every_samples() == 0 {
+                // A stopped stream: what was gathered goes, nothing more.
+                pending = None;
+            }
+            let bytes = encode(&reply.0, &reply.1)?;
+            line.spend(bytes.len());
+            send(pty, &bytes);
+            stats.replies += 1;
+        }
+        board.run_until(start.elapsed().as_micros() as u64);
+        // The stream: frames go when the line has room; until then records wait in the queue,
+        // and the queue drops when full.
+        line.refill();
+        loop {
+            if pending.is_none() {
+                let rec = board.pop_record();
+                let frame = match rec {
+                    Some(r) => batcher.push(r, board.dropped()),
+                    None if last_flush.elapsed() >= FLUSH_AFTER => batcher.flush(board.dropped()),
+                    None => None,
+                };
+                match frame {
+                    Some((h, r)) => pending = Some(encode(&h, &r)?),
+                    None if rec.is_some() => continue,
+                    None => break,
+                }
+            }
+            let Some(bytes) = pending.as_ref() else { break };
+            if line.budget < bytes.len() as f64 {
+                break;
+            }
+            line.spend(bytes.len());
+            send(pty, bytes);
+            pending = None;
+            last_flush = Instant::now();
+            stats.stream_frames += 1;
+        }
+        std::thread::sleep(Duration::from_micros(500));
+    }
+    stats.dropped = board.dropped();
+    Ok(stats)
+}
+
+/// The UART's pace: a byte budget refilled at the line rate, at most one frame ahead.
+struct Line {
+    budget: f64,
+    last: Instant,
+    bytes_per_s: f64,
+}
+
+impl Line {
+    fn refill(&mut self) {
+        let now = Instant::now();
+        self.budget = (self.budget + (now - self.last).as_secs_f64() * self.bytes_per_s)
+            .min(2.0 * MAX_ENCODED as f64);
+        self.last = now;
+    }
+
+    fn spend(&mut self, bytes: usize) {
+        self.refill();
+        self.budget -= bytes as f64;
+    }
+}
+
+fn encode(header: &Header, reply: &Reply) -> Result<Vec<u8>, String> {
+    let mut out = [0u8; MAX_ENCODED];
+    let n = frame::encode(header, reply, &mut out).map_err(|e| e.to_string())?;
+    Ok(out[..n].to_vec())
+}
+
+/// Writes a frame; if the pty's buffer stays full (no one reading) for 50 ms, the rest is
+/// dropped (the host resynchronises at the next zero).
+fn send(pty: &Pty, mut bytes: &[u8]) {
+    let give_up = Instant::now() + Duration::from_millis(50);
+    while !bytes.is_empty() && Instant::now() < give_up {
+        match pty.write(bytes) {
+            Ok(0) => std::thread::sleep(Duration::from_micros(200)),
+            Ok(n) => bytes = &bytes[n..],
+            Err(_) => return,
+        }
+    }
+}
