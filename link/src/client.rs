@@ -117,9 +117,11 @@ impl<P: Read + Write> Client<P> {
         loop {
             match self.read_frame(start + self.timeout)? {
                 Some((h, Reply::Stream(s))) => self.streams.push_back((h, s)),
-                Some((h, Reply::Error(e))) if h.seq == self.seq || h.seq == 0 => {
-                    return Err(ClientError::Link(e))
-                }
+                Some((h, Reply::Error(e))) if h.seq == self.seq => return Err(ClientError::Link(e)),
+                // A frame refused before its number was read: maybe ours, maybe what an earlier
+                // client left half-sent (closed by our leading zero). Only noise to count; if it
+                // was ours, no reply comes and the timeout says so.
+                Some((h, Reply::Error(_))) if h.seq == 0 => self.bad_frames += 1,
                 Some((h, reply)) if h.seq == self.seq => return Ok(reply),
                 // A stale reply to an earlier request that timed out.
                 Some(_) => {}

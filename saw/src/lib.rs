@@ -56,7 +56,7 @@ pub enum Command {
         /// Boundary index, 0 = the end of the first region.
         index: u8,
         /// New position, mm from the start end (0 to 1000; the scene's layout rules apply).
-        #[arg(value_parser = mm)]
+        #[arg(value_parser = mm, allow_hyphen_values = true)]
         mm: f64,
     },
     /// Give region INDEX a new texture, written as scene-file keys: `saw set 1 kind=grating
