@@ -496,7 +496,7 @@ fn stream<P: std::io::Read + std::io::Write>(
     };
     Ok(Done {
         text: format!(
-            "{records} records in {seconds} s to {} ({rate} records/s asked); {dropped} dropped by the board, {frames_lost} frames lost on the line, {} refused",
+            "{records} records in {seconds} s to {} ({rate:.0} records/s asked); {dropped} dropped by the board, {frames_lost} frames lost on the line, {} refused",
             csv.display(),
             client.bad_frames()
         ),

@@ -96,7 +96,8 @@ fn saw_json(port: &Path, args: &[&str]) -> Value {
     let mut all = vec!["--json"];
     all.extend_from_slice(args);
     let r = saw(port, &all);
-    serde_json::from_str(r.stdout.trim()).unwrap_or_else(|e| panic!("{e}: {} {}", r.stdout, r.stderr))
+    serde_json::from_str(r.stdout.trim())
+        .unwrap_or_else(|e| panic!("{e}: {} {}", r.stdout, r.stderr))
 }
 
 fn scenes() -> Vec<PathBuf> {
@@ -142,9 +143,7 @@ fn csv_rows(path: &Path) -> Vec<Vec<String>> {
 /// Positions (mm) where the region changed from `a` to `b` or back, in a stream CSV.
 fn switches(rows: &[Vec<String>], a: &str, b: &str) -> Vec<f64> {
     rows.windows(2)
-        .filter(|w| {
-            (w[0][3] == a && w[1][3] == b) || (w[0][3] == b && w[1][3] == a)
-        })
+        .filter(|w| (w[0][3] == a && w[1][3] == b) || (w[0][3] == b && w[1][3] == a))
         .filter_map(|w| w[1][1].parse::<f64>().ok())
         .map(|um| um / 1000.0)
         .collect()
@@ -157,7 +156,18 @@ fn a_boundary_moved_live_moves_the_switch() {
     let before = dir.path().join("before.csv");
     let after = dir.path().join("after.csv");
     // 60 mm of travel at 100 mm/s: each pass crosses the boundary once.
-    let r = saw(&vb.port, &["stream", "--csv", before.to_str().unwrap(), "--seconds", "1.5", "--every", "2"]);
+    let r = saw(
+        &vb.port,
+        &[
+            "stream",
+            "--csv",
+            before.to_str().unwrap(),
+            "--seconds",
+            "1.5",
+            "--every",
+            "2",
+        ],
+    );
     assert_eq!(r.code, 0, "{}", r.stderr);
     let s = switches(&csv_rows(&before), "0", "1");
     assert!(!s.is_empty());
@@ -166,8 +176,23 @@ fn a_boundary_moved_live_moves_the_switch() {
     assert!(s.iter().all(|x| (x - 18.963).abs() < 0.15), "{s:?}");
     let r = saw(&vb.port, &["boundary", "0", "30"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
-    assert!(r.stdout.contains("boundary 0 at 30 mm: running"), "{}", r.stdout);
-    let r = saw(&vb.port, &["stream", "--csv", after.to_str().unwrap(), "--seconds", "1.5", "--every", "2"]);
+    assert!(
+        r.stdout.contains("boundary 0 at 30 mm: running"),
+        "{}",
+        r.stdout
+    );
+    let r = saw(
+        &vb.port,
+        &[
+            "stream",
+            "--csv",
+            after.to_str().unwrap(),
+            "--seconds",
+            "1.5",
+            "--every",
+            "2",
+        ],
+    );
     assert_eq!(r.code, 0, "{}", r.stderr);
     let s = switches(&csv_rows(&after), "0", "1");
     assert!(!s.is_empty());
@@ -179,17 +204,35 @@ fn ten_seconds_stream_without_a_drop_at_1_khz() {
     let vb = VirtualBoard::start(&[]);
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("s.csv");
-    let r = saw_json(&vb.port, &["stream", "--csv", csv.to_str().unwrap(), "--seconds", "10", "--every", "10"]);
+    let r = saw_json(
+        &vb.port,
+        &[
+            "stream",
+            "--csv",
+            csv.to_str().unwrap(),
+            "--seconds",
+            "10",
+            "--every",
+            "10",
+        ],
+    );
     let res = &r["result"];
     assert_eq!(res["dropped"], 0, "{r}");
     assert_eq!(res["frames_lost"], 0, "{r}");
     assert_eq!(res["bad_frames"], 0, "{r}");
     let rows = csv_rows(&csv);
     // 1000 records/s for 10 s, give or take the frames in flight at the ends.
-    assert!((9_900..=10_100).contains(&rows.len()), "{} records", rows.len());
+    assert!(
+        (9_900..=10_100).contains(&rows.len()),
+        "{} records",
+        rows.len()
+    );
     // Consecutive records are 10 samples (1 ms) apart: nothing lost in between.
     let t: Vec<u64> = rows.iter().map(|r| r[0].parse().unwrap()).collect();
-    assert!(t.windows(2).all(|w| w[1] - w[0] == 1_000), "a gap in the records");
+    assert!(
+        t.windows(2).all(|w| w[1] - w[0] == 1_000),
+        "a gap in the records"
+    );
 }
 
 #[test]
@@ -198,7 +241,18 @@ fn a_stream_faster_than_the_line_drops_and_counts_and_never_stalls() {
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("s.csv");
     // Every sample: 10 000 records/s of ~19 bytes is twice what 921 600 baud carries.
-    let r = saw_json(&vb.port, &["stream", "--csv", csv.to_str().unwrap(), "--seconds", "1", "--every", "1"]);
+    let r = saw_json(
+        &vb.port,
+        &[
+            "stream",
+            "--csv",
+            csv.to_str().unwrap(),
+            "--seconds",
+            "1",
+            "--every",
+            "1",
+        ],
+    );
     let dropped = r["result"]["dropped"].as_u64().unwrap();
     let records = r["result"]["records"].as_u64().unwrap();
     assert!(dropped > 2_000, "{r}");
@@ -229,17 +283,28 @@ fn a_refused_scene_reads_as_host_sim_reads_it_and_changes_nothing() {
     assert_eq!(r.code, 1);
     assert_eq!(r.stderr.trim(), format!("error: {host}"));
     let after = saw_json(&vb.port, &["hello"]);
-    assert_eq!(before["result"]["hello"]["scene_id"], after["result"]["hello"]["scene_id"]);
+    assert_eq!(
+        before["result"]["hello"]["scene_id"],
+        after["result"]["hello"]["scene_id"]
+    );
     // A live edit refused by the board: its sentence, nothing changed.
     let r = saw(&vb.port, &["set", "1", "kind=constant", "f_b_hz=9000"]);
     assert_eq!(r.code, 1);
-    assert!(r.stderr.contains("f_b 9000 Hz is above this board's limit of 2000 Hz"), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("f_b 9000 Hz is above this board's limit of 2000 Hz"),
+        "{}",
+        r.stderr
+    );
     // Refused at the door (scene-file range): exit 2, the field named.
     let r = saw(&vb.port, &["set", "1", "kind=constant", "f_b_hz=-3"]);
     assert_eq!(r.code, 2, "{}", r.stderr);
     assert!(r.stderr.contains("f_b_hz"), "{}", r.stderr);
     let after2 = saw_json(&vb.port, &["hello"]);
-    assert_eq!(before["result"]["hello"]["scene_id"], after2["result"]["hello"]["scene_id"]);
+    assert_eq!(
+        before["result"]["hello"]["scene_id"],
+        after2["result"]["hello"]["scene_id"]
+    );
 }
 
 #[test]
@@ -257,7 +322,8 @@ fn a_second_client_is_told_the_port_is_busy() {
 
 fn encoded(version: u16, seq: u32, req: &saw_link::msg::Request) -> Vec<u8> {
     let mut out = [0u8; saw_link::frame::MAX_ENCODED];
-    let n = saw_link::frame::encode(&saw_link::msg::Header { version, seq }, req, &mut out).unwrap();
+    let n =
+        saw_link::frame::encode(&saw_link::msg::Header { version, seq }, req, &mut out).unwrap();
     out[..n].to_vec()
 }
 
@@ -270,7 +336,9 @@ fn unplugged_mid_upload_and_noise_leave_the_scene_and_the_link_usable() {
     let frame = encoded(1, 5, &saw_link::msg::Request::LoadScene(cfg));
     {
         // A client that dies half way through an upload.
-        let mut p = serialport::new(vb.port.to_string_lossy(), 921_600).open_native().unwrap();
+        let mut p = serialport::new(vb.port.to_string_lossy(), 921_600)
+            .open_native()
+            .unwrap();
         p.write_all(&frame[..frame.len() / 2]).unwrap();
         p.flush().unwrap();
     }
@@ -280,7 +348,9 @@ fn unplugged_mid_upload_and_noise_leave_the_scene_and_the_link_usable() {
     assert_eq!(h["result"]["hello"]["scene_id"], before);
     {
         // Junk, then a frame with one bit flipped.
-        let mut p = serialport::new(vb.port.to_string_lossy(), 921_600).open_native().unwrap();
+        let mut p = serialport::new(vb.port.to_string_lossy(), 921_600)
+            .open_native()
+            .unwrap();
         p.write_all(&[0x13, 0x37, 0xff, 0x00, 0x42]).unwrap();
         let mut bad = frame.clone();
         bad[7] ^= 0x04;
@@ -290,7 +360,13 @@ fn unplugged_mid_upload_and_noise_leave_the_scene_and_the_link_usable() {
     }
     std::thread::sleep(Duration::from_millis(50));
     let c = saw_json(&vb.port, &["counters"]);
-    assert!(c["result"]["counters"]["link"]["frames_bad"].as_u64().unwrap() >= 2, "{c}");
+    assert!(
+        c["result"]["counters"]["link"]["frames_bad"]
+            .as_u64()
+            .unwrap()
+            >= 2,
+        "{c}"
+    );
     let h = saw_json(&vb.port, &["hello"]);
     assert_eq!(h["result"]["hello"]["scene_id"], before);
 }
@@ -304,7 +380,8 @@ fn a_host_of_another_protocol_version_gets_a_typed_answer() {
         .open_native()
         .unwrap();
     p.write_all(&[0]).unwrap();
-    p.write_all(&encoded(2, 41, &saw_link::msg::Request::Hello)).unwrap();
+    p.write_all(&encoded(2, 41, &saw_link::msg::Request::Hello))
+        .unwrap();
     let mut rx = saw_link::frame::Receiver::<{ saw_link::frame::MAX_ENCODED }>::default();
     let deadline = std::time::Instant::now() + Duration::from_secs(2);
     let mut byte = [0u8; 1];

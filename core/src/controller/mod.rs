@@ -51,6 +51,90 @@ struct Active {
     drive: DriveMode,
 }
 
+/// A configuration validated and compiled, ready to [`Controller::install`].
+#[derive(Clone, Debug)]
+pub struct Prepared {
+    active: Active,
+    /// For the load log line.
+    lines: usize,
+    hysteresis_um: u32,
+}
+
+impl Prepared {
+    /// Validates and compiles `config` for a controller with this burst timer and sample
+    /// period. Needs no controller: the firmware runs it at low priority.
+    pub fn compile(
+        timer: &BurstTimer,
+        sample_period_us: u32,
+        config: &Config,
+    ) -> Result<Prepared, ConfigError> {
+        let mapper = PositionMapper::new(config.calibration).map_err(ConfigError::Calibration)?;
+        let scene = &config.scene;
+        if scene.textures.len() != scene.boundaries_um.len() + 1 {
+            return Err(ConfigError::TextureCount {
+                textures: scene.textures.len(),
+                boundaries: scene.boundaries_um.len(),
+            });
+        }
+        let length_um = mapper.length_um();
+        let regions = RegionMap::new(
+            scene.textures.len(),
+            &scene.boundaries_um,
+            length_um,
+            scene.hysteresis_um,
+        )
+        .map_err(ConfigError::Region)?;
+        config.limits.validate().map_err(ConfigError::Limits)?;
+        let min_stale_us = 2 * sample_period_us;
+        if config.stale_after_us < min_stale_us || config.stale_after_us > MAX_STALE_US {
+            return Err(ConfigError::StaleLimit {
+                stale_after_us: config.stale_after_us,
+                min_us: min_stale_us,
+            });
+        }
+        let mut compiled = Vec::new();
+        for (i, texture) in scene.textures.iter().enumerate() {
+            let region = i as u8;
+            let (c, capped) =
+                Compiled::compile(texture, timer, &config.limits, length_um, sample_period_us)
+                    .map_err(|e| match e {
+                        CompileError::Params(error) => ConfigError::TextureParams { region, error },
+                        CompileError::Burst(error) => ConfigError::Texture { region, error },
+                    })?;
+            if capped {
+                warn!(
+                    "region {}: on-time capped to {} us",
+                    i, config.limits.max_on_time_us
+                );
+            }
+            // Cannot fail: the region map holds at most MAX_REGIONS.
+            let _ = compiled.push(c);
+        }
+        let lines = LinePulses::compile(&scene.lines, timer, &config.limits, length_um).map_err(
+            |e| match e {
+                CompileError::Params(e) => ConfigError::Lines(e),
+                CompileError::Burst(e) => ConfigError::LinePulse(e),
+            },
+        )?;
+        for (i, t) in scene.textures.iter().enumerate() {
+            debug!("region {}: {}", i, t.kind());
+        }
+        Ok(Prepared {
+            active: Active {
+                mapper,
+                regions,
+                compiled,
+                lines,
+                limits: config.limits,
+                stale_after_us: config.stale_after_us,
+                drive: scene.drive,
+            },
+            lines: scene.lines.positions_um.len(),
+            hysteresis_um: scene.hysteresis_um,
+        })
+    }
+}
+
 /// The control core.
 #[derive(Clone, Debug)]
 pub struct Controller<E: VelocityEstimator = DefaultEstimator> {
@@ -108,25 +192,9 @@ impl<E: VelocityEstimator> Controller<E> {
 
     /// Validates and compiles `config`, then makes it active. On error nothing changes.
     pub fn load(&mut self, config: &Config) -> Result<(), ConfigError> {
-        match self.compile(config) {
-            Ok(active) => {
-                info!(
-                    "scene loaded: {} regions, {} lines, hysteresis {} um, duty cap {} permille, on-time cap {} us",
-                    active.regions.len(),
-                    config.scene.lines.positions_um.len(),
-                    config.scene.hysteresis_um,
-                    active.limits.max_duty_permille,
-                    active.limits.max_on_time_us
-                );
-                for (i, t) in config.scene.textures.iter().enumerate() {
-                    debug!("region {}: {}", i, t.kind());
-                }
-                self.active = Some(active);
-                // The old region index and line arming mean nothing in the new layout (a
-                // running line pulse keeps its window: the gate may be in its rest).
-                self.region = None;
-                self.lines.reset();
-                self.drive_pending = true;
+        match Prepared::compile(&self.timer, self.sample_period_us, config) {
+            Ok(p) => {
+                self.install(p);
                 Ok(())
             }
             Err(e) => {
@@ -137,68 +205,25 @@ impl<E: VelocityEstimator> Controller<E> {
         }
     }
 
-    fn compile(&self, config: &Config) -> Result<Active, ConfigError> {
-        let mapper = PositionMapper::new(config.calibration).map_err(ConfigError::Calibration)?;
-        let scene = &config.scene;
-        if scene.textures.len() != scene.boundaries_um.len() + 1 {
-            return Err(ConfigError::TextureCount {
-                textures: scene.textures.len(),
-                boundaries: scene.boundaries_um.len(),
-            });
-        }
-        let length_um = mapper.length_um();
-        let regions = RegionMap::new(
-            scene.textures.len(),
-            &scene.boundaries_um,
-            length_um,
-            scene.hysteresis_um,
-        )
-        .map_err(ConfigError::Region)?;
-        config.limits.validate().map_err(ConfigError::Limits)?;
-        let min_stale_us = 2 * self.sample_period_us;
-        if config.stale_after_us < min_stale_us || config.stale_after_us > MAX_STALE_US {
-            return Err(ConfigError::StaleLimit {
-                stale_after_us: config.stale_after_us,
-                min_us: min_stale_us,
-            });
-        }
-        let mut compiled = Vec::new();
-        for (i, texture) in scene.textures.iter().enumerate() {
-            let region = i as u8;
-            let (c, capped) = Compiled::compile(
-                texture,
-                &self.timer,
-                &config.limits,
-                length_um,
-                self.sample_period_us,
-            )
-            .map_err(|e| match e {
-                CompileError::Params(error) => ConfigError::TextureParams { region, error },
-                CompileError::Burst(error) => ConfigError::Texture { region, error },
-            })?;
-            if capped {
-                warn!(
-                    "region {}: on-time capped to {} us",
-                    i, config.limits.max_on_time_us
-                );
-            }
-            // Cannot fail: the region map holds at most MAX_REGIONS.
-            let _ = compiled.push(c);
-        }
-        let lines = LinePulses::compile(&scene.lines, &self.timer, &config.limits, length_um)
-            .map_err(|e| match e {
-                CompileError::Params(e) => ConfigError::Lines(e),
-                CompileError::Burst(e) => ConfigError::LinePulse(e),
-            })?;
-        Ok(Active {
-            mapper,
-            regions,
-            compiled,
-            lines,
-            limits: config.limits,
-            stale_after_us: config.stale_after_us,
-            drive: scene.drive,
-        })
+    /// Makes a configuration compiled by [`Prepared::compile`] active from the next sample:
+    /// a move, no checks and no compile on the sample path (the firmware compiles in its link
+    /// task and hands the result over).
+    pub fn install(&mut self, prepared: Prepared) {
+        let active = prepared.active;
+        info!(
+            "scene loaded: {} regions, {} lines, hysteresis {} um, duty cap {} permille, on-time cap {} us",
+            active.regions.len(),
+            prepared.lines,
+            prepared.hysteresis_um,
+            active.limits.max_duty_permille,
+            active.limits.max_on_time_us
+        );
+        self.active = Some(active);
+        // The old region index and line arming mean nothing in the new layout (a running line
+        // pulse keeps its window: the gate may be in its rest).
+        self.region = None;
+        self.lines.reset();
+        self.drive_pending = true;
     }
 
     /// The burst timer this controller plans for.
