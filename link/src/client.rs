@@ -117,7 +117,9 @@ impl<P: Read + Write> Client<P> {
         loop {
             match self.read_frame(start + self.timeout)? {
                 Some((h, Reply::Stream(s))) => self.streams.push_back((h, s)),
-                Some((h, Reply::Error(e))) if h.seq == self.seq => return Err(ClientError::Link(e)),
+                Some((h, Reply::Error(e))) if h.seq == self.seq => {
+                    return Err(ClientError::Link(e))
+                }
                 // A frame refused before its number was read: maybe ours, maybe what an earlier
                 // client left half-sent (closed by our leading zero). Only noise to count; if it
                 // was ours, no reply comes and the timeout says so.

@@ -19,8 +19,9 @@ pub trait Board {
     /// Compiles `config` and makes it active from the next sample, or refuses it with nothing
     /// changed (the controller's compile step: `Controller::load`).
     async fn apply(&mut self, config: &Config) -> Result<(), saw_core::controller::ConfigError>;
-    /// The control core's counters now.
-    fn telemetry(&mut self) -> Telemetry;
+    /// The control core's counters now (on the firmware the control loop hands them over
+    /// between two samples).
+    async fn telemetry(&mut self) -> Telemetry;
     /// Stream one record every `every_samples` samples from now (0: stop).
     fn stream(&mut self, every_samples: u16);
     /// Telemetry records (dropped, sent) since boot.
@@ -139,7 +140,7 @@ impl Session {
                 self.apply(board, next).await
             }
             Request::Counters { reset } => {
-                let now = self.counters(board);
+                let now = self.counters(board).await;
                 let since = since(&now, &self.base);
                 if reset {
                     self.base = now;
@@ -180,10 +181,10 @@ impl Session {
         }
     }
 
-    fn counters<B: Board>(&self, board: &mut B) -> Counters {
+    async fn counters<B: Board>(&self, board: &mut B) -> Counters {
         let (dropped, sent) = board.stream_counts();
         Counters {
-            core: board.telemetry(),
+            core: board.telemetry().await,
             link: LinkCounters {
                 records_dropped: dropped,
                 records_sent: sent,

@@ -44,7 +44,7 @@ impl Board for CoreBoard {
     async fn apply(&mut self, config: &Config) -> Result<(), ConfigError> {
         self.ctrl.load(config)
     }
-    fn telemetry(&mut self) -> Telemetry {
+    async fn telemetry(&mut self) -> Telemetry {
         self.ctrl.telemetry()
     }
     fn stream(&mut self, every_samples: u16) {

@@ -142,7 +142,7 @@ impl<E: VelocityEstimator> Board for VirtualBoard<E> {
         self.lp.ctrl.load(config)
     }
 
-    fn telemetry(&mut self) -> Telemetry {
+    async fn telemetry(&mut self) -> Telemetry {
         self.lp.ctrl.telemetry()
     }
 
