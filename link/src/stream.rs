@@ -20,6 +20,11 @@ pub struct Decimator {
 }
 
 impl Decimator {
+    /// Stopped.
+    pub const fn new() -> Self {
+        Self { every: 0, left: 0 }
+    }
+
     /// Streams every `every` samples from the next one on (0: stop).
     pub fn set(&mut self, every: u16) {
         self.every = every;
