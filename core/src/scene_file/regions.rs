@@ -268,6 +268,27 @@ impl Region<'_> {
         if let Some(d) = &s.delta_mu {
             return self.cx.range(d, &self.field("delta_mu"), 0.0, 100.0);
         }
+        // Neither `delta_mu` nor any eq. 12 parameter: name the simple way first.
+        let eq12 = [
+            &s.e_object_pa,
+            &s.nu_object,
+            &s.e_skin_pa,
+            &s.nu_skin,
+            &s.sigma_um,
+            &s.beta_um,
+            &s.shear_strength_diff_pa,
+        ];
+        if eq12.iter().all(|v| v.is_none()) {
+            return Err(self.cx.err(
+                self.span.clone(),
+                &self.field("delta_mu"),
+                format_args!(
+                    "kind `material` needs `delta_mu` (μs − μc, 0 to 100), or all of \
+                     e_object_pa, nu_object, e_skin_pa, nu_skin, sigma_um, beta_um and \
+                     shear_strength_diff_pa to compute it from eq. 12"
+                ),
+            ));
+        }
         // Eq. 12: μs − μc = π (s − s') β / (E σ), 1/E = (1 − ν_s²)/E_s + (1 − ν_o²)/E_o.
         let e_o = self.need(&s.e_object_pa, "e_object_pa", 1.0, 1e13)?;
         let nu_o = self.need(&s.nu_object, "nu_object", 0.0, 0.5)?;
