@@ -598,3 +598,50 @@ fn the_summary_reports_a_stalled_gate() {
         assert_eq!(stalled(&args), None, "{scene}");
     }
 }
+
+/// What tile-to-scene prints is a scene file: it loads as one, and its grating is the tile's
+/// (with or without --scene-file; before, without the flag it printed keys a scene file refuses).
+#[test]
+fn tile_to_scene_prints_a_region_a_scene_file_accepts() {
+    let board = saw_boards::NUCLEO_F446RE;
+    for (groove, land, force) in [
+        ("0.5", "0.25", "112"),
+        ("1", "0.25", "112"),
+        ("1.5", "1", "56"),
+    ] {
+        for flag in [&[][..], &["--scene-file"][..]] {
+            let mut args = vec![
+                "tile-to-scene",
+                "--groove-mm",
+                groove,
+                "--land-mm",
+                land,
+                "--force-g",
+                force,
+            ];
+            args.extend_from_slice(flag);
+            let out = run(&args);
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let text = String::from_utf8(out.stdout).unwrap();
+            let config = saw_core::scene_file::load_for_board(
+                "tile.toml",
+                &text,
+                sim::burst_timer(&board),
+                sim::sample_period_us(&board),
+            )
+            .unwrap_or_else(|e| panic!("{e}\n{text}"));
+            let saw_core::texture::Texture::Grating(g) = config.scene.textures[0] else {
+                panic!("{text}")
+            };
+            // λ = groove + land, in µm.
+            let want_um = ((groove.parse::<f64>().unwrap() + land.parse::<f64>().unwrap()) * 1000.0)
+                .round() as u32;
+            assert_eq!(g.wavelength_um, want_um, "{text}");
+            assert!((1..=1000).contains(&g.amplitude_permille), "{text}");
+        }
+    }
+}
