@@ -645,3 +645,26 @@ fn tile_to_scene_prints_a_region_a_scene_file_accepts() {
         }
     }
 }
+
+/// bench and model charts write outside the tracked docs/ unless asked (`--out docs`), and an
+/// output path that is a file is refused before anything runs.
+#[test]
+fn generated_files_go_to_out_unless_asked() {
+    let help = String::from_utf8(run(&["bench", "--help"]).stdout).unwrap();
+    assert!(help.contains("default: out/bench"), "{help}");
+    assert_eq!(host_sim::bench::default_out_dir(), Path::new("out/bench"));
+    let help = String::from_utf8(run(&["model", "charts", "--help"]).stdout).unwrap();
+    assert!(help.contains("[default: out/models]"), "{help}");
+    let file = scratch().join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    for cmd in [&["bench", "--out"][..], &["model", "charts", "--out"][..]] {
+        let mut args = cmd.to_vec();
+        let f = file.to_str().unwrap();
+        args.push(f);
+        let out = run(&args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8(out.stderr).unwrap();
+        assert!(err.contains("a file is there, not a directory"), "{err}");
+        assert!(err.contains("--out"), "{err}");
+    }
+}

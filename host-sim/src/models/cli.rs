@@ -140,8 +140,9 @@ enum Model {
     /// Writes the models-*.png charts and prints the tables of docs/models.md; the atan cost
     /// axis runs this binary under valgrind (callgrind), skipped if valgrind is missing.
     Charts {
-        /// Output directory.
-        #[arg(long, value_name = "DIR", default_value = "docs/charts")]
+        /// Output directory (default out/models; `--out docs/charts` refreshes the committed
+        /// charts).
+        #[arg(long, value_name = "DIR", default_value = "out/models", value_parser = crate::door::out_dir)]
         out: PathBuf,
         /// Only this chart.
         #[arg(long, value_parser = PossibleValuesParser::new(Chart::ALL.map(Chart::name))
