@@ -313,6 +313,10 @@ mod tests {
                 .starts_with("kind `material` needs `delta_mu` (μs − μc, 0 to 100), or all of"),
             "{e}"
         );
+        // Both ways at once: refused at the eq. 12 parameter, which would be ignored.
+        let e = err("[[region]]\nkind = \"material\"\ndelta_mu = 0.5\nsigma_um = 10\n");
+        assert_eq!((e.line, e.field.as_str()), (4, "region[0].sigma_um"), "{e}");
+        assert!(e.message.contains("not both"), "{e}");
         // One eq. 12 parameter given: the next missing one is named.
         let e = err("[[region]]\nkind = \"material\"\ne_object_pa = 2e6\n");
         assert_eq!(e.field, "region[0].nu_object", "{e}");
