@@ -54,7 +54,7 @@ impl VirtualBoard {
         }
     }
 
-    /// Pulls the plug: the board stops; its flash file (in `dir`) stays.
+    /// Pulls the plug: the board stops; its directory (and the flash file in it) stays.
     fn power_off(mut self) -> tempfile::TempDir {
         self.stop.store(true, Ordering::Relaxed);
         let _ = self.handle.take().unwrap().join().unwrap();
@@ -421,4 +421,33 @@ fn no_board_and_bad_values_are_one_line_each() {
     let r = saw(&silent, &["--timeout", "100", "hello"]);
     assert_eq!(r.code, 3);
     assert!(r.stderr.contains("no answer within 100 ms"), "{}", r.stderr);
+}
+
+#[test]
+fn a_saved_scene_survives_a_power_cycle() {
+    let dir = tempfile::tempdir().unwrap();
+    let flash = dir.path().join("flash.bin");
+    let flash_arg = flash.to_str().unwrap().to_string();
+    // No store: said plainly.
+    {
+        let vb = VirtualBoard::start(&[]);
+        let r = saw(&vb.port, &["save"]);
+        assert_eq!(r.code, 1);
+        assert!(r.stderr.contains("no scene store"), "{}", r.stderr);
+    }
+    let vb = VirtualBoard::start_in(dir, &["--flash", &flash_arg]);
+    let h = saw_json(&vb.port, &["hello"]);
+    assert_eq!(h["result"]["hello"]["scene_source"], "Default", "{h}");
+    let grating = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/grating.toml");
+    let pushed = saw_json(&vb.port, &["push", grating.to_str().unwrap()]);
+    let id = pushed["result"]["applied"].clone();
+    let s = saw_json(&vb.port, &["save"]);
+    assert_eq!(s["result"]["saved"], id, "{s}");
+    // An edit after the save is not saved.
+    assert_eq!(saw(&vb.port, &["boundary", "0", "25"]).code, 0);
+    let dir = vb.power_off();
+    let vb = VirtualBoard::start_in(dir, &["--flash", &flash_arg]);
+    let h = saw_json(&vb.port, &["hello"]);
+    assert_eq!(h["result"]["hello"]["scene_id"], id, "{h}");
+    assert_eq!(h["result"]["hello"]["scene_source"], "Saved", "{h}");
 }
