@@ -451,3 +451,26 @@ fn a_saved_scene_survives_a_power_cycle() {
     assert_eq!(h["result"]["hello"]["scene_id"], id, "{h}");
     assert_eq!(h["result"]["hello"]["scene_source"], "Saved", "{h}");
 }
+
+/// docs/link.md: at 921 600 baud the line carries every third sample of a 10 kHz board without a
+/// drop, and not every second one (the benchmark `saw bench` finds the same edge).
+#[test]
+fn the_line_carries_every_third_sample_and_not_every_second() {
+    let vb = VirtualBoard::start(&[]);
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("s.csv");
+    let c = csv.to_str().unwrap();
+    let third = saw_json(
+        &vb.port,
+        &["stream", "--csv", c, "--seconds", "2", "--every", "3"],
+    );
+    assert_eq!(third["result"]["dropped"], 0, "{third}");
+    let second = saw_json(
+        &vb.port,
+        &["stream", "--csv", c, "--seconds", "2", "--every", "2"],
+    );
+    assert!(
+        second["result"]["dropped"].as_u64().unwrap() > 500,
+        "{second}"
+    );
+}
