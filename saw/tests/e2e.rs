@@ -149,30 +149,33 @@ fn switches(rows: &[Vec<String>], a: &str, b: &str) -> Vec<f64> {
         .collect()
 }
 
+/// Streams `seconds` at every second sample; the positions (mm) where region 0 and 1 swap.
+fn switch_positions(port: &Path, seconds: &str) -> Vec<f64> {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("s.csv");
+    let args = [
+        "stream",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--seconds",
+        seconds,
+        "--every",
+        "2",
+    ];
+    let r = saw(port, &args);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let s = switches(&csv_rows(&csv), "0", "1");
+    assert!(!s.is_empty(), "no switch in {seconds} s");
+    s
+}
+
 #[test]
 fn a_boundary_moved_live_moves_the_switch() {
-    let vb = VirtualBoard::start(&["--speed", "100"]);
-    let dir = tempfile::tempdir().unwrap();
-    let before = dir.path().join("before.csv");
-    let after = dir.path().join("after.csv");
     // 60 mm of travel at 100 mm/s: each pass crosses the boundary once.
-    let r = saw(
-        &vb.port,
-        &[
-            "stream",
-            "--csv",
-            before.to_str().unwrap(),
-            "--seconds",
-            "1.5",
-            "--every",
-            "2",
-        ],
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let s = switches(&csv_rows(&before), "0", "1");
-    assert!(!s.is_empty());
+    let vb = VirtualBoard::start(&["--speed", "100"]);
     // The default boundary is at 18.963 mm; a switch lands within hysteresis (0.1 mm) plus two
     // samples' travel past it.
+    let s = switch_positions(&vb.port, "1.5");
     assert!(s.iter().all(|x| (x - 18.963).abs() < 0.15), "{s:?}");
     let r = saw(&vb.port, &["boundary", "0", "30"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
@@ -181,21 +184,7 @@ fn a_boundary_moved_live_moves_the_switch() {
         "{}",
         r.stdout
     );
-    let r = saw(
-        &vb.port,
-        &[
-            "stream",
-            "--csv",
-            after.to_str().unwrap(),
-            "--seconds",
-            "1.5",
-            "--every",
-            "2",
-        ],
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let s = switches(&csv_rows(&after), "0", "1");
-    assert!(!s.is_empty());
+    let s = switch_positions(&vb.port, "1.5");
     assert!(s.iter().all(|x| (x - 30.0).abs() < 0.15), "{s:?}");
 }
 

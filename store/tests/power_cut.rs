@@ -4,8 +4,6 @@
 use embassy_futures::block_on;
 use proptest::prelude::*;
 use saw_core::scene::{default_config, Config};
-use saw_core::texture::lines::MAX_LINES;
-use saw_core::texture::{RandomBurst, Texture};
 use saw_store::{Saved, SceneStore, StoreError, ITEM_BYTES};
 use sequential_storage::mock_flash::{MockFlashBase, WriteCountCheck};
 
@@ -68,28 +66,7 @@ fn every_scene_file_round_trips() {
 
 #[test]
 fn largest_scene_fits() {
-    let mut big = default_config();
-    big.scene.textures.clear();
-    big.scene.boundaries_um.clear();
-    for i in 0..8u32 {
-        big.scene
-            .textures
-            .push(Texture::Random(RandomBurst {
-                center_millihz: u32::MAX,
-                spread_permille: u16::MAX,
-                amplitude_permille: u16::MAX,
-                amplitude_spread_permille: u16::MAX,
-                duty_permille: u16::MAX,
-                seed: u64::MAX,
-            }))
-            .unwrap();
-        if i < 7 {
-            big.scene.boundaries_um.push(u32::MAX - i).unwrap();
-        }
-    }
-    for _ in 0..MAX_LINES {
-        big.scene.lines.positions_um.push(u32::MAX).unwrap();
-    }
+    let big = saw_core::scene::largest_config();
     let encoded = postcard::to_allocvec(&(u32::MAX, &big)).unwrap().len();
     assert!(encoded + 1 + 16 < ITEM_BYTES, "{encoded} bytes");
     let mut store = SceneStore::new(fresh(), RANGE).unwrap();
