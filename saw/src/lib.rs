@@ -81,7 +81,7 @@ pub enum Command {
     },
     /// Record the telemetry stream to a CSV file.
     Stream {
-        /// Where to write the records (time_us, position_um, velocity_um_s, region, f_b_hz, gate, fault).
+        /// Where to write the records (time_us, position_um, velocity_um_s, region, f_b_hz, bursting, fault).
         #[arg(long, value_name = "FILE")]
         csv: PathBuf,
         /// How long, s (0.1 to 86400).
@@ -459,13 +459,13 @@ pub fn csv_line(r: &Record) -> String {
         opt(r.velocity_um_s),
         r.region.map_or(String::new(), |v| v.to_string()),
         r.burst_millihz as f64 / 1000.0,
-        u8::from(r.gate_high),
+        u8::from(r.bursting),
         r.fault.map_or(String::new(), |f| format!("{f:?}"))
     )
 }
 
 /// The CSV header.
-pub const CSV_HEADER: &str = "time_us,position_um,velocity_um_s,region,f_b_hz,gate,fault";
+pub const CSV_HEADER: &str = "time_us,position_um,velocity_um_s,region,f_b_hz,bursting,fault";
 
 fn stream<P: std::io::Read + std::io::Write>(
     client: &mut Client<P>,
