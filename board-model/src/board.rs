@@ -5,8 +5,8 @@
 
 use crate::machine::{ChipSpec, Machine, Mapped, PinMode, PinSpec};
 use crate::periph::{
-    self, adc_f4, adc_g4, dma_f4, dma_g4, gpio, iwdg, misc, rcc_f4, rcc_g4, tim, ClockDomain,
-    Peripheral, ResetCause, Time,
+    self, adc_f4, adc_g4, dma_f4, dma_g4, gpio, iwdg, misc, rcc_f4, rcc_g4, tim, usart_f4,
+    ClockDomain, Peripheral, ResetCause, Time,
 };
 use std::path::Path;
 
@@ -238,6 +238,7 @@ fn f446(input: Input) -> (Vec<Mapped>, ChipSpec) {
             timer(4, 16, false, TimApb1, "TIM4", 30, 30),
         ),
         map(0x4000_3000, 0x400, iwdg::Iwdg::new(false)),
+        map(0x4000_4400, 0x400, usart_f4::UsartF4::new()),
         map(0x4000_7000, 0x400, misc::PwrF4::new()),
         map(
             0x4001_0000,

@@ -579,3 +579,132 @@ pub fn watchdog(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     }
     Ok(out)
 }
+
+/// Whether the image carries the host link (its symbols name `saw_link`).
+pub fn image_has_link(elf: &Path) -> bool {
+    std::fs::read(elf).is_ok_and(|b| b.windows(8).any(|w| w == b"saw_link"))
+}
+
+/// The host link on the firmware image (issue #13): frames in on the UART, answers out, while
+/// the finger moves. Hello; a boundary moved live (the answer carries the new scene's id); a
+/// frame with a flipped bit refused; the counters; a stream of records that follow the finger.
+/// Also the boundary move's round trip in board time, from its last byte in to its answer's
+/// last byte out.
+pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
+    use saw_link::frame::{self, Receiver, MAX_ENCODED};
+    use saw_link::msg::{Header, LinkError, Reply, Request, PROTOCOL_VERSION};
+    let frame_of = |seq: u32, req: &Request| -> Vec<u8> {
+        let mut out = vec![0u8; MAX_ENCODED + 1];
+        let n = frame::encode(&Header { version: PROTOCOL_VERSION, seq }, req, &mut out[1..])
+            .expect("a request frames");
+        out.truncate(n + 1);
+        out
+    };
+    let mut flipped = frame_of(3, &Request::Save);
+    flipped[3] ^= 0x08;
+    let mut opts = Options::new(board, elf, 0.62);
+    opts.link_input = vec![
+        (0.20, frame_of(1, &Request::Hello)),
+        (0.25, frame_of(2, &Request::MoveBoundary { index: 0, at_um: 30_000 })),
+        (0.30, flipped),
+        (0.35, frame_of(4, &Request::Counters { reset: false })),
+        (0.40, frame_of(5, &Request::Stream { every_samples: 10 })),
+        (0.50, frame_of(6, &Request::Stream { every_samples: 0 })),
+    ];
+    let sent_at = |s: f64| (s * TICKS_PER_S as f64) as Time;
+    let move_bytes = opts.link_input[1].1.len() as u64;
+    let (o, m) = run::run(&opts)?;
+    let mut out = Vec::new();
+    if let Some(s) = &o.stop {
+        out.push(check("link: runs to the end", false, format!("stopped: {s}")));
+        return Ok(out);
+    }
+    // The answers, each with the time its last byte left.
+    let mut rx = Receiver::<MAX_ENCODED>::default();
+    let mut replies: Vec<(Time, Header, Reply)> = Vec::new();
+    let mut bad = 0;
+    for &(t, b) in &o.link_output {
+        match rx.push(b) {
+            Some(Ok(n)) => match frame::message::<Reply>(rx.payload(n)) {
+                Ok((h, r)) => replies.push((t, h, r)),
+                Err(_) => bad += 1,
+            },
+            Some(Err(_)) => bad += 1,
+            None => {}
+        }
+    }
+    let answer = |seq: u32| {
+        replies
+            .iter()
+            .find(|(_, h, r)| h.seq == seq && !matches!(r, Reply::Stream(_)))
+            .cloned()
+    };
+    let def = board.def();
+    out.push(check(
+        "link: hello",
+        matches!(answer(1), Some((_, _, Reply::Hello(ref h))) if h.board.as_str() == def.name && h.protocol == PROTOCOL_VERSION),
+        format!("{:?}", answer(1).map(|a| a.2)),
+    ));
+    let moved_config = saw_core::default_config()
+        .with_boundary(0, 30_000)
+        .map_err(|e| e.to_string())?;
+    let want = saw_link::scene_id(&moved_config);
+    let moved = answer(2);
+    let rtt_ms = moved.as_ref().map(|(t, _, _)| {
+        let last_in = sent_at(0.25) + move_bytes * 10 * TICKS_PER_S / 921_600;
+        (*t as f64 - last_in as f64) * 1e3 / TICKS_PER_S as f64
+    });
+    out.push(check(
+        "link: boundary moved live",
+        matches!(moved, Some((_, _, Reply::Applied { scene_id })) if scene_id == want),
+        format!(
+            "answer {:?} (want Applied {{ scene_id: {want:#010x} }}); round trip {} from the request's last byte to the answer's",
+            moved.as_ref().map(|a| &a.2),
+            rtt_ms.map_or("—".into(), |r| format!("{r:.3} ms")),
+        ),
+    ));
+    let refused = replies
+        .iter()
+        .find(|(_, h, r)| h.seq == 0 && matches!(r, Reply::Error(LinkError::Crc { .. } | LinkError::Cobs)));
+    out.push(check(
+        "link: a flipped bit is refused, the next request answered",
+        refused.is_some() && answer(3).is_none() && answer(4).is_some(),
+        format!("refusal: {:?}; answer to the corrupted Save: {:?}", refused.map(|r| &r.2), answer(3).map(|a| a.2)),
+    ));
+    out.push(check(
+        "link: counters",
+        matches!(answer(4), Some((_, _, Reply::Counters(c))) if c.core.samples > 1000 && c.link.frames_bad == 1),
+        format!("{:?}", answer(4).map(|a| a.2)),
+    ));
+    // The stream: ~1000 records/s for 0.1 s, following the trajectory (the model's finger).
+    let records: Vec<saw_link::msg::Record> = replies
+        .iter()
+        .filter_map(|(_, _, r)| match r {
+            Reply::Stream(s) => Some(s.records.clone()),
+            _ => None,
+        })
+        .flatten()
+        .collect();
+    let t0 = o.t0.unwrap_or(0);
+    let mut worst_um = 0.0f64;
+    for r in &records {
+        // The record's µs clock is the firmware's uptime; compare with the trajectory at the
+        // same board time (the wiper model's origin is the first conversion, `t0`).
+        let at = r.time_us as u64 * (TICKS_PER_S / 1_000_000);
+        let rel = at.saturating_sub(t0);
+        let truth = opts.trajectory.state(rel as f64 / TICKS_PER_S as f64).position_um;
+        if let Some(p) = r.position_um {
+            worst_um = worst_um.max((p as f64 - truth).abs());
+        }
+    }
+    out.push(check(
+        "link: stream follows the finger",
+        (90..=110).contains(&records.len()) && worst_um < 300.0 && bad == 0,
+        format!(
+            "{} records in 0.1 s at every 10th sample; worst distance from the true position {worst_um:.0} µm (one sample's travel and the sampler's delay); {bad} frames from the board refused",
+            records.len()
+        ),
+    ));
+    let _ = m;
+    Ok(out)
+}

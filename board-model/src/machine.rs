@@ -345,6 +345,17 @@ impl Sim {
                 },
                 PinMode::Input | PinMode::Analog => false,
             };
+            // The timer channel drives the pad: GPIOx_IDR reads it back (RM0390 §7.3.11,
+            // "the I/O state is read" in alternate-function mode; RM0440 §9.3.11).
+            if let (PinMode::Alternate(_), Some(_)) = (mode, spec.af) {
+                if let Some(g) = self.periphs[spec.port]
+                    .p
+                    .as_any_mut()
+                    .downcast_mut::<crate::periph::gpio::Gpio>()
+                {
+                    g.set_alternate_level(spec.pin, Some(high));
+                }
+            }
             let rec = &mut self.pins[i];
             if rec.last().map_or(true, |e| e.high != high) {
                 rec.push(PinEdge {
@@ -372,6 +383,28 @@ impl Sim {
     /// Reads a peripheral register as a debugger would (for checks; read side effects apply).
     pub fn peek(&mut self, addr: u32) -> Result<u32, String> {
         self.bus_read(addr, 4)
+    }
+
+    /// Queues bytes from the host on the link UART, arriving back to back from `at`. Fails on a
+    /// board whose link UART is not modelled.
+    pub fn uart_send(&mut self, at: Time, bytes: &[u8]) -> Result<(), String> {
+        let u = self
+            .periphs
+            .iter_mut()
+            .find_map(|m| m.p.as_any_mut().downcast_mut::<crate::periph::usart_f4::UsartF4>())
+            .ok_or("this board's link UART is not modelled")?;
+        u.send(at, bytes);
+        self.replan = true;
+        Ok(())
+    }
+
+    /// Every byte the firmware sent on the link UART, with the time its stop bit ended.
+    pub fn uart_output(&self) -> Vec<(Time, u8)> {
+        self.periphs
+            .iter()
+            .find_map(|m| m.p.as_any().downcast_ref::<crate::periph::usart_f4::UsartF4>())
+            .map(|u| u.output().to_vec())
+            .unwrap_or_default()
     }
 
     /// Turns recording of a timer channel's output on or off.

@@ -35,6 +35,8 @@ pub struct Options {
     /// call site of the image (`movw/movt r0, &Location; bl panic_const_div_by_zero`): the
     /// firmware's own panic machinery runs from there, as after a division by zero.
     pub force_panic_s: Option<f64>,
+    /// Bytes the host sends on the link UART, each batch from its virtual time (s) on.
+    pub link_input: Vec<(f64, Vec<u8>)>,
 }
 
 impl Options {
@@ -56,6 +58,7 @@ impl Options {
             debugger: false,
             carrier_window_s: None,
             force_panic_s: None,
+            link_input: Vec::new(),
         }
     }
 }
@@ -91,6 +94,8 @@ pub struct Outcome {
     pub sleeping: Time,
     pub exceptions: u64,
     pub wall_s: f64,
+    /// Every byte the firmware sent on the link UART, with the time its stop bit ended.
+    pub link_output: Vec<(Time, u8)>,
 }
 
 /// Runs `opts`.
@@ -142,6 +147,9 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
     if let Some(s) = opts.force_panic_s {
         plan.push((at(s), 3));
     }
+    for (i, (s, _)) in opts.link_input.iter().enumerate() {
+        plan.push((at(*s), 10 + i as u8));
+    }
     plan.sort();
     let mut stop = None;
     for (t, what) in plan {
@@ -160,6 +168,11 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
                 m.sim_mut().stuck_irqs.push(irq);
             }
             4 => m.sim_mut().stuck_irqs.clear(),
+            n if n >= 10 => {
+                let bytes = &opts.link_input[(n - 10) as usize].1;
+                let now = m.now();
+                m.sim_mut().uart_send(now, bytes)?;
+            }
             _ => {
                 let site = m.image.call_site("panic_const_div_by_zero").ok_or(
                     "the image has no `bl panic_const_div_by_zero` call site to divert to",
@@ -212,6 +225,7 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
         sleeping: s.sleeping_ticks,
         exceptions: s.exceptions_taken,
         wall_s: started.elapsed().as_secs_f64(),
+        link_output: s.uart_output(),
     };
     Ok((out, m))
 }

@@ -85,6 +85,9 @@ fn request_for(controller: u8, stream: usize, channel: u32) -> Option<Request> {
     match (controller, stream, channel) {
         // DMA2 stream 0 channel 0 and stream 4 channel 0: ADC1.
         (2, 0, 0) | (2, 4, 0) => Some(Request::Adc1),
+        // DMA1 stream 5 channel 4: USART2_RX; stream 6 channel 4: USART2_TX (table 28).
+        (1, 5, 4) => Some(Request::Usart2Rx),
+        (1, 6, 4) => Some(Request::Usart2Tx),
         _ => None,
     }
 }
@@ -131,9 +134,23 @@ pub struct DmaF4 {
     /// Absolute base address, for messages.
     base: u32,
     streams: [Stream; STREAMS],
+    /// Level-sensitive requests that are high now (`Event::DmaLevel`).
+    levels: Vec<Request>,
 }
 
 impl DmaF4 {
+    /// Serves `request` on every enabled stream that selects it.
+    fn serve_request(&mut self, request: Request, out: &mut Signals) {
+        for x in 0..STREAMS {
+            let chsel = (self.streams[x].cr >> CR_CHSEL_SHIFT) & 0x7;
+            if self.streams[x].cr & CR_EN != 0
+                && request_for(self.number, x, chsel) == Some(request)
+            {
+                self.serve(x, out);
+            }
+        }
+    }
+
     /// `number`: 1 or 2; `irqs`: NVIC lines of streams 0..7; `base`: 0x4002_6000 / 0x4002_6400.
     pub fn new(number: u8, irqs: [u16; 8], base: u32) -> Self {
         let mut dma = DmaF4 {
@@ -141,6 +158,7 @@ impl DmaF4 {
             irqs,
             base,
             streams: [Stream::default(); STREAMS],
+            levels: Vec::new(),
         };
         dma.reset(0);
         dma
@@ -264,6 +282,15 @@ impl DmaF4 {
         };
         self.streams[x].cr = cr;
         out.replan = true;
+        // A level-sensitive request already high is served as soon as its stream is enabled.
+        if !was_on && cr & CR_EN != 0 {
+            let chsel = (cr >> CR_CHSEL_SHIFT) & 0x7;
+            if let Some(r) = request_for(self.number, x, chsel) {
+                if self.levels.contains(&r) {
+                    self.serve(x, out);
+                }
+            }
+        }
         Ok(())
     }
 
@@ -424,6 +451,14 @@ impl Peripheral for DmaF4 {
     }
 
     fn on_event(&mut self, _now: Time, event: Event, out: &mut Signals) {
+        if let Event::DmaLevel { request, high } = event {
+            self.levels.retain(|r| *r != request);
+            if high {
+                self.levels.push(request);
+                self.serve_request(request, out);
+            }
+            return;
+        }
         if let Event::DmaRequest(request) = event {
             for x in 0..STREAMS {
                 let chsel = (self.streams[x].cr >> CR_CHSEL_SHIFT) & 0x7;
@@ -450,6 +485,7 @@ impl Peripheral for DmaF4 {
     }
 
     fn reset(&mut self, _now: Time) {
+        self.levels.clear();
         for s in self.streams.iter_mut() {
             *s = Stream {
                 fcr: FCR_RESET,
@@ -657,5 +693,29 @@ mod tests {
             d.read(0, 0x08, &mut Signals::default()).is_err(),
             "LIFCR is write-only"
         );
+    }
+
+    /// USART2_TX (DMA1 stream 6 channel 4) is a level request: a stream enabled while it is
+    /// high moves an item at once; a new high moves the next; while low nothing moves.
+    #[test]
+    fn a_level_request_is_served_at_enable_and_while_high() {
+        let mut d = DmaF4::new(1, [11, 12, 13, 14, 15, 16, 17, 47], 0x4002_6000);
+        let mut s = Signals::default();
+        let level = |high| Event::DmaLevel { request: Request::Usart2Tx, high };
+        d.on_event(0, level(true), &mut s);
+        assert!(s.copies.is_empty(), "no stream enabled yet");
+        // Stream 6: PAR = USART2_DR, M0AR = a buffer, 3 bytes, memory to peripheral, MINC.
+        let s6 = 0x10 + 6 * 0x18;
+        w(&mut d, s6 + 0x8, 0x4000_4404).unwrap();
+        w(&mut d, s6 + 0xC, 0x2000_0100).unwrap();
+        w(&mut d, s6 + 0x4, 3).unwrap();
+        let cr = (4 << CR_CHSEL_SHIFT) | (1 << CR_DIR_SHIFT) | CR_MINC | CR_TCIE;
+        d.write(0, s6, cr | CR_EN, 0xFFFF_FFFF, &mut s).unwrap();
+        assert_eq!(s.copies, vec![Copy { from: 0x2000_0100, to: 0x4000_4404, size: 1 }]);
+        s.copies.clear();
+        d.on_event(1, level(false), &mut s);
+        assert!(s.copies.is_empty());
+        d.on_event(2, level(true), &mut s);
+        assert_eq!(s.copies, vec![Copy { from: 0x2000_0101, to: 0x4000_4404, size: 1 }]);
     }
 }

@@ -398,9 +398,12 @@ impl DmaMux {
         }
     }
 
-    fn request_id(request: Request) -> u32 {
+    /// The DMAMUX request ID of `request` on the G474; None for the F446's USART2 (the G474's
+    /// link is LPUART1, not modelled yet).
+    fn request_id(request: Request) -> Option<u32> {
         match request {
-            Request::Adc1 => DMAREQ_ADC1,
+            Request::Adc1 => Some(DMAREQ_ADC1),
+            Request::Usart2Rx | Request::Usart2Tx => None,
         }
     }
 }
@@ -498,7 +501,9 @@ impl Peripheral for DmaMux {
 
     fn on_event(&mut self, now: Time, event: Event, out: &mut Signals) {
         if let Event::DmaRequest(request) = event {
-            let id = Self::request_id(request);
+            let Some(id) = Self::request_id(request) else {
+                return;
+            };
             for (n, &cr) in self.cxcr.iter().enumerate() {
                 if cr & CXCR_DMAREQ_ID_MASK == id {
                     // Channels 0..=7 feed DMA1 channels 1..=8, 8..=15 DMA2 channels 1..=8 (§13.3.2).

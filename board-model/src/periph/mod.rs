@@ -18,6 +18,7 @@ pub mod misc;
 pub mod rcc_f4;
 pub mod rcc_g4;
 pub mod tim;
+pub mod usart_f4;
 
 use std::any::Any;
 
@@ -102,6 +103,10 @@ impl ClockDomain {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Request {
     Adc1,
+    /// USART2 receive (RXNE with DMAR).
+    Usart2Rx,
+    /// USART2 transmit (TXE with DMAT), a level: see [`Event::DmaLevel`].
+    Usart2Tx,
 }
 
 /// What one peripheral tells the others. Delivered by the board to every peripheral's `on_event`;
@@ -117,6 +122,9 @@ pub enum Event {
     /// G4: the DMAMUX routed a request to a DMA controller's channel (controller 1 or 2,
     /// channel 1..=8).
     DmaChannelRequest { controller: u8, channel: u8 },
+    /// A level-sensitive DMA request changed level (a USART's TXE while DMAT = 1): the DMA
+    /// serves it while it is high, also when a stream is enabled with it already high.
+    DmaLevel { request: Request, high: bool },
 }
 
 /// A data move a DMA controller performs: read `size` bytes at `from`, write them at `to`.
