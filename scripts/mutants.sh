@@ -15,9 +15,12 @@ cd "$(dirname "$0")/.."
 if ! cargo mutants --version >/dev/null 2>&1; then
     cargo install cargo-mutants --locked
 fi
-# Mutants come from core/ and boards/; the tests are the whole workspace's (with `-p`,
-# cargo-mutants would test only the mutated package).
+# Mutants come from core/ and boards/; the tests are every package's (with `-p`, cargo-mutants
+# would test only the mutated package) but the `saw` command's, whose end-to-end tests drive the
+# virtual board in real time and exercise the link, not the core.
+TESTS=(--test-package saw-core --test-package saw-boards --test-package saw-link
+       --test-package saw-store --test-package host-sim --test-package saw-tests)
 case " $* " in
-    *" --file "*|*" -f "*|*" --in-diff "*|*" -D "*) exec cargo mutants --test-workspace=true "$@" ;;
-    *) exec cargo mutants --test-workspace=true --file 'core/src/**/*.rs' --file 'boards/src/*.rs' "$@" ;;
+    *" --file "*|*" -f "*|*" --in-diff "*|*" -D "*) exec cargo mutants "${TESTS[@]}" "$@" ;;
+    *) exec cargo mutants "${TESTS[@]}" --file 'core/src/**/*.rs' --file 'boards/src/*.rs' "$@" ;;
 esac

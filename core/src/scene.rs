@@ -107,6 +107,28 @@ pub fn default_scene() -> Scene {
     }
 }
 
+/// The configuration with the longest encoding: 8 regions of the widest texture (random, every
+/// field at its maximum) and every line. Not a valid scene: buffers that carry a `Config` (the
+/// link's frames, the flash store's item) are sized and tested against it.
+pub fn largest_config() -> Config {
+    let mut c = default_config();
+    c.scene.textures.clear();
+    c.scene.boundaries_um.clear();
+    let widest = Texture::Random(crate::texture::RandomBurst {
+        center_millihz: u32::MAX,
+        spread_permille: u16::MAX,
+        amplitude_permille: u16::MAX,
+        amplitude_spread_permille: u16::MAX,
+        duty_permille: u16::MAX,
+        seed: u64::MAX,
+    });
+    // Each list filled to its capacity with the longest value postcard encodes.
+    while c.scene.textures.push(widest).is_ok() {}
+    while c.scene.boundaries_um.push(u32::MAX).is_ok() {}
+    while c.scene.lines.positions_um.push(u32::MAX).is_ok() {}
+    c
+}
+
 /// Default calibration, default caps, the default scene, stale after 5 ms (50 samples at 10 kHz).
 pub fn default_config() -> Config {
     Config {

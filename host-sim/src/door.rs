@@ -140,6 +140,20 @@ pub fn png_path(s: &str) -> Result<PathBuf, String> {
     }
 }
 
+/// Clap value parser of an output directory: anything but an existing file (created if absent).
+pub fn out_dir(s: &str) -> Result<PathBuf, String> {
+    let p = PathBuf::from(s);
+    if s.is_empty() {
+        return Err("the output directory must be named".into());
+    }
+    if p.exists() && !p.is_dir() {
+        return Err(
+            "a file is there, not a directory: name a directory (created if missing)".into(),
+        );
+    }
+    Ok(p)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -598,3 +598,73 @@ fn the_summary_reports_a_stalled_gate() {
         assert_eq!(stalled(&args), None, "{scene}");
     }
 }
+
+/// What tile-to-scene prints is a scene file: it loads as one, and its grating is the tile's
+/// (with or without --scene-file; before, without the flag it printed keys a scene file refuses).
+#[test]
+fn tile_to_scene_prints_a_region_a_scene_file_accepts() {
+    let board = saw_boards::NUCLEO_F446RE;
+    for (groove, land, force) in [
+        ("0.5", "0.25", "112"),
+        ("1", "0.25", "112"),
+        ("1.5", "1", "56"),
+    ] {
+        for flag in [&[][..], &["--scene-file"][..]] {
+            let mut args = vec![
+                "tile-to-scene",
+                "--groove-mm",
+                groove,
+                "--land-mm",
+                land,
+                "--force-g",
+                force,
+            ];
+            args.extend_from_slice(flag);
+            let out = run(&args);
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let text = String::from_utf8(out.stdout).unwrap();
+            let config = saw_core::scene_file::load_for_board(
+                "tile.toml",
+                &text,
+                sim::burst_timer(&board),
+                sim::sample_period_us(&board),
+            )
+            .unwrap_or_else(|e| panic!("{e}\n{text}"));
+            let saw_core::texture::Texture::Grating(g) = config.scene.textures[0] else {
+                panic!("{text}")
+            };
+            // λ = groove + land, in µm.
+            let want_um = ((groove.parse::<f64>().unwrap() + land.parse::<f64>().unwrap()) * 1000.0)
+                .round() as u32;
+            assert_eq!(g.wavelength_um, want_um, "{text}");
+            assert!((1..=1000).contains(&g.amplitude_permille), "{text}");
+        }
+    }
+}
+
+/// bench and model charts write outside the tracked docs/ unless asked (`--out docs`), and an
+/// output path that is a file is refused before anything runs.
+#[test]
+fn generated_files_go_to_out_unless_asked() {
+    let help = String::from_utf8(run(&["bench", "--help"]).stdout).unwrap();
+    assert!(help.contains("default: out/bench"), "{help}");
+    assert_eq!(host_sim::bench::default_out_dir(), Path::new("out/bench"));
+    let help = String::from_utf8(run(&["model", "charts", "--help"]).stdout).unwrap();
+    assert!(help.contains("[default: out/models]"), "{help}");
+    let file = scratch().join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    for cmd in [&["bench", "--out"][..], &["model", "charts", "--out"][..]] {
+        let mut args = cmd.to_vec();
+        let f = file.to_str().unwrap();
+        args.push(f);
+        let out = run(&args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8(out.stderr).unwrap();
+        assert!(err.contains("a file is there, not a directory"), "{err}");
+        assert!(err.contains("--out"), "{err}");
+    }
+}

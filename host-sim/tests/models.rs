@@ -564,7 +564,7 @@ fn tile_to_scene_normalised_and_lambda() {
     let toml = run_tile_to_scene(&args("--groove-mm 1.0 --land-mm 0.25 --force-g 448")).unwrap();
     assert!(
         toml.contains(
-            "[[region]]\nkind = \"grating\"\nwavelength_um = 1250\namplitude_permille = 1000\n"
+            "[[region]]\nkind = \"grating\"\nwavelength_mm = 1.25\namplitude_percent = 100\n"
         ),
         "{toml}"
     );

@@ -151,8 +151,10 @@ pub struct Record {
     pub region: Option<u8>,
     /// Burst frequency in force, mHz (0: no bursts).
     pub burst_millihz: u32,
-    /// The carrier enable line's level at the sample.
-    pub gate_high: bool,
+    /// Bursts are running (the burst timer gates the carrier); false while the line is held
+    /// off. The instantaneous enable level, sampled at the stream's rate, would only alias the
+    /// burst frequency.
+    pub bursting: bool,
     /// The sensor fault in force.
     pub fault: Option<SensorFault>,
 }

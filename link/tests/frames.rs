@@ -98,28 +98,10 @@ fn every_scene_file_round_trips_and_the_largest_scene_fits() {
     assert!(n >= 5, "{n} scene files");
 
     // The largest a Config gets: 8 random regions (the widest texture), every line.
-    let mut big = default_config();
-    big.scene.textures.clear();
-    big.scene.boundaries_um.clear();
-    for i in 0..8u32 {
-        big.scene
-            .textures
-            .push(Texture::Random(saw_core::texture::RandomBurst {
-                center_millihz: u32::MAX,
-                spread_permille: u16::MAX,
-                amplitude_permille: u16::MAX,
-                amplitude_spread_permille: u16::MAX,
-                duty_permille: u16::MAX,
-                seed: u64::MAX,
-            }))
-            .unwrap();
-        if i < 7 {
-            big.scene.boundaries_um.push(u32::MAX - i).unwrap();
-        }
-    }
-    for _ in 0..MAX_LINES {
-        big.scene.lines.positions_um.push(u32::MAX).unwrap();
-    }
+    let big = saw_core::scene::largest_config();
+    assert_eq!(big.scene.textures.len(), 8);
+    assert_eq!(big.scene.boundaries_um.len(), 7);
+    assert_eq!(big.scene.lines.positions_um.len(), MAX_LINES);
     let len = postcard::to_allocvec(&Request::LoadScene(big.clone()))
         .unwrap()
         .len();

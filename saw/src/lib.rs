@@ -81,7 +81,7 @@ pub enum Command {
     },
     /// Record the telemetry stream to a CSV file.
     Stream {
-        /// Where to write the records (time_us, position_um, velocity_um_s, region, f_b_hz, gate, fault).
+        /// Where to write the records (time_us, position_um, velocity_um_s, region, f_b_hz, bursting, fault).
         #[arg(long, value_name = "FILE")]
         csv: PathBuf,
         /// How long, s (0.1 to 86400).
@@ -93,6 +93,20 @@ pub enum Command {
     },
     /// Save the active scene to flash: the board boots into it from now on.
     Save,
+    /// Measure the link: the round trip of boundary moves (the scene is restored after), and
+    /// the fastest stream that arrives without a drop.
+    Bench {
+        /// Boundary moves to time (10 to 100000).
+        #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(10..=100_000))]
+        moves: u32,
+        /// Seconds each stream rate is tried (0.5 to 60).
+        #[arg(long, value_name = "S", default_value_t = 2.0, value_parser = bench_seconds)]
+        seconds: f64,
+    },
+}
+
+fn bench_seconds(s: &str) -> Result<f64, String> {
+    finite_in(s, 0.5, 60.0, "s")
 }
 
 /// Drive modes as typed on the command line.
@@ -217,6 +231,7 @@ pub fn run(cli: &Cli) -> Result<Done, Failure> {
             seconds,
             every,
         } => stream(&mut client, csv, *seconds, *every),
+        Command::Bench { moves, seconds } => bench(&mut client, *moves, *seconds),
         Command::Save => match client.request(&Request::Save)? {
             Reply::Saved { scene_id } => Ok(Done {
                 text: format!("saved scene {scene_id:#010x}: the board boots into it"),
@@ -444,13 +459,13 @@ pub fn csv_line(r: &Record) -> String {
         opt(r.velocity_um_s),
         r.region.map_or(String::new(), |v| v.to_string()),
         r.burst_millihz as f64 / 1000.0,
-        u8::from(r.gate_high),
+        u8::from(r.bursting),
         r.fault.map_or(String::new(), |f| format!("{f:?}"))
     )
 }
 
 /// The CSV header.
-pub const CSV_HEADER: &str = "time_us,position_um,velocity_um_s,region,f_b_hz,gate,fault";
+pub const CSV_HEADER: &str = "time_us,position_um,velocity_um_s,region,f_b_hz,bursting,fault";
 
 fn stream<P: std::io::Read + std::io::Write>(
     client: &mut Client<P>,
@@ -506,4 +521,98 @@ fn stream<P: std::io::Read + std::io::Write>(
             "rate_hz": rate, "csv": csv.display().to_string(),
         }),
     })
+}
+
+/// Round trips of boundary moves and the lossless stream rate.
+fn bench<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+    moves: u32,
+    seconds: f64,
+) -> Result<Done, Failure> {
+    let Reply::Scene { config, .. } = client.request(&Request::GetScene)? else {
+        return Err(Failure::link("the board did not send its scene".into()));
+    };
+    let Some(&at_um) = config.scene.boundaries_um.first() else {
+        return Err(Failure::input(
+            "the active scene has no boundary to move".into(),
+        ));
+    };
+    let mut rtt_us: Vec<f64> = Vec::with_capacity(moves as usize);
+    for i in 0..moves {
+        // 0.1 mm either side of where it was: a real move each time, always a valid layout.
+        let to = if i % 2 == 0 {
+            at_um + 100
+        } else {
+            at_um.saturating_sub(100)
+        };
+        let t = Instant::now();
+        match client.request(&Request::MoveBoundary {
+            index: 0,
+            at_um: to,
+        })? {
+            Reply::Applied { .. } => {}
+            other => return Err(unexpected(other)),
+        }
+        rtt_us.push(t.elapsed().as_secs_f64() * 1e6);
+    }
+    match client.request(&Request::LoadScene(config))? {
+        Reply::Applied { .. } => {}
+        other => return Err(unexpected(other)),
+    }
+    rtt_us.sort_by(f64::total_cmp);
+    let pick = |q: f64| rtt_us[((rtt_us.len() - 1) as f64 * q).round() as usize];
+    let (median, p99, max) = (pick(0.5), pick(0.99), pick(1.0));
+
+    let hello = client.hello()?;
+    let mut rates = Vec::new();
+    let mut lossless: Option<f64> = None;
+    for every in [1u16, 2, 3, 4, 5, 10] {
+        let before = counters(client)?.link.records_dropped;
+        client.request(&Request::Stream {
+            every_samples: every,
+        })?;
+        let end = Instant::now() + Duration::from_secs_f64(seconds);
+        let mut records = 0u64;
+        while let Some((_, s)) = client.next_stream(end)? {
+            records += s.records.len() as u64;
+        }
+        client.request(&Request::Stream { every_samples: 0 })?;
+        // Frames still in flight after the stop are read and dropped here.
+        while client
+            .next_stream(Instant::now() + Duration::from_millis(50))?
+            .is_some()
+        {}
+        let dropped = counters(client)?.link.records_dropped.wrapping_sub(before);
+        let rate = hello.sample_rate_hz as f64 / every as f64;
+        if dropped == 0 && lossless.is_none() {
+            lossless = Some(rate);
+        }
+        rates.push(
+            json!({ "every": every, "rate_hz": rate, "records": records, "dropped": dropped }),
+        );
+    }
+    let text = format!(
+        "boundary move round trip over {moves} moves: median {:.0} µs, 99th percentile {:.0} µs, max {:.0} µs\n\
+         fastest stream without a drop over {seconds} s: {}",
+        median,
+        p99,
+        max,
+        lossless.map_or("none of the rates tried".into(), |r| format!("{r:.0} records/s"))
+    );
+    Ok(Done {
+        text,
+        json: json!({
+            "moves": moves, "rtt_us": { "median": median, "p99": p99, "max": max },
+            "lossless_rate_hz": lossless, "rates": rates,
+        }),
+    })
+}
+
+fn counters<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+) -> Result<Counters, Failure> {
+    match client.request(&Request::Counters { reset: false })? {
+        Reply::Counters(c) => Ok(c),
+        other => Err(unexpected(other)),
+    }
 }

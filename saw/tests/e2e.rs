@@ -54,7 +54,7 @@ impl VirtualBoard {
         }
     }
 
-    /// Pulls the plug: the board stops; its flash file (in `dir`) stays.
+    /// Pulls the plug: the board stops; its directory (and the flash file in it) stays.
     fn power_off(mut self) -> tempfile::TempDir {
         self.stop.store(true, Ordering::Relaxed);
         let _ = self.handle.take().unwrap().join().unwrap();
@@ -149,30 +149,33 @@ fn switches(rows: &[Vec<String>], a: &str, b: &str) -> Vec<f64> {
         .collect()
 }
 
+/// Streams `seconds` at every second sample; the positions (mm) where region 0 and 1 swap.
+fn switch_positions(port: &Path, seconds: &str) -> Vec<f64> {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("s.csv");
+    let args = [
+        "stream",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--seconds",
+        seconds,
+        "--every",
+        "2",
+    ];
+    let r = saw(port, &args);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let s = switches(&csv_rows(&csv), "0", "1");
+    assert!(!s.is_empty(), "no switch in {seconds} s");
+    s
+}
+
 #[test]
 fn a_boundary_moved_live_moves_the_switch() {
-    let vb = VirtualBoard::start(&["--speed", "100"]);
-    let dir = tempfile::tempdir().unwrap();
-    let before = dir.path().join("before.csv");
-    let after = dir.path().join("after.csv");
     // 60 mm of travel at 100 mm/s: each pass crosses the boundary once.
-    let r = saw(
-        &vb.port,
-        &[
-            "stream",
-            "--csv",
-            before.to_str().unwrap(),
-            "--seconds",
-            "1.5",
-            "--every",
-            "2",
-        ],
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let s = switches(&csv_rows(&before), "0", "1");
-    assert!(!s.is_empty());
+    let vb = VirtualBoard::start(&["--speed", "100"]);
     // The default boundary is at 18.963 mm; a switch lands within hysteresis (0.1 mm) plus two
     // samples' travel past it.
+    let s = switch_positions(&vb.port, "1.5");
     assert!(s.iter().all(|x| (x - 18.963).abs() < 0.15), "{s:?}");
     let r = saw(&vb.port, &["boundary", "0", "30"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
@@ -181,21 +184,7 @@ fn a_boundary_moved_live_moves_the_switch() {
         "{}",
         r.stdout
     );
-    let r = saw(
-        &vb.port,
-        &[
-            "stream",
-            "--csv",
-            after.to_str().unwrap(),
-            "--seconds",
-            "1.5",
-            "--every",
-            "2",
-        ],
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let s = switches(&csv_rows(&after), "0", "1");
-    assert!(!s.is_empty());
+    let s = switch_positions(&vb.port, "1.5");
     assert!(s.iter().all(|x| (x - 30.0).abs() < 0.15), "{s:?}");
 }
 
@@ -421,4 +410,56 @@ fn no_board_and_bad_values_are_one_line_each() {
     let r = saw(&silent, &["--timeout", "100", "hello"]);
     assert_eq!(r.code, 3);
     assert!(r.stderr.contains("no answer within 100 ms"), "{}", r.stderr);
+}
+
+#[test]
+fn a_saved_scene_survives_a_power_cycle() {
+    let dir = tempfile::tempdir().unwrap();
+    let flash = dir.path().join("flash.bin");
+    let flash_arg = flash.to_str().unwrap().to_string();
+    // No store: said plainly.
+    {
+        let vb = VirtualBoard::start(&[]);
+        let r = saw(&vb.port, &["save"]);
+        assert_eq!(r.code, 1);
+        assert!(r.stderr.contains("no scene store"), "{}", r.stderr);
+    }
+    let vb = VirtualBoard::start_in(dir, &["--flash", &flash_arg]);
+    let h = saw_json(&vb.port, &["hello"]);
+    assert_eq!(h["result"]["hello"]["scene_source"], "Default", "{h}");
+    let grating = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/grating.toml");
+    let pushed = saw_json(&vb.port, &["push", grating.to_str().unwrap()]);
+    let id = pushed["result"]["applied"].clone();
+    let s = saw_json(&vb.port, &["save"]);
+    assert_eq!(s["result"]["saved"], id, "{s}");
+    // An edit after the save is not saved.
+    assert_eq!(saw(&vb.port, &["boundary", "0", "25"]).code, 0);
+    let dir = vb.power_off();
+    let vb = VirtualBoard::start_in(dir, &["--flash", &flash_arg]);
+    let h = saw_json(&vb.port, &["hello"]);
+    assert_eq!(h["result"]["hello"]["scene_id"], id, "{h}");
+    assert_eq!(h["result"]["hello"]["scene_source"], "Saved", "{h}");
+}
+
+/// docs/link.md: at 921 600 baud the line carries every third sample of a 10 kHz board without a
+/// drop, and not every second one (the benchmark `saw bench` finds the same edge).
+#[test]
+fn the_line_carries_every_third_sample_and_not_every_second() {
+    let vb = VirtualBoard::start(&[]);
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("s.csv");
+    let c = csv.to_str().unwrap();
+    let third = saw_json(
+        &vb.port,
+        &["stream", "--csv", c, "--seconds", "2", "--every", "3"],
+    );
+    assert_eq!(third["result"]["dropped"], 0, "{third}");
+    let second = saw_json(
+        &vb.port,
+        &["stream", "--csv", c, "--seconds", "2", "--every", "2"],
+    );
+    assert!(
+        second["result"]["dropped"].as_u64().unwrap() > 500,
+        "{second}"
+    );
 }

@@ -305,6 +305,24 @@ mod tests {
     /// E_o = 2 MPa, ν_o = 0.3: 1/E = 0.75e-6 + 0.455e-6 = 1.205e-6 /Pa; with s − s' = 0.1 MPa and
     /// β/σ = 20 µm / 10 µm, μs − μc = π · 1e5 · 2 · 1.205e-6 = 0.241 π.
     #[test]
+    fn a_bare_material_names_delta_mu_first() {
+        let e = err("[[region]]\nkind = \"material\"\n");
+        assert_eq!(e.field, "region[0].delta_mu", "{e}");
+        assert!(
+            e.message
+                .starts_with("kind `material` needs `delta_mu` (μs − μc, 0 to 100), or all of"),
+            "{e}"
+        );
+        // Both ways at once: refused at the eq. 12 parameter, which would be ignored.
+        let e = err("[[region]]\nkind = \"material\"\ndelta_mu = 0.5\nsigma_um = 10\n");
+        assert_eq!((e.line, e.field.as_str()), (4, "region[0].sigma_um"), "{e}");
+        assert!(e.message.contains("not both"), "{e}");
+        // One eq. 12 parameter given: the next missing one is named.
+        let e = err("[[region]]\nkind = \"material\"\ne_object_pa = 2e6\n");
+        assert_eq!(e.field, "region[0].nu_object", "{e}");
+    }
+
+    #[test]
     fn material_delta_mu_from_eq_12() {
         let text = "[[region]]\nkind = \"material\"\ne_skin_pa = 1e6\nnu_skin = 0.5\n\
                     e_object_pa = 2e6\nnu_object = 0.3\nsigma_um = 10\nbeta_um = 20\n\

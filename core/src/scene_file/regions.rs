@@ -265,8 +265,39 @@ impl Region<'_> {
     /// A material's μs − μc: `delta_mu` as given, else from the eq. 12 parameters.
     fn delta_mu(&self) -> Result<f64, SceneFileError> {
         let s = self.spec;
+        let eq12 = [
+            ("e_object_pa", &s.e_object_pa),
+            ("nu_object", &s.nu_object),
+            ("e_skin_pa", &s.e_skin_pa),
+            ("nu_skin", &s.nu_skin),
+            ("sigma_um", &s.sigma_um),
+            ("beta_um", &s.beta_um),
+            ("shear_strength_diff_pa", &s.shear_strength_diff_pa),
+        ];
         if let Some(d) = &s.delta_mu {
+            // Both ways at once: one would be silently ignored, so neither is guessed.
+            if let Some((name, v)) = eq12.iter().find_map(|(n, v)| v.as_ref().map(|v| (n, v))) {
+                return Err(self.cx.err(
+                    v.span(),
+                    &self.field(name),
+                    format_args!(
+                        "give `delta_mu` or the eq. 12 parameters, not both (`{name}` would be ignored)"
+                    ),
+                ));
+            }
             return self.cx.range(d, &self.field("delta_mu"), 0.0, 100.0);
+        }
+        // Neither `delta_mu` nor any eq. 12 parameter: name the simple way first.
+        if eq12.iter().all(|(_, v)| v.is_none()) {
+            return Err(self.cx.err(
+                self.span.clone(),
+                &self.field("delta_mu"),
+                format_args!(
+                    "kind `material` needs `delta_mu` (μs − μc, 0 to 100), or all of \
+                     e_object_pa, nu_object, e_skin_pa, nu_skin, sigma_um, beta_um and \
+                     shear_strength_diff_pa to compute it from eq. 12"
+                ),
+            ));
         }
         // Eq. 12: μs − μc = π (s − s') β / (E σ), 1/E = (1 − ν_s²)/E_s + (1 − ν_o²)/E_o.
         let e_o = self.need(&s.e_object_pa, "e_object_pa", 1.0, 1e13)?;

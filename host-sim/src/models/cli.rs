@@ -140,8 +140,9 @@ enum Model {
     /// Writes the models-*.png charts and prints the tables of docs/models.md; the atan cost
     /// axis runs this binary under valgrind (callgrind), skipped if valgrind is missing.
     Charts {
-        /// Output directory.
-        #[arg(long, value_name = "DIR", default_value = "docs/charts")]
+        /// Output directory (default out/models; `--out docs/charts` refreshes the committed
+        /// charts).
+        #[arg(long, value_name = "DIR", default_value = "out/models", value_parser = crate::door::out_dir)]
         out: PathBuf,
         /// Only this chart.
         #[arg(long, value_parser = PossibleValuesParser::new(Chart::ALL.map(Chart::name))
@@ -284,8 +285,8 @@ struct GroovedArgs {
 #[command(
     name = "host-sim tile-to-scene",
     bin_name = "host-sim tile-to-scene",
-    about = "A grooved tile as a grating region (keys of scenes/*.toml with --scene-file: \
-             wavelength_mm, amplitude_percent)"
+    about = "A grooved tile as a grating region, printed as a scene file's [[region]] table \
+             (wavelength_mm, amplitude_percent): paste it into a file under scenes/"
 )]
 struct TileToSceneCli {
     #[command(flatten)]
@@ -294,7 +295,8 @@ struct TileToSceneCli {
           help = SLIDE_SPEED.help("Finger speed, for the comment f = V/lambda"),
           value_parser = SLIDE_SPEED.parser())]
     speed_mm_s: Option<f64>,
-    /// Print the keys of a scene file (scenes/*.toml).
+    /// The output is always a scene file's region (this flag is the default, kept so older
+    /// scripts run).
     #[arg(long)]
     scene_file: bool,
 }
@@ -630,7 +632,7 @@ pub fn run_tile_to_scene(args: &[String]) -> Result<String, String> {
 
 fn exec_tile_to_scene(cli: TileToSceneCli) -> Result<String, String> {
     let inp = cli.tile.input();
-    let (speed, scene_file) = (cli.speed_mm_s, cli.scene_file);
+    let speed = cli.speed_mm_s;
     let reg = tile_to_region(&inp).map_err(|e| e.to_string())?;
     let a_max = a_max_mm2().map_err(|e| e.to_string())?;
     let mut s = format!(
@@ -644,10 +646,6 @@ fn exec_tile_to_scene(cli: TileToSceneCli) -> Result<String, String> {
             v * 1000.0 / reg.wavelength_um as f64
         );
     }
-    if scene_file {
-        s.push_str(&reg.to_scene_file_toml());
-    } else {
-        s.push_str(&reg.to_toml());
-    }
+    s.push_str(&reg.to_scene_file_toml());
     Ok(s)
 }

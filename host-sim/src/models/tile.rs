@@ -117,14 +117,6 @@ impl GratingRegion {
             self.amplitude_permille as f64 / 10.0
         )
     }
-
-    /// The TOML snippet of the region, with the field names of `saw_core::texture::Grating`.
-    pub fn to_toml(&self) -> String {
-        format!(
-            "[[region]]\nkind = \"grating\"\nwavelength_um = {}\namplitude_permille = {}\n",
-            self.wavelength_um, self.amplitude_permille
-        )
-    }
 }
 
 /// One tile of the paper's sets at one force, with the paper's k and μ.

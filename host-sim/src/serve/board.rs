@@ -103,7 +103,7 @@ impl<E: VelocityEstimator> VirtualBoard<E> {
                     velocity_um_s: p.est_vel_um_s,
                     region: p.region,
                     burst_millihz: self.lp.ctrl.telemetry().burst_millihz,
-                    gate_high: p.gate,
+                    bursting: self.lp.tm.is_running(),
                     fault: p.fault,
                 };
                 if self.queue.len() < QUEUE_RECORDS {

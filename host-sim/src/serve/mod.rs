@@ -7,6 +7,7 @@
 //! dropped and counted, as on the firmware.
 
 pub mod board;
+pub mod flash;
 pub mod pty;
 
 use std::path::PathBuf;
@@ -27,7 +28,7 @@ use saw_link::stream::Batcher;
 use crate::door::{Range, Whole};
 use crate::sim::{burst_timer, sample_period_us, SimParams};
 use crate::trajectory::Trajectory;
-use board::{Persist, VirtualBoard};
+use board::VirtualBoard;
 use pty::Pty;
 
 /// The ST-LINK virtual COM port's rate the firmware uses (boards/README.md): 921 600 baud.
@@ -122,9 +123,6 @@ pub fn run_from_env() -> Option<ExitCode> {
     )
 }
 
-/// Opens the file store named by `--flash`.
-pub type StoreOpener = fn(&std::path::Path) -> Result<Box<dyn Persist + Send>, String>;
-
 /// Runs the virtual board until `stop` is set or `--seconds` pass. `ready` is called once the
 /// pty exists.
 pub fn serve(
@@ -135,7 +133,7 @@ pub fn serve(
     let board = a.board;
     let (params, source) = params(a, board)?;
     let store = match &a.flash {
-        Some(path) => Some(open_store(path)?),
+        Some(path) => Some(flash::open(path, board)?),
         None => None,
     };
     let ctrl =
@@ -186,13 +184,6 @@ fn params(a: &ServeArgs, board: &'static BoardDef) -> Result<(SimParams, SceneSo
         .with_config(config)
         .with_noise(a.noise, a.seed);
     Ok((p, source))
-}
-
-fn open_store(path: &std::path::Path) -> Result<Box<dyn Persist + Send>, String> {
-    Err(format!(
-        "--flash {}: the scene store is not built yet",
-        path.display()
-    ))
 }
 
 fn run<E: VelocityEstimator>(

@@ -1,0 +1,195 @@
+//! The virtual board's flash: a file of NOR flash pages (erased = 0xFF, a write only clears
+//! bits), written through after every operation so a killed `host-sim serve` leaves exactly what
+//! a power cut leaves; under it the same `saw_store::SceneStore` the firmware uses.
+
+use std::path::{Path, PathBuf};
+
+use embedded_storage_async::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
+use saw_core::scene::Config;
+use saw_link::msg::StoreFault;
+use saw_store::{Saved, SceneStore};
+
+use super::board::Persist;
+
+/// The store's geometry on a board: erase unit and count (boards/: the F446's sectors 6–7 are
+/// two 128 KiB sectors; the G474's store is four 2 KiB pages).
+#[derive(Clone, Copy, Debug)]
+pub struct Geometry {
+    /// Erase unit, bytes.
+    pub erase_bytes: u32,
+    /// Erase units.
+    pub units: u32,
+    /// Programming unit, bytes (F446 x32 word: 4; G474 double word: 8).
+    pub write_bytes: u32,
+}
+
+/// The store's geometry for `board`.
+pub fn geometry(board: &saw_boards::BoardDef) -> Geometry {
+    if board.name.contains("g474") {
+        Geometry {
+            erase_bytes: 2048,
+            units: 4,
+            write_bytes: 8,
+        }
+    } else {
+        Geometry {
+            erase_bytes: 128 * 1024,
+            units: 2,
+            write_bytes: 4,
+        }
+    }
+}
+
+/// A flash error: the file could not be written, or an access broke the NOR rules.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FileFlashError {
+    /// Outside the flash or not aligned.
+    Access,
+    /// The file could not be written.
+    Io,
+}
+
+impl NorFlashError for FileFlashError {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            FileFlashError::Access => NorFlashErrorKind::OutOfBounds,
+            FileFlashError::Io => NorFlashErrorKind::Other,
+        }
+    }
+}
+
+/// NOR flash in a file.
+pub struct FileFlash<const WRITE: usize, const ERASE: usize> {
+    path: PathBuf,
+    data: Vec<u8>,
+}
+
+impl<const WRITE: usize, const ERASE: usize> FileFlash<WRITE, ERASE> {
+    /// Opens (or creates, erased) `units` erase units in `path`.
+    pub fn open(path: &Path, units: usize) -> Result<Self, String> {
+        let size = units * ERASE;
+        let data = match std::fs::read(path) {
+            Ok(d) if d.len() == size => d,
+            Ok(d) => {
+                return Err(format!(
+                    "--flash {}: {} bytes, not this board's {size}-byte store",
+                    path.display(),
+                    d.len()
+                ))
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => vec![0xFF; size],
+            Err(e) => return Err(format!("--flash {}: {e}", path.display())),
+        };
+        let f = Self {
+            path: path.to_path_buf(),
+            data,
+        };
+        f.persist()
+            .map_err(|_| format!("--flash {}: cannot write", path.display()))?;
+        Ok(f)
+    }
+
+    fn persist(&self) -> Result<(), FileFlashError> {
+        std::fs::write(&self.path, &self.data).map_err(|_| FileFlashError::Io)
+    }
+
+    fn range(
+        &self,
+        offset: u32,
+        len: usize,
+        align: usize,
+    ) -> Result<std::ops::Range<usize>, FileFlashError> {
+        let start = offset as usize;
+        let end = start.checked_add(len).ok_or(FileFlashError::Access)?;
+        if end > self.data.len() || !start.is_multiple_of(align) || !len.is_multiple_of(align) {
+            return Err(FileFlashError::Access);
+        }
+        Ok(start..end)
+    }
+}
+
+impl<const WRITE: usize, const ERASE: usize> ErrorType for FileFlash<WRITE, ERASE> {
+    type Error = FileFlashError;
+}
+
+impl<const WRITE: usize, const ERASE: usize> ReadNorFlash for FileFlash<WRITE, ERASE> {
+    const READ_SIZE: usize = 1;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let r = self.range(offset, bytes.len(), 1)?;
+        bytes.copy_from_slice(&self.data[r]);
+        Ok(())
+    }
+
+    fn capacity(&self) -> usize {
+        self.data.len()
+    }
+}
+
+impl<const WRITE: usize, const ERASE: usize> NorFlash for FileFlash<WRITE, ERASE> {
+    const WRITE_SIZE: usize = WRITE;
+    const ERASE_SIZE: usize = ERASE;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        let r = self.range(from, to.saturating_sub(from) as usize, ERASE)?;
+        self.data[r].fill(0xFF);
+        self.persist()
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        let r = self.range(offset, bytes.len(), WRITE)?;
+        // NOR: programming only clears bits.
+        for (d, b) in self.data[r].iter_mut().zip(bytes) {
+            *d &= *b;
+        }
+        self.persist()
+    }
+}
+
+/// The scene store over a flash file.
+pub struct FileStore<const WRITE: usize, const ERASE: usize> {
+    store: SceneStore<FileFlash<WRITE, ERASE>>,
+}
+
+impl<const WRITE: usize, const ERASE: usize> Persist for FileStore<WRITE, ERASE> {
+    fn load(&mut self) -> Option<(u32, Config)> {
+        match embassy_futures::block_on(self.store.load()) {
+            Ok(Some(s)) => Some((s.scene_id, s.config)),
+            Ok(None) => None,
+            Err(e) => {
+                log::warn!("boot: the saved scene cannot be read ({e})");
+                None
+            }
+        }
+    }
+
+    fn save(&mut self, scene_id: u32, config: &Config) -> Result<(), StoreFault> {
+        let saved = Saved {
+            scene_id,
+            config: config.clone(),
+        };
+        embassy_futures::block_on(self.store.save(&saved)).map_err(|e| match e {
+            saw_store::StoreError::TooLarge => StoreFault::TooLarge,
+            _ => StoreFault::Flash,
+        })
+    }
+}
+
+/// Opens the store of `board` in the file at `path`.
+pub fn open(path: &Path, board: &saw_boards::BoardDef) -> Result<Box<dyn Persist + Send>, String> {
+    let g = geometry(board);
+    fn make<const W: usize, const E: usize>(
+        path: &Path,
+        units: u32,
+    ) -> Result<Box<dyn Persist + Send>, String> {
+        let flash = FileFlash::<W, E>::open(path, units as usize)?;
+        let store = SceneStore::new(flash, 0..units * E as u32).map_err(|e| e.to_string())?;
+        Ok(Box::new(FileStore { store }))
+    }
+    match (g.write_bytes, g.erase_bytes) {
+        (8, 2048) => make::<8, 2048>(path, g.units),
+        _ => make::<4, { 128 * 1024 }>(path, g.units),
+    }
+}

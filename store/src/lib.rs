@@ -1,0 +1,162 @@
+//! The saved scene in flash. One item (key 0) of a `sequential-storage` map over two or more
+//! erase units: a new save is written after the old one and only then counts, and a page is
+//! erased only once its items live on elsewhere, so a power cut at any write or erase leaves the
+//! old scene or the new one, whole (`tests/power_cut.rs` cuts at every byte).
+//!
+//! Why the map rather than the queue: the map keeps the newest value of a key and migrates it
+//! when it reclaims a page; a queue would need the reader to skip to its last item and the
+//! writer to pop old ones, two steps a cut could separate.
+//!
+//! The item is `FORMAT ‖ postcard(scene_id, Config)`. A stored item of another format, or one
+//! that does not decode, is reported, never returned: the caller boots the default scene. A
+//! decoded scene is not checked here; the caller compiles it and falls back to the default if
+//! the controller refuses it.
+
+#![no_std]
+
+use core::ops::Range;
+
+use embedded_storage_async::nor_flash::NorFlash;
+use saw_core::scene::Config;
+use sequential_storage::cache::Cache;
+use sequential_storage::map::{MapConfig, MapStorage};
+
+/// The item's layout version: bump it when `Config`'s encoding changes.
+pub const FORMAT: u8 = 1;
+/// The largest item, bytes: a format byte, the id and the largest `Config` (8 regions of the
+/// widest texture and 16 lines encode to under 500 bytes, `tests::largest_scene_fits`), with
+/// room for the map's key and word alignment.
+pub const ITEM_BYTES: usize = 768;
+const KEY: u8 = 0;
+
+/// A scene as stored.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Saved {
+    /// Its id (`saw_link::scene_id`).
+    pub scene_id: u32,
+    /// The scene.
+    pub config: Config,
+}
+
+/// Why the store could not be read or written. Nothing is lost on any of these: a failed save
+/// leaves the previous scene readable.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum StoreError {
+    /// The range is not whole erase units, or fewer than two.
+    BadRange,
+    /// The flash refused a read, write or erase (or power went during one).
+    Flash,
+    /// The store's bookkeeping is inconsistent (erase it to recover).
+    Corrupted,
+    /// A stored item of another layout version.
+    OtherFormat {
+        /// The version found.
+        found: u8,
+    },
+    /// A stored item that does not decode.
+    Undecodable,
+    /// The scene does not fit an item.
+    TooLarge,
+}
+
+impl core::fmt::Display for StoreError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            StoreError::BadRange => write!(
+                f,
+                "the store's flash range is not two or more whole erase units"
+            ),
+            StoreError::Flash => write!(f, "the flash refused a read, write or erase"),
+            StoreError::Corrupted => write!(
+                f,
+                "the store's bookkeeping is inconsistent; erase it to recover"
+            ),
+            StoreError::OtherFormat { found } => {
+                write!(
+                    f,
+                    "the saved scene has layout version {found}, this firmware reads {FORMAT}"
+                )
+            }
+            StoreError::Undecodable => write!(f, "the saved scene does not decode"),
+            StoreError::TooLarge => write!(
+                f,
+                "the scene does not fit the store's {ITEM_BYTES}-byte item"
+            ),
+        }
+    }
+}
+
+fn from_ss<E>(e: sequential_storage::Error<E>) -> StoreError {
+    match e {
+        sequential_storage::Error::Corrupted { .. }
+        | sequential_storage::Error::LogicBug { .. } => StoreError::Corrupted,
+        sequential_storage::Error::BufferTooSmall(_)
+        | sequential_storage::Error::ItemTooBig
+        | sequential_storage::Error::SerializationError(_) => StoreError::TooLarge,
+        _ => StoreError::Flash,
+    }
+}
+
+/// The scene store over `flash`, in `range` (offsets in `flash`).
+pub struct SceneStore<F: NorFlash> {
+    map: MapStorage<
+        u8,
+        F,
+        Cache<
+            sequential_storage::cache::Uncached,
+            sequential_storage::cache::Uncached,
+            sequential_storage::cache::Uncached,
+            u8,
+        >,
+    >,
+    buf: [u8; ITEM_BYTES],
+}
+
+impl<F: NorFlash> SceneStore<F> {
+    /// A store over `range` of `flash`: whole erase units, at least two.
+    pub fn new(flash: F, range: Range<u32>) -> Result<Self, StoreError> {
+        let config = MapConfig::try_new(range).map_err(|_| StoreError::BadRange)?;
+        Ok(Self {
+            map: MapStorage::new(flash, config, Cache::new_uncached()),
+            buf: [0; ITEM_BYTES],
+        })
+    }
+
+    /// The saved scene; `None` when nothing was ever saved (or the flash is erased).
+    pub async fn load(&mut self) -> Result<Option<Saved>, StoreError> {
+        let item: Option<&[u8]> = self
+            .map
+            .fetch_item(&mut self.buf, &KEY)
+            .await
+            .map_err(from_ss)?;
+        let Some(bytes) = item else { return Ok(None) };
+        let (&format, body) = bytes.split_first().ok_or(StoreError::Undecodable)?;
+        if format != FORMAT {
+            return Err(StoreError::OtherFormat { found: format });
+        }
+        let (scene_id, config): (u32, Config) =
+            postcard::from_bytes(body).map_err(|_| StoreError::Undecodable)?;
+        Ok(Some(Saved { scene_id, config }))
+    }
+
+    /// Stores `saved` as the scene to boot into.
+    pub async fn save(&mut self, saved: &Saved) -> Result<(), StoreError> {
+        let mut item = [0u8; ITEM_BYTES];
+        item[0] = FORMAT;
+        let n = postcard::to_slice(&(saved.scene_id, &saved.config), &mut item[1..])
+            .map_err(|_| StoreError::TooLarge)?
+            .len();
+        let value: &[u8] = &item[..1 + n];
+        self.map
+            .store_item(&mut self.buf, &KEY, &value)
+            .await
+            .map_err(from_ss)
+    }
+
+    /// The flash back (tests: "reboot" by building a new store over it).
+    pub fn into_flash(self) -> F {
+        self.map.destroy().0
+    }
+}
