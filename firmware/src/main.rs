@@ -288,7 +288,7 @@ async fn control(
                         velocity_um_s: out.velocity_um_s,
                         region: out.region,
                         burst_millihz: ctrl.telemetry().burst_millihz,
-                        gate_high: burst.line_high(),
+                        bursting: burst.line() != rf::Line::Off,
                         fault: out.fault,
                     });
                 }

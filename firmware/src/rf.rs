@@ -192,14 +192,6 @@ impl BurstGate {
     pub fn line(&self) -> Line {
         self.line
     }
-
-    /// The IDT A enable pin's level now: GPIOx_IDR samples the pin every AHB cycle in
-    /// alternate-function mode too (RM0390 §8.3.11 / RM0440 §9.3.11, "input data register").
-    pub fn line_high(&self) -> bool {
-        const PIN: saw_boards::Pin = crate::board::BOARD.burst.pin;
-        const _: () = assert!(PIN.port == 'A');
-        embassy_stm32::pac::GPIOA.idr().read().idr(PIN.pin as usize) == embassy_stm32::pac::gpio::vals::Idr::HIGH
-    }
 }
 
 impl BurstOutput for BurstGate {
