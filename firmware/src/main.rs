@@ -1,20 +1,28 @@
 //! SAW tactile display firmware (embassy). Thin: init clocks, bind peripherals, spawn tasks.
 //!
-//! Tasks:
-//! - `sampler`: timer-triggered (TIM3 TRGO, 10 kHz), DMA-fed ADC; 16 conversions per sample.
-//! - `control`: feeds every sample to `saw_core::Controller`, applies gate actions to the burst
-//!   timer, runs the stale-sensor watchdog every 1 ms and logs telemetry at 1 Hz.
+//! Tasks, by priority:
+//! - on the interrupt executor (the sample path, preempts everything below):
+//!   - `sampler`: timer-triggered (TIM3 TRGO, 10 kHz), DMA-fed ADC; 16 conversions per sample.
+//!   - `control`: feeds every sample to `saw_core::Controller`, applies gate actions to the
+//!     burst timer, runs the stale-sensor watchdog every 1 ms, logs telemetry at 1 Hz, and
+//!     between samples takes what the link hands over (a compiled scene, a counters request)
+//!     and taps the telemetry stream.
+//! - in thread mode: `link::link`, the host link (docs/link.md): frames in and out over the
+//!   ST-LINK virtual COM port, scenes compiled here and only swapped in by `control`.
 #![no_std]
 #![no_main]
 
 mod board;
+mod link;
 mod rf;
 
 use defmt::{info, unwrap, warn};
 use defmt_rtt as _;
-use embassy_executor::Spawner;
+use embassy_executor::{InterruptExecutor, Spawner};
 use embassy_futures::select::{select, Either};
 use embassy_stm32::gpio::Output;
+use embassy_stm32::interrupt;
+use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
@@ -72,6 +80,19 @@ const TELEMETRY_PERIOD_US: u64 = 1_000_000;
 /// Shortest interval between two ADC fault warnings.
 const ADC_WARN_PERIOD_US: u64 = 1_000_000;
 
+/// The sample path's executor: `sampler` and `control` run in the UART4 interrupt (UART4 is
+/// unused on both boards; its vector only runs this executor), so the link task in thread mode
+/// never delays a sample. Priority 6 of 0–15: below the DMA and timer interrupts embassy's
+/// drivers use (their default, 0), above thread mode.
+static EXECUTOR_HIGH: InterruptExecutor = InterruptExecutor::new();
+const SAMPLE_PATH_PRIORITY: Priority = Priority::P6;
+
+#[interrupt]
+unsafe fn UART4() {
+    // SAFETY: the executor runs only from this vector, started once in `main`.
+    unsafe { EXECUTOR_HIGH.on_interrupt() }
+}
+
 /// Samples from the ADC task to the control task (6.4 ms of slack at 10 kHz).
 static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 64> = Channel::new();
 
@@ -118,7 +139,17 @@ async fn main(spawner: Spawner) {
         max_burst_hz: BOARD.max_burst_hz,
     };
     let mut ctrl = unwrap!(Controller::new(timer, SAMPLE_PERIOD_US));
-    unwrap!(ctrl.load(&saw_core::default_config()));
+    let (config, source) = boot_scene(&timer);
+    unwrap!(ctrl.load(&config));
+    let session = saw_link::session::Session::new(
+        saw_link::session::Identity {
+            firmware: concat!("saw-firmware ", env!("CARGO_PKG_VERSION")),
+            board: BOARD.name,
+            sample_rate_hz: BOARD.sample_rate_hz,
+        },
+        config,
+        source,
+    );
 
     // Both enable lines are forced inactive: now the amplifier may be armed.
     rf_arm.set_high();
@@ -140,9 +171,43 @@ async fn main(spawner: Spawner) {
     let mut wdg = IndependentWatchdog::new(parts.iwdg, IWDG_TIMEOUT_US);
     wdg.unleash();
 
-    spawner.spawn(unwrap!(sampler(parts.sampler)));
-    spawner.spawn(unwrap!(control(ctrl, burst, rf_arm, wdg)));
+    interrupt::UART4.set_priority(SAMPLE_PATH_PRIORITY);
+    let high = EXECUTOR_HIGH.start(interrupt::UART4);
+    high.spawn(unwrap!(sampler(parts.sampler)));
+    high.spawn(unwrap!(control(ctrl, burst, rf_arm, wdg)));
+    let board = link::FirmwareBoard { timer, sample_period_us: SAMPLE_PERIOD_US, sent: 0 };
+    #[cfg(feature = "nucleo-f446re")]
+    spawner.spawn(unwrap!(link::link(parts.link_tx, parts.link_rx, session, board)));
+    // The G474's LPUART1 link (UM2505 §7.9) waits for its board-model peripheral (issue #13).
+    #[cfg(not(feature = "nucleo-f446re"))]
+    {
+        let _ = (session, board);
+        warn!("link: not on {} yet: its LPUART1 is not brought up", BOARD.name);
+    }
 }
+
+/// The scene to boot into: the one embedded at build time (`SAW_SCENE`, checked by build.rs on
+/// the host) if any, else the built-in default; says which.
+fn boot_scene(timer: &BurstTimer) -> (saw_core::scene::Config, saw_link::msg::SceneSource) {
+    use saw_link::msg::SceneSource;
+    if let Some(bytes) = EMBEDDED_SCENE {
+        match postcard::from_bytes::<saw_core::scene::Config>(bytes) {
+            Ok(c) => match saw_core::controller::Prepared::compile(timer, SAMPLE_PERIOD_US, &c) {
+                Ok(_) => {
+                    info!("boot: the scene embedded at build time ({})", EMBEDDED_SCENE_FILE);
+                    return (c, SceneSource::BuildTime);
+                }
+                Err(e) => warn!("boot: the embedded scene is refused ({}); the default runs", e),
+            },
+            Err(_) => warn!("boot: the embedded scene does not decode; the default runs"),
+        }
+    }
+    info!("boot: the built-in default scene");
+    (saw_core::default_config(), SceneSource::Default)
+}
+
+// `EMBEDDED_SCENE: Option<&[u8]>` and `EMBEDDED_SCENE_FILE: &str`, written by build.rs.
+include!(concat!(env!("OUT_DIR"), "/scene.rs"));
 
 #[embassy_executor::task]
 async fn sampler(mut s: board::Sampler) {
@@ -209,12 +274,24 @@ async fn control(
     // pull-down keeps the amplifier disarmed while the pin is unconfigured).
     let mut watchdog = Ticker::every(WATCHDOG_PERIOD);
     let mut next_log = Instant::now().as_micros() + TELEMETRY_PERIOD_US;
+    let mut tap = link::StreamTap::new();
     loop {
         match select(SAMPLES.receive(), watchdog.next()).await {
             Either::First(sample) => {
                 let out = ctrl.on_sample(sample);
                 // Drive mode, then amplitude, then the line (saw-core's order).
                 saw_core::controller::apply(&out, &mut burst);
+                if tap.take() {
+                    tap.push(saw_link::msg::Record {
+                        time_us: sample.t_us,
+                        position_um: out.position_um,
+                        velocity_um_s: out.velocity_um_s,
+                        region: out.region,
+                        burst_millihz: ctrl.telemetry().burst_millihz,
+                        bursting: burst.line() != rf::Line::Off,
+                        fault: out.fault,
+                    });
+                }
             }
             Either::Second(()) => {
                 if let Some(a) = ctrl.on_tick(Instant::now().as_micros() as u32) {
@@ -222,6 +299,8 @@ async fn control(
                 }
             }
         }
+        // Between samples: a scene compiled by the link, a counters request.
+        link::service(&mut ctrl);
         // A completed iteration is a live control loop.
         wdg.pet();
         // Checked on both branches so a busy sample queue cannot starve the log.

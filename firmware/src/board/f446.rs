@@ -13,6 +13,8 @@ use embassy_stm32::timer::low_level::MasterMode;
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::{Ch1, Ch3};
+use embassy_stm32::mode::Async;
+use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::{bind_interrupts, dma, peripherals, Config, Peri, Peripherals};
 use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, PllOut};
@@ -91,7 +93,15 @@ pub fn freeze_watchdog_if_debugged() {
 
 bind_interrupts!(struct Irqs {
     DMA2_STREAM0 => dma::InterruptHandler<peripherals::DMA2_CH0>;
+    USART2 => usart::InterruptHandler<peripherals::USART2>;
+    DMA1_STREAM6 => dma::InterruptHandler<peripherals::DMA1_CH6>;
+    DMA1_STREAM5 => dma::InterruptHandler<peripherals::DMA1_CH5>;
 });
+
+/// The link's receive ring: 1 KiB is 11 ms of bytes at 921 600 baud, longer than the link task
+/// ever waits (a scene's compile), so a request is never overrun.
+const LINK_RX_BYTES: usize = 1024;
+static LINK_RX: StaticCell<[u8; LINK_RX_BYTES]> = StaticCell::new();
 
 /// Peripherals bound to their roles.
 pub struct Parts {
@@ -103,6 +113,10 @@ pub struct Parts {
     pub rf_arm: Output<'static>,
     pub sampler: Sampler,
     pub iwdg: Peri<'static, peripherals::IWDG>,
+    /// The host link's transmitter.
+    pub link_tx: UartTx<'static, Async>,
+    /// The host link's receiver, DMA into a ring buffer.
+    pub link_rx: RingBufferedUartRx<'static>,
 }
 
 pub fn split(p: Peripherals) -> Parts {
@@ -116,7 +130,26 @@ pub fn split(p: Peripherals) -> Parts {
     // PB10: TIM2_CH3 AF1 (second RF enable, IDT B).
     let burst_b_pin = PwmPin::new(p.PB10, OutputType::PushPull);
     let sampler = Sampler::new(p.ADC1, p.PA1, p.DMA2_CH0, p.TIM3);
-    Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, burst_b_pin, rf_arm, sampler, iwdg: p.IWDG }
+    // The link: USART2 on PA2 (TX) / PA3 (RX), AF7, wired to the ST-LINK/V2-1's virtual COM port
+    // (UM1724 §6.8 "USART communication": SB13/SB14 closed by default). DMA1 stream 6 channel 4
+    // transmits, stream 5 channel 4 receives into a ring buffer (RM0390 §9.3.3 Table 28).
+    let mut cfg = usart::Config::default();
+    cfg.baudrate = crate::link::BAUD;
+    let uart = defmt::unwrap!(Uart::new(p.USART2, p.PA3, p.PA2, p.DMA1_CH6, p.DMA1_CH5, Irqs, cfg));
+    let (link_tx, rx) = uart.split();
+    let link_rx = rx.into_ring_buffered(LINK_RX.init([0; LINK_RX_BYTES]));
+    Parts {
+        carrier_tim: p.TIM1,
+        carrier_pin,
+        burst_tim: p.TIM2,
+        burst_pin,
+        burst_b_pin,
+        rf_arm,
+        sampler,
+        iwdg: p.IWDG,
+        link_tx,
+        link_rx,
+    }
 }
 
 /// Sampling time against the rheostat's source impedance (assumed 10 kΩ divider, ≤ 2.5 kΩ

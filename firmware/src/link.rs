@@ -1,0 +1,183 @@
+//! The host link on the board: the ST-LINK virtual COM port (UART, DMA both ways), the session
+//! of `saw_link` that decides what each request does, and the hand-over to the control loop.
+//!
+//! The link task runs in thread mode, below the control loop's interrupt executor: it can be
+//! preempted by every sample and never delays one. Everything the two share crosses through the
+//! statics below: a compiled scene goes in whole (`INSTALL`; the control loop only moves it in),
+//! counters come out on request, stream records come out through a bounded queue that drops and
+//! counts when the link falls behind.
+
+use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, Ordering};
+
+use defmt::{info, warn};
+use embassy_futures::select::{select3, Either3};
+use embassy_stm32::mode::Async;
+use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_sync::signal::Signal;
+use embassy_time::{Duration, Timer};
+use saw_core::burst::BurstTimer;
+use saw_core::controller::{ConfigError, Prepared, Telemetry};
+use saw_core::scene::Config;
+use saw_link::frame::{self, Receiver, MAX_ENCODED};
+use saw_link::msg::{Header, Record, Reply, StoreFault};
+use saw_link::session::{Board, Session};
+use saw_link::stream::{Batcher, Decimator, QUEUE_RECORDS};
+
+/// The link's line rate: 921 600 baud, 8N1. The highest standard rate within what both
+/// Nucleos' ST-LINKs carry (V2-1 on the F446RE, V3E on the G474RE); the USART's divider error
+/// is below 0.1 % on both (docs/link.md).
+pub const BAUD: u32 = 921_600;
+/// A partial stream frame goes out after this long, so a slow stream arrives steadily.
+const FLUSH_AFTER: Duration = Duration::from_millis(20);
+
+/// A compiled scene on its way to the control loop.
+pub static INSTALL: Signal<CriticalSectionRawMutex, Prepared> = Signal::new();
+/// The control loop has installed it.
+pub static INSTALLED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// The link asks for the counters; the control loop answers in `TELEMETRY`.
+pub static TELEMETRY_WANTED: AtomicBool = AtomicBool::new(false);
+/// The counters, handed over between two samples.
+pub static TELEMETRY: Signal<CriticalSectionRawMutex, Telemetry> = Signal::new();
+/// Stream decimation in force (0: stopped).
+pub static EVERY: AtomicU16 = AtomicU16::new(0);
+/// Records from the control loop to the link.
+pub static RECORDS: Channel<CriticalSectionRawMutex, Record, QUEUE_RECORDS> = Channel::new();
+/// Records the queue had no room for.
+pub static DROPPED: AtomicU32 = AtomicU32::new(0);
+
+/// The control loop's end of the stream: one atomic load and a compare per sample while
+/// stopped.
+pub struct StreamTap {
+    decimator: Decimator,
+    every: u16,
+}
+
+impl StreamTap {
+    pub const fn new() -> Self {
+        Self { decimator: Decimator::new(), every: 0 }
+    }
+
+    /// Whether this sample becomes a record (follows `EVERY`).
+    #[inline]
+    pub fn take(&mut self) -> bool {
+        let every = EVERY.load(Ordering::Relaxed);
+        if every != self.every {
+            self.every = every;
+            self.decimator.set(every);
+        }
+        self.decimator.take()
+    }
+
+    /// Queues a record, or counts it dropped.
+    pub fn push(&self, record: Record) {
+        if RECORDS.try_send(record).is_err() {
+            DROPPED.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// The control loop's end of the hand-over, called once per iteration between samples.
+pub fn service(ctrl: &mut saw_core::Controller) {
+    if let Some(p) = INSTALL.try_take() {
+        ctrl.install(p);
+        INSTALLED.signal(());
+    }
+    if TELEMETRY_WANTED.swap(false, Ordering::Relaxed) {
+        TELEMETRY.signal(ctrl.telemetry());
+    }
+}
+
+/// The board as the session sees it.
+pub struct FirmwareBoard {
+    pub timer: BurstTimer,
+    pub sample_period_us: u32,
+    pub sent: u32,
+}
+
+impl Board for FirmwareBoard {
+    async fn apply(&mut self, config: &Config) -> Result<(), ConfigError> {
+        // Compiled here, at thread priority; the control loop only swaps it in.
+        let p = Prepared::compile(&self.timer, self.sample_period_us, config)?;
+        INSTALLED.reset();
+        INSTALL.signal(p);
+        INSTALLED.wait().await;
+        Ok(())
+    }
+
+    async fn telemetry(&mut self) -> Telemetry {
+        TELEMETRY.reset();
+        TELEMETRY_WANTED.store(true, Ordering::Relaxed);
+        TELEMETRY.wait().await
+    }
+
+    fn stream(&mut self, every_samples: u16) {
+        EVERY.store(every_samples, Ordering::Relaxed);
+        if every_samples == 0 {
+            RECORDS.clear();
+        }
+    }
+
+    fn stream_counts(&mut self) -> (u32, u32) {
+        (DROPPED.load(Ordering::Relaxed), self.sent)
+    }
+
+    async fn save(&mut self, _scene_id: u32, _config: &Config) -> Result<(), StoreFault> {
+        Err(StoreFault::NoStore)
+    }
+}
+
+/// Frames `reply` and sends it (DMA); a failed write is logged, the link goes on.
+async fn send(tx: &mut UartTx<'static, Async>, header: &Header, reply: &Reply) {
+    let mut out = [0u8; MAX_ENCODED];
+    match frame::encode(header, reply, &mut out) {
+        Ok(n) => {
+            if tx.write(&out[..n]).await.is_err() {
+                warn!("link: a reply could not be sent");
+            }
+        }
+        Err(e) => warn!("link: a reply could not be framed: {}", e),
+    }
+}
+
+#[embassy_executor::task]
+pub async fn link(
+    mut tx: UartTx<'static, Async>,
+    mut rx: RingBufferedUartRx<'static>,
+    mut session: Session,
+    mut board: FirmwareBoard,
+) {
+    info!("link: {} baud on the ST-LINK virtual COM port", BAUD);
+    let mut receiver = Receiver::<MAX_ENCODED>::default();
+    let mut batcher = Batcher::default();
+    let mut bytes = [0u8; 64];
+    loop {
+        match select3(rx.read(&mut bytes), RECORDS.receive(), Timer::after(FLUSH_AFTER)).await {
+            Either3::First(Ok(n)) => {
+                for &b in &bytes[..n] {
+                    let (header, reply) = match receiver.push(b) {
+                        None => continue,
+                        Some(Ok(len)) => session.on_frame(&mut board, receiver.payload(len)).await,
+                        Some(Err(e)) => session.on_bad_frame(None, e),
+                    };
+                    send(&mut tx, &header, &reply).await;
+                }
+            }
+            // An overrun or a framing error: the bytes lost are a broken frame the receiver
+            // drops at the next zero; the ring buffer restarts on the next read.
+            Either3::First(Err(e)) => warn!("link: uart {}", e),
+            Either3::Second(record) => {
+                board.sent = board.sent.wrapping_add(1);
+                if let Some((h, r)) = batcher.push(record, DROPPED.load(Ordering::Relaxed)) {
+                    send(&mut tx, &h, &r).await;
+                }
+            }
+            Either3::Third(()) => {
+                if let Some((h, r)) = batcher.flush(DROPPED.load(Ordering::Relaxed)) {
+                    send(&mut tx, &h, &r).await;
+                }
+            }
+        }
+    }
+}
