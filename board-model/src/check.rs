@@ -658,8 +658,11 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         "link: boundary moved live",
         matches!(moved, Some((_, _, Reply::Applied { scene_id })) if scene_id == want),
         format!(
-            "answer {:?} (want Applied {{ scene_id: {want:#010x} }}); round trip {} from the request's last byte to the answer's",
-            moved.as_ref().map(|a| &a.2),
+            "answer {} (want Applied, scene {want:#010x}); round trip {} from the request's last byte to the answer's",
+            match moved.as_ref().map(|a| &a.2) {
+                Some(Reply::Applied { scene_id }) => format!("Applied, scene {scene_id:#010x}"),
+                other => format!("{other:?}"),
+            },
             rtt_ms.map_or("—".into(), |r| format!("{r:.3} ms")),
         ),
     ));

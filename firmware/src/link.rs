@@ -9,28 +9,16 @@
 
 use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, Ordering};
 
-use defmt::{info, warn};
-use embassy_futures::select::{select3, Either3};
-use embassy_stm32::mode::Async;
-use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
-use embassy_time::{Duration, Timer};
 use saw_core::burst::BurstTimer;
 use saw_core::controller::{ConfigError, Prepared, Telemetry};
 use saw_core::scene::Config;
-use saw_link::frame::{self, Receiver, MAX_ENCODED};
-use saw_link::msg::{Header, Record, Reply, StoreFault};
-use saw_link::session::{Board, Session};
-use saw_link::stream::{Batcher, Decimator, QUEUE_RECORDS};
+use saw_link::msg::{Record, StoreFault};
+use saw_link::session::Board;
+use saw_link::stream::{Decimator, QUEUE_RECORDS};
 
-/// The link's line rate: 921 600 baud, 8N1. The highest standard rate within what both
-/// Nucleos' ST-LINKs carry (V2-1 on the F446RE, V3E on the G474RE); the USART's divider error
-/// is below 0.1 % on both (docs/link.md).
-pub const BAUD: u32 = 921_600;
-/// A partial stream frame goes out after this long, so a slow stream arrives steadily.
-const FLUSH_AFTER: Duration = Duration::from_millis(20);
 
 /// A compiled scene on its way to the control loop.
 pub static INSTALL: Signal<CriticalSectionRawMutex, Prepared> = Signal::new();
@@ -128,54 +116,84 @@ impl Board for FirmwareBoard {
     }
 }
 
-/// Frames `reply` and sends it (DMA); a failed write is logged, the link goes on.
-async fn send(tx: &mut UartTx<'static, Async>, header: &Header, reply: &Reply) {
-    let mut out = [0u8; MAX_ENCODED];
-    match frame::encode(header, reply, &mut out) {
-        Ok(n) => {
-            if tx.write(&out[..n]).await.is_err() {
-                warn!("link: a reply could not be sent");
-            }
-        }
-        Err(e) => warn!("link: a reply could not be framed: {}", e),
-    }
-}
+#[cfg(feature = "nucleo-f446re")]
+pub use uart::link;
 
-#[embassy_executor::task]
-pub async fn link(
-    mut tx: UartTx<'static, Async>,
-    mut rx: RingBufferedUartRx<'static>,
-    mut session: Session,
-    mut board: FirmwareBoard,
-) {
-    info!("link: {} baud on the ST-LINK virtual COM port", BAUD);
-    let mut receiver = Receiver::<MAX_ENCODED>::default();
-    let mut batcher = Batcher::default();
-    let mut bytes = [0u8; 64];
-    loop {
-        match select3(rx.read(&mut bytes), RECORDS.receive(), Timer::after(FLUSH_AFTER)).await {
-            Either3::First(Ok(n)) => {
-                for &b in &bytes[..n] {
-                    let (header, reply) = match receiver.push(b) {
-                        None => continue,
-                        Some(Ok(len)) => session.on_frame(&mut board, receiver.payload(len)).await,
-                        Some(Err(e)) => session.on_bad_frame(None, e),
-                    };
-                    send(&mut tx, &header, &reply).await;
+// The UART side runs where its UART is brought up: the F446's USART2. The G474's LPUART1 waits
+// for its board-model peripheral (issue #13); the hand-over to the control loop is on both.
+/// The link's line rate: 921 600 baud, 8N1, a standard rate the ST-LINK/V2-1's virtual COM
+/// port takes (not yet measured on a board). On the F446, 45 MHz / BRR 49 gives 918 367 baud,
+/// 0.35 % slow, well inside the ±2 % an 8N1 receiver tolerates (RM0390 §25.4.5).
+#[cfg(feature = "nucleo-f446re")]
+pub const BAUD: u32 = 921_600;
+#[cfg(feature = "nucleo-f446re")]
+mod uart {
+    use core::sync::atomic::Ordering;
+
+    use defmt::{info, warn};
+    use embassy_futures::select::{select3, Either3};
+    use embassy_stm32::mode::Async;
+    use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
+    use embassy_time::{Duration, Timer};
+    use saw_link::frame::{self, Receiver, MAX_ENCODED};
+    use saw_link::msg::{Header, Reply};
+    use saw_link::session::Session;
+    use saw_link::stream::Batcher;
+
+    use super::{FirmwareBoard, BAUD, DROPPED, RECORDS};
+
+    /// A partial stream frame goes out after this long, so a slow stream arrives steadily.
+    const FLUSH_AFTER: Duration = Duration::from_millis(20);
+
+    /// Frames `reply` and sends it (DMA); a failed write is logged, the link goes on.
+    async fn send(tx: &mut UartTx<'static, Async>, header: &Header, reply: &Reply) {
+        let mut out = [0u8; MAX_ENCODED];
+        match frame::encode(header, reply, &mut out) {
+            Ok(n) => {
+                if tx.write(&out[..n]).await.is_err() {
+                    warn!("link: a reply could not be sent");
                 }
             }
-            // An overrun or a framing error: the bytes lost are a broken frame the receiver
-            // drops at the next zero; the ring buffer restarts on the next read.
-            Either3::First(Err(e)) => warn!("link: uart {}", e),
-            Either3::Second(record) => {
-                board.sent = board.sent.wrapping_add(1);
-                if let Some((h, r)) = batcher.push(record, DROPPED.load(Ordering::Relaxed)) {
-                    send(&mut tx, &h, &r).await;
+            Err(e) => warn!("link: a reply could not be framed: {}", e),
+        }
+    }
+
+    #[embassy_executor::task]
+    pub async fn link(
+        mut tx: UartTx<'static, Async>,
+        mut rx: RingBufferedUartRx<'static>,
+        mut session: Session,
+        mut board: FirmwareBoard,
+    ) {
+        info!("link: {} baud on the ST-LINK virtual COM port", BAUD);
+        let mut receiver = Receiver::<MAX_ENCODED>::default();
+        let mut batcher = Batcher::default();
+        let mut bytes = [0u8; 64];
+        loop {
+            match select3(rx.read(&mut bytes), RECORDS.receive(), Timer::after(FLUSH_AFTER)).await {
+                Either3::First(Ok(n)) => {
+                    for &b in &bytes[..n] {
+                        let (header, reply) = match receiver.push(b) {
+                            None => continue,
+                            Some(Ok(len)) => session.on_frame(&mut board, receiver.payload(len)).await,
+                            Some(Err(e)) => session.on_bad_frame(None, e),
+                        };
+                        send(&mut tx, &header, &reply).await;
+                    }
                 }
-            }
-            Either3::Third(()) => {
-                if let Some((h, r)) = batcher.flush(DROPPED.load(Ordering::Relaxed)) {
-                    send(&mut tx, &h, &r).await;
+                // An overrun or a framing error: the bytes lost are a broken frame the receiver
+                // drops at the next zero; the ring buffer restarts on the next read.
+                Either3::First(Err(e)) => warn!("link: uart {}", e),
+                Either3::Second(record) => {
+                    board.sent = board.sent.wrapping_add(1);
+                    if let Some((h, r)) = batcher.push(record, DROPPED.load(Ordering::Relaxed)) {
+                        send(&mut tx, &h, &r).await;
+                    }
+                }
+                Either3::Third(()) => {
+                    if let Some((h, r)) = batcher.flush(DROPPED.load(Ordering::Relaxed)) {
+                        send(&mut tx, &h, &r).await;
+                    }
                 }
             }
         }

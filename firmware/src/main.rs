@@ -181,7 +181,7 @@ async fn main(spawner: Spawner) {
     // The G474's LPUART1 link (UM2505 §7.9) waits for its board-model peripheral (issue #13).
     #[cfg(not(feature = "nucleo-f446re"))]
     {
-        let _ = (session, board);
+        let _ = (session, board, &spawner);
         warn!("link: not on {} yet: its LPUART1 is not brought up", BOARD.name);
     }
 }
