@@ -287,6 +287,35 @@ pub struct AdcDef {
     pub triggers_per_sample: u32,
 }
 
+/// The flash the saved scene lives in: whole erase units the image never reaches.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StoreLayout {
+    /// First address.
+    pub origin: u32,
+    /// Length, bytes: two or more erase units (sequential-storage reclaims a unit only once
+    /// its items live on in another).
+    pub bytes: u32,
+    /// The erase unit, bytes (the F446's sector, the G474's page).
+    pub erase_bytes: u32,
+    /// Base of the embassy flash region the store is addressed in (its offsets count from here).
+    pub region_base: u32,
+    /// Whether the CPU keeps fetching from flash while the store is erased or written: true only
+    /// when the store is in the other bank of a dual-bank flash (read-while-write, RM0440 §3.3.9);
+    /// a single-bank erase stalls every fetch until it ends (RM0390 §3.5.3).
+    pub read_while_write: bool,
+}
+
+impl StoreLayout {
+    /// One past the last address.
+    pub const fn end(&self) -> u32 {
+        self.origin + self.bytes
+    }
+    /// The store's range as offsets in its embassy region.
+    pub const fn region_range(&self) -> core::ops::Range<u32> {
+        self.origin - self.region_base..self.end() - self.region_base
+    }
+}
+
 /// One board: chip, clocks, timers, pins, memory.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BoardDef {
@@ -331,7 +360,13 @@ pub struct BoardDef {
     pub time_driver_timer: &'static str,
 
     pub flash_origin: u32,
+    /// Flash the firmware image links into (`boards/<name>/memory.x`): the linker refuses an
+    /// image that would grow past it, into the store.
     pub flash_bytes: u32,
+    /// The chip's whole flash.
+    pub chip_flash_bytes: u32,
+    /// Where the saved scene lives (`saw-store`).
+    pub store: StoreLayout,
     pub ram_origin: u32,
     /// RAM the firmware links into (see `boards/<name>/memory.x`).
     pub ram_bytes: u32,

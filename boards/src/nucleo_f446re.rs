@@ -123,7 +123,21 @@ pub const NUCLEO_F446RE: BoardDef = BoardDef {
     time_driver_timer: "TIM4",
 
     flash_origin: 0x0800_0000,
-    flash_bytes: 512 * 1024,
+    // The image: sectors 0–4 (4 × 16 + 64 KiB, RM0390 §3.3 table 4). Sector 5 is left empty so
+    // the image can grow by 128 KiB without moving the store.
+    flash_bytes: 128 * 1024,
+    chip_flash_bytes: 512 * 1024,
+    // Sectors 6 and 7 (128 KiB each): the smallest erase units past the image's room. Erasing
+    // one stalls every flash fetch for 1–2 s (DS10693 t_ERASE128KB; RM0390 §3.5: a read during
+    // an operation stalls the bus): the save sequence turns RF off and lengthens the IWDG.
+    store: crate::StoreLayout {
+        origin: 0x0804_0000,
+        bytes: 256 * 1024,
+        erase_bytes: 128 * 1024,
+        // embassy's Bank1Region3: sectors 5–7.
+        region_base: 0x0802_0000,
+        read_while_write: false,
+    },
     ram_origin: 0x2000_0000,
     ram_bytes: 128 * 1024,
 };

@@ -121,7 +121,20 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
     time_driver_timer: "TIM4",
 
     flash_origin: 0x0800_0000,
-    flash_bytes: 512 * 1024,
+    // The image: the first 128 KiB of bank 1 (as on the F446).
+    flash_bytes: 128 * 1024,
+    chip_flash_bytes: 512 * 1024,
+    // The last 8 pages of bank 2 (2 KiB pages in dual-bank mode, DBANK = 1, the factory setting:
+    // RM0440 §3.3.1 and §3.4.1 FLASH_OPTR). Erasing or writing bank 2 leaves bank 1 readable
+    // (read-while-write, RM0440 §3.3.8): the firmware keeps running from bank 1 while it saves.
+    store: crate::StoreLayout {
+        origin: 0x0807_C000,
+        bytes: 16 * 1024,
+        erase_bytes: 2 * 1024,
+        // embassy's Bank2Region (feature `dual-bank`): all of bank 2.
+        region_base: 0x0804_0000,
+        read_while_write: true,
+    },
     ram_origin: 0x2000_0000,
     ram_bytes: 96 * 1024,
 };

@@ -1273,3 +1273,49 @@ fn memory_matches_each_boards_linker_script() {
         assert_eq!(region("RAM"), (b.ram_origin, b.ram_bytes), "{}", b.name);
     }
 }
+
+/// Each board's store is whole erase units (two or more) on unit boundaries, inside the chip's
+/// flash and past everything the image may link into (`flash_bytes`, the linker's FLASH region),
+/// and addressable in its embassy region. The F446's units are its sectors (RM0390 §3.3 table 4:
+/// 4 × 16 KiB, 64 KiB, then 128 KiB each); the G474's store must be in bank 2 (from
+/// 0x0804_0000 in dual-bank mode, RM0440 §3.3.1) for the CPU to run on while it is written.
+#[test]
+fn each_store_is_whole_erase_units_the_image_never_reaches() {
+    for b in saw_boards::ALL {
+        let s = b.store;
+        let chip_end = b.flash_origin + b.chip_flash_bytes;
+        assert!(
+            s.origin >= b.flash_origin + b.flash_bytes,
+            "{}: store overlaps the image",
+            b.name
+        );
+        assert!(s.end() <= chip_end, "{}: store past the flash", b.name);
+        assert_eq!((s.origin - b.flash_origin) % s.erase_bytes, 0, "{}", b.name);
+        assert_eq!(s.bytes % s.erase_bytes, 0, "{}", b.name);
+        assert!(
+            s.bytes / s.erase_bytes >= 2,
+            "{}: fewer than two erase units",
+            b.name
+        );
+        assert!(s.region_base <= s.origin, "{}", b.name);
+        let r = s.region_range();
+        assert_eq!(r.end - r.start, s.bytes, "{}", b.name);
+    }
+    // The F446: sector boundaries from the reference manual's table, not from the layout.
+    let f = saw_boards::NUCLEO_F446RE.store;
+    let mut sector_starts = vec![0x0800_0000u32];
+    for size_kib in [16, 16, 16, 16, 64, 128, 128, 128] {
+        let last = *sector_starts.last().unwrap();
+        sector_starts.push(last + size_kib * 1024);
+    }
+    assert!(sector_starts.contains(&f.origin) && sector_starts.contains(&f.end()));
+    assert_eq!(f.erase_bytes, 128 * 1024);
+    assert!(!f.read_while_write);
+    // embassy's F446 region 3 starts at sector 5.
+    assert_eq!(f.region_base, sector_starts[5]);
+    // The G474: bank 2 is the upper 256 KiB.
+    let g = saw_boards::NUCLEO_G474RE.store;
+    assert!(g.origin >= 0x0804_0000 && g.region_base == 0x0804_0000);
+    assert_eq!(g.erase_bytes, 2 * 1024);
+    assert!(g.read_while_write);
+}
