@@ -34,6 +34,11 @@ pub static EVERY: AtomicU16 = AtomicU16::new(0);
 pub static RECORDS: Channel<CriticalSectionRawMutex, Record, QUEUE_RECORDS> = Channel::new();
 /// Records the queue had no room for.
 pub static DROPPED: AtomicU32 = AtomicU32::new(0);
+/// The link asks the control loop to hold RF off (true: a save is about to touch the flash) or
+/// to let it run again (false); the control loop answers in `QUIETED` once it has.
+pub static QUIET: Signal<CriticalSectionRawMutex, bool> = Signal::new();
+/// The control loop has done what `QUIET` asked.
+pub static QUIETED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
 /// The control loop's end of the stream: one atomic load and a compare per sample while
 /// stopped.
@@ -67,7 +72,8 @@ impl StreamTap {
 }
 
 /// The control loop's end of the hand-over, called once per iteration between samples.
-pub fn service(ctrl: &mut saw_core::Controller) {
+/// Returns a `QUIET` request for the control loop to carry out (then it calls `quieted`).
+pub fn service(ctrl: &mut saw_core::Controller) -> Option<bool> {
     if let Some(p) = INSTALL.try_take() {
         ctrl.install(p);
         INSTALLED.signal(());
@@ -75,6 +81,19 @@ pub fn service(ctrl: &mut saw_core::Controller) {
     if TELEMETRY_WANTED.swap(false, Ordering::Relaxed) {
         TELEMETRY.signal(ctrl.telemetry());
     }
+    QUIET.try_take()
+}
+
+/// The control loop has carried out a `QUIET` request.
+pub fn quieted() {
+    QUIETED.signal(());
+}
+
+/// Asks the control loop to hold RF off (or let it run) and waits until it has.
+async fn quiet(on: bool) {
+    QUIETED.reset();
+    QUIET.signal(on);
+    QUIETED.wait().await;
 }
 
 /// The board as the session sees it.
@@ -82,6 +101,8 @@ pub struct FirmwareBoard {
     pub timer: BurstTimer,
     pub sample_period_us: u32,
     pub sent: u32,
+    /// The scene store; None when the board has none (then `save` says so).
+    pub store: Option<saw_store::SceneStore<crate::board::StoreFlash>>,
 }
 
 impl Board for FirmwareBoard {
@@ -111,8 +132,28 @@ impl Board for FirmwareBoard {
         (DROPPED.load(Ordering::Relaxed), self.sent)
     }
 
-    async fn save(&mut self, _scene_id: u32, _config: &Config) -> Result<(), StoreFault> {
-        Err(StoreFault::NoStore)
+    /// Saves with RF held off from before the first flash operation to after the last: on a
+    /// single-bank flash every fetch (and so the sample path) stalls while a unit is written or
+    /// erased, and the burst timer would keep gating RF at the last command meanwhile. The
+    /// control loop also lengthens the watchdog for that time (`store::lengthen_watchdog`).
+    async fn save(&mut self, scene_id: u32, config: &Config) -> Result<(), StoreFault> {
+        let Some(store) = self.store.as_mut() else {
+            return Err(StoreFault::NoStore);
+        };
+        let saved = saw_store::Saved { scene_id, config: config.clone() };
+        quiet(true).await;
+        let result = store.save(&saved).await;
+        quiet(false).await;
+        match result {
+            Ok(()) => {
+                defmt::info!("store: scene {=u32:08x} saved", scene_id);
+                Ok(())
+            }
+            Err(e) => {
+                defmt::warn!("store: scene {=u32:08x} not saved: {}", scene_id, e);
+                Err(crate::store::fault(e))
+            }
+        }
     }
 }
 

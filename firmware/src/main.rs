@@ -15,6 +15,7 @@
 mod board;
 mod link;
 mod rf;
+mod store;
 
 use defmt::{info, unwrap, warn};
 use defmt_rtt as _;
@@ -139,7 +140,8 @@ async fn main(spawner: Spawner) {
         max_burst_hz: BOARD.max_burst_hz,
     };
     let mut ctrl = unwrap!(Controller::new(timer, SAMPLE_PERIOD_US));
-    let (config, source) = boot_scene(&timer);
+    let mut store = store::open(parts.store);
+    let (config, source) = boot_scene(&timer, store.as_mut()).await;
     unwrap!(ctrl.load(&config));
     let session = saw_link::session::Session::new(
         saw_link::session::Identity {
@@ -175,7 +177,7 @@ async fn main(spawner: Spawner) {
     let high = EXECUTOR_HIGH.start(interrupt::UART4);
     high.spawn(unwrap!(sampler(parts.sampler)));
     high.spawn(unwrap!(control(ctrl, burst, rf_arm, wdg)));
-    let board = link::FirmwareBoard { timer, sample_period_us: SAMPLE_PERIOD_US, sent: 0 };
+    let board = link::FirmwareBoard { timer, sample_period_us: SAMPLE_PERIOD_US, sent: 0, store };
     #[cfg(feature = "nucleo-f446re")]
     spawner.spawn(unwrap!(link::link(parts.link_tx, parts.link_rx, session, board)));
     // The G474's LPUART1 link (UM2505 §7.9) waits for its board-model peripheral (issue #13).
@@ -186,10 +188,30 @@ async fn main(spawner: Spawner) {
     }
 }
 
-/// The scene to boot into: the one embedded at build time (`SAW_SCENE`, checked by build.rs on
-/// the host) if any, else the built-in default; says which.
-fn boot_scene(timer: &BurstTimer) -> (saw_core::scene::Config, saw_link::msg::SceneSource) {
+/// The scene to boot into, and says which: the one saved in flash if it reads back and compiles,
+/// else the one embedded at build time (`SAW_SCENE`, checked by build.rs on the host) if any,
+/// else the built-in default.
+async fn boot_scene(
+    timer: &BurstTimer,
+    store: Option<&mut saw_store::SceneStore<board::StoreFlash>>,
+) -> (saw_core::scene::Config, saw_link::msg::SceneSource) {
     use saw_link::msg::SceneSource;
+    match store {
+        Some(store) => match store.load().await {
+            Ok(Some(saved)) => {
+                match saw_core::controller::Prepared::compile(timer, SAMPLE_PERIOD_US, &saved.config) {
+                    Ok(_) => {
+                        info!("boot: the scene saved in flash (id {=u32:08x})", saved.scene_id);
+                        return (saved.config, SceneSource::Saved);
+                    }
+                    Err(e) => warn!("boot: the saved scene {=u32:08x} is refused ({})", saved.scene_id, e),
+                }
+            }
+            Ok(None) => info!("boot: no scene saved in flash"),
+            Err(e) => warn!("boot: the saved scene cannot be read ({})", e),
+        },
+        None => info!("boot: no scene store on this board"),
+    }
     if let Some(bytes) = EMBEDDED_SCENE {
         match postcard::from_bytes::<saw_core::scene::Config>(bytes) {
             Ok(c) => match saw_core::controller::Prepared::compile(timer, SAMPLE_PERIOD_US, &c) {
@@ -267,11 +289,13 @@ async fn sampler(mut s: board::Sampler) {
 async fn control(
     mut ctrl: Controller,
     mut burst: BurstGate,
-    _rf_arm: Output<'static>,
+    mut rf_arm: Output<'static>,
     mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
 ) {
-    // `_rf_arm` is owned here for the life of the loop (a reset drops it low; an external
-    // pull-down keeps the amplifier disarmed while the pin is unconfigured).
+    // `rf_arm` is owned here for the life of the loop (a reset drops it low; an external
+    // pull-down keeps the amplifier disarmed while the pin is unconfigured); it goes low only
+    // while a save holds RF off.
+    let mut held: Option<store::Timeout> = None;
     let mut watchdog = Ticker::every(WATCHDOG_PERIOD);
     let mut next_log = Instant::now().as_micros() + TELEMETRY_PERIOD_US;
     let mut tap = link::StreamTap::new();
@@ -299,8 +323,22 @@ async fn control(
                 }
             }
         }
-        // Between samples: a scene compiled by the link, a counters request.
-        link::service(&mut ctrl);
+        // Between samples: a scene compiled by the link, a counters request, a save's hold.
+        if let Some(quiet) = link::service(&mut ctrl) {
+            if quiet {
+                // RF off at the amplifier before the flash can stall us, then a watchdog long
+                // enough for an erase; the gate keeps following the controller, so bursts
+                // resume in step when the arm comes back.
+                rf_arm.set_low();
+                held = Some(store::lengthen_watchdog());
+                info!("save: rf arm low, watchdog lengthened");
+            } else if let Some(t) = held.take() {
+                store::restore_watchdog(t);
+                rf_arm.set_high();
+                info!("save: done, watchdog restored, rf arm high");
+            }
+            link::quieted();
+        }
         // A completed iteration is a live control loop.
         wdg.pet();
         // Checked on both branches so a busy sample queue cannot starve the log.

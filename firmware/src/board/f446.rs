@@ -15,7 +15,7 @@ use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::{Ch1, Ch3};
 use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
-use embassy_stm32::{bind_interrupts, dma, peripherals, Config, Peri, Peripherals};
+use embassy_stm32::{bind_interrupts, dma, flash, peripherals, Config, Peri, Peripherals};
 use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, PllOut};
 use static_cell::StaticCell;
@@ -96,7 +96,17 @@ bind_interrupts!(struct Irqs {
     USART2 => usart::InterruptHandler<peripherals::USART2>;
     DMA1_STREAM6 => dma::InterruptHandler<peripherals::DMA1_CH6>;
     DMA1_STREAM5 => dma::InterruptHandler<peripherals::DMA1_CH5>;
+    FLASH => flash::InterruptHandler;
 });
+
+/// The saved scene's flash: embassy's region 3 of bank 1 (sectors 5–7, 128 KiB each, RM0390
+/// §3.3 table 4); the store uses sectors 6–7 (`BOARD.store`), addressed from the region's start.
+pub type StoreFlash = flash::Bank1Region3<'static, flash::Async>;
+
+fn store_flash(p: Peri<'static, peripherals::FLASH>) -> Option<StoreFlash> {
+    const _: () = assert!(BOARD.store.region_base == 0x0802_0000);
+    Some(flash::Flash::new(p, Irqs).into_regions().bank1_region3)
+}
 
 /// The link's receive ring: 1 KiB is 11 ms of bytes at 921 600 baud, longer than the link task
 /// ever waits (a scene's compile), so a request is never overrun.
@@ -113,6 +123,8 @@ pub struct Parts {
     pub rf_arm: Output<'static>,
     pub sampler: Sampler,
     pub iwdg: Peri<'static, peripherals::IWDG>,
+    /// The saved scene's flash (None: this board has no usable store).
+    pub store: Option<StoreFlash>,
     /// The host link's transmitter.
     pub link_tx: UartTx<'static, Async>,
     /// The host link's receiver, DMA into a ring buffer.
@@ -147,6 +159,7 @@ pub fn split(p: Peripherals) -> Parts {
         rf_arm,
         sampler,
         iwdg: p.IWDG,
+        store: store_flash(p.FLASH),
         link_tx,
         link_rx,
     }

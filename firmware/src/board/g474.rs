@@ -13,7 +13,7 @@ use embassy_stm32::timer::low_level::MasterMode;
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::{Ch1, Ch3};
-use embassy_stm32::{bind_interrupts, dma, peripherals, Config, Peri, Peripherals};
+use embassy_stm32::{bind_interrupts, dma, flash, peripherals, Config, Peri, Peripherals};
 use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, Oversampling, PllOut};
 use static_cell::StaticCell;
@@ -78,7 +78,24 @@ pub fn freeze_watchdog_if_debugged() {
 
 bind_interrupts!(struct Irqs {
     DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+    FLASH => flash::InterruptHandler;
 });
+
+/// The saved scene's flash: embassy's bank 2 region (dual-bank mode: 128 pages of 2 KiB from
+/// 0x0804_0000, RM0440 §5.3.1); the store uses its last 8 pages (`BOARD.store`).
+pub type StoreFlash = flash::Bank2Region<'static, flash::Async>;
+
+/// Only in dual-bank mode (FLASH_OPTR.DBANK = 1, the factory setting; RM0440 §5.3.1). With
+/// DBANK = 0 there is no bank 2 (one bank of 4 KiB pages) and embassy's `dual-bank` driver would
+/// panic: the board then runs without a store and says so.
+fn store_flash(p: Peri<'static, peripherals::FLASH>) -> Option<StoreFlash> {
+    const _: () = assert!(BOARD.store.region_base == 0x0804_0000);
+    if !pac::FLASH.optr().read().dbank() {
+        defmt::warn!("store: the flash is in single-bank mode (FLASH_OPTR.DBANK = 0); no store");
+        return None;
+    }
+    Some(flash::Flash::new(p, Irqs).into_regions().bank2_region)
+}
 
 /// Peripherals bound to their roles.
 pub struct Parts {
@@ -90,6 +107,8 @@ pub struct Parts {
     pub rf_arm: Output<'static>,
     pub sampler: Sampler,
     pub iwdg: Peri<'static, peripherals::IWDG>,
+    /// The saved scene's flash (None: this board has no usable store).
+    pub store: Option<StoreFlash>,
 }
 
 pub fn split(p: Peripherals) -> Parts {
@@ -101,7 +120,8 @@ pub fn split(p: Peripherals) -> Parts {
     // PB10: TIM2_CH3 AF1 (second RF enable, IDT B).
     let burst_b_pin = PwmPin::new(p.PB10, OutputType::PushPull);
     let sampler = Sampler::new(p.ADC1, p.PA1, p.DMA1_CH1, p.TIM3);
-    Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, burst_b_pin, rf_arm, sampler, iwdg: p.IWDG }
+    let store = store_flash(p.FLASH);
+    Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, burst_b_pin, rf_arm, sampler, iwdg: p.IWDG, store }
 }
 
 /// Sampling time against the rheostat's source impedance. No rheostat value is stated in
