@@ -297,11 +297,14 @@ pub struct StoreLayout {
     pub bytes: u32,
     /// The erase unit, bytes (the F446's sector, the G474's page).
     pub erase_bytes: u32,
+    /// The programming unit, bytes: embassy's `WRITE_SIZE` (the F446's ×32 word, the G474's
+    /// double word).
+    pub write_bytes: u32,
     /// Base of the embassy flash region the store is addressed in (its offsets count from here).
     pub region_base: u32,
     /// Whether the CPU keeps fetching from flash while the store is erased or written: true only
-    /// when the store is in the other bank of a dual-bank flash (read-while-write, RM0440 §3.3.9);
-    /// a single-bank erase stalls every fetch until it ends (RM0390 §3.5.3).
+    /// when the store is in the other bank of a dual-bank flash (read-while-write, RM0440 §5.3);
+    /// a single-bank erase stalls every fetch until it ends (RM0390 §3.5).
     pub read_while_write: bool,
 }
 

@@ -134,6 +134,7 @@ pub const NUCLEO_F446RE: BoardDef = BoardDef {
         origin: 0x0804_0000,
         bytes: 256 * 1024,
         erase_bytes: 128 * 1024,
+        write_bytes: 4,
         // embassy's Bank1Region3: sectors 5–7.
         region_base: 0x0802_0000,
         read_while_write: false,

@@ -125,12 +125,13 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
     flash_bytes: 128 * 1024,
     chip_flash_bytes: 512 * 1024,
     // The last 8 pages of bank 2 (2 KiB pages in dual-bank mode, DBANK = 1, the factory setting:
-    // RM0440 §3.3.1 and §3.4.1 FLASH_OPTR). Erasing or writing bank 2 leaves bank 1 readable
-    // (read-while-write, RM0440 §3.3.8): the firmware keeps running from bank 1 while it saves.
+    // RM0440 §5.3.1; FLASH_OPTR in §5.7). Erasing or writing bank 2 leaves bank 1 readable
+    // (read-while-write, RM0440 §5.3): the firmware keeps running from bank 1 while it saves.
     store: crate::StoreLayout {
         origin: 0x0807_C000,
         bytes: 16 * 1024,
         erase_bytes: 2 * 1024,
+        write_bytes: 8,
         // embassy's Bank2Region (feature `dual-bank`): all of bank 2.
         region_base: 0x0804_0000,
         read_while_write: true,

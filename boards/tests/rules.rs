@@ -1278,7 +1278,7 @@ fn memory_matches_each_boards_linker_script() {
 /// flash and past everything the image may link into (`flash_bytes`, the linker's FLASH region),
 /// and addressable in its embassy region. The F446's units are its sectors (RM0390 §3.3 table 4:
 /// 4 × 16 KiB, 64 KiB, then 128 KiB each); the G474's store must be in bank 2 (from
-/// 0x0804_0000 in dual-bank mode, RM0440 §3.3.1) for the CPU to run on while it is written.
+/// 0x0804_0000 in dual-bank mode, RM0440 §5.3.1) for the CPU to run on while it is written.
 #[test]
 fn each_store_is_whole_erase_units_the_image_never_reaches() {
     for b in saw_boards::ALL {

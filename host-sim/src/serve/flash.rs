@@ -13,8 +13,8 @@ use saw_store::{Saved, SceneStore};
 
 use super::board::Persist;
 
-/// The store's geometry on a board: erase unit and count (boards/: the F446's sectors 6–7 are
-/// two 128 KiB sectors; the G474's store is four 2 KiB pages).
+/// The store's geometry on a board (`saw_boards::StoreLayout`: the F446's sectors 6–7, the
+/// G474's last 8 pages of bank 2).
 #[derive(Clone, Copy, Debug)]
 pub struct Geometry {
     /// Erase unit, bytes.
@@ -27,18 +27,11 @@ pub struct Geometry {
 
 /// The store's geometry for `board`.
 pub fn geometry(board: &saw_boards::BoardDef) -> Geometry {
-    if board.name.contains("g474") {
-        Geometry {
-            erase_bytes: 2048,
-            units: 4,
-            write_bytes: 8,
-        }
-    } else {
-        Geometry {
-            erase_bytes: 128 * 1024,
-            units: 2,
-            write_bytes: 4,
-        }
+    let s = board.store;
+    Geometry {
+        erase_bytes: s.erase_bytes,
+        units: s.bytes / s.erase_bytes,
+        write_bytes: s.write_bytes,
     }
 }
 
@@ -190,6 +183,10 @@ pub fn open(path: &Path, board: &saw_boards::BoardDef) -> Result<Box<dyn Persist
     }
     match (g.write_bytes, g.erase_bytes) {
         (8, 2048) => make::<8, 2048>(path, g.units),
-        _ => make::<4, { 128 * 1024 }>(path, g.units),
+        (4, 0x2_0000) => make::<4, 0x2_0000>(path, g.units),
+        (w, e) => Err(format!(
+            "{}: no virtual flash for {w}-byte writes and {e}-byte erase units",
+            board.name
+        )),
     }
 }
