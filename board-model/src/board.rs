@@ -284,6 +284,7 @@ fn f446(input: Input) -> (Vec<Mapped>, ChipSpec) {
             let f = p.as_any().downcast_ref::<misc::FlashF4>().unwrap();
             (f.art_enabled(), f.wait_states())
         },
+        flash_prog: |p| &mut p.as_any_mut().downcast_mut::<misc::FlashF4>().unwrap().prog,
         pin_mode,
         // UM1724 §6.11 / RM0390 table 11 (AF map, DS10693): PA0 AF1 = TIM2_CH1, PB10 AF1 =
         // TIM2_CH3, PA8 AF1 = TIM1_CH1, PB5 = RF arm (GPIO output).
@@ -382,6 +383,7 @@ fn g474(input: Input) -> (Vec<Mapped>, ChipSpec) {
             let f = p.as_any().downcast_ref::<misc::FlashG4>().unwrap();
             (f.art_enabled(), f.wait_states())
         },
+        flash_prog: |p| &mut p.as_any_mut().downcast_mut::<misc::FlashG4>().unwrap().prog,
         pin_mode,
         // UM2505 / DS12288 AF map: PA0 AF1 = TIM2_CH1, PB10 AF1 = TIM2_CH3, PA8 AF6 = TIM1_CH1.
         pins: vec![

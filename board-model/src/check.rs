@@ -595,8 +595,15 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     use saw_link::msg::{Header, LinkError, Reply, Request, PROTOCOL_VERSION};
     let frame_of = |seq: u32, req: &Request| -> Vec<u8> {
         let mut out = vec![0u8; MAX_ENCODED + 1];
-        let n = frame::encode(&Header { version: PROTOCOL_VERSION, seq }, req, &mut out[1..])
-            .expect("a request frames");
+        let n = frame::encode(
+            &Header {
+                version: PROTOCOL_VERSION,
+                seq,
+            },
+            req,
+            &mut out[1..],
+        )
+        .expect("a request frames");
         out.truncate(n + 1);
         out
     };
@@ -605,7 +612,16 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     let mut opts = Options::new(board, elf, 0.62);
     opts.link_input = vec![
         (0.20, frame_of(1, &Request::Hello)),
-        (0.25, frame_of(2, &Request::MoveBoundary { index: 0, at_um: 30_000 })),
+        (
+            0.25,
+            frame_of(
+                2,
+                &Request::MoveBoundary {
+                    index: 0,
+                    at_um: 30_000,
+                },
+            ),
+        ),
         (0.30, flipped),
         (0.35, frame_of(4, &Request::Counters { reset: false })),
         (0.40, frame_of(5, &Request::Stream { every_samples: 10 })),
@@ -616,7 +632,11 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     let (o, m) = run::run(&opts)?;
     let mut out = Vec::new();
     if let Some(s) = &o.stop {
-        out.push(check("link: runs to the end", false, format!("stopped: {s}")));
+        out.push(check(
+            "link: runs to the end",
+            false,
+            format!("stopped: {s}"),
+        ));
         return Ok(out);
     }
     // The answers, each with the time its last byte left.
@@ -666,13 +686,17 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
             rtt_ms.map_or("—".into(), |r| format!("{r:.3} ms")),
         ),
     ));
-    let refused = replies
-        .iter()
-        .find(|(_, h, r)| h.seq == 0 && matches!(r, Reply::Error(LinkError::Crc { .. } | LinkError::Cobs)));
+    let refused = replies.iter().find(|(_, h, r)| {
+        h.seq == 0 && matches!(r, Reply::Error(LinkError::Crc { .. } | LinkError::Cobs))
+    });
     out.push(check(
         "link: a flipped bit is refused, the next request answered",
         refused.is_some() && answer(3).is_none() && answer(4).is_some(),
-        format!("refusal: {:?}; answer to the corrupted Save: {:?}", refused.map(|r| &r.2), answer(3).map(|a| a.2)),
+        format!(
+            "refusal: {:?}; answer to the corrupted Save: {:?}",
+            refused.map(|r| &r.2),
+            answer(3).map(|a| a.2)
+        ),
     ));
     out.push(check(
         "link: counters",
@@ -695,7 +719,10 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         // same board time (the wiper model's origin is the first conversion, `t0`).
         let at = r.time_us as u64 * (TICKS_PER_S / 1_000_000);
         let rel = at.saturating_sub(t0);
-        let truth = opts.trajectory.state(rel as f64 / TICKS_PER_S as f64).position_um;
+        let truth = opts
+            .trajectory
+            .state(rel as f64 / TICKS_PER_S as f64)
+            .position_um;
         if let Some(p) = r.position_um {
             worst_um = worst_um.max((p as f64 - truth).abs());
         }
@@ -709,5 +736,191 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         ),
     ));
     let _ = m;
+    Ok(out)
+}
+
+/// Saving a scene on the board (issue #13), from a store that earlier saves have filled up to
+/// the point where the next save must erase a unit (`store_image::before_an_erase`): the board
+/// boots into the last of them and says so; a boundary moved live is saved over the link — the
+/// erase and every write happen with the RF arm low, and the watchdog (lengthened for the F446's
+/// second-long sector erase, which stalls every fetch) does not reset the chip; after the save the
+/// watchdog bites at its own 50 ms again (a stuck interrupt at 1.9 s must reset the chip within
+/// 60 ms), and the board comes back up in the scene just saved.
+pub fn save(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
+    // The save starts at 0.3 s and lasts 1.2 s on the F446 (a 1 s erase and the migration).
+    const STUCK_S: f64 = 1.9;
+    use saw_link::frame::{self, Receiver, MAX_ENCODED};
+    use saw_link::msg::{Header, Reply, Request, SceneSource, PROTOCOL_VERSION};
+    let def = board.def();
+    let scene = |i: usize| {
+        saw_core::default_config()
+            .with_boundary(0, 25_000 + (i as u32 % 50) * 100)
+            .expect("a boundary between 25 and 30 mm is valid in the default scene")
+    };
+    let (image, last, saves) = crate::store_image::before_an_erase(def, scene)?;
+    let frame_of = |seq: u32, req: &Request| -> Vec<u8> {
+        let mut out = vec![0u8; MAX_ENCODED + 1];
+        let n = frame::encode(
+            &Header {
+                version: PROTOCOL_VERSION,
+                seq,
+            },
+            req,
+            &mut out[1..],
+        )
+        .expect("a request frames");
+        out.truncate(n + 1);
+        out
+    };
+    let mut opts = Options::new(board, elf, 2.5);
+    opts.flash_preload = vec![(def.store.origin, image)];
+    opts.link_input = vec![
+        (0.20, frame_of(1, &Request::Hello)),
+        (
+            0.25,
+            frame_of(
+                2,
+                &Request::MoveBoundary {
+                    index: 0,
+                    at_um: 30_000,
+                },
+            ),
+        ),
+        (0.30, frame_of(3, &Request::Save)),
+        (2.35, frame_of(4, &Request::Hello)),
+    ];
+    opts.stuck_irq = Some((
+        STUCK_S,
+        match board {
+            BoardKind::F446 => 56,
+            BoardKind::G474 => 11,
+        },
+    ));
+    opts.stuck_for_s = Some(0.1);
+    let at = |s: f64| (s * TICKS_PER_S as f64) as Time;
+    let (o, m) = run::run(&opts)?;
+    let mut out = Vec::new();
+    if let Some(s) = &o.stop {
+        out.push(check(
+            "save: runs to the end",
+            false,
+            format!("stopped: {s}"),
+        ));
+        return Ok(out);
+    }
+    let mut rx = Receiver::<MAX_ENCODED>::default();
+    let mut replies: Vec<(Time, u32, Reply)> = Vec::new();
+    for &(t, b) in &o.link_output {
+        if let Some(Ok(n)) = rx.push(b) {
+            if let Ok((h, r)) = frame::message::<Reply>(rx.payload(n)) {
+                replies.push((t, h.seq, r));
+            }
+        }
+    }
+    let answer = |seq: u32| replies.iter().find(|r| r.1 == seq).cloned();
+    let hello = |seq: u32| match answer(seq) {
+        Some((_, _, Reply::Hello(h))) => Some((h.scene_id, h.scene_source)),
+        _ => None,
+    };
+    let boot_line = |id: u32| format!("boot: the scene saved in flash (id {id:08x})");
+    out.push(check(
+        "save: boots into the saved scene",
+        hello(1) == Some((last.scene_id, SceneSource::Saved))
+            && o.log.iter().any(|l| l.text == boot_line(last.scene_id)),
+        format!(
+            "a store holding {saves} earlier saves, the last scene {:#010x}: hello says {:?}; log {}",
+            last.scene_id,
+            hello(1),
+            if o.log.iter().any(|l| l.text == boot_line(last.scene_id)) { "names it" } else { "does not name it" }
+        ),
+    ));
+    let moved = saw_core::default_config()
+        .with_boundary(0, 30_000)
+        .map_err(|e| e.to_string())?;
+    let moved_id = saw_link::scene_id(&moved);
+    let saved = answer(3);
+    out.push(check(
+        "save: answered Saved",
+        matches!(saved, Some((_, _, Reply::Saved { scene_id })) if scene_id == moved_id),
+        format!(
+            "{:?} {} after the request",
+            saved.as_ref().map(|a| &a.2),
+            saved.as_ref().map_or("—".into(), |a| format!(
+                "{:.1} ms",
+                (a.0 as f64 - at(0.30) as f64) * 1e3 / TICKS_PER_S as f64
+            ))
+        ),
+    ));
+    // Every flash operation of the save, with the arm line's level.
+    let fi = m.sim().chip.flash_if;
+    let ops: Vec<_> = {
+        let periph = m.sim().periphs[fi].p.as_any();
+        match board {
+            BoardKind::F446 => periph
+                .downcast_ref::<crate::periph::misc::FlashF4>()
+                .map(|f| crate::periph::flash_prog::FlashControl::operations(&f.prog).to_vec()),
+            BoardKind::G474 => periph
+                .downcast_ref::<crate::periph::misc::FlashG4>()
+                .map(|f| crate::periph::flash_prog::FlashControl::operations(&f.prog).to_vec()),
+        }
+        .unwrap_or_default()
+    };
+    let erases: Vec<_> = ops.iter().filter(|o| o.erase).collect();
+    let arm = &o.pins[PIN_RF_ARM];
+    let armed_during = ops
+        .iter()
+        .filter(|op| high_within(arm, op.start, op.end))
+        .count();
+    let (first, last_end) = (
+        ops.first().map(|o| o.start),
+        ops.iter().map(|o| o.end).max(),
+    );
+    out.push(check(
+        "save: RF arm low through every flash operation",
+        !ops.is_empty() && !erases.is_empty() && armed_during == 0,
+        format!(
+            "{} operations ({} erases of {}) from {} to {}; the arm high during {armed_during} of them; the core waited {:.3} s for the flash",
+            ops.len(),
+            erases.len(),
+            erases.first().map_or("—".into(), |e| format!("0x{:08X}", e.addr)),
+            first.map_or("—".into(), |t| format!("{:.4} s", t as f64 / TICKS_PER_S as f64)),
+            last_end.map_or("—".into(), |t| format!("{:.4} s", t as f64 / TICKS_PER_S as f64)),
+            m.sim().flash_stalled_ticks as f64 / TICKS_PER_S as f64,
+        ),
+    ));
+    let resets: Vec<_> = o
+        .resets
+        .iter()
+        .map(|r| (r.0 as f64 / TICKS_PER_S as f64, r.1))
+        .collect();
+    let during_save = o.resets.iter().filter(|r| r.0 < at(STUCK_S)).count();
+    let bite = o
+        .resets
+        .iter()
+        .find(|r| r.0 >= at(STUCK_S) && r.1 == ResetCause::IndependentWatchdog)
+        .map(|r| (r.0 - at(STUCK_S)) as f64 * 1e3 / TICKS_PER_S as f64);
+    out.push(check(
+        "save: the watchdog does not bite during the save, and bites at 50 ms after it",
+        during_save == 0 && bite.is_some_and(|ms| ms <= 60.0),
+        format!(
+            "resets {resets:?}; the stuck interrupt at {STUCK_S} s reset the chip after {}",
+            bite.map_or("never (by the end of the run)".into(), |ms| format!(
+                "{ms:.1} ms"
+            ))
+        ),
+    ));
+    let boots = o
+        .log
+        .iter()
+        .filter(|l| l.text == boot_line(moved_id))
+        .count();
+    out.push(check(
+        "save: after a reset the board runs the scene just saved",
+        hello(4) == Some((moved_id, SceneSource::Saved)) && boots == 1,
+        format!(
+            "hello says {:?} (want {moved_id:#010x}, Saved); boot lines naming it: {boots}",
+            hello(4)
+        ),
+    ));
     Ok(out)
 }

@@ -10,3 +10,4 @@ pub mod machine;
 pub mod periph;
 pub mod run;
 pub mod scs;
+pub mod store_image;

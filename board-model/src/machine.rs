@@ -9,6 +9,7 @@
 //! within one translated block (a few instructions) of the moment its flag rises.
 
 use crate::elf::{thumb_instructions, Image};
+use crate::periph::flash_prog::FlashControl;
 use crate::periph::{
     micros, ticks_per_cycle, ChannelLevel, Clocks, Peripheral, ResetCause, Signals, Time,
     Unmodelled, TICKS_PER_S,
@@ -46,6 +47,8 @@ pub struct ChipSpec {
     /// Index of the FLASH interface and how to read (ART/caches on, wait states).
     pub flash_if: usize,
     pub flash_timing: fn(&dyn Peripheral) -> (bool, u32),
+    /// The flash interface's programming side (keys, program, erase, busy banks).
+    pub flash_prog: fn(&mut dyn Peripheral) -> &mut crate::periph::flash_prog::Prog,
     /// How to read a GPIO port's pin mode.
     pub pin_mode: fn(&dyn Peripheral, u8) -> PinMode,
     /// Pins whose level is recorded.
@@ -161,6 +164,11 @@ pub struct Sim {
     pub core: CoreState,
     /// A BKPT executed with no debugger attached: escalates to HardFault.
     bkpt_escalate: bool,
+    /// Flash cells a store programmed in this slice, written again when the slice ends
+    /// (address, bytes): Unicorn may complete the store itself after the hook.
+    flash_fixups: Vec<(u32, Vec<u8>)>,
+    /// Time the core spent waiting for the flash (fetches from a bank being written or erased).
+    pub flash_stalled_ticks: Time,
     /// Lockups: time and PC.
     pub lockups: Vec<(Time, u32)>,
 }
@@ -391,7 +399,10 @@ impl Sim {
         let u = self
             .periphs
             .iter_mut()
-            .find_map(|m| m.p.as_any_mut().downcast_mut::<crate::periph::usart_f4::UsartF4>())
+            .find_map(|m| {
+                m.p.as_any_mut()
+                    .downcast_mut::<crate::periph::usart_f4::UsartF4>()
+            })
             .ok_or("this board's link UART is not modelled")?;
         u.send(at, bytes);
         self.replan = true;
@@ -402,7 +413,10 @@ impl Sim {
     pub fn uart_output(&self) -> Vec<(Time, u8)> {
         self.periphs
             .iter()
-            .find_map(|m| m.p.as_any().downcast_ref::<crate::periph::usart_f4::UsartF4>())
+            .find_map(|m| {
+                m.p.as_any()
+                    .downcast_ref::<crate::periph::usart_f4::UsartF4>()
+            })
             .map(|u| u.output().to_vec())
             .unwrap_or_default()
     }
@@ -616,6 +630,8 @@ impl Machine {
             unclocked: Vec::new(),
             core: CoreState::Running,
             bkpt_escalate: false,
+            flash_fixups: Vec::new(),
+            flash_stalled_ticks: 0,
             lockups: Vec::new(),
         };
         let mut uc =
@@ -630,6 +646,55 @@ impl Machine {
         .map_err(uc_err)?;
         uc.mem_write(flash_base as u64, &flash_image)
             .map_err(uc_err)?;
+        // A store to flash is a program operation of the flash interface (`flash_prog`): the
+        // model decides what the cells hold afterwards (old AND new on the F446, a double word
+        // into erased cells on the G474, nothing on an error) and the slice ends so a busy
+        // flash can stall the core.
+        uc.add_mem_hook(
+            unicorn_engine::unicorn_const::HookType::MEM_WRITE_PROT,
+            flash_base as u64,
+            (flash_base + flash_size - 1) as u64,
+            |uc: &mut Unicorn<'_, Sim>,
+             _kind: unicorn_engine::unicorn_const::MemType,
+             addr: u64,
+             size: usize,
+             value: i64| {
+                let mut old = [0u8; 4];
+                let n = size.min(4);
+                let _ = uc.mem_read(addr, &mut old[..n]);
+                let s = uc.get_data_mut();
+                let now = s.now;
+                let fi = s.chip.flash_if;
+                let prog = (s.chip.flash_prog)(&mut *s.periphs[fi].p);
+                match prog.store(
+                    now,
+                    addr as u32,
+                    n as u8,
+                    value as u32,
+                    u32::from_le_bytes(old),
+                ) {
+                    Ok(new) => {
+                        let bytes = new.to_le_bytes()[..n].to_vec();
+                        let _ = uc.mem_write(addr, &bytes);
+                        let s = uc.get_data_mut();
+                        s.flash_fixups.push((addr as u32, bytes));
+                        // The slice ends at the next block (never inside this one: see the block
+                        // hook), where a busy flash can stall the core.
+                        s.replan = true;
+                        true
+                    }
+                    Err(why) => {
+                        let s = uc.get_data_mut();
+                        s.stop.get_or_insert(Stop::Fault(format!(
+                            "{why} (t = {} µs)",
+                            micros(s.now)
+                        )));
+                        false
+                    }
+                }
+            },
+        )
+        .map_err(uc_err)?;
         let ram = uc.get_data().chip.ram.clone();
         for (b, s) in ram {
             uc.mem_map(b as u64, s as u64, Prot::ALL).map_err(uc_err)?;
@@ -924,6 +989,32 @@ impl Machine {
         self.reset_core()
     }
 
+    /// NRST pressed now (the reset button): a system reset; flash keeps what was written.
+    pub fn reset_pin(&mut self) -> Option<Stop> {
+        self.system_reset(ResetCause::Pin).err().map(Stop::Fault)
+    }
+
+    /// Writes `bytes` into flash at `addr` before a run, as a probe would have programmed them.
+    pub fn preload_flash(&mut self, addr: u32, bytes: &[u8]) -> Result<(), String> {
+        let (base, size) = self.uc.get_data().chip.flash;
+        if addr < base || (addr - base) as usize + bytes.len() > size as usize {
+            return Err(format!(
+                "flash preload at 0x{addr:08X} ({} B) is outside flash",
+                bytes.len()
+            ));
+        }
+        self.uc
+            .mem_write(addr as u64, bytes)
+            .map_err(|e| format!("{e:?}"))
+    }
+
+    /// Reads flash (or any mapped memory) as the machine has it now.
+    pub fn read_memory(&self, addr: u32, len: usize) -> Result<Vec<u8>, String> {
+        self.uc
+            .mem_read_as_vec(addr as u64, len)
+            .map_err(|e| format!("{e:?}"))
+    }
+
     /// Virtual time now.
     pub fn now(&self) -> Time {
         self.uc.get_data().now
@@ -948,6 +1039,13 @@ impl Machine {
                 if let Err(e) = self.idle_until(until) {
                     return Some(Stop::Fault(e));
                 }
+                continue;
+            }
+            // A fetch from a bank being written or erased waits for the operation, and so does
+            // an exception's vector fetch: nothing runs until the flash is free.
+            let pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
+            if let Some(t) = self.flash_stall(pc) {
+                self.stall_until(t.min(until));
                 continue;
             }
             if let Err(e) = self.take_exceptions() {
@@ -1232,7 +1330,49 @@ impl Machine {
     }
 
     /// Carries out DMA transfers that touch RAM.
+    /// Until when a fetch from `pc` waits for the flash.
+    fn flash_stall(&mut self, pc: u32) -> Option<Time> {
+        let s = self.uc.get_data_mut();
+        let (now, fi) = (s.now, s.chip.flash_if);
+        let prog = (s.chip.flash_prog)(&mut *s.periphs[fi].p);
+        prog.stall_until(now, pc)
+    }
+
+    /// The core waits for the flash until `t`; peripherals run on.
+    fn stall_until(&mut self, t: Time) {
+        let s = self.uc.get_data_mut();
+        let next = s.periphs.iter().filter_map(|m| m.p.next_event()).min();
+        let t = next.unwrap_or(t).min(t).max(s.now + 1);
+        s.flash_stalled_ticks += t - s.now;
+        s.now = t;
+        s.advance_periphs(t);
+        self.copy_dma();
+        self.drain_rtt();
+        if let Some(cause) = self.uc.get_data_mut().pending_reset.take() {
+            if let Err(e) = self.system_reset(cause) {
+                self.uc.get_data_mut().stop.get_or_insert(Stop::Fault(e));
+            }
+        }
+    }
+
+    /// Programmed cells written again (see `flash_fixups`), erased ranges filled with 0xFF.
+    fn apply_flash(&mut self) {
+        let s = self.uc.get_data_mut();
+        let fixups = std::mem::take(&mut s.flash_fixups);
+        let fi = s.chip.flash_if;
+        let erases = crate::periph::flash_prog::FlashControl::take_erases((s.chip.flash_prog)(
+            &mut *s.periphs[fi].p,
+        ));
+        for (addr, bytes) in fixups {
+            let _ = self.uc.mem_write(addr as u64, &bytes);
+        }
+        for (addr, len) in erases {
+            let _ = self.uc.mem_write(addr as u64, &vec![0xFF; len as usize]);
+        }
+    }
+
     fn copy_dma(&mut self) {
+        self.apply_flash();
         loop {
             let copies = std::mem::take(&mut self.uc.get_data_mut().ram_copies);
             if copies.is_empty() {

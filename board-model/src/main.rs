@@ -107,6 +107,7 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
             // The host link, where its UART is modelled (the F446's USART2).
             if kind == BoardKind::F446 && check::image_has_link(&elf) {
                 rep.extend(check::link(kind, &elf)?);
+                rep.extend(check::save(kind, &elf)?);
             }
             rep.wall_s = started.elapsed().as_secs_f64();
             let text = serde_json::to_string_pretty(&rep).map_err(|e| e.to_string())?;

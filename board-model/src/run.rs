@@ -37,6 +37,11 @@ pub struct Options {
     pub force_panic_s: Option<f64>,
     /// Bytes the host sends on the link UART, each batch from its virtual time (s) on.
     pub link_input: Vec<(f64, Vec<u8>)>,
+    /// At this virtual time (s), NRST is pulled low (the reset button): the firmware boots again
+    /// from the flash as it is then.
+    pub reset_pin_s: Option<f64>,
+    /// Flash contents written before the run (address, bytes): a store left by earlier saves.
+    pub flash_preload: Vec<(u32, Vec<u8>)>,
 }
 
 impl Options {
@@ -59,6 +64,8 @@ impl Options {
             carrier_window_s: None,
             force_panic_s: None,
             link_input: Vec::new(),
+            reset_pin_s: None,
+            flash_preload: Vec::new(),
         }
     }
 }
@@ -129,6 +136,9 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
         }
     });
     let mut m = board::build(opts.board, &opts.elf, wiper)?;
+    for (addr, bytes) in &opts.flash_preload {
+        m.preload_flash(*addr, bytes)?;
+    }
     m.sim_mut().scs.debugger_attached = opts.debugger;
     let end = (opts.duration_s * TICKS_PER_S as f64) as Time;
     // Scheduled interventions, in time order: (time, what).
@@ -146,6 +156,9 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
     }
     if let Some(s) = opts.force_panic_s {
         plan.push((at(s), 3));
+    }
+    if let Some(s) = opts.reset_pin_s {
+        plan.push((at(s), 5));
     }
     for (i, (s, _)) in opts.link_input.iter().enumerate() {
         plan.push((at(*s), 10 + i as u8));
@@ -168,6 +181,12 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
                 m.sim_mut().stuck_irqs.push(irq);
             }
             4 => m.sim_mut().stuck_irqs.clear(),
+            5 => {
+                stop = m.reset_pin();
+                if stop.is_some() {
+                    break;
+                }
+            }
             n if n >= 10 => {
                 let bytes = &opts.link_input[(n - 10) as usize].1;
                 let now = m.now();

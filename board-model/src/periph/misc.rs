@@ -18,6 +18,7 @@
 //! every access is `Unmodelled`: init only enables/resets SYSCFG through the RCC and enables the
 //! EXTI interrupts in the NVIC; no register of either block is read or written.
 
+use super::flash_prog::{Kind, Prog, FLASH_IRQ};
 use super::gpio::Chip;
 use super::{merge, Peripheral, Signals, Time, Unmodelled};
 use std::any::Any;
@@ -79,6 +80,8 @@ fn acr_cache_reset_check(
 pub struct FlashF4 {
     acr: u32,
     history: Vec<AcrWrite>,
+    /// Keys, CR/SR, program and erase (`flash_prog`).
+    pub prog: Prog,
 }
 
 impl Default for FlashF4 {
@@ -95,6 +98,7 @@ impl FlashF4 {
         FlashF4 {
             acr: Self::ACR_RESET,
             history: Vec::new(),
+            prog: Prog::new(Kind::F446),
         }
     }
 
@@ -133,6 +137,7 @@ impl Peripheral for FlashF4 {
     fn read(&mut self, _now: Time, offset: u32, _out: &mut Signals) -> Result<u32, Unmodelled> {
         match offset {
             0x00 => Ok(self.acr),
+            _ if self.prog.read(offset).is_some() => Ok(self.prog.read(offset).unwrap_or(0)),
             _ => Err(Unmodelled::read(
                 offset,
                 format!(
@@ -148,7 +153,7 @@ impl Peripheral for FlashF4 {
         offset: u32,
         value: u32,
         mask: u32,
-        _out: &mut Signals,
+        out: &mut Signals,
     ) -> Result<(), Unmodelled> {
         match offset {
             0x00 => {
@@ -159,18 +164,38 @@ impl Peripheral for FlashF4 {
                 self.history.push((now, new));
                 Ok(())
             }
-            _ => Err(Unmodelled::write(
-                offset,
-                value,
-                format!(
-                    "F446 FLASH register at offset {offset:#x} (KEYR/OPTKEYR/SR/CR/OPTCR: programming) is not modelled"
-                ),
-            )),
+            _ => match self.prog.write(now, offset, value, mask) {
+                Ok(true) => {
+                    out.replan = true;
+                    Ok(())
+                }
+                Ok(false) => Err(Unmodelled::write(
+                    offset,
+                    value,
+                    format!("F446 FLASH register at offset {offset:#x} (OPTKEYR/OPTCR writes) is not modelled"),
+                )),
+                Err(why) => Err(Unmodelled::write(offset, value, why)),
+            },
+        }
+    }
+
+    fn advance(&mut self, now: Time, _out: &mut Signals) {
+        self.prog.advance(now);
+    }
+
+    fn next_event(&self) -> Option<Time> {
+        self.prog.next_event()
+    }
+
+    fn irq_lines(&self, raise: &mut dyn FnMut(u16)) {
+        if self.prog.irq_line() {
+            raise(FLASH_IRQ);
         }
     }
 
     fn reset(&mut self, _now: Time) {
         self.acr = Self::ACR_RESET;
+        self.prog.reset();
     }
 
     fn as_any(&self) -> &dyn Any {
@@ -229,6 +254,8 @@ pub fn g474_min_wait_states(hclk_hz: u64, range: G4Range) -> Option<u32> {
 pub struct FlashG4 {
     acr: u32,
     history: Vec<AcrWrite>,
+    /// Keys, CR/SR, program and erase (`flash_prog`).
+    pub prog: Prog,
 }
 
 impl Default for FlashG4 {
@@ -246,6 +273,7 @@ impl FlashG4 {
         FlashG4 {
             acr: Self::ACR_RESET,
             history: Vec::new(),
+            prog: Prog::new(Kind::G474),
         }
     }
 
@@ -281,6 +309,7 @@ impl Peripheral for FlashG4 {
     fn read(&mut self, _now: Time, offset: u32, _out: &mut Signals) -> Result<u32, Unmodelled> {
         match offset {
             0x00 => Ok(self.acr),
+            _ if self.prog.read(offset).is_some() => Ok(self.prog.read(offset).unwrap_or(0)),
             _ => Err(Unmodelled::read(
                 offset,
                 format!("G474 FLASH register at offset {offset:#x} (keys/SR/CR/ECC/option bytes) is not modelled"),
@@ -294,7 +323,7 @@ impl Peripheral for FlashG4 {
         offset: u32,
         value: u32,
         mask: u32,
-        _out: &mut Signals,
+        out: &mut Signals,
     ) -> Result<(), Unmodelled> {
         match offset {
             0x00 => {
@@ -314,11 +343,32 @@ impl Peripheral for FlashG4 {
                 self.history.push((now, new));
                 Ok(())
             }
-            _ => Err(Unmodelled::write(
-                offset,
-                value,
-                format!("G474 FLASH register at offset {offset:#x} (keys/SR/CR/ECC/option bytes) is not modelled"),
-            )),
+            _ => match self.prog.write(now, offset, value, mask) {
+                Ok(true) => {
+                    out.replan = true;
+                    Ok(())
+                }
+                Ok(false) => Err(Unmodelled::write(
+                    offset,
+                    value,
+                    format!("G474 FLASH register at offset {offset:#x} (ECC/option bytes/PCROP) is not modelled"),
+                )),
+                Err(why) => Err(Unmodelled::write(offset, value, why)),
+            },
+        }
+    }
+
+    fn advance(&mut self, now: Time, _out: &mut Signals) {
+        self.prog.advance(now);
+    }
+
+    fn next_event(&self) -> Option<Time> {
+        self.prog.next_event()
+    }
+
+    fn irq_lines(&self, raise: &mut dyn FnMut(u16)) {
+        if self.prog.irq_line() {
+            raise(FLASH_IRQ);
         }
     }
 
@@ -327,6 +377,7 @@ impl Peripheral for FlashG4 {
     /// flash it has no effect, so the RCC model does not ask for this reset.)
     fn reset(&mut self, _now: Time) {
         self.acr = Self::ACR_RESET;
+        self.prog.reset();
     }
 
     fn as_any(&self) -> &dyn Any {

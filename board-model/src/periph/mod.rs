@@ -12,6 +12,7 @@ pub mod adc_f4;
 pub mod adc_g4;
 pub mod dma_f4;
 pub mod dma_g4;
+pub mod flash_prog;
 pub mod gpio;
 pub mod iwdg;
 pub mod misc;
@@ -145,6 +146,9 @@ pub enum ResetCause {
     IndependentWatchdog,
     /// SCB AIRCR.SYSRESETREQ.
     Software,
+    /// NRST pulled low from outside: the Nucleo's reset button (B2) or the probe (UM1724 §6.5,
+    /// UM2505 §7.6). Flash keeps its contents; RAM is not cleared.
+    Pin,
 }
 
 /// A timer channel output level change (after CCxE/CCxP/MOE), for the GPIO pins to show.

@@ -389,6 +389,7 @@ impl RccF4 {
         self.csr_flags |= match cause {
             ResetCause::IndependentWatchdog => CSR_IWDGRSTF | CSR_PINRSTF,
             ResetCause::Software => CSR_SFTRSTF | CSR_PINRSTF,
+            ResetCause::Pin => CSR_PINRSTF,
         };
     }
 

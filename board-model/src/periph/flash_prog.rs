@@ -1,0 +1,556 @@
+//! The flash interface's programming side, for both chips: the unlock keys, FLASH_CR and
+//! FLASH_SR, program and erase operations with their durations, the busy time that stalls a
+//! fetch from the bank being written, and the end-of-operation interrupt. The memory itself is
+//! the machine's: the model says what a store leaves in a cell and which ranges an erase fills
+//! with 0xFF (`FlashControl`).
+//!
+//! F446 (RM0390 §3.5–§3.6 operations, §3.8 registers; the same interface as RM0090's F405/F429):
+//! - KEYR takes 0x4567_0123 then 0xCDEF_89AB to clear CR.LOCK; any other sequence is a bus error
+//!   that keeps CR locked until reset (§3.6.1): reported, as the firmware must never do it.
+//! - CR: PG, SER, MER, SNB[6:3], PSIZE[9:8], STRT, EOPIE, ERRIE, LOCK. Writes while locked are
+//!   ignored; a write while BSY stalls the bus until BSY clears (§3.6.1 note): reported.
+//! - Program: with PG set, a store whose size matches PSIZE (else PGPERR) and which does not
+//!   cross a 128-bit row (else PGAERR) programs the cell: bits only go 1 → 0 ("successive
+//!   writes are possible ... when changing bits from 1 to 0", §3.6.4), i.e. old AND new. A store
+//!   to flash without PG sets PGSERR and changes nothing (§3.8.4).
+//! - Erase: SER with SNB and STRT erases one sector; MER is not modelled.
+//! - SR: EOP (set at the end of an operation only when EOPIE = 1), OPERR, WRPERR, PGAERR,
+//!   PGPERR, PGSERR (all write 1 to clear), BSY. IRQ: FLASH global interrupt, position 4, when
+//!   EOP with EOPIE or an error with ERRIE.
+//! - Single bank: while BSY, every fetch from flash waits (§3.5: "any attempt to read the flash
+//!   memory ... while it is being written or erased causes the bus to stall").
+//!
+//! G474 (RM0440 §5.3 operations, §5.7 registers), dual-bank mode (DBANK = 1, the factory
+//! setting; FLASH_OPTR reads it):
+//! - KEYR as on the F446 (§5.3.5). CR: PG, PER, MER1, PNB[10:3], BKER (bit 11), STRT (bit 16),
+//!   EOPIE (24), ERRIE (25), LOCK (31).
+//! - Program: 64 bits at a time, two word stores to one 8-aligned double word, the first at
+//!   its lower address (§5.3.7); the operation starts with the second. A double word that is
+//!   not all ones is not programmed and sets PROGERR (the flash has ECC: §5.3.7).
+//!   A store to flash without PG sets PGSERR.
+//! - Erase: PER with PNB (page in its bank) and BKER (bank 2), STRT.
+//! - SR: EOP, OPERR, PROGERR, WRPERR, PGAERR, SIZERR, PGSERR, MISERR, FASTERR (w1c), BSY.
+//! - Read-while-write: an operation on one bank stalls fetches from that bank only (§5.3).
+//!
+//! Durations are the datasheets' typical figures, named here as the model's assumptions (a
+//! review against DS10693 / DS12288 is owed): F446 word program 16 µs, 128 KiB sector erase
+//! 1 s, 64 KiB 550 ms, 16 KiB 250 ms (×32 parallelism); G474 double-word program 82 µs, 2 KiB
+//! page erase 22 ms.
+
+use super::{Time, TICKS_PER_S};
+
+const KEY1: u32 = 0x4567_0123;
+const KEY2: u32 = 0xCDEF_89AB;
+
+pub const F4_KEYR: u32 = 0x04;
+pub const F4_SR: u32 = 0x0C;
+pub const F4_CR: u32 = 0x10;
+pub const F4_OPTCR: u32 = 0x14;
+
+pub const G4_KEYR: u32 = 0x08;
+pub const G4_SR: u32 = 0x10;
+pub const G4_CR: u32 = 0x14;
+pub const G4_OPTR: u32 = 0x20;
+
+const SR_EOP: u32 = 1 << 0;
+const SR_OPERR: u32 = 1 << 1;
+const SR_BSY: u32 = 1 << 16;
+// F4 errors (RM0390 §3.8.4).
+const F4_SR_ERRORS: u32 = 0xF2;
+const F4_PGAERR: u32 = 1 << 5;
+const F4_PGPERR: u32 = 1 << 6;
+const F4_PGSERR: u32 = 1 << 7;
+// G4 errors (RM0440 §5.7.5).
+const G4_SR_ERRORS: u32 = 0xC3FA;
+const G4_PROGERR: u32 = 1 << 3;
+const G4_PGAERR: u32 = 1 << 5;
+const G4_PGSERR: u32 = 1 << 7;
+
+const CR_PG: u32 = 1 << 0;
+const CR_SER_PER: u32 = 1 << 1;
+const CR_MER: u32 = 1 << 2;
+const CR_STRT: u32 = 1 << 16;
+const CR_EOPIE: u32 = 1 << 24;
+const CR_ERRIE: u32 = 1 << 25;
+const CR_LOCK: u32 = 1 << 31;
+const G4_CR_BKER: u32 = 1 << 11;
+
+/// FLASH global interrupt: position 4 on both chips (RM0390 table 38, RM0440 table 97).
+pub const FLASH_IRQ: u16 = 4;
+
+/// Which chip's interface.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    F446,
+    G474,
+}
+
+/// An operation under way: the bank it occupies and when it ends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Busy {
+    until: Time,
+    bank: u8,
+}
+
+/// What the machine sees of the flash interface.
+pub trait FlashControl {
+    /// A CPU store of `size` bytes of `value` at flash address `addr`, whose cells hold `old`
+    /// (little-endian). Returns what the cells hold afterwards; Err stops the run (a store the
+    /// model does not cover).
+    fn store(
+        &mut self,
+        now: Time,
+        addr: u32,
+        size: u8,
+        value: u32,
+        old: u32,
+    ) -> Result<u32, String>;
+    /// Ranges (address, bytes) an erase has started on since the last call: the machine fills
+    /// them with 0xFF (their content during the erase is unreadable anyway: fetches stall).
+    fn take_erases(&mut self) -> Vec<(u32, u32)>;
+    /// Until when a fetch or read from `addr` at `now` waits (an operation on its bank).
+    fn stall_until(&self, now: Time, addr: u32) -> Option<Time>;
+    /// Every operation so far: (start, end, what), for the checks.
+    fn operations(&self) -> &[Operation];
+}
+
+/// One program or erase, as it happened.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Operation {
+    pub start: Time,
+    pub end: Time,
+    pub erase: bool,
+    pub addr: u32,
+}
+
+/// The programming registers and operation state of one chip's flash interface.
+#[derive(Clone, Debug)]
+pub struct Prog {
+    kind: Kind,
+    cr: u32,
+    sr: u32,
+    /// KEYR sequence: 0 nothing, 1 first key seen.
+    key_state: u8,
+    busy: Option<Busy>,
+    /// G474: the first word of a double word waiting for its second (address, value).
+    half: Option<(u32, u32)>,
+    erases: Vec<(u32, u32)>,
+    ops: Vec<Operation>,
+}
+
+fn ticks_us(us: u64) -> Time {
+    us * (TICKS_PER_S / 1_000_000)
+}
+
+impl Prog {
+    pub fn new(kind: Kind) -> Self {
+        Prog {
+            kind,
+            cr: CR_LOCK,
+            sr: 0,
+            key_state: 0,
+            busy: None,
+            half: None,
+            erases: Vec::new(),
+            ops: Vec::new(),
+        }
+    }
+
+    pub fn reset(&mut self) {
+        let ops = std::mem::take(&mut self.ops);
+        *self = Prog::new(self.kind);
+        // An operation cut by the reset is not modelled (the flash's content would be
+        // undefined); the history is kept for the checks.
+        self.ops = ops;
+    }
+
+    fn bank_of(&self, addr: u32) -> u8 {
+        match self.kind {
+            Kind::F446 => 1,
+            // Dual-bank mode: bank 2 is the upper 256 KiB.
+            Kind::G474 => {
+                if addr >= 0x0804_0000 {
+                    2
+                } else {
+                    1
+                }
+            }
+        }
+    }
+
+    fn errors(&self) -> u32 {
+        match self.kind {
+            Kind::F446 => F4_SR_ERRORS,
+            Kind::G474 => G4_SR_ERRORS,
+        }
+    }
+
+    /// Ends an operation whose time has come.
+    pub fn advance(&mut self, now: Time) {
+        if let Some(b) = self.busy {
+            if now >= b.until {
+                self.busy = None;
+                if self.cr & CR_EOPIE != 0 {
+                    self.sr |= SR_EOP;
+                }
+            }
+        }
+    }
+
+    pub fn next_event(&self) -> Option<Time> {
+        self.busy.map(|b| b.until)
+    }
+
+    pub fn irq_line(&self) -> bool {
+        (self.sr & SR_EOP != 0 && self.cr & CR_EOPIE != 0)
+            || (self.sr & (self.errors() | SR_OPERR) != 0 && self.cr & CR_ERRIE != 0)
+    }
+
+    pub fn read(&self, offset: u32) -> Option<u32> {
+        let (keyr, sr, cr) = self.offsets();
+        match offset {
+            o if o == sr => Some(self.sr | if self.busy.is_some() { SR_BSY } else { 0 }),
+            o if o == cr => Some(self.cr),
+            o if o == keyr => Some(0),
+            // F446 FLASH_OPTCR (RM0390 §3.8.6): its reset value 0x0FFF_AAED (no write
+            // protection, read protection level 0, BOR off); embassy's F4 driver does not read
+            // it on a single-bank chip, kept so a read is not a fault.
+            F4_OPTCR if self.kind == Kind::F446 => Some(0x0FFF_AAED),
+            // G474 FLASH_OPTR (RM0440 §5.7.8), the factory value 0xFFEF_F8AA: DBANK (bit 22) = 1.
+            G4_OPTR if self.kind == Kind::G474 => Some(0xFFEF_F8AA),
+            _ => None,
+        }
+    }
+
+    fn offsets(&self) -> (u32, u32, u32) {
+        match self.kind {
+            Kind::F446 => (F4_KEYR, F4_SR, F4_CR),
+            Kind::G474 => (G4_KEYR, G4_SR, G4_CR),
+        }
+    }
+
+    /// A register write; Ok(false) if the offset is not one of ours, Err for a write the
+    /// hardware forbids or the model does not cover.
+    pub fn write(&mut self, now: Time, offset: u32, value: u32, mask: u32) -> Result<bool, String> {
+        let (keyr, sr, cr) = self.offsets();
+        let v = value & mask;
+        if offset == keyr {
+            match (self.key_state, v) {
+                (0, KEY1) => self.key_state = 1,
+                (1, KEY2) => {
+                    self.key_state = 0;
+                    self.cr &= !CR_LOCK;
+                }
+                _ => {
+                    return Err(format!(
+                        "FLASH_KEYR: 0x{v:08X} out of the unlock sequence (a bus error that locks FLASH_CR until reset)"
+                    ))
+                }
+            }
+            return Ok(true);
+        }
+        if offset == sr {
+            // Error and EOP flags are write 1 to clear.
+            self.sr &= !(v & (self.errors() | SR_EOP | SR_OPERR));
+            return Ok(true);
+        }
+        if offset != cr {
+            return Ok(false);
+        }
+        if self.busy.is_some() {
+            return Err(
+                "FLASH_CR written while BSY (the bus stalls until the operation ends): not modelled"
+                    .into(),
+            );
+        }
+        if self.cr & CR_LOCK != 0 {
+            // Locked: only LOCK itself is set by writes; the rest is ignored.
+            return Ok(true);
+        }
+        let new = (self.cr & !mask) | v;
+        if new & CR_MER != 0 {
+            return Err("FLASH_CR.MER (mass erase) is not modelled".into());
+        }
+        self.cr = new & !CR_STRT;
+        if new & CR_STRT != 0 {
+            self.start_erase(now, new)?;
+        }
+        Ok(true)
+    }
+
+    fn start_erase(&mut self, now: Time, cr: u32) -> Result<(), String> {
+        if cr & CR_SER_PER == 0 {
+            return Err("FLASH_CR.STRT without SER/PER: not modelled".into());
+        }
+        let (addr, bytes, us) = match self.kind {
+            Kind::F446 => {
+                // SNB[6:3], sectors 0–7 (RM0390 §3.3 table 4).
+                let snb = (cr >> 3) & 0xF;
+                let (addr, bytes) = match snb {
+                    0..=3 => (0x0800_0000 + snb * 0x4000, 0x4000),
+                    4 => (0x0801_0000, 0x1_0000),
+                    5..=7 => (0x0802_0000 + (snb - 5) * 0x2_0000, 0x2_0000),
+                    _ => return Err(format!("FLASH_CR.SNB = {snb}: no such sector on the F446")),
+                };
+                let us = match bytes {
+                    0x4000 => 250_000,
+                    0x1_0000 => 550_000,
+                    _ => 1_000_000,
+                };
+                (addr, bytes, us)
+            }
+            Kind::G474 => {
+                // PNB[10:3] (0–127 in a bank of dual-bank mode), BKER bit 11.
+                let pnb = (cr >> 3) & 0xFF;
+                if pnb > 127 {
+                    return Err(format!(
+                        "FLASH_CR.PNB = {pnb}: a bank has 128 pages in dual-bank mode"
+                    ));
+                }
+                let bank_base = if cr & G4_CR_BKER != 0 {
+                    0x0804_0000
+                } else {
+                    0x0800_0000
+                };
+                (bank_base + pnb * 0x800, 0x800, 22_000)
+            }
+        };
+        let end = now + ticks_us(us);
+        self.busy = Some(Busy {
+            until: end,
+            bank: self.bank_of(addr),
+        });
+        self.erases.push((addr, bytes));
+        self.ops.push(Operation {
+            start: now,
+            end,
+            erase: true,
+            addr,
+        });
+        Ok(())
+    }
+
+    fn program_error(&mut self, flag: u32) -> Result<Option<u32>, String> {
+        self.sr |= flag;
+        Ok(None)
+    }
+
+    /// A store to flash memory. Ok(Some(new)) programs the cells, Ok(None) leaves them (an
+    /// error flag was set).
+    fn program(
+        &mut self,
+        now: Time,
+        addr: u32,
+        size: u8,
+        value: u32,
+        old: u32,
+    ) -> Result<Option<u32>, String> {
+        if self.busy.is_some() {
+            return Err(format!(
+                "store to flash at 0x{addr:08X} while an operation is under way (the bus stalls): not modelled"
+            ));
+        }
+        if self.cr & CR_PG == 0 || self.cr & CR_LOCK != 0 {
+            let flag = match self.kind {
+                Kind::F446 => F4_PGSERR,
+                Kind::G474 => G4_PGSERR,
+            };
+            return self.program_error(flag);
+        }
+        match self.kind {
+            Kind::F446 => {
+                // PSIZE: 0 = x8, 1 = x16, 2 = x32, 3 = x64.
+                let psize = (self.cr >> 8) & 3;
+                if psize == 3 || u32::from(size) != 1 << psize {
+                    return self.program_error(F4_PGPERR);
+                }
+                if (addr % 16) + u32::from(size) > 16 || addr % u32::from(size) != 0 {
+                    return self.program_error(F4_PGAERR);
+                }
+                let end = now + ticks_us(16);
+                self.busy = Some(Busy {
+                    until: end,
+                    bank: 1,
+                });
+                self.ops.push(Operation {
+                    start: now,
+                    end,
+                    erase: false,
+                    addr,
+                });
+                Ok(Some(old & value))
+            }
+            Kind::G474 => {
+                if size != 4 {
+                    return self.program_error(G4_PGAERR);
+                }
+                match self.half.take() {
+                    None if addr % 8 == 0 => {
+                        self.half = Some((addr, value));
+                        if old != 0xFFFF_FFFF {
+                            // Not erased: the double word will not be programmed.
+                            self.sr |= G4_PROGERR;
+                            return Ok(None);
+                        }
+                        // The model writes the first word at once; on the chip it is latched
+                        // until the second starts the operation (nothing reads it in between).
+                        Ok(Some(value))
+                    }
+                    Some((first, _)) if addr == first + 4 => {
+                        if old != 0xFFFF_FFFF || self.sr & G4_PROGERR != 0 {
+                            self.sr |= G4_PROGERR;
+                            return Ok(None);
+                        }
+                        let end = now + ticks_us(82);
+                        self.busy = Some(Busy {
+                            until: end,
+                            bank: self.bank_of(addr),
+                        });
+                        self.ops.push(Operation {
+                            start: now,
+                            end,
+                            erase: false,
+                            addr: first,
+                        });
+                        Ok(Some(value))
+                    }
+                    _ => self.program_error(G4_PGAERR),
+                }
+            }
+        }
+    }
+}
+
+impl FlashControl for Prog {
+    fn store(
+        &mut self,
+        now: Time,
+        addr: u32,
+        size: u8,
+        value: u32,
+        old: u32,
+    ) -> Result<u32, String> {
+        Ok(self.program(now, addr, size, value, old)?.unwrap_or(old))
+    }
+
+    fn take_erases(&mut self) -> Vec<(u32, u32)> {
+        std::mem::take(&mut self.erases)
+    }
+
+    fn stall_until(&self, now: Time, addr: u32) -> Option<Time> {
+        let b = self.busy?;
+        (b.until > now && b.bank == self.bank_of(addr)).then_some(b.until)
+    }
+
+    fn operations(&self) -> &[Operation] {
+        &self.ops
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unlocked(kind: Kind) -> Prog {
+        let mut p = Prog::new(kind);
+        let keyr = p.offsets().0;
+        p.write(0, keyr, KEY1, !0).unwrap();
+        p.write(0, keyr, KEY2, !0).unwrap();
+        p
+    }
+
+    #[test]
+    fn locked_at_reset_and_unlocked_only_by_the_two_keys_in_order() {
+        let mut p = Prog::new(Kind::F446);
+        assert_eq!(p.read(F4_CR), Some(CR_LOCK));
+        // A CR write while locked changes nothing.
+        p.write(0, F4_CR, CR_PG, !0).unwrap();
+        assert_eq!(p.read(F4_CR), Some(CR_LOCK));
+        assert!(p.write(0, F4_KEYR, KEY2, !0).is_err());
+        let p = unlocked(Kind::F446);
+        assert_eq!(p.read(F4_CR), Some(0));
+    }
+
+    #[test]
+    fn f446_word_program_ands_bits_and_is_busy_16_us() {
+        let mut p = unlocked(Kind::F446);
+        p.write(0, F4_CR, CR_PG | (2 << 8), !0).unwrap();
+        assert_eq!(
+            p.store(100, 0x0804_0000, 4, 0x1234_5678, !0).unwrap(),
+            0x1234_5678
+        );
+        assert_eq!(p.read(F4_SR).unwrap() & SR_BSY, SR_BSY);
+        // Every fetch stalls: one bank.
+        assert_eq!(p.stall_until(100, 0x0800_0100), Some(100 + ticks_us(16)));
+        p.advance(100 + ticks_us(16));
+        assert_eq!(p.read(F4_SR).unwrap() & SR_BSY, 0);
+        // Programming over programmed bits only clears more (1 → 0).
+        assert_eq!(
+            p.store(200, 0x0804_0000, 4, 0xFF00_FF00, 0x1234_5678)
+                .unwrap(),
+            0x1200_5600
+        );
+    }
+
+    #[test]
+    fn f446_program_errors_leave_the_cells() {
+        let mut p = unlocked(Kind::F446);
+        // No PG: PGSERR.
+        assert_eq!(p.store(0, 0x0804_0000, 4, 0, !0).unwrap(), !0);
+        assert_ne!(p.read(F4_SR).unwrap() & F4_PGSERR, 0);
+        p.write(0, F4_SR, F4_PGSERR, !0).unwrap();
+        // x32 with a byte store: PGPERR.
+        p.write(0, F4_CR, CR_PG | (2 << 8), !0).unwrap();
+        assert_eq!(p.store(0, 0x0804_0000, 1, 0, 0xFF).unwrap(), 0xFF);
+        assert_ne!(p.read(F4_SR).unwrap() & F4_PGPERR, 0);
+    }
+
+    #[test]
+    fn f446_sector_erase_takes_a_second_and_raises_eop_only_with_eopie() {
+        let mut p = unlocked(Kind::F446);
+        p.write(0, F4_CR, CR_SER_PER | (6 << 3), !0).unwrap();
+        p.write(10, F4_CR, CR_STRT, CR_STRT).unwrap();
+        assert_eq!(p.take_erases(), vec![(0x0804_0000, 0x2_0000)]);
+        assert_eq!(p.next_event(), Some(10 + TICKS_PER_S));
+        p.advance(10 + TICKS_PER_S);
+        assert_eq!(p.read(F4_SR).unwrap() & (SR_BSY | SR_EOP), 0);
+        assert!(!p.irq_line());
+        p.write(0, F4_CR, CR_EOPIE | CR_STRT, CR_EOPIE | CR_STRT)
+            .unwrap();
+        p.advance(u64::MAX);
+        assert!(p.irq_line());
+        p.write(0, F4_SR, SR_EOP, !0).unwrap();
+        assert!(!p.irq_line());
+    }
+
+    #[test]
+    fn g474_double_word_program_needs_erased_cells_and_stalls_only_its_bank() {
+        let mut p = unlocked(Kind::G474);
+        p.write(0, G4_CR, CR_PG, !0).unwrap();
+        assert_eq!(p.store(0, 0x0807_C000, 4, 1, !0).unwrap(), 1);
+        assert_eq!(
+            p.read(G4_SR).unwrap() & SR_BSY,
+            0,
+            "the first word only latches"
+        );
+        assert_eq!(p.store(0, 0x0807_C004, 4, 2, !0).unwrap(), 2);
+        assert_eq!(p.read(G4_SR).unwrap() & SR_BSY, SR_BSY);
+        assert_eq!(p.stall_until(0, 0x0800_1000), None, "bank 1 reads on");
+        assert!(p.stall_until(0, 0x0807_0000).is_some());
+        p.advance(u64::MAX);
+        // A programmed double word is not programmed again: PROGERR, cells kept.
+        assert_eq!(p.store(0, 0x0807_C000, 4, 0, 1).unwrap(), 1);
+        assert_eq!(p.store(0, 0x0807_C004, 4, 0, 2).unwrap(), 2);
+        assert_ne!(p.read(G4_SR).unwrap() & G4_PROGERR, 0);
+    }
+
+    #[test]
+    fn g474_page_erase_in_bank_2_and_dbank_set() {
+        let mut p = unlocked(Kind::G474);
+        assert_ne!(p.read(G4_OPTR).unwrap() & (1 << 22), 0);
+        p.write(0, G4_CR, CR_SER_PER | (120 << 3) | G4_CR_BKER | CR_STRT, !0)
+            .unwrap();
+        assert_eq!(p.take_erases(), vec![(0x0807_C000, 0x800)]);
+        assert_eq!(p.next_event(), Some(ticks_us(22_000)));
+    }
+}
