@@ -147,7 +147,7 @@ fn level_at(edges: &[PinEdge], t: Time) -> bool {
         .iter()
         .take_while(|e| e.at <= t)
         .last()
-        .map_or(false, |e| e.high)
+        .is_some_and(|e| e.high)
 }
 
 fn high_within(edges: &[PinEdge], from: Time, to: Time) -> bool {
@@ -312,7 +312,7 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
     let rate = tele
         .windows(2)
         .map(|w| (w[1].1 - w[0].1) as f64 / (w[1].0 - w[0].0))
-        .last();
+        .next_back();
     let samples_per_s = rate.map(|r| r.round() as u64);
     checks.push(check(
         "ADC samples reach the control loop",
@@ -397,7 +397,7 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
     let (median, worst) = (lat.get(lat.len() / 2).copied(), lat.last().copied());
     checks.push(check(
         "sensor-to-gate latency ≤ 100 µs",
-        worst.map_or(false, |w| w <= 100.0),
+        worst.is_some_and(|w| w <= 100.0),
         match (median, worst) {
             (Some(md), Some(w)) => format!(
                 "{} burst-timer updates: median {md:.1} µs, worst {w:.1} µs (model CPU: 1 instruction = 1 HCLK cycle, ART on)",
@@ -547,7 +547,7 @@ pub fn watchdog(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     let after_ms = reset.map(|r| (r as f64 - storm as f64) / TICKS_PER_S as f64 * 1e3);
     out.push(check(
         "stalled loop: IWDG resets the chip",
-        reset.is_some() && after_ms.map_or(false, |ms| ms > 0.0 && ms <= 60.0),
+        reset.is_some() && after_ms.is_some_and(|ms| ms > 0.0 && ms <= 60.0),
         format!(
             "{}; expected 50 ms after the last pet (the IWDG timeout), so within 60 ms of the storm",
             match after_ms {
@@ -595,8 +595,15 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     use saw_link::msg::{Header, LinkError, Reply, Request, PROTOCOL_VERSION};
     let frame_of = |seq: u32, req: &Request| -> Vec<u8> {
         let mut out = vec![0u8; MAX_ENCODED + 1];
-        let n = frame::encode(&Header { version: PROTOCOL_VERSION, seq }, req, &mut out[1..])
-            .expect("a request frames");
+        let n = frame::encode(
+            &Header {
+                version: PROTOCOL_VERSION,
+                seq,
+            },
+            req,
+            &mut out[1..],
+        )
+        .expect("a request frames");
         out.truncate(n + 1);
         out
     };
@@ -605,18 +612,29 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     let mut opts = Options::new(board, elf, 0.62);
     opts.link_input = vec![
         (0.20, frame_of(1, &Request::Hello)),
-        (0.25, frame_of(2, &Request::MoveBoundary { index: 0, at_um: 30_000 })),
+        (
+            0.25,
+            frame_of(
+                2,
+                &Request::MoveBoundary {
+                    index: 0,
+                    at_um: 30_000,
+                },
+            ),
+        ),
         (0.30, flipped),
         (0.35, frame_of(4, &Request::Counters { reset: false })),
         (0.40, frame_of(5, &Request::Stream { every_samples: 10 })),
         (0.50, frame_of(6, &Request::Stream { every_samples: 0 })),
     ];
-    let sent_at = |s: f64| (s * TICKS_PER_S as f64) as Time;
-    let move_bytes = opts.link_input[1].1.len() as u64;
     let (o, m) = run::run(&opts)?;
     let mut out = Vec::new();
     if let Some(s) = &o.stop {
-        out.push(check("link: runs to the end", false, format!("stopped: {s}")));
+        out.push(check(
+            "link: runs to the end",
+            false,
+            format!("stopped: {s}"),
+        ));
         return Ok(out);
     }
     // The answers, each with the time its last byte left.
@@ -650,10 +668,13 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         .map_err(|e| e.to_string())?;
     let want = saw_link::scene_id(&moved_config);
     let moved = answer(2);
-    let rtt_ms = moved.as_ref().map(|(t, _, _)| {
-        let last_in = sent_at(0.25) + move_bytes * 10 * TICKS_PER_S / 921_600;
-        (*t as f64 - last_in as f64) * 1e3 / TICKS_PER_S as f64
-    });
+    // The request's last byte in, at the line rate the UART's registers set (the batches are
+    // sent in time order; the move is the second).
+    let last_in = o.link_input_done.get(1).copied();
+    let rtt_ms = moved
+        .as_ref()
+        .zip(last_in)
+        .map(|((t, _, _), last_in)| (*t as f64 - last_in as f64) * 1e3 / TICKS_PER_S as f64);
     out.push(check(
         "link: boundary moved live",
         matches!(moved, Some((_, _, Reply::Applied { scene_id })) if scene_id == want),
@@ -666,13 +687,17 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
             rtt_ms.map_or("—".into(), |r| format!("{r:.3} ms")),
         ),
     ));
-    let refused = replies
-        .iter()
-        .find(|(_, h, r)| h.seq == 0 && matches!(r, Reply::Error(LinkError::Crc { .. } | LinkError::Cobs)));
+    let refused = replies.iter().find(|(_, h, r)| {
+        h.seq == 0 && matches!(r, Reply::Error(LinkError::Crc { .. } | LinkError::Cobs))
+    });
     out.push(check(
         "link: a flipped bit is refused, the next request answered",
         refused.is_some() && answer(3).is_none() && answer(4).is_some(),
-        format!("refusal: {:?}; answer to the corrupted Save: {:?}", refused.map(|r| &r.2), answer(3).map(|a| a.2)),
+        format!(
+            "refusal: {:?}; answer to the corrupted Save: {:?}",
+            refused.map(|r| &r.2),
+            answer(3).map(|a| a.2)
+        ),
     ));
     out.push(check(
         "link: counters",
@@ -695,7 +720,10 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         // same board time (the wiper model's origin is the first conversion, `t0`).
         let at = r.time_us as u64 * (TICKS_PER_S / 1_000_000);
         let rel = at.saturating_sub(t0);
-        let truth = opts.trajectory.state(rel as f64 / TICKS_PER_S as f64).position_um;
+        let truth = opts
+            .trajectory
+            .state(rel as f64 / TICKS_PER_S as f64)
+            .position_um;
         if let Some(p) = r.position_um {
             worst_um = worst_um.max((p as f64 - truth).abs());
         }

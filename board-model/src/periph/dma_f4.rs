@@ -701,7 +701,10 @@ mod tests {
     fn a_level_request_is_served_at_enable_and_while_high() {
         let mut d = DmaF4::new(1, [11, 12, 13, 14, 15, 16, 17, 47], 0x4002_6000);
         let mut s = Signals::default();
-        let level = |high| Event::DmaLevel { request: Request::Usart2Tx, high };
+        let level = |high| Event::DmaLevel {
+            request: Request::Usart2Tx,
+            high,
+        };
         d.on_event(0, level(true), &mut s);
         assert!(s.copies.is_empty(), "no stream enabled yet");
         // Stream 6: PAR = USART2_DR, M0AR = a buffer, 3 bytes, memory to peripheral, MINC.
@@ -711,11 +714,25 @@ mod tests {
         w(&mut d, s6 + 0x4, 3).unwrap();
         let cr = (4 << CR_CHSEL_SHIFT) | (1 << CR_DIR_SHIFT) | CR_MINC | CR_TCIE;
         d.write(0, s6, cr | CR_EN, 0xFFFF_FFFF, &mut s).unwrap();
-        assert_eq!(s.copies, vec![Copy { from: 0x2000_0100, to: 0x4000_4404, size: 1 }]);
+        assert_eq!(
+            s.copies,
+            vec![Copy {
+                from: 0x2000_0100,
+                to: 0x4000_4404,
+                size: 1
+            }]
+        );
         s.copies.clear();
         d.on_event(1, level(false), &mut s);
         assert!(s.copies.is_empty());
         d.on_event(2, level(true), &mut s);
-        assert_eq!(s.copies, vec![Copy { from: 0x2000_0101, to: 0x4000_4404, size: 1 }]);
+        assert_eq!(
+            s.copies,
+            vec![Copy {
+                from: 0x2000_0101,
+                to: 0x4000_4404,
+                size: 1
+            }]
+        );
     }
 }

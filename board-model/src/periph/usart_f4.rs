@@ -21,8 +21,8 @@
 //!   DR; TC on a read of SR followed by a write of DR, or by writing 0 to it (§25.6.1). The line
 //!   never has noise or framing errors here: the host's bytes arrive whole.
 
+use super::TICKS_PER_S;
 use super::{merge, ClockDomain, Clocks, Event, Peripheral, Request, Signals, Time, Unmodelled};
-use super::{TICKS_PER_S};
 use std::any::Any;
 use std::collections::VecDeque;
 
@@ -132,7 +132,7 @@ impl UsartF4 {
 
     /// One bit, master ticks (BRR PCLK1 cycles), or None before the clock and BRR are set.
     pub fn bit_ticks(&self) -> Option<Time> {
-        if self.pclk_hz == 0 || self.brr < 16 || TICKS_PER_S % self.pclk_hz != 0 {
+        if self.pclk_hz == 0 || self.brr < 16 || !TICKS_PER_S.is_multiple_of(self.pclk_hz) {
             return None;
         }
         Some(self.brr as u64 * (TICKS_PER_S / self.pclk_hz))
@@ -148,14 +148,16 @@ impl UsartF4 {
     }
 
     /// Queues `bytes` from the host, back to back at the line rate from `at` (after whatever is
-    /// still queued). Before the USART is configured the bytes wait.
-    pub fn send(&mut self, at: Time, bytes: &[u8]) {
+    /// still queued). Before the USART is configured the bytes wait. Returns when the last
+    /// one's stop bit ends.
+    pub fn send(&mut self, at: Time, bytes: &[u8]) -> Time {
         let frame = self.frame_ticks().unwrap_or(TICKS_PER_S / 92_160);
         let mut t = self.incoming.back().map_or(at, |&(last, _)| last.max(at));
         for &b in bytes {
             t += frame;
             self.incoming.push_back((t, b));
         }
+        t
     }
 
     /// Every byte transmitted so far, with the time its stop bit ended.
@@ -196,7 +198,11 @@ impl UsartF4 {
 
     fn write_dr(&mut self, now: Time, value: u32, out: &mut Signals) -> Result<(), Unmodelled> {
         if !self.enabled() || self.cr1 & CR1_TE == 0 {
-            return Err(Unmodelled::write(DR, value, "USART2_DR written with UE or TE clear"));
+            return Err(Unmodelled::write(
+                DR,
+                value,
+                "USART2_DR written with UE or TE clear",
+            ));
         }
         let byte = value as u8;
         if self.sr_read {
@@ -295,14 +301,19 @@ impl Peripheral for UsartF4 {
             BRR => {
                 let v = merge(self.brr, value, mask);
                 if v & !0xFFFF != 0 {
-                    return Err(Unmodelled::write(offset, value, "USART2_BRR reserved bits set"));
+                    return Err(Unmodelled::write(
+                        offset,
+                        value,
+                        "USART2_BRR reserved bits set",
+                    ));
                 }
                 self.brr = v;
             }
             CR1 => {
                 let old = self.cr1;
                 let v = merge(old, value, mask);
-                self.check_cr1(v).map_err(|e| Unmodelled::write(offset, value, e))?;
+                self.check_cr1(v)
+                    .map_err(|e| Unmodelled::write(offset, value, e))?;
                 self.cr1 = v;
                 let te_rises = v & CR1_TE != 0 && (old & CR1_TE == 0 || old & CR1_UE == 0);
                 if te_rises && v & CR1_UE != 0 && self.shifting.is_none() {
@@ -377,7 +388,9 @@ impl Peripheral for UsartF4 {
                 }
                 self.update_tx_request(t, out);
             } else if next_rx == Some(t) {
-                let Some((_, b)) = self.incoming.pop_front() else { break };
+                let Some((_, b)) = self.incoming.pop_front() else {
+                    break;
+                };
                 if !self.enabled() || self.cr1 & CR1_RE == 0 {
                     continue; // nobody listening: the byte is gone
                 }
@@ -458,7 +471,8 @@ mod tests {
         // 921 600 baud: USARTDIV = 45 MHz / (16 × 921 600) = 3.0518 → BRR 0x31 (mantissa 3,
         // fraction 1): 45 MHz / 49 = 918 367 baud, 0.35 % slow.
         u.write(0, BRR, 0x31, 0xFFFF_FFFF, &mut s).unwrap();
-        u.write(0, CR1, CR1_UE | CR1_TE | CR1_RE, 0xFFFF_FFFF, &mut s).unwrap();
+        u.write(0, CR1, CR1_UE | CR1_TE | CR1_RE, 0xFFFF_FFFF, &mut s)
+            .unwrap();
         (u, s)
     }
 
@@ -491,7 +505,10 @@ mod tests {
         let frame = 10 * 49 * 80;
         s.events.clear();
         u.advance(1000 + frame, &mut s);
-        assert_eq!(s.events, vec![(1000 + frame, Event::DmaRequest(Request::Usart2Rx))]);
+        assert_eq!(
+            s.events,
+            vec![(1000 + frame, Event::DmaRequest(Request::Usart2Rx))]
+        );
         assert_eq!(u.read(0, DR, &mut s).unwrap(), 1);
         u.advance(1000 + 2 * frame, &mut s);
         assert_eq!(u.read(0, DR, &mut s).unwrap(), 2);
@@ -511,7 +528,11 @@ mod tests {
         u.advance(3 * 10 * 49 * 80, &mut s);
         assert_eq!(u.sr & SR_ORE, SR_ORE);
         assert_eq!(u.overruns, 1);
-        assert_eq!(u.read(0, DR, &mut s).unwrap(), 7, "RDR keeps the first byte");
+        assert_eq!(
+            u.read(0, DR, &mut s).unwrap(),
+            7,
+            "RDR keeps the first byte"
+        );
     }
 
     #[test]
@@ -521,14 +542,26 @@ mod tests {
         u.write(0, CR3, CR3_DMAT, 0xFFFF_FFFF, &mut s).unwrap();
         assert_eq!(
             s.events,
-            vec![(0, Event::DmaLevel { request: Request::Usart2Tx, high: true })]
+            vec![(
+                0,
+                Event::DmaLevel {
+                    request: Request::Usart2Tx,
+                    high: true
+                }
+            )]
         );
         s.events.clear();
         // The idle frame is shifting: the first byte waits in TDR, TXE falls.
         u.write(1, DR, 0x55, 0xFF, &mut s).unwrap();
         assert_eq!(
             s.events,
-            vec![(1, Event::DmaLevel { request: Request::Usart2Tx, high: false })]
+            vec![(
+                1,
+                Event::DmaLevel {
+                    request: Request::Usart2Tx,
+                    high: false
+                }
+            )]
         );
     }
 
@@ -542,7 +575,13 @@ mod tests {
         assert_eq!(u.sr & SR_TXE, SR_TXE);
         assert_eq!(
             s.events,
-            vec![(10 * 49 * 80, Event::DmaLevel { request: Request::Usart2Tx, high: true })],
+            vec![(
+                10 * 49 * 80,
+                Event::DmaLevel {
+                    request: Request::Usart2Tx,
+                    high: true
+                }
+            )],
             "the request stays up for the next byte"
         );
     }
@@ -550,7 +589,9 @@ mod tests {
     #[test]
     fn unmodelled_modes_are_refused() {
         let (mut u, mut s) = configured();
-        assert!(u.write(0, CR1, CR1_UE | CR1_M, 0xFFFF_FFFF, &mut s).is_err());
+        assert!(u
+            .write(0, CR1, CR1_UE | CR1_M, 0xFFFF_FFFF, &mut s)
+            .is_err());
         assert!(u.write(0, CR2, 0x2000, 0xFFFF_FFFF, &mut s).is_err());
         assert!(u.write(0, CR3, 1 << 3, 0xFFFF_FFFF, &mut s).is_err());
         assert!(u.read(0, 0x1C, &mut s).is_err());
