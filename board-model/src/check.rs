@@ -675,16 +675,24 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         .as_ref()
         .zip(last_in)
         .map(|((t, _, _), last_in)| (*t as f64 - last_in as f64) * 1e3 / TICKS_PER_S as f64);
+    // The line rate the UART's registers set, from the move's bytes (queued back to back from
+    // their start, 10 bits each).
+    let baud = last_in.map(|done| {
+        let start = (opts.link_input[1].0 * TICKS_PER_S as f64) as Time;
+        let bits = 10.0 * opts.link_input[1].1.len() as f64;
+        bits * TICKS_PER_S as f64 / (done - start) as f64
+    });
     out.push(check(
         "link: boundary moved live",
         matches!(moved, Some((_, _, Reply::Applied { scene_id })) if scene_id == want),
         format!(
-            "answer {} (want Applied, scene {want:#010x}); round trip {} from the request's last byte to the answer's",
+            "answer {} (want Applied, scene {want:#010x}); round trip {} from the request's last byte to the answer's; line {} (from the UART's registers)",
             match moved.as_ref().map(|a| &a.2) {
                 Some(Reply::Applied { scene_id }) => format!("Applied, scene {scene_id:#010x}"),
                 other => format!("{other:?}"),
             },
             rtt_ms.map_or("—".into(), |r| format!("{r:.3} ms")),
+            baud.map_or("—".into(), |b| format!("{b:.0} baud")),
         ),
     ));
     let refused = replies.iter().find(|(_, h, r)| {
