@@ -5,8 +5,8 @@
 
 use crate::machine::{ChipSpec, Machine, Mapped, PinMode, PinSpec};
 use crate::periph::{
-    self, adc_f4, adc_g4, dma_f4, dma_g4, gpio, iwdg, misc, rcc_f4, rcc_g4, tim, usart_f4,
-    ClockDomain, Peripheral, ResetCause, Time,
+    self, adc_f4, adc_g4, dma_f4, dma_g4, gpio, iwdg, lpuart_g4, misc, rcc_f4, rcc_g4, tim,
+    usart_f4, ClockDomain, Peripheral, ResetCause, Time,
 };
 use std::path::Path;
 
@@ -338,6 +338,9 @@ fn g474(input: Input) -> (Vec<Mapped>, ChipSpec) {
         ),
         map(0x4000_3000, 0x400, iwdg::Iwdg::new(true)),
         map(0x4000_7000, 0x400, misc::PwrG4::new()),
+        // LPUART1 (RM0440 §2.2.2 table 4: 0x4000_8000), the host link (UM2505 §7.9: PA2/PA3 to
+        // the STLINK-V3E virtual COM port).
+        map(0x4000_8000, 0x400, lpuart_g4::LpuartG4::new()),
         map(0x4001_0000, 0x400, misc::Syscfg::new()),
         map(0x4001_0400, 0x400, misc::Exti::new()),
         map(

@@ -147,7 +147,7 @@ fn level_at(edges: &[PinEdge], t: Time) -> bool {
         .iter()
         .take_while(|e| e.at <= t)
         .last()
-        .map_or(false, |e| e.high)
+        .is_some_and(|e| e.high)
 }
 
 fn high_within(edges: &[PinEdge], from: Time, to: Time) -> bool {
@@ -312,7 +312,7 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
     let rate = tele
         .windows(2)
         .map(|w| (w[1].1 - w[0].1) as f64 / (w[1].0 - w[0].0))
-        .last();
+        .next_back();
     let samples_per_s = rate.map(|r| r.round() as u64);
     checks.push(check(
         "ADC samples reach the control loop",
@@ -397,7 +397,7 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
     let (median, worst) = (lat.get(lat.len() / 2).copied(), lat.last().copied());
     checks.push(check(
         "sensor-to-gate latency ≤ 100 µs",
-        worst.map_or(false, |w| w <= 100.0),
+        worst.is_some_and(|w| w <= 100.0),
         match (median, worst) {
             (Some(md), Some(w)) => format!(
                 "{} burst-timer updates: median {md:.1} µs, worst {w:.1} µs (model CPU: 1 instruction = 1 HCLK cycle, ART on)",
@@ -547,7 +547,7 @@ pub fn watchdog(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     let after_ms = reset.map(|r| (r as f64 - storm as f64) / TICKS_PER_S as f64 * 1e3);
     out.push(check(
         "stalled loop: IWDG resets the chip",
-        reset.is_some() && after_ms.map_or(false, |ms| ms > 0.0 && ms <= 60.0),
+        reset.is_some() && after_ms.is_some_and(|ms| ms > 0.0 && ms <= 60.0),
         format!(
             "{}; expected 50 ms after the last pet (the IWDG timeout), so within 60 ms of the storm",
             match after_ms {
@@ -627,8 +627,6 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         (0.40, frame_of(5, &Request::Stream { every_samples: 10 })),
         (0.50, frame_of(6, &Request::Stream { every_samples: 0 })),
     ];
-    let sent_at = |s: f64| (s * TICKS_PER_S as f64) as Time;
-    let move_bytes = opts.link_input[1].1.len() as u64;
     let (o, m) = run::run(&opts)?;
     let mut out = Vec::new();
     if let Some(s) = &o.stop {
@@ -670,20 +668,31 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         .map_err(|e| e.to_string())?;
     let want = saw_link::scene_id(&moved_config);
     let moved = answer(2);
-    let rtt_ms = moved.as_ref().map(|(t, _, _)| {
-        let last_in = sent_at(0.25) + move_bytes * 10 * TICKS_PER_S / 921_600;
-        (*t as f64 - last_in as f64) * 1e3 / TICKS_PER_S as f64
+    // The request's last byte in, at the line rate the UART's registers set (the batches are
+    // sent in time order; the move is the second).
+    let last_in = o.link_input_done.get(1).copied();
+    let rtt_ms = moved
+        .as_ref()
+        .zip(last_in)
+        .map(|((t, _, _), last_in)| (*t as f64 - last_in as f64) * 1e3 / TICKS_PER_S as f64);
+    // The line rate the UART's registers set, from the move's bytes (queued back to back from
+    // their start, 10 bits each).
+    let baud = last_in.map(|done| {
+        let start = (opts.link_input[1].0 * TICKS_PER_S as f64) as Time;
+        let bits = 10.0 * opts.link_input[1].1.len() as f64;
+        bits * TICKS_PER_S as f64 / (done - start) as f64
     });
     out.push(check(
         "link: boundary moved live",
         matches!(moved, Some((_, _, Reply::Applied { scene_id })) if scene_id == want),
         format!(
-            "answer {} (want Applied, scene {want:#010x}); round trip {} from the request's last byte to the answer's",
+            "answer {} (want Applied, scene {want:#010x}); round trip {} from the request's last byte to the answer's; line {} (from the UART's registers)",
             match moved.as_ref().map(|a| &a.2) {
                 Some(Reply::Applied { scene_id }) => format!("Applied, scene {scene_id:#010x}"),
                 other => format!("{other:?}"),
             },
             rtt_ms.map_or("—".into(), |r| format!("{r:.3} ms")),
+            baud.map_or("—".into(), |b| format!("{b:.0} baud")),
         ),
     ));
     let refused = replies.iter().find(|(_, h, r)| {

@@ -365,7 +365,7 @@ impl Sim {
                 }
             }
             let rec = &mut self.pins[i];
-            if rec.last().map_or(true, |e| e.high != high) {
+            if rec.last().is_none_or(|e| e.high != high) {
                 rec.push(PinEdge {
                     at,
                     high,
@@ -393,31 +393,35 @@ impl Sim {
         self.bus_read(addr, 4)
     }
 
-    /// Queues bytes from the host on the link UART, arriving back to back from `at`. Fails on a
+    /// Queues bytes from the host on the link UART (the F446's USART2, the G474's LPUART1),
+    /// arriving back to back from `at`; returns when the last one's stop bit ends. Fails on a
     /// board whose link UART is not modelled.
-    pub fn uart_send(&mut self, at: Time, bytes: &[u8]) -> Result<(), String> {
-        let u = self
-            .periphs
-            .iter_mut()
-            .find_map(|m| {
-                m.p.as_any_mut()
-                    .downcast_mut::<crate::periph::usart_f4::UsartF4>()
-            })
-            .ok_or("this board's link UART is not modelled")?;
-        u.send(at, bytes);
+    pub fn uart_send(&mut self, at: Time, bytes: &[u8]) -> Result<Time, String> {
+        use crate::periph::{lpuart_g4::LpuartG4, usart_f4::UsartF4};
+        let done = self.periphs.iter_mut().find_map(|m| {
+            let p = m.p.as_any_mut();
+            if let Some(u) = p.downcast_mut::<UsartF4>() {
+                Some(u.send(at, bytes))
+            } else {
+                p.downcast_mut::<LpuartG4>().map(|u| u.send(at, bytes))
+            }
+        });
+        let done = done.ok_or("this board's link UART is not modelled")?;
         self.replan = true;
-        Ok(())
+        Ok(done)
     }
 
     /// Every byte the firmware sent on the link UART, with the time its stop bit ended.
     pub fn uart_output(&self) -> Vec<(Time, u8)> {
+        use crate::periph::{lpuart_g4::LpuartG4, usart_f4::UsartF4};
         self.periphs
             .iter()
             .find_map(|m| {
-                m.p.as_any()
-                    .downcast_ref::<crate::periph::usart_f4::UsartF4>()
+                let p = m.p.as_any();
+                p.downcast_ref::<UsartF4>()
+                    .map(|u| u.output().to_vec())
+                    .or_else(|| p.downcast_ref::<LpuartG4>().map(|u| u.output().to_vec()))
             })
-            .map(|u| u.output().to_vec())
             .unwrap_or_default()
     }
 

@@ -104,8 +104,8 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
             rep.passed = rep.passed();
             rep.extend(check::rail_fault(kind, &elf)?);
             rep.extend(check::watchdog(kind, &elf)?);
-            // The host link, where its UART is modelled (the F446's USART2).
-            if kind == BoardKind::F446 && check::image_has_link(&elf) {
+            // The host link, on both boards (the F446's USART2, the G474's LPUART1).
+            if check::image_has_link(&elf) {
                 rep.extend(check::link(kind, &elf)?);
                 rep.extend(check::save(kind, &elf)?);
             }

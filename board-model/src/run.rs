@@ -103,6 +103,9 @@ pub struct Outcome {
     pub wall_s: f64,
     /// Every byte the firmware sent on the link UART, with the time its stop bit ended.
     pub link_output: Vec<(Time, u8)>,
+    /// For each `link_input` batch sent (in time order), when its last byte's stop bit ended,
+    /// at the rate the UART's registers set.
+    pub link_input_done: Vec<Time>,
 }
 
 /// Runs `opts`.
@@ -164,6 +167,7 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
         plan.push((at(*s), 10 + i as u8));
     }
     plan.sort();
+    let mut link_input_done = Vec::new();
     let mut stop = None;
     for (t, what) in plan {
         if t >= end {
@@ -190,7 +194,7 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
             n if n >= 10 => {
                 let bytes = &opts.link_input[(n - 10) as usize].1;
                 let now = m.now();
-                m.sim_mut().uart_send(now, bytes)?;
+                link_input_done.push(m.sim_mut().uart_send(now, bytes)?);
             }
             _ => {
                 let site = m.image.call_site("panic_const_div_by_zero").ok_or(
@@ -245,6 +249,7 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
         exceptions: s.exceptions_taken,
         wall_s: started.elapsed().as_secs_f64(),
         link_output: s.uart_output(),
+        link_input_done,
     };
     Ok((out, m))
 }

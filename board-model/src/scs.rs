@@ -174,7 +174,7 @@ impl Scs {
             if self.group(p) >= exec_priority {
                 continue;
             }
-            if best.map_or(true, |(bp, _)| p < bp) {
+            if best.is_none_or(|(bp, _)| p < bp) {
                 best = Some((p, e as u16));
             }
         }
@@ -242,7 +242,7 @@ impl Scs {
         for e in 2..(16 + self.irqs as usize) {
             if self.pending[e] && self.enabled[e] {
                 let p = self.priority_of(e as u16);
-                if pend.map_or(true, |(bp, _)| p < bp) {
+                if pend.is_none_or(|(bp, _)| p < bp) {
                     pend = Some((p, e as u16));
                 }
             }

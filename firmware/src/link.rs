@@ -157,17 +157,15 @@ impl Board for FirmwareBoard {
     }
 }
 
-#[cfg(feature = "nucleo-f446re")]
 pub use uart::link;
 
-// The UART side runs where its UART is brought up: the F446's USART2. The G474's LPUART1 waits
-// for its board-model peripheral (issue #13); the hand-over to the control loop is on both.
-/// The link's line rate: 921 600 baud, 8N1, a standard rate the ST-LINK/V2-1's virtual COM
-/// port takes (not yet measured on a board). On the F446, 45 MHz / BRR 49 gives 918 367 baud,
-/// 0.35 % slow, well inside the ±2 % an 8N1 receiver tolerates (RM0390 §25.4.5).
-#[cfg(feature = "nucleo-f446re")]
+// The UART side: the F446's USART2, the G474's LPUART1 (board/*.rs bring them up).
+/// The link's line rate: 921 600 baud, 8N1, a standard rate the ST-LINK/V2-1's (F446) and
+/// STLINK-V3E's (G474) virtual COM ports take (not yet measured on a board). On the F446, 45 MHz / BRR 49 gives 918 367 baud,
+/// 0.35 % slow, well inside the ±2 % an 8N1 receiver tolerates (RM0390 §25.4.5). On the G474,
+/// LPUART1 runs from PCLK1 = 150 MHz (CCIPR.LPUART1SEL = 00, RM0440 §7.4.26) and BRR = 256 ×
+/// 150 MHz / 921 600 = 41 667 (§38.4.8) gives 921 593 baud, 0.0008 % slow.
 pub const BAUD: u32 = 921_600;
-#[cfg(feature = "nucleo-f446re")]
 mod uart {
     use core::sync::atomic::Ordering;
 

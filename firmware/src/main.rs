@@ -178,14 +178,7 @@ async fn main(spawner: Spawner) {
     high.spawn(unwrap!(sampler(parts.sampler)));
     high.spawn(unwrap!(control(ctrl, burst, rf_arm, wdg)));
     let board = link::FirmwareBoard { timer, sample_period_us: SAMPLE_PERIOD_US, sent: 0, store };
-    #[cfg(feature = "nucleo-f446re")]
     spawner.spawn(unwrap!(link::link(parts.link_tx, parts.link_rx, session, board)));
-    // The G474's LPUART1 link (UM2505 §7.9) waits for its board-model peripheral (issue #13).
-    #[cfg(not(feature = "nucleo-f446re"))]
-    {
-        let _ = (session, board, &spawner);
-        warn!("link: not on {} yet: its LPUART1 is not brought up", BOARD.name);
-    }
 }
 
 /// The scene to boot into, and says which: the one saved in flash if it reads back and compiles,

@@ -5,10 +5,21 @@
 //!
 //! Behaviours this model commits to:
 //! - DMAMUX channel n (0..=15) forwards the request whose DMAREQ_ID it holds to DMA1 channel n+1
-//!   (n ≤ 7) or DMA2 channel n−7 (§13.3.2); only request 5 (ADC1, RM0440 table "DMAMUX: assignment
-//!   of multiplexer inputs to resources") is modelled. EGE (event generation) is accepted: its
-//!   event output feeds only DMAMUX synchronisation inputs and request generators, which are not
-//!   modelled, so it has no observable effect here.
+//!   (n ≤ 7) or DMA2 channel n−7 (§13.3.2); only requests 5 (ADC1), 34 (LPUART1_RX) and 35
+//!   (LPUART1_TX) of RM0440 table 91 ("DMAMUX: assignment of multiplexer inputs to resources")
+//!   are modelled. The LPUART1 numbers are taken from stm32-metapac 21's STM32G474RE data
+//!   (`request: Some(34)` / `Some(35)`), which embassy-stm32 programs; they agree with the
+//!   sequence USART1..UART5 = 24..33 then LPUART1 in third-party G4 tables, not re-read in the
+//!   RM0440 PDF here. EGE (event generation) is accepted: its event output feeds only DMAMUX
+//!   synchronisation inputs and request generators, which are not modelled, so it has no
+//!   observable effect here.
+//! - A level-sensitive request (`Event::DmaLevel`: LPUART1_TX, high while TXE/TXFNF with DMAT)
+//!   reaches the channels that select it as `Event::DmaChannelLevel`, also when a DMAMUX channel
+//!   starts selecting a request that is already high (or stops selecting one). The DMA channel
+//!   moves one item for each high it is told of, and one when it is enabled while its request is
+//!   high: the peripheral says high again after every item that leaves it high, so the channel
+//!   keeps moving items for as long as the level stays up, as DMA1/DMA2 serve a request line
+//!   that stays asserted (§12.4.3 "DMA transfers"; the F446 model does the same).
 //! - A DMA channel moves one item per routed request while EN = 1 and CNDTR > 0: a `Copy`, then
 //!   CNDTR − 1. HTIF is set the first time at least half the items have moved, TCIF at CNDTR = 0;
 //!   circular mode reloads CNDTR and the addresses (§12.4.6); in normal mode the channel stays
@@ -20,7 +31,9 @@
 //!   (the board reports no bus errors), so that check is only a guard.
 //! - CCR configuration and interrupt-enable bits, CNDTR, CPAR and CMAR "must not be written when
 //!   the channel is enabled" (§12.6.3-12.6.6): a write that changes them while EN = 1 is
-//!   `Unmodelled`.
+//!   `Unmodelled`, except a CCR write that also clears EN: the CCR bits are "read-only when the
+//!   channel is enabled" (§12.6.3), so that write only disables the channel and the other bits
+//!   keep their values.
 
 use super::{merge, Copy, Event, Peripheral, Request, Signals, Time, Unmodelled};
 use std::any::Any;
@@ -52,8 +65,10 @@ const CCR_MSIZE_SHIFT: u32 = 10;
 const CCR_MEM2MEM: u32 = 1 << 14;
 const CCR_DEFINED: u32 = 0x7FFF;
 
-/// DMAREQ_ID of ADC1 (RM0440 §13.3.2, DMAMUX request table).
+/// DMAREQ_IDs (RM0440 §13.3.2 table 91; see the module doc for where 34/35 come from).
 const DMAREQ_ADC1: u32 = 5;
+const DMAREQ_LPUART1_RX: u32 = 34;
+const DMAREQ_LPUART1_TX: u32 = 35;
 const MUX_CHANNELS: usize = 16;
 
 fn size_bytes(code: u32) -> Option<u8> {
@@ -84,6 +99,8 @@ struct Channel {
     /// The last CNDTR software wrote (to tell a fresh start from a resume).
     cndtr_written: u32,
     transfer: Option<Transfer>,
+    /// The level of the level-sensitive request routed here (`Event::DmaChannelLevel`).
+    level: bool,
 }
 
 /// One DMA controller (DMA1 or DMA2) of the G474.
@@ -127,16 +144,22 @@ impl DmaG4 {
             ))
         };
         let c = self.channels[i];
-        let new = merge(c.ccr, value, mask);
+        let mut new = merge(c.ccr, value, mask);
         if new & !CCR_DEFINED != 0 {
             return refuse("CCR reserved bits written non-zero".into());
         }
         let was_on = c.ccr & CCR_EN != 0;
         if was_on && (new ^ c.ccr) & !CCR_EN != 0 {
-            return refuse(
-                "CCR bits changed while EN = 1 (RM0440 §12.6.3: must not be written when enabled)"
-                    .into(),
-            );
+            if new & CCR_EN != 0 {
+                return refuse(
+                    "CCR bits changed while EN = 1 (RM0440 §12.6.3: must not be written when enabled)"
+                        .into(),
+                );
+            }
+            // A write that clears EN: the other bits are read-only while EN = 1 (§12.6.3), so
+            // they keep their values and only EN falls (embassy's `request_stop` writes
+            // TCIE | TEIE alone).
+            new = c.ccr & !CCR_EN;
         }
         match (was_on, new & CCR_EN != 0) {
             (false, true) => {
@@ -173,6 +196,10 @@ impl DmaG4 {
         }
         self.channels[i].ccr = new;
         out.replan = true;
+        // A level-sensitive request already high is served as soon as its channel is enabled.
+        if !was_on && new & CCR_EN != 0 && self.channels[i].level {
+            self.serve(i, out);
+        }
         Ok(())
     }
 
@@ -323,14 +350,25 @@ impl Peripheral for DmaG4 {
     }
 
     fn on_event(&mut self, _now: Time, event: Event, out: &mut Signals) {
-        if let Event::DmaChannelRequest {
-            controller,
-            channel,
-        } = event
-        {
-            if controller == self.number && (1..=CHANNELS as u8).contains(&channel) {
+        match event {
+            Event::DmaChannelRequest {
+                controller,
+                channel,
+            } if controller == self.number && (1..=CHANNELS as u8).contains(&channel) => {
                 self.serve(channel as usize - 1, out);
             }
+            Event::DmaChannelLevel {
+                controller,
+                channel,
+                high,
+            } if controller == self.number && (1..=CHANNELS as u8).contains(&channel) => {
+                let i = channel as usize - 1;
+                self.channels[i].level = high;
+                if high {
+                    self.serve(i, out);
+                }
+            }
+            _ => {}
         }
     }
 
@@ -346,7 +384,12 @@ impl Peripheral for DmaG4 {
     }
 
     fn reset(&mut self, _now: Time) {
+        // The request lines' levels come from the DMAMUX and survive the controller's reset.
+        let levels = self.channels.map(|c| c.level);
         self.channels = [Channel::default(); CHANNELS];
+        for (c, level) in self.channels.iter_mut().zip(levels) {
+            c.level = level;
+        }
     }
 
     fn as_any(&self) -> &dyn Any {
@@ -382,6 +425,8 @@ const RGCR_DEFINED: u32 = 0x1F | RGCR_OIE | 0x00FF_0000;
 pub struct DmaMux {
     cxcr: [u32; MUX_CHANNELS],
     rgcr: [u32; MUX_GENERATORS],
+    /// DMAREQ_IDs of the level-sensitive requests that are high now.
+    high: Vec<u32>,
 }
 
 impl Default for DmaMux {
@@ -395,16 +440,25 @@ impl DmaMux {
         DmaMux {
             cxcr: [0; MUX_CHANNELS],
             rgcr: [0; MUX_GENERATORS],
+            high: Vec::new(),
         }
     }
 
     /// The DMAMUX request ID of `request` on the G474; None for the F446's USART2 (the G474's
-    /// link is LPUART1, not modelled yet).
+    /// link is LPUART1).
     fn request_id(request: Request) -> Option<u32> {
         match request {
             Request::Adc1 => Some(DMAREQ_ADC1),
+            Request::Lpuart1Rx => Some(DMAREQ_LPUART1_RX),
+            Request::Lpuart1Tx => Some(DMAREQ_LPUART1_TX),
             Request::Usart2Rx | Request::Usart2Tx => None,
         }
+    }
+
+    /// DMAMUX channel n feeds DMA1 channels 1..=8 (n 0..=7) or DMA2 channels 1..=8 (n 8..=15)
+    /// (§13.3.2).
+    fn target(n: usize) -> (u8, u8) {
+        (1 + (n / 8) as u8, (n % 8) as u8 + 1)
     }
 }
 
@@ -433,11 +487,11 @@ impl Peripheral for DmaMux {
 
     fn write(
         &mut self,
-        _now: Time,
+        now: Time,
         offset: u32,
         value: u32,
         mask: u32,
-        _out: &mut Signals,
+        out: &mut Signals,
     ) -> Result<(), Unmodelled> {
         match offset {
             0x00..=0x3C => {
@@ -455,8 +509,10 @@ impl Peripheral for DmaMux {
                     return refuse("reserved bits written non-zero".into());
                 }
                 let id = new & CXCR_DMAREQ_ID_MASK;
-                if id != 0 && id != DMAREQ_ADC1 {
-                    return refuse(format!("DMAREQ_ID {id} is not modelled (only 5 = ADC1)"));
+                if ![0, DMAREQ_ADC1, DMAREQ_LPUART1_RX, DMAREQ_LPUART1_TX].contains(&id) {
+                    return refuse(format!(
+                        "DMAREQ_ID {id} is not modelled (only 5 = ADC1, 34/35 = LPUART1_RX/TX)"
+                    ));
                 }
                 if new & (CXCR_SE | CXCR_SOIE) != 0 {
                     return refuse("synchronisation (SE/SOIE) is not modelled".into());
@@ -466,6 +522,20 @@ impl Peripheral for DmaMux {
                     return refuse("NBREQ changed while SE or EGE is set (§13.6.1)".into());
                 }
                 self.cxcr[n] = new;
+                // The channel now forwards another request: its DMA channel sees that one's level.
+                let old_id = old & CXCR_DMAREQ_ID_MASK;
+                let (was, is) = (self.high.contains(&old_id), self.high.contains(&id));
+                if old_id != id && (was || is) {
+                    let (controller, channel) = Self::target(n);
+                    out.events.push((
+                        now,
+                        Event::DmaChannelLevel {
+                            controller,
+                            channel,
+                            high: is,
+                        },
+                    ));
+                }
             }
             MUX_CSR | MUX_RGSR => {
                 return Err(Unmodelled::write(
@@ -500,29 +570,44 @@ impl Peripheral for DmaMux {
     }
 
     fn on_event(&mut self, now: Time, event: Event, out: &mut Signals) {
-        if let Event::DmaRequest(request) = event {
-            let Some(id) = Self::request_id(request) else {
-                return;
-            };
-            for (n, &cr) in self.cxcr.iter().enumerate() {
-                if cr & CXCR_DMAREQ_ID_MASK == id {
-                    // Channels 0..=7 feed DMA1 channels 1..=8, 8..=15 DMA2 channels 1..=8 (§13.3.2).
-                    let controller = 1 + (n / 8) as u8;
-                    let channel = (n % 8) as u8 + 1;
-                    out.events.push((
-                        now,
-                        Event::DmaChannelRequest {
-                            controller,
-                            channel,
-                        },
-                    ));
-                }
+        let (request, level) = match event {
+            Event::DmaRequest(r) => (r, None),
+            Event::DmaLevel { request, high } => (request, Some(high)),
+            _ => return,
+        };
+        let Some(id) = Self::request_id(request) else {
+            return;
+        };
+        if let Some(high) = level {
+            self.high.retain(|&h| h != id);
+            if high {
+                self.high.push(id);
+            }
+        }
+        for (n, &cr) in self.cxcr.iter().enumerate() {
+            if cr & CXCR_DMAREQ_ID_MASK == id {
+                let (controller, channel) = Self::target(n);
+                let e = match level {
+                    None => Event::DmaChannelRequest {
+                        controller,
+                        channel,
+                    },
+                    Some(high) => Event::DmaChannelLevel {
+                        controller,
+                        channel,
+                        high,
+                    },
+                };
+                out.events.push((now, e));
             }
         }
     }
 
     fn reset(&mut self, _now: Time) {
+        // The requests' levels are the peripherals' state, not the DMAMUX's: kept.
+        let high = std::mem::take(&mut self.high);
         *self = DmaMux::new();
+        self.high = high;
     }
 
     fn as_any(&self) -> &dyn Any {
@@ -743,6 +828,122 @@ mod tests {
             d.read(0, 0x18, &mut Signals::default()).is_err(),
             "reserved word after CMAR1"
         );
+    }
+
+    /// LPUART1_TX (DMAREQ_ID 35) is a level: the DMAMUX forwards it to the channel that selects
+    /// it, also when that selection comes after the level rose (embassy sets DMAT, then
+    /// programs the DMAMUX and the channel); an enabled channel moves an item per high.
+    #[test]
+    fn a_level_request_through_the_dmamux_is_served_at_enable_and_while_high() {
+        const LPUART1_TDR: u32 = 0x4000_8028;
+        let mut mux = DmaMux::new();
+        let mut d = dma1();
+        let mut s = Signals::default();
+        let level = |high| Event::DmaLevel {
+            request: Request::Lpuart1Tx,
+            high,
+        };
+        mux.on_event(0, level(true), &mut s);
+        assert!(s.events.is_empty(), "no DMAMUX channel selects it yet");
+        // DMAMUX channel 2 → DMA1 channel 3 (the firmware's TX channel), as embassy writes it.
+        mux.write(1, 0x08, 35, 0xFFFF_FFFF, &mut s).unwrap();
+        let to_ch3 = |high| Event::DmaChannelLevel {
+            controller: 1,
+            channel: 3,
+            high,
+        };
+        assert_eq!(
+            s.events,
+            vec![(1, to_ch3(true))],
+            "the level it now selects is high"
+        );
+        for (t, e) in std::mem::take(&mut s.events) {
+            d.on_event(t, e, &mut s);
+        }
+        assert!(s.copies.is_empty(), "channel not enabled yet");
+        // DMA1 channel 3: CPAR = TDR, CMAR = a buffer, 3 bytes, memory to peripheral, MINC.
+        let ch3 = 0x08 + 2 * 20;
+        w(&mut d, ch3 + 0x8, LPUART1_TDR).unwrap();
+        w(&mut d, ch3 + 0xC, 0x2000_0100).unwrap();
+        w(&mut d, ch3 + 0x4, 3).unwrap();
+        d.write(
+            2,
+            ch3,
+            CCR_DIR | CCR_MINC | CCR_TCIE | CCR_EN,
+            0xFFFF_FFFF,
+            &mut s,
+        )
+        .unwrap();
+        assert_eq!(
+            s.copies,
+            vec![Copy {
+                from: 0x2000_0100,
+                to: LPUART1_TDR,
+                size: 1
+            }]
+        );
+        s.copies.clear();
+        mux.on_event(3, level(false), &mut s);
+        assert_eq!(s.events, vec![(3, to_ch3(false))]);
+        for (t, e) in std::mem::take(&mut s.events) {
+            d.on_event(t, e, &mut s);
+        }
+        assert!(s.copies.is_empty(), "low: nothing moves");
+        mux.on_event(4, level(true), &mut s);
+        for (t, e) in std::mem::take(&mut s.events) {
+            d.on_event(t, e, &mut s);
+        }
+        assert_eq!(
+            s.copies,
+            vec![Copy {
+                from: 0x2000_0101,
+                to: LPUART1_TDR,
+                size: 1
+            }]
+        );
+        // LPUART1_RX (34) is a plain request; 36 is not modelled.
+        let mut s = Signals::default();
+        mux.write(0, 0x04, 34, 0xFFFF_FFFF, &mut s).unwrap();
+        mux.on_event(5, Event::DmaRequest(Request::Lpuart1Rx), &mut s);
+        assert_eq!(
+            s.events,
+            vec![(
+                5,
+                Event::DmaChannelRequest {
+                    controller: 1,
+                    channel: 2
+                }
+            )]
+        );
+        assert!(w(&mut mux, 0x0C, 36).is_err());
+        // The F446's USART2 requests go nowhere on the G474.
+        let mut s = Signals::default();
+        mux.on_event(
+            6,
+            Event::DmaLevel {
+                request: Request::Usart2Tx,
+                high: true,
+            },
+            &mut s,
+        );
+        assert!(s.events.is_empty());
+    }
+
+    #[test]
+    fn a_write_that_clears_en_only_disables() {
+        let mut d = dma1();
+        setup(&mut d, 4, CCR_ADC | CCR_DIR | CCR_EN);
+        // embassy's request_stop: CCR = TEIE | TCIE (EN, DIR, MINC, sizes 0).
+        w(&mut d, CCR1, CCR_TEIE | CCR_TCIE).unwrap();
+        assert_eq!(
+            r(&mut d, CCR1),
+            CCR_ADC | CCR_DIR,
+            "configuration read-only while EN = 1"
+        );
+        assert!(request(&mut d, 1).is_empty());
+        // Disabled: now it can be reprogrammed.
+        w(&mut d, CCR1, CCR_TEIE | CCR_TCIE).unwrap();
+        assert_eq!(r(&mut d, CCR1), CCR_TEIE | CCR_TCIE);
     }
 
     #[test]

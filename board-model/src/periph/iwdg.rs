@@ -114,7 +114,7 @@ impl Iwdg {
     /// the master clock (`ticks_per_cycle` rule). Intended before the watchdog starts.
     pub fn set_lsi_hz(&mut self, hz: u64) {
         assert!(
-            hz > 0 && TICKS_PER_S % hz == 0,
+            hz > 0 && TICKS_PER_S.is_multiple_of(hz),
             "LSI {hz} Hz does not divide the master clock"
         );
         self.lsi_hz = hz;
@@ -271,6 +271,7 @@ impl Iwdg {
     /// A write to PR/RLR/WINR: ignored while locked (RM0390 §19.3.4 "Register access
     /// protection"); a second write while the previous one is still on its way is not covered
     /// by the manuals ("can be updated only when PVU is reset"), so it is reported.
+    #[allow(clippy::too_many_arguments)]
     fn protected_write(
         &mut self,
         now: Time,

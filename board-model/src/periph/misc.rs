@@ -14,9 +14,11 @@
 //!   the firmware's fault path sets the IWDG freeze bit. IDCODE is read only by the F4 flash
 //!   driver (dual-bank erase), which the firmware does not use.
 //!
-//! Registers outside that list return `Unmodelled`. SYSCFG and EXTI are mapped as blocks whose
-//! every access is `Unmodelled`: init only enables/resets SYSCFG through the RCC and enables the
-//! EXTI interrupts in the NVIC; no register of either block is read or written.
+//! Registers outside that list return `Unmodelled`. SYSCFG answers a read of MEMRMP (embassy's G4
+//! flash driver reads FB_MODE) and EXTI is a block whose every access is `Unmodelled`: init only
+//! enables/resets SYSCFG through the RCC and enables the EXTI interrupts in the NVIC.
+//!
+//! The flash interface's programming side (keys, CR/SR, program, erase) is `flash_prog`.
 
 use super::flash_prog::{Kind, Prog, FLASH_IRQ};
 use super::gpio::Chip;
@@ -761,10 +763,16 @@ impl Peripheral for Syscfg {
         "SYSCFG"
     }
     fn read(&mut self, _now: Time, offset: u32, _out: &mut Signals) -> Result<u32, Unmodelled> {
-        Err(Unmodelled::read(
-            offset,
-            format!("SYSCFG register at offset {offset:#x} is not modelled (nothing in the firmware's init uses it)"),
-        ))
+        match offset {
+            // SYSCFG_MEMRMP after a boot from main flash with the banks not swapped: MEM_MODE =
+            // 0 and (G474) FB_MODE = 0 (RM0390 §8.2.1, RM0440 §9.1.1). embassy's G4 flash driver
+            // reads FB_MODE to place the banks.
+            0x00 => Ok(0),
+            _ => Err(Unmodelled::read(
+                offset,
+                format!("SYSCFG register at offset {offset:#x} is not modelled (nothing in the firmware uses it)"),
+            )),
+        }
     }
     fn write(
         &mut self,

@@ -15,6 +15,7 @@ pub mod dma_g4;
 pub mod flash_prog;
 pub mod gpio;
 pub mod iwdg;
+pub mod lpuart_g4;
 pub mod misc;
 pub mod rcc_f4;
 pub mod rcc_g4;
@@ -35,7 +36,7 @@ pub const TICKS_PER_S: u64 = 3_600_000_000;
 /// a clock plan the model cannot represent exactly must be noticed, not rounded.
 pub fn ticks_per_cycle(hz: u64) -> u64 {
     assert!(
-        hz > 0 && TICKS_PER_S % hz == 0,
+        hz > 0 && TICKS_PER_S.is_multiple_of(hz),
         "clock {hz} Hz does not divide the 3.6 GHz master clock"
     );
     TICKS_PER_S / hz
@@ -70,6 +71,10 @@ pub struct Clocks {
     pub adc_kernel_hz: u64,
     /// Low-speed internal RC (IWDG clock): 32 kHz on both chips.
     pub lsi_hz: u64,
+    /// G474: LPUART1's kernel clock as RCC_CCIPR.LPUART1SEL selects it (RM0440 §7.4.26: 00
+    /// PCLK1, 01 SYSCLK, 10 HSI16, 11 LSE); 0 when that source is off or not modelled (LSE),
+    /// and on the F446, which has no LPUART.
+    pub lpuart1_hz: u64,
 }
 
 /// Which bus clock a peripheral's kernel runs on.
@@ -108,6 +113,10 @@ pub enum Request {
     Usart2Rx,
     /// USART2 transmit (TXE with DMAT), a level: see [`Event::DmaLevel`].
     Usart2Tx,
+    /// LPUART1 receive (RXNE/RXFNE with DMAR).
+    Lpuart1Rx,
+    /// LPUART1 transmit (TXE/TXFNF with DMAT), a level: see [`Event::DmaLevel`].
+    Lpuart1Tx,
 }
 
 /// What one peripheral tells the others. Delivered by the board to every peripheral's `on_event`;
@@ -126,6 +135,13 @@ pub enum Event {
     /// A level-sensitive DMA request changed level (a USART's TXE while DMAT = 1): the DMA
     /// serves it while it is high, also when a stream is enabled with it already high.
     DmaLevel { request: Request, high: bool },
+    /// G4: the DMAMUX forwards a level-sensitive request's level to a DMA controller's channel
+    /// (also when a DMAMUX channel starts or stops selecting a request that is high).
+    DmaChannelLevel {
+        controller: u8,
+        channel: u8,
+        high: bool,
+    },
 }
 
 /// A data move a DMA controller performs: read `size` bytes at `from`, write them at `to`.

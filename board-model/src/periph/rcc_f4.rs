@@ -123,7 +123,7 @@ pub(crate) struct Gate {
 
 /// `x` divides `TICKS_PER_S` (so the board can time it exactly).
 pub(crate) fn divides_master(hz: u64) -> bool {
-    hz > 0 && TICKS_PER_S % hz == 0
+    hz > 0 && TICKS_PER_S.is_multiple_of(hz)
 }
 
 /// Bases of the blocks whose reset bit went from 0 to 1 in register `off` (old → new).
@@ -329,6 +329,12 @@ pub struct RccF4 {
     last_clocks: Clocks,
     clocks_changed: bool,
     bdcr_writes_ignored: u32,
+}
+
+impl Default for RccF4 {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 impl RccF4 {
@@ -586,6 +592,7 @@ impl RccF4 {
             // The LSI counts as running once enabled (LSION or forced by the IWDG); its start-up
             // delay only shows in LSIRDY.
             lsi_hz: if self.lsi.on() { LSI_HZ } else { 0 },
+            lpuart1_hz: 0,
         }
     }
 

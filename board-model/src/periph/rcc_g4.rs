@@ -233,6 +233,12 @@ pub struct RccG4 {
     bdcr_writes_ignored: u32,
 }
 
+impl Default for RccG4 {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl RccG4 {
     /// Power-on state of the Nucleo board's chip (see `nucleo_g474re`).
     pub fn new() -> Self {
@@ -344,6 +350,11 @@ impl RccG4 {
 
     pub fn pll_on(&self) -> bool {
         self.pll.on()
+    }
+
+    /// CCIPR.LPUART1SEL (bits 11:10): 0 PCLK1, 1 SYSCLK, 2 HSI16, 3 LSE (RM0440 §7.4.26).
+    pub fn lpuart1sel(&self) -> u32 {
+        (self.ccipr >> 10) & 3
     }
 
     /// CCIPR.ADC12SEL: 0 none, 1 PLL P, 2 SYSCLK, 3 reserved.
@@ -480,6 +491,13 @@ impl RccG4 {
             adc_kernel_hz,
             // Running once enabled (LSION or forced by the IWDG); start-up only shows in LSIRDY.
             lsi_hz: if self.lsi.on() { LSI_HZ } else { 0 },
+            // CCIPR.LPUART1SEL (RM0440 §7.4.26): PCLK1, SYSCLK, HSI16; LSE is not modelled.
+            lpuart1_hz: match self.lpuart1sel() {
+                0 => pclk1_hz,
+                1 => sysclk_hz,
+                2 if self.hsi.on() => HSI_HZ,
+                _ => 0,
+            },
         }
     }
 

@@ -132,7 +132,7 @@ impl UsartF4 {
 
     /// One bit, master ticks (BRR PCLK1 cycles), or None before the clock and BRR are set.
     pub fn bit_ticks(&self) -> Option<Time> {
-        if self.pclk_hz == 0 || self.brr < 16 || TICKS_PER_S % self.pclk_hz != 0 {
+        if self.pclk_hz == 0 || self.brr < 16 || !TICKS_PER_S.is_multiple_of(self.pclk_hz) {
             return None;
         }
         Some(self.brr as u64 * (TICKS_PER_S / self.pclk_hz))
@@ -148,14 +148,16 @@ impl UsartF4 {
     }
 
     /// Queues `bytes` from the host, back to back at the line rate from `at` (after whatever is
-    /// still queued). Before the USART is configured the bytes wait.
-    pub fn send(&mut self, at: Time, bytes: &[u8]) {
+    /// still queued). Before the USART is configured the bytes wait. Returns when the last
+    /// one's stop bit ends.
+    pub fn send(&mut self, at: Time, bytes: &[u8]) -> Time {
         let frame = self.frame_ticks().unwrap_or(TICKS_PER_S / 92_160);
         let mut t = self.incoming.back().map_or(at, |&(last, _)| last.max(at));
         for &b in bytes {
             t += frame;
             self.incoming.push_back((t, b));
         }
+        t
     }
 
     /// Every byte transmitted so far, with the time its stop bit ended.

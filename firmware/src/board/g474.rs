@@ -13,6 +13,8 @@ use embassy_stm32::timer::low_level::MasterMode;
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::{Ch1, Ch3};
+use embassy_stm32::mode::Async;
+use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::{bind_interrupts, dma, flash, peripherals, Config, Peri, Peripherals};
 use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, Oversampling, PllOut};
@@ -78,8 +80,16 @@ pub fn freeze_watchdog_if_debugged() {
 
 bind_interrupts!(struct Irqs {
     DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+    LPUART1 => usart::InterruptHandler<peripherals::LPUART1>;
+    DMA1_CHANNEL3 => dma::InterruptHandler<peripherals::DMA1_CH3>;
+    DMA1_CHANNEL2 => dma::InterruptHandler<peripherals::DMA1_CH2>;
     FLASH => flash::InterruptHandler;
 });
+
+/// The link's receive ring: 1 KiB is 11 ms of bytes at 921 600 baud, longer than the link task
+/// ever waits (a scene's compile), so a request is never overrun.
+const LINK_RX_BYTES: usize = 1024;
+static LINK_RX: StaticCell<[u8; LINK_RX_BYTES]> = StaticCell::new();
 
 /// The saved scene's flash: embassy's bank 2 region (dual-bank mode: 128 pages of 2 KiB from
 /// 0x0804_0000, RM0440 §5.3.1); the store uses its last 8 pages (`BOARD.store`).
@@ -109,6 +119,10 @@ pub struct Parts {
     pub iwdg: Peri<'static, peripherals::IWDG>,
     /// The saved scene's flash (None: this board has no usable store).
     pub store: Option<StoreFlash>,
+    /// The host link's transmitter.
+    pub link_tx: UartTx<'static, Async>,
+    /// The host link's receiver, DMA into a ring buffer.
+    pub link_rx: RingBufferedUartRx<'static>,
 }
 
 pub fn split(p: Peripherals) -> Parts {
@@ -121,7 +135,27 @@ pub fn split(p: Peripherals) -> Parts {
     let burst_b_pin = PwmPin::new(p.PB10, OutputType::PushPull);
     let sampler = Sampler::new(p.ADC1, p.PA1, p.DMA1_CH1, p.TIM3);
     let store = store_flash(p.FLASH);
-    Parts { carrier_tim: p.TIM1, carrier_pin, burst_tim: p.TIM2, burst_pin, burst_b_pin, rf_arm, sampler, iwdg: p.IWDG, store }
+    // The link: LPUART1 on PA2 (TX) / PA3 (RX), AF12, wired to the STLINK-V3E's virtual COM port
+    // (UM2505 §7.9 "Virtual COM port (VCP)"). DMA1 channels 3 (TX) and 2 (RX) through the DMAMUX
+    // (RM0440 §13.3.2); channel 1 is the ADC's.
+    let mut cfg = usart::Config::default();
+    cfg.baudrate = crate::link::BAUD;
+    let uart = defmt::unwrap!(Uart::new(p.LPUART1, p.PA3, p.PA2, p.DMA1_CH3, p.DMA1_CH2, Irqs, cfg));
+    let (link_tx, rx) = uart.split();
+    let link_rx = rx.into_ring_buffered(LINK_RX.init([0; LINK_RX_BYTES]));
+    Parts {
+        carrier_tim: p.TIM1,
+        carrier_pin,
+        burst_tim: p.TIM2,
+        burst_pin,
+        burst_b_pin,
+        rf_arm,
+        sampler,
+        iwdg: p.IWDG,
+        store,
+        link_tx,
+        link_rx,
+    }
 }
 
 /// Sampling time against the rheostat's source impedance. No rheostat value is stated in
