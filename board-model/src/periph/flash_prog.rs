@@ -364,7 +364,7 @@ impl Prog {
                 if psize == 3 || u32::from(size) != 1 << psize {
                     return self.program_error(F4_PGPERR);
                 }
-                if (addr % 16) + u32::from(size) > 16 || addr % u32::from(size) != 0 {
+                if (addr % 16) + u32::from(size) > 16 || !addr.is_multiple_of(u32::from(size)) {
                     return self.program_error(F4_PGAERR);
                 }
                 let end = now + ticks_us(16);
@@ -385,7 +385,7 @@ impl Prog {
                     return self.program_error(G4_PGAERR);
                 }
                 match self.half.take() {
-                    None if addr % 8 == 0 => {
+                    None if addr.is_multiple_of(8) => {
                         self.half = Some((addr, value));
                         if old != 0xFFFF_FFFF {
                             // Not erased: the double word will not be programmed.
