@@ -1125,8 +1125,9 @@ mod tests {
         f.reset(400);
         assert_eq!(f.acr(), 0);
         assert_eq!(f.acr_history().len(), 5);
-        // Other FLASH registers are not modelled.
-        assert!(f.read(0, 0x0C, &mut Signals::default()).is_err());
+        // The option-byte registers are not modelled (the programming ones are: flash_prog).
+        assert!(f.read(0, 0x08, &mut Signals::default()).is_err());
+        assert!(f.read(0, 0x0C, &mut Signals::default()).is_ok());
     }
 
     #[test]
