@@ -933,3 +933,55 @@ pub fn save(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     ));
     Ok(out)
 }
+
+/// What the telemetry stream costs the sample path (issue #13: "nothing on the link may delay
+/// the control loop"): instructions executed per sample inside the sample path's interrupt
+/// executor (UART4's vector, position 52 on both chips: RM0390 table 38, RM0440 table 97) over
+/// 0.1 s with the stream stopped, at every 10th sample and at every sample (more records than the
+/// line carries: the queue drops and counts), and, for information, in thread mode (the link task
+/// that frames and sends the records). Asserted: the tap at every sample adds at most 10 % to the
+/// sample path.
+pub fn stream_cost(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
+    use saw_link::frame::{self, MAX_ENCODED};
+    use saw_link::msg::{Header, Request, PROTOCOL_VERSION};
+    const SAMPLE_PATH: usize = 16 + 52;
+    let frame_of = |seq: u32, req: &Request| -> Vec<u8> {
+        let mut out = vec![0u8; MAX_ENCODED + 1];
+        let n = frame::encode(&Header { version: PROTOCOL_VERSION, seq }, req, &mut out[1..])
+            .expect("a request frames");
+        out.truncate(n + 1);
+        out
+    };
+    let mut opts = Options::new(board, elf, 0.75);
+    opts.link_input = vec![
+        (0.40, frame_of(1, &Request::Stream { every_samples: 10 })),
+        (0.55, frame_of(2, &Request::Stream { every_samples: 1 })),
+        (0.70, frame_of(3, &Request::Stream { every_samples: 0 })),
+    ];
+    opts.count_at_s = vec![0.25, 0.35, 0.45, 0.55, 0.60, 0.70];
+    let (o, _m) = run::run(&opts)?;
+    if let Some(s) = &o.stop {
+        return Ok(vec![check("stream cost: runs to the end", false, format!("stopped: {s}"))]);
+    }
+    let c = &o.instruction_counts;
+    if c.len() != 6 {
+        return Err(format!("{} instruction counts, 6 asked", c.len()));
+    }
+    // 0.1 s at 10 kHz: 1 000 samples per window.
+    let per_sample = |a: usize, b: usize, ex: usize| (c[b][ex] - c[a][ex]) as f64 / 1000.0;
+    let (off, tenth, every) = (
+        per_sample(0, 1, SAMPLE_PATH),
+        per_sample(2, 3, SAMPLE_PATH),
+        per_sample(4, 5, SAMPLE_PATH),
+    );
+    let (t_off, t_tenth, t_every) = (per_sample(0, 1, 0), per_sample(2, 3, 0), per_sample(4, 5, 0));
+    Ok(vec![check(
+        "stream cost: the tap adds at most 10 % to the sample path",
+        off > 0.0 && every <= off * 1.10,
+        format!(
+            "sample path (the interrupt executor) per sample: {off:.0} instructions with the stream stopped, {tenth:.0} at every 10th sample, {every:.0} at every sample (+{:.0}, +{:.1} %); thread mode (the link task) per sample: {t_off:.0}, {t_tenth:.0}, {t_every:.0}",
+            every - off,
+            100.0 * (every - off) / off.max(1.0)
+        ),
+    )])
+}

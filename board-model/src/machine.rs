@@ -119,6 +119,8 @@ pub struct Sim {
     deadline: Time,
     ticks_per_cycle: u64,
     pub instructions: u64,
+    /// Instructions executed in each exception (index: exception number; 0 = thread mode).
+    pub instructions_in: Vec<u64>,
     pub periphs: Vec<Mapped>,
     pub scs: Scs,
     sig: Signals,
@@ -602,6 +604,7 @@ impl Machine {
             deadline: 0,
             ticks_per_cycle: 1,
             instructions: 0,
+            instructions_in: vec![0; 512],
             periphs,
             scs: Scs::new(irqs),
             sig: Signals::default(),
@@ -872,6 +875,10 @@ impl Machine {
             let s = uc.get_data_mut();
             let cycles = s.block_cycles(a, insns, bytes);
             s.instructions += insns as u64;
+            let ex = s.scs.active_stack.last().copied().unwrap_or(0) as usize;
+            if let Some(n) = s.instructions_in.get_mut(ex) {
+                *n += insns as u64;
+            }
             s.now += cycles * s.ticks_per_cycle;
         })
         .map_err(uc_err)?;

@@ -108,6 +108,7 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
             if check::image_has_link(&elf) {
                 rep.extend(check::link(kind, &elf)?);
                 rep.extend(check::save(kind, &elf)?);
+                rep.extend(check::stream_cost(kind, &elf)?);
             }
             rep.wall_s = started.elapsed().as_secs_f64();
             let text = serde_json::to_string_pretty(&rep).map_err(|e| e.to_string())?;

@@ -42,6 +42,9 @@ pub struct Options {
     pub reset_pin_s: Option<f64>,
     /// Flash contents written before the run (address, bytes): a store left by earlier saves.
     pub flash_preload: Vec<(u32, Vec<u8>)>,
+    /// Times (s) at which the instructions executed so far in each exception are noted
+    /// (`Outcome::instruction_counts`).
+    pub count_at_s: Vec<f64>,
 }
 
 impl Options {
@@ -66,6 +69,7 @@ impl Options {
             link_input: Vec::new(),
             reset_pin_s: None,
             flash_preload: Vec::new(),
+            count_at_s: Vec::new(),
         }
     }
 }
@@ -106,6 +110,9 @@ pub struct Outcome {
     /// For each `link_input` batch sent (in time order), when its last byte's stop bit ended,
     /// at the rate the UART's registers set.
     pub link_input_done: Vec<Time>,
+    /// At each `Options::count_at_s`: the instructions executed so far in each exception
+    /// (index: exception number, 0 = thread mode).
+    pub instruction_counts: Vec<Vec<u64>>,
 }
 
 /// Runs `opts`.
@@ -163,6 +170,10 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
     if let Some(s) = opts.reset_pin_s {
         plan.push((at(s), 5));
     }
+    for s in &opts.count_at_s {
+        plan.push((at(*s), 6));
+    }
+    let mut instruction_counts = Vec::new();
     for (i, (s, _)) in opts.link_input.iter().enumerate() {
         plan.push((at(*s), 10 + i as u8));
     }
@@ -185,6 +196,7 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
                 m.sim_mut().stuck_irqs.push(irq);
             }
             4 => m.sim_mut().stuck_irqs.clear(),
+            6 => instruction_counts.push(m.sim().instructions_in.clone()),
             5 => {
                 stop = m.reset_pin();
                 if stop.is_some() {
@@ -249,6 +261,7 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
         exceptions: s.exceptions_taken,
         wall_s: started.elapsed().as_secs_f64(),
         link_output: s.uart_output(),
+        instruction_counts,
         link_input_done,
     };
     Ok((out, m))
