@@ -585,6 +585,25 @@ pub fn image_has_link(elf: &Path) -> bool {
     std::fs::read(elf).is_ok_and(|b| b.windows(8).any(|w| w == b"saw_link"))
 }
 
+/// `req` as the host sends it: a zero first (any partial frame before it is dropped), then the
+/// frame with sequence number `seq`.
+fn request_frame(seq: u32, req: &saw_link::msg::Request) -> Vec<u8> {
+    use saw_link::frame::{self, MAX_ENCODED};
+    use saw_link::msg::{Header, PROTOCOL_VERSION};
+    let mut out = vec![0u8; MAX_ENCODED + 1];
+    let n = frame::encode(
+        &Header {
+            version: PROTOCOL_VERSION,
+            seq,
+        },
+        req,
+        &mut out[1..],
+    )
+    .expect("a request frames");
+    out.truncate(n + 1);
+    out
+}
+
 /// The host link on the firmware image (issue #13): frames in on the UART, answers out, while
 /// the finger moves. Hello; a boundary moved live (the answer carries the new scene's id); a
 /// frame with a flipped bit refused; the counters; a stream of records that follow the finger.
@@ -593,20 +612,7 @@ pub fn image_has_link(elf: &Path) -> bool {
 pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     use saw_link::frame::{self, Receiver, MAX_ENCODED};
     use saw_link::msg::{Header, LinkError, Reply, Request, PROTOCOL_VERSION};
-    let frame_of = |seq: u32, req: &Request| -> Vec<u8> {
-        let mut out = vec![0u8; MAX_ENCODED + 1];
-        let n = frame::encode(
-            &Header {
-                version: PROTOCOL_VERSION,
-                seq,
-            },
-            req,
-            &mut out[1..],
-        )
-        .expect("a request frames");
-        out.truncate(n + 1);
-        out
-    };
+    let frame_of = request_frame;
     let mut flipped = frame_of(3, &Request::Save);
     flipped[3] ^= 0x08;
     let mut opts = Options::new(board, elf, 0.62);
@@ -759,7 +765,7 @@ pub fn save(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     // The save starts at 0.3 s and lasts 1.2 s on the F446 (a 1 s erase and the migration).
     const STUCK_S: f64 = 1.9;
     use saw_link::frame::{self, Receiver, MAX_ENCODED};
-    use saw_link::msg::{Header, Reply, Request, SceneSource, PROTOCOL_VERSION};
+    use saw_link::msg::{Reply, Request, SceneSource};
     let def = board.def();
     let scene = |i: usize| {
         saw_core::default_config()
@@ -767,20 +773,7 @@ pub fn save(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
             .expect("a boundary between 25 and 30 mm is valid in the default scene")
     };
     let (image, last, saves) = crate::store_image::before_an_erase(def, scene)?;
-    let frame_of = |seq: u32, req: &Request| -> Vec<u8> {
-        let mut out = vec![0u8; MAX_ENCODED + 1];
-        let n = frame::encode(
-            &Header {
-                version: PROTOCOL_VERSION,
-                seq,
-            },
-            req,
-            &mut out[1..],
-        )
-        .expect("a request frames");
-        out.truncate(n + 1);
-        out
-    };
+    let frame_of = request_frame;
     let mut opts = Options::new(board, elf, 2.5);
     opts.flash_preload = vec![(def.store.origin, image)];
     opts.link_input = vec![
@@ -942,16 +935,9 @@ pub fn save(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
 /// that frames and sends the records). Asserted: the tap at every sample adds at most 10 % to the
 /// sample path.
 pub fn stream_cost(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
-    use saw_link::frame::{self, MAX_ENCODED};
-    use saw_link::msg::{Header, Request, PROTOCOL_VERSION};
+    use saw_link::msg::Request;
     const SAMPLE_PATH: usize = 16 + 52;
-    let frame_of = |seq: u32, req: &Request| -> Vec<u8> {
-        let mut out = vec![0u8; MAX_ENCODED + 1];
-        let n = frame::encode(&Header { version: PROTOCOL_VERSION, seq }, req, &mut out[1..])
-            .expect("a request frames");
-        out.truncate(n + 1);
-        out
-    };
+    let frame_of = request_frame;
     let mut opts = Options::new(board, elf, 0.75);
     opts.link_input = vec![
         (0.40, frame_of(1, &Request::Stream { every_samples: 10 })),
@@ -961,7 +947,11 @@ pub fn stream_cost(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     opts.count_at_s = vec![0.25, 0.35, 0.45, 0.55, 0.60, 0.70];
     let (o, _m) = run::run(&opts)?;
     if let Some(s) = &o.stop {
-        return Ok(vec![check("stream cost: runs to the end", false, format!("stopped: {s}"))]);
+        return Ok(vec![check(
+            "stream cost: runs to the end",
+            false,
+            format!("stopped: {s}"),
+        )]);
     }
     let c = &o.instruction_counts;
     if c.len() != 6 {
@@ -974,7 +964,11 @@ pub fn stream_cost(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         per_sample(2, 3, SAMPLE_PATH),
         per_sample(4, 5, SAMPLE_PATH),
     );
-    let (t_off, t_tenth, t_every) = (per_sample(0, 1, 0), per_sample(2, 3, 0), per_sample(4, 5, 0));
+    let (t_off, t_tenth, t_every) = (
+        per_sample(0, 1, 0),
+        per_sample(2, 3, 0),
+        per_sample(4, 5, 0),
+    );
     Ok(vec![check(
         "stream cost: the tap adds at most 10 % to the sample path",
         off > 0.0 && every <= off * 1.10,

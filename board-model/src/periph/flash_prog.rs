@@ -201,6 +201,13 @@ impl Prog {
         self.busy.map(|b| b.until)
     }
 
+    /// Raises the FLASH interrupt when its line is high.
+    pub fn irq_lines(&self, raise: &mut dyn FnMut(u16)) {
+        if self.irq_line() {
+            raise(FLASH_IRQ);
+        }
+    }
+
     pub fn irq_line(&self) -> bool {
         (self.sr & SR_EOP != 0 && self.cr & CR_EOPIE != 0)
             || (self.sr & (self.errors() | SR_OPERR) != 0 && self.cr & CR_ERRIE != 0)

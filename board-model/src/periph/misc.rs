@@ -20,7 +20,7 @@
 //!
 //! The flash interface's programming side (keys, CR/SR, program, erase) is `flash_prog`.
 
-use super::flash_prog::{Kind, Prog, FLASH_IRQ};
+use super::flash_prog::{Kind, Prog};
 use super::gpio::Chip;
 use super::{merge, Peripheral, Signals, Time, Unmodelled};
 use std::any::Any;
@@ -75,7 +75,33 @@ fn acr_cache_reset_check(
     Ok(())
 }
 
-/// F446 flash interface, FLASH_ACR only (RM0390 §3.8.1). LATENCY reads back at once (the
+/// A write to a flash interface register other than ACR: the programming side's, or unmodelled.
+#[allow(clippy::too_many_arguments)]
+fn prog_write(
+    prog: &mut Prog,
+    now: Time,
+    offset: u32,
+    value: u32,
+    mask: u32,
+    out: &mut Signals,
+    chip: &str,
+    others: &str,
+) -> Result<(), Unmodelled> {
+    match prog.write(now, offset, value, mask) {
+        Ok(true) => {
+            out.replan = true;
+            Ok(())
+        }
+        Ok(false) => Err(Unmodelled::write(
+            offset,
+            value,
+            format!("{chip} FLASH register at offset {offset:#x} {others} is not modelled"),
+        )),
+        Err(why) => Err(Unmodelled::write(offset, value, why)),
+    }
+}
+
+/// F446 flash interface: FLASH_ACR (RM0390 §3.8.1) here, the programming registers in `prog`. LATENCY reads back at once (the
 /// manual's "read back to check" loop ends on the first read); the caches and prefetch are
 /// state for the board to charge fetch time with.
 #[derive(Clone, Debug)]
@@ -166,33 +192,27 @@ impl Peripheral for FlashF4 {
                 self.history.push((now, new));
                 Ok(())
             }
-            _ => match self.prog.write(now, offset, value, mask) {
-                Ok(true) => {
-                    out.replan = true;
-                    Ok(())
-                }
-                Ok(false) => Err(Unmodelled::write(
-                    offset,
-                    value,
-                    format!("F446 FLASH register at offset {offset:#x} (OPTKEYR/OPTCR writes) is not modelled"),
-                )),
-                Err(why) => Err(Unmodelled::write(offset, value, why)),
-            },
+            _ => prog_write(
+                &mut self.prog,
+                now,
+                offset,
+                value,
+                mask,
+                out,
+                "F446",
+                "(OPTKEYR/OPTCR writes)",
+            ),
         }
     }
 
     fn advance(&mut self, now: Time, _out: &mut Signals) {
         self.prog.advance(now);
     }
-
     fn next_event(&self) -> Option<Time> {
         self.prog.next_event()
     }
-
     fn irq_lines(&self, raise: &mut dyn FnMut(u16)) {
-        if self.prog.irq_line() {
-            raise(FLASH_IRQ);
-        }
+        self.prog.irq_lines(raise);
     }
 
     fn reset(&mut self, _now: Time) {
@@ -251,7 +271,7 @@ pub fn g474_min_wait_states(hclk_hz: u64, range: G4Range) -> Option<u32> {
     Some((hclk_hz.saturating_sub(1) / step) as u32)
 }
 
-/// G474 flash interface, FLASH_ACR only (RM0440 §5.7.1).
+/// G474 flash interface: FLASH_ACR (RM0440 §5.7.1) here, the programming registers in `prog`.
 #[derive(Clone, Debug)]
 pub struct FlashG4 {
     acr: u32,
@@ -345,33 +365,27 @@ impl Peripheral for FlashG4 {
                 self.history.push((now, new));
                 Ok(())
             }
-            _ => match self.prog.write(now, offset, value, mask) {
-                Ok(true) => {
-                    out.replan = true;
-                    Ok(())
-                }
-                Ok(false) => Err(Unmodelled::write(
-                    offset,
-                    value,
-                    format!("G474 FLASH register at offset {offset:#x} (ECC/option bytes/PCROP) is not modelled"),
-                )),
-                Err(why) => Err(Unmodelled::write(offset, value, why)),
-            },
+            _ => prog_write(
+                &mut self.prog,
+                now,
+                offset,
+                value,
+                mask,
+                out,
+                "G474",
+                "(ECC/option bytes/PCROP)",
+            ),
         }
     }
 
     fn advance(&mut self, now: Time, _out: &mut Signals) {
         self.prog.advance(now);
     }
-
     fn next_event(&self) -> Option<Time> {
         self.prog.next_event()
     }
-
     fn irq_lines(&self, raise: &mut dyn FnMut(u16)) {
-        if self.prog.irq_line() {
-            raise(FLASH_IRQ);
-        }
+        self.prog.irq_lines(raise);
     }
 
     /// System reset. (RCC_AHB1RSTR.FLASHRST, which embassy pulses at init, "can be activated
