@@ -140,16 +140,21 @@ fn csv_rows(path: &Path) -> Vec<Vec<String>> {
         .collect()
 }
 
-/// Positions (mm) where the region changed from `a` to `b` or back, in a stream CSV.
-fn switches(rows: &[Vec<String>], a: &str, b: &str) -> Vec<f64> {
+/// Positions (mm) where the region changed from `a` to `b` or back, in a stream CSV, located
+/// only between two records `max_gap_us` apart or less: across records the line dropped (the
+/// stream's drop counter), the switch could be anywhere in the gap.
+fn switches(rows: &[Vec<String>], a: &str, b: &str, max_gap_us: u64) -> Vec<f64> {
+    let t = |r: &Vec<String>| r[0].parse::<u64>().unwrap_or(0);
     rows.windows(2)
+        .filter(|w| t(&w[1]).wrapping_sub(t(&w[0])) <= max_gap_us)
         .filter(|w| (w[0][3] == a && w[1][3] == b) || (w[0][3] == b && w[1][3] == a))
         .filter_map(|w| w[1][1].parse::<f64>().ok())
         .map(|um| um / 1000.0)
         .collect()
 }
 
-/// Streams `seconds` at every second sample; the positions (mm) where region 0 and 1 swap.
+/// Streams `seconds` at every fourth sample (2 500 records/s, within the line's 3 333); the
+/// positions (mm) where region 0 and 1 swap.
 fn switch_positions(port: &Path, seconds: &str) -> Vec<f64> {
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("s.csv");
@@ -160,11 +165,12 @@ fn switch_positions(port: &Path, seconds: &str) -> Vec<f64> {
         "--seconds",
         seconds,
         "--every",
-        "2",
+        "4",
     ];
     let r = saw(port, &args);
     assert_eq!(r.code, 0, "{}", r.stderr);
-    let s = switches(&csv_rows(&csv), "0", "1");
+    // Every fourth sample at 10 kHz: consecutive records are 400 µs apart (0.04 mm at 100 mm/s).
+    let s = switches(&csv_rows(&csv), "0", "1", 400);
     assert!(!s.is_empty(), "no switch in {seconds} s");
     s
 }
@@ -173,8 +179,8 @@ fn switch_positions(port: &Path, seconds: &str) -> Vec<f64> {
 fn a_boundary_moved_live_moves_the_switch() {
     // 60 mm of travel at 100 mm/s: each pass crosses the boundary once.
     let vb = VirtualBoard::start(&["--speed", "100"]);
-    // The default boundary is at 18.963 mm; a switch lands within hysteresis (0.1 mm) plus two
-    // samples' travel past it.
+    // The default boundary is at 18.963 mm; a switch lands within hysteresis (0.1 mm) plus one
+    // record's travel (0.04 mm) past it.
     let s = switch_positions(&vb.port, "1.5");
     assert!(s.iter().all(|x| (x - 18.963).abs() < 0.15), "{s:?}");
     let r = saw(&vb.port, &["boundary", "0", "30"]);
