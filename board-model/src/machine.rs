@@ -680,11 +680,19 @@ impl Machine {
                     value as u32,
                     u32::from_le_bytes(old),
                 ) {
-                    Ok(new) => {
-                        let bytes = new.to_le_bytes()[..n].to_vec();
-                        let _ = uc.mem_write(addr, &bytes);
+                    Ok(cells) => {
+                        // The store's own cells keep their content unless programmed (Unicorn
+                        // may complete the store after this hook: the fix-ups undo it).
+                        let mut fix: Vec<(u32, Vec<u8>)> = vec![(addr as u32, old[..n].to_vec())];
+                        for (a, w) in cells {
+                            fix.retain(|(f, _)| *f != a);
+                            fix.push((a, w.to_le_bytes().to_vec()));
+                        }
+                        for (a, bytes) in &fix {
+                            let _ = uc.mem_write(*a as u64, bytes);
+                        }
                         let s = uc.get_data_mut();
-                        s.flash_fixups.push((addr as u32, bytes));
+                        s.flash_fixups.extend(fix);
                         // The slice ends at the next block (never inside this one: see the block
                         // hook), where a busy flash can stall the core.
                         s.replan = true;

@@ -55,7 +55,8 @@ pub struct Timeout {
 
 /// Waits until PR and RLR writes have reached the LSI domain (SR.PVU = RVU = 0): a write while
 /// one is under way is not taken, and the registers read back meaningless values until then
-/// (RM0390 §19.4.2–§19.4.4, RM0440 §42.4.2–§42.4.4). Up to 5 LSI periods, ~160 µs.
+/// (RM0390's IWDG register descriptions; RM0440 §42.4.2–§42.4.4). "Up to five RC 40 kHz
+/// cycles": ~160 µs at 32 kHz, ~300 µs at the slowest LSI.
 fn wait_updated() {
     use embassy_stm32::pac::IWDG;
     while {
@@ -64,11 +65,14 @@ fn wait_updated() {
     } {}
 }
 
-/// Sets the watchdog's prescaler and reload, then reloads the counter with it (RM0390 §19.3.2:
-/// KR = 0x5555 opens PR/RLR; KR = 0xAAAA reloads from RLR).
+/// Sets the watchdog's prescaler and reload, then reloads the counter with it: KR = 0x5555 opens
+/// PR/RLR, wait for SR = 0, KR = 0xAAAA reloads from RLR and closes them again (the IWDG's
+/// "register access protection" and configuration sequence: RM0390's IWDG chapter, RM0440
+/// §42.3). The dog is fed first, so the waits cannot run it out.
 fn set(t: Timeout) {
     use embassy_stm32::pac::iwdg::vals::{Key, Pr};
     use embassy_stm32::pac::IWDG;
+    IWDG.kr().write(|w| w.set_key(Key::RESET));
     wait_updated();
     IWDG.kr().write(|w| w.set_key(Key::ENABLE));
     IWDG.pr().write(|w| w.set_pr(Pr::from_bits(t.pr)));

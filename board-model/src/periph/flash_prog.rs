@@ -4,15 +4,18 @@
 //! the machine's: the model says what a store leaves in a cell and which ranges an erase fills
 //! with 0xFF (`FlashControl`).
 //!
-//! F446 (RM0390 §3.5–§3.6 operations, §3.8 registers; the same interface as RM0090's F405/F429):
+//! F446 (RM0390 §3.5 erase and program operations, §3.8 registers; the same interface as RM0090's
+//! F405/F429, whose §3.5 the review could read):
 //! - KEYR takes 0x4567_0123 then 0xCDEF_89AB to clear CR.LOCK; any other sequence is a bus error
-//!   that keeps CR locked until reset (§3.6.1): reported, as the firmware must never do it.
+//!   that keeps CR locked until reset (§3.5.1): reported, as the firmware must never do it.
 //! - CR: PG, SER, MER, SNB[6:3], PSIZE[9:8], STRT, EOPIE, ERRIE, LOCK. Writes while locked are
-//!   ignored; a write while BSY stalls the bus until BSY clears (§3.6.1 note): reported.
+//!   ignored; a write while BSY stalls the bus until BSY clears (§3.5.1 note): reported.
 //! - Program: with PG set, a store whose size matches PSIZE (else PGPERR) and which does not
 //!   cross a 128-bit row (else PGAERR) programs the cell: bits only go 1 → 0 ("successive
-//!   writes are possible ... when changing bits from 1 to 0", §3.6.4), i.e. old AND new. A store
-//!   to flash without PG sets PGSERR and changes nothing (§3.8.4).
+//!   writes are possible ... when changing bits from 1 to 0", §3.5.4), i.e. old AND new. A store
+//!   to flash without PG sets PGSERR and changes nothing (§3.8 FLASH_SR).
+//! - OPERR is not raised (set only with ERRIE on an operation error the model never makes); the
+//!   interrupt line follows EOP with EOPIE and the error flags with ERRIE.
 //! - Erase: SER with SNB and STRT erases one sector; MER is not modelled.
 //! - SR: EOP (set at the end of an operation only when EOPIE = 1), OPERR, WRPERR, PGAERR,
 //!   PGPERR, PGSERR (all write 1 to clear), BSY. IRQ: FLASH global interrupt, position 4, when
@@ -22,12 +25,14 @@
 //!
 //! G474 (RM0440 §5.3 operations, §5.7 registers), dual-bank mode (DBANK = 1, the factory
 //! setting; FLASH_OPTR reads it):
-//! - KEYR as on the F446 (§5.3.5). CR: PG, PER, MER1, PNB[10:3], BKER (bit 11), STRT (bit 16),
-//!   EOPIE (24), ERRIE (25), LOCK (31).
+//! - KEYR as on the F446. CR: PG, PER, MER1, PNB[9:3] (7 bits on the G474), BKER (bit 11), STRT
+//!   (bit 16), EOPIE (24), ERRIE (25), OPTLOCK (30), LOCK (31); reset LOCK | OPTLOCK.
 //! - Program: 64 bits at a time, two word stores to one 8-aligned double word, the first at
-//!   its lower address (§5.3.7); the operation starts with the second. A double word that is
-//!   not all ones is not programmed and sets PROGERR (the flash has ECC: §5.3.7).
-//!   A store to flash without PG sets PGSERR.
+//!   its lower address (§5.3.7); the first is latched and the operation starts with the second.
+//!   A double word whose cells are not erased is not programmed and sets PROGERR, unless it is
+//!   all zeros (the flash has ECC); a byte or half-word store sets SIZERR; a second word that is
+//!   not the latched one's partner sets PGAERR; a store while one of those flags is still set
+//!   sets PGSERR, as does a store without PG.
 //! - Erase: PER with PNB (page in its bank) and BKER (bank 2), STRT.
 //! - SR: EOP, OPERR, PROGERR, WRPERR, PGAERR, SIZERR, PGSERR, MISERR, FASTERR (w1c), BSY.
 //! - Read-while-write: an operation on one bank stalls fetches from that bank only (§5.3).
@@ -64,7 +69,12 @@ const F4_PGSERR: u32 = 1 << 7;
 const G4_SR_ERRORS: u32 = 0xC3FA;
 const G4_PROGERR: u32 = 1 << 3;
 const G4_PGAERR: u32 = 1 << 5;
+const G4_SIZERR: u32 = 1 << 6;
 const G4_PGSERR: u32 = 1 << 7;
+/// PROGERR, WRPERR, PGAERR, SIZERR, MISSERR, FASTERR: flags that block the next program.
+const G4_STALE_ERRORS: u32 = G4_PROGERR | (1 << 4) | G4_PGAERR | G4_SIZERR | (1 << 8) | (1 << 9);
+/// FLASH_CR reset value on the G474: LOCK and OPTLOCK (RM0440 §5.7.6).
+const G4_CR_RESET: u32 = CR_LOCK | (1 << 30);
 
 const CR_PG: u32 = 1 << 0;
 const CR_SER_PER: u32 = 1 << 1;
@@ -95,8 +105,9 @@ struct Busy {
 /// What the machine sees of the flash interface.
 pub trait FlashControl {
     /// A CPU store of `size` bytes of `value` at flash address `addr`, whose cells hold `old`
-    /// (little-endian). Returns what the cells hold afterwards; Err stops the run (a store the
-    /// model does not cover).
+    /// (little-endian). Returns the words it programs (address, new content): none for a word
+    /// the G474 only latches or a store refused with an error flag. Err stops the run (a store
+    /// the model does not cover).
     fn store(
         &mut self,
         now: Time,
@@ -104,7 +115,7 @@ pub trait FlashControl {
         size: u8,
         value: u32,
         old: u32,
-    ) -> Result<u32, String>;
+    ) -> Result<Vec<(u32, u32)>, String>;
     /// Ranges (address, bytes) an erase has started on since the last call: the machine fills
     /// them with 0xFF (their content during the erase is unreadable anyway: fetches stall).
     fn take_erases(&mut self) -> Vec<(u32, u32)>;
@@ -132,8 +143,9 @@ pub struct Prog {
     /// KEYR sequence: 0 nothing, 1 first key seen.
     key_state: u8,
     busy: Option<Busy>,
-    /// G474: the first word of a double word waiting for its second (address, value).
-    half: Option<(u32, u32)>,
+    /// G474: the first word of a double word waiting for its second (address, value, the cell's
+    /// content).
+    half: Option<(u32, u32, u32)>,
     erases: Vec<(u32, u32)>,
     ops: Vec<Operation>,
 }
@@ -146,7 +158,10 @@ impl Prog {
     pub fn new(kind: Kind) -> Self {
         Prog {
             kind,
-            cr: CR_LOCK,
+            cr: match kind {
+                Kind::F446 => CR_LOCK,
+                Kind::G474 => G4_CR_RESET,
+            },
             sr: 0,
             key_state: 0,
             busy: None,
@@ -307,8 +322,8 @@ impl Prog {
                 (addr, bytes, us)
             }
             Kind::G474 => {
-                // PNB[10:3] (0–127 in a bank of dual-bank mode), BKER bit 11.
-                let pnb = (cr >> 3) & 0xFF;
+                // PNB[9:3] (0–127 in a bank of dual-bank mode), BKER bit 11.
+                let pnb = (cr >> 3) & 0x7F;
                 if pnb > 127 {
                     return Err(format!(
                         "FLASH_CR.PNB = {pnb}: a bank has 128 pages in dual-bank mode"
@@ -337,13 +352,14 @@ impl Prog {
         Ok(())
     }
 
-    fn program_error(&mut self, flag: u32) -> Result<Option<u32>, String> {
+    fn program_error(&mut self, flag: u32) -> Result<Vec<(u32, u32)>, String> {
         self.sr |= flag;
-        Ok(None)
+        self.half = None;
+        Ok(Vec::new())
     }
 
-    /// A store to flash memory. Ok(Some(new)) programs the cells, Ok(None) leaves them (an
-    /// error flag was set).
+    /// A store to flash memory: the cells it programs (address, new word), none when it only
+    /// latches a word or an error flag was set.
     fn program(
         &mut self,
         now: Time,
@@ -351,7 +367,7 @@ impl Prog {
         size: u8,
         value: u32,
         old: u32,
-    ) -> Result<Option<u32>, String> {
+    ) -> Result<Vec<(u32, u32)>, String> {
         if self.busy.is_some() {
             return Err(format!(
                 "store to flash at 0x{addr:08X} while an operation is under way (the bus stalls): not modelled"
@@ -385,28 +401,31 @@ impl Prog {
                     erase: false,
                     addr,
                 });
-                Ok(Some(old & value))
+                Ok(vec![(addr, old & value)])
             }
             Kind::G474 => {
+                // An error flag left from an earlier program blocks the next: PGSERR (RM0440
+                // §5.7.5: "set ... when PROGERR, SIZERR, PGAERR, WRPERR, MISSERR or FASTERR is set
+                // due to a previous programming error").
+                if self.sr & G4_STALE_ERRORS != 0 {
+                    return self.program_error(G4_PGSERR);
+                }
+                // Only word accesses make up a double word: a byte or half-word is SIZERR.
                 if size != 4 {
-                    return self.program_error(G4_PGAERR);
+                    return self.program_error(G4_SIZERR);
                 }
                 match self.half.take() {
+                    // The first word is latched; nothing is programmed until the second.
                     None if addr.is_multiple_of(8) => {
-                        self.half = Some((addr, value));
-                        if old != 0xFFFF_FFFF {
-                            // Not erased: the double word will not be programmed.
-                            self.sr |= G4_PROGERR;
-                            return Ok(None);
-                        }
-                        // The model writes the first word at once; on the chip it is latched
-                        // until the second starts the operation (nothing reads it in between).
-                        Ok(Some(value))
+                        self.half = Some((addr, value, old));
+                        Ok(Vec::new())
                     }
-                    Some((first, _)) if addr == first + 4 => {
-                        if old != 0xFFFF_FFFF || self.sr & G4_PROGERR != 0 {
-                            self.sr |= G4_PROGERR;
-                            return Ok(None);
+                    Some((first, first_value, first_old)) if addr == first + 4 => {
+                        // ECC: a double word is programmed only into erased cells, except all
+                        // zeros, which may be written over anything (RM0440 §5.7.5, PROGERR).
+                        let erased = first_old == 0xFFFF_FFFF && old == 0xFFFF_FFFF;
+                        if !erased && (first_value, value) != (0, 0) {
+                            return self.program_error(G4_PROGERR);
                         }
                         let end = now + ticks_us(82);
                         self.busy = Some(Busy {
@@ -419,8 +438,9 @@ impl Prog {
                             erase: false,
                             addr: first,
                         });
-                        Ok(Some(value))
+                        Ok(vec![(first, first_value), (addr, value)])
                     }
+                    // Not the second half of the latched double word: PGAERR.
                     _ => self.program_error(G4_PGAERR),
                 }
             }
@@ -436,8 +456,8 @@ impl FlashControl for Prog {
         size: u8,
         value: u32,
         old: u32,
-    ) -> Result<u32, String> {
-        Ok(self.program(now, addr, size, value, old)?.unwrap_or(old))
+    ) -> Result<Vec<(u32, u32)>, String> {
+        self.program(now, addr, size, value, old)
     }
 
     fn take_erases(&mut self) -> Vec<(u32, u32)> {
@@ -484,7 +504,7 @@ mod tests {
         p.write(0, F4_CR, CR_PG | (2 << 8), !0).unwrap();
         assert_eq!(
             p.store(100, 0x0804_0000, 4, 0x1234_5678, !0).unwrap(),
-            0x1234_5678
+            vec![(0x0804_0000, 0x1234_5678)]
         );
         assert_eq!(p.read(F4_SR).unwrap() & SR_BSY, SR_BSY);
         // Every fetch stalls: one bank.
@@ -495,7 +515,7 @@ mod tests {
         assert_eq!(
             p.store(200, 0x0804_0000, 4, 0xFF00_FF00, 0x1234_5678)
                 .unwrap(),
-            0x1200_5600
+            vec![(0x0804_0000, 0x1200_5600)]
         );
     }
 
@@ -503,12 +523,12 @@ mod tests {
     fn f446_program_errors_leave_the_cells() {
         let mut p = unlocked(Kind::F446);
         // No PG: PGSERR.
-        assert_eq!(p.store(0, 0x0804_0000, 4, 0, !0).unwrap(), !0);
+        assert_eq!(p.store(0, 0x0804_0000, 4, 0, !0).unwrap(), vec![]);
         assert_ne!(p.read(F4_SR).unwrap() & F4_PGSERR, 0);
         p.write(0, F4_SR, F4_PGSERR, !0).unwrap();
         // x32 with a byte store: PGPERR.
         p.write(0, F4_CR, CR_PG | (2 << 8), !0).unwrap();
-        assert_eq!(p.store(0, 0x0804_0000, 1, 0, 0xFF).unwrap(), 0xFF);
+        assert_eq!(p.store(0, 0x0804_0000, 1, 0, 0xFF).unwrap(), vec![]);
         assert_ne!(p.read(F4_SR).unwrap() & F4_PGPERR, 0);
     }
 
@@ -533,22 +553,42 @@ mod tests {
     #[test]
     fn g474_double_word_program_needs_erased_cells_and_stalls_only_its_bank() {
         let mut p = unlocked(Kind::G474);
+        assert_eq!(Prog::new(Kind::G474).read(G4_CR), Some(G4_CR_RESET));
         p.write(0, G4_CR, CR_PG, !0).unwrap();
-        assert_eq!(p.store(0, 0x0807_C000, 4, 1, !0).unwrap(), 1);
+        // The first word only latches: no cell changes, nothing busy.
+        assert_eq!(p.store(0, 0x0807_C000, 4, 1, !0).unwrap(), vec![]);
+        assert_eq!(p.read(G4_SR).unwrap() & SR_BSY, 0);
         assert_eq!(
-            p.read(G4_SR).unwrap() & SR_BSY,
-            0,
-            "the first word only latches"
+            p.store(0, 0x0807_C004, 4, 2, !0).unwrap(),
+            vec![(0x0807_C000, 1), (0x0807_C004, 2)]
         );
-        assert_eq!(p.store(0, 0x0807_C004, 4, 2, !0).unwrap(), 2);
         assert_eq!(p.read(G4_SR).unwrap() & SR_BSY, SR_BSY);
         assert_eq!(p.stall_until(0, 0x0800_1000), None, "bank 1 reads on");
         assert!(p.stall_until(0, 0x0807_0000).is_some());
         p.advance(u64::MAX);
-        // A programmed double word is not programmed again: PROGERR, cells kept.
-        assert_eq!(p.store(0, 0x0807_C000, 4, 0, 1).unwrap(), 1);
-        assert_eq!(p.store(0, 0x0807_C004, 4, 0, 2).unwrap(), 2);
+        // All zeros may be written over programmed cells (ECC allows it).
+        assert_eq!(p.store(0, 0x0807_C000, 4, 0, 1).unwrap(), vec![]);
+        assert_eq!(
+            p.store(0, 0x0807_C004, 4, 0, 2).unwrap(),
+            vec![(0x0807_C000, 0), (0x0807_C004, 0)]
+        );
+        p.advance(u64::MAX);
+        // Anything else over programmed cells: PROGERR, nothing programmed, not even the first
+        // word.
+        assert_eq!(p.store(0, 0x0807_C008, 4, 5, !0).unwrap(), vec![]);
+        assert_eq!(p.store(0, 0x0807_C00C, 4, 6, 7).unwrap(), vec![]);
         assert_ne!(p.read(G4_SR).unwrap() & G4_PROGERR, 0);
+        // While PROGERR stands, the next program is refused with PGSERR.
+        assert_eq!(p.store(0, 0x0807_C010, 4, 5, !0).unwrap(), vec![]);
+        assert_ne!(p.read(G4_SR).unwrap() & G4_PGSERR, 0);
+        p.write(0, G4_SR, G4_PROGERR | G4_PGSERR, !0).unwrap();
+        // A half-word store: SIZERR; a second word that is not the partner: PGAERR.
+        assert_eq!(p.store(0, 0x0807_C010, 2, 5, !0).unwrap(), vec![]);
+        assert_ne!(p.read(G4_SR).unwrap() & G4_SIZERR, 0);
+        p.write(0, G4_SR, G4_SIZERR, !0).unwrap();
+        assert_eq!(p.store(0, 0x0807_C010, 4, 5, !0).unwrap(), vec![]);
+        assert_eq!(p.store(0, 0x0807_C018, 4, 5, !0).unwrap(), vec![]);
+        assert_ne!(p.read(G4_SR).unwrap() & G4_PGAERR, 0);
     }
 
     #[test]

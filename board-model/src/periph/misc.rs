@@ -14,8 +14,8 @@
 //!   the firmware's fault path sets the IWDG freeze bit. IDCODE is read only by the F4 flash
 //!   driver (dual-bank erase), which the firmware does not use.
 //!
-//! Registers outside that list return `Unmodelled`. SYSCFG answers a read of MEMRMP (embassy's G4
-//! flash driver reads FB_MODE) and EXTI is a block whose every access is `Unmodelled`: init only
+//! Registers outside that list return `Unmodelled`. SYSCFG answers a read of MEMRMP (embassy's
+//! generated G4 flash layout reads FB_MODE) and EXTI is a block whose every access is `Unmodelled`: init only
 //! enables/resets SYSCFG through the RCC and enables the EXTI interrupts in the NVIC.
 //!
 //! The flash interface's programming side (keys, CR/SR, program, erase) is `flash_prog`.
@@ -760,9 +760,11 @@ impl Peripheral for PwrG4 {
 // ------------------------------------------------------------------------------------------
 
 /// SYSCFG (RM0390 §8, RM0440 §10): mapped so that an access is reported by name. embassy init
-/// only enables and resets it through the RCC; neither embassy nor the firmware reads or writes
-/// a SYSCFG register (EXTI line muxing, memory remap, compensation cell, and on the G474 the
-/// VREFBUF/COMP/OPAMP registers in the same 1 KB window), so every access is `Unmodelled`.
+/// only enables and resets it through the RCC; the one register read is SYSCFG_MEMRMP, by the
+/// flash layout embassy-stm32 0.6 generates for the dual-bank G474 (`FlashBank::base` in its
+/// build's `_generated.rs` reads FB_MODE to place the banks). Every other access (EXTI line
+/// muxing, compensation cell, and on the G474 the VREFBUF/COMP/OPAMP registers in the same 1 KB
+/// window) is `Unmodelled`.
 #[derive(Clone, Debug, Default)]
 pub struct Syscfg;
 
@@ -778,9 +780,8 @@ impl Peripheral for Syscfg {
     }
     fn read(&mut self, _now: Time, offset: u32, _out: &mut Signals) -> Result<u32, Unmodelled> {
         match offset {
-            // SYSCFG_MEMRMP after a boot from main flash with the banks not swapped: MEM_MODE =
-            // 0 and (G474) FB_MODE = 0 (RM0390 §8.2.1, RM0440 §9.1.1). embassy's G4 flash driver
-            // reads FB_MODE to place the banks.
+            // SYSCFG_MEMRMP after a boot from main flash with the banks not swapped (BFB2 = 0):
+            // MEM_MODE = 0 and (G474) FB_MODE, bit 8, = 0 (RM0390 §8.2.1; RM0440 SYSCFG_MEMRMP).
             0x00 => Ok(0),
             _ => Err(Unmodelled::read(
                 offset,
