@@ -3,6 +3,7 @@
 //! prints one JSON object per command for scripts. The link itself is `saw_link`.
 
 pub mod port;
+pub mod ui;
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -93,6 +94,20 @@ pub enum Command {
     },
     /// Save the active scene to flash: the board boots into it from now on.
     Save,
+    /// The fig. 11 panel: a local web page that shows the finger, the regions and the trace live
+    /// and edits the scene (docs/ui.md). Open the address it prints in a browser.
+    Ui {
+        /// Where the page is served. Loopback only unless --allow-remote is given.
+        #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:8800")]
+        listen: std::net::SocketAddr,
+        /// Allow a non-loopback --listen address (anyone who reaches it drives the display).
+        #[arg(long)]
+        allow_remote: bool,
+        /// One record every N samples in the page's trace (1 to 10000; 10 = 1 kHz on a 10 kHz
+        /// board).
+        #[arg(long, value_name = "N", default_value_t = 10, value_parser = clap::value_parser!(u16).range(1..=10_000))]
+        every: u16,
+    },
     /// Measure the link: the round trip of boundary moves (the scene is restored after), and
     /// the fastest stream that arrives without a drop.
     Bench {
@@ -188,6 +203,14 @@ pub struct Done {
 
 /// Runs one command.
 pub fn run(cli: &Cli) -> Result<Done, Failure> {
+    if let Command::Ui {
+        listen,
+        allow_remote,
+        every,
+    } = &cli.command
+    {
+        return ui_command(cli, *listen, *allow_remote, *every);
+    }
     let port = port::open(&cli.port).map_err(Failure::link)?;
     let mut client = Client::new(port, Duration::from_millis(cli.timeout));
     // Every command starts with hello: a board speaking another protocol is named before
@@ -232,24 +255,61 @@ pub fn run(cli: &Cli) -> Result<Done, Failure> {
             every,
         } => stream(&mut client, csv, *seconds, *every),
         Command::Bench { moves, seconds } => bench(&mut client, *moves, *seconds),
-        Command::Save => match client.request(&Request::Save)? {
-            Reply::Saved { scene_id } => Ok(Done {
-                text: format!("saved scene {scene_id:#010x}: the board boots into it"),
-                json: json!({ "saved": scene_id }),
-            }),
-            Reply::SaveFailed(e) => Err(Failure::refused(format!("save failed: {e}"))),
-            other => Err(unexpected(other)),
-        },
+        Command::Save => save(&mut client),
+        Command::Ui { .. } => unreachable!("handled before the port is opened"),
     }
 }
 
-fn unexpected(r: Reply) -> Failure {
+/// `saw ui`: serves the panel until interrupted.
+fn ui_command(
+    cli: &Cli,
+    listen: std::net::SocketAddr,
+    allow_remote: bool,
+    every: u16,
+) -> Result<Done, Failure> {
+    if let Some(warning) = ui::check_listen(listen, allow_remote).map_err(Failure::input)? {
+        eprintln!("{warning}");
+    }
+    let handle = ui::start(ui::UiOptions {
+        port: cli.port.clone(),
+        listen,
+        allow_remote,
+        timeout: Duration::from_millis(cli.timeout),
+        every,
+    })
+    .map_err(Failure::input)?;
+    eprintln!(
+        "saw ui: http://{} (the panel for {}); Ctrl-C to stop",
+        handle.addr,
+        cli.port.display()
+    );
+    handle.wait();
+    Ok(Done {
+        text: "the panel stopped".into(),
+        json: json!({ "stopped": true }),
+    })
+}
+
+pub(crate) fn save<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+) -> Result<Done, Failure> {
+    match client.request(&Request::Save)? {
+        Reply::Saved { scene_id } => Ok(Done {
+            text: format!("saved scene {scene_id:#010x}: the board boots into it"),
+            json: json!({ "saved": scene_id }),
+        }),
+        Reply::SaveFailed(e) => Err(Failure::refused(format!("save failed: {e}"))),
+        other => Err(unexpected(other)),
+    }
+}
+
+pub(crate) fn unexpected(r: Reply) -> Failure {
     Failure::link(format!(
         "the board answered with an unexpected reply: {r:?}"
     ))
 }
 
-fn source_name(s: SceneSource) -> &'static str {
+pub(crate) fn source_name(s: SceneSource) -> &'static str {
     match s {
         SceneSource::Default => "the built-in default",
         SceneSource::BuildTime => "embedded at build time",
@@ -271,7 +331,7 @@ fn hello_text(h: &Hello) -> String {
     )
 }
 
-fn applied(reply: Reply, what: String) -> Result<Done, Failure> {
+pub(crate) fn applied(reply: Reply, what: String) -> Result<Done, Failure> {
     match reply {
         Reply::Applied { scene_id } => Ok(Done {
             text: format!("{what}: running, scene {scene_id:#010x}"),
@@ -288,8 +348,18 @@ fn push<P: std::io::Read + std::io::Write>(
 ) -> Result<Done, Failure> {
     let name = file.display().to_string();
     let text = std::fs::read_to_string(file).map_err(|e| Failure::input(format!("{name}: {e}")))?;
+    push_text(client, &name, &text)
+}
+
+/// Loads the scene file `text` (named `name` in messages): checked here, compiled on the board.
+pub(crate) fn push_text<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+    name: &str,
+    text: &str,
+) -> Result<Done, Failure> {
+    let name = name.to_string();
     let doc =
-        saw_core::scene_file::parse(&name, &text).map_err(|e| Failure::input(e.to_string()))?;
+        saw_core::scene_file::parse(&name, text).map_err(|e| Failure::input(e.to_string()))?;
     match client.request(&Request::LoadScene(doc.config.clone()))? {
         Reply::Applied { scene_id } => Ok(Done {
             text: format!("{name}: running, scene {scene_id:#010x}"),
@@ -352,7 +422,7 @@ fn scene_text(scene_id: u32, source: SceneSource, c: &Config) -> String {
     s
 }
 
-fn texture_text(t: &Texture) -> String {
+pub(crate) fn texture_text(t: &Texture) -> String {
     match t {
         Texture::Off => "off".into(),
         Texture::Constant(c) => format!(
@@ -391,7 +461,7 @@ pub fn region_toml(keys: &[String]) -> Result<String, String> {
     Ok(out)
 }
 
-fn set<P: std::io::Read + std::io::Write>(
+pub(crate) fn set<P: std::io::Read + std::io::Write>(
     client: &mut Client<P>,
     index: u8,
     keys: &[String],

@@ -1,76 +1,15 @@
 //! End to end through a real tty: the `saw` binary against the virtual board of
 //! `host-sim serve` (the same core and link code as the firmware) on a pseudo-terminal.
 
+mod common;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::Duration;
 
-use clap::Parser;
-use host_sim::serve::{serve, ServeArgs, ServeStats};
+use common::VirtualBoard;
 use serde_json::Value;
-
-/// A virtual board running in a thread, stopped on drop.
-struct VirtualBoard {
-    stop: Arc<AtomicBool>,
-    handle: Option<JoinHandle<Result<ServeStats, String>>>,
-    port: PathBuf,
-    _dir: tempfile::TempDir,
-}
-
-impl VirtualBoard {
-    fn start(extra: &[&str]) -> Self {
-        let dir = tempfile::tempdir().unwrap();
-        Self::start_in(dir, extra)
-    }
-
-    fn start_in(dir: tempfile::TempDir, extra: &[&str]) -> Self {
-        let port = dir.path().join("tty");
-        let mut argv = vec![
-            "serve".to_string(),
-            "--pty".into(),
-            port.display().to_string(),
-        ];
-        argv.extend(extra.iter().map(|s| s.to_string()));
-        let args = ServeArgs::try_parse_from(argv).unwrap();
-        let stop = Arc::new(AtomicBool::new(false));
-        let (tx, rx) = std::sync::mpsc::channel();
-        let s = stop.clone();
-        let handle = std::thread::spawn(move || {
-            serve(&args, &s, |_| {
-                let _ = tx.send(());
-            })
-        });
-        rx.recv_timeout(Duration::from_secs(10))
-            .expect("the virtual board did not start");
-        Self {
-            stop,
-            handle: Some(handle),
-            port,
-            _dir: dir,
-        }
-    }
-
-    /// Pulls the plug: the board stops; its directory (and the flash file in it) stays.
-    fn power_off(mut self) -> tempfile::TempDir {
-        self.stop.store(true, Ordering::Relaxed);
-        let _ = self.handle.take().unwrap().join().unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        std::mem::replace(&mut self._dir, dir)
-    }
-}
-
-impl Drop for VirtualBoard {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(h) = self.handle.take() {
-            let _ = h.join();
-        }
-    }
-}
 
 struct Run {
     code: i32,

@@ -1,0 +1,261 @@
+//! `saw ui` against the virtual board: the page is served from the binary with nothing from
+//! elsewhere, foreign Host and Origin headers are refused, a non-loopback address needs its flag,
+//! and the WebSocket carries the board's own scene and telemetry, edits with the board's
+//! answers, and a lost link that comes back by itself.
+
+mod common;
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::time::{Duration, Instant};
+
+use common::VirtualBoard;
+use saw::ui::{start, UiHandle, UiOptions};
+use serde_json::{json, Value};
+use tungstenite::client::IntoClientRequest;
+use tungstenite::Message;
+
+fn panel(vb: &VirtualBoard) -> UiHandle {
+    start(UiOptions {
+        port: vb.port.clone(),
+        listen: "127.0.0.1:0".parse().unwrap(),
+        allow_remote: false,
+        timeout: Duration::from_millis(1000),
+        every: 10,
+    })
+    .unwrap()
+}
+
+/// A raw HTTP/1.1 GET with the given extra headers: (status, body).
+fn get(ui: &UiHandle, path: &str, headers: &[(&str, &str)]) -> (u16, String) {
+    let mut s = TcpStream::connect(ui.addr).unwrap();
+    let host = format!("127.0.0.1:{}", ui.addr.port());
+    let mut req = format!("GET {path} HTTP/1.1\r\nConnection: close\r\n");
+    if !headers.iter().any(|(k, _)| k.eq_ignore_ascii_case("host")) {
+        req += &format!("Host: {host}\r\n");
+    }
+    for (k, v) in headers {
+        req += &format!("{k}: {v}\r\n");
+    }
+    req += "\r\n";
+    s.write_all(req.as_bytes()).unwrap();
+    let mut out = String::new();
+    s.read_to_string(&mut out).unwrap();
+    let status = out[9..12].parse().unwrap();
+    let body = out.split_once("\r\n\r\n").map_or("", |b| b.1).to_string();
+    (status, body)
+}
+
+type Socket = tungstenite::WebSocket<tungstenite::stream::MaybeTlsStream<TcpStream>>;
+
+fn socket(ui: &UiHandle) -> Socket {
+    let mut req = format!("ws://127.0.0.1:{}/ws", ui.addr.port())
+        .into_client_request()
+        .unwrap();
+    req.headers_mut().insert(
+        "Origin",
+        format!("http://127.0.0.1:{}", ui.addr.port())
+            .parse()
+            .unwrap(),
+    );
+    let (ws, _) = tungstenite::connect(req).unwrap();
+    if let tungstenite::stream::MaybeTlsStream::Plain(s) = ws.get_ref() {
+        s.set_read_timeout(Some(Duration::from_millis(200)))
+            .unwrap();
+    }
+    ws
+}
+
+/// The next message of type `t` within `secs` (others are skipped).
+fn next(ws: &mut Socket, t: &str, secs: f64) -> Option<Value> {
+    let end = Instant::now() + Duration::from_secs_f64(secs);
+    while Instant::now() < end {
+        match ws.read() {
+            Ok(Message::Text(text)) => {
+                let v: Value = serde_json::from_str(&text).unwrap();
+                if v["t"] == t {
+                    return Some(v);
+                }
+            }
+            Ok(_) => {}
+            Err(tungstenite::Error::Io(e))
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
+            Err(e) => panic!("websocket: {e}"),
+        }
+    }
+    None
+}
+
+fn command(ws: &mut Socket, cmd: Value) -> Value {
+    ws.send(Message::Text(cmd.to_string().into())).unwrap();
+    next(ws, "answer", 5.0).expect("no answer")
+}
+
+#[test]
+fn the_page_comes_from_the_binary_and_names_nothing_elsewhere() {
+    let vb = VirtualBoard::start(&[]);
+    let ui = panel(&vb);
+    let (status, body) = get(&ui, "/", &[]);
+    assert_eq!(status, 200);
+    assert!(body.contains("<canvas id=\"strip\""), "{body}");
+    // Nothing fetched at run time: no script, style, image or font from another address.
+    for needle in [
+        "src=\"http",
+        "href=\"http",
+        "url(http",
+        "import(\"http",
+        "//cdn",
+    ] {
+        assert!(!body.contains(needle), "the page names {needle}");
+    }
+}
+
+#[test]
+fn foreign_host_and_origin_are_refused() {
+    let vb = VirtualBoard::start(&[]);
+    let ui = panel(&vb);
+    let port = ui.addr.port();
+    // DNS rebinding: a name that resolves here but is not this panel's.
+    let (status, body) = get(&ui, "/", &[("Host", &format!("attacker.example:{port}"))]);
+    assert_eq!(status, 403, "{body}");
+    assert!(body.contains("Host `attacker.example"), "{body}");
+    // A page elsewhere opening the control socket or fetching the page.
+    for path in ["/", "/ws"] {
+        let (status, body) = get(&ui, path, &[("Origin", "http://attacker.example")]);
+        assert_eq!(status, 403, "{path}: {body}");
+        assert!(body.contains("Origin `http://attacker.example`"), "{body}");
+    }
+    // Same host, other port: another local server is another site.
+    let (status, _) = get(
+        &ui,
+        "/",
+        &[("Origin", &format!("http://127.0.0.1:{}", port + 1))],
+    );
+    assert_eq!(status, 403);
+    // Its own page, under either local name.
+    assert_eq!(
+        get(&ui, "/", &[("Origin", &format!("http://127.0.0.1:{port}"))]).0,
+        200
+    );
+    assert_eq!(
+        get(&ui, "/", &[("Host", &format!("localhost:{port}"))]).0,
+        200
+    );
+}
+
+#[test]
+fn a_non_loopback_address_needs_its_flag() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_saw"))
+        .args(["--port", "/nonexistent", "ui", "--listen", "0.0.0.0:0"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--listen 0.0.0.0:0") && err.contains("--allow-remote"),
+        "{err}"
+    );
+    let warned = saw::ui::check_listen("0.0.0.0:0".parse().unwrap(), true).unwrap();
+    assert!(warned.is_some_and(|w| w.starts_with("warning:")));
+    assert_eq!(
+        saw::ui::check_listen("127.0.0.1:0".parse().unwrap(), false),
+        Ok(None)
+    );
+}
+
+#[test]
+fn the_socket_carries_the_board_edits_and_their_refusals() {
+    let vb = VirtualBoard::start(&["--speed", "100"]);
+    let ui = panel(&vb);
+    let mut ws = socket(&ui);
+    let link = next(&mut ws, "link", 5.0).expect("link state");
+    assert_eq!(link["ok"], true, "{link}");
+    assert_eq!(link["hello"]["board"], "nucleo-f446re");
+    let scene = next(&mut ws, "scene", 5.0).expect("scene");
+    assert_eq!(scene["regions"].as_array().unwrap().len(), 3, "{scene}");
+    // The finger: records at 1 kHz, positions on the substrate and moving.
+    let mut positions = Vec::new();
+    while positions.len() < 500 {
+        let r = next(&mut ws, "records", 2.0).expect("records");
+        positions.extend(
+            r["records"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .filter_map(|r| r[1].as_f64()),
+        );
+    }
+    let (lo, hi) = positions
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &p| (a.min(p), b.max(p)));
+    assert!(
+        lo >= 0.0 && hi <= 63_000.0 && hi - lo > 10_000.0,
+        "{lo}..{hi} µm"
+    );
+    // A boundary moved: answered, and the scene redrawn from the board's answer.
+    let a = command(
+        &mut ws,
+        json!({"id": 7, "cmd": "boundary", "index": 0, "mm": 30.0}),
+    );
+    assert_eq!(
+        (a["id"].as_u64(), a["ok"].as_bool()),
+        (Some(7), Some(true)),
+        "{a}"
+    );
+    let scene = next(&mut ws, "scene", 5.0).expect("scene after the move");
+    assert_eq!(scene["regions"][0]["to_mm"], 30.0, "{scene}");
+    // A refused edit: the scene file's sentence, nothing changed.
+    let a = command(
+        &mut ws,
+        json!({"id": 8, "cmd": "set", "index": 1, "keys": ["kind=grating", "wavelength_mm=-1"]}),
+    );
+    assert_eq!(a["ok"], false, "{a}");
+    assert!(a["text"].as_str().unwrap().contains("wavelength_mm"), "{a}");
+    let scene = next(&mut ws, "scene", 5.0).unwrap();
+    assert_eq!(scene["regions"][0]["to_mm"], 30.0);
+    // A bad command from the page is refused at the door.
+    let a = command(
+        &mut ws,
+        json!({"id": 9, "cmd": "boundary", "index": 0, "mm": "far"}),
+    );
+    assert!(
+        a["text"].as_str().unwrap().contains("`mm` = \"far\""),
+        "{a}"
+    );
+    // A scene file loaded through the page.
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../scenes/grating.toml"
+    ))
+    .unwrap();
+    let a = command(
+        &mut ws,
+        json!({"id": 10, "cmd": "push", "name": "grating.toml", "text": text}),
+    );
+    assert_eq!(a["ok"], true, "{a}");
+}
+
+#[test]
+fn a_lost_link_is_shown_and_comes_back() {
+    let vb = VirtualBoard::start(&[]);
+    let ui = panel(&vb);
+    let mut ws = socket(&ui);
+    assert_eq!(next(&mut ws, "link", 5.0).unwrap()["ok"], true);
+    // Unplugged.
+    let dir = vb.power_off();
+    let lost = next(&mut ws, "link", 5.0).expect("no link-lost message");
+    assert_eq!(lost["ok"], false, "{lost}");
+    assert!(!lost["why"].as_str().unwrap().is_empty());
+    // An edit while the link is down is refused, not queued.
+    let a = command(&mut ws, json!({"id": 3, "cmd": "save"}));
+    assert_eq!(a["ok"], false);
+    assert!(a["text"].as_str().unwrap().contains("link is lost"), "{a}");
+    // Plugged in again at the same port: the panel finds it by itself.
+    let _vb = VirtualBoard::start_in(dir, &[]);
+    let back = next(&mut ws, "link", 10.0).expect("no reconnect");
+    assert_eq!(back["ok"], true, "{back}");
+    assert!(next(&mut ws, "records", 5.0).is_some());
+}
