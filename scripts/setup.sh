@@ -4,10 +4,11 @@
 # Installs Debian's Rust toolchain (rustc-web/cargo-web + rust-web-src for `-Zbuild-std=core`
 # on thumbv7em-none-eabihf — rustup targets are not needed), the lld-22 linker, QEMU for Arm,
 # libfontconfig1-dev (host-side plotting) and, for the board model (board-model/, test-only, GPL),
-# libunicorn-dev with libclang-dev (bindgen). apt is skipped entirely when everything is present.
+# libunicorn-dev with libclang-dev (bindgen), and Chromium with chromedriver for the web panel's
+# browser test (saw/tests/browser.rs). apt is skipped entirely when everything is present.
 set -euo pipefail
 
-PACKAGES=(rustc-web cargo-web rust-web-src lld-22 qemu-system-arm libfontconfig1-dev libunicorn-dev libclang-dev)
+PACKAGES=(rustc-web cargo-web rust-web-src lld-22 qemu-system-arm libfontconfig1-dev libunicorn-dev libclang-dev chromium chromium-driver)
 
 export DEBIAN_FRONTEND=noninteractive
 
