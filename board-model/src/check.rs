@@ -585,6 +585,30 @@ pub fn image_has_link(elf: &Path) -> bool {
     std::fs::read(elf).is_ok_and(|b| b.windows(8).any(|w| w == b"saw_link"))
 }
 
+/// The frames the board sent, decoded, each with the time its last byte left; and how many were
+/// refused.
+fn board_replies(
+    bytes: &[(Time, u8)],
+) -> (
+    Vec<(Time, saw_link::msg::Header, saw_link::msg::Reply)>,
+    usize,
+) {
+    use saw_link::frame::{self, Receiver, MAX_ENCODED};
+    let mut rx = Receiver::<MAX_ENCODED>::default();
+    let (mut replies, mut bad) = (Vec::new(), 0);
+    for &(t, b) in bytes {
+        match rx.push(b) {
+            Some(Ok(n)) => match frame::message::<saw_link::msg::Reply>(rx.payload(n)) {
+                Ok((h, r)) => replies.push((t, h, r)),
+                Err(_) => bad += 1,
+            },
+            Some(Err(_)) => bad += 1,
+            None => {}
+        }
+    }
+    (replies, bad)
+}
+
 /// `req` as the host sends it: a zero first (any partial frame before it is dropped), then the
 /// frame with sequence number `seq`.
 fn request_frame(seq: u32, req: &saw_link::msg::Request) -> Vec<u8> {
@@ -610,8 +634,7 @@ fn request_frame(seq: u32, req: &saw_link::msg::Request) -> Vec<u8> {
 /// Also the boundary move's round trip in board time, from its last byte in to its answer's
 /// last byte out.
 pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
-    use saw_link::frame::{self, Receiver, MAX_ENCODED};
-    use saw_link::msg::{Header, LinkError, Reply, Request, PROTOCOL_VERSION};
+    use saw_link::msg::{LinkError, Reply, Request, PROTOCOL_VERSION};
     let frame_of = request_frame;
     let mut flipped = frame_of(3, &Request::Save);
     flipped[3] ^= 0x08;
@@ -644,19 +667,7 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         return Ok(out);
     }
     // The answers, each with the time its last byte left.
-    let mut rx = Receiver::<MAX_ENCODED>::default();
-    let mut replies: Vec<(Time, Header, Reply)> = Vec::new();
-    let mut bad = 0;
-    for &(t, b) in &o.link_output {
-        match rx.push(b) {
-            Some(Ok(n)) => match frame::message::<Reply>(rx.payload(n)) {
-                Ok((h, r)) => replies.push((t, h, r)),
-                Err(_) => bad += 1,
-            },
-            Some(Err(_)) => bad += 1,
-            None => {}
-        }
-    }
+    let (replies, bad) = board_replies(&o.link_output);
     let answer = |seq: u32| {
         replies
             .iter()
@@ -764,7 +775,6 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
 pub fn save(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     // The save starts at 0.3 s and lasts 1.2 s on the F446 (a 1 s erase and the migration).
     const STUCK_S: f64 = 1.9;
-    use saw_link::frame::{self, Receiver, MAX_ENCODED};
     use saw_link::msg::{Reply, Request, SceneSource};
     let def = board.def();
     let scene = |i: usize| {
@@ -810,15 +820,11 @@ pub fn save(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         ));
         return Ok(out);
     }
-    let mut rx = Receiver::<MAX_ENCODED>::default();
-    let mut replies: Vec<(Time, u32, Reply)> = Vec::new();
-    for &(t, b) in &o.link_output {
-        if let Some(Ok(n)) = rx.push(b) {
-            if let Ok((h, r)) = frame::message::<Reply>(rx.payload(n)) {
-                replies.push((t, h.seq, r));
-            }
-        }
-    }
+    let replies: Vec<(Time, u32, Reply)> = board_replies(&o.link_output)
+        .0
+        .into_iter()
+        .map(|(t, h, r)| (t, h.seq, r))
+        .collect();
     let answer = |seq: u32| replies.iter().find(|r| r.1 == seq).cloned();
     let hello = |seq: u32| match answer(seq) {
         Some((_, _, Reply::Hello(h))) => Some((h.scene_id, h.scene_source)),
