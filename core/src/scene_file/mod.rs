@@ -18,6 +18,9 @@ mod ctx;
 mod regions;
 mod sections;
 mod spec;
+mod write;
+
+pub use write::to_scene_file;
 
 use core::fmt;
 use core::ops::Range;
