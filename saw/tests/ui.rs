@@ -225,6 +225,19 @@ fn the_socket_carries_the_board_edits_and_their_refusals() {
         a["text"].as_str().unwrap().contains("`mm` = \"far\""),
         "{a}"
     );
+    // The board's scene saved as a scene file: it reads back as the scene the board runs.
+    let a = command(&mut ws, json!({"id": 11, "cmd": "export"}));
+    assert_eq!(a["ok"], true, "{a}");
+    let file = a["file"]
+        .as_str()
+        .unwrap_or_else(|| panic!("no scene file: {a}"));
+    let doc = saw_core::scene_file::parse("exported", file).unwrap();
+    assert_eq!(doc.config.scene.boundaries_um[0], 30_000, "{file}");
+    let scene = next(&mut ws, "scene", 5.0).unwrap();
+    assert_eq!(
+        doc.config.scene.textures.len(),
+        scene["regions"].as_array().unwrap().len()
+    );
     // A scene file loaded through the page.
     let text = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),

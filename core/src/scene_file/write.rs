@@ -27,7 +27,7 @@ fn thousandths(v: u64) -> String {
 
 /// `v` tenths as a decimal: 400 ‰ → "40", 125 → "12.5".
 fn tenths(v: u16) -> String {
-    if v % 10 == 0 {
+    if v.is_multiple_of(10) {
         std::format!("{}", v / 10)
     } else {
         std::format!("{}.{}", v / 10, v % 10)

@@ -45,6 +45,8 @@ pub enum Command {
     Drive(DriveMode),
     /// Counters from zero.
     ResetCounters,
+    /// The board's scene as a scene file.
+    Export,
 }
 
 /// Reads one command from the page: `{"id": N, "cmd": …}`. Every value is checked here; the
@@ -130,6 +132,7 @@ pub fn parse_command(text: &str) -> Result<(u64, Command), (u64, String)> {
             }
         },
         "reset_counters" => Command::ResetCounters,
+        "export" => Command::Export,
         other => {
             return Err(fail(format!(
                 "`cmd` = \"{other}\": not a command of the panel"
@@ -248,7 +251,7 @@ fn linked<P: Read + Write>(
             let link_failed = matches!(&result, Err(f) if f.code == 3);
             match result {
                 Ok(done) => {
-                    out.send(json!({"t": "answer", "id": id, "ok": true, "text": done.text}))
+                    out.send(json!({"t": "answer", "id": id, "ok": true, "text": done.text, "file": done.json.get("scene_file")}))
                 }
                 Err(f) => {
                     out.send(json!({"t": "answer", "id": id, "ok": false, "text": f.message}))
@@ -315,6 +318,20 @@ fn execute<P: Read + Write>(client: &mut Client<P>, cmd: &Command) -> Result<Don
             let reply = client.request(&Request::SetDrive(*mode))?;
             crate::applied(reply, format!("drive {mode:?}"))
         }
+        Command::Export => match client.request(&Request::GetScene)? {
+            Reply::Scene {
+                scene_id, config, ..
+            } => {
+                let title = format!(
+                    "Scene {scene_id:#010x}, saved from the panel (saw ui): the board's own account of its scene."
+                );
+                Ok(Done {
+                    text: format!("scene {scene_id:#010x} as a scene file"),
+                    json: json!({"scene_file": saw_core::scene_file::to_scene_file(&config, &title)}),
+                })
+            }
+            other => Err(crate::unexpected(other)),
+        },
         Command::ResetCounters => match client.request(&Request::Counters { reset: true })? {
             Reply::Counters(_) => Ok(Done {
                 text: "counters from zero".into(),
