@@ -668,3 +668,38 @@ fn generated_files_go_to_out_unless_asked() {
         assert!(err.contains("--out"), "{err}");
     }
 }
+
+// ---------------------------------------------------------------- `serve`'s fault injection
+
+flag_test!(serve_fault_window:
+    ["serve", "--pty", "/nonexistent/tty", "--fault", "open", "--fault-at", "nan", "--fault-for", "1"] => "error: invalid value 'nan' for '--fault-at <S>': must be a finite number from 0 to 1e6 s",
+    ["serve", "--pty", "/nonexistent/tty", "--fault", "open", "--fault-at=-1", "--fault-for", "1"] => "error: invalid value '-1' for '--fault-at <S>': must be from 0 to 1e6 s",
+    ["serve", "--pty", "/nonexistent/tty", "--fault", "open", "--fault-at", "1", "--fault-for", "0"] => "error: invalid value '0' for '--fault-for <S>': must be from 0.001 to 1e6 s",
+    ["serve", "--pty", "/nonexistent/tty", "--fault", "short", "--fault-at", "1", "--fault-for", "inf"] => "error: invalid value 'inf' for '--fault-for <S>': must be a finite number from 0.001 to 1e6 s",
+);
+
+/// A fault without its window (or a window without its fault) is refused, naming what is missing.
+#[test]
+fn serve_fault_needs_its_window() {
+    for args in [
+        &["serve", "--pty", "/nonexistent/tty", "--fault", "open"][..],
+        &[
+            "serve",
+            "--pty",
+            "/nonexistent/tty",
+            "--fault-at",
+            "1",
+            "--fault-for",
+            "1",
+        ][..],
+    ] {
+        let out = run(args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.starts_with("error: the following required arguments were not provided:"),
+            "{err}"
+        );
+        assert!(err.contains("--fault"), "{err}");
+    }
+}

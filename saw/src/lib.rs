@@ -223,14 +223,7 @@ pub fn run(cli: &Cli) -> Result<Done, Failure> {
         }),
         Command::Push { file } => push(&mut client, file),
         Command::Get => get(&mut client),
-        Command::Boundary { index, mm } => {
-            let at_um = (mm * 1000.0).round() as u32;
-            let reply = client.request(&Request::MoveBoundary {
-                index: *index,
-                at_um,
-            })?;
-            applied(reply, format!("boundary {index} at {mm} mm"))
-        }
+        Command::Boundary { index, mm } => boundary(&mut client, *index, *mm),
         Command::Set { index, keys } => set(&mut client, *index, keys),
         Command::Drive { mode } => {
             let drive = match mode {
@@ -288,6 +281,17 @@ fn ui_command(
         text: "the panel stopped".into(),
         json: json!({ "stopped": true }),
     })
+}
+
+/// Moves boundary `index` to `mm`, live.
+pub(crate) fn boundary<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+    index: u8,
+    mm: f64,
+) -> Result<Done, Failure> {
+    let at_um = (mm * 1000.0).round() as u32;
+    let reply = client.request(&Request::MoveBoundary { index, at_um })?;
+    applied(reply, format!("boundary {index} at {mm} mm"))
 }
 
 pub(crate) fn save<P: std::io::Read + std::io::Write>(

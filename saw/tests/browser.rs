@@ -2,7 +2,8 @@
 //! against the virtual board. The page loads and links; the finger marker sits where the
 //! virtual finger rests; dragging a boundary moves the board's boundary (read back with `saw`
 //! once the panel has let go of the port); a refused edit shows the board's sentence; pulling
-//! the virtual board shows "link lost" and the page comes back when it returns; frame times are
+//! the virtual board shows "link lost" and the page comes back when it returns; an open wiper is
+//! named on the strip while it lasts; frame times are
 //! measured in the browser while the stream runs. Screenshots go to target/ui-screens/ (and to
 //! the directory in SAW_UI_SCREENSHOTS, e.g. docs/ui, to refresh the committed ones).
 
@@ -63,6 +64,18 @@ async fn browser() -> (Driver, Client) {
     }
 }
 
+/// A panel on `vb`'s port, on any free local port.
+fn panel(vb: &VirtualBoard) -> saw::ui::UiHandle {
+    start(UiOptions {
+        port: vb.port.clone(),
+        listen: "127.0.0.1:0".parse().unwrap(),
+        allow_remote: false,
+        timeout: Duration::from_millis(1000),
+        every: 10,
+    })
+    .unwrap()
+}
+
 async fn js(c: &Client, script: &str) -> Value {
     c.execute(script, vec![]).await.unwrap()
 }
@@ -97,14 +110,7 @@ async fn screenshot(c: &Client, name: &str) {
 async fn the_panel_in_a_real_browser() {
     // The finger rests at 42.5 mm on the default scene.
     let vb = VirtualBoard::start(&["--rest-at", "42.5"]);
-    let ui = start(UiOptions {
-        port: vb.port.clone(),
-        listen: "127.0.0.1:0".parse().unwrap(),
-        allow_remote: false,
-        timeout: Duration::from_millis(1000),
-        every: 10,
-    })
-    .unwrap();
+    let ui = panel(&vb);
     let (_driver, c) = browser().await;
     c.goto(&format!("http://127.0.0.1:{}/", ui.addr.port()))
         .await
@@ -230,14 +236,7 @@ async fn the_panel_in_a_real_browser() {
     );
 
     // A new panel on the same board; the page reloaded.
-    let ui = start(UiOptions {
-        port: vb.port.clone(),
-        listen: "127.0.0.1:0".parse().unwrap(),
-        allow_remote: false,
-        timeout: Duration::from_millis(1000),
-        every: 10,
-    })
-    .unwrap();
+    let ui = panel(&vb);
     c.goto(&format!("http://127.0.0.1:{}/", ui.addr.port()))
         .await
         .unwrap();
@@ -278,7 +277,20 @@ async fn the_panel_in_a_real_browser() {
     until(&c, "link lost shown", "return document.body.dataset.link === 'lost' && document.getElementById('status').textContent.includes('link lost')", 10).await;
     screenshot(&c, "link-lost").await;
     // Back, now with the finger sliding (1.5 ↔ 61.5 mm at 60 mm/s): the marker follows it.
-    let _vb = VirtualBoard::start_in(dir, &["--speed", "60"]);
+    // (An open wiper from 5 s to 8 s after it starts: the panel names the fault.)
+    let _vb = VirtualBoard::start_in(
+        dir,
+        &[
+            "--speed",
+            "60",
+            "--fault",
+            "open",
+            "--fault-at",
+            "5",
+            "--fault-for",
+            "3",
+        ],
+    );
     until(
         &c,
         "reconnected",
@@ -315,6 +327,21 @@ async fn the_panel_in_a_real_browser() {
         );
     }
     screenshot(&c, "moving").await;
+    until(
+        &c,
+        "the sensor fault named",
+        "return document.getElementById('strip').dataset.fault === 'RailLow'",
+        10,
+    )
+    .await;
+    screenshot(&c, "fault").await;
+    until(
+        &c,
+        "the fault over",
+        "return document.getElementById('strip').dataset.fault === ''",
+        10,
+    )
+    .await;
     c.close().await.unwrap();
     ui.stop();
 }

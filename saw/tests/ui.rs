@@ -272,3 +272,34 @@ fn a_lost_link_is_shown_and_comes_back() {
     assert_eq!(back["ok"], true, "{back}");
     assert!(next(&mut ws, "records", 5.0).is_some());
 }
+
+#[test]
+fn a_sensor_fault_reaches_the_page_while_it_lasts() {
+    // The wiper open from 0.5 s to 0.8 s after the board starts.
+    let vb = VirtualBoard::start(&["--fault", "open", "--fault-at", "0.5", "--fault-for", "0.3"]);
+    let ui = panel(&vb);
+    let mut ws = socket(&ui);
+    let (mut faulted, mut after) = (0, 0);
+    let end = Instant::now() + Duration::from_secs(3);
+    while Instant::now() < end {
+        let Some(r) = next(&mut ws, "records", 1.0) else {
+            continue;
+        };
+        for rec in r["records"].as_array().unwrap() {
+            let t_us = rec[0].as_u64().unwrap();
+            match rec[6].as_str() {
+                Some(f) => {
+                    assert_eq!(f, "RailLow", "{rec}");
+                    // Within the window (plus the core's few samples to see it go).
+                    assert!((500_000..=805_000).contains(&t_us), "{rec}");
+                    faulted += 1;
+                }
+                None if t_us > 900_000 => after += 1,
+                None => {}
+            }
+        }
+    }
+    // 0.3 s at 1 kHz.
+    assert!((250..=310).contains(&faulted), "{faulted} faulted records");
+    assert!(after > 100, "records after the fault: {after}");
+}

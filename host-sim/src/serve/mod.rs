@@ -38,6 +38,19 @@ const AT: Range = Range::new(0.0, 1000.0, "mm");
 const NOISE: Range = Range::new(0.0, 100.0, "LSB RMS");
 const SECONDS: Range = Range::new(0.01, 1e6, "s");
 const BAUD: Whole = Whole::new(9_600, 16_000_000);
+const FAULT_AT: Range = Range::new(0.0, 1e6, "s");
+const FAULT_FOR: Range = Range::new(0.001, 1e6, "s");
+
+/// A sensor fault the virtual board's ADC sees (`--fault`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ServeFault {
+    /// The wiper open: every conversion reads 0.
+    Open,
+    /// The wiper shorted to the supply: every conversion reads full scale.
+    Short,
+    /// No samples at all (the ADC or its DMA stopped).
+    Dropout,
+}
 const SEED: Whole = Whole::new(0, u64::MAX);
 /// A partial stream frame goes out after this long, so a slow stream still arrives steadily.
 const FLUSH_AFTER: Duration = Duration::from_millis(20);
@@ -74,6 +87,14 @@ pub struct ServeArgs {
     pub baud: u64,
     #[arg(long, value_name = "S", help = SECONDS.help("Stop after this long (default: run until interrupted)"), value_parser = SECONDS.parser())]
     pub seconds: Option<f64>,
+    /// A sensor fault to inject (with --fault-at and --fault-for): the core turns the carrier
+    /// off while it lasts and reports it in the stream.
+    #[arg(long, value_enum, requires_all = ["fault_at", "fault_for"])]
+    pub fault: Option<ServeFault>,
+    #[arg(long, value_name = "S", requires = "fault", help = FAULT_AT.help("When the fault begins, from the board's start"), value_parser = FAULT_AT.parser())]
+    pub fault_at: Option<f64>,
+    #[arg(long, value_name = "S", requires = "fault", help = FAULT_FOR.help("How long the fault lasts"), value_parser = FAULT_FOR.parser())]
+    pub fault_for: Option<f64>,
 }
 
 /// What a serve run did.
@@ -180,9 +201,22 @@ fn params(a: &ServeArgs, board: &'static BoardDef) -> Result<(SimParams, SceneSo
             speed_um_s: a.speed * 1000.0,
         },
     };
-    let p = SimParams::new(board, trajectory, f64::INFINITY)
+    let mut p = SimParams::new(board, trajectory, f64::INFINITY)
         .with_config(config)
         .with_noise(a.noise, a.seed);
+    if let (Some(kind), Some(at), Some(dur)) = (a.fault, a.fault_at, a.fault_for) {
+        let kind = match kind {
+            ServeFault::Open => crate::adc::FaultKind::Open,
+            ServeFault::Short => crate::adc::FaultKind::Short,
+            ServeFault::Dropout => crate::adc::FaultKind::Dropout,
+        };
+        let start_us = (at * 1e6) as u64;
+        p = p.with_faults(vec![crate::adc::FaultWindow {
+            kind,
+            start_us,
+            end_us: start_us + (dur * 1e6) as u64,
+        }]);
+    }
     Ok((p, source))
 }
 

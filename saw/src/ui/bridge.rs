@@ -303,14 +303,7 @@ fn linked<P: Read + Write>(
 
 fn execute<P: Read + Write>(client: &mut Client<P>, cmd: &Command) -> Result<Done, Failure> {
     match cmd {
-        Command::Boundary { index, mm } => {
-            let at_um = (mm * 1000.0).round() as u32;
-            let reply = client.request(&Request::MoveBoundary {
-                index: *index,
-                at_um,
-            })?;
-            crate::applied(reply, format!("boundary {index} at {mm:.2} mm"))
-        }
+        Command::Boundary { index, mm } => crate::boundary(client, *index, *mm),
         Command::Set { index, keys } => crate::set(client, *index, keys),
         Command::Push { name, text } => crate::push_text(client, name, text),
         Command::Save => crate::save(client),
