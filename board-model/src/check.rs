@@ -810,7 +810,7 @@ pub fn save(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     ));
     opts.stuck_for_s = Some(0.1);
     let at = |s: f64| (s * TICKS_PER_S as f64) as Time;
-    let (o, m) = run::run(&opts)?;
+    let (o, mut m) = run::run(&opts)?;
     let mut out = Vec::new();
     if let Some(s) = &o.stop {
         out.push(check(
@@ -860,19 +860,10 @@ pub fn save(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         ),
     ));
     // Every flash operation of the save, with the arm line's level.
-    let fi = m.sim().chip.flash_if;
-    let ops: Vec<_> = {
-        let periph = m.sim().periphs[fi].p.as_any();
-        match board {
-            BoardKind::F446 => periph
-                .downcast_ref::<crate::periph::misc::FlashF4>()
-                .map(|f| crate::periph::flash_prog::FlashControl::operations(&f.prog).to_vec()),
-            BoardKind::G474 => periph
-                .downcast_ref::<crate::periph::misc::FlashG4>()
-                .map(|f| crate::periph::flash_prog::FlashControl::operations(&f.prog).to_vec()),
-        }
-        .unwrap_or_default()
-    };
+    let (fi, flash_prog) = (m.sim().chip.flash_if, m.sim().chip.flash_prog);
+    let ops = flash_prog(&mut *m.sim_mut().periphs[fi].p)
+        .operations()
+        .to_vec();
     let erases: Vec<_> = ops.iter().filter(|o| o.erase).collect();
     let arm = &o.pins[PIN_RF_ARM];
     let armed_during = ops

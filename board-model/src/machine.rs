@@ -9,7 +9,6 @@
 //! within one translated block (a few instructions) of the moment its flag rises.
 
 use crate::elf::{thumb_instructions, Image};
-use crate::periph::flash_prog::FlashControl;
 use crate::periph::{
     micros, ticks_per_cycle, ChannelLevel, Clocks, Peripheral, ResetCause, Signals, Time,
     Unmodelled, TICKS_PER_S,
@@ -1008,11 +1007,6 @@ impl Machine {
         self.reset_core()
     }
 
-    /// NRST pressed now (the reset button): a system reset; flash keeps what was written.
-    pub fn reset_pin(&mut self) -> Option<Stop> {
-        self.system_reset(ResetCause::Pin).err().map(Stop::Fault)
-    }
-
     /// Writes `bytes` into flash at `addr` before a run, as a probe would have programmed them.
     pub fn preload_flash(&mut self, addr: u32, bytes: &[u8]) -> Result<(), String> {
         let (base, size) = self.uc.get_data().chip.flash;
@@ -1024,13 +1018,6 @@ impl Machine {
         }
         self.uc
             .mem_write(addr as u64, bytes)
-            .map_err(|e| format!("{e:?}"))
-    }
-
-    /// Reads flash (or any mapped memory) as the machine has it now.
-    pub fn read_memory(&self, addr: u32, len: usize) -> Result<Vec<u8>, String> {
-        self.uc
-            .mem_read_as_vec(addr as u64, len)
             .map_err(|e| format!("{e:?}"))
     }
 
@@ -1064,7 +1051,13 @@ impl Machine {
             // an exception's vector fetch: nothing runs until the flash is free.
             let pc = self.uc.reg_read(RegisterARM::PC).unwrap_or(0) as u32;
             if let Some(t) = self.flash_stall(pc) {
-                self.stall_until(t.min(until));
+                // The core waits as it does halted or asleep; peripherals run on.
+                let before = self.now();
+                if let Err(e) = self.idle_until(t.min(until)) {
+                    return Some(Stop::Fault(e));
+                }
+                let s = self.uc.get_data_mut();
+                s.flash_stalled_ticks += s.now.saturating_sub(before);
                 continue;
             }
             if let Err(e) = self.take_exceptions() {
@@ -1348,30 +1341,11 @@ impl Machine {
         Ok(())
     }
 
-    /// Carries out DMA transfers that touch RAM.
     /// Until when a fetch from `pc` waits for the flash.
     fn flash_stall(&mut self, pc: u32) -> Option<Time> {
         let s = self.uc.get_data_mut();
         let (now, fi) = (s.now, s.chip.flash_if);
-        let prog = (s.chip.flash_prog)(&mut *s.periphs[fi].p);
-        prog.stall_until(now, pc)
-    }
-
-    /// The core waits for the flash until `t`; peripherals run on.
-    fn stall_until(&mut self, t: Time) {
-        let s = self.uc.get_data_mut();
-        let next = s.periphs.iter().filter_map(|m| m.p.next_event()).min();
-        let t = next.unwrap_or(t).min(t).max(s.now + 1);
-        s.flash_stalled_ticks += t - s.now;
-        s.now = t;
-        s.advance_periphs(t);
-        self.copy_dma();
-        self.drain_rtt();
-        if let Some(cause) = self.uc.get_data_mut().pending_reset.take() {
-            if let Err(e) = self.system_reset(cause) {
-                self.uc.get_data_mut().stop.get_or_insert(Stop::Fault(e));
-            }
-        }
+        (s.chip.flash_prog)(&mut *s.periphs[fi].p).stall_until(now, pc)
     }
 
     /// Programmed cells written again (see `flash_fixups`), erased ranges filled with 0xFF.
@@ -1379,9 +1353,7 @@ impl Machine {
         let s = self.uc.get_data_mut();
         let fixups = std::mem::take(&mut s.flash_fixups);
         let fi = s.chip.flash_if;
-        let erases = crate::periph::flash_prog::FlashControl::take_erases((s.chip.flash_prog)(
-            &mut *s.periphs[fi].p,
-        ));
+        let erases = (s.chip.flash_prog)(&mut *s.periphs[fi].p).take_erases();
         for (addr, bytes) in fixups {
             let _ = self.uc.mem_write(addr as u64, &bytes);
         }
@@ -1390,6 +1362,7 @@ impl Machine {
         }
     }
 
+    /// Carries out DMA transfers that touch RAM (and, first, what the flash interface did).
     fn copy_dma(&mut self) {
         self.apply_flash();
         loop {

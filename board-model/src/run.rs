@@ -37,9 +37,6 @@ pub struct Options {
     pub force_panic_s: Option<f64>,
     /// Bytes the host sends on the link UART, each batch from its virtual time (s) on.
     pub link_input: Vec<(f64, Vec<u8>)>,
-    /// At this virtual time (s), NRST is pulled low (the reset button): the firmware boots again
-    /// from the flash as it is then.
-    pub reset_pin_s: Option<f64>,
     /// Flash contents written before the run (address, bytes): a store left by earlier saves.
     pub flash_preload: Vec<(u32, Vec<u8>)>,
     /// Times (s) at which the instructions executed so far in each exception are noted
@@ -67,7 +64,6 @@ impl Options {
             carrier_window_s: None,
             force_panic_s: None,
             link_input: Vec::new(),
-            reset_pin_s: None,
             flash_preload: Vec::new(),
             count_at_s: Vec::new(),
         }
@@ -167,9 +163,6 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
     if let Some(s) = opts.force_panic_s {
         plan.push((at(s), 3));
     }
-    if let Some(s) = opts.reset_pin_s {
-        plan.push((at(s), 5));
-    }
     for s in &opts.count_at_s {
         plan.push((at(*s), 6));
     }
@@ -197,12 +190,6 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
             }
             4 => m.sim_mut().stuck_irqs.clear(),
             6 => instruction_counts.push(m.sim().instructions_in.clone()),
-            5 => {
-                stop = m.reset_pin();
-                if stop.is_some() {
-                    break;
-                }
-            }
             n if n >= 10 => {
                 let bytes = &opts.link_input[(n - 10) as usize].1;
                 let now = m.now();

@@ -2,7 +2,7 @@
 //! FLASH_SR, program and erase operations with their durations, the busy time that stalls a
 //! fetch from the bank being written, and the end-of-operation interrupt. The memory itself is
 //! the machine's: the model says what a store leaves in a cell and which ranges an erase fills
-//! with 0xFF (`FlashControl`).
+//! with 0xFF (`Prog::store`, `Prog::take_erases`).
 //!
 //! F446 (RM0390 §3.5 erase and program operations, §3.8 registers; the same interface as RM0090's
 //! F405/F429, whose §3.5 the review could read):
@@ -100,29 +100,6 @@ pub enum Kind {
 struct Busy {
     until: Time,
     bank: u8,
-}
-
-/// What the machine sees of the flash interface.
-pub trait FlashControl {
-    /// A CPU store of `size` bytes of `value` at flash address `addr`, whose cells hold `old`
-    /// (little-endian). Returns the words it programs (address, new content): none for a word
-    /// the G474 only latches or a store refused with an error flag. Err stops the run (a store
-    /// the model does not cover).
-    fn store(
-        &mut self,
-        now: Time,
-        addr: u32,
-        size: u8,
-        value: u32,
-        old: u32,
-    ) -> Result<Vec<(u32, u32)>, String>;
-    /// Ranges (address, bytes) an erase has started on since the last call: the machine fills
-    /// them with 0xFF (their content during the erase is unreadable anyway: fetches stall).
-    fn take_erases(&mut self) -> Vec<(u32, u32)>;
-    /// Until when a fetch or read from `addr` at `now` waits (an operation on its bank).
-    fn stall_until(&self, now: Time, addr: u32) -> Option<Time>;
-    /// Every operation so far: (start, end, what), for the checks.
-    fn operations(&self) -> &[Operation];
 }
 
 /// One program or erase, as it happened.
@@ -358,9 +335,11 @@ impl Prog {
         Ok(Vec::new())
     }
 
-    /// A store to flash memory: the cells it programs (address, new word), none when it only
-    /// latches a word or an error flag was set.
-    fn program(
+    /// A CPU store of `size` bytes of `value` at flash address `addr`, whose cells hold `old`
+    /// (little-endian). Returns the words it programs (address, new content): none for a word
+    /// the G474 only latches or a store refused with an error flag. Err stops the run (a store
+    /// the model does not cover).
+    pub fn store(
         &mut self,
         now: Time,
         addr: u32,
@@ -446,30 +425,20 @@ impl Prog {
             }
         }
     }
-}
-
-impl FlashControl for Prog {
-    fn store(
-        &mut self,
-        now: Time,
-        addr: u32,
-        size: u8,
-        value: u32,
-        old: u32,
-    ) -> Result<Vec<(u32, u32)>, String> {
-        self.program(now, addr, size, value, old)
-    }
-
-    fn take_erases(&mut self) -> Vec<(u32, u32)> {
+    /// Ranges (address, bytes) an erase has started on since the last call: the machine fills
+    /// them with 0xFF (their content during the erase is unreadable anyway: fetches stall).
+    pub fn take_erases(&mut self) -> Vec<(u32, u32)> {
         std::mem::take(&mut self.erases)
     }
 
-    fn stall_until(&self, now: Time, addr: u32) -> Option<Time> {
+    /// Until when a fetch or read from `addr` at `now` waits (an operation on its bank).
+    pub fn stall_until(&self, now: Time, addr: u32) -> Option<Time> {
         let b = self.busy?;
         (b.until > now && b.bank == self.bank_of(addr)).then_some(b.until)
     }
 
-    fn operations(&self) -> &[Operation] {
+    /// Every operation so far, for the checks.
+    pub fn operations(&self) -> &[Operation] {
         &self.ops
     }
 }

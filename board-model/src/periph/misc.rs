@@ -165,11 +165,10 @@ impl Peripheral for FlashF4 {
     fn read(&mut self, _now: Time, offset: u32, _out: &mut Signals) -> Result<u32, Unmodelled> {
         match offset {
             0x00 => Ok(self.acr),
-            _ if self.prog.read(offset).is_some() => Ok(self.prog.read(offset).unwrap_or(0)),
-            _ => Err(Unmodelled::read(
+            _ => self.prog.read(offset).ok_or_else(|| Unmodelled::read(
                 offset,
                 format!(
-                    "F446 FLASH register at offset {offset:#x} (KEYR/OPTKEYR/SR/CR/OPTCR: programming) is not modelled"
+                    "F446 FLASH register at offset {offset:#x} (OPTKEYR: option-byte programming) is not modelled"
                 ),
             )),
         }
@@ -331,10 +330,9 @@ impl Peripheral for FlashG4 {
     fn read(&mut self, _now: Time, offset: u32, _out: &mut Signals) -> Result<u32, Unmodelled> {
         match offset {
             0x00 => Ok(self.acr),
-            _ if self.prog.read(offset).is_some() => Ok(self.prog.read(offset).unwrap_or(0)),
-            _ => Err(Unmodelled::read(
+            _ => self.prog.read(offset).ok_or_else(|| Unmodelled::read(
                 offset,
-                format!("G474 FLASH register at offset {offset:#x} (keys/SR/CR/ECC/option bytes) is not modelled"),
+                format!("G474 FLASH register at offset {offset:#x} (ECC, option-byte keys, PCROP, WRP) is not modelled"),
             )),
         }
     }

@@ -162,9 +162,6 @@ pub enum ResetCause {
     IndependentWatchdog,
     /// SCB AIRCR.SYSRESETREQ.
     Software,
-    /// NRST pulled low from outside: the Nucleo's reset button (B2) or the probe (UM1724 §6.5,
-    /// UM2505 §7.6). Flash keeps its contents; RAM is not cleared.
-    Pin,
 }
 
 /// A timer channel output level change (after CCxE/CCxP/MOE), for the GPIO pins to show.

@@ -395,7 +395,6 @@ impl RccF4 {
         self.csr_flags |= match cause {
             ResetCause::IndependentWatchdog => CSR_IWDGRSTF | CSR_PINRSTF,
             ResetCause::Software => CSR_SFTRSTF | CSR_PINRSTF,
-            ResetCause::Pin => CSR_PINRSTF,
         };
     }
 

@@ -296,7 +296,6 @@ impl RccG4 {
         self.csr_flags |= match cause {
             ResetCause::IndependentWatchdog => CSR_IWDGRSTF | CSR_PINRSTF,
             ResetCause::Software => CSR_SFTRSTF | CSR_PINRSTF,
-            ResetCause::Pin => CSR_PINRSTF,
         };
     }
 
