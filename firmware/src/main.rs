@@ -29,6 +29,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_time::{Duration, Instant, Ticker};
 use saw_core::burst::BurstTimer;
+use saw_core::controller::Prepared;
 use saw_core::gate::BurstOutput;
 use saw_core::sample::Sample;
 use saw_core::Controller;
@@ -141,8 +142,8 @@ async fn main(spawner: Spawner) {
     };
     let mut ctrl = unwrap!(Controller::new(timer, SAMPLE_PERIOD_US));
     let mut store = store::open(parts.store);
-    let (config, source) = boot_scene(&timer, store.as_mut()).await;
-    unwrap!(ctrl.load(&config));
+    let (config, prepared, source) = boot_scene(&timer, store.as_mut()).await;
+    ctrl.install(prepared);
     let session = saw_link::session::Session::new(
         saw_link::session::Identity {
             firmware: concat!("saw-firmware ", env!("CARGO_PKG_VERSION")),
@@ -181,21 +182,21 @@ async fn main(spawner: Spawner) {
     spawner.spawn(unwrap!(link::link(parts.link_tx, parts.link_rx, session, board)));
 }
 
-/// The scene to boot into, and says which: the one saved in flash if it reads back and compiles,
-/// else the one embedded at build time (`SAW_SCENE`, checked by build.rs on the host) if any,
-/// else the built-in default.
+/// The scene to boot into, compiled, and says which: the one saved in flash if it reads back and
+/// compiles, else the one embedded at build time (`SAW_SCENE`, checked by build.rs on the host)
+/// if any, else the built-in default.
 async fn boot_scene(
     timer: &BurstTimer,
     store: Option<&mut saw_store::SceneStore<board::StoreFlash>>,
-) -> (saw_core::scene::Config, saw_link::msg::SceneSource) {
+) -> (saw_core::scene::Config, Prepared, saw_link::msg::SceneSource) {
     use saw_link::msg::SceneSource;
     match store {
         Some(store) => match store.load().await {
             Ok(Some(saved)) => {
-                match saw_core::controller::Prepared::compile(timer, SAMPLE_PERIOD_US, &saved.config) {
-                    Ok(_) => {
+                match Prepared::compile(timer, SAMPLE_PERIOD_US, &saved.config) {
+                    Ok(p) => {
                         info!("boot: the scene saved in flash (id {=u32:08x})", saved.scene_id);
-                        return (saved.config, SceneSource::Saved);
+                        return (saved.config, p, SceneSource::Saved);
                     }
                     Err(e) => warn!("boot: the saved scene {=u32:08x} is refused ({})", saved.scene_id, e),
                 }
@@ -207,10 +208,10 @@ async fn boot_scene(
     }
     if let Some(bytes) = EMBEDDED_SCENE {
         match postcard::from_bytes::<saw_core::scene::Config>(bytes) {
-            Ok(c) => match saw_core::controller::Prepared::compile(timer, SAMPLE_PERIOD_US, &c) {
-                Ok(_) => {
+            Ok(c) => match Prepared::compile(timer, SAMPLE_PERIOD_US, &c) {
+                Ok(p) => {
                     info!("boot: the scene embedded at build time ({})", EMBEDDED_SCENE_FILE);
-                    return (c, SceneSource::BuildTime);
+                    return (c, p, SceneSource::BuildTime);
                 }
                 Err(e) => warn!("boot: the embedded scene is refused ({}); the default runs", e),
             },
@@ -218,7 +219,9 @@ async fn boot_scene(
         }
     }
     info!("boot: the built-in default scene");
-    (saw_core::default_config(), SceneSource::Default)
+    let c = saw_core::default_config();
+    let p = unwrap!(Prepared::compile(timer, SAMPLE_PERIOD_US, &c));
+    (c, p, SceneSource::Default)
 }
 
 // `EMBEDDED_SCENE: Option<&[u8]>` and `EMBEDDED_SCENE_FILE: &str`, written by build.rs.
