@@ -389,6 +389,21 @@ fn get<P: std::io::Read + std::io::Write>(client: &mut Client<P>) -> Result<Done
     }
 }
 
+/// Each region's extent, mm from the start end, and its texture, left to right.
+pub(crate) fn regions_mm(c: &Config) -> impl Iterator<Item = (f64, f64, &Texture)> {
+    let ends = c
+        .scene
+        .boundaries_um
+        .iter()
+        .copied()
+        .chain([c.calibration.length_um]);
+    let starts = core::iter::once(0).chain(c.scene.boundaries_um.iter().copied());
+    starts
+        .zip(ends)
+        .zip(c.scene.textures.iter())
+        .map(|((from, to), t)| (from as f64 / 1000.0, to as f64 / 1000.0, t))
+}
+
 fn scene_text(scene_id: u32, source: SceneSource, c: &Config) -> String {
     let mut s = format!(
         "scene {scene_id:#010x}, {}; {} regions over {} mm, {:?} drive",
@@ -397,21 +412,11 @@ fn scene_text(scene_id: u32, source: SceneSource, c: &Config) -> String {
         c.calibration.length_um as f64 / 1000.0,
         c.scene.drive
     );
-    let mut from_um = 0;
-    for (i, t) in c.scene.textures.iter().enumerate() {
-        let to_um = c
-            .scene
-            .boundaries_um
-            .get(i)
-            .copied()
-            .unwrap_or(c.calibration.length_um);
+    for (i, (from_mm, to_mm, t)) in regions_mm(c).enumerate() {
         s += &format!(
-            "\n  region {i}: {} to {} mm, {}",
-            from_um as f64 / 1000.0,
-            to_um as f64 / 1000.0,
+            "\n  region {i}: {from_mm} to {to_mm} mm, {}",
             texture_text(t)
         );
-        from_um = to_um;
     }
     if !c.scene.lines.positions_um.is_empty() {
         let mm: Vec<String> = c

@@ -237,7 +237,10 @@ fn linked<P: Read + Write>(
         Ok(other) => return format!("the board answered the stream request with {other:?}"),
         Err(e) => return e.to_string(),
     };
-    out.send(json!({"t": "stream", "records_per_s": sample_rate_hz as f64 / opts.every as f64}));
+    out.keep(
+        |s| &mut s.stream,
+        json!({"t": "stream", "records_per_s": sample_rate_hz as f64 / opts.every as f64}),
+    );
     let mut records: Vec<Value> = Vec::new();
     let mut dropped = 0u32;
     let (mut flushed, mut counted, mut heard) = (Instant::now(), Instant::now(), Instant::now());
@@ -344,19 +347,8 @@ fn publish_scene<P: Read + Write>(client: &mut Client<P>, out: &Out) -> Result<(
             config,
         }) => {
             let length_mm = config.calibration.length_um as f64 / 1000.0;
-            let b = &config.scene.boundaries_um;
-            let regions: Vec<Value> = config
-                .scene
-                .textures
-                .iter()
-                .enumerate()
-                .map(|(i, t)| {
-                    let from = if i == 0 {
-                        0.0
-                    } else {
-                        b[i - 1] as f64 / 1000.0
-                    };
-                    let to = b.get(i).map_or(length_mm, |&u| u as f64 / 1000.0);
+            let regions: Vec<Value> = crate::regions_mm(&config)
+                .map(|(from, to, t)| {
                     json!({"from_mm": from, "to_mm": to, "label": crate::texture_text(t)})
                 })
                 .collect();

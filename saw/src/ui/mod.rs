@@ -44,11 +44,13 @@ pub struct UiOptions {
     pub every: u16,
 }
 
-/// What every new page gets first: the link's state, the scene, the counters (JSON messages).
+/// What every new page gets first: the link's state, the scene, the stream's rate, the counters
+/// (JSON messages).
 #[derive(Default)]
 pub(crate) struct Snapshot {
     pub link: Option<String>,
     pub scene: Option<String>,
+    pub stream: Option<String>,
     pub counters: Option<String>,
 }
 
@@ -188,7 +190,7 @@ async fn session(app: App, mut socket: WebSocket) {
     let mut rx = app.out.subscribe();
     let first: Vec<String> = {
         let s = app.snapshot.lock().unwrap_or_else(|e| e.into_inner());
-        [&s.link, &s.scene, &s.counters]
+        [&s.link, &s.scene, &s.stream, &s.counters]
             .into_iter()
             .flatten()
             .cloned()
