@@ -1,66 +1,10 @@
 //! Store images for the save checks: the flash a board's store is left in by earlier saves,
-//! built on the host with the same `saw-store` the firmware runs, over RAM NOR flash with the
-//! board's geometry (`saw_boards::StoreLayout`).
+//! built on the host with the same `saw-store` the firmware runs, over sequential-storage's mock
+//! NOR flash with the board's geometry (`saw_boards::StoreLayout`).
 
-use embedded_storage_async::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-};
 use saw_core::scene::Config;
 use saw_store::{Saved, SceneStore};
-
-/// NOR flash in RAM: erased = 0xFF, a write only clears bits; counts erases.
-#[derive(Clone)]
-struct RamNor<const W: usize, const E: usize> {
-    data: Vec<u8>,
-    erases: u32,
-}
-
-#[derive(Debug, Clone, Copy)]
-struct Bounds;
-
-impl NorFlashError for Bounds {
-    fn kind(&self) -> NorFlashErrorKind {
-        NorFlashErrorKind::OutOfBounds
-    }
-}
-
-impl<const W: usize, const E: usize> ErrorType for RamNor<W, E> {
-    type Error = Bounds;
-}
-
-impl<const W: usize, const E: usize> ReadNorFlash for RamNor<W, E> {
-    const READ_SIZE: usize = 1;
-    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Bounds> {
-        let o = offset as usize;
-        let src = self.data.get(o..o + bytes.len()).ok_or(Bounds)?;
-        bytes.copy_from_slice(src);
-        Ok(())
-    }
-    fn capacity(&self) -> usize {
-        self.data.len()
-    }
-}
-
-impl<const W: usize, const E: usize> NorFlash for RamNor<W, E> {
-    const WRITE_SIZE: usize = W;
-    const ERASE_SIZE: usize = E;
-    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Bounds> {
-        self.data
-            .get_mut(from as usize..to as usize)
-            .ok_or(Bounds)?
-            .fill(0xFF);
-        self.erases += 1;
-        Ok(())
-    }
-    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Bounds> {
-        let o = offset as usize;
-        let dst = self.data.get_mut(o..o + bytes.len()).ok_or(Bounds)?;
-        for (d, b) in dst.iter_mut().zip(bytes) {
-            *d &= *b;
-        }
-        Ok(())
-    }
-}
+use sequential_storage::mock_flash::MockFlashBase;
 
 /// The store of `board` after as many saves of `scene(i)` (i = 0, 1, …) as fit before the next
 /// one must erase a unit: its bytes (for `board.store.origin`), the last scene saved, and how
@@ -69,26 +13,29 @@ pub fn before_an_erase(
     board: &saw_boards::BoardDef,
     scene: impl Fn(usize) -> Config,
 ) -> Result<(Vec<u8>, Saved, usize), String> {
-    fn fill<const W: usize, const E: usize>(
-        bytes: usize,
+    /// `PAGES` erase units of `PAGE_WORDS` words of `W` bytes: sequential-storage's own mock
+    /// NOR flash (erased 0xFF, each word written once, erases counted).
+    fn fill<const PAGES: usize, const W: usize, const PAGE_WORDS: usize>(
         scene: &dyn Fn(usize) -> Config,
     ) -> Result<(Vec<u8>, Saved, usize), String> {
-        let mut flash = RamNor::<W, E> {
-            data: vec![0xFF; bytes],
-            erases: 0,
-        };
+        let mut flash = MockFlashBase::<PAGES, W, PAGE_WORDS>::default();
+        let start = flash.stats_snapshot();
         let mut last: Option<Saved> = None;
         for i in 0..100_000 {
-            let before = flash.data.clone();
+            let before = flash.as_bytes().to_vec();
             let config = scene(i);
             let saved = Saved {
                 scene_id: saw_link::scene_id(&config),
                 config,
             };
-            let mut store = SceneStore::new(flash, 0..bytes as u32).map_err(|e| e.to_string())?;
+            let mut store = SceneStore::new(
+                flash,
+                MockFlashBase::<PAGES, W, PAGE_WORDS>::FULL_FLASH_RANGE,
+            )
+            .map_err(|e| e.to_string())?;
             embassy_futures::block_on(store.save(&saved)).map_err(|e| e.to_string())?;
             flash = store.into_flash();
-            if flash.erases > 0 {
+            if start.compare_to(flash.stats_snapshot()).erases > 0 {
                 let last = last.ok_or("the first save already erased")?;
                 return Ok((before, last, i));
             }
@@ -97,11 +44,11 @@ pub fn before_an_erase(
         Err("no erase after 100 000 saves".into())
     }
     let s = board.store;
-    match (s.write_bytes, s.erase_bytes) {
-        (4, 0x2_0000) => fill::<4, 0x2_0000>(s.bytes as usize, &scene),
-        (8, 0x800) => fill::<8, 0x800>(s.bytes as usize, &scene),
-        (w, e) => Err(format!(
-            "no RAM flash for {w}-byte writes and {e}-byte units"
+    match (s.write_bytes, s.erase_bytes, s.bytes / s.erase_bytes) {
+        (4, 0x2_0000, 2) => fill::<2, 4, 0x8000>(&scene),
+        (8, 0x800, 8) => fill::<8, 8, 0x100>(&scene),
+        (w, e, n) => Err(format!(
+            "no mock flash for {n} units of {e} bytes written {w} at a time"
         )),
     }
 }
