@@ -151,7 +151,7 @@ impl Board for FirmwareBoard {
             }
             Err(e) => {
                 defmt::warn!("store: scene {=u32:08x} not saved: {}", scene_id, e);
-                Err(crate::store::fault(e))
+                Err(e.into())
             }
         }
     }

@@ -3,8 +3,7 @@
 //! the watchdog lengthened for as long as the flash may stall the CPU.
 
 use defmt::{info, warn};
-use saw_link::msg::StoreFault;
-use saw_store::{SceneStore, StoreError};
+use saw_store::SceneStore;
 
 use crate::board::{StoreFlash, BOARD};
 
@@ -27,14 +26,6 @@ pub fn open(flash: Option<StoreFlash>) -> Option<SceneStore<StoreFlash>> {
             warn!("store: not usable ({}); save is refused", e);
             None
         }
-    }
-}
-
-/// What the link answers for a failed save.
-pub fn fault(e: StoreError) -> StoreFault {
-    match e {
-        StoreError::TooLarge => StoreFault::TooLarge,
-        _ => StoreFault::Flash,
     }
 }
 

@@ -89,6 +89,16 @@ impl core::fmt::Display for StoreError {
     }
 }
 
+/// What the link answers for a save that failed with this error.
+impl From<StoreError> for saw_link::msg::StoreFault {
+    fn from(e: StoreError) -> Self {
+        match e {
+            StoreError::TooLarge => saw_link::msg::StoreFault::TooLarge,
+            _ => saw_link::msg::StoreFault::Flash,
+        }
+    }
+}
+
 fn from_ss<E>(e: sequential_storage::Error<E>) -> StoreError {
     match e {
         sequential_storage::Error::Corrupted { .. }

@@ -163,10 +163,7 @@ impl<const WRITE: usize, const ERASE: usize> Persist for FileStore<WRITE, ERASE>
             scene_id,
             config: config.clone(),
         };
-        embassy_futures::block_on(self.store.save(&saved)).map_err(|e| match e {
-            saw_store::StoreError::TooLarge => StoreFault::TooLarge,
-            _ => StoreFault::Flash,
-        })
+        embassy_futures::block_on(self.store.save(&saved)).map_err(StoreFault::from)
     }
 }
 
