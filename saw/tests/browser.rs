@@ -12,10 +12,9 @@ mod common;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::VirtualBoard;
+use common::{panel, VirtualBoard};
 use fantoccini::actions::{InputSource, MouseActions, PointerAction, MOUSE_BUTTON_LEFT};
 use fantoccini::{Client, ClientBuilder};
-use saw::ui::{start, UiOptions};
 use serde_json::{json, Value};
 
 struct Driver(Child);
@@ -62,18 +61,6 @@ async fn browser() -> (Driver, Client) {
             Err(_) => tokio::time::sleep(Duration::from_millis(200)).await,
         }
     }
-}
-
-/// A panel on `vb`'s port, on any free local port.
-fn panel(vb: &VirtualBoard) -> saw::ui::UiHandle {
-    start(UiOptions {
-        port: vb.port.clone(),
-        listen: "127.0.0.1:0".parse().unwrap(),
-        allow_remote: false,
-        timeout: Duration::from_millis(1000),
-        every: 10,
-    })
-    .unwrap()
 }
 
 async fn js(c: &Client, script: &str) -> Value {

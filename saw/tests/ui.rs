@@ -9,22 +9,11 @@ use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
-use common::VirtualBoard;
-use saw::ui::{start, UiHandle, UiOptions};
+use common::{panel, VirtualBoard};
+use saw::ui::UiHandle;
 use serde_json::{json, Value};
 use tungstenite::client::IntoClientRequest;
 use tungstenite::Message;
-
-fn panel(vb: &VirtualBoard) -> UiHandle {
-    start(UiOptions {
-        port: vb.port.clone(),
-        listen: "127.0.0.1:0".parse().unwrap(),
-        allow_remote: false,
-        timeout: Duration::from_millis(1000),
-        every: 10,
-    })
-    .unwrap()
-}
 
 /// A raw HTTP/1.1 GET with the given extra headers: (status, body).
 fn get(ui: &UiHandle, path: &str, headers: &[(&str, &str)]) -> (u16, String) {

@@ -67,3 +67,17 @@ impl Drop for VirtualBoard {
         }
     }
 }
+
+/// The web panel on `vb`'s port, served on any free local port.
+// Each test file compiles this module on its own; the link tests do not use the panel.
+#[allow(dead_code)]
+pub fn panel(vb: &VirtualBoard) -> saw::ui::UiHandle {
+    saw::ui::start(saw::ui::UiOptions {
+        port: vb.port.clone(),
+        listen: "127.0.0.1:0".parse().unwrap(),
+        allow_remote: false,
+        timeout: Duration::from_millis(1000),
+        every: 10,
+    })
+    .unwrap()
+}
