@@ -11,6 +11,7 @@
 #![forbid(unsafe_code)]
 
 pub mod nucleo_f446re;
+pub mod rf_level;
 pub mod nucleo_g474re;
 
 pub use nucleo_f446re::NUCLEO_F446RE;
@@ -319,6 +320,24 @@ impl StoreLayout {
     }
 }
 
+/// The RF level output of a board (`docs/rf-level.md`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RfLevelDef {
+    /// DAC1_OUT1 (analog, no alternate function).
+    pub dac_pin: Pin,
+    /// The envelope timer: slave of the burst timer, its TRGO triggers the DAC.
+    pub envelope_timer: &'static str,
+    pub envelope_timer_clk_hz: u32,
+    /// DAC_CR.TSEL1 code of the envelope timer's TRGO.
+    pub dac_tsel: u8,
+    /// SMCR.TS of the envelope timer that selects the burst timer's TRGO (ITR1 = TIM2).
+    pub envelope_ts: u8,
+    /// The DMA that writes envelope entries into DHR12R1 on the envelope timer's CC1 request.
+    pub envelope_dma: &'static str,
+    /// Level ‰ → DAC code (replace for your amplifier; checked at compile time).
+    pub table: rf_level::LevelTable,
+}
+
 /// One board: chip, clocks, timers, pins, memory.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BoardDef {
@@ -356,6 +375,10 @@ pub struct BoardDef {
     pub adc: AdcDef,
     pub sample_rate_hz: u32,
     pub adc_oversample: u32,
+
+    /// RF level: DAC1 channel 1 into the amplifier's gain control, and the timer that paces
+    /// envelopes (`docs/rf-level.md`).
+    pub rf_level: RfLevelDef,
 
     /// Plain GPIO "RF arm" output (amplifier supply/enable interlock), low = RF impossible.
     pub rf_arm_pin: Pin,
@@ -459,6 +482,15 @@ impl BoardDef {
             && !same(&self.burst.pin, &self.adc.pin)
             && !same(&self.burst.pin, &self.rf_arm_pin)
             && !same(&self.adc.pin, &self.rf_arm_pin)
+            // The DAC output: PA4 on both chips (DAC1_OUT1), shared with nothing else.
+            && self.rf_level.dac_pin.is('A', 4)
+            && !is_reserved(&self.rf_level.dac_pin)
+            && !same(&self.rf_level.dac_pin, &self.carrier.pin)
+            && !same(&self.rf_level.dac_pin, &self.burst.pin)
+            && !same(&self.rf_level.dac_pin, &self.burst_b_pin)
+            && !same(&self.rf_level.dac_pin, &self.adc.pin)
+            && !same(&self.rf_level.dac_pin, &self.rf_arm_pin)
+            && self.rf_level.table.check().is_ok()
             // Timers: carrier, burst, ADC trigger and time driver are four different timers.
             && !eq(self.carrier.name, self.burst.name)
             && !eq(self.carrier.name, self.adc.trigger_timer)
