@@ -2,6 +2,7 @@
 //! and only changes reach the hardware port.
 
 use crate::burst::{BurstTimer, SafetyLimits, TimerSettings};
+pub use crate::texture::Envelope;
 
 /// What the burst-timer port must do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -38,10 +39,20 @@ pub trait BurstOutput {
     /// Carries out one action.
     fn apply(&mut self, action: GateAction);
 
-    /// Sets the RF drive level, ‰ of full scale (a DAC or PWM into the amplifier's gain input).
-    /// The default drops the request: a board without amplitude control keeps it and says so at
-    /// boot, so random amplitude and triangle envelopes degrade to full-amplitude bursts.
+    /// Sets the RF drive level, ‰ of full scale (a DAC into the amplifier's gain input), for
+    /// the bursts that follow. A `Start` or `Pulse` applied after it takes it from its first
+    /// edge; while a burst runs it takes effect at the next update event — the next period's
+    /// start, like the timer's preloaded settings — so a burst never changes level inside
+    /// itself. An `Off` drops the output to level 0 and keeps the request for the next start.
+    /// The default drops the request: a board without amplitude control keeps it and says so
+    /// at boot, so random amplitude and triangle envelopes degrade to full-amplitude bursts.
     fn set_amplitude(&mut self, _permille: u16) {}
+
+    /// Shape of the level over the next one-pulse: flat at the set level, or a triangle rising
+    /// from 0 to it at the pulse's middle and back to 0 at its end, played by the port in
+    /// hardware time (not in steps of the sample loop). Sent with every `Pulse`. The default
+    /// ignores it: the pulse is flat.
+    fn set_envelope(&mut self, _envelope: Envelope) {}
 
     /// Selects the IDTs to drive. The default ignores it: a board with one enable output is
     /// always progressive.

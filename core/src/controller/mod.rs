@@ -12,7 +12,7 @@ use heapless::Vec;
 use crate::burst::{BurstTimer, SafetyLimits, TimerSettings};
 use crate::fmt::LogLimit;
 pub use crate::fmt::LOG_INTERVAL_US;
-use crate::gate::{BurstOutput, DriveMode, Gate, GateAction};
+use crate::gate::{BurstOutput, DriveMode, Envelope, Gate, GateAction};
 use crate::position::{PositionMapper, SensorFault};
 use crate::region::{RegionMap, MAX_REGIONS};
 use crate::sample::{PositionSource, Sample};
@@ -305,17 +305,15 @@ impl<E: VelocityEstimator> Controller<E> {
             return false;
         };
         let limits = active.limits;
+        let envelope = lines.envelope();
         match self.lines.step(lines, position_um, t_us) {
             LineStep::Free => false,
-            LineStep::Window {
-                amplitude_permille,
-                skipped,
-            } => {
+            LineStep::Window { skipped } => {
+                // The port plays the pulse's envelope by itself; nothing to send.
                 if skipped {
                     self.telemetry.lines_skipped = self.telemetry.lines_skipped.wrapping_add(1);
                     debug!("line crossed during a pulse's rest: skipped to keep the duty cap");
                 }
-                out.amplitude_permille = self.set_amplitude(amplitude_permille);
                 true
             }
             LineStep::Fire {
@@ -339,6 +337,7 @@ impl<E: VelocityEstimator> Controller<E> {
                 debug!("line {} crossed at {} um: pulse", line, position_um);
                 out.action = action;
                 out.line = Some(line);
+                out.envelope = Some(envelope);
                 out.amplitude_permille = self.set_amplitude(amplitude_permille);
                 true
             }
@@ -387,6 +386,7 @@ impl<E: VelocityEstimator> Controller<E> {
                 let action = self.gate.pulse(p, t_us, &self.timer, &limits);
                 if matches!(action, Some(GateAction::Pulse(_))) {
                     self.telemetry.ridge_pulses = self.telemetry.ridge_pulses.wrapping_add(1);
+                    out.envelope = Some(Envelope::Rectangular);
                 } else {
                     // Inside the duty cap's rest after the previous pulse.
                     skipped += 1;
@@ -519,13 +519,17 @@ impl<E: VelocityEstimator> Controller<E> {
     }
 }
 
-/// Sends one output's changes to a burst port: drive mode first, then amplitude, then the line.
+/// Sends one output's changes to a burst port: drive mode first, then amplitude and envelope,
+/// then the line.
 pub fn apply<B: BurstOutput>(output: &Output, out: &mut B) {
     if let Some(mode) = output.drive {
         out.set_drive(mode);
     }
     if let Some(a) = output.amplitude_permille {
         out.set_amplitude(a);
+    }
+    if let Some(e) = output.envelope {
+        out.set_envelope(e);
     }
     if let Some(action) = output.action {
         out.apply(action);
@@ -967,9 +971,9 @@ mod tests {
     }
 
     /// A line's pulse owns the enable line for its window: the 10 ms pulse plus the cap's
-    /// 10 ms rest (50 %). Inside it the triangular envelope is reported (half way up at
-    /// 2.5 ms, the peak at 5 ms) and a second line crossed is skipped and counted; crossed at
-    /// exactly 20 ms it fires.
+    /// 10 ms rest (50 %). The pulse goes out with its peak level and its triangular envelope
+    /// (the port plays it); inside the window nothing more is sent — no 100 µs staircase —
+    /// and a second line crossed is skipped and counted; crossed at exactly 20 ms it fires.
     #[test]
     fn line_window_holds_the_envelope_and_skips_inside_it() {
         for (cross_at_us, fires) in [(19_900u32, false), (20_000, true)] {
@@ -990,12 +994,14 @@ mod tests {
             }
             let at = |t_us: u32| outs[(t_us / 100) as usize];
             assert_eq!(at(1_000).line, Some(0));
-            assert_eq!(at(1_000 + 2_500).amplitude_permille, Some(500));
-            assert_eq!(at(1_000 + 5_000).amplitude_permille, Some(1_000));
-            // After the pulse, through the rest, the drive stays at 0 (the region's texture does
-            // not take the amplitude back before the window ends).
-            let rest = &outs[(1_000 + 10_000) / 100..(1_000 + 19_900) / 100];
-            assert!(rest.iter().all(|o| o.amplitude_permille.unwrap_or(0) == 0));
+            assert!(matches!(at(1_000).action, Some(GateAction::Pulse(_))));
+            assert_eq!(at(1_000).envelope, Some(Envelope::Triangular));
+            // The first sample (the texture's) already set full drive: the peak is no change.
+            assert!(outs[..10].iter().any(|o| o.amplitude_permille == Some(1000)));
+            let window = &outs[(1_000 + 100) / 100..(1_000 + 19_900) / 100];
+            assert!(window
+                .iter()
+                .all(|o| o.amplitude_permille.is_none() && o.envelope.is_none()));
             let second = at(1_000 + cross_at_us);
             let tm = c.telemetry();
             if fires {
@@ -1098,7 +1104,16 @@ mod tests {
     /// pulse's rest, so a line crossed then gets no pulse.
     #[test]
     fn a_fault_ends_the_line_window() {
-        let mut c = single(Texture::Off, &[20_000, 22_000]);
+        let mut cfg = default_config();
+        cfg.scene.boundaries_um.clear();
+        cfg.scene.textures.clear();
+        let _ = cfg.scene.textures.push(Texture::Off);
+        for l in [20_000, 22_000] {
+            let _ = cfg.scene.lines.positions_um.push(l);
+        }
+        cfg.scene.lines.amplitude_permille = 600;
+        let mut c = Controller::new(TIMER, 100).unwrap();
+        c.load(&cfg).unwrap();
         let mut t = 0;
         let outs = stroke(&mut c, 19_500.0, 100_000.0, &mut t, 60);
         let fired = outs
@@ -1106,9 +1121,8 @@ mod tests {
             .position(|o| o.line == Some(0))
             .expect("line 0 fires");
         let fired_us = fired as u32 * 100;
-        // 1 ms into the triangular pulse: the envelope is a fifth of the way up.
-        let envelope = outs.last().unwrap().amplitude_permille;
-        assert!(envelope.is_some_and(|a| a < 1000), "{envelope:?}");
+        // The pulse went out at the lines' 600 ‰ peak.
+        assert_eq!(outs[fired].amplitude_permille, Some(600));
         let fault = c.on_sample(Sample { code: 0, t_us: t });
         t += 100;
         assert_eq!(fault.action, Some(GateAction::Off));

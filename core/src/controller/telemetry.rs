@@ -1,6 +1,6 @@
 //! What the controller reports: each sample's [`Output`] and the counters of [`Telemetry`].
 
-use crate::gate::{DriveMode, GateAction};
+use crate::gate::{DriveMode, Envelope, GateAction};
 use crate::position::SensorFault;
 
 /// What one sample produced (for logs, host analyses and the firmware's telemetry).
@@ -17,6 +17,8 @@ pub struct Output {
     pub action: Option<GateAction>,
     /// The new drive amplitude, ‰, when it changes.
     pub amplitude_permille: Option<u16>,
+    /// The level's shape over the one-pulse of `action` (with every `Pulse`).
+    pub envelope: Option<Envelope>,
     /// The drive mode, on the first sample after a scene loads.
     pub drive: Option<DriveMode>,
     /// The index of a line crossed on this sample (its pulse fired).

@@ -135,6 +135,11 @@ pub(crate) struct LinePulses {
 }
 
 impl LinePulses {
+    /// The pulses' envelope.
+    pub(crate) fn envelope(&self) -> Envelope {
+        self.lines.envelope
+    }
+
     /// Validates `lines` on a substrate of `length_um` and prepares their pulse; None when the
     /// scene draws no lines.
     pub(crate) fn compile(
@@ -169,12 +174,9 @@ fn refractory_us(lines: &Lines, limits: &SafetyLimits) -> u32 {
 pub(crate) enum LineStep {
     /// No line pulse owns the gate: the region's texture does.
     Free,
-    /// Inside a pulse or its rest: the line owns the gate and the amplitude. `skipped`: a line
-    /// was crossed now and gets no pulse, to keep the duty cap.
-    Window {
-        amplitude_permille: u16,
-        skipped: bool,
-    },
+    /// Inside a pulse or its rest: the line owns the gate (the port plays the pulse's
+    /// envelope). `skipped`: a line was crossed now and gets no pulse, to keep the duty cap.
+    Window { skipped: bool },
     /// Line `line` was crossed: fire `pulse` at `amplitude_permille`, and call
     /// [`LineTracker::started`] if the gate takes it.
     Fire {
@@ -218,7 +220,6 @@ impl LineTracker {
             let dt = t_us.wrapping_sub(start);
             if dt < lines.window_us {
                 return LineStep::Window {
-                    amplitude_permille: lines.lines.amplitude_at(dt),
                     skipped: fired.is_some(),
                 };
             }
@@ -228,7 +229,7 @@ impl LineTracker {
             Some(line) => LineStep::Fire {
                 line,
                 pulse: lines.pulse,
-                amplitude_permille: lines.lines.amplitude_at(0),
+                amplitude_permille: lines.lines.amplitude_permille,
             },
             None => LineStep::Free,
         }
