@@ -234,12 +234,14 @@ pub struct EnvelopePlan {
 
 /// The plan for a pulse of `pulse_clocks` envelope-timer clocks at `clk_hz`: as many entries as
 /// fit (at most [`MAX_ENVELOPE_ENTRIES`], at least [`MIN_ENVELOPE_STEP_NS`] apart), an even
-/// number so the peak falls on a step, at least 2.
+/// number so the peak falls on a step, at least 2. The step is rounded down, so the last entry
+/// (level 0) is latched before the pulse ends and the envelope timer stops with it (at most
+/// `entries` clocks early).
 pub fn triangle_plan(pulse_clocks: u64, clk_hz: u32) -> EnvelopePlan {
     let min_step = (clk_hz as u64 * MIN_ENVELOPE_STEP_NS).div_ceil(1_000_000_000).max(1);
     let fit = (pulse_clocks / min_step).min(MAX_ENVELOPE_ENTRIES as u64) as usize;
     let entries = (fit & !1).max(2);
-    let step = (pulse_clocks + entries as u64 / 2) / entries as u64;
+    let step = pulse_clocks / entries as u64;
     EnvelopePlan {
         entries,
         step_clocks: step.clamp(1, u16::MAX as u64 + 1) as u32,
@@ -334,10 +336,11 @@ mod tests {
 
     #[test]
     fn plan_keeps_entries_apart_and_covers_the_pulse() {
-        // 10 ms at 180 MHz: 128 entries of 14 062.5 clocks.
+        // 10 ms at 180 MHz: 128 entries of 14 062.5 clocks, rounded down: the last entry is
+        // latched 64 clocks before the pulse ends, not after.
         let a = triangle_plan(1_800_000, 180_000_000);
         assert_eq!(a.entries, 128);
-        assert_eq!(a.step_clocks, 14_063);
+        assert_eq!(a.step_clocks, 14_062);
         // 100 µs at 150 MHz: 4 µs apart → 25 fit, 24 (even) used.
         let b = triangle_plan(15_000, 150_000_000);
         assert_eq!(b.entries, 24);

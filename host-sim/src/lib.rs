@@ -19,6 +19,7 @@ pub mod door;
 pub mod metrics;
 pub mod models;
 pub mod report;
+pub mod rf;
 pub mod scenario;
 pub mod serve;
 pub mod sim;

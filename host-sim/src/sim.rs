@@ -14,7 +14,7 @@ use saw_core::velocity::VelocityEstimator;
 use saw_core::{Config, ConfigError, Controller, Telemetry};
 
 use crate::adc::{AdcError, AdcModel, AdcParams, FaultWindow};
-use crate::timer::{TimerModel, Waveform};
+use crate::timer::{LevelPort, TimerModel, Waveform};
 use crate::trajectory::{State, Trajectory};
 
 /// Everything a run needs.
@@ -221,7 +221,12 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
         Ok(Self {
             ctrl,
             adc,
-            tm: TimerModel::new(timer.clock_hz, timer.counter_bits, params.preload),
+            tm: TimerModel::new(timer.clock_hz, timer.counter_bits, params.preload).with_level(
+                LevelPort::new(
+                    params.board.rf_level.table,
+                    params.board.rf_level.envelope_timer_clk_hz,
+                ),
+            ),
             clock_hz: timer.clock_hz as u64,
             period_us: sample_period_us(params.board),
             action_latency_us: params.action_latency_us,
@@ -260,6 +265,13 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
         };
         if let Some(s) = sample {
             let out = self.ctrl.on_sample(s);
+            // The port's order (`saw_core::controller::apply`): level and envelope, then line.
+            if let Some(e) = out.envelope {
+                self.tm.set_envelope(e);
+            }
+            if let Some(a) = out.amplitude_permille {
+                self.tm.set_amplitude(self.clk(t_us + latency), a);
+            }
             if let Some(a) = out.action {
                 self.tm.apply(self.clk(t_us + latency), a);
                 point.action = Some(a);

@@ -13,9 +13,18 @@
 //!   pulse), an ARR below the count makes the counter run on to 2^bits before wrapping. PSC is
 //!   always buffered by the hardware, in both modes.
 //! - `Off`: line low now, counter stopped.
+//!
+//! The RF level (`docs/rf-level.md`) rides on the same events, as the DAC triggered by TIM8,
+//! TIM8 slaved to this timer, does on the boards: a level asked for while a burst runs is latched
+//! at the next update event (never inside a period); `Start` and a rectangular `Pulse` latch it
+//! at their first edge; a triangular `Pulse` plays the board's envelope table, one entry per
+//! envelope-timer step while the counter runs; `Off` latches level 0 at once. The DAC codes go
+//! through the board's calibration table ([`saw_boards::rf_level::LevelTable`]); the RF the
+//! finger gets is the reference circuit's answer to them ([`crate::rf::permille_at_code`]).
 
+use saw_boards::rf_level::{self, LevelTable, MAX_ENVELOPE_ENTRIES};
 use saw_core::burst::TimerSettings;
-use saw_core::gate::GateAction;
+use saw_core::gate::{Envelope, GateAction};
 
 /// One level change of the enable line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -49,11 +58,21 @@ impl Pulse {
     }
 }
 
+/// One change of the DAC's output (DOR), kernel clocks of the burst timer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LevelEdge {
+    pub t: u64,
+    /// The DAC code from then on.
+    pub code: u16,
+}
+
 /// The recorded waveform of the enable line.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Waveform {
     /// Level changes in time order; the line starts low.
     pub edges: Vec<Edge>,
+    /// DAC output changes in time order; the DAC starts at code 0.
+    pub levels: Vec<LevelEdge>,
     /// Kernel clock, Hz.
     pub clock_hz: u32,
     /// End of the recording, kernel clocks.
@@ -121,6 +140,34 @@ impl Waveform {
         self.edges.iter().any(|e| e.high && e.t >= from && e.t < to)
     }
 
+    /// DAC code at time `t` (after any change at exactly `t`).
+    pub fn code_at(&self, t: u64) -> u16 {
+        match self.levels.partition_point(|e| e.t <= t) {
+            0 => 0,
+            i => self.levels[i - 1].code,
+        }
+    }
+
+    /// The RF drive the finger gets at `t`, ‰ of full amplitude: enable × the reference
+    /// circuit's amplitude for the DAC code (0 while the line is low).
+    pub fn drive_at(&self, t: u64) -> f64 {
+        if self.level_at(t) {
+            crate::rf::permille_at_code(self.code_at(t))
+        } else {
+            0.0
+        }
+    }
+
+    /// DAC codes latched in `[from, to)`, with the code in force at `from` first.
+    pub fn codes_within(&self, from: u64, to: u64) -> Vec<LevelEdge> {
+        let mut out = vec![LevelEdge {
+            t: from,
+            code: self.code_at(from),
+        }];
+        out.extend(self.levels.iter().filter(|e| e.t > from && e.t < to).copied());
+        out
+    }
+
     /// Converts µs to kernel clocks.
     pub fn us_to_clocks(&self, us: f64) -> u64 {
         (us * self.clock_hz as f64 / 1e6).round() as u64
@@ -149,6 +196,50 @@ struct Running {
     one_pulse: bool,
 }
 
+/// A triangle being played: the DMA's table and the envelope timer's steps.
+#[derive(Clone, Debug)]
+struct Playing {
+    /// The pulse's start (TIM2 CEN), kernel clocks.
+    start: u64,
+    /// One envelope step, kernel clocks (fractional: TIM8 may run at another clock).
+    step: f64,
+    codes: Vec<u16>,
+    /// Entries latched so far.
+    next: usize,
+}
+
+/// The RF level port: what the board's DAC, TIM8 and DMA do (`docs/rf-level.md`).
+#[derive(Clone, Debug)]
+pub struct LevelPort {
+    table: LevelTable,
+    /// Envelope timer (TIM8) clock, Hz.
+    envelope_clk_hz: u32,
+    /// The level the core asked for, ‰.
+    requested_permille: u16,
+    /// The next one-pulse's envelope.
+    envelope: Envelope,
+    /// DHR: latched at the next trigger.
+    held: u16,
+    /// DOR: the output.
+    out: u16,
+    playing: Option<Playing>,
+}
+
+impl LevelPort {
+    /// The port of a board: its calibration table and envelope-timer clock.
+    pub fn new(table: LevelTable, envelope_clk_hz: u32) -> Self {
+        Self {
+            table,
+            envelope_clk_hz,
+            requested_permille: 0,
+            envelope: Envelope::Rectangular,
+            held: 0,
+            out: 0,
+            playing: None,
+        }
+    }
+}
+
 /// The burst timer.
 #[derive(Clone, Debug)]
 pub struct TimerModel {
@@ -164,6 +255,8 @@ pub struct TimerModel {
     pub protocol_errors: u32,
     /// Every action applied, with its time.
     pub actions: Vec<(u64, GateAction)>,
+    level: LevelPort,
+    levels: Vec<LevelEdge>,
 }
 
 impl TimerModel {
@@ -179,7 +272,65 @@ impl TimerModel {
             edges: Vec::new(),
             protocol_errors: 0,
             actions: Vec::new(),
+            // The reference table, its envelope timer at this clock: boards set theirs with
+            // [`TimerModel::with_level`].
+            level: LevelPort::new(rf_level::REFERENCE_TABLE, clock_hz),
+            levels: Vec::new(),
         }
+    }
+
+    /// The same timer with a board's RF level port.
+    pub fn with_level(mut self, level: LevelPort) -> Self {
+        self.level = level;
+        self
+    }
+
+    /// The DAC code on the output now.
+    pub fn level_code(&self) -> u16 {
+        self.level.out
+    }
+
+    /// The core asks for a level, ‰ (see `BurstOutput::set_amplitude`): while a burst runs it
+    /// is latched at the next update event; while off it waits for the next start.
+    pub fn set_amplitude(&mut self, t: u64, permille: u16) {
+        self.advance_to(t);
+        self.level.requested_permille = permille;
+        if self.running.is_some_and(|r| !r.one_pulse) {
+            self.level.held = self.level.table.code(permille);
+        }
+    }
+
+    /// The next one-pulse's envelope (see `BurstOutput::set_envelope`).
+    pub fn set_envelope(&mut self, envelope: Envelope) {
+        self.level.envelope = envelope;
+    }
+
+    /// The DAC latches DHR at `t`.
+    fn latch(&mut self, t: u64, code: u16) {
+        self.level.out = code;
+        if self.levels.last().is_some_and(|e| e.t == t) {
+            self.levels.pop();
+        }
+        if self.levels.last().map(|e| e.code) != Some(code) {
+            self.levels.push(LevelEdge { t, code });
+        }
+    }
+
+    /// Envelope entries due up to `t` (inclusive), but not past the pulse's end `until`.
+    fn play_to(&mut self, t: u64, until: u64) {
+        let Some(mut p) = self.level.playing.take() else {
+            return;
+        };
+        while p.next < p.codes.len() {
+            let at = p.start + ((p.next + 1) as f64 * p.step).round() as u64;
+            if at > t || at > until {
+                break;
+            }
+            let code = p.codes[p.next];
+            p.next += 1;
+            self.latch(at, code);
+        }
+        self.level.playing = Some(p);
     }
 
     /// Kernel clock, Hz.
@@ -216,6 +367,8 @@ impl TimerModel {
         while let Some(mut r) = self.running {
             let tick = r.psc as u64 + 1;
             let end = r.t0 + r.end_ticks * tick;
+            // TIM8 counts (gated) while this counter runs: the envelope's entries up to here.
+            self.play_to(t, end);
             let fall = r.t0 + r.ccr as u64 * tick;
             if self.high && fall < end && fall <= t {
                 self.set_level(fall, false);
@@ -225,9 +378,11 @@ impl TimerModel {
                 break;
             }
             if r.one_pulse {
-                // OPM: the update event clears CEN; the line stays low.
+                // OPM: the update event clears CEN; the line stays low, and TIM8 (gated by
+                // CEN) stops: the envelope is over.
                 self.running = None;
                 self.set_level(end, false);
+                self.level.playing = None;
                 break;
             }
             // Update event: load the preloaded values, restart the period.
@@ -239,12 +394,40 @@ impl TimerModel {
             r.t0 = end;
             self.running = Some(r);
             self.set_level(end, r.ccr > 0);
+            // TRGO (update) → TIM8 reset → its TRGO → the DAC latches DHR.
+            let held = self.level.held;
+            self.latch(end, held);
         }
         self.now = t;
     }
 
     /// Latches `s` and counts from 0 at `t` (UG + CEN); `one_pulse` stops at the update event.
+    /// The level: a periodic start and a rectangular pulse latch the requested level now; a
+    /// triangular pulse keeps the output (0 after an off) and plays its table.
     fn start(&mut self, t: u64, s: TimerSettings, one_pulse: bool) {
+        let code = self.level.table.code(self.level.requested_permille);
+        self.level.playing = None;
+        if one_pulse && self.level.envelope == Envelope::Triangular {
+            // The pulse is high for `ccr` ticks from CNT = 1 (firmware: PWM mode 2, CCR = 1);
+            // TIM2 is enabled for the whole count, and TIM8 steps through it.
+            let tick = s.psc as u64 + 1;
+            let pulse_clocks = s.ccr as u64 * tick;
+            let env_clocks = pulse_clocks * self.level.envelope_clk_hz as u64 / self.clock_hz as u64;
+            let plan = rf_level::triangle_plan(env_clocks, self.level.envelope_clk_hz);
+            let mut codes = [0u16; MAX_ENVELOPE_ENTRIES];
+            rf_level::triangle(&self.level.table, self.level.requested_permille, &plan, &mut codes);
+            self.level.held = 0;
+            self.level.playing = Some(Playing {
+                start: t,
+                step: plan.step_clocks as f64 * self.clock_hz as f64
+                    / self.level.envelope_clk_hz as f64,
+                codes: codes[..plan.entries].to_vec(),
+                next: 0,
+            });
+        } else {
+            self.level.held = code;
+            self.latch(t, code);
+        }
         self.running = Some(Running {
             t0: t,
             psc: s.psc,
@@ -265,6 +448,10 @@ impl TimerModel {
             GateAction::Off => {
                 self.running = None;
                 self.set_level(t, false);
+                // DMA stopped, DHR = 0, TIM8 UG: the DAC latches 0 now.
+                self.level.playing = None;
+                self.level.held = 0;
+                self.latch(t, 0);
             }
             GateAction::Start(s) => self.start(t, s, false),
             // One-pulse mode from a stopped counter: high for ccr ticks, then low and stopped.
@@ -295,6 +482,9 @@ impl TimerModel {
                 self.protocol_errors += 1;
                 self.running = None;
                 self.set_level(t, false);
+                self.level.playing = None;
+                self.level.held = 0;
+                self.latch(t, 0);
             }
         }
     }
@@ -304,6 +494,7 @@ impl TimerModel {
     pub fn forget_history(&mut self) {
         self.edges.clear();
         self.actions.clear();
+        self.levels.clear();
     }
 
     /// Finishes the recording at `t` and returns the waveform.
@@ -311,6 +502,7 @@ impl TimerModel {
         self.advance_to(t);
         Waveform {
             edges: self.edges,
+            levels: self.levels,
             clock_hz: self.clock_hz,
             end: t,
         }
@@ -320,6 +512,7 @@ impl TimerModel {
     pub fn waveform(&self) -> Waveform {
         Waveform {
             edges: self.edges.clone(),
+            levels: self.levels.clone(),
             clock_hz: self.clock_hz,
             end: self.now,
         }

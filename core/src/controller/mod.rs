@@ -110,7 +110,14 @@ impl Prepared {
             // Cannot fail: the region map holds at most MAX_REGIONS.
             let _ = compiled.push(c);
         }
-        let lines = LinePulses::compile(&scene.lines, timer, &config.limits, length_um).map_err(
+        let lines = LinePulses::compile(
+            &scene.lines,
+            timer,
+            &config.limits,
+            length_um,
+            sample_period_us,
+        )
+        .map_err(
             |e| match e {
                 CompileError::Params(e) => ConfigError::Lines(e),
                 CompileError::Burst(e) => ConfigError::LinePulse(e),
@@ -284,7 +291,7 @@ impl<E: VelocityEstimator> Controller<E> {
             ..Output::default()
         };
         // Lines overlay every region: inside a line pulse or its rest the pulse owns the gate.
-        if !self.lines_step(position_um, t_us, &mut out) {
+        if !self.lines_step(position_um, velocity_um_s, t_us, &mut out) {
             self.texture_step(region, position_um, velocity_um_s, t_us, &mut out);
         }
         let t = &mut self.telemetry;
@@ -297,7 +304,13 @@ impl<E: VelocityEstimator> Controller<E> {
     /// Lines: fires a pulse on a crossing, and owns the gate and the amplitude during a pulse
     /// and its rest. True while they own them (the region's texture is not asked).
     #[inline(always)]
-    fn lines_step(&mut self, position_um: i32, t_us: u32, out: &mut Output) -> bool {
+    fn lines_step(
+        &mut self,
+        position_um: i32,
+        velocity_um_s: Option<i32>,
+        t_us: u32,
+        out: &mut Output,
+    ) -> bool {
         let Some(active) = self.active.as_ref() else {
             return false;
         };
@@ -306,7 +319,7 @@ impl<E: VelocityEstimator> Controller<E> {
         };
         let limits = active.limits;
         let envelope = lines.envelope();
-        match self.lines.step(lines, position_um, t_us) {
+        match self.lines.step(lines, position_um, velocity_um_s, t_us) {
             LineStep::Free => false,
             LineStep::Window { skipped } => {
                 // The port plays the pulse's envelope by itself; nothing to send.
@@ -807,7 +820,12 @@ mod tests {
 
     /// A one-region scene with `texture` (and optional lines).
     fn single(texture: Texture, lines: &[u32]) -> Controller {
+        single_with(texture, lines, Envelope::Triangular)
+    }
+
+    fn single_with(texture: Texture, lines: &[u32], envelope: Envelope) -> Controller {
         let mut cfg = default_config();
+        cfg.scene.lines.envelope = envelope;
         cfg.scene.boundaries_um.clear();
         cfg.scene.textures.clear();
         let _ = cfg.scene.textures.push(texture);
@@ -971,13 +989,15 @@ mod tests {
     }
 
     /// A line's pulse owns the enable line for its window: the 10 ms pulse plus the cap's
-    /// 10 ms rest (50 %). The pulse goes out with its peak level and its triangular envelope
-    /// (the port plays it); inside the window nothing more is sent — no 100 µs staircase —
+    /// 10 ms rest (50 %). The pulse goes out with its level and its envelope (the port plays
+    /// it); inside the window nothing more is sent — no 100 µs staircase —
     /// and a second line crossed is skipped and counted; crossed at exactly 20 ms it fires.
     #[test]
     fn line_window_holds_the_envelope_and_skips_inside_it() {
         for (cross_at_us, fires) in [(19_900u32, false), (20_000, true)] {
-            let mut c = single(Texture::Off, &[20_000, 21_000]);
+            // Rectangles fire on the crossing itself (a triangle fires ahead by the velocity,
+            // which these position jumps make meaningless).
+            let mut c = single_with(Texture::Off, &[20_000, 21_000], Envelope::Rectangular);
             let mut outs = std::vec::Vec::new();
             // Below line 0 (arming both), over it at 1 ms, then between the lines until the
             // second crossing `cross_at_us` after the first.
@@ -995,7 +1015,7 @@ mod tests {
             let at = |t_us: u32| outs[(t_us / 100) as usize];
             assert_eq!(at(1_000).line, Some(0));
             assert!(matches!(at(1_000).action, Some(GateAction::Pulse(_))));
-            assert_eq!(at(1_000).envelope, Some(Envelope::Triangular));
+            assert_eq!(at(1_000).envelope, Some(Envelope::Rectangular));
             // The first sample (the texture's) already set full drive: the peak is no change.
             assert!(outs[..10].iter().any(|o| o.amplitude_permille == Some(1000)));
             let window = &outs[(1_000 + 100) / 100..(1_000 + 19_900) / 100];

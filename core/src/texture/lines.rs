@@ -124,11 +124,20 @@ enum Side {
     Above,
 }
 
+/// Farthest ahead of a line a pulse may fire, µm: 400 mm/s with a 10 ms triangle. A faster
+/// velocity estimate (a glitch the median did not catch) must not fire a line millimetres early.
+pub const MAX_LINE_LEAD_UM: i64 = 2_000;
+
 /// A scene's lines, compiled: the pulse's one-pulse settings and the rest after it.
 #[derive(Clone, Debug)]
 pub(crate) struct LinePulses {
     lines: Lines,
     pulse: TimerSettings,
+    /// How far ahead a triangle fires, in µs of travel: half the pulse, so the peak (felt as the
+    /// line) falls on it, plus half a sample period, so firing on the sample grid lands the peak
+    /// within ± half a sample of travel instead of 0 … 1 sample late. 0 for rectangles: their
+    /// first edge marks the line, as before.
+    lead_us: u32,
     /// Pulse plus the rest after it, µs: the line owns the gate this long after it fires, so
     /// pulse / (pulse + rest) keeps the duty cap.
     window_us: u32,
@@ -147,6 +156,7 @@ impl LinePulses {
         timer: &BurstTimer,
         limits: &SafetyLimits,
         length_um: u32,
+        sample_period_us: u32,
     ) -> Result<Option<Self>, CompileError> {
         lines.validate(length_um, limits.max_on_time_us)?;
         if lines.positions_um.is_empty() {
@@ -155,9 +165,14 @@ impl LinePulses {
         // High for the whole count, one tick low at the end.
         let clocks = lines.pulse_us as u64 * timer.clock_hz as u64 / 1_000_000;
         let pulse = timer.one_pulse(clocks)?;
+        let lead_us = match lines.envelope {
+            Envelope::Triangular => lines.pulse_us / 2 + sample_period_us / 2,
+            Envelope::Rectangular => 0,
+        };
         Ok(Some(Self {
             lines: lines.clone(),
             pulse,
+            lead_us,
             window_us: lines.pulse_us + refractory_us(lines, limits),
         }))
     }
@@ -190,6 +205,9 @@ pub(crate) enum LineStep {
 #[derive(Clone, Debug, Default)]
 pub(crate) struct LineTracker {
     armed: [Option<Side>; MAX_LINES],
+    /// Where each line last fired, µm (a triangle fires ahead of its line: re-arming counts
+    /// the hysteresis from there as well as from the line).
+    fired_at_um: [Option<i32>; MAX_LINES],
     /// Start of the running line pulse, while in its pulse + rest window.
     pulse_start_us: Option<u32>,
 }
@@ -199,6 +217,7 @@ impl LineTracker {
     /// window is kept: the gate may still be in its rest.
     pub(crate) fn reset(&mut self) {
         self.armed = [None; MAX_LINES];
+        self.fired_at_um = [None; MAX_LINES];
     }
 
     /// Forgets everything, the running pulse's window too (a fault has cut the line).
@@ -214,8 +233,18 @@ impl LineTracker {
 
     /// One sample of the lines at `position_um`, `t_us`.
     #[inline]
-    pub(crate) fn step(&mut self, lines: &LinePulses, position_um: i32, t_us: u32) -> LineStep {
-        let fired = self.update(&lines.lines, position_um);
+    pub(crate) fn step(
+        &mut self,
+        lines: &LinePulses,
+        position_um: i32,
+        velocity_um_s: Option<i32>,
+        t_us: u32,
+    ) -> LineStep {
+        let lead_um = velocity_um_s.map_or(0, |v| {
+            (v as i64 * lines.lead_us as i64 / 1_000_000).clamp(-MAX_LINE_LEAD_UM, MAX_LINE_LEAD_UM)
+                as i32
+        });
+        let fired = self.update_ahead(&lines.lines, position_um, lead_um);
         if let Some(start) = self.pulse_start_us {
             let dt = t_us.wrapping_sub(start);
             if dt < lines.window_us {
@@ -236,29 +265,48 @@ impl LineTracker {
     }
 
     /// Updates with a new position; returns the index of a line crossed, if any.
+    #[cfg(test)]
     pub(crate) fn update(&mut self, lines: &Lines, position_um: i32) -> Option<u8> {
+        self.update_ahead(lines, position_um, 0)
+    }
+
+    /// Updates with a new position, firing a line `lead_um` of travel before the finger reaches
+    /// it (signed: the direction of motion; only a lead towards the line counts). Returns the
+    /// index of a line fired, if any. A line re-arms once the finger is `hysteresis_um` clear
+    /// of both the line and where it fired.
+    pub(crate) fn update_ahead(
+        &mut self,
+        lines: &Lines,
+        position_um: i32,
+        lead_um: i32,
+    ) -> Option<u8> {
         let h = lines.hysteresis_um as i32;
         let mut fired = None;
-        for (i, (&line, armed)) in lines
+        for (i, ((&line, armed), fired_at)) in lines
             .positions_um
             .iter()
             .zip(self.armed.iter_mut())
+            .zip(self.fired_at_um.iter_mut())
             .enumerate()
         {
             let line = line as i32;
             let crossed = match *armed {
-                Some(Side::Below) => position_um >= line,
-                Some(Side::Above) => position_um <= line,
+                Some(Side::Below) => position_um.saturating_add(lead_um.max(0)) >= line,
+                Some(Side::Above) => position_um.saturating_add(lead_um.min(0)) <= line,
                 None => false,
             };
             if crossed {
                 *armed = None;
+                *fired_at = Some(position_um);
                 fired = Some(i as u8);
             }
-            if position_um < line - h {
+            let (low, high) = fired_at.map_or((line, line), |f| (line.min(f), line.max(f)));
+            if position_um < low.saturating_sub(h) {
                 *armed = Some(Side::Below);
-            } else if position_um > line + h {
+                *fired_at = None;
+            } else if position_um > high.saturating_add(h) {
                 *armed = Some(Side::Above);
+                *fired_at = None;
             }
         }
         fired
@@ -455,5 +503,45 @@ mod tests {
         assert_eq!(t.update(&l, 10_500), None);
         // Armed again from the new side: going back down over the line fires it.
         assert_eq!(t.update(&l, 10_000), Some(0));
+    }
+
+    /// A triangle fires ahead of its line by the lead, once; it re-arms only when the finger is
+    /// the hysteresis clear of both the line and the point where it fired — so a finger still
+    /// short of the line after firing (it fired 500 µm early) does not fire it again.
+    #[test]
+    fn a_lead_fires_ahead_once_and_rearms_clear_of_the_firing_point() {
+        let l = lines();
+        let mut t = LineTracker::default();
+        let mut fired_at = std::vec::Vec::new();
+        for p in (8_000..12_000).step_by(10) {
+            if t.update_ahead(&l, p, 500).is_some() {
+                fired_at.push(p);
+            }
+        }
+        assert_eq!(fired_at, [9_500]);
+        // Back down: the line re-arms above (past 10 200) and fires when the finger, moving
+        // down with a lead of −500 µm, is 500 µm above it.
+        let mut down = std::vec::Vec::new();
+        for p in (8_000..=12_000).rev().step_by(10) {
+            if t.update_ahead(&l, p, -500).is_some() {
+                down.push(p);
+            }
+        }
+        assert_eq!(down, [10_500]);
+        // Fired ahead, then the finger turns back before the line: re-armed only once it is
+        // 200 µm below where it fired, so wobbling near the firing point fires nothing.
+        let mut t = LineTracker::default();
+        assert_eq!(t.update_ahead(&l, 9_000, 0), None);
+        assert_eq!(t.update_ahead(&l, 9_500, 500), Some(0));
+        for p in [9_400, 9_350, 9_450, 9_310] {
+            assert_eq!(t.update_ahead(&l, p, 500), None, "{p}");
+        }
+        assert_eq!(t.update_ahead(&l, 9_290, -100), None);
+        assert_eq!(t.update_ahead(&l, 9_600, 500), Some(0));
+        // A lead away from the line does not delay or advance anything.
+        let mut t = LineTracker::default();
+        assert_eq!(t.update_ahead(&l, 9_000, -400), None);
+        assert_eq!(t.update_ahead(&l, 9_999, -400), None);
+        assert_eq!(t.update_ahead(&l, 10_000, -400), Some(0));
     }
 }
