@@ -11,8 +11,8 @@
 #![forbid(unsafe_code)]
 
 pub mod nucleo_f446re;
-pub mod rf_level;
 pub mod nucleo_g474re;
+pub mod rf_level;
 
 pub use nucleo_f446re::NUCLEO_F446RE;
 pub use nucleo_g474re::NUCLEO_G474RE;

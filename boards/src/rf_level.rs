@@ -168,30 +168,102 @@ impl LevelTable {
 /// divided down: the circuit gives 6 ‰ for all of them, and 0 ‰ maps to code 0.
 pub const REFERENCE_TABLE: LevelTable = LevelTable {
     points: &[
-        LevelPoint { permille: 0, code: 0 },
-        LevelPoint { permille: 7, code: 356 },
-        LevelPoint { permille: 8, code: 450 },
-        LevelPoint { permille: 10, code: 607 },
-        LevelPoint { permille: 13, code: 792 },
-        LevelPoint { permille: 16, code: 938 },
-        LevelPoint { permille: 20, code: 1095 },
-        LevelPoint { permille: 25, code: 1252 },
-        LevelPoint { permille: 32, code: 1425 },
-        LevelPoint { permille: 40, code: 1582 },
-        LevelPoint { permille: 50, code: 1739 },
-        LevelPoint { permille: 63, code: 1902 },
-        LevelPoint { permille: 79, code: 2061 },
-        LevelPoint { permille: 100, code: 2227 },
-        LevelPoint { permille: 126, code: 2389 },
-        LevelPoint { permille: 158, code: 2548 },
-        LevelPoint { permille: 200, code: 2714 },
-        LevelPoint { permille: 251, code: 2874 },
-        LevelPoint { permille: 316, code: 3036 },
-        LevelPoint { permille: 398, code: 3198 },
-        LevelPoint { permille: 501, code: 3360 },
-        LevelPoint { permille: 631, code: 3522 },
-        LevelPoint { permille: 794, code: 3684 },
-        LevelPoint { permille: 1000, code: 3846 },
+        LevelPoint {
+            permille: 0,
+            code: 0,
+        },
+        LevelPoint {
+            permille: 7,
+            code: 356,
+        },
+        LevelPoint {
+            permille: 8,
+            code: 450,
+        },
+        LevelPoint {
+            permille: 10,
+            code: 607,
+        },
+        LevelPoint {
+            permille: 13,
+            code: 792,
+        },
+        LevelPoint {
+            permille: 16,
+            code: 938,
+        },
+        LevelPoint {
+            permille: 20,
+            code: 1095,
+        },
+        LevelPoint {
+            permille: 25,
+            code: 1252,
+        },
+        LevelPoint {
+            permille: 32,
+            code: 1425,
+        },
+        LevelPoint {
+            permille: 40,
+            code: 1582,
+        },
+        LevelPoint {
+            permille: 50,
+            code: 1739,
+        },
+        LevelPoint {
+            permille: 63,
+            code: 1902,
+        },
+        LevelPoint {
+            permille: 79,
+            code: 2061,
+        },
+        LevelPoint {
+            permille: 100,
+            code: 2227,
+        },
+        LevelPoint {
+            permille: 126,
+            code: 2389,
+        },
+        LevelPoint {
+            permille: 158,
+            code: 2548,
+        },
+        LevelPoint {
+            permille: 200,
+            code: 2714,
+        },
+        LevelPoint {
+            permille: 251,
+            code: 2874,
+        },
+        LevelPoint {
+            permille: 316,
+            code: 3036,
+        },
+        LevelPoint {
+            permille: 398,
+            code: 3198,
+        },
+        LevelPoint {
+            permille: 501,
+            code: 3360,
+        },
+        LevelPoint {
+            permille: 631,
+            code: 3522,
+        },
+        LevelPoint {
+            permille: 794,
+            code: 3684,
+        },
+        LevelPoint {
+            permille: 1000,
+            code: 3846,
+        },
     ],
 };
 const _: () = assert!(REFERENCE_TABLE.check().is_ok());
@@ -238,7 +310,9 @@ pub struct EnvelopePlan {
 /// (level 0) is latched before the pulse ends and the envelope timer stops with it (at most
 /// `entries` clocks early).
 pub fn triangle_plan(pulse_clocks: u64, clk_hz: u32) -> EnvelopePlan {
-    let min_step = (clk_hz as u64 * MIN_ENVELOPE_STEP_NS).div_ceil(1_000_000_000).max(1);
+    let min_step = (clk_hz as u64 * MIN_ENVELOPE_STEP_NS)
+        .div_ceil(1_000_000_000)
+        .max(1);
     let fit = (pulse_clocks / min_step).min(MAX_ENVELOPE_ENTRIES as u64) as usize;
     let entries = (fit & !1).max(2);
     let step = pulse_clocks / entries as u64;
@@ -253,7 +327,11 @@ pub fn triangle_plan(pulse_clocks: u64, clk_hz: u32) -> EnvelopePlan {
 pub fn triangle_level(peak_permille: u16, k: usize, entries: usize) -> u16 {
     let n = entries as u32;
     let x2 = 2 * (k as u32 + 1);
-    let rise = if x2 <= n { x2 } else { (2 * n).saturating_sub(x2) };
+    let rise = if x2 <= n {
+        x2
+    } else {
+        (2 * n).saturating_sub(x2)
+    };
     (peak_permille as u32 * rise / n) as u16
 }
 
@@ -284,8 +362,14 @@ mod tests {
     fn each_rule_is_refused_with_point_value_and_rule() {
         let cases: [(&'static [LevelPoint], &str); 6] = [
             (&[p!(0, 0)], "1 points; it needs at least 2"),
-            (&[p!(1, 0), p!(1000, 9)], "first point is 1 ‰; it must be 0 ‰"),
-            (&[p!(0, 0), p!(999, 9)], "last point is 999 ‰; it must be 1000 ‰"),
+            (
+                &[p!(1, 0), p!(1000, 9)],
+                "first point is 1 ‰; it must be 0 ‰",
+            ),
+            (
+                &[p!(0, 0), p!(999, 9)],
+                "last point is 999 ‰; it must be 1000 ‰",
+            ),
             (
                 &[p!(0, 0), p!(500, 5), p!(500, 6), p!(1000, 9)],
                 "point 2: level 500 ‰ must be above the previous point's 500 ‰",
@@ -303,7 +387,13 @@ mod tests {
             let e = LevelTable { points }.check().unwrap_err().to_string();
             assert!(e.contains(words), "{points:?} gave {e:?}");
         }
-        assert_eq!(LevelTable { points: &[p!(0, 0), p!(1000, 4095)] }.check(), Ok(()));
+        assert_eq!(
+            LevelTable {
+                points: &[p!(0, 0), p!(1000, 4095)]
+            }
+            .check(),
+            Ok(())
+        );
     }
 
     #[test]
@@ -325,7 +415,10 @@ mod tests {
 
     #[test]
     fn triangle_rises_to_the_peak_halfway_and_ends_at_zero() {
-        let plan = EnvelopePlan { entries: 8, step_clocks: 1 };
+        let plan = EnvelopePlan {
+            entries: 8,
+            step_clocks: 1,
+        };
         let levels: std::vec::Vec<u16> = (0..8).map(|k| triangle_level(800, k, 8)).collect();
         assert_eq!(levels, [200, 400, 600, 800, 600, 400, 200, 0]);
         let mut out = [0u16; 8];

@@ -60,7 +60,10 @@ mod tests {
                 continue;
             }
             let got = permille_at_code(REFERENCE_TABLE.code(want));
-            assert!((got - want as f64).abs() <= want as f64 * 0.01, "entry {k}: {got} vs {want}");
+            assert!(
+                (got - want as f64).abs() <= want as f64 * 0.01,
+                "entry {k}: {got} vs {want}"
+            );
         }
     }
 }

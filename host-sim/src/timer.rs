@@ -164,7 +164,12 @@ impl Waveform {
             t: from,
             code: self.code_at(from),
         }];
-        out.extend(self.levels.iter().filter(|e| e.t > from && e.t < to).copied());
+        out.extend(
+            self.levels
+                .iter()
+                .filter(|e| e.t > from && e.t < to)
+                .copied(),
+        );
         out
     }
 
@@ -412,10 +417,16 @@ impl TimerModel {
             // TIM2 is enabled for the whole count, and TIM8 steps through it.
             let tick = s.psc as u64 + 1;
             let pulse_clocks = s.ccr as u64 * tick;
-            let env_clocks = pulse_clocks * self.level.envelope_clk_hz as u64 / self.clock_hz as u64;
+            let env_clocks =
+                pulse_clocks * self.level.envelope_clk_hz as u64 / self.clock_hz as u64;
             let plan = rf_level::triangle_plan(env_clocks, self.level.envelope_clk_hz);
             let mut codes = [0u16; MAX_ENVELOPE_ENTRIES];
-            rf_level::triangle(&self.level.table, self.level.requested_permille, &plan, &mut codes);
+            rf_level::triangle(
+                &self.level.table,
+                self.level.requested_permille,
+                &plan,
+                &mut codes,
+            );
             self.level.held = 0;
             self.level.playing = Some(Playing {
                 start: t,

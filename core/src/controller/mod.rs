@@ -117,12 +117,10 @@ impl Prepared {
             length_um,
             sample_period_us,
         )
-        .map_err(
-            |e| match e {
-                CompileError::Params(e) => ConfigError::Lines(e),
-                CompileError::Burst(e) => ConfigError::LinePulse(e),
-            },
-        )?;
+        .map_err(|e| match e {
+            CompileError::Params(e) => ConfigError::Lines(e),
+            CompileError::Burst(e) => ConfigError::LinePulse(e),
+        })?;
         for (i, t) in scene.textures.iter().enumerate() {
             debug!("region {}: {}", i, t.kind());
         }
@@ -1017,7 +1015,9 @@ mod tests {
             assert!(matches!(at(1_000).action, Some(GateAction::Pulse(_))));
             assert_eq!(at(1_000).envelope, Some(Envelope::Rectangular));
             // The first sample (the texture's) already set full drive: the peak is no change.
-            assert!(outs[..10].iter().any(|o| o.amplitude_permille == Some(1000)));
+            assert!(outs[..10]
+                .iter()
+                .any(|o| o.amplitude_permille == Some(1000)));
             let window = &outs[(1_000 + 100) / 100..(1_000 + 19_900) / 100];
             assert!(window
                 .iter()
