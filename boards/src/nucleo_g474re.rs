@@ -125,7 +125,7 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
         envelope_timer_clk_hz: CLOCKS.apb2_timer_hz(),
         dac_tsel: 1,
         envelope_ts: 1,
-        envelope_dma: "DMA1 channel 3 via DMAMUX (TIM8_CH1)",
+        envelope_dma: "DMA1 channel 4 (DMAMUX1 channel 3, request 49 = TIM8_CH1)",
         table: crate::rf_level::REFERENCE_TABLE,
     },
     rf_arm_pin: Pin {

@@ -131,6 +131,9 @@ pub struct SafetyLimits {
     pub max_duty_permille: u16,
     /// Longest single on-time, µs (heat in the IDTs and the amplifier).
     pub max_on_time_us: u32,
+    /// Highest RF level, ‰ of full drive: no region, line or pulse drives above it (textures
+    /// without an amplitude of their own, "full drive", play at it).
+    pub max_level_permille: u16,
 }
 
 impl Default for SafetyLimits {
@@ -140,6 +143,7 @@ impl Default for SafetyLimits {
         Self {
             max_duty_permille: 500,
             max_on_time_us: 50_000,
+            max_level_permille: 1000,
         }
     }
 }
@@ -534,6 +538,7 @@ mod tests {
         let l = |max_duty_permille, max_on_time_us| SafetyLimits {
             max_duty_permille,
             max_on_time_us,
+            ..SafetyLimits::default()
         };
         assert_eq!(l(1000, 1).validate(), Ok(()));
         assert_eq!(l(1, 1).validate(), Ok(()));
@@ -706,6 +711,7 @@ mod tests {
         let limits = SafetyLimits {
             max_duty_permille: 500,
             max_on_time_us: 10_000,
+            ..SafetyLimits::default()
         };
         let (s, capped) = plan(&T32, &limits, &cmd(20)).unwrap();
         assert!(capped);
@@ -852,6 +858,7 @@ mod tests {
         let l = SafetyLimits {
             max_duty_permille: 1,
             max_on_time_us: 50_000,
+            ..SafetyLimits::default()
         };
         let fast = FastPlanner::new(&tiny, &l, 1).unwrap();
         assert_eq!(fast.plan_hz(500.0), None);

@@ -333,6 +333,7 @@ mod tests {
         let l = SafetyLimits {
             max_duty_permille: 1,
             max_on_time_us: 10_000_000,
+            ..SafetyLimits::default()
         };
         // 3 s at 90 MHz.
         let p = TimerSettings {

@@ -210,8 +210,9 @@ async fn the_panel_in_a_real_browser() {
     assert_eq!(
         out.status.code(),
         Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        "{}{}",
+        String::from_utf8_lossy(&out.stderr),
+        String::from_utf8_lossy(&out.stdout)
     );
     let got: Value = serde_json::from_slice(&out.stdout).unwrap();
     let b0 = got["result"]["config"]["scene"]["boundaries_um"][0]

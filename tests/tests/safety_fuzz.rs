@@ -152,6 +152,8 @@ fn random_config(rng: &mut ChaCha8Rng, max_hz: u32) -> Config {
             rng.random_range(50..=600)
         },
         max_on_time_us: log_uniform(rng, 20.0, 100_000.0) as u32,
+        // Full drive: the random textures draw amplitudes up to 1000 ‰ and must stay loadable.
+        max_level_permille: 1000,
     };
     cfg.stale_after_us = rng.random_range(300..=10_000);
     let n = rng.random_range(1..=8usize);

@@ -495,6 +495,8 @@ impl<E: VelocityEstimator> Controller<E> {
     }
 
     fn set_amplitude(&mut self, permille: u16) -> Option<u16> {
+        // The level cap is the last word: full drive and the top of a random spread play at it.
+        let permille = permille.min(self.limits().max_level_permille);
         (self.amplitude != Some(permille)).then(|| {
             self.amplitude = Some(permille);
             permille

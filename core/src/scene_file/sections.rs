@@ -57,9 +57,17 @@ pub(super) fn limits(
         50.0,
     )?;
     let stale = cx.opt(&l.stale_after_ms, "limits.stale_after_ms", 0.2, 1000.0, 5.0)?;
+    let level = cx.opt(
+        &l.max_level_percent,
+        "limits.max_level_percent",
+        0.1,
+        100.0,
+        100.0,
+    )?;
     let caps = SafetyLimits {
         max_duty_permille: (duty * 10.0).round() as u16,
         max_on_time_us: milli(on),
+        max_level_permille: (level * 10.0).round() as u16,
     };
     Ok((caps, milli(stale)))
 }

@@ -58,6 +58,7 @@ pub(super) struct Substrate {
 #[serde(deny_unknown_fields)]
 pub(super) struct Limits {
     pub(super) max_duty_percent: Option<Spanned<f64>>,
+    pub(super) max_level_percent: Option<Spanned<f64>>,
     pub(super) max_on_time_ms: Option<Spanned<f64>>,
     pub(super) stale_after_ms: Option<Spanned<f64>>,
 }

@@ -78,6 +78,10 @@ pub fn to_scene_file(config: &Config, title: &str) -> String {
         thousandths(l.max_on_time_us.into())
     ));
     line(std::format!(
+        "max_level_percent = {}",
+        tenths(l.max_level_permille)
+    ));
+    line(std::format!(
         "stale_after_ms = {}",
         thousandths(config.stale_after_us.into())
     ));

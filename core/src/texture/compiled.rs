@@ -126,6 +126,20 @@ impl Compiled {
         length_um: u32,
         sample_period_us: u32,
     ) -> Result<(Self, bool), CompileError> {
+        // An amplitude of the texture's own above the level cap is a contradiction in the
+        // scene: refused, like a duty above the duty cap. ("Full drive" plays at the cap.)
+        let asked = match texture {
+            Texture::Grating(g) => Some(g.amplitude_permille),
+            Texture::Random(r) => Some(r.amplitude_permille),
+            _ => None,
+        };
+        if let Some(permille) = asked.filter(|&a| a > limits.max_level_permille) {
+            return Err(TextureError::LevelAboveCap {
+                permille,
+                max_level_permille: limits.max_level_permille,
+            }
+            .into());
+        }
         Ok(match texture {
             Texture::Off => (Compiled::Off, false),
             Texture::Constant(cmd) => {

@@ -159,6 +159,13 @@ impl LinePulses {
         sample_period_us: u32,
     ) -> Result<Option<Self>, CompileError> {
         lines.validate(length_um, limits.max_on_time_us)?;
+        if !lines.positions_um.is_empty() && lines.amplitude_permille > limits.max_level_permille {
+            return Err(TextureError::LevelAboveCap {
+                permille: lines.amplitude_permille,
+                max_level_permille: limits.max_level_permille,
+            }
+            .into());
+        }
         if lines.positions_um.is_empty() {
             return Ok(None);
         }

@@ -125,6 +125,13 @@ pub enum TextureError {
         /// The on-time cap, µs.
         max_on_time_us: u32,
     },
+    /// An amplitude above the scene's level cap (`limits.max_level_percent`).
+    LevelAboveCap {
+        /// The amplitude asked for, ‰.
+        permille: u16,
+        /// The cap, ‰.
+        max_level_permille: u16,
+    },
     /// Grating re-arm distance not below half the period.
     BadRearm {
         /// The re-arm distance asked for, µm.
@@ -307,6 +314,15 @@ impl core::fmt::Display for TextureError {
                 "line pulse {} ms must be above 0 ms and at most the on-time cap of {} ms",
                 Milli(pulse_us as u64),
                 Milli(max_on_time_us as u64)
+            ),
+            TextureError::LevelAboveCap {
+                permille,
+                max_level_permille,
+            } => write!(
+                f,
+                "amplitude {} % is above the level cap of {} % (limits.max_level_percent)",
+                Deci(permille as u64),
+                Deci(max_level_permille as u64)
             ),
             TextureError::BadRearm {
                 rearm_um,

@@ -247,6 +247,8 @@ pub fn decode_config(r: &mut Reader) -> Config {
     let limits = SafetyLimits {
         max_duty_permille: r.u16(),
         max_on_time_us: r.u32(),
+        // Not in the golden-vector format: the vectors predate the level cap (full drive).
+        max_level_permille: 1000,
     };
     let stale_after_us = r.u32();
     let hysteresis_um = r.u32();

@@ -171,9 +171,9 @@ pub(super) fn spawn(
     snapshot: Arc<Mutex<Snapshot>>,
     commands: Receiver<(u64, Command)>,
     stop: Arc<AtomicBool>,
-) {
+) -> Option<std::thread::JoinHandle<()>> {
     let out = Out { tx, snapshot };
-    let _ = std::thread::Builder::new()
+    std::thread::Builder::new()
         .name("saw-ui-link".into())
         .spawn(move || {
             let mut last_why = String::new();
@@ -195,7 +195,8 @@ pub(super) fn spawn(
                 }
                 std::thread::sleep(RETRY);
             }
-        });
+        })
+        .ok()
 }
 
 fn record_json(r: &Record) -> Value {

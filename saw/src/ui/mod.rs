@@ -69,6 +69,8 @@ pub struct UiHandle {
     pub addr: SocketAddr,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
     thread: Option<std::thread::JoinHandle<()>>,
+    /// The bridge thread: it owns the port, so `stop` waits for it to let go.
+    bridge: Option<std::thread::JoinHandle<()>>,
     bridge_stop: Arc<std::sync::atomic::AtomicBool>,
 }
 
@@ -85,6 +87,10 @@ impl UiHandle {
             let _ = s.send(());
         }
         if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        // The port is closed (and its lock dropped) only when the bridge's loop sees the flag.
+        if let Some(t) = self.bridge.take() {
             let _ = t.join();
         }
     }
@@ -251,7 +257,7 @@ pub fn start(opts: UiOptions) -> Result<UiHandle, String> {
     let snapshot = Arc::new(Mutex::new(Snapshot::default()));
     let (commands, commands_rx) = std::sync::mpsc::channel();
     let bridge_stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    bridge::spawn(
+    let bridge = bridge::spawn(
         opts.clone(),
         out.clone(),
         snapshot.clone(),
@@ -303,6 +309,7 @@ pub fn start(opts: UiOptions) -> Result<UiHandle, String> {
         addr,
         stop: Some(stop_tx),
         thread: Some(thread),
+        bridge,
         bridge_stop,
     })
 }
