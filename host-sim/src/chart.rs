@@ -1,4 +1,6 @@
-//! PNG chart of a run: stacked panels over time — position, velocity, region, gate line.
+//! PNG chart of a run: stacked panels over time — position, velocity, region, gate line and the
+//! RF drive the finger gets (enable × level); with lines, a last panel of every line pulse's
+//! drive against the finger's distance from its line (the triangle and where it peaks).
 
 use std::path::Path;
 
@@ -145,7 +147,10 @@ pub fn write_png(
     path: &Path,
     title: &str,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let root = BitMapBackend::new(path, (1600, 1200)).into_drawing_area();
+    let lines = &r.params.config.scene.lines;
+    let with_lines = !lines.positions_um.is_empty();
+    let height = if with_lines { 1520 } else { 1200 };
+    let root = BitMapBackend::new(path, (1600, height)).into_drawing_area();
     root.fill(&WHITE)?;
     let (header, body) = root.split_vertically(40);
     header.draw(&Text::new(
@@ -153,7 +158,11 @@ pub fn write_png(
         (20, 10),
         ("sans-serif", 22).into_font(),
     ))?;
-    let panels = body.split_by_breakpoints::<i32, i32, _, _>([], [330, 660, 860]);
+    let panels = if with_lines {
+        body.split_by_breakpoints::<i32, i32, _, _>([], [330, 660, 860, 1160])
+    } else {
+        body.split_by_breakpoints::<i32, i32, _, _>([], [330, 660, 860])
+    };
     let t_end = r.params.duration_s;
     let label_font = ("sans-serif", 18);
 
@@ -314,7 +323,7 @@ pub fn write_png(
             .y_label_area_size(80)
             .build_cartesian_2d(0.0..t_end, -0.2..1.2)?;
         c.configure_mesh()
-            .y_desc("RF gate")
+            .y_desc("RF gate, drive")
             .x_desc("time (s)")
             .axis_desc_style(label_font)
             .label_style(("sans-serif", 15))
@@ -340,17 +349,129 @@ pub fn write_png(
         for run in dense_duty(&pts, t_end, BUCKETS) {
             c.draw_series(LineSeries::new(run, orange.stroke_width(2)))?;
         }
+        // The drive the finger gets: enable × the RF level (the reference circuit's amplitude
+        // for the DAC code), as a share of full drive.
+        let drive = drive_steps(w, t_end);
+        let blue = RGBColor(30, 90, 220);
+        c.draw_series(LineSeries::new(
+            decimate(&drive, 0.0, t_end, 3 * BUCKETS),
+            blue.mix(0.8).stroke_width(1),
+        ))?;
         side_legend(
             &panels[3],
             &[
                 ("gate line".into(), BLACK.to_rgba(), 1),
+                ("RF drive (enable × level)".into(), blue.mix(0.8), 1),
                 ("on-time share where".into(), orange.to_rgba(), 2),
                 ("  bursts are denser".into(), WHITE.to_rgba(), 0),
                 ("  than pixels".into(), WHITE.to_rgba(), 0),
             ],
         )?;
     }
+
+    if with_lines {
+        line_envelopes(r, &panels[4])?;
+    }
     root.present()?;
+    Ok(())
+}
+
+/// The drive (enable × level, share of full drive) as a step curve over `[0, t_end]`.
+fn drive_steps(w: &crate::timer::Waveform, t_end: f64) -> Vec<(f64, f64)> {
+    let mut times: Vec<u64> = w
+        .edges
+        .iter()
+        .map(|e| e.t)
+        .chain(w.levels.iter().map(|l| l.t))
+        .collect();
+    times.sort_unstable();
+    times.dedup();
+    let mut pts = vec![(0.0, 0.0)];
+    let mut last = 0.0;
+    for t in times {
+        let x = w.clocks_to_s(t);
+        let y = w.drive_at(t) / 1000.0;
+        pts.push((x, last));
+        pts.push((x, y));
+        last = y;
+    }
+    pts.push((t_end, last));
+    pts
+}
+
+/// Every line pulse's drive against the finger's true distance from the line it was fired
+/// for (the nearest one at the pulse's middle), mm: the envelope the finger feels, overlaid.
+fn line_envelopes<DB: DrawingBackend>(
+    r: &SimResult,
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let w = &r.waveform;
+    let lines = &r.params.config.scene.lines;
+    let mut curves: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut reach = 0.1f64;
+    for p in w.pulses() {
+        let mid = w.clocks_to_s((p.rise + p.fall) / 2);
+        let at = r.params.trajectory.state(mid).position_um;
+        let Some(&line) = lines
+            .positions_um
+            .iter()
+            .min_by(|a, b| (**a as f64 - at).abs().total_cmp(&(**b as f64 - at).abs()))
+        else {
+            continue;
+        };
+        let x =
+            |t: u64| (r.params.trajectory.state(w.clocks_to_s(t)).position_um - line as f64) / 1e3;
+        let mut c = vec![(x(p.rise), 0.0)];
+        let mut last = 0.0;
+        for e in w.codes_within(p.rise, p.fall) {
+            let y = crate::rf::permille_at_code(e.code) / 1000.0;
+            c.push((x(e.t), last));
+            c.push((x(e.t), y));
+            last = y;
+        }
+        c.push((x(p.fall), last));
+        c.push((x(p.fall), 0.0));
+        reach = c.iter().fold(reach, |m, q| m.max(q.0.abs()));
+        curves.push(c);
+    }
+    let reach = reach * 1.1;
+    let mut c = ChartBuilder::on(area)
+        .margin(10)
+        .margin_right(LEGEND_PX)
+        .x_label_area_size(45)
+        .y_label_area_size(80)
+        .build_cartesian_2d(-reach..reach, 0.0..1.1)?;
+    c.configure_mesh()
+        .y_desc("line pulse drive")
+        .x_desc("finger's distance from the line (mm)")
+        .axis_desc_style(("sans-serif", 18))
+        .label_style(("sans-serif", 15))
+        .light_line_style(WHITE.mix(0.0))
+        .draw()?;
+    c.draw_series(DashedLineSeries::new(
+        vec![(0.0, 0.0), (0.0, 1.1)],
+        2,
+        3,
+        MAGENTA.mix(0.7).stroke_width(1),
+    ))?;
+    let blue = RGBColor(30, 90, 220);
+    for curve in &curves {
+        c.draw_series(LineSeries::new(
+            curve.clone(),
+            blue.mix(0.5).stroke_width(1),
+        ))?;
+    }
+    side_legend(
+        area,
+        &[
+            (format!("{} line pulses,", curves.len()), blue.mix(0.5), 1),
+            ("  overlaid".into(), WHITE.to_rgba(), 0),
+            ("the line".into(), MAGENTA.mix(0.7), 1),
+        ],
+    )?;
     Ok(())
 }
 

@@ -236,7 +236,8 @@ impl LevelPort {
         Self {
             table,
             envelope_clk_hz,
-            requested_permille: 0,
+            // Full drive until the core asks for a level, as the firmware's port.
+            requested_permille: 1000,
             envelope: Envelope::Rectangular,
             held: 0,
             out: 0,
