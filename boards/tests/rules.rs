@@ -1319,3 +1319,106 @@ fn each_store_is_whole_erase_units_the_image_never_reaches() {
     assert_eq!(g.erase_bytes, 2 * 1024);
     assert!(g.read_while_write);
 }
+
+/// The RF level's DAC output must be PA4 (DAC1_OUT1 on both chips), not a reserved pin, not
+/// any other role's pin, and its calibration table must pass its checks: each broken alone is
+/// refused, the board as shipped is accepted.
+#[test]
+fn rf_level_pin_and_table_rules() {
+    use saw_boards::rf_level::{LevelPoint, LevelTable};
+    const BAD_TABLE: LevelTable = LevelTable {
+        points: &[
+            LevelPoint {
+                permille: 0,
+                code: 0,
+            },
+            LevelPoint {
+                permille: 1000,
+                code: 5000,
+            },
+        ],
+    };
+    for b in [F446, G474] {
+        assert!(b.is_consistent(), "{}", b.name);
+        let with_pin = |pin: saw_boards::Pin| BoardDef {
+            rf_level: saw_boards::RfLevelDef {
+                dac_pin: pin,
+                ..b.rf_level
+            },
+            ..b
+        };
+        // PA5 is DAC1_OUT2 but the Nucleo's LED: reserved, and not PA4 either.
+        let pa = |pin| saw_boards::Pin {
+            port: 'A',
+            pin,
+            af: None,
+            header: "",
+        };
+        for (pin, why) in [(pa(5), "PA5 (the LED)"), (pa(6), "PA6 (no DAC)")] {
+            assert!(!with_pin(pin).is_consistent(), "{}: {why}", b.name);
+        }
+        // Another role on PA4, with the DAC there too.
+        let pa4 = |pin: saw_boards::Pin| saw_boards::Pin {
+            port: 'A',
+            pin: 4,
+            ..pin
+        };
+        let others = [
+            (
+                "the carrier",
+                BoardDef {
+                    carrier: saw_boards::PwmTimer {
+                        pin: pa4(b.carrier.pin),
+                        ..b.carrier
+                    },
+                    ..b
+                },
+            ),
+            (
+                "the burst",
+                BoardDef {
+                    burst: saw_boards::PwmTimer {
+                        pin: pa4(b.burst.pin),
+                        ..b.burst
+                    },
+                    ..b
+                },
+            ),
+            (
+                "IDT B",
+                BoardDef {
+                    burst_b_pin: pa4(b.burst_b_pin),
+                    ..b
+                },
+            ),
+            (
+                "the wiper",
+                BoardDef {
+                    adc: saw_boards::AdcDef {
+                        pin: pa4(b.adc.pin),
+                        ..b.adc
+                    },
+                    ..b
+                },
+            ),
+            (
+                "the arm",
+                BoardDef {
+                    rf_arm_pin: pa4(b.rf_arm_pin),
+                    ..b
+                },
+            ),
+        ];
+        for (why, bad) in others {
+            assert!(!bad.is_consistent(), "{}: {why} on PA4", b.name);
+        }
+        let bad = BoardDef {
+            rf_level: saw_boards::RfLevelDef {
+                table: BAD_TABLE,
+                ..b.rf_level
+            },
+            ..b
+        };
+        assert!(!bad.is_consistent(), "{}: a code past the DAC", b.name);
+    }
+}

@@ -1120,6 +1120,64 @@ mod tests {
         assert!((90.0..=110.0).contains(&f), "{f} Hz");
     }
 
+    /// The level cap: an amplitude of a region's or the lines' own above it is refused with a
+    /// sentence naming both and the scene key, and the previous scene keeps running; full
+    /// drive (a constant region) plays at the cap, and no sample ever sends more.
+    #[test]
+    fn the_level_cap_refuses_explicit_amplitudes_and_caps_full_drive() {
+        let mut c = loaded();
+        let before = c.telemetry();
+        let mut cfg = default_config();
+        cfg.limits.max_level_permille = 500;
+        let mut g = crate::texture::Grating::new(2_000);
+        g.amplitude_permille = 600;
+        cfg.scene.textures[1] = Texture::Grating(g);
+        let e = c.load(&cfg).unwrap_err();
+        let text = std::format!("{e}");
+        assert!(
+            text.contains("region 1: amplitude 60 % is above the level cap of 50 % (limits.max_level_percent)"),
+            "{text}"
+        );
+        assert_eq!(c.telemetry(), before, "nothing changed");
+        // A random region's central amplitude too; a grating exactly at the cap loads.
+        let mut r = cfg.clone();
+        r.scene.textures[1] = Texture::Random(crate::texture::RandomBurst {
+            center_millihz: 100_000,
+            spread_permille: 100,
+            amplitude_permille: 501,
+            amplitude_spread_permille: 100,
+            duty_permille: 400,
+            seed: 1,
+        });
+        let text = std::format!("{}", c.load(&r).unwrap_err());
+        assert!(
+            text.contains("region 1: amplitude 50.1 % is above"),
+            "{text}"
+        );
+        g.amplitude_permille = 500;
+        cfg.scene.textures[1] = Texture::Grating(g);
+        c.load(&cfg).unwrap();
+        // The lines' amplitude too.
+        let mut cfg = default_config();
+        cfg.limits.max_level_permille = 500;
+        let _ = cfg.scene.lines.positions_um.push(20_000);
+        cfg.scene.lines.amplitude_permille = 501;
+        let text = std::format!("{}", c.load(&cfg).unwrap_err());
+        assert!(
+            text.contains("amplitude 50.1 % is above the level cap of 50 %"),
+            "{text}"
+        );
+        // At the cap it loads; the default scene's constant regions ask for full drive and get
+        // the cap, over a whole stroke.
+        cfg.scene.lines.amplitude_permille = 500;
+        c.load(&cfg).unwrap();
+        let mut t = 0;
+        let outs = stroke(&mut c, 1_000.0, 100_000.0, &mut t, 6_000);
+        let sent: std::vec::Vec<u16> = outs.iter().filter_map(|o| o.amplitude_permille).collect();
+        assert!(!sent.is_empty());
+        assert!(sent.iter().all(|&a| a == 500), "{sent:?}");
+    }
+
     /// A fault ends a line pulse's window with the pulse: after recovering inside what would
     /// have been the window, the region's texture owns the amplitude again (full drive for
     /// `off`), not the envelope of a pulse no longer running; the gate still keeps the cut
