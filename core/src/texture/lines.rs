@@ -136,8 +136,10 @@ pub(crate) struct LinePulses {
     /// How far ahead a triangle fires, in µs of travel: half the pulse, so the peak (felt as the
     /// line) falls on it, plus half a sample period, so firing on the sample grid lands the peak
     /// within ± half a sample of travel instead of 0 … 1 sample late. 0 for rectangles: their
-    /// first edge marks the line, as before.
-    lead_us: u32,
+    /// first edge marks the line, as before. Kept as s × 2^32 (µm of lead per µm/s of speed),
+    /// so the per-sample lead is one 32 × 32 → 64-bit multiply and a shift: a 64-bit division
+    /// is a library call on the Cortex-M4.
+    lead_s_q32: i64,
     /// Pulse plus the rest after it, µs: the line owns the gate this long after it fires, so
     /// pulse / (pulse + rest) keeps the duty cap.
     window_us: u32,
@@ -176,10 +178,11 @@ impl LinePulses {
             Envelope::Triangular => lines.pulse_us / 2 + sample_period_us / 2,
             Envelope::Rectangular => 0,
         };
+        let lead_s_q32 = ((lead_us as i64) << 32) / 1_000_000;
         Ok(Some(Self {
             lines: lines.clone(),
             pulse,
-            lead_us,
+            lead_s_q32,
             window_us: lines.pulse_us + refractory_us(lines, limits),
         }))
     }
@@ -248,8 +251,7 @@ impl LineTracker {
         t_us: u32,
     ) -> LineStep {
         let lead_um = velocity_um_s.map_or(0, |v| {
-            (v as i64 * lines.lead_us as i64 / 1_000_000).clamp(-MAX_LINE_LEAD_UM, MAX_LINE_LEAD_UM)
-                as i32
+            ((v as i64 * lines.lead_s_q32) >> 32).clamp(-MAX_LINE_LEAD_UM, MAX_LINE_LEAD_UM) as i32
         });
         let fired = self.update_ahead(&lines.lines, position_um, lead_um);
         if let Some(start) = self.pulse_start_us {
