@@ -349,7 +349,8 @@ impl<E: VelocityEstimator> Controller<E> {
                 out.action = action;
                 out.line = Some(line);
                 out.envelope = Some(envelope);
-                out.amplitude_permille = self.set_amplitude(amplitude_permille);
+                out.amplitude_permille =
+                    self.set_amplitude(amplitude_permille, limits.max_level_permille);
                 true
             }
         }
@@ -368,6 +369,7 @@ impl<E: VelocityEstimator> Controller<E> {
         let Some(active) = self.active.as_mut() else {
             return;
         };
+        let level_cap = active.limits.max_level_permille;
         let now = Moment {
             position_um,
             velocity_um_s,
@@ -420,7 +422,7 @@ impl<E: VelocityEstimator> Controller<E> {
             );
         }
         if request.amplitude != u16::MAX {
-            out.amplitude_permille = self.set_amplitude(request.amplitude);
+            out.amplitude_permille = self.set_amplitude(request.amplitude, level_cap);
         }
     }
 
@@ -494,9 +496,10 @@ impl<E: VelocityEstimator> Controller<E> {
         }
     }
 
-    fn set_amplitude(&mut self, permille: u16) -> Option<u16> {
-        // The level cap is the last word: full drive and the top of a random spread play at it.
-        let permille = permille.min(self.limits().max_level_permille);
+    /// The level cap `cap` is the last word: full drive and the top of a random spread play at
+    /// it. (The caller has the active scene at hand: no second fetch of its limits.)
+    fn set_amplitude(&mut self, permille: u16, cap: u16) -> Option<u16> {
+        let permille = permille.min(cap);
         (self.amplitude != Some(permille)).then(|| {
             self.amplitude = Some(permille);
             permille

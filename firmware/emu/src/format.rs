@@ -366,11 +366,14 @@ pub fn encode_output<S: Sink>(s: &mut S, o: &Output) {
         s.u8(r);
     }
     if let Some(a) = o.action {
-        let (kind, ts) = match a {
-            GateAction::Off => (0, None),
-            GateAction::Start(t) => (1, Some(t)),
-            GateAction::Update(t) => (2, Some(t)),
-            GateAction::Pulse(t) => (3, Some(t)),
+        // The flag byte is full: a pulse's envelope (sent only with a pulse) rides in its kind.
+        let (kind, ts) = match (a, o.envelope) {
+            (GateAction::Off, _) => (0, None),
+            (GateAction::Start(t), _) => (1, Some(t)),
+            (GateAction::Update(t), _) => (2, Some(t)),
+            (GateAction::Pulse(t), None) => (3, Some(t)),
+            (GateAction::Pulse(t), Some(Envelope::Rectangular)) => (4, Some(t)),
+            (GateAction::Pulse(t), Some(Envelope::Triangular)) => (5, Some(t)),
         };
         s.u8(kind);
         if let Some(t) = ts {
@@ -425,6 +428,11 @@ pub fn decode_output(r: &mut Reader) -> Output {
             2 => GateAction::Update(ts(r)),
             _ => GateAction::Pulse(ts(r)),
         });
+        o.envelope = match kind {
+            4 => Some(Envelope::Rectangular),
+            5 => Some(Envelope::Triangular),
+            _ => None,
+        };
     }
     if flags & F_AMP != 0 {
         o.amplitude_permille = Some(r.u16());

@@ -51,6 +51,7 @@ static mut OUTPUTS: [Output; MAX_SAMPLES] = [Output {
     region: None,
     action: None,
     amplitude_permille: None,
+    envelope: None,
     drive: None,
     line: None,
     fault: None,
