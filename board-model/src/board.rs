@@ -5,7 +5,7 @@
 
 use crate::machine::{ChipSpec, Machine, Mapped, PinMode, PinSpec};
 use crate::periph::{
-    self, adc_f4, adc_g4, dma_f4, dma_g4, gpio, iwdg, lpuart_g4, misc, rcc_f4, rcc_g4, tim,
+    self, adc_f4, adc_g4, dac, dma_f4, dma_g4, gpio, iwdg, lpuart_g4, misc, rcc_f4, rcc_g4, tim,
     usart_f4, ClockDomain, Peripheral, ResetCause, Time,
 };
 use std::path::Path;
@@ -146,6 +146,8 @@ fn timer(
         name,
         irq_up,
         irq_cc,
+        // TIM8's ITR1 is TIM2's TRGO on both chips (see `TimerConfig::itr1`).
+        itr1: (number == 8).then_some(2),
     })
 }
 
@@ -240,10 +242,18 @@ fn f446(input: Input) -> (Vec<Mapped>, ChipSpec) {
         map(0x4000_3000, 0x400, iwdg::Iwdg::new(false)),
         map(0x4000_4400, 0x400, usart_f4::UsartF4::new()),
         map(0x4000_7000, 0x400, misc::PwrF4::new()),
+        // DAC (RM0390 §2.2.2 table 1: 0x4000_7400, APB1).
+        map(0x4000_7400, 0x400, dac::Dac::new(dac::DacChip::F446)),
         map(
             0x4001_0000,
             0x400,
             timer(1, 16, true, TimApb2, "TIM1", 25, 27),
+        ),
+        // TIM8 (0x4001_0400, APB2): TIM8_UP_TIM13 = 44, TIM8_CC = 46 (RM0390 table 38).
+        map(
+            0x4001_0400,
+            0x400,
+            timer(8, 16, true, TimApb2, "TIM8", 44, 46),
         ),
         map(0x4001_2000, 0x400, adc_f4::AdcF4::new(18, input)),
         map(0x4001_3800, 0x400, misc::Syscfg::new()),
@@ -348,6 +358,12 @@ fn g474(input: Input) -> (Vec<Mapped>, ChipSpec) {
             0x400,
             timer(1, 16, true, TimApb2, "TIM1", 25, 27),
         ),
+        // TIM8 (RM0440 table 4: 0x4001_3400, APB2): TIM8_UP = 44, TIM8_CC = 46 (table 97).
+        map(
+            0x4001_3400,
+            0x400,
+            timer(8, 16, true, TimApb2, "TIM8", 44, 46),
+        ),
         map(
             0x4002_0000,
             0x400,
@@ -365,6 +381,8 @@ fn g474(input: Input) -> (Vec<Mapped>, ChipSpec) {
         map(0x4800_0400, 0x400, gpio::Gpio::new(gpio::Chip::G474, 'B')),
         map(0x4800_0800, 0x400, gpio::Gpio::new(gpio::Chip::G474, 'C')),
         map(0x5000_0000, 0x400, adc_g4::AdcG4::new(18, input)),
+        // DAC1 (RM0440 table 4: 0x5000_0800, AHB2).
+        map(0x5000_0800, 0x400, dac::Dac::new(dac::DacChip::G474)),
         map(0xE004_2000, 0x400, misc::DbgMcu::new(0x469)),
     ];
     let (gpioa, gpiob) = (index(&periphs, 0x4800_0000), index(&periphs, 0x4800_0400));
