@@ -13,6 +13,7 @@
 #![no_main]
 
 mod board;
+mod level;
 mod link;
 mod rf;
 mod store;
@@ -118,7 +119,9 @@ async fn main(spawner: Spawner) {
 
     let parts = board::split(p);
     let mut rf_arm: Output<'static> = parts.rf_arm;
-    let burst = BurstGate::new(parts.burst_tim, parts.burst_pin, parts.burst_b_pin, BOARD);
+    // The level before the burst gate: DAC on at code 0, TIM8 stopped, before TIM2 can run.
+    let level = level::RfLevel::new(parts.envelope_tim, parts.dac, parts.dac_pin, parts.envelope_dma);
+    let mut burst = BurstGate::new(parts.burst_tim, parts.burst_pin, parts.burst_b_pin, level, BOARD);
     let carrier = Carrier::start(parts.carrier_tim, parts.carrier_pin, BOARD);
     info!(
         "carrier: {} {} / {} = {} Hz (registers give {} Hz); burst: {} {}-bit @ {} Hz",
@@ -157,7 +160,7 @@ async fn main(spawner: Spawner) {
     // Both enable lines are forced inactive: now the amplifier may be armed.
     rf_arm.set_high();
     info!(
-        "adc: {} ch{} @ {} Hz x{} (trigger {} TRGO); enables CH{} + CH{} (no RF level control); rf arm high",
+        "adc: {} ch{} @ {} Hz x{} (trigger {} TRGO); enables CH{} + CH{}; rf arm high",
         BOARD.adc.adc,
         BOARD.adc.channel,
         BOARD.sample_rate_hz,
@@ -167,9 +170,27 @@ async fn main(spawner: Spawner) {
         BOARD.burst_b_channel
     );
 
-    // Random amplitude and line envelopes need a level input on the RF amplifier; the Nucleo
-    // builds have none wired, so they degrade to full-drive bursts — said once, clearly.
-    warn!("amplitude: no RF level control on {}: random amplitude and line envelopes run at full drive", BOARD.name);
+    let rl = &BOARD.rf_level;
+    let points = rl.table.points;
+    let rebuild_us = burst.time_worst_rebuild_us();
+    info!(
+        "rf level: DAC1_OUT1 on P{}{} ({}), buffer on, TSEL1 {} = {} TRGO; table {} points (0 ‰ -> code {}, 1000 ‰ -> code {}); envelope timer {} @ {} Hz, slave of {} (ITR{}), DMA {}; triangle table ({} entries) built in {} µs",
+        rl.dac_pin.port,
+        rl.dac_pin.pin,
+        rl.dac_pin.header,
+        rl.dac_tsel,
+        rl.envelope_timer,
+        points.len(),
+        points[0].code,
+        points[points.len() - 1].code,
+        rl.envelope_timer,
+        rl.envelope_timer_clk_hz,
+        BOARD.burst.name,
+        rl.envelope_ts,
+        board::ENVELOPE_DMA,
+        saw_boards::rf_level::MAX_ENVELOPE_ENTRIES,
+        rebuild_us
+    );
 
     let mut wdg = IndependentWatchdog::new(parts.iwdg, IWDG_TIMEOUT_US);
     wdg.unleash();

@@ -1,5 +1,5 @@
 //! RF timers: the free-running 15 MHz carrier (TIM1) and the burst timer (TIM2) whose PWM output
-//! is the RF enable line.
+//! is the RF enable line; TIM2's TRGO also times the RF level (`level.rs`, docs/rf-level.md).
 //!
 //! Gating: the carrier never stops; the burst timer's channel output gates the RF
 //! amplifier/switch. Stopping the carrier instead (master/slave gated mode) would freeze the
@@ -11,9 +11,13 @@ use embassy_stm32::timer::low_level::{OutputCompareMode, Timer};
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::{Ch1, Ch3, Channel};
 use embassy_stm32::Peri;
+use embassy_stm32::pac::timer::vals::Mms;
 use saw_boards::BoardDef;
 use saw_core::burst::TimerSettings;
-use saw_core::gate::{BurstOutput, DriveMode, GateAction};
+use saw_core::gate::{BurstOutput, DriveMode, Envelope, GateAction};
+
+use crate::board::BOARD;
+use crate::level::RfLevel;
 
 /// The 15 MHz carrier: TIM1 CH1, PSC 0, ARR = divider − 1, CCR = divider / 2 (50 %).
 pub struct Carrier {
@@ -53,8 +57,15 @@ pub struct BurstStats {
     pub updates: u32,
     pub offs: u32,
     pub pulses: u32,
-    /// Amplitude requests dropped (these boards have no RF level control).
-    pub amplitude_ignored: u32,
+    /// Level requests (`set_amplitude`), and how many of them were written to the DAC at once
+    /// (the line running; the others wait for the next start).
+    pub levels_set: u32,
+    pub levels_written: u32,
+    /// Triangle envelopes armed, and the table rebuilds among them (new peak or pulse length).
+    pub envelopes_played: u32,
+    pub table_rebuilds: u32,
+    /// Longest table rebuild so far, µs.
+    pub rebuild_us_max: u32,
 }
 
 /// What the enable lines are doing.
@@ -79,6 +90,11 @@ pub struct BurstGate {
     _pin_b: PwmPin<'static, TIM2, Ch3>,
     line: Line,
     drive: DriveMode,
+    /// The RF level the core asked for, ‰ (kept while the line is off, for the next start).
+    level_permille: u16,
+    /// Shape of the next one-pulse's level.
+    envelope: Envelope,
+    level: RfLevel,
     pub stats: BurstStats,
 }
 
@@ -88,6 +104,7 @@ impl BurstGate {
         tim: Peri<'static, TIM2>,
         pin_a: PwmPin<'static, TIM2, Ch1>,
         pin_b: PwmPin<'static, TIM2, Ch3>,
+        level: RfLevel,
         board: &BoardDef,
     ) -> Self {
         let t = Timer::new(tim);
@@ -106,6 +123,11 @@ impl BurstGate {
             _pin_b: pin_b,
             line: Line::Off,
             drive: DriveMode::Standing,
+            // Full level until the core says otherwise: a scene without random amplitude or
+            // envelopes never calls set_amplitude, and must burst as before.
+            level_permille: 1000,
+            envelope: Envelope::Rectangular,
+            level,
             stats: BurstStats::default(),
         }
     }
@@ -134,23 +156,47 @@ impl BurstGate {
     /// above the duty cap). UDIS = 1 holds every update event off while they are written: the
     /// shadow registers keep the old set, the counter still wraps (RM0390 §17.3.2 upcounting
     /// mode, §17.4.1 TIMx_CR1.UDIS; RM0440 TIMx_CR1 is the same). At most one period runs
-    /// longer on the old set.
+    /// longer on the old set. The level's DHR is written in the same window: with no update
+    /// event there is no TRGO (MMS = 010), so the DAC takes it at the same edge as the new
+    /// settings (docs/rf-level.md).
     fn update(&self, s: &TimerSettings) {
+        // The table lookup before the window, which stays a few stores long.
+        let code = self.level_code();
         let cr1 = self.tim.regs_gp32().cr1();
         cr1.modify(|w| w.set_udis(true));
         self.write(s.psc, s.arr, s.ccr);
+        self.level.hold(code);
         cr1.modify(|w| w.set_udis(false));
+    }
+
+    /// DAC code of the requested level (the board's calibration table).
+    fn level_code(&self) -> u16 {
+        BOARD.rf_level.table.code(self.level_permille)
+    }
+
+    /// TIM2's TRGO (RM0390 §17.4.2 TIMx_CR2.MMS; RM0440 TIMx_CR2 alike): 010 = update event for
+    /// a periodic burst (every period's start latches the DAC through TIM8), 001 = enable
+    /// (CNT_EN) for a one-pulse (the rising edge starts it, the level gates TIM8). Written only
+    /// with the counter stopped, where both read low: no stray edge.
+    fn set_trgo(&self, mms: Mms) {
+        self.tim.regs_gp32().cr2().modify(|w| w.set_mms(mms));
     }
 
     /// Load, latch with UG, enable the counter: the first period starts (whole, bar the few
     /// ticks between CEN and the mode write) at CNT = 0.
+    ///
+    /// The level: TIM8 in slave reset mode, TRGO = update, DHR = code(level) before UG, so UG →
+    /// TRGO → TIM8 reset → its UEV → its TRGO → DAC latches the level at the burst's first edge.
     fn start(&mut self, s: &TimerSettings) {
         self.tim.stop();
         self.set_mode(OutputCompareMode::ForceInactive);
         self.tim.regs_gp32().cr1().modify(|w| w.set_opm(false));
+        self.level.periodic();
+        self.set_trgo(Mms::UPDATE);
+        self.level.hold(self.level_code());
         self.write(s.psc, s.arr, s.ccr);
         self.tim.reset(); // CNT = 0
-        self.tim.generate_update_event(); // latch PSC/ARR/CCR from preload
+        self.tim.generate_update_event(); // latch PSC/ARR/CCR from preload; TRGO: the level
                                           // In PWM mode OCxREF changes only when the comparison result changes or when the mode
                                           // switches from Frozen to PWM (RM0390 §17.3.9; RM0440 PWM mode alike). Straight from
                                           // force-inactive, CNT = 0 < CCR is no change: the line would stay low for the whole
@@ -166,6 +212,10 @@ impl BurstGate {
     /// (the counter stops at 0 and 0 < CCR), so this uses PWM mode 2 with a 1-tick delay:
     /// CCR = 1, ARR = ccr → the line is high for CNT = 1..=ccr (ccr ticks), then the update
     /// event stops the counter at 0 where PWM mode 2 is inactive.
+    ///
+    /// The level, with TIM2's TRGO = enable (high exactly while the one-pulse runs): flat at
+    /// code(level), TIM8 in reset mode so CEN's rising TRGO latches it at the pulse's start; or
+    /// a triangle peaking at the level, TIM8 gated by TRGO and the DMA playing the table.
     fn pulse(&mut self, s: &TimerSettings) {
         if s.ccr == 0 {
             self.off();
@@ -173,6 +223,21 @@ impl BurstGate {
         }
         self.tim.stop();
         self.set_mode(OutputCompareMode::ForceInactive);
+        match self.envelope {
+            Envelope::Rectangular => {
+                self.level.periodic();
+                self.level.hold(self.level_code());
+            }
+            Envelope::Triangular => {
+                let armed = self.level.triangle(self.level_permille, crate::level::pulse_tim8_clocks(s));
+                self.stats.envelopes_played = self.stats.envelopes_played.wrapping_add(1);
+                if let Some(us) = armed.rebuilt_us {
+                    self.stats.table_rebuilds = self.stats.table_rebuilds.wrapping_add(1);
+                    self.stats.rebuild_us_max = self.stats.rebuild_us_max.max(us);
+                }
+            }
+        }
+        self.set_trgo(Mms::ENABLE);
         self.tim.regs_gp32().cr1().modify(|w| w.set_opm(true));
         self.write(s.psc, s.ccr, 1);
         self.tim.reset();
@@ -182,11 +247,19 @@ impl BurstGate {
         self.line = Line::Pulse;
     }
 
-    /// Force both lines inactive now (OCxM is not preloaded), then stop the counter.
+    /// Force both lines inactive now (OCxM is not preloaded), then stop the counter; then the
+    /// level to 0 at once (TIM8 and its DMA stopped, DHR = 0, TIM8 UG latches it). The request
+    /// is kept for the next start.
     pub fn off(&mut self) {
         self.set_mode(OutputCompareMode::ForceInactive);
         self.tim.stop();
+        self.level.off();
         self.line = Line::Off;
+    }
+
+    /// See `RfLevel::time_worst_rebuild_us`.
+    pub fn time_worst_rebuild_us(&mut self) -> u32 {
+        self.level.time_worst_rebuild_us()
     }
 
     pub fn line(&self) -> Line {
@@ -221,9 +294,20 @@ impl BurstOutput for BurstGate {
         }
     }
 
-    fn set_amplitude(&mut self, _permille: u16) {
-        // No RF level control on the Nucleo builds: bursts stay at full amplitude.
-        self.stats.amplitude_ignored = self.stats.amplitude_ignored.wrapping_add(1);
+    /// Remembered always; written to DHR at once only while a periodic burst runs, where the
+    /// next TIM2 update (TRGO → TIM8 reset → TRGO) latches it: never inside a period. Off or
+    /// during a one-pulse (a triangle's DMA owns DHR then) it waits for the next start.
+    fn set_amplitude(&mut self, permille: u16) {
+        self.level_permille = permille;
+        self.stats.levels_set = self.stats.levels_set.wrapping_add(1);
+        if self.line == Line::Running {
+            self.level.hold(self.level_code());
+            self.stats.levels_written = self.stats.levels_written.wrapping_add(1);
+        }
+    }
+
+    fn set_envelope(&mut self, envelope: Envelope) {
+        self.envelope = envelope;
     }
 
     fn set_drive(&mut self, mode: DriveMode) {
@@ -248,6 +332,7 @@ impl BurstOutput for BurstGate {
 /// this is immediate), stops the burst timer, then takes the enable pins (PA0, PB10) away from
 /// the timer — ODR low, MODER = general-purpose output (RM0390 §7.4.1/§7.4.7; RM0440 GPIO
 /// alike) — so they are low whatever TIM2 still does, and drops the RF arm line (PB5).
+/// Then the RF level to 0 and the DAC released (`level::emergency_off`).
 /// (Writes to a peripheral whose clock is still off, before `board::split`, are ignored.)
 pub fn emergency_off() {
     use embassy_stm32::pac;
@@ -262,6 +347,7 @@ pub fn emergency_off() {
     pac::GPIOA.moder().modify(|w| w.set_moder(0, Moder::OUTPUT));
     pac::GPIOB.moder().modify(|w| w.set_moder(10, Moder::OUTPUT));
     pac::GPIOB.bsrr().write(|w| w.set_br(5, true));
+    crate::level::emergency_off();
 }
 const _: () = {
     let b = crate::board::BOARD;

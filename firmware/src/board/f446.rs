@@ -6,7 +6,7 @@
 use embassy_stm32::adc::{Adc, AdcChannel, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
 use embassy_stm32::pac;
-use embassy_stm32::peripherals::{ADC1, TIM1, TIM2, TIM3};
+use embassy_stm32::peripherals::{ADC1, DAC1, PA4, TIM1, TIM2, TIM3, TIM8};
 use embassy_stm32::rcc::{Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllSource, Sysclk};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::MasterMode;
@@ -129,6 +129,11 @@ pub struct Parts {
     pub link_tx: UartTx<'static, Async>,
     /// The host link's receiver, DMA into a ring buffer.
     pub link_rx: RingBufferedUartRx<'static>,
+    /// The RF level: envelope timer, DAC, its pin (PA4) and the envelope DMA.
+    pub envelope_tim: Peri<'static, TIM8>,
+    pub dac: Peri<'static, DAC1>,
+    pub dac_pin: Peri<'static, PA4>,
+    pub envelope_dma: EnvelopeDma,
 }
 
 pub fn split(p: Peripherals) -> Parts {
@@ -162,7 +167,86 @@ pub fn split(p: Peripherals) -> Parts {
         store: store_flash(p.FLASH),
         link_tx,
         link_rx,
+        envelope_tim: p.TIM8,
+        dac: p.DAC1,
+        dac_pin: p.PA4,
+        envelope_dma: EnvelopeDma { _stream: p.DMA2_CH2 },
     }
+}
+
+/// Where the envelope DMA is, for the boot log.
+pub const ENVELOPE_DMA: &str = "DMA2 stream 2 channel 7";
+
+/// The stream that plays a triangle envelope into DAC_DHR12R1: DMA2 stream 2, channel 7 =
+/// TIM8_CH1 (RM0390 §9.3.3 table 29, DMA2 request mapping; metapac's F446 data lists TIM8 CH1
+/// on DMA2_CH2 with requests 0 (the shared TIM8_CH1/CH2/CH3 request) and 7 (TIM8_CH1 alone)).
+/// Free here: DMA2 stream 0 is the ADC's, DMA1 streams 5/6 the link's, and the DAC's own
+/// requests (DMA1 streams 5/6, table 28) collide with the link, which is why TIM8 paces the
+/// table. DMA2's peripheral port reaches APB1, where the DAC sits, through the bus matrix
+/// (RM0390 §2.1 "System architecture", bus matrix figure; DMA1's peripheral port could
+/// not).
+pub struct EnvelopeDma {
+    _stream: Peri<'static, peripherals::DMA2_CH2>,
+}
+
+const ENV_STREAM: usize = 2;
+const ENV_CHSEL: u8 = 7;
+
+impl EnvelopeDma {
+    /// EN = 0, then wait until it reads 0: the stream finishes the transfer in progress first
+    /// (RM0390 §9.5.5 DMA_SxCR.EN; §9.3 "Stream configuration procedure", step 1).
+    pub fn stop(&mut self) {
+        let st = pac::DMA2.st(ENV_STREAM);
+        st.cr().modify(|w| w.set_en(false));
+        while st.cr().read().en() {}
+    }
+
+    /// Memory → peripheral, `src` (16-bit entries) to the 16-bit register at `dst`: one entry
+    /// per TIM8 CC1 request, normal mode (the stream disables itself after the last, NDTR = 0).
+    /// Programmed in the order of RM0390 §9.3 "Stream configuration procedure" with EN = 0 (after `stop`), the stream's
+    /// flags cleared before EN (§9.5.3 DMA_LIFCR; the procedure: EN with a flag set does not start). Direct
+    /// mode (FIFO off, §9.3 "Direct mode"): sizes are equal; in memory → peripheral the stream fetches the
+    /// first entry at EN and writes it on the first request. No interrupt: this is played
+    /// blind, the control loop never waits on it (its vector is not bound).
+    pub fn arm(&mut self, src: &[u16], dst: u32) {
+        use pac::dma::vals;
+        let (dma, st) = (pac::DMA2, ENV_STREAM);
+        let s = dma.st(st);
+        dma.ifcr(st / 4).write(|w| {
+            w.set_tcif(st % 4, true);
+            w.set_htif(st % 4, true);
+            w.set_teif(st % 4, true);
+            w.set_dmeif(st % 4, true);
+            w.set_feif(st % 4, true);
+        });
+        s.par().write_value(dst);
+        s.m0ar().write_value(src.as_ptr() as u32);
+        s.ndtr().write(|w| w.set_ndt(src.len() as u16));
+        s.fcr().write(|w| w.set_dmdis(vals::Dmdis::ENABLED));
+        s.cr().write(|w| {
+            w.set_chsel(ENV_CHSEL);
+            w.set_dir(vals::Dir::MEMORY_TO_PERIPHERAL);
+            w.set_msize(vals::Size::BITS16);
+            w.set_psize(vals::Size::BITS16);
+            w.set_minc(true);
+            w.set_pinc(false);
+            w.set_circ(false);
+            w.set_pl(vals::Pl::HIGH);
+        });
+        s.cr().modify(|w| w.set_en(true));
+    }
+}
+
+/// DAC channel 1's output buffer on: DAC_CR.BOFF1 = 0 (RM0390 §14.3 "DAC output buffer
+/// enable", §14.5.1 DAC_CR). Its reset value; written so the choice is visible.
+pub fn dac_configure() {
+    pac::DAC1.cr().modify(|w| w.set_boff(0, false));
+}
+
+/// The F446's DAC has no ready flag: t_WAKEUP (DS10693 DAC characteristics, 6.5 µs max with the
+/// buffer on; value from memory, not re-checked) passes long before the first burst.
+pub fn dac_wait_ready() {
+    cortex_m::asm::delay(10 * (BOARD.sysclk_hz / 1_000_000));
 }
 
 /// Sampling time against the rheostat's source impedance (assumed 10 kΩ divider, ≤ 2.5 kΩ

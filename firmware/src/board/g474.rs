@@ -6,7 +6,7 @@
 use embassy_stm32::adc::{vals, Adc, AdcChannel, AdcConfig, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
 use embassy_stm32::pac;
-use embassy_stm32::peripherals::{ADC1, TIM1, TIM2, TIM3};
+use embassy_stm32::peripherals::{ADC1, DAC1, PA4, TIM1, TIM2, TIM3, TIM8};
 use embassy_stm32::rcc::{mux, Hse, HseMode, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::MasterMode;
@@ -123,6 +123,11 @@ pub struct Parts {
     pub link_tx: UartTx<'static, Async>,
     /// The host link's receiver, DMA into a ring buffer.
     pub link_rx: RingBufferedUartRx<'static>,
+    /// The RF level: envelope timer, DAC, its pin (PA4) and the envelope DMA.
+    pub envelope_tim: Peri<'static, TIM8>,
+    pub dac: Peri<'static, DAC1>,
+    pub dac_pin: Peri<'static, PA4>,
+    pub envelope_dma: EnvelopeDma,
 }
 
 pub fn split(p: Peripherals) -> Parts {
@@ -155,6 +160,96 @@ pub fn split(p: Peripherals) -> Parts {
         store,
         link_tx,
         link_rx,
+        envelope_tim: p.TIM8,
+        dac: p.DAC1,
+        dac_pin: p.PA4,
+        envelope_dma: EnvelopeDma::new(p.DMA1_CH4),
+    }
+}
+
+/// Where the envelope DMA is, for the boot log.
+pub const ENVELOPE_DMA: &str = "DMA1 channel 4 via DMAMUX1 channel 3, request 49 (TIM8_CH1)";
+
+/// The channel that plays a triangle envelope into DAC_DHR12R1: DMA1 channel 4 (PAC index 3),
+/// fed by DMAMUX1 channel 3 (DMAMUX channels 0–7 serve DMA1 channels 1–8, RM0440 §13.3.2) with
+/// request 49 = TIM8_CH1 (RM0440 DMAMUX chapter, §13.3.2 request table; metapac's G474 data: TIM8 CH1 request 49).
+/// DMA1 channel 1 is the ADC's, channels 2 and 3 the link's (LPUART1 RX/TX).
+pub struct EnvelopeDma {
+    _ch: Peri<'static, peripherals::DMA1_CH4>,
+}
+
+const ENV_CH: usize = 3;
+const ENV_MUX_CH: usize = 3;
+const ENV_REQUEST_TIM8_CH1: u8 = 49;
+
+impl EnvelopeDma {
+    /// Routes TIM8_CH1's request to the channel once (DMAMUX1_C3CR: DMAREQ_ID = 49, no
+    /// synchronization, no event generation; RM0440 DMAMUX_CxCR). DMA and DMAMUX clocks are on
+    /// (embassy's init enables every DMA controller and the DMAMUX).
+    fn new(ch: Peri<'static, peripherals::DMA1_CH4>) -> Self {
+        pac::DMAMUX1.ccr(ENV_MUX_CH).write(|w| {
+            w.set_dmareq_id(ENV_REQUEST_TIM8_CH1);
+            w.set_nbreq(0);
+            w.set_ege(false);
+        });
+        EnvelopeDma { _ch: ch }
+    }
+
+    /// EN = 0 (RM0440 DMA_CCRx.EN: the channel stops; CNDTR, CPAR and CMAR become
+    /// writable). Read back until 0, as the F446's stream needs, so both boards share one
+    /// sequence.
+    pub fn stop(&mut self) {
+        let c = pac::DMA1.ch(ENV_CH);
+        c.cr().modify(|w| w.set_en(false));
+        while c.cr().read().en() {}
+    }
+
+    /// Memory → peripheral, `src` (16-bit entries) to the 16-bit register at `dst`: one entry
+    /// per TIM8 CC1 request, normal mode (the channel stops requesting after the last, CNDTR =
+    /// 0). Programmed with EN = 0 (after `stop`), the channel's flags cleared (CGIF), then EN
+    /// (RM0440 §12.4 "Channel configuration procedure"). No interrupt.
+    pub fn arm(&mut self, src: &[u16], dst: u32) {
+        use pac::bdma::vals;
+        let (dma, ch) = (pac::DMA1, ENV_CH);
+        let c = dma.ch(ch);
+        dma.ifcr().write(|w| w.set_gif(ch, true));
+        c.par().write_value(dst);
+        c.mar().write_value(src.as_ptr() as u32);
+        c.ndtr().write(|w| w.set_ndt(src.len() as u16));
+        c.cr().write(|w| {
+            w.set_dir(vals::Dir::FROM_MEMORY);
+            w.set_msize(vals::Size::BITS16);
+            w.set_psize(vals::Size::BITS16);
+            w.set_minc(true);
+            w.set_pinc(false);
+            w.set_circ(false);
+            w.set_mem2mem(false);
+            w.set_pl(vals::Pl::HIGH);
+        });
+        c.cr().modify(|w| w.set_en(true));
+    }
+}
+
+/// DAC1 channel 1: normal mode, external pin, buffer on (DAC_MCR.MODE1 = 000), and the
+/// high-frequency interface mode HCLK needs above 80 MHz (DAC_MCR.HFSEL = 01 up to 160 MHz;
+/// RM0440 DAC_MCR; embassy's DAC driver picks the same). MODE1 may only be written while
+/// EN1 = 0.
+pub fn dac_configure() {
+    const _: () = assert!(BOARD.clocks.hclk_hz() > 80_000_000 && BOARD.clocks.hclk_hz() <= 160_000_000);
+    pac::DAC1.mcr().modify(|w| {
+        w.set_hfsel(0b01);
+        w.set_mode(0, pac::dac::vals::Mode::NORMAL_EXT_BUFEN);
+    });
+}
+
+/// DAC_SR.DAC1RDY rises once the channel is ready after EN1 (RM0440 DAC_SR). Bounded at 50 µs
+/// (t_WAKEUP is a few µs, DS12288), so a chip or model that never sets it cannot hang the boot.
+pub fn dac_wait_ready() {
+    let sr = pac::DAC1.sr();
+    let mut left = 50 * (BOARD.sysclk_hz / 1_000_000) / 10;
+    while !sr.read().dacrdy(0) && left > 0 {
+        cortex_m::asm::delay(10);
+        left -= 1;
     }
 }
 
