@@ -207,6 +207,21 @@ pub fn build(kind: BoardKind, elf: &Path, mut wiper: Wiper) -> Result<Machine, S
     let mut m = Machine::new(spec, periphs, image, true)?;
     // Keep every write to the burst timer (latency, update sequences) and to TIM3 (trigger).
     m.sim_mut().watch = vec![(0x4000_0000, 0x400), (0x4000_0400, 0x400)];
+    // Planted defects, to show the RF level checks fail (comma-separated): `dac-ignore-ten`,
+    // `dac-ignore-en`, `tim8-gate-ignored`. Never set in CI.
+    let plants = std::env::var("BOARD_MODEL_PLANT").unwrap_or_default();
+    for m in m.sim_mut().periphs.iter_mut() {
+        let a = m.p.as_any_mut();
+        if let Some(d) = a.downcast_mut::<dac::Dac>() {
+            d.plant_ignore_ten = plants.contains("dac-ignore-ten");
+            d.plant_ignore_en = plants.contains("dac-ignore-en");
+        } else if let Some(t) = a.downcast_mut::<tim::Timer>() {
+            if t.name() == "TIM8" && plants.contains("tim8-gate-ignored") {
+                t.plant_gate_ignored = true;
+                t.plant_gate_open();
+            }
+        }
+    }
     // Record the burst channels always; the carrier only while `record_carrier` is on.
     for t in m.sim_mut().periphs.iter_mut() {
         if let Some(tm) = t.p.as_any_mut().downcast_mut::<tim::Timer>() {

@@ -133,6 +133,10 @@ pub struct Dac {
     pub trace: Vec<DacSample>,
     /// Times of the selected trigger's rising edges (for the checks and tests).
     pub triggers: Vec<Time>,
+    /// Planted defects (`BOARD_MODEL_PLANT`, to show a check fails): DHR → DOR one clock after
+    /// every write even with TEN1 = 1; EN1 = 0 does not release the output.
+    pub plant_ignore_ten: bool,
+    pub plant_ignore_en: bool,
 }
 
 impl Dac {
@@ -163,6 +167,8 @@ impl Dac {
                 driven: false,
             }],
             triggers: Vec::new(),
+            plant_ignore_ten: false,
+            plant_ignore_en: false,
         }
     }
 
@@ -211,7 +217,7 @@ impl Dac {
             DacChip::F446 => true,
             DacChip::G474 => self.mcr & MCR_MODE1 != 0b011,
         };
-        self.cr & CR_EN1 != 0 && connected
+        (self.cr & CR_EN1 != 0 || self.plant_ignore_en) && connected
     }
 
     /// What the pin shows now: (code, driven).
@@ -327,7 +333,7 @@ impl Dac {
 
     fn write_dhr(&mut self, now: Time, code: u16, out: &mut Signals) {
         self.dhr = code & 0xFFF;
-        if !self.ten() {
+        if !self.ten() || self.plant_ignore_ten {
             // One bus clock after the write (RM0390 §14.3.6; RM0440 §22.4.6).
             self.pending.push((now + self.tick, self.dhr));
             out.replan = true;
@@ -530,12 +536,14 @@ impl Peripheral for Dac {
     }
 
     fn reset(&mut self, now: Time) {
-        let (tick, trace, triggers) = (
+        let (tick, trace, triggers, plants) = (
             self.tick,
             std::mem::take(&mut self.trace),
             std::mem::take(&mut self.triggers),
+            (self.plant_ignore_ten, self.plant_ignore_en),
         );
         *self = Dac::new(self.chip);
+        (self.plant_ignore_ten, self.plant_ignore_en) = plants;
         self.tick = tick;
         self.trace = trace;
         self.triggers = triggers;

@@ -655,6 +655,9 @@ pub struct Timer {
     /// Signals produced where the interface gives no `Signals` (a clock change, a reset): handed
     /// out with the next access or `advance`.
     pending: Signals,
+    /// Planted defect (`BOARD_MODEL_PLANT`, to show a check fails): gated mode ignores TRGI
+    /// (the counter runs whenever CEN = 1).
+    pub plant_gate_ignored: bool,
 }
 
 impl Timer {
@@ -680,6 +683,7 @@ impl Timer {
             hz: 0,
             clock_error: None,
             pending: Signals::default(),
+            plant_gate_ignored: false,
         }
     }
 
@@ -715,6 +719,11 @@ impl Timer {
             self.cfg.name
         );
         self.st.core.level[channel as usize - 1]
+    }
+
+    /// Planted defect: the gate starts open (see `plant_gate_ignored`).
+    pub fn plant_gate_open(&mut self) {
+        self.st.core.trgi_high = true;
     }
 
     /// Kernel clock (CK_INT) in Hz; 0 before the first `set_clocks`.
@@ -1165,7 +1174,7 @@ impl Peripheral for Timer {
                 self.st.run(now, out);
                 let was = self.st.counting();
                 let changed = self.st.core.trgi_high != high;
-                self.st.core.trgi_high = high;
+                self.st.core.trgi_high = high || self.plant_gate_ignored;
                 if selected && self.st.core.sms() == SMS_GATED && changed {
                     // TIF at each start and stop of the gated counter.
                     self.st.core.sr |= SR_TIF;
