@@ -1184,17 +1184,20 @@ impl Peripheral for Timer {
                     out.replan = true;
                 }
             }
-            Event::Trgo { timer } if timer == master => {
-                if selected && self.st.core.sms() == SMS_RESET && self.clock_error.is_none() {
-                    self.flush_pending(out);
-                    self.st.run(now, out);
-                    self.st.core.sr |= SR_TIF;
-                    // Counter and prescaler re-initialised, an update generated (URS counts it
-                    // as UG: RM0390 §17.4.1 URS "update generation through the slave mode
-                    // controller").
-                    self.st.ug(now, out);
-                    out.replan = true;
-                }
+            Event::Trgo { timer }
+                if timer == master
+                    && selected
+                    && self.st.core.sms() == SMS_RESET
+                    && self.clock_error.is_none() =>
+            {
+                self.flush_pending(out);
+                self.st.run(now, out);
+                self.st.core.sr |= SR_TIF;
+                // Counter and prescaler re-initialised, an update generated (URS counts it
+                // as UG: RM0390 §17.4.1 URS "update generation through the slave mode
+                // controller").
+                self.st.ug(now, out);
+                out.replan = true;
             }
             _ => {}
         }
