@@ -207,8 +207,11 @@ pub fn build(kind: BoardKind, elf: &Path, mut wiper: Wiper) -> Result<Machine, S
     let mut m = Machine::new(spec, periphs, image, true)?;
     // Keep every write to the burst timer (latency, update sequences) and to TIM3 (trigger).
     m.sim_mut().watch = vec![(0x4000_0000, 0x400), (0x4000_0400, 0x400)];
-    // Planted defects, to show the RF level checks fail (comma-separated): `dac-ignore-ten`,
-    // `dac-ignore-en`, `tim8-gate-ignored`. Never set in CI.
+    // Planted defects, to show the RF level checks fail (comma-separated): `dac-ignore-ten`
+    // (DHR → DOR at every write, as with TEN1 = 0), `dac-ignore-en` (EN1 = 0 does not release
+    // the output), `tim8-gate-ignored` (gated mode counts whenever CEN = 1), `tim8-ug-no-trgo`
+    // (TIM8's EGR.UG makes no TRGO), `tim8-no-cc-dma` (TIM8's CC1DE raises no request). Never
+    // set in CI.
     let plants = std::env::var("BOARD_MODEL_PLANT").unwrap_or_default();
     for m in m.sim_mut().periphs.iter_mut() {
         let a = m.p.as_any_mut();
@@ -216,9 +219,15 @@ pub fn build(kind: BoardKind, elf: &Path, mut wiper: Wiper) -> Result<Machine, S
             d.plant_ignore_ten = plants.contains("dac-ignore-ten");
             d.plant_ignore_en = plants.contains("dac-ignore-en");
         } else if let Some(t) = a.downcast_mut::<tim::Timer>() {
-            if t.name() == "TIM8" && plants.contains("tim8-gate-ignored") {
-                t.plant_gate_ignored = true;
-                t.plant_gate_open();
+            if t.name() == "TIM8" {
+                if plants.contains("tim8-gate-ignored") {
+                    t.plant_gate_ignored = true;
+                    t.plant_gate_open();
+                }
+                t.plant_ug_no_trgo = plants.contains("tim8-ug-no-trgo");
+                if plants.contains("tim8-no-cc-dma") {
+                    t.plant_no_cc_dma();
+                }
             }
         }
     }

@@ -534,10 +534,10 @@ pub fn rail_fault(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         "rf level: 0 after a sensor fault (Off) within one sample",
         dac_before.code != 0 && dac_zero && dac_late.is_none(),
         format!(
-            "DAC code {} before the fault; 0 {} after the onset ({:.1} µs after the first fully faulted trigger; limit one sample, {:.0} µs); {} until the fault ends",
+            "DAC code {} before the fault; 0 {} after the onset ({} after the first fully faulted trigger; limit one sample, {:.0} µs); {} until the fault ends",
             dac_before.code,
             fmt_us(zero_at.map(|z| us(z - start))),
-            zero_at.map_or(f64::NAN, |z| (z as f64 - first as f64) * 1e6 / TICKS_PER_S as f64),
+            zero_at.map_or("—".to_string(), |z| format!("{:.1} µs", (z as f64 - first as f64) * 1e6 / TICKS_PER_S as f64)),
             us(period),
             match dac_late {
                 None => "held at 0".to_string(),
@@ -1149,7 +1149,7 @@ pub fn rf_level(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     let mut first_desc = String::new();
     let mut worst_peak_off_us: f64 = 0.0;
     let mut worst_step_ratio: f64 = 0.0;
-    let mut dac_left: Vec<(Time, u16)> = Vec::new();
+    let mut dac_after: Vec<(Time, u16, u16, u16, bool)> = Vec::new();
     for (i, &(s, e)) in pulses.iter().enumerate() {
         let plan = saw_boards::rf_level::triangle_plan((e - s) / tpc, clk as u32);
         let step = plan.step_clocks as u64 * tpc;
@@ -1171,9 +1171,14 @@ pub fn rf_level(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         let entry = (2 * peak as u64).div_ceil(plan.entries as u64) as u16 + 2;
         let after = dac_at(&o.dac, e + step);
         let ends = seq.last().is_some_and(|x| x.1 == 0);
-        if after.code != 0 {
-            dac_left.push((s, after.code));
-        }
+        // What the DAC holds after the pulse (docs/rf-level.md: the last latched entry, code(0)
+        // or, when N × step overruns the pulse, the one before: one entry's level).
+        let held = if after.driven {
+            permille_of_code(table, after.code)
+        } else {
+            0
+        };
+        dac_after.push((s, after.code, held, entry, level_at(a, e + step)));
         let ok = peak > 0
             && rising
             && falling
@@ -1211,19 +1216,31 @@ pub fn rf_level(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
             bad.first().map_or(String::new(), |b| format!("; FAILED: {b}"))
         ),
     ));
+    let zero = dac_after.iter().filter(|x| x.1 == 0).count();
+    let over = dac_after.iter().find(|x| x.2 > x.3 || x.4);
     out.push(check(
-        "rf level: the DAC is back at 0 after a line pulse",
-        !pulses.is_empty() && dac_left.is_empty(),
-        match dac_left.first() {
-            None => format!("after each of {} pulses the DAC shows code 0 one step after the end (the table's last entry, docs/rf-level.md)", pulses.len()),
-            Some(&(s, c)) => format!(
-                "after {} of {} pulses the DAC still shows a non-zero code one step after the pulse (the first, at {:.4} s: code {c} = {} ‰; the enable is low, so the finger gets 0): the table's last entry (code 0) was never latched — TIM8's last update falls after the gate (TIM2's enable) closed",
-                dac_left.len(),
-                pulses.len(),
-                s as f64 / TICKS_PER_S as f64,
-                permille_of_code(table, c)
-            ),
-        },
+        "rf level: after a line pulse the DAC holds at most one entry's level, the enable low",
+        !dac_after.is_empty() && over.is_none(),
+        format!(
+            "one step after each of {} pulses: {zero} at code 0 (the table's last entry), {} holding the entry before it ({}: TIM8's last update falls after the gate, TIM2's enable, closed — N × step overruns the pulse); {}",
+            dac_after.len(),
+            dac_after.len() - zero,
+            dac_after
+                .iter()
+                .find(|x| x.1 != 0)
+                .map_or("—".into(), |x| format!("first: code {} = {} ‰, one entry is ≤ {} ‰", x.1, x.2, x.3)),
+            match over {
+                None => "none above one entry, the enable low each time".to_string(),
+                Some(x) => format!(
+                    "FAILED after the pulse at {:.4} s: code {} = {} ‰ (limit {} ‰), enable {}",
+                    x.0 as f64 / TICKS_PER_S as f64,
+                    x.1,
+                    x.2,
+                    x.3,
+                    if x.4 { "high" } else { "low" }
+                ),
+            }
+        ),
     ));
     // Per-sample cost with triangles firing.
     let per_sample = |o: &Outcome| -> (f64, u64, Time) {

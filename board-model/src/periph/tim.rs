@@ -275,6 +275,8 @@ struct State {
     advanced: bool,
     /// 2^bits.
     modulus: u64,
+    /// Planted defect: CCxDE raises no DMA request (`Timer::plant_no_cc_dma`).
+    no_cc_dma: bool,
 }
 
 /// Look-ahead budget of `next_event` (steps). Only reached with a huge repetition counter.
@@ -452,7 +454,7 @@ impl State {
                 continue;
             }
             self.core.sr |= 1 << (ch + 1);
-            if self.core.dier & (1 << (9 + ch)) != 0 {
+            if self.core.dier & (1 << (9 + ch)) != 0 && !self.no_cc_dma {
                 out.events.push((
                     t,
                     Event::DmaRequest(super::Request::TimCc {
@@ -655,9 +657,10 @@ pub struct Timer {
     /// Signals produced where the interface gives no `Signals` (a clock change, a reset): handed
     /// out with the next access or `advance`.
     pending: Signals,
-    /// Planted defect (`BOARD_MODEL_PLANT`, to show a check fails): gated mode ignores TRGI
-    /// (the counter runs whenever CEN = 1).
+    /// Planted defects (`BOARD_MODEL_PLANT`, to show a check fails): gated mode ignores TRGI
+    /// (the counter runs whenever CEN = 1); EGR.UG makes no TRGO; CCxDE raises no DMA request.
     pub plant_gate_ignored: bool,
+    pub plant_ug_no_trgo: bool,
 }
 
 impl Timer {
@@ -678,12 +681,14 @@ impl Timer {
                 number: cfg.number,
                 advanced: cfg.advanced,
                 modulus,
+                no_cc_dma: false,
             },
             cfg,
             hz: 0,
             clock_error: None,
             pending: Signals::default(),
             plant_gate_ignored: false,
+            plant_ug_no_trgo: false,
         }
     }
 
@@ -719,6 +724,11 @@ impl Timer {
             self.cfg.name
         );
         self.st.core.level[channel as usize - 1]
+    }
+
+    /// Planted defect: CCxDE raises no DMA request.
+    pub fn plant_no_cc_dma(&mut self) {
+        self.st.no_cc_dma = true;
     }
 
     /// Planted defect: the gate starts open (see `plant_gate_ignored`).
@@ -901,7 +911,16 @@ impl Timer {
                 // CCxG on an output channel sets CCxIF (RM0390 §17.4.6).
                 self.st.core.sr |= v & !EGR_UG & FLAGS_MODELLED;
                 if v & EGR_UG != 0 {
+                    let n = out.events.len();
                     self.st.ug(now, out);
+                    if self.plant_ug_no_trgo {
+                        let me = self.cfg.number;
+                        let mut k = 0;
+                        out.events.retain(|e| {
+                            k += 1;
+                            k <= n || e.1 != Event::Trgo { timer: me }
+                        });
+                    }
                 }
             }
             CCMR1 | CCMR2 => {
