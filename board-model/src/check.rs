@@ -1222,13 +1222,13 @@ pub fn rf_level(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         "rf level: after a line pulse the DAC holds at most one entry's level, the enable low",
         !dac_after.is_empty() && over.is_none(),
         format!(
-            "one step after each of {} pulses: {zero} at code 0 (the table's last entry), {} holding the entry before it ({}: TIM8's last update falls after the gate, TIM2's enable, closed — N × step overruns the pulse); {}",
+            "one step after each of {} pulses: {zero} at code 0 (the table's last entry), {} holding the entry before it{}; {}",
             dac_after.len(),
             dac_after.len() - zero,
             dac_after
                 .iter()
                 .find(|x| x.1 != 0)
-                .map_or("—".into(), |x| format!("first: code {} = {} ‰, one entry is ≤ {} ‰", x.1, x.2, x.3)),
+                .map_or(String::new(), |x| format!(" (first: code {} = {} ‰, one entry is ≤ {} ‰: TIM8's last update falls after the gate, TIM2's enable, closed — N × step overruns the pulse)", x.1, x.2, x.3)),
             match over {
                 None => "none above one entry, the enable low each time".to_string(),
                 Some(x) => format!(
