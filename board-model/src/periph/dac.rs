@@ -1,5 +1,5 @@
 //! DAC1 channel 1 (the RF level output on PA4) of the STM32F446 (RM0390 §14, DAC on APB1 at
-//! 0x4000_7400) and the STM32G474 (RM0440 §22, DAC1 on AHB2 at 0x5000_0800): the data holding
+//! 0x4000_7400) and the STM32G474 (RM0440 DAC chapter, DAC1 on AHB2 at 0x5000_0800): the data holding
 //! register, the data output register and its transfer rules, the trigger selection, and the
 //! level the pin shows. What the firmware's RF level port and embassy-stm32 0.6's `dac` driver
 //! touch is modelled; everything else is `Unmodelled`.
@@ -17,7 +17,8 @@
 //! - SWTRIGR.SWTRIG1, DHR12R1, DHR12L1, DHR8R1 (writes and reads), DOR1 (read-only), SR.DMAUDR1
 //!   (rc_w1; never set: see below), G474 SR.DAC1RDY (set as EN1 is set: the wake-up time,
 //!   DS12288 tWAKEUP, is not modelled).
-//! - DHR → DOR (RM0390 §14.3.6 "DAC conversion"; RM0440 §22.4.6): with TEN1 = 0 one bus clock
+//! - DHR → DOR (RM0390 §14.3 "DAC conversion"; RM0440 DAC chapter, "DAC conversion"; the
+//!   subsection numbers were not re-read here): with TEN1 = 0 one bus clock
 //!   after the DHR write; with TEN1 = 1, three bus clocks after the selected trigger (a software
 //!   trigger: one clock, SWTRIG1 cleared then). The bus clock is the F446's APB1 clock (PCLK1)
 //!   and the G474's dac_hclk (HCLK: DAC1 sits on AHB2). The value moved is DHR as it is at the
@@ -25,7 +26,7 @@
 //!   firmware never writes that close to a trigger). A new trigger while a transfer is pending
 //!   schedules another. Transfers happen whatever EN1 is (the digital part is clocked; not
 //!   stated by the manual, not verified).
-//! - Triggers (TSEL1): F446 RM0390 table 71 "External triggers": 000 TIM6, 001 TIM8, 010 TIM7,
+//! - Triggers (TSEL1): F446 RM0390 §14.3 "DAC trigger selection" table (number not re-read): 000 TIM6, 001 TIM8, 010 TIM7,
 //!   011 TIM5, 100 TIM2, 101 TIM4, 110 EXTI9, 111 SWTRIG; G474 RM0440 DAC trigger table: 0000
 //!   SWTRIG, 0001 TIM8, 0010 TIM7, 0011 TIM15, 0100 TIM2, 0101 TIM4, 0110 EXTI9, 0111 TIM6,
 //!   1000 TIM3, 1001–1111 HRTIM. Both agree with stm32-metapac 21's DAC_CHX_TRGn table (the
@@ -334,7 +335,7 @@ impl Dac {
     fn write_dhr(&mut self, now: Time, code: u16, out: &mut Signals) {
         self.dhr = code & 0xFFF;
         if !self.ten() || self.plant_ignore_ten {
-            // One bus clock after the write (RM0390 §14.3.6; RM0440 §22.4.6).
+            // One bus clock after the write (RM0390 §14.3 / RM0440 "DAC conversion").
             self.pending.push((now + self.tick, self.dhr));
             out.replan = true;
             self.run(now);
@@ -521,7 +522,7 @@ impl Peripheral for Dac {
         self.run(now);
         if let Event::Trgo { timer } = event {
             if self.ten() && Self::trigger(self.cr, self.chip) == Trigger::Timer(timer) {
-                // Three bus clocks after the trigger (RM0390 §14.3.6; RM0440 §22.4.6).
+                // Three bus clocks after the trigger (RM0390 §14.3 / RM0440 "DAC conversion").
                 self.schedule(now, 3, out);
             }
         }
@@ -700,6 +701,64 @@ mod tests {
         w(&mut g, 0, CR, CR_EN1);
         assert_eq!(g.output(), (0, false));
         assert_eq!(g.r_sr() & SR_DAC1RDY_G4, SR_DAC1RDY_G4);
+    }
+
+    /// The chain of docs/rf-level.md, by hand as the board delivers events: TIM2's UG (MMS =
+    /// 010) → TRGO → TIM8 in slave reset mode → its update → TRGO → the DAC latches DHR three
+    /// APB1 clocks later.
+    #[test]
+    fn tim2_update_reaches_the_dac_through_tim8() {
+        use crate::periph::tim::{Timer, TimerConfig};
+        use crate::periph::ClockDomain;
+        let clocks = Clocks {
+            pclk1_hz: 45 * MHZ,
+            tim_apb1_hz: 90 * MHZ,
+            tim_apb2_hz: 180 * MHZ,
+            ..Default::default()
+        };
+        let cfg = |number, name, clock, advanced, itr1| TimerConfig {
+            number,
+            bits: 16,
+            advanced,
+            clock,
+            name,
+            irq_up: 0,
+            irq_cc: 0,
+            itr1,
+        };
+        let mut t2 = Timer::new(cfg(2, "TIM2", ClockDomain::TimApb1, false, None));
+        let mut t8 = Timer::new(cfg(8, "TIM8", ClockDomain::TimApb2, true, Some(2)));
+        let mut d = Dac::new(DacChip::F446);
+        t2.set_clocks(0, &clocks);
+        t8.set_clocks(0, &clocks);
+        d.set_clocks(0, &clocks);
+        let mut s = Signals::default();
+        let all = 0xFFFF_FFFF;
+        t8.write(0, 0x04, 0b010 << 4, all, &mut s).unwrap(); // CR2.MMS = update
+        t8.write(0, 0x08, (1 << 4) | 0b100, all, &mut s).unwrap(); // SMCR: ITR1, reset
+        t2.write(0, 0x04, 0b010 << 4, all, &mut s).unwrap();
+        w(&mut d, 0, CR, CR_EN1 | CR_TEN1_F4 | (1 << 3));
+        w(&mut d, 0, DHR12R1, 1234);
+        s.events.clear();
+        // Deliver events to every block until nothing new comes, as `Sim::settle_local` does.
+        let mut pending = Vec::new();
+        t2.write(4000, 0x14, 1, all, &mut s).unwrap(); // EGR.UG
+        pending.append(&mut s.events);
+        let mut seen = Vec::new();
+        while let Some((t, e)) = pending.pop() {
+            seen.push((t, e));
+            let mut s = Signals::default();
+            t8.on_event(t, e, &mut s);
+            d.on_event(t, e, &mut s);
+            pending.append(&mut s.events);
+        }
+        assert!(seen.contains(&(4000, Event::Trgo { timer: 2 })));
+        assert!(seen.contains(&(4000, Event::Trgo { timer: 8 })));
+        assert_eq!(d.next_event(), Some(4000 + 3 * 80));
+        drive(&mut d, 4239);
+        assert_eq!(d.dor(), 0);
+        drive(&mut d, 4240);
+        assert_eq!(d.dor(), 1234);
     }
 
     #[test]

@@ -678,6 +678,55 @@ mod tests {
     }
 
     #[test]
+    fn tim8_ch1_and_dac1_requests_are_routed_by_their_ids() {
+        // The firmware's G474 envelope DMA: DMAMUX channel 3 (→ DMA1 channel 4) on request 49.
+        let mut mux = DmaMux::new();
+        let mut s = Signals::default();
+        mux.write(0, 3 * 4, DMAREQ_TIM8_CH1, 0xFFFF_FFFF, &mut s)
+            .unwrap();
+        mux.write(0, 4 * 4, DMAREQ_DAC1_CH1, 0xFFFF_FFFF, &mut s)
+            .unwrap();
+        let mut s = Signals::default();
+        mux.on_event(
+            9,
+            Event::DmaRequest(Request::TimCc {
+                timer: 8,
+                channel: 1,
+            }),
+            &mut s,
+        );
+        mux.on_event(10, Event::DmaRequest(Request::Dac1Ch1), &mut s);
+        // TIM1's channel has no DMAMUX id modelled: dropped.
+        mux.on_event(
+            11,
+            Event::DmaRequest(Request::TimCc {
+                timer: 1,
+                channel: 1,
+            }),
+            &mut s,
+        );
+        assert_eq!(
+            s.events,
+            vec![
+                (
+                    9,
+                    Event::DmaChannelRequest {
+                        controller: 1,
+                        channel: 4
+                    }
+                ),
+                (
+                    10,
+                    Event::DmaChannelRequest {
+                        controller: 1,
+                        channel: 5
+                    }
+                ),
+            ]
+        );
+    }
+
+    #[test]
     fn dmamux_routes_adc1_to_the_channels_that_select_it() {
         let mut mux = DmaMux::new();
         w(&mut mux, 0x00, 5).unwrap(); // channel 0 → DMA1 ch1
