@@ -9,7 +9,7 @@
 #    machine), and its tests on the firmware images (faults, panic path, findings of issue #9);
 # 2. `board-model check` per board: boot log, clock tree, 15 MHz carrier from registers and
 #    edges, 10 000 samples/s, the closed loop against host-sim, duty/on-time caps, sensor-to-gate
-#    latency, rail fault, watchdog reset. JSON summaries in target/board-model/<board>.json.
+#    latency, rail fault, watchdog reset, RF level (DAC on PA4). JSON summaries in target/board-model/<board>.json.
 # Needs firmware/target/<board>.elf (scripts/build-firmware.sh) and defmt-print (scripts/setup.sh).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

@@ -5,7 +5,7 @@
 
 use crate::machine::{ChipSpec, Machine, Mapped, PinMode, PinSpec};
 use crate::periph::{
-    self, adc_f4, adc_g4, dma_f4, dma_g4, gpio, iwdg, lpuart_g4, misc, rcc_f4, rcc_g4, tim,
+    self, adc_f4, adc_g4, dac, dma_f4, dma_g4, gpio, iwdg, lpuart_g4, misc, rcc_f4, rcc_g4, tim,
     usart_f4, ClockDomain, Peripheral, ResetCause, Time,
 };
 use std::path::Path;
@@ -146,6 +146,8 @@ fn timer(
         name,
         irq_up,
         irq_cc,
+        // TIM8's ITR1 is TIM2's TRGO on both chips (see `TimerConfig::itr1`).
+        itr1: (number == 8).then_some(2),
     })
 }
 
@@ -205,6 +207,30 @@ pub fn build(kind: BoardKind, elf: &Path, mut wiper: Wiper) -> Result<Machine, S
     let mut m = Machine::new(spec, periphs, image, true)?;
     // Keep every write to the burst timer (latency, update sequences) and to TIM3 (trigger).
     m.sim_mut().watch = vec![(0x4000_0000, 0x400), (0x4000_0400, 0x400)];
+    // Planted defects, to show the RF level checks fail (comma-separated): `dac-ignore-ten`
+    // (DHR → DOR at every write, as with TEN1 = 0), `dac-ignore-en` (EN1 = 0 does not release
+    // the output), `tim8-gate-ignored` (gated mode counts whenever CEN = 1), `tim8-ug-no-trgo`
+    // (TIM8's EGR.UG makes no TRGO), `tim8-no-cc-dma` (TIM8's CC1DE raises no request). Never
+    // set in CI.
+    let plants = std::env::var("BOARD_MODEL_PLANT").unwrap_or_default();
+    for m in m.sim_mut().periphs.iter_mut() {
+        let a = m.p.as_any_mut();
+        if let Some(d) = a.downcast_mut::<dac::Dac>() {
+            d.plant_ignore_ten = plants.contains("dac-ignore-ten");
+            d.plant_ignore_en = plants.contains("dac-ignore-en");
+        } else if let Some(t) = a.downcast_mut::<tim::Timer>() {
+            if t.name() == "TIM8" {
+                if plants.contains("tim8-gate-ignored") {
+                    t.plant_gate_ignored = true;
+                    t.plant_gate_open();
+                }
+                t.plant_ug_no_trgo = plants.contains("tim8-ug-no-trgo");
+                if plants.contains("tim8-no-cc-dma") {
+                    t.plant_no_cc_dma();
+                }
+            }
+        }
+    }
     // Record the burst channels always; the carrier only while `record_carrier` is on.
     for t in m.sim_mut().periphs.iter_mut() {
         if let Some(tm) = t.p.as_any_mut().downcast_mut::<tim::Timer>() {
@@ -240,10 +266,18 @@ fn f446(input: Input) -> (Vec<Mapped>, ChipSpec) {
         map(0x4000_3000, 0x400, iwdg::Iwdg::new(false)),
         map(0x4000_4400, 0x400, usart_f4::UsartF4::new()),
         map(0x4000_7000, 0x400, misc::PwrF4::new()),
+        // DAC (RM0390 §2.2.2 table 1: 0x4000_7400, APB1).
+        map(0x4000_7400, 0x400, dac::Dac::new(dac::DacChip::F446)),
         map(
             0x4001_0000,
             0x400,
             timer(1, 16, true, TimApb2, "TIM1", 25, 27),
+        ),
+        // TIM8 (0x4001_0400, APB2): TIM8_UP_TIM13 = 44, TIM8_CC = 46 (RM0390 table 38).
+        map(
+            0x4001_0400,
+            0x400,
+            timer(8, 16, true, TimApb2, "TIM8", 44, 46),
         ),
         map(0x4001_2000, 0x400, adc_f4::AdcF4::new(18, input)),
         map(0x4001_3800, 0x400, misc::Syscfg::new()),
@@ -348,6 +382,12 @@ fn g474(input: Input) -> (Vec<Mapped>, ChipSpec) {
             0x400,
             timer(1, 16, true, TimApb2, "TIM1", 25, 27),
         ),
+        // TIM8 (RM0440 table 4: 0x4001_3400, APB2): TIM8_UP = 44, TIM8_CC = 46 (table 97).
+        map(
+            0x4001_3400,
+            0x400,
+            timer(8, 16, true, TimApb2, "TIM8", 44, 46),
+        ),
         map(
             0x4002_0000,
             0x400,
@@ -365,6 +405,8 @@ fn g474(input: Input) -> (Vec<Mapped>, ChipSpec) {
         map(0x4800_0400, 0x400, gpio::Gpio::new(gpio::Chip::G474, 'B')),
         map(0x4800_0800, 0x400, gpio::Gpio::new(gpio::Chip::G474, 'C')),
         map(0x5000_0000, 0x400, adc_g4::AdcG4::new(18, input)),
+        // DAC1 (RM0440 table 4: 0x5000_0800, AHB2).
+        map(0x5000_0800, 0x400, dac::Dac::new(dac::DacChip::G474)),
         map(0xE004_2000, 0x400, misc::DbgMcu::new(0x469)),
     ];
     let (gpioa, gpiob) = (index(&periphs, 0x4800_0000), index(&periphs, 0x4800_0400));

@@ -515,6 +515,36 @@ pub fn rail_fault(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
             (first as f64 - start as f64) * 1e6 / TICKS_PER_S as f64,
         ),
     ));
+    // (b) RF level: 0 by the next sample, through the fault window.
+    let dac_before = dac_at(&o.dac, start);
+    let dac_late = o
+        .dac
+        .iter()
+        .find(|d| d.at > deadline && d.at < stop && (d.driven && d.code != 0));
+    let dac_zero = dac_at(&o.dac, deadline).code == 0 || !dac_at(&o.dac, deadline).driven;
+    let zero_at = if dac_at(&o.dac, start).code == 0 {
+        Some(start)
+    } else {
+        o.dac
+            .iter()
+            .find(|d| d.at > start && d.code == 0)
+            .map(|d| d.at)
+    };
+    out.push(check(
+        "rf level: 0 after a sensor fault (Off) within one sample",
+        dac_before.code != 0 && dac_zero && dac_late.is_none(),
+        format!(
+            "DAC code {} before the fault; 0 {} after the onset ({} after the first fully faulted trigger; limit one sample, {:.0} µs); {} until the fault ends",
+            dac_before.code,
+            fmt_us(zero_at.map(|z| us(z - start))),
+            zero_at.map_or("—".to_string(), |z| format!("{:.1} µs", (z as f64 - first as f64) * 1e6 / TICKS_PER_S as f64)),
+            us(period),
+            match dac_late {
+                None => "held at 0".to_string(),
+                Some(d) => format!("code {} at {:.4} s", d.code, d.at as f64 / TICKS_PER_S as f64),
+            }
+        ),
+    ));
     out.push(check(
         "rail fault: logged",
         log_has(&o, "sensor fault"),
@@ -578,6 +608,11 @@ pub fn watchdog(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         ));
     }
     Ok(out)
+}
+
+/// Whether the image drives the RF level (its symbols name the firmware's `level` module).
+pub fn image_has_rf_level(elf: &Path) -> bool {
+    std::fs::read(elf).is_ok_and(|b| b.windows(7).any(|w| w == b"RfLevel"))
 }
 
 /// Whether the image carries the host link (its symbols name `saw_link`).
@@ -973,6 +1008,338 @@ pub fn stream_cost(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
             "sample path (the interrupt executor) per sample: {off:.0} instructions with the stream stopped, {tenth:.0} at every 10th sample, {every:.0} at every sample (+{:.0}, +{:.1} %); thread mode (the link task) per sample: {t_off:.0}, {t_tenth:.0}, {t_every:.0}",
             every - off,
             100.0 * (every - off) / off.max(1.0)
+        ),
+    )])
+}
+
+// ------------------------------------------------------------------------------------------
+// RF level (issue #15): DAC1 channel 1 on PA4, docs/rf-level.md
+// ------------------------------------------------------------------------------------------
+
+/// Level ‰ of a DAC code through the board's calibration table: the largest level whose code is
+/// at most `code` (the inverse of `LevelTable::code`, exact for the codes the table gives).
+pub fn permille_of_code(table: &saw_boards::rf_level::LevelTable, code: u16) -> u16 {
+    let n = (0..=1000u16)
+        .collect::<Vec<_>>()
+        .partition_point(|&l| table.code(l) <= code);
+    n.saturating_sub(1) as u16
+}
+
+/// The RF drive the finger gets, ‰, as a step function: (time, enable × level) at every change
+/// of the enable (PA0, TIM2 CH1) or of what the DAC shows (released = 0).
+pub fn drive_trace(
+    enable: &[PinEdge],
+    dac: &[crate::periph::dac::DacSample],
+    table: &saw_boards::rf_level::LevelTable,
+) -> Vec<(Time, u16)> {
+    let mut ev: Vec<(Time, Option<bool>, Option<u16>)> = enable
+        .iter()
+        .map(|e| (e.at, Some(e.high), None))
+        .chain(dac.iter().map(|d| {
+            let l = if d.driven {
+                permille_of_code(table, d.code)
+            } else {
+                0
+            };
+            (d.at, None, Some(l))
+        }))
+        .collect();
+    ev.sort_by_key(|e| e.0);
+    let (mut on, mut level) = (false, 0u16);
+    let mut out: Vec<(Time, u16)> = Vec::new();
+    for (t, e, l) in ev {
+        if let Some(e) = e {
+            on = e;
+        }
+        if let Some(l) = l {
+            level = l;
+        }
+        let v = if on { level } else { 0 };
+        if out.last().is_none_or(|x| x.1 != v) {
+            out.push((t, v));
+        }
+    }
+    out
+}
+
+/// The DAC's sample at or before `t`.
+fn dac_at(dac: &[crate::periph::dac::DacSample], t: Time) -> crate::periph::dac::DacSample {
+    let k = dac.partition_point(|d| d.at <= t);
+    dac[k.saturating_sub(1)]
+}
+
+/// A scene file compiled for `board`, as the host would push it over the link.
+fn scene_for(board: BoardKind, file: &str) -> Result<saw_core::Config, String> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes")
+        .join(file);
+    let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let b = board.def();
+    let timer = saw_core::burst::BurstTimer {
+        clock_hz: b.burst_timer_clk_hz,
+        counter_bits: b.burst_timer_bits,
+        max_burst_hz: b.max_burst_hz,
+    };
+    saw_core::scene_file::load_for_board(file, &text, timer, 1_000_000 / b.sample_rate_hz)
+        .map_err(|e| format!("{file}: {e}"))
+}
+
+/// DAC bus clocks → master ticks: the DHR → DOR latency after a trigger is three of them
+/// (F446 PCLK1, G474 HCLK: `periph::dac`).
+fn dac_latency(board: BoardKind) -> Time {
+    let c = &board.def().clocks;
+    3 * ticks_per_cycle(match board {
+        BoardKind::F446 => c.pclk1_hz() as u64,
+        BoardKind::G474 => c.sysclk_hz as u64,
+    })
+}
+
+/// (a) Line crossings with a triangular envelope (scenes/lines.toml pushed over the link at
+/// 0.2 s): during each line pulse the drive (enable × level) rises then falls, peaks within one
+/// table step of the pulse's middle, never moves by more than one table entry's change, and the
+/// DAC is back at 0 one step after the pulse.
+/// (d) A random-amplitude scene (scenes/random.toml): every change of the DAC output falls on a
+/// TIM2 TRGO (its update or start) plus the DAC's trigger latency, or is a drop to 0 with the
+/// line low (an Off).
+/// Also the per-sample cost of the sample path with triangles firing: worst sample and mean,
+/// against the default scene (no lines).
+pub fn rf_level(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
+    use saw_link::msg::{Reply, Request};
+    const SAMPLE_PATH: usize = 16 + 52;
+    let def = board.def();
+    let table = &def.rf_level.table;
+    let lat = dac_latency(board);
+    let mut out = Vec::new();
+    let run_scene = |file: Option<&str>| -> Result<(Outcome, bool), String> {
+        let mut opts = Options::new(board, elf, 1.0);
+        if let Some(f) = file {
+            opts.link_input = vec![(
+                0.2,
+                request_frame(1, &Request::LoadScene(scene_for(board, f)?)),
+            )];
+        }
+        opts.count_per_trigger = Some(SAMPLE_PATH);
+        let (o, _m) = run::run(&opts)?;
+        let applied = board_replies(&o.link_output)
+            .0
+            .iter()
+            .any(|(_, h, r)| h.seq == 1 && matches!(r, Reply::Applied { .. }));
+        Ok((o, applied))
+    };
+    // (a) lines.
+    let (o, applied) = run_scene(Some("lines.toml"))?;
+    if let Some(s) = &o.stop {
+        return Ok(vec![check(
+            "rf level: runs to the end",
+            false,
+            format!("stopped: {s}"),
+        )]);
+    }
+    let from = (0.25 * TICKS_PER_S as f64) as Time;
+    let a = &o.pins[PIN_BURST_A];
+    let pulses: Vec<(Time, Time)> = a
+        .windows(2)
+        .filter(|w| w[0].high && !w[1].high && w[0].at >= from)
+        .map(|w| (w[0].at, w[1].at))
+        .collect();
+    let drive = drive_trace(a, &o.dac, table);
+    let clk = def.rf_level.envelope_timer_clk_hz as u64;
+    let tpc = ticks_per_cycle(clk);
+    let mut bad: Vec<String> = Vec::new();
+    let mut first_desc = String::new();
+    let mut worst_peak_off_us: f64 = 0.0;
+    let mut worst_step_ratio: f64 = 0.0;
+    let mut dac_after: Vec<(Time, u16, u16, u16, bool)> = Vec::new();
+    for (i, &(s, e)) in pulses.iter().enumerate() {
+        let plan = saw_boards::rf_level::triangle_plan((e - s) / tpc, clk as u32);
+        let step = plan.step_clocks as u64 * tpc;
+        // The drive inside the pulse: its value at s and every change up to e.
+        let k0 = drive.partition_point(|d| d.0 <= s);
+        let mut seq: Vec<(Time, u16)> = vec![(s, drive[k0.saturating_sub(1)].1)];
+        seq.extend(drive.iter().copied().filter(|d| d.0 > s && d.0 <= e));
+        let peak = seq.iter().map(|x| x.1).max().unwrap_or(0);
+        let ip = seq.iter().position(|x| x.1 == peak).unwrap_or(0);
+        let rising = seq[..=ip].windows(2).all(|w| w[1].1 >= w[0].1);
+        let falling = seq[ip..].windows(2).all(|w| w[1].1 <= w[0].1);
+        let mid = s + (e - s) / 2;
+        let off = seq[ip].0 as i64 - mid as i64;
+        let max_step = seq
+            .windows(2)
+            .map(|w| w[1].1.abs_diff(w[0].1))
+            .max()
+            .unwrap_or(0);
+        let entry = (2 * peak as u64).div_ceil(plan.entries as u64) as u16 + 2;
+        let after = dac_at(&o.dac, e + step);
+        let ends = seq.last().is_some_and(|x| x.1 == 0);
+        // What the DAC holds after the pulse (docs/rf-level.md: the last latched entry, code(0)
+        // or, when N × step overruns the pulse, the one before: one entry's level).
+        let held = if after.driven {
+            permille_of_code(table, after.code)
+        } else {
+            0
+        };
+        dac_after.push((s, after.code, held, entry, level_at(a, e + step)));
+        let ok = peak > 0
+            && rising
+            && falling
+            && ends
+            && off.unsigned_abs() <= step + lat
+            && max_step <= entry;
+        worst_peak_off_us = worst_peak_off_us.max(us(off.unsigned_abs()));
+        worst_step_ratio = worst_step_ratio.max(max_step as f64 / entry as f64);
+        let desc = format!(
+            "pulse at {:.4} s, {:.2} ms: {} levels (plan {} entries of {:.2} µs), peak {peak} ‰ {:+.2} µs from the middle, largest step {max_step} ‰ (limit {entry}), rising {rising}, falling {falling}, ends at 0 {ends}; DAC code {} one step after the end",
+            s as f64 / TICKS_PER_S as f64,
+            us(e - s) / 1e3,
+            seq.len(),
+            plan.entries,
+            us(step),
+            off as f64 * 1e6 / TICKS_PER_S as f64,
+            after.code
+        );
+        if i == 0 {
+            first_desc = desc.clone();
+        }
+        if !ok {
+            bad.push(desc);
+        }
+    }
+    out.push(check(
+        "rf level: a line crossing plays a triangle",
+        applied && !pulses.is_empty() && bad.is_empty(),
+        format!(
+            "scenes/lines.toml {}; {} line pulses; {}; worst peak offset {worst_peak_off_us:.2} µs, worst step {:.0} % of one entry's change{}",
+            if applied { "applied" } else { "NOT applied" },
+            pulses.len(),
+            if first_desc.is_empty() { "none".into() } else { format!("first: {first_desc}") },
+            100.0 * worst_step_ratio,
+            bad.first().map_or(String::new(), |b| format!("; FAILED: {b}"))
+        ),
+    ));
+    let zero = dac_after.iter().filter(|x| x.1 == 0).count();
+    let over = dac_after.iter().find(|x| x.2 > x.3 || x.4);
+    out.push(check(
+        "rf level: after a line pulse the DAC holds at most one entry's level, the enable low",
+        !dac_after.is_empty() && over.is_none(),
+        format!(
+            "one step after each of {} pulses: {zero} at code 0 (the table's last entry), {} holding the entry before it{}; {}",
+            dac_after.len(),
+            dac_after.len() - zero,
+            dac_after
+                .iter()
+                .find(|x| x.1 != 0)
+                .map_or(String::new(), |x| format!(" (first: code {} = {} ‰, one entry is ≤ {} ‰: TIM8's last update falls after the gate, TIM2's enable, closed — N × step overruns the pulse)", x.1, x.2, x.3)),
+            match over {
+                None => "none above one entry, the enable low each time".to_string(),
+                Some(x) => format!(
+                    "FAILED after the pulse at {:.4} s: code {} = {} ‰ (limit {} ‰), enable {}",
+                    x.0 as f64 / TICKS_PER_S as f64,
+                    x.1,
+                    x.2,
+                    x.3,
+                    if x.4 { "high" } else { "low" }
+                ),
+            }
+        ),
+    ));
+    // Per-sample cost with triangles firing.
+    let per_sample = |o: &Outcome| -> (f64, u64, Time) {
+        let c: Vec<(Time, u64)> = o
+            .per_trigger_counts
+            .iter()
+            .copied()
+            .filter(|x| x.0 >= from)
+            .collect();
+        let d: Vec<(Time, u64)> = c.windows(2).map(|w| (w[0].0, w[1].1 - w[0].1)).collect();
+        let mean = d.iter().map(|x| x.1).sum::<u64>() as f64 / d.len().max(1) as f64;
+        let worst = d.iter().copied().max_by_key(|x| x.1).unwrap_or((0, 0));
+        (mean, worst.1, worst.0)
+    };
+    let (lines_mean, lines_worst, lines_worst_at) = per_sample(&o);
+    // (d) random amplitude.
+    let (o, applied) = run_scene(Some("random.toml"))?;
+    let t2: Vec<Time> = o.trgo.iter().filter(|x| x.1 == 2).map(|x| x.0).collect();
+    let (mut at_update, mut offs, mut stray) = (0, 0, Vec::new());
+    let mut codes = std::collections::BTreeSet::new();
+    for w in o.dac.windows(2).filter(|w| w[1].at >= from) {
+        let (prev, d) = (w[0], w[1]);
+        if prev.code == d.code && prev.driven == d.driven {
+            continue;
+        }
+        codes.insert(d.code);
+        let g = d.at.saturating_sub(lat);
+        if t2.binary_search(&g).is_ok() {
+            at_update += 1;
+        } else if d.code == 0 && !level_at(&o.pins[PIN_BURST_A], d.at) {
+            offs += 1;
+        } else {
+            stray.push(d);
+        }
+    }
+    out.push(check(
+        "rf level: with a running burst the level changes only at TIM2 updates",
+        applied && stray.is_empty() && at_update >= 5 && codes.len() > 3,
+        format!(
+            "scenes/random.toml {}; {} DAC changes after 0.25 s over {} distinct codes: {at_update} at a TIM2 TRGO + {:.3} µs, {offs} drops to 0 with the line low, {} elsewhere{}",
+            if applied { "applied" } else { "NOT applied" },
+            at_update + offs + stray.len(),
+            codes.len(),
+            us(lat),
+            stray.len(),
+            stray.first().map_or(String::new(), |d| format!(
+                " (first: code {} at {:.6} s, PA0 {})",
+                d.code,
+                d.at as f64 / TICKS_PER_S as f64,
+                if level_at(&o.pins[PIN_BURST_A], d.at) { "high" } else { "low" }
+            ))
+        ),
+    ));
+    // Baseline cost: the default scene.
+    let (o, _) = run_scene(None)?;
+    let (base_mean, base_worst, _) = per_sample(&o);
+    out.push(check(
+        "rf level: sample path cost with triangles",
+        lines_worst > 0 && base_worst > 0,
+        format!(
+            "instructions per sample in the sample path (interrupt executor) from 0.25 to 1 s: lines scene (triangles firing) mean {lines_mean:.0}, worst {lines_worst} (at {:.4} s); default scene mean {base_mean:.0}, worst {base_worst}",
+            lines_worst_at as f64 / TICKS_PER_S as f64
+        ),
+    ));
+    Ok(out)
+}
+
+/// (c) A forced panic at 0.5 s while bursts run: the DAC is released (level 0) within one
+/// sample and stays so until the watchdog's reset.
+pub fn rf_level_panic(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
+    let mut opts = Options::new(board, elf, 0.58);
+    opts.force_panic_s = Some(0.5);
+    let (o, _m) = run::run(&opts)?;
+    let at = TICKS_PER_S / 2;
+    let period = TICKS_PER_S / board.def().sample_rate_hz as u64;
+    let before = dac_at(&o.dac, at);
+    let released = o
+        .dac
+        .iter()
+        .find(|d| d.at >= at && !d.driven && d.code == 0);
+    let reset = o.resets.iter().find(|r| r.0 >= at).map(|r| r.0);
+    let until = reset.unwrap_or(o.end);
+    let again = released.and_then(|r| {
+        o.dac
+            .iter()
+            .find(|d| d.at > r.at && d.at < until && (d.driven || d.code != 0))
+    });
+    let delay = released.map(|r| us(r.at - at));
+    Ok(vec![check(
+        "rf level: 0 after a panic",
+        delay.is_some_and(|d| d <= us(period)) && again.is_none(),
+        format!(
+            "before the panic the DAC showed code {} (driven {}); released (0 V) {} after the diversion (limit {:.0} µs), {} until the reset at {}",
+            before.code,
+            before.driven,
+            fmt_us(delay),
+            us(period),
+            if again.is_none() { "held" } else { "driven again" },
+            reset.map_or("— (none)".into(), |r| format!("{:.4} s", r as f64 / TICKS_PER_S as f64))
         ),
     )])
 }

@@ -137,6 +137,10 @@ pub struct Sim {
     /// Address ranges whose writes are kept in `writes`.
     pub watch: Vec<(u32, u32)>,
     pub events: Vec<(Time, crate::periph::Event)>,
+    /// When this event is delivered, note the instructions executed so far in this exception
+    /// (`snapshots`): per-sample cost from the ADC trigger (`Trgo { timer: 3 }`).
+    pub snapshot_on: Option<(crate::periph::Event, usize)>,
+    pub snapshots: Vec<(Time, u64)>,
     /// RTT: control block address and the bytes read so far with the time each was seen.
     rtt: Option<u32>,
     pub log: Vec<u8>,
@@ -272,6 +276,12 @@ impl Sim {
             }
             for (t, e) in events {
                 self.events.push((t, e));
+                if let Some((on, ex)) = self.snapshot_on {
+                    if on == e {
+                        let n = self.instructions_in.get(ex).copied().unwrap_or(0);
+                        self.snapshots.push((t, n));
+                    }
+                }
                 let Sim { periphs, sig, .. } = self;
                 for m in periphs.iter_mut() {
                     m.p.on_event(t, e, sig);
@@ -619,6 +629,8 @@ impl Machine {
             writes: Vec::new(),
             watch: Vec::new(),
             events: Vec::new(),
+            snapshot_on: None,
+            snapshots: Vec::new(),
             rtt: rtt_addr,
             log: Vec::new(),
             log_times: Vec::new(),

@@ -104,6 +104,12 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
             rep.passed = rep.passed();
             rep.extend(check::rail_fault(kind, &elf)?);
             rep.extend(check::watchdog(kind, &elf)?);
+            if check::image_has_rf_level(&elf) {
+                rep.extend(check::rf_level_panic(kind, &elf)?);
+                if check::image_has_link(&elf) {
+                    rep.extend(check::rf_level(kind, &elf)?);
+                }
+            }
             // The host link, on both boards (the F446's USART2, the G474's LPUART1).
             if check::image_has_link(&elf) {
                 rep.extend(check::link(kind, &elf)?);

@@ -42,6 +42,9 @@ pub struct Options {
     /// Times (s) at which the instructions executed so far in each exception are noted
     /// (`Outcome::instruction_counts`).
     pub count_at_s: Vec<f64>,
+    /// Note the instructions executed so far in this exception at every ADC trigger (TIM3
+    /// TRGO): `Outcome::per_trigger_counts`.
+    pub count_per_trigger: Option<usize>,
 }
 
 impl Options {
@@ -66,6 +69,7 @@ impl Options {
             link_input: Vec::new(),
             flash_preload: Vec::new(),
             count_at_s: Vec::new(),
+            count_per_trigger: None,
         }
     }
 }
@@ -109,6 +113,13 @@ pub struct Outcome {
     /// At each `Options::count_at_s`: the instructions executed so far in each exception
     /// (index: exception number, 0 = thread mode).
     pub instruction_counts: Vec<Vec<u64>>,
+    /// At every TIM3 TRGO (with `Options::count_per_trigger`): (time, instructions so far in
+    /// that exception).
+    pub per_trigger_counts: Vec<(Time, u64)>,
+    /// What DAC1's channel 1 put on PA4 (every change), and the RF drive level the finger gets.
+    pub dac: Vec<crate::periph::dac::DacSample>,
+    /// TRGO pulses of TIM2 (the burst timer) and TIM8 (the DAC's trigger): (time, timer).
+    pub trgo: Vec<(Time, u8)>,
 }
 
 /// Runs `opts`.
@@ -146,6 +157,9 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
         m.preload_flash(*addr, bytes)?;
     }
     m.sim_mut().scs.debugger_attached = opts.debugger;
+    if let Some(ex) = opts.count_per_trigger {
+        m.sim_mut().snapshot_on = Some((Event::Trgo { timer: 3 }, ex));
+    }
     let end = (opts.duration_s * TICKS_PER_S as f64) as Time;
     // Scheduled interventions, in time order: (time, what).
     let at = |s: f64| (s * TICKS_PER_S as f64) as Time;
@@ -250,6 +264,24 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
         link_output: s.uart_output(),
         instruction_counts,
         link_input_done,
+        per_trigger_counts: s.snapshots.clone(),
+        trgo: s
+            .events
+            .iter()
+            .filter_map(|&(t, e)| match e {
+                Event::Trgo { timer } if timer == 2 || timer == 8 => Some((t, timer)),
+                _ => None,
+            })
+            .collect(),
+        dac: s
+            .periphs
+            .iter()
+            .find_map(|p| {
+                p.p.as_any()
+                    .downcast_ref::<crate::periph::dac::Dac>()
+                    .map(|d| d.trace.clone())
+            })
+            .unwrap_or_default(),
     };
     Ok((out, m))
 }

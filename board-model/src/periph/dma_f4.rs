@@ -88,6 +88,15 @@ fn request_for(controller: u8, stream: usize, channel: u32) -> Option<Request> {
         // DMA1 stream 5 channel 4: USART2_RX; stream 6 channel 4: USART2_TX (table 28).
         (1, 5, 4) => Some(Request::Usart2Rx),
         (1, 6, 4) => Some(Request::Usart2Tx),
+        // DMA1 stream 5 channel 7: DAC1 (table 28).
+        (1, 5, 7) => Some(Request::Dac1Ch1),
+        // DMA2 stream 2 channel 7: TIM8_CH1 (table 29; stm32-metapac 21 agrees: TIM8 CH1 on
+        // DMA2_CH2 request 7). Channel 0 of the same stream carries TIM8_CH1/CH2/CH3 together:
+        // not modelled.
+        (2, 2, 7) => Some(Request::TimCc {
+            timer: 8,
+            channel: 1,
+        }),
         _ => None,
     }
 }
@@ -536,6 +545,65 @@ mod tests {
         w(d, S0M0AR, 0x2000_0000).unwrap();
         w(d, S0NDTR, items).unwrap();
         w(d, S0CR, cr).unwrap();
+    }
+
+    #[test]
+    fn tim8_ch1_request_feeds_a_table_into_the_dac_on_stream_2_channel_7() {
+        // docs/rf-level.md: M2P, 16-bit both sides, MINC, normal mode, NDTR = N, PAR = DHR12R1.
+        let mut d = dma2();
+        let (s2par, s2m0ar, s2ndtr, s2cr) = (
+            0x10 + 2 * 0x18 + 8,
+            0x10 + 2 * 0x18 + 12,
+            0x10 + 2 * 0x18 + 4,
+            0x10 + 2 * 0x18,
+        );
+        w(&mut d, s2par, 0x4000_7408).unwrap();
+        w(&mut d, s2m0ar, 0x2000_0100).unwrap();
+        w(&mut d, s2ndtr, 3).unwrap();
+        let cr = (7 << CR_CHSEL_SHIFT)
+            | (1 << CR_DIR_SHIFT)
+            | (1 << CR_PSIZE_SHIFT)
+            | (1 << CR_MSIZE_SHIFT)
+            | CR_MINC;
+        w(&mut d, s2cr, cr | CR_EN).unwrap();
+        let mut moved = Vec::new();
+        for _ in 0..4 {
+            let mut s = Signals::default();
+            d.on_event(
+                0,
+                Event::DmaRequest(Request::TimCc {
+                    timer: 8,
+                    channel: 1,
+                }),
+                &mut s,
+            );
+            moved.extend(s.copies);
+        }
+        let want: Vec<Copy> = (0..3)
+            .map(|k| Copy {
+                from: 0x2000_0100 + 2 * k,
+                to: 0x4000_7408,
+                size: 2,
+            })
+            .collect();
+        assert_eq!(
+            moved, want,
+            "three items, then the stream is done (EN cleared)"
+        );
+        // Another timer's channel is not on this stream.
+        let mut d = dma2();
+        w(&mut d, s2ndtr, 3).unwrap();
+        w(&mut d, s2cr, cr | CR_EN).unwrap();
+        let mut s = Signals::default();
+        d.on_event(
+            0,
+            Event::DmaRequest(Request::TimCc {
+                timer: 1,
+                channel: 1,
+            }),
+            &mut s,
+        );
+        assert!(s.copies.is_empty());
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //!
 //! Behaviours this model commits to:
 //! - DMAMUX channel n (0..=15) forwards the request whose DMAREQ_ID it holds to DMA1 channel n+1
-//!   (n ≤ 7) or DMA2 channel n−7 (§13.3.2); only requests 5 (ADC1), 34 (LPUART1_RX) and 35
+//!   (n ≤ 7) or DMA2 channel n−7 (§13.3.2); only requests 5 (ADC1), 6 (DAC1_CH1), 49 (TIM8_CH1), 34 (LPUART1_RX) and 35
 //!   (LPUART1_TX) of RM0440 table 91 ("DMAMUX: assignment of multiplexer inputs to resources")
 //!   are modelled. The LPUART1 numbers are taken from stm32-metapac 21's STM32G474RE data
 //!   (`request: Some(34)` / `Some(35)`), which embassy-stm32 programs; they agree with the
@@ -69,6 +69,10 @@ const CCR_DEFINED: u32 = 0x7FFF;
 const DMAREQ_ADC1: u32 = 5;
 const DMAREQ_LPUART1_RX: u32 = 34;
 const DMAREQ_LPUART1_TX: u32 = 35;
+/// DAC1_CH1 and TIM8_CH1: stm32-metapac 21's STM32G474RE data (`request: Some(6)`, `Some(49)`),
+/// the numbers embassy-stm32 programs; not re-read in RM0440 table 91 here.
+const DMAREQ_DAC1_CH1: u32 = 6;
+const DMAREQ_TIM8_CH1: u32 = 49;
 const MUX_CHANNELS: usize = 16;
 
 fn size_bytes(code: u32) -> Option<u8> {
@@ -451,7 +455,12 @@ impl DmaMux {
             Request::Adc1 => Some(DMAREQ_ADC1),
             Request::Lpuart1Rx => Some(DMAREQ_LPUART1_RX),
             Request::Lpuart1Tx => Some(DMAREQ_LPUART1_TX),
-            Request::Usart2Rx | Request::Usart2Tx => None,
+            Request::Dac1Ch1 => Some(DMAREQ_DAC1_CH1),
+            Request::TimCc {
+                timer: 8,
+                channel: 1,
+            } => Some(DMAREQ_TIM8_CH1),
+            Request::Usart2Rx | Request::Usart2Tx | Request::TimCc { .. } => None,
         }
     }
 
@@ -509,9 +518,18 @@ impl Peripheral for DmaMux {
                     return refuse("reserved bits written non-zero".into());
                 }
                 let id = new & CXCR_DMAREQ_ID_MASK;
-                if ![0, DMAREQ_ADC1, DMAREQ_LPUART1_RX, DMAREQ_LPUART1_TX].contains(&id) {
+                if ![
+                    0,
+                    DMAREQ_ADC1,
+                    DMAREQ_DAC1_CH1,
+                    DMAREQ_LPUART1_RX,
+                    DMAREQ_LPUART1_TX,
+                    DMAREQ_TIM8_CH1,
+                ]
+                .contains(&id)
+                {
                     return refuse(format!(
-                        "DMAREQ_ID {id} is not modelled (only 5 = ADC1, 34/35 = LPUART1_RX/TX)"
+                        "DMAREQ_ID {id} is not modelled (only 5 = ADC1, 6 = DAC1_CH1, 34/35 = LPUART1_RX/TX, 49 = TIM8_CH1)"
                     ));
                 }
                 if new & (CXCR_SE | CXCR_SOIE) != 0 {
@@ -660,6 +678,55 @@ mod tests {
     }
 
     #[test]
+    fn tim8_ch1_and_dac1_requests_are_routed_by_their_ids() {
+        // The firmware's G474 envelope DMA: DMAMUX channel 3 (→ DMA1 channel 4) on request 49.
+        let mut mux = DmaMux::new();
+        let mut s = Signals::default();
+        mux.write(0, 3 * 4, DMAREQ_TIM8_CH1, 0xFFFF_FFFF, &mut s)
+            .unwrap();
+        mux.write(0, 4 * 4, DMAREQ_DAC1_CH1, 0xFFFF_FFFF, &mut s)
+            .unwrap();
+        let mut s = Signals::default();
+        mux.on_event(
+            9,
+            Event::DmaRequest(Request::TimCc {
+                timer: 8,
+                channel: 1,
+            }),
+            &mut s,
+        );
+        mux.on_event(10, Event::DmaRequest(Request::Dac1Ch1), &mut s);
+        // TIM1's channel has no DMAMUX id modelled: dropped.
+        mux.on_event(
+            11,
+            Event::DmaRequest(Request::TimCc {
+                timer: 1,
+                channel: 1,
+            }),
+            &mut s,
+        );
+        assert_eq!(
+            s.events,
+            vec![
+                (
+                    9,
+                    Event::DmaChannelRequest {
+                        controller: 1,
+                        channel: 4
+                    }
+                ),
+                (
+                    10,
+                    Event::DmaChannelRequest {
+                        controller: 1,
+                        channel: 5
+                    }
+                ),
+            ]
+        );
+    }
+
+    #[test]
     fn dmamux_routes_adc1_to_the_channels_that_select_it() {
         let mut mux = DmaMux::new();
         w(&mut mux, 0x00, 5).unwrap(); // channel 0 → DMA1 ch1
@@ -705,7 +772,7 @@ mod tests {
         // NBREQ change with EGE set is refused; unmodelled request IDs and sync are refused.
         w(&mut mux, 0x00, 5 | CXCR_EGE).unwrap();
         assert!(w(&mut mux, 0x00, 5 | CXCR_EGE | (3 << 19)).is_err());
-        assert!(w(&mut mux, 0x04, 6).is_err());
+        assert!(w(&mut mux, 0x04, 7).is_err());
         assert!(w(&mut mux, 0x04, CXCR_SE).is_err());
         assert!(w(&mut mux, 0x100, RGCR_GE).is_err());
         assert_eq!(r(&mut mux, 0x80), 0);

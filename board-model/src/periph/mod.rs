@@ -10,6 +10,7 @@
 
 pub mod adc_f4;
 pub mod adc_g4;
+pub mod dac;
 pub mod dma_f4;
 pub mod dma_g4;
 pub mod flash_prog;
@@ -117,6 +118,13 @@ pub enum Request {
     Lpuart1Rx,
     /// LPUART1 transmit (TXE/TXFNF with DMAT), a level: see [`Event::DmaLevel`].
     Lpuart1Tx,
+    /// A timer's capture/compare channel (CCxDE): a pulse at each compare match.
+    TimCc {
+        timer: u8,
+        channel: u8,
+    },
+    /// DAC1 channel 1 (DMAEN1): a pulse at each selected trigger.
+    Dac1Ch1,
 }
 
 /// What one peripheral tells the others. Delivered by the board to every peripheral's `on_event`;
@@ -126,6 +134,10 @@ pub enum Request {
 pub enum Event {
     /// A timer's TRGO pulsed (timer number, 1 = TIM1).
     Trgo { timer: u8 },
+    /// A timer's TRGO changed level where it is a level (master mode "enable", MMS = 001:
+    /// TRGO = CNT_EN). The rising edge also comes as a `Trgo` pulse (what edge-triggered inputs
+    /// see); a slave timer in gated mode follows the level.
+    TrgoLevel { timer: u8, high: bool },
     /// A peripheral raised a DMA request (F4: to the DMA stream whose CHSEL selects it; G4: to
     /// the DMAMUX, which forwards it as `DmaChannelRequest`).
     DmaRequest(Request),

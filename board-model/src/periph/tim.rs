@@ -13,9 +13,30 @@
 //!   preload, force-inactive → PWM1 starts) and one-pulse PWM mode 2; `board/*.rs`: TIM3 TRGO on
 //!   update (MMS = 010) for the ADC.
 //!
-//! Everything else (down/center-aligned counting, input capture, slave mode, DMA requests and
-//! bursts, complementary outputs, break, dead time, the G474's extended OCxM modes, dithering,
-//! UIF remapping) is refused with `Unmodelled`.
+//! - `firmware/src/rf.rs` (RF level, docs/rf-level.md): TIM2 CR2.MMS = 001 (enable) as well as
+//!   010; TIM8 as a slave of TIM2 (SMCR.TS = ITR1, SMS = 100 reset or 101 gated) with its
+//!   TRGO on update for the DAC, and DIER.CC1DE: a DMA request at each CC1 match.
+//!
+//! Slave mode (RM0390 §16.3.19–§16.3.20 / §17.3.15 "Timers and external trigger
+//! synchronization", SMCR §16.4.3 / §17.4.3; RM0440 §28.3 / §29.3 the same): only TS = ITR1 from
+//! the timer `TimerConfig::itr1` names, with SMS = 000 (off), 100 (reset: a rising edge of TRGI
+//! re-initialises the counter and the prescaler and generates an update, as EGR.UG does, and
+//! sets TIF) and 101 (gated: the counter clock runs while TRGI is high and CEN = 1; TIF at each
+//! start and stop). The trigger acts at the master's TRGO time; in gated mode the counter starts
+//! on the next kernel clock edge (as for CEN). The manual's resynchronisation of TRGI (a few
+//! CK_INT cycles, not quantified for the internal triggers) is not modelled: an approximation of
+//! at most a few kernel clocks. Gated mode follows a TRGO *level* (master mode enable, MMS =
+//! 001); a master in update or reset mode gives one-clock pulses, which open the gate for no
+//! whole clock here. MSM (master/slave delay) is refused.
+//!
+//! DMA requests (RM0390 §17.4.4 DIER CCxDE; CR2.CCDS = 0, the only value accepted): a compare
+//! match on channel x with CCxDE = 1 raises `Request::TimCc` at the match. CCxG (EGR) sets CCxIF
+//! but raises no DMA request here (the manual says it does; the firmware does not use it).
+//!
+//! Everything else (down/center-aligned counting, input capture, the other slave modes and
+//! triggers, update/trigger/COM DMA requests and DMA bursts, complementary outputs, break, dead
+//! time, the G474's extended OCxM modes, dithering, UIF remapping) is refused with
+//! `Unmodelled`.
 //!
 //! Time: the kernel clock (CK_INT, here = CK_PSC: internal clock, no slave mode) has edges on a
 //! grid of `ticks_per_cycle(f)` master ticks that starts where the clock was last set. The
@@ -48,6 +69,11 @@ pub struct TimerConfig {
     pub irq_up: u16,
     /// NVIC line of the capture/compare interrupt (the same as `irq_up` for TIM2–TIM5).
     pub irq_cc: u16,
+    /// The timer whose TRGO is this timer's internal trigger ITR1 (SMCR.TS = 001), if the board
+    /// wires one the model knows: TIM8's ITR1 is TIM2 on both chips (RM0390 §16.4.3 table 86
+    /// "TIMx internal trigger connection"; RM0440 §28 TIM8 internal trigger table, ITR1 =
+    /// TIM2_TRGO). Table numbers from the manuals' published structure, not re-read here.
+    pub itr1: Option<u8>,
 }
 
 // Register offsets (RM0390 §16.4.21 / §17.4.21 register maps; RM0440 §28.6 / §29.5 agree up to
@@ -95,7 +121,16 @@ const CR2_MMS3: u32 = 1 << 25;
 
 // SR / EGR (RM0390 §17.4.5–§17.4.6); DIER enables sit at the same bits as the SR flags.
 const SR_UIF: u32 = 1 << 0;
+/// Trigger interrupt flag (set by the slave mode controller; its interrupt, TIE, is refused).
+const SR_TIF: u32 = 1 << 6;
 const EGR_UG: u32 = 1 << 0;
+/// DIER.CC1DE..CC4DE (RM0390 §17.4.4): DMA requests on compare matches.
+const DIER_CCDE: u32 = 0xF << 9;
+// SMCR (RM0390 §17.4.3; RM0440 adds SMS[3] at bit 16 and TS[4:3] at bits 21:20).
+const SMCR_SMS: u32 = 7;
+const SMCR_TS: u32 = 7 << 4;
+const SMS_RESET: u32 = 0b100;
+const SMS_GATED: u32 = 0b101;
 /// UIF and CC1IF..CC4IF: the only flags this model ever sets, and the only enables it accepts.
 const FLAGS_MODELLED: u32 = 0x1F;
 
@@ -139,6 +174,10 @@ impl OcMode {
 struct Core {
     cr1: u32,
     cr2: u32,
+    smcr: u32,
+    /// TRGI's level as the master last signalled it (`Event::TrgoLevel`), kept whatever SMCR
+    /// holds so a slave mode chosen later starts from the right level.
+    trgi_high: bool,
     dier: u32,
     sr: u32,
     ccmr: [u32; 2],
@@ -173,6 +212,8 @@ impl Core {
         Core {
             cr1: 0,
             cr2: 0,
+            smcr: 0,
+            trgi_high: false,
             dier: 0,
             sr: 0,
             ccmr: [0; 2],
@@ -209,6 +250,13 @@ impl Core {
     fn mms(&self) -> u32 {
         (self.cr2 & CR2_MMS) >> 4
     }
+    fn sms(&self) -> u32 {
+        self.smcr & SMCR_SMS
+    }
+    /// Gated mode with TRGI low: the counter clock is stopped.
+    fn gated_off(&self) -> bool {
+        self.sms() == SMS_GATED && !self.trgi_high
+    }
 }
 
 /// The simulated part of a timer: `Core` plus its place in time. Cloned to look ahead.
@@ -227,6 +275,8 @@ struct State {
     advanced: bool,
     /// 2^bits.
     modulus: u64,
+    /// Planted defect: CCxDE raises no DMA request (`Timer::plant_no_cc_dma`).
+    no_cc_dma: bool,
 }
 
 /// Look-ahead budget of `next_event` (steps). Only reached with a huge repetition counter.
@@ -236,7 +286,10 @@ impl State {
     /// The counter advances: CEN set, a clock, and ARR ≠ 0 ("the counter is blocked while the
     /// auto-reload value is null", RM0390 §17.4.12).
     fn counting(&self) -> bool {
-        self.core.cr1 & CR1_CEN != 0 && self.tick > 0 && self.core.arr_sh != 0
+        self.core.cr1 & CR1_CEN != 0
+            && self.tick > 0
+            && self.core.arr_sh != 0
+            && !self.core.gated_off()
     }
 
     /// First kernel-clock edge at or after `t`.
@@ -317,6 +370,21 @@ impl State {
         out.events.push((t, Event::Trgo { timer: self.number }));
     }
 
+    /// TRGO as a level in master mode enable (MMS = 001): CNT_EN = CEN here (no slave mode on
+    /// a master in this model's boards). A rising edge is also a `Trgo` pulse.
+    fn trgo_level(&self, t: Time, high: bool, out: &mut Signals) {
+        if high {
+            self.trgo(t, out);
+        }
+        out.events.push((
+            t,
+            Event::TrgoLevel {
+                timer: self.number,
+                high,
+            },
+        ));
+    }
+
     /// Update event (UEV) at `t`, from an overflow (`by_ug` false) or from EGR.UG.
     fn update_event(&mut self, t: Time, out: &mut Signals, by_ug: bool) {
         let c = &mut self.core;
@@ -347,11 +415,15 @@ impl State {
         // One-pulse mode: "counter stops counting at the next update event (clearing the bit
         // CEN)" (RM0390 §17.4.1, §17.3.10). Whether a UG-generated update also clears CEN is not
         // stated; it is taken as one (the firmware only issues UG with the counter stopped).
+        let stopped = c.cr1 & CR1_OPM != 0 && c.cr1 & CR1_CEN != 0;
         if c.cr1 & CR1_OPM != 0 {
             c.cr1 &= !CR1_CEN;
         }
         if mms == 2 || (by_ug && mms == 0) {
             self.trgo(t, out);
+        }
+        if stopped && mms == 1 {
+            self.trgo_level(t, false, out);
         }
     }
 
@@ -376,12 +448,21 @@ impl State {
     /// CCxIF is set, and the match modes act on OCxREF. Matches are counted on counter steps
     /// only, not on CNT or CCRx writes nor on UG. The later manuals' "CCxIF goes high at overflow
     /// when CCRx > ARR" (RM0440 SR) is not modelled.
-    fn compare_match(&mut self) {
+    fn compare_match(&mut self, t: Time, out: &mut Signals) {
         for ch in 0..4 {
             if self.core.cnt != self.core.ccr_sh[ch] {
                 continue;
             }
             self.core.sr |= 1 << (ch + 1);
+            if self.core.dier & (1 << (9 + ch)) != 0 && !self.no_cc_dma {
+                out.events.push((
+                    t,
+                    Event::DmaRequest(super::Request::TimCc {
+                        timer: self.number,
+                        channel: ch as u8 + 1,
+                    }),
+                ));
+            }
             match self.core.mode(ch) {
                 OcMode::ActiveOnMatch => self.core.ocref[ch] = true,
                 OcMode::InactiveOnMatch => self.core.ocref[ch] = false,
@@ -437,7 +518,7 @@ impl State {
             self.overflow(t, out);
         }
         // After the shadow load, so a CCRx = 0 loaded at this update matches at CNT = 0.
-        self.compare_match();
+        self.compare_match(t, out);
         self.track_pwm(before, None);
         self.update_levels(t, out);
         overflow
@@ -576,6 +657,10 @@ pub struct Timer {
     /// Signals produced where the interface gives no `Signals` (a clock change, a reset): handed
     /// out with the next access or `advance`.
     pending: Signals,
+    /// Planted defects (`BOARD_MODEL_PLANT`, to show a check fails): gated mode ignores TRGI
+    /// (the counter runs whenever CEN = 1); EGR.UG makes no TRGO; CCxDE raises no DMA request.
+    pub plant_gate_ignored: bool,
+    pub plant_ug_no_trgo: bool,
 }
 
 impl Timer {
@@ -596,11 +681,14 @@ impl Timer {
                 number: cfg.number,
                 advanced: cfg.advanced,
                 modulus,
+                no_cc_dma: false,
             },
             cfg,
             hz: 0,
             clock_error: None,
             pending: Signals::default(),
+            plant_gate_ignored: false,
+            plant_ug_no_trgo: false,
         }
     }
 
@@ -636,6 +724,16 @@ impl Timer {
             self.cfg.name
         );
         self.st.core.level[channel as usize - 1]
+    }
+
+    /// Planted defect: CCxDE raises no DMA request.
+    pub fn plant_no_cc_dma(&mut self) {
+        self.st.no_cc_dma = true;
+    }
+
+    /// Planted defect: the gate starts open (see `plant_gate_ignored`).
+    pub fn plant_gate_open(&mut self) {
+        self.st.core.trgi_high = true;
     }
 
     /// Kernel clock (CK_INT) in Hz; 0 before the first `set_clocks`.
@@ -702,8 +800,9 @@ impl Timer {
                 }
                 // MMS = 001 enable: TRGO is CNT_EN, a level; its rising edge is emitted as a
                 // pulse (what an edge-triggered ADC sees). The falling edge is not an event.
-                if old & CR1_CEN == 0 && v & CR1_CEN != 0 && c.mms() == 1 {
-                    self.st.trgo(now, out);
+                if (old ^ v) & CR1_CEN != 0 && c.mms() == 1 {
+                    let high = v & CR1_CEN != 0;
+                    self.st.trgo_level(now, high, out);
                 }
             }
             CR2 => {
@@ -735,31 +834,58 @@ impl Timer {
                 }
                 let old_mms = self.st.core.mms();
                 self.st.core.cr2 = v;
-                if mms == 1 && old_mms != 1 && self.st.core.cr1 & CR1_CEN != 0 {
-                    self.st.trgo(now, out);
+                if (mms == 1) != (old_mms == 1) && self.st.core.cr1 & CR1_CEN != 0 {
+                    self.st.trgo_level(now, mms == 1, out);
                 }
             }
             SMCR => {
-                let v = merge(0, value, mask);
-                if v != 0 {
+                let v = merge(self.st.core.smcr, value, mask);
+                let sms = v & SMCR_SMS;
+                let ts = (v & SMCR_TS) >> 4;
+                if v & !(SMCR_SMS | SMCR_TS) != 0 {
                     return self.unmodelled(
                         offset,
                         value,
                         format!(
-                            "SMCR={v:#x}: slave mode, triggers and external clock are not modelled"
+                            "SMCR={v:#x}: MSM, external trigger/clock and the G474's SMS[3]/TS[4:3] are not modelled"
                         ),
                     );
+                }
+                if sms != 0 && !(sms == SMS_RESET || sms == SMS_GATED) {
+                    return self.unmodelled(
+                        offset,
+                        value,
+                        format!("SMCR.SMS={sms:03b}: only 000, 100 (reset) and 101 (gated) are modelled"),
+                    );
+                }
+                if sms != 0 && (ts != 1 || self.cfg.itr1.is_none()) {
+                    return self.unmodelled(
+                        offset,
+                        value,
+                        format!(
+                            "SMCR.TS={ts:03b}: only ITR1 from a modelled master is modelled ({})",
+                            match self.cfg.itr1 {
+                                Some(m) => format!("ITR1 = TIM{m}"),
+                                None => "this timer has none".into(),
+                            }
+                        ),
+                    );
+                }
+                let was = self.st.counting();
+                self.st.core.smcr = v;
+                if self.st.counting() && !was {
+                    self.st.at = self.st.align_up(now);
                 }
             }
             DIER => {
                 let v = merge(self.st.core.dier, value, mask);
-                if v & !FLAGS_MODELLED != 0 {
+                if v & !(FLAGS_MODELLED | DIER_CCDE) != 0 {
                     return self.unmodelled(
                         offset,
                         value,
                         format!(
-                            "DIER bits {:#x} (DMA requests, trigger/COM/break interrupts) are not modelled",
-                            v & !FLAGS_MODELLED
+                            "DIER bits {:#x} (update/trigger/COM DMA requests, trigger/COM/break interrupts) are not modelled",
+                            v & !(FLAGS_MODELLED | DIER_CCDE)
                         ),
                     );
                 }
@@ -785,7 +911,16 @@ impl Timer {
                 // CCxG on an output channel sets CCxIF (RM0390 §17.4.6).
                 self.st.core.sr |= v & !EGR_UG & FLAGS_MODELLED;
                 if v & EGR_UG != 0 {
+                    let n = out.events.len();
                     self.st.ug(now, out);
+                    if self.plant_ug_no_trgo {
+                        let me = self.cfg.number;
+                        let mut k = 0;
+                        out.events.retain(|e| {
+                            k += 1;
+                            k <= n || e.1 != Event::Trgo { timer: me }
+                        });
+                    }
                 }
             }
             CCMR1 | CCMR2 => {
@@ -972,8 +1107,7 @@ impl Peripheral for Timer {
         Ok(match offset {
             CR1 => c.cr1,
             CR2 => c.cr2,
-            // Slave mode is refused on write, so SMCR keeps its reset value.
-            SMCR => 0,
+            SMCR => c.smcr,
             DIER => c.dier,
             SR => c.sr,
             // Write-only.
@@ -1044,6 +1178,50 @@ impl Peripheral for Timer {
         self.st.run(now, out);
     }
 
+    /// The master's TRGO on ITR1 (see the module doc, "Slave mode").
+    fn on_event(&mut self, now: Time, event: Event, out: &mut Signals) {
+        let Some(master) = self.cfg.itr1 else {
+            return;
+        };
+        let selected = (self.st.core.smcr & SMCR_TS) >> 4 == 1;
+        match event {
+            Event::TrgoLevel { timer, high } if timer == master => {
+                if self.clock_error.is_some() {
+                    return;
+                }
+                self.flush_pending(out);
+                self.st.run(now, out);
+                let was = self.st.counting();
+                let changed = self.st.core.trgi_high != high;
+                self.st.core.trgi_high = high || self.plant_gate_ignored;
+                if selected && self.st.core.sms() == SMS_GATED && changed {
+                    // TIF at each start and stop of the gated counter.
+                    self.st.core.sr |= SR_TIF;
+                    if self.st.counting() && !was {
+                        self.st.at = self.st.align_up(now);
+                    }
+                    out.replan = true;
+                }
+            }
+            Event::Trgo { timer }
+                if timer == master
+                    && selected
+                    && self.st.core.sms() == SMS_RESET
+                    && self.clock_error.is_none() =>
+            {
+                self.flush_pending(out);
+                self.st.run(now, out);
+                self.st.core.sr |= SR_TIF;
+                // Counter and prescaler re-initialised, an update generated (URS counts it
+                // as UG: RM0390 §17.4.1 URS "update generation through the slave mode
+                // controller").
+                self.st.ug(now, out);
+                out.replan = true;
+            }
+            _ => {}
+        }
+    }
+
     fn next_event(&self) -> Option<Time> {
         let pending = self
             .pending
@@ -1100,9 +1278,10 @@ impl Peripheral for Timer {
     fn reset(&mut self, now: Time) {
         let mut pending = std::mem::take(&mut self.pending);
         self.st.run(now, &mut pending);
-        let level = self.st.core.level;
+        let (level, trgi) = (self.st.core.level, self.st.core.trgi_high);
         self.st.core = Core::reset(self.st.modulus);
         self.st.core.level = level;
+        self.st.core.trgi_high = trgi;
         // Outputs fall with the reset; recorded channels show it.
         self.st.update_levels(now, &mut pending);
         self.pending = pending;
@@ -1158,6 +1337,7 @@ mod tests {
                 2 => (32, false, ClockDomain::TimApb1, 28, 28, "TIM2"),
                 3 => (16, false, ClockDomain::TimApb1, 29, 29, "TIM3"),
                 4 => (16, false, ClockDomain::TimApb1, 30, 30, "TIM4"),
+                8 => (16, true, ClockDomain::TimApb2, 44, 46, "TIM8"),
                 _ => unreachable!(),
             };
             let mut t = Timer::new(TimerConfig {
@@ -1168,6 +1348,7 @@ mod tests {
                 name,
                 irq_up,
                 irq_cc,
+                itr1: (number == 8).then_some(2),
             });
             t.set_clocks(
                 0,
@@ -1783,7 +1964,7 @@ mod tests {
         assert!(h.write_err(0, CCMR1, 0x01).why.contains("input capture"));
         assert!(h.write_err(0, CCMR1, 1 << 16).why.contains("OC1M[3]"));
         assert!(h.write_err(0, CCMR2, 0x80 << 8).why.contains("OC4CE"));
-        assert!(h.write_err(0, SMCR, 0b100).why.contains("SMCR"));
+        assert!(h.write_err(0, SMCR, 0b100).why.contains("ITR1"));
         assert!(h.write_err(0, CR2, 0b011 << 4).why.contains("MMS"));
         assert!(h.write_err(0, DIER, 1 << 8).why.contains("DIER"));
         assert!(h.write_err(0, CCER, 1 << 2).why.contains("CC1NE"));
@@ -1800,6 +1981,150 @@ mod tests {
             .contains("PWM modes 1 and 2"));
         let mut t1 = H::new(1, 180 * MHZ);
         assert!(t1.write_err(0, BDTR, BDTR_MOE | 0x40).why.contains("BDTR"));
+    }
+
+    const SMCR_ITR1_RESET: u32 = (1 << 4) | SMS_RESET;
+    const SMCR_ITR1_GATED: u32 = (1 << 4) | SMS_GATED;
+
+    fn level(h: &mut H, t: Time, high: bool) {
+        let mut s = Signals::default();
+        h.t.on_event(t, Event::TrgoLevel { timer: 2, high }, &mut s);
+        if high {
+            h.t.on_event(t, Event::Trgo { timer: 2 }, &mut s);
+        }
+        h.take(s);
+    }
+
+    #[test]
+    fn slave_reset_mode_turns_a_master_trgo_into_an_update_and_trgo() {
+        // TIM8 at 180 MHz (20 ticks), PSC = ARR = 0xFFFF, TRGO on update, reset mode on ITR1.
+        let mut h = H::new(8, 180 * MHZ);
+        h.w(0, PSC, 0xFFFF);
+        h.w(0, ARR, 0xFFFF);
+        h.w(0, CR2, 0b010 << 4);
+        h.w(0, SMCR, SMCR_ITR1_RESET);
+        h.w(0, CR1, CR1_CEN);
+        h.trgos();
+        assert_eq!(h.r(0, SMCR), SMCR_ITR1_RESET);
+        let mut s = Signals::default();
+        // Another timer's TRGO is not ITR1.
+        h.t.on_event(1000, Event::Trgo { timer: 3 }, &mut s);
+        h.take(s);
+        assert!(h.trgos().is_empty());
+        let mut s = Signals::default();
+        h.t.on_event(5000, Event::Trgo { timer: 2 }, &mut s);
+        assert!(s.replan);
+        h.take(s);
+        assert_eq!(
+            h.trgos(),
+            vec![5000],
+            "reset → update → TRGO at the master's TRGO"
+        );
+        assert_eq!(h.r(5000, SR) & (SR_UIF | SR_TIF), SR_UIF | SR_TIF);
+        // Counter and prescaler re-initialised: CNT 0 until 65 536 kernel clocks later.
+        assert_eq!(h.r(5000 + 65_535 * 20, CNT), 0);
+        assert_eq!(h.r(5000 + 65_536 * 20 + 20, CNT), 1);
+        // Without a slave mode the master's TRGO does nothing.
+        h.w(2_000_000, SMCR, 0);
+        let mut s = Signals::default();
+        h.t.on_event(2_000_000, Event::Trgo { timer: 2 }, &mut s);
+        h.take(s);
+        assert!(h.trgos().is_empty());
+    }
+
+    #[test]
+    fn slave_gated_mode_counts_only_while_the_master_runs() {
+        // Triangle envelope plan: PSC 0, ARR = step − 1 = 99, CCR1 = 50, TRGO on update.
+        let mut h = H::new(8, 180 * MHZ);
+        h.w(0, ARR, 99);
+        h.w(0, CCR1, 50);
+        h.w(0, CR2, 0b010 << 4);
+        h.w(0, SMCR, SMCR_ITR1_GATED);
+        h.w(0, CR1, CR1_CEN);
+        h.trgos();
+        assert_eq!(h.t.next_event(), None, "gate closed: nothing happens");
+        assert_eq!(h.r(10_000, CNT), 0);
+        // Gate opens at 10 010: counting from the next kernel edge (10 020); update after 100
+        // clocks (12 020), then every 2 000 ticks.
+        level(&mut h, 10_010, true);
+        assert_eq!(h.r(10_010, SR) & SR_TIF, SR_TIF);
+        h.adv(16_020);
+        assert_eq!(h.trgos(), vec![12_020, 14_020, 16_020]);
+        // Gate closes at 17_000 (CNT 49): the counter holds.
+        level(&mut h, 17_000, false);
+        assert_eq!(h.r(17_000, CNT), 49);
+        assert_eq!(h.r(1_000_000, CNT), 49);
+        assert!(h.trgos().is_empty());
+        // Reopened at 1 000 000: resumes from 49, update 51 clocks later.
+        level(&mut h, 1_000_000, true);
+        h.adv(1_000_000 + 51 * 20);
+        assert_eq!(h.trgos(), vec![1_000_000 + 51 * 20]);
+    }
+
+    #[test]
+    fn cc1de_raises_a_dma_request_at_each_cc1_match() {
+        let mut h = H::new(8, 180 * MHZ);
+        h.w(0, ARR, 99);
+        h.w(0, CCR1, 50);
+        h.w(0, DIER, 1 << 9);
+        h.w(0, CR1, CR1_CEN);
+        h.log.events.clear();
+        // CEN at 0 (a kernel edge): CNT = k at 20 k, CNT 50 at 1 000, then every 100 clocks.
+        assert_eq!(h.t.next_event(), Some(1000));
+        h.adv(5000);
+        let req: Vec<Time> = h
+            .log
+            .events
+            .iter()
+            .filter(|e| {
+                e.1 == Event::DmaRequest(super::super::Request::TimCc {
+                    timer: 8,
+                    channel: 1,
+                })
+            })
+            .map(|e| e.0)
+            .collect();
+        assert_eq!(req, vec![1000, 3000, 5000]);
+        assert!(
+            h.write_err(0, DIER, 1 << 8).why.contains("DIER"),
+            "UDE is refused"
+        );
+    }
+
+    #[test]
+    fn master_enable_mode_signals_cen_as_a_level() {
+        // TIM2 MMS = 001, one-pulse: TRGO rises at CEN and falls at the update that clears it.
+        let mut h = H::new(2, 90 * MHZ);
+        h.w(0, ARR, 9);
+        h.w(0, CR2, 0b001 << 4);
+        h.log.events.clear();
+        h.w(400, CR1, CR1_OPM | CR1_CEN);
+        h.adv(10_000);
+        let lv: Vec<(Time, bool)> = h
+            .log
+            .events
+            .iter()
+            .filter_map(|e| match e.1 {
+                Event::TrgoLevel { timer: 2, high } => Some((e.0, high)),
+                _ => None,
+            })
+            .collect();
+        // CEN at 400 (a kernel edge): CNT 1 at 440 … 9 at 760, the wrap (update) at 800.
+        assert_eq!(lv, vec![(400, true), (800, false)]);
+        assert_eq!(h.trgos(), vec![400]);
+    }
+
+    #[test]
+    fn unmodelled_slave_settings_are_refused() {
+        let mut h = H::new(8, 180 * MHZ);
+        assert!(h
+            .write_err(0, SMCR, (2 << 4) | SMS_RESET)
+            .why
+            .contains("TS"));
+        assert!(h.write_err(0, SMCR, (1 << 4) | 0b110).why.contains("SMS"));
+        assert!(h.write_err(0, SMCR, 1 << 7).why.contains("MSM"));
+        let mut t2 = H::new(2, 90 * MHZ);
+        assert!(t2.write_err(0, SMCR, SMCR_ITR1_RESET).why.contains("none"));
     }
 
     #[test]
