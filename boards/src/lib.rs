@@ -338,6 +338,30 @@ pub struct RfLevelDef {
     pub table: rf_level::LevelTable,
 }
 
+impl RfLevelDef {
+    /// The RF level of both Nucleo-64 boards: DAC1_OUT1 on PA4 (Arduino A2; UM1724 / UM2505
+    /// pinouts), TIM8 as envelope timer — free on both, a DAC1 trigger on both (TSEL1 = 1, the
+    /// code embassy-stm32 generates for TIM8_TRGO) and slave of TIM2 through ITR1 (TS = 1) —
+    /// clocked at `envelope_timer_clk_hz`, its CC1 request on `envelope_dma`, and the reference
+    /// circuit's calibration table.
+    pub const fn nucleo64(envelope_timer_clk_hz: u32, envelope_dma: &'static str) -> Self {
+        Self {
+            dac_pin: Pin {
+                port: 'A',
+                pin: 4,
+                af: None,
+                header: "A2 (CN8-3), morpho CN7-32",
+            },
+            envelope_timer: "TIM8",
+            envelope_timer_clk_hz,
+            dac_tsel: 1,
+            envelope_ts: 1,
+            envelope_dma,
+            table: rf_level::REFERENCE_TABLE,
+        }
+    }
+}
+
 /// One board: chip, clocks, timers, pins, memory.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BoardDef {

@@ -113,23 +113,12 @@ pub const NUCLEO_F446RE: BoardDef = BoardDef {
     sample_rate_hz: SAMPLE_RATE_HZ,
     adc_oversample: ADC_OVERSAMPLE,
 
+    // PA4 = DAC1_OUT1 (Arduino A2), the amplifier's gain control; TIM8 paces envelopes.
+    rf_level: crate::RfLevelDef::nucleo64(
+        CLOCKS.apb2_timer_hz(),
+        "DMA2 stream 2 channel 7 (TIM8_CH1, RM0390 table 29)",
+    ),
     // PB5 (Arduino D4): plain push-pull GPIO, RF amplifier arm/interlock.
-    // PA4 = DAC1_OUT1 (Arduino A2): the amplifier's gain control. TIM8 (free on this board) paces
-    // envelopes: slave of TIM2 (ITR1), its TRGO triggers the DAC.
-    rf_level: crate::RfLevelDef {
-        dac_pin: Pin {
-            port: 'A',
-            pin: 4,
-            af: None,
-            header: "A2 (CN8-3), morpho CN7-32",
-        },
-        envelope_timer: "TIM8",
-        envelope_timer_clk_hz: CLOCKS.apb2_timer_hz(),
-        dac_tsel: 1,
-        envelope_ts: 1,
-        envelope_dma: "DMA2 stream 2 channel 7 (TIM8_CH1, RM0390 table 29)",
-        table: crate::rf_level::REFERENCE_TABLE,
-    },
     rf_arm_pin: Pin {
         port: 'B',
         pin: 5,

@@ -112,22 +112,11 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
     sample_rate_hz: SAMPLE_RATE_HZ,
     adc_oversample: ADC_OVERSAMPLE,
 
-    // PA4 = DAC1_OUT1 (Arduino A2): the amplifier's gain control. TIM8 (free on this board) paces
-    // envelopes: slave of TIM2 (ITR1), its TRGO triggers the DAC.
-    rf_level: crate::RfLevelDef {
-        dac_pin: Pin {
-            port: 'A',
-            pin: 4,
-            af: None,
-            header: "A2 (CN8-3), morpho CN7-32",
-        },
-        envelope_timer: "TIM8",
-        envelope_timer_clk_hz: CLOCKS.apb2_timer_hz(),
-        dac_tsel: 1,
-        envelope_ts: 1,
-        envelope_dma: "DMA1 channel 4 (DMAMUX1 channel 3, request 49 = TIM8_CH1)",
-        table: crate::rf_level::REFERENCE_TABLE,
-    },
+    // PA4 = DAC1_OUT1 (Arduino A2), the amplifier's gain control; TIM8 paces envelopes.
+    rf_level: crate::RfLevelDef::nucleo64(
+        CLOCKS.apb2_timer_hz(),
+        "DMA1 channel 4 (DMAMUX1 channel 3, request 49 = TIM8_CH1)",
+    ),
     rf_arm_pin: Pin {
         port: 'B',
         pin: 5,

@@ -5,7 +5,6 @@
 //! rail fault drops the level to 0 with the enables (`docs/rf-level.md`).
 
 use host_sim::adc::{FaultKind, FaultWindow};
-use host_sim::metrics;
 use host_sim::rf::permille_at_code;
 use host_sim::sim::{self, SimParams, SimResult};
 use host_sim::trajectory::Trajectory;
@@ -276,17 +275,7 @@ fn a_rail_fault_drops_the_level_with_the_enables() {
         // Where the pulse is without the fault; the rail goes 2 ms into it.
         let clean = sim::run(&stroke(vec![])).unwrap();
         let fault_at_s = clean.waveform.clocks_to_s(the_pulse(&clean).0) + 0.002;
-        let p = SimParams::new(
-            &NUCLEO_F446RE,
-            Trajectory::Constant {
-                from_um: 35_000.0,
-                speed_um_s: 20_000.0,
-            },
-            1.0,
-        )
-        .with_config(lines_config(Envelope::Triangular, 1000))
-        .with_noise(2.0, 1)
-        .with_faults(vec![FaultWindow {
+        let p = stroke(vec![FaultWindow {
             kind,
             start_us: (fault_at_s * 1e6) as u64,
             end_us: ((fault_at_s + 0.1) * 1e6) as u64,
@@ -309,6 +298,5 @@ fn a_rail_fault_drops_the_level_with_the_enables() {
             .waveform
             .codes_within(cut, r.clocks(((fault_at_s + 0.1) * 1e6) as u64));
         assert!(later.iter().all(|e| e.code == 0), "{later:?}");
-        let _ = metrics::ridges_crossed;
     }
 }

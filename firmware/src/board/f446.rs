@@ -212,13 +212,7 @@ impl EnvelopeDma {
         use pac::dma::vals;
         let (dma, st) = (pac::DMA2, ENV_STREAM);
         let s = dma.st(st);
-        dma.ifcr(st / 4).write(|w| {
-            w.set_tcif(st % 4, true);
-            w.set_htif(st % 4, true);
-            w.set_teif(st % 4, true);
-            w.set_dmeif(st % 4, true);
-            w.set_feif(st % 4, true);
-        });
+        clear_stream_flags(dma, st);
         s.par().write_value(dst);
         s.m0ar().write_value(src.as_ptr() as u32);
         s.ndtr().write(|w| w.set_ndt(src.len() as u16));
@@ -373,13 +367,7 @@ impl Sampler {
         // buffer's start, where `clear` puts the ring buffer's indices.
         let (dma, st) = (pac::DMA2, DMA_STREAM);
         while dma.st(st).cr().read().en() {}
-        dma.ifcr(st / 4).write(|w| {
-            w.set_tcif(st % 4, true);
-            w.set_htif(st % 4, true);
-            w.set_teif(st % 4, true);
-            w.set_dmeif(st % 4, true);
-            w.set_feif(st % 4, true);
-        });
+        clear_stream_flags(dma, st);
         dma.st(st).ndtr().write(|w| w.set_ndt(DMA_LEN as u16));
         // SR flags are rc_w0.
         adc.sr().modify(|w| {
@@ -409,4 +397,16 @@ fn trigger_timer(tim: Peri<'static, TIM3>) -> Timer<'static, TIM3> {
     t.regs_core().psc().write_value(psc as u16);
     t.set_max_compare_value(arr as u16); // ARR, then UG latches PSC/ARR (a TRGO pulse)
     t
+}
+
+/// Clears every event flag of DMA stream `st` (LIFCR/HIFCR, RM0390 §9.5): a stream is only
+/// re-enabled with its flags clear (RM0390 §9.3, "Stream configuration procedure").
+fn clear_stream_flags(dma: pac::dma::Dma, st: usize) {
+    dma.ifcr(st / 4).write(|w| {
+        w.set_tcif(st % 4, true);
+        w.set_htif(st % 4, true);
+        w.set_teif(st % 4, true);
+        w.set_dmeif(st % 4, true);
+        w.set_feif(st % 4, true);
+    });
 }
