@@ -394,6 +394,14 @@ mod tests {
             .check(),
             Ok(())
         );
+        // Monotonic, not strictly: a flat run (levels under a VGA's floor share a code) passes.
+        assert_eq!(
+            LevelTable {
+                points: &[p!(0, 0), p!(5, 300), p!(7, 300), p!(1000, 4095)]
+            }
+            .check(),
+            Ok(())
+        );
     }
 
     #[test]
