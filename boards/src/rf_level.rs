@@ -150,15 +150,22 @@ impl LevelTable {
     pub fn code(&self, permille: u16) -> u16 {
         let l = permille.min(1000);
         let p = self.points;
-        // Index of the first point at or above l (p[0] = 0 ≤ l ≤ 1000 = last, checked).
-        let hi = p.partition_point(|q| q.permille < l).min(p.len() - 1);
-        if hi == 0 || p[hi].permille == l {
-            return p[hi].code;
+        // The segment that ends at the first point above `l` (the last segment at 1000 ‰). On
+        // a checked table p[0] is 0 ‰ and levels rise; an unchecked one gets a code, no panic.
+        let hi = p
+            .partition_point(|q| q.permille <= l)
+            .min(p.len().saturating_sub(1))
+            .max(1);
+        let (Some(a), Some(b)) = (p.get(hi - 1), p.get(hi)) else {
+            return p.first().map_or(0, |q| q.code);
+        };
+        let span = b.permille.saturating_sub(a.permille) as u32;
+        if span == 0 {
+            return a.code;
         }
-        let (a, b) = (p[hi - 1], p[hi]);
-        let span = (b.permille - a.permille) as u32;
-        let rise = (b.code - a.code) as u32;
-        a.code + (rise * (l - a.permille) as u32 / span) as u16
+        let rise = b.code.saturating_sub(a.code) as u32;
+        let run = l.saturating_sub(a.permille) as u32;
+        a.code + (rise * run / span) as u16
     }
 }
 
@@ -371,8 +378,8 @@ mod tests {
                 "last point is 999 ‰; it must be 1000 ‰",
             ),
             (
-                &[p!(0, 0), p!(500, 5), p!(500, 6), p!(1000, 9)],
-                "point 2: level 500 ‰ must be above the previous point's 500 ‰",
+                &[p!(0, 0), p!(500, 5), p!(400, 6), p!(1000, 9)],
+                "point 2: level 400 ‰ must be above the previous point's 500 ‰",
             ),
             (
                 &[p!(0, 0), p!(500, 7), p!(1000, 6)],
@@ -415,6 +422,29 @@ mod tests {
         assert_eq!(t.code(550), 1550);
         assert_eq!(t.code(1000), 2000);
         assert_eq!(t.code(u16::MAX), 2000);
+        assert_eq!(t.code(99), 1090);
+        assert_eq!(t.code(101), 1101);
+        // Unchecked tables get a code, never a panic.
+        for bad in [
+            LevelTable { points: &[] },
+            LevelTable {
+                points: &[p!(0, 7)],
+            },
+            LevelTable {
+                points: &[p!(0, 9), p!(0, 5), p!(10, 1)],
+            },
+        ] {
+            for l in [0, 5, 1000] {
+                let _ = bad.code(l);
+            }
+        }
+        assert_eq!(
+            LevelTable {
+                points: &[p!(0, 7)]
+            }
+            .code(500),
+            7
+        );
         // Monotonic over every level of the reference table.
         let codes: std::vec::Vec<u16> = (0..=1000).map(|l| REFERENCE_TABLE.code(l)).collect();
         assert!(codes.windows(2).all(|w| w[0] <= w[1]));
@@ -448,5 +478,11 @@ mod tests {
         assert_eq!(b.step_clocks, 625);
         // Shorter than two steps: still 2 entries.
         assert_eq!(triangle_plan(100, 150_000_000).entries, 2);
+        // 10 s at 180 MHz: the step stops at the 16-bit counter's 65 536 clocks (the firmware
+        // prescales such pulses first).
+        assert_eq!(
+            triangle_plan(1_800_000_000, 180_000_000).step_clocks,
+            65_536
+        );
     }
 }
