@@ -178,7 +178,8 @@ impl LinePulses {
             Envelope::Triangular => lines.pulse_us / 2 + sample_period_us / 2,
             Envelope::Rectangular => 0,
         };
-        let lead_s_q32 = ((lead_us as i64) << 32) / 1_000_000;
+        // Rounded to nearest: 5 050 µs at 200 mm/s is 1 010 µm, not 1 009.
+        let lead_s_q32 = (((lead_us as i64) << 32) + 500_000) / 1_000_000;
         Ok(Some(Self {
             lines: lines.clone(),
             pulse,
@@ -252,8 +253,11 @@ impl LineTracker {
         velocity_um_s: Option<i32>,
         t_us: u32,
     ) -> LineStep {
+        // On the speed's magnitude, so both directions round alike (an arithmetic shift floors
+        // a negative product towards −∞).
         let lead_um = velocity_um_s.map_or(0, |v| {
-            ((v as i64 * lines.lead_s_q32) >> 32).clamp(-MAX_LINE_LEAD_UM, MAX_LINE_LEAD_UM) as i32
+            let ahead = ((v.unsigned_abs() as i64 * lines.lead_s_q32) >> 32).min(MAX_LINE_LEAD_UM);
+            (if v.is_negative() { -ahead } else { ahead }) as i32
         });
         let fired = self.update_ahead(&lines.lines, position_um, lead_um);
         if let Some(start) = self.pulse_start_us {
@@ -556,5 +560,57 @@ mod tests {
         assert_eq!(t.update_ahead(&l, 9_000, -400), None);
         assert_eq!(t.update_ahead(&l, 9_999, -400), None);
         assert_eq!(t.update_ahead(&l, 10_000, -400), Some(0));
+    }
+
+    /// The lead a compiled triangle fires with: velocity × (half the pulse + half a sample
+    /// period), to the µm — 10 ms pulses sampled every 100 µs lead by 5.05 ms of travel: 1 010 µm
+    /// at 200 mm/s, 101 µm at 20 mm/s, the other way when moving down — and none for rectangles
+    /// or without a velocity.
+    #[test]
+    fn a_triangle_leads_by_half_the_pulse_and_half_a_sample() {
+        let timer = crate::burst::TEST_TIMER;
+        let limits = SafetyLimits::default();
+        let fire_from = |envelope, v: Option<i32>, up: bool| -> i32 {
+            let mut l = lines();
+            l.envelope = envelope;
+            let c = LinePulses::compile(&l, &timer, &limits, 100_000, 100)
+                .unwrap()
+                .unwrap();
+            // Approach line 0 (10 mm) one µm at a time; where does it fire?
+            let mut t = LineTracker::default();
+            let path: std::vec::Vec<i32> = if up {
+                (7_000..=10_000).collect()
+            } else {
+                (10_000..=13_000).rev().collect()
+            };
+            for p in path {
+                if let LineStep::Fire { line: 0, .. } = t.step(&c, p, v, 0) {
+                    return p;
+                }
+            }
+            panic!("never fired");
+        };
+        assert_eq!(
+            fire_from(Envelope::Triangular, Some(200_000), true),
+            10_000 - 1_010
+        );
+        assert_eq!(
+            fire_from(Envelope::Triangular, Some(20_000), true),
+            10_000 - 101
+        );
+        assert_eq!(
+            fire_from(Envelope::Triangular, Some(-200_000), false),
+            10_000 + 1_010
+        );
+        assert_eq!(fire_from(Envelope::Triangular, None, true), 10_000);
+        assert_eq!(
+            fire_from(Envelope::Rectangular, Some(200_000), true),
+            10_000
+        );
+        // A glitch of 10 m/s leads by the 2 mm cap, not 50 mm.
+        assert_eq!(
+            fire_from(Envelope::Triangular, Some(10_000_000), true),
+            10_000 - 2_000
+        );
     }
 }
