@@ -17,6 +17,8 @@ pub mod frame;
 pub mod msg;
 pub mod session;
 pub mod stream;
+#[cfg(feature = "testing")]
+pub mod testing;
 
 use crc::{Crc, CRC_32_ISO_HDLC};
 use saw_core::scene::Config;

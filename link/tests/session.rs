@@ -3,74 +3,17 @@
 //! reset, and bad frames are answered with a typed error while the link stays usable.
 
 use embassy_futures::block_on;
-use saw_core::burst::BurstTimer;
-use saw_core::controller::{ConfigError, Controller, Telemetry};
+use saw_core::controller::ConfigError;
 use saw_core::gate::DriveMode;
 use saw_core::sample::Sample;
-use saw_core::scene::{default_config, Config};
+use saw_core::scene::default_config;
 use saw_core::texture::Texture;
 use saw_link::frame::{self, Receiver, MAX_ENCODED};
 use saw_link::msg::{Header, LinkError, Reply, Request, SceneSource, StoreFault, PROTOCOL_VERSION};
 use saw_link::scene_id;
-use saw_link::session::{Board, Identity, Session};
+use saw_link::session::Session;
 
-const TIMER: BurstTimer = BurstTimer {
-    clock_hz: 90_000_000,
-    counter_bits: 32,
-    max_burst_hz: 2_000,
-};
-
-struct CoreBoard {
-    ctrl: Controller,
-    every: u16,
-    saved: Option<(u32, Config)>,
-    flash_ok: bool,
-}
-
-impl CoreBoard {
-    fn new() -> Self {
-        let mut ctrl = Controller::new(TIMER, 100).unwrap();
-        ctrl.load(&default_config()).unwrap();
-        Self {
-            ctrl,
-            every: 0,
-            saved: None,
-            flash_ok: true,
-        }
-    }
-}
-
-impl Board for CoreBoard {
-    async fn apply(&mut self, config: &Config) -> Result<(), ConfigError> {
-        self.ctrl.load(config)
-    }
-    async fn telemetry(&mut self) -> Telemetry {
-        self.ctrl.telemetry()
-    }
-    fn stream(&mut self, every_samples: u16) {
-        self.every = every_samples;
-    }
-    fn stream_counts(&mut self) -> (u32, u32) {
-        (3, 40)
-    }
-    async fn save(&mut self, scene_id: u32, config: &Config) -> Result<(), StoreFault> {
-        if !self.flash_ok {
-            return Err(StoreFault::Flash);
-        }
-        self.saved = Some((scene_id, config.clone()));
-        Ok(())
-    }
-}
-
-const ID: Identity = Identity {
-    firmware: "saw-firmware 0.1.0",
-    board: "nucleo-f446re",
-    sample_rate_hz: 10_000,
-};
-
-fn session() -> Session {
-    Session::new(ID, default_config(), SceneSource::Default)
-}
+use saw_link::testing::{session, CoreBoard, TIMER};
 
 /// Sends `req` as bytes through a receiver, as the board does.
 fn ask(s: &mut Session, b: &mut CoreBoard, seq: u32, req: &Request) -> (Header, Reply) {

@@ -1,0 +1,125 @@
+//! The fuzz corpora (`fuzz/corpus/<target>/`, kept in the repository) replayed through the same
+//! entry points the fuzz targets call (`saw_link::testing`), on the stable toolchain: every
+//! input a fuzzer ever kept is answered without a panic, on every `cargo test`.
+//!
+//! `cargo test -p saw-link --test fuzz_corpus -- --ignored write_the_seed_inputs` (re)writes the
+//! seed inputs: every request kind framed as the host sends it, through both doors of
+//! `link_bytes`, and the repository's scene files.
+
+use std::path::{Path, PathBuf};
+
+use saw_core::gate::DriveMode;
+use saw_core::scene::default_config;
+use saw_core::texture::Texture;
+use saw_link::frame::{self, Receiver, MAX_ENCODED};
+use saw_link::msg::{Header, Request, PROTOCOL_VERSION};
+use saw_link::testing::{link_bytes, scene_file_bytes};
+
+fn corpus(target: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus").join(target)
+}
+
+fn inputs(target: &str) -> Vec<(PathBuf, Vec<u8>)> {
+    let dir = corpus(target);
+    let mut v: Vec<(PathBuf, Vec<u8>)> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .map(|p| {
+            let bytes = std::fs::read(&p).unwrap();
+            (p, bytes)
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+/// Every request kind, as the host frames it.
+fn requests() -> Vec<Request> {
+    vec![
+        Request::Hello,
+        Request::GetScene,
+        Request::LoadScene(default_config()),
+        Request::MoveBoundary {
+            index: 0,
+            at_um: 20_000,
+        },
+        Request::SetTexture {
+            region: 1,
+            texture: Texture::Off,
+        },
+        Request::SetDrive(DriveMode::Progressive),
+        Request::Counters { reset: true },
+        Request::Stream { every_samples: 10 },
+        Request::Save,
+    ]
+}
+
+fn seed() {
+    let dir = corpus("link_bytes");
+    std::fs::create_dir_all(&dir).unwrap();
+    for (i, req) in requests().iter().enumerate() {
+        let mut wire = [0u8; MAX_ENCODED];
+        let h = Header {
+            version: PROTOCOL_VERSION,
+            seq: i as u32,
+        };
+        let n = frame::encode(&h, req, &mut wire).unwrap();
+        // Door 0: the line's bytes.
+        let mut line = vec![0u8];
+        line.extend_from_slice(&wire[..n]);
+        std::fs::write(dir.join(format!("seed-line-{i}")), &line).unwrap();
+        // Door 1: the frame's header and body, as the receiver hands them on.
+        let mut rx = Receiver::<MAX_ENCODED>::default();
+        let len = wire[..n]
+            .iter()
+            .find_map(|&b| rx.push(b))
+            .unwrap()
+            .unwrap();
+        let mut payload = vec![1u8];
+        payload.extend_from_slice(rx.payload(len));
+        std::fs::write(dir.join(format!("seed-frame-{i}")), &payload).unwrap();
+    }
+    let dir = corpus("scene_file");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    for e in std::fs::read_dir(scenes).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_string_lossy().to_string();
+        std::fs::copy(&p, dir.join(format!("seed-{name}"))).unwrap();
+    }
+}
+
+#[test]
+#[ignore = "writes fuzz/corpus: run by hand when the requests or the scenes change"]
+fn write_the_seed_inputs() {
+    seed();
+}
+
+#[test]
+fn every_link_input_kept_is_answered() {
+    let all = inputs("link_bytes");
+    assert!(all.len() >= 18, "{} inputs", all.len());
+    let mut answered = 0;
+    for (p, bytes) in &all {
+        let fed = link_bytes(bytes);
+        answered += fed.replies;
+        // A seed is one whole request: exactly one reply, and not an error.
+        if p.file_name().unwrap().to_string_lossy().starts_with("seed-") {
+            assert_eq!((fed.replies, fed.refused), (1, 0), "{}", p.display());
+        }
+    }
+    assert!(answered as usize >= all.len() / 2, "{answered} replies");
+}
+
+#[test]
+fn every_scene_file_input_kept_is_read() {
+    let all = inputs("scene_file");
+    let accepted = all.iter().filter(|(_, b)| scene_file_bytes(b)).count();
+    // The repository's scenes are among them, and they load.
+    for (p, b) in &all {
+        if p.file_name().unwrap().to_string_lossy().starts_with("seed-") {
+            assert!(scene_file_bytes(b), "{}", p.display());
+        }
+    }
+    assert!(accepted >= 5, "{accepted} of {} accepted", all.len());
+}
