@@ -179,7 +179,7 @@ pub fn to_scene_file(config: &Config, title: &str) -> String {
     // Without positions the other keys change nothing a finger feels, but they are part of the
     // scene (its id, what `saw get` shows): written whenever they differ from the defaults, so
     // the file reads back to the same scene (found by the scene_file fuzz target).
-    if !lines.positions_um.is_empty() || *lines != crate::texture::Lines::default() {
+    if *lines != crate::texture::Lines::default() {
         line(String::new());
         line("[lines]".into());
         let mut p = String::new();
