@@ -38,7 +38,8 @@ impl CoreBoard {
     /// The default scene loaded, the flash working.
     pub fn new() -> Self {
         let mut ctrl = Controller::new(TIMER, 100).expect("the F446's timer and 100 µs");
-        ctrl.load(&default_config()).expect("the default scene loads");
+        ctrl.load(&default_config())
+            .expect("the default scene loads");
         Self {
             ctrl,
             every: 0,

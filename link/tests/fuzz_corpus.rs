@@ -16,7 +16,9 @@ use saw_link::msg::{Header, Request, PROTOCOL_VERSION};
 use saw_link::testing::{link_bytes, scene_file_bytes};
 
 fn corpus(target: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus").join(target)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/corpus")
+        .join(target)
 }
 
 fn inputs(target: &str) -> Vec<(PathBuf, Vec<u8>)> {
@@ -70,11 +72,7 @@ fn seed() {
         std::fs::write(dir.join(format!("seed-line-{i}")), &line).unwrap();
         // Door 1: the frame's header and body, as the receiver hands them on.
         let mut rx = Receiver::<MAX_ENCODED>::default();
-        let len = wire[..n]
-            .iter()
-            .find_map(|&b| rx.push(b))
-            .unwrap()
-            .unwrap();
+        let len = wire[..n].iter().find_map(|&b| rx.push(b)).unwrap().unwrap();
         let mut payload = vec![1u8];
         payload.extend_from_slice(rx.payload(len));
         std::fs::write(dir.join(format!("seed-frame-{i}")), &payload).unwrap();
@@ -104,7 +102,11 @@ fn every_link_input_kept_is_answered() {
         let fed = link_bytes(bytes);
         answered += fed.replies;
         // A seed is one whole request: exactly one reply, and not an error.
-        if p.file_name().unwrap().to_string_lossy().starts_with("seed-") {
+        if p.file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with("seed-")
+        {
             assert_eq!((fed.replies, fed.refused), (1, 0), "{}", p.display());
         }
     }
@@ -117,7 +119,11 @@ fn every_scene_file_input_kept_is_read() {
     let accepted = all.iter().filter(|(_, b)| scene_file_bytes(b)).count();
     // The repository's scenes are among them, and they load.
     for (p, b) in &all {
-        if p.file_name().unwrap().to_string_lossy().starts_with("seed-") {
+        if p.file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with("seed-")
+        {
             assert!(scene_file_bytes(b), "{}", p.display());
         }
     }
