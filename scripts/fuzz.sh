@@ -32,7 +32,9 @@ for t in "${TARGETS[@]}"; do
     log="../target/fuzz-$t.log"
     mkdir -p ../target
     set +e
-    cargo +nightly fuzz run -O "$t" "corpus/$t" -- -runs="$RUNS" -max_len=4096 -print_final_stats=1 > "$log" 2>&1
+    dict=()
+    [ -f "$t.dict" ] && dict=(-dict="$t.dict")
+    cargo +nightly fuzz run -O "$t" "corpus/$t" -- -runs="$RUNS" -max_len=4096 -print_final_stats=1 "${dict[@]}" > "$log" 2>&1
     rc=$?
     set -e
     grep -E "^(Done|stat::number_of_executed_units)|panicked at|ERROR" "$log" || true
