@@ -8,7 +8,10 @@ use saw_core::controller::{ConfigError, Controller, Telemetry};
 use saw_core::scene::{default_config, Config};
 
 use crate::frame::{self, Receiver, MAX_ENCODED};
-use crate::msg::{Header, Reply, SceneSource, StoreFault};
+use saw_core::gate::DriveMode;
+use saw_core::texture::Texture;
+
+use crate::msg::{Header, Reply, Request, SceneSource, StoreFault};
 use crate::session::{Board, Identity, Session};
 
 /// The F446's burst timer (90 MHz, 32-bit, 2 kHz f_b limit).
@@ -155,4 +158,25 @@ pub fn scene_file_bytes(data: &[u8]) -> bool {
             false
         }
     }
+}
+
+/// One request of every kind (`Request::VARIANTS` of them), as a host sends them.
+pub fn every_request() -> std::vec::Vec<Request> {
+    vec![
+        Request::Hello,
+        Request::GetScene,
+        Request::LoadScene(default_config()),
+        Request::MoveBoundary {
+            index: 1,
+            at_um: 40_000,
+        },
+        Request::SetTexture {
+            region: 2,
+            texture: Texture::constant_hz(250),
+        },
+        Request::SetDrive(DriveMode::Progressive),
+        Request::Counters { reset: true },
+        Request::Stream { every_samples: 10 },
+        Request::Save,
+    ]
 }

@@ -3,10 +3,8 @@
 //! decoded as another request, and the next good frame decodes at once.
 
 use proptest::prelude::*;
-use saw_core::gate::DriveMode;
 use saw_core::scene::default_config;
 use saw_core::texture::lines::MAX_LINES;
-use saw_core::texture::Texture;
 use saw_link::frame::{self, Receiver, MAX_ENCODED, MAX_PAYLOAD};
 use saw_link::msg::{Header, LinkError, Request, PROTOCOL_VERSION};
 
@@ -41,29 +39,9 @@ fn feed(bytes: &[u8]) -> Vec<Result<(u32, Request), LinkError>> {
     out
 }
 
-fn requests() -> Vec<Request> {
-    vec![
-        Request::Hello,
-        Request::GetScene,
-        Request::LoadScene(default_config()),
-        Request::MoveBoundary {
-            index: 1,
-            at_um: 40_000,
-        },
-        Request::SetTexture {
-            region: 2,
-            texture: Texture::constant_hz(250),
-        },
-        Request::SetDrive(DriveMode::Progressive),
-        Request::Counters { reset: true },
-        Request::Stream { every_samples: 10 },
-        Request::Save,
-    ]
-}
-
 #[test]
 fn every_request_round_trips() {
-    let reqs = requests();
+    let reqs = saw_link::testing::every_request();
     // One per variant: VARIANTS must count them, or "unknown request" would refuse a real one.
     assert_eq!(reqs.len() as u32, Request::VARIANTS);
     for (i, req) in reqs.iter().enumerate() {

@@ -8,11 +8,8 @@
 
 use std::path::{Path, PathBuf};
 
-use saw_core::gate::DriveMode;
-use saw_core::scene::default_config;
-use saw_core::texture::Texture;
 use saw_link::frame::{self, Receiver, MAX_ENCODED};
-use saw_link::msg::{Header, Request, PROTOCOL_VERSION};
+use saw_link::msg::{Header, PROTOCOL_VERSION};
 use saw_link::testing::{link_bytes, scene_file_bytes};
 
 fn corpus(target: &str) -> PathBuf {
@@ -35,31 +32,10 @@ fn inputs(target: &str) -> Vec<(PathBuf, Vec<u8>)> {
     v
 }
 
-/// Every request kind, as the host frames it.
-fn requests() -> Vec<Request> {
-    vec![
-        Request::Hello,
-        Request::GetScene,
-        Request::LoadScene(default_config()),
-        Request::MoveBoundary {
-            index: 0,
-            at_um: 20_000,
-        },
-        Request::SetTexture {
-            region: 1,
-            texture: Texture::Off,
-        },
-        Request::SetDrive(DriveMode::Progressive),
-        Request::Counters { reset: true },
-        Request::Stream { every_samples: 10 },
-        Request::Save,
-    ]
-}
-
 fn seed() {
     let dir = corpus("link_bytes");
     std::fs::create_dir_all(&dir).unwrap();
-    for (i, req) in requests().iter().enumerate() {
+    for (i, req) in saw_link::testing::every_request().iter().enumerate() {
         let mut wire = [0u8; MAX_ENCODED];
         let h = Header {
             version: PROTOCOL_VERSION,
