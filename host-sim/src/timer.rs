@@ -411,7 +411,6 @@ impl TimerModel {
     /// The level: a periodic start and a rectangular pulse latch the requested level now; a
     /// triangular pulse keeps the output (0 after an off) and plays its table.
     fn start(&mut self, t: u64, s: TimerSettings, one_pulse: bool) {
-        let code = self.level.table.code(self.level.requested_permille);
         self.level.playing = None;
         if one_pulse && self.level.envelope == Envelope::Triangular {
             // The pulse is high for `ccr` ticks from CNT = 1 (firmware: PWM mode 2, CCR = 1);
@@ -437,6 +436,7 @@ impl TimerModel {
                 next: 0,
             });
         } else {
+            let code = self.level.table.code(self.level.requested_permille);
             self.level.held = code;
             self.latch(t, code);
         }

@@ -99,22 +99,6 @@ impl Lines {
         }
         Ok(())
     }
-
-    /// Amplitude `dt_us` into a pulse, ‰ (0 outside the pulse).
-    pub fn amplitude_at(&self, dt_us: u32) -> u16 {
-        if dt_us >= self.pulse_us {
-            return 0;
-        }
-        match self.envelope {
-            Envelope::Rectangular => self.amplitude_permille,
-            Envelope::Triangular => {
-                let half = self.pulse_us as u64;
-                let x = 2 * dt_us as u64;
-                let rise = if x <= half { x } else { 2 * half - x };
-                (self.amplitude_permille as u64 * rise / half) as u16
-            }
-        }
-    }
 }
 
 /// Which side of a line the finger was last seen clear of.
@@ -369,25 +353,6 @@ mod tests {
             fires += t.update(&l, p).is_some() as u32;
         }
         assert_eq!(fires, 0);
-    }
-
-    #[test]
-    fn triangle_envelope_peaks_mid_pulse() {
-        let l = lines();
-        assert_eq!(l.amplitude_at(0), 0);
-        assert_eq!(l.amplitude_at(5_000), 1000);
-        assert_eq!(l.amplitude_at(2_500), 500);
-        assert_eq!(l.amplitude_at(10_000), 0);
-        // The falling half mirrors the rising one.
-        assert_eq!(l.amplitude_at(7_500), 500);
-        assert_eq!(l.amplitude_at(9_000), 200);
-        assert_eq!(l.amplitude_at(1_000), 200);
-        let r = Lines {
-            envelope: Envelope::Rectangular,
-            ..lines()
-        };
-        assert_eq!(r.amplitude_at(0), 1000);
-        assert_eq!(r.amplitude_at(9_999), 1000);
     }
 
     #[test]
