@@ -6,6 +6,10 @@
 //! plus a fixed offset and Gaussian noise (σ in 12-bit LSB RMS, independent per conversion),
 //! rounded and clamped to 0..=4095. Rail faults replace every conversion of the window by 0
 //! (open wiper, pulled down) or 4095 (short to the supply); a dropout delivers no sample at all.
+//!
+//! The sum is drawn in one step from its exact distribution ([`crate::noise::SumTable`]) where
+//! that is valid, and conversion by conversion elsewhere (near the rails, tiny or huge σ, or
+//! when [`AdcParams::per_conversion`] asks for it).
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -13,6 +17,8 @@ use rand_distr::{Distribution, Normal};
 use saw_core::position::{Calibration, PositionMapper};
 use saw_core::sample::{Sample, CONVERSION_FULL_SCALE, OVERSAMPLE};
 use serde::Deserialize;
+
+use crate::noise::SumTable;
 
 /// What goes wrong with the sensor during a fault window.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
@@ -57,6 +63,9 @@ pub struct AdcParams {
     pub seed: u64,
     /// Fault windows.
     pub faults: Vec<FaultWindow>,
+    /// Draw every conversion instead of the sum's tabulated distribution (the reference the
+    /// fast path is measured against; about 10× slower).
+    pub per_conversion: bool,
 }
 
 impl Default for AdcParams {
@@ -67,6 +76,7 @@ impl Default for AdcParams {
             oversample: OVERSAMPLE,
             seed: 1,
             faults: Vec::new(),
+            per_conversion: false,
         }
     }
 }
@@ -87,6 +97,7 @@ pub struct AdcModel {
     params: AdcParams,
     rng: ChaCha8Rng,
     noise: Option<Normal<f64>>,
+    table: Option<SumTable>,
 }
 
 /// Why an ADC model could not be built.
@@ -133,11 +144,17 @@ impl AdcModel {
             });
         };
         let rng = ChaCha8Rng::seed_from_u64(params.seed);
+        let table = if params.per_conversion {
+            None
+        } else {
+            SumTable::new(params.noise_lsb_rms, params.oversample)
+        };
         Ok(Self {
             mapper,
             params,
             rng,
             noise,
+            table,
         })
     }
 
@@ -169,6 +186,20 @@ impl AdcModel {
         v.round().clamp(0.0, (CONVERSION_FULL_SCALE - 1) as f64) as u32
     }
 
+    /// The sum of one sample's conversions at `position_um`: from the table where it serves,
+    /// else conversion by conversion.
+    fn sum_of_conversions(&mut self, position_um: f64) -> u32 {
+        if let Some(t) = &self.table {
+            let v = self.ideal_conversion(position_um) + self.params.offset_lsb;
+            if t.serves(v, CONVERSION_FULL_SCALE - 1) {
+                return t.draw(v, &mut self.rng);
+            }
+        }
+        (0..self.params.oversample)
+            .map(|_| self.convert(position_um))
+            .sum()
+    }
+
     /// The control sample at `t_us` for a finger at `position_um`, or None during a dropout.
     /// `t_us` is simulation time; the sample carries it truncated to the core's wrapping u32.
     pub fn sample(&mut self, position_um: f64, t_us: u64) -> Option<Sample> {
@@ -176,9 +207,7 @@ impl AdcModel {
             Some(FaultKind::Dropout) => return None,
             Some(FaultKind::Open) => 0,
             Some(FaultKind::Short) => (CONVERSION_FULL_SCALE - 1) * self.params.oversample,
-            None => (0..self.params.oversample)
-                .map(|_| self.convert(position_um))
-                .sum(),
+            None => self.sum_of_conversions(position_um),
         };
         Some(Sample::from_sum(sum, t_us as u32))
     }

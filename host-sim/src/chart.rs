@@ -8,6 +8,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::sim::{SimResult, TracePoint};
+use crate::timer::{Edge, LevelEdge};
 
 /// Points per trace after decimation (min/max per bucket, so spikes survive).
 const BUCKETS: usize = 1_500;
@@ -48,37 +49,470 @@ fn decimate(points: &[(f64, f64)], t0: f64, t1: f64, buckets: usize) -> Vec<(f64
     out
 }
 
-/// Splits a series at `None` values into continuous runs.
-fn runs(points: impl Iterator<Item = (f64, Option<f64>)>) -> Vec<Vec<(f64, f64)>> {
-    let mut out: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
-    for (t, y) in points {
+/// (t s, value) points.
+type Series = Vec<(f64, f64)>;
+
+/// Min/max decimation done as the points arrive: the points themselves while there are at most
+/// `2 × buckets` of them, then per bucket of `[t0, t1]` its lowest and highest point (in the
+/// order they came), so a run of any length is drawn from bounded memory, spikes kept — the
+/// same points [`decimate`] gives for the whole series.
+#[derive(Clone, Debug)]
+pub struct Decimator {
+    t0: f64,
+    /// Buckets per second.
+    per_s: f64,
+    buckets: usize,
+    raw: Option<Series>,
+    /// Per bucket: (lowest, its arrival, highest, its arrival); empty buckets have no arrival.
+    minmax: Vec<((f64, f64), u64, (f64, f64), u64)>,
+    arrivals: u64,
+}
+
+impl Decimator {
+    /// A decimator into `buckets` buckets over `[t0, t1]`.
+    pub fn new(t0: f64, t1: f64, buckets: usize) -> Self {
+        Self {
+            t0,
+            per_s: buckets.max(1) as f64 / (t1 - t0),
+            buckets: buckets.max(1),
+            raw: Some(Vec::new()),
+            minmax: Vec::new(),
+            arrivals: 0,
+        }
+    }
+
+    /// The bucket time `t_s` falls in.
+    #[inline]
+    pub fn bucket_of(&self, t_s: f64) -> usize {
+        (((t_s - self.t0) * self.per_s).max(0.0) as usize).min(self.buckets - 1)
+    }
+
+    /// The next point (in time order), whose bucket the caller computed with
+    /// [`Self::bucket_of`] (series sampled at the same times share it).
+    #[inline]
+    pub fn push_in(&mut self, bucket: usize, p: (f64, f64)) {
+        if self.raw.is_some() {
+            return self.push(p);
+        }
+        self.bucket_at(bucket, p);
+    }
+
+    /// The next point (in time order).
+    pub fn push(&mut self, p: (f64, f64)) {
+        if let Some(raw) = &mut self.raw {
+            raw.push(p);
+            if raw.len() <= 2 * self.buckets {
+                return;
+            }
+            let raw = self.raw.take().unwrap_or_default();
+            self.minmax =
+                vec![((0.0, f64::MAX), u64::MAX, (0.0, f64::MIN), u64::MAX); self.buckets];
+            for q in raw {
+                self.bucket(q);
+            }
+            return;
+        }
+        self.bucket(p);
+    }
+
+    fn bucket(&mut self, p: (f64, f64)) {
+        self.bucket_at(self.bucket_of(p.0), p);
+    }
+
+    #[inline]
+    fn bucket_at(&mut self, b: usize, p: (f64, f64)) {
+        self.arrivals += 1;
+        let slot = &mut self.minmax[b];
+        if p.1 < slot.0 .1 {
+            slot.0 = p;
+            slot.1 = self.arrivals;
+        }
+        if p.1 > slot.2 .1 {
+            slot.2 = p;
+            slot.3 = self.arrivals;
+        }
+    }
+
+    /// The decimated points.
+    pub fn points(&self) -> Series {
+        if let Some(raw) = &self.raw {
+            return raw.clone();
+        }
+        let mut out = Vec::with_capacity(2 * self.buckets);
+        for &(lo, lo_at, hi, hi_at) in &self.minmax {
+            if lo_at == u64::MAX {
+                continue;
+            }
+            if (lo.0, lo_at) <= (hi.0, hi_at) {
+                out.extend([lo, hi]);
+            } else {
+                out.extend([hi, lo]);
+            }
+        }
+        out
+    }
+}
+
+/// A quantity the core may not have (None during a fault), decimated in runs broken where it is
+/// missing: one [`Decimator`] per run while the runs are few, then one for all with the breaks
+/// kept at bucket resolution.
+#[derive(Clone, Debug)]
+pub struct GappyDecimator {
+    t0: f64,
+    t1: f64,
+    buckets: usize,
+    runs: Vec<Decimator>,
+    open: bool,
+}
+
+/// Runs kept apart before a gappy series is merged into one decimator with breaks.
+const RUNS_KEPT: usize = 64;
+
+impl GappyDecimator {
+    /// A decimator into `buckets` buckets over `[t0, t1]`.
+    pub fn new(t0: f64, t1: f64, buckets: usize) -> Self {
+        Self {
+            t0,
+            t1,
+            buckets,
+            runs: Vec::new(),
+            open: false,
+        }
+    }
+
+    /// The next point, in `bucket` (see [`Decimator::push_in`]).
+    #[inline]
+    pub fn push_in(&mut self, bucket: usize, t: f64, y: Option<f64>) {
+        match (y, self.open) {
+            (Some(y), true) => {
+                if let Some(run) = self.runs.last_mut() {
+                    run.push_in(bucket, (t, y));
+                }
+            }
+            _ => self.push(t, y),
+        }
+    }
+
+    /// The next point.
+    pub fn push(&mut self, t: f64, y: Option<f64>) {
         match y {
-            Some(y) => out.last_mut().unwrap().push((t, y)),
-            None => {
-                if !out.last().unwrap().is_empty() {
-                    out.push(Vec::new());
+            None => self.open = false,
+            Some(y) => {
+                if !self.open && self.runs.len() < RUNS_KEPT {
+                    self.runs
+                        .push(Decimator::new(self.t0, self.t1, self.buckets));
+                }
+                self.open = true;
+                if let Some(run) = self.runs.last_mut() {
+                    run.push((t, y));
                 }
             }
         }
     }
-    out.retain(|r| !r.is_empty());
-    out
+
+    /// The decimated runs.
+    pub fn runs(&self) -> Vec<Series> {
+        self.runs
+            .iter()
+            .map(Decimator::points)
+            .filter(|r| !r.is_empty())
+            .collect()
+    }
 }
 
-/// Writes the chart of `r` to `path` (PNG).
-/// (t s, value) points.
-type Series = Vec<(f64, f64)>;
+/// Accumulates [`dense_duty`]'s figures from a step curve fed point by point.
+#[derive(Clone, Debug)]
+struct DutyBins {
+    t_end: f64,
+    width: f64,
+    on: Vec<f64>,
+    rises: Vec<u32>,
+    last: Option<(f64, f64)>,
+}
 
-/// One quantity over time from the trace: the truth, and what the core saw (in runs broken where
-/// it saw nothing).
-fn truth_and_core(
-    r: &SimResult,
-    truth: impl Fn(&TracePoint) -> f64,
-    core: impl Fn(&TracePoint) -> Option<f64>,
-) -> (Series, Vec<Series>) {
-    let t_s = |p: &TracePoint| p.t_us as f64 * 1e-6;
-    let truth = r.trace.iter().map(|p| (t_s(p), truth(p))).collect();
-    (truth, runs(r.trace.iter().map(|p| (t_s(p), core(p)))))
+impl DutyBins {
+    fn new(t_end: f64, bins: usize) -> Self {
+        Self {
+            t_end,
+            width: t_end / bins as f64,
+            on: vec![0.0; bins],
+            rises: vec![0; bins],
+            last: None,
+        }
+    }
+
+    fn slice(&self, t: f64) -> usize {
+        ((t.max(0.0) / self.width) as usize).min(self.on.len() - 1)
+    }
+
+    fn push(&mut self, p: (f64, f64)) {
+        let Some((t0, level)) = self.last.replace(p) else {
+            return;
+        };
+        let (t1, next) = p;
+        if level < 0.5 && next > 0.5 && t1 == t0 {
+            let k = self.slice(t0);
+            self.rises[k] += 1;
+        }
+        if level < 0.5 || t1 <= t0 {
+            return;
+        }
+        // Spread [t0, t1) over the slices it overlaps.
+        let (a, b) = (t0.max(0.0), t1.min(self.t_end));
+        for k in self.slice(a)..=self.slice(b) {
+            let (lo, hi) = (k as f64 * self.width, (k + 1) as f64 * self.width);
+            self.on[k] += (b.min(hi) - a.max(lo)).max(0.0);
+        }
+    }
+
+    fn runs(&self) -> Vec<Series> {
+        let mut runs: Vec<Series> = Vec::new();
+        let mut open = false;
+        for k in 0..self.on.len() {
+            if self.rises[k] >= 2 {
+                if !open {
+                    runs.push(Vec::new());
+                    open = true;
+                }
+                if let Some(run) = runs.last_mut() {
+                    run.push(((k as f64 + 0.5) * self.width, self.on[k] / self.width));
+                }
+            } else {
+                open = false;
+            }
+        }
+        runs
+    }
+}
+
+/// Line pulses drawn on the line panel (the first ones; the legend gives the total).
+pub const LINE_PULSES_DRAWN: usize = 400;
+
+/// Everything the chart draws, in memory bounded by the chart's width, not the run's length:
+/// fed point by point and edge by edge by [`Recorder`].
+#[derive(Clone, Debug)]
+pub struct ChartData {
+    t_end: f64,
+    length_mm: f64,
+    boundaries_mm: Vec<f64>,
+    lines_mm: Vec<f64>,
+    region_labels: Vec<String>,
+    pos_truth: Decimator,
+    pos_core: GappyDecimator,
+    vel_truth: Decimator,
+    vel_core: GappyDecimator,
+    vel_max_mm_s: f64,
+    region: Decimator,
+    gate: Decimator,
+    duty: DutyBins,
+    drive: Decimator,
+    line_curves: Vec<Series>,
+    line_pulses: usize,
+}
+
+/// Builds a [`ChartData`] as a run goes: [`Recorder::point`] per trace point,
+/// [`Recorder::edges`] with the timer model's edges and DAC changes (in time order).
+#[derive(Clone, Debug)]
+pub struct Recorder {
+    data: ChartData,
+    clock_hz: f64,
+    trajectory: crate::trajectory::Trajectory,
+    last_region: Option<f64>,
+    gate_high: bool,
+    code: u16,
+    drive_last: f64,
+    /// The line pulse being drawn: (finger position at each step µm, drive) while the gate is
+    /// high, with the rise's time.
+    pulse: Option<(u64, Vec<(f64, f64)>)>,
+}
+
+impl Recorder {
+    /// A recorder for a run of `params` on a burst timer clocked at `clock_hz`.
+    pub fn new(params: &crate::sim::SimParams, clock_hz: u32) -> Self {
+        let t_end = params.duration_s;
+        let scene = &params.config.scene;
+        let mut gate = Decimator::new(0.0, t_end, 3 * BUCKETS);
+        gate.push((0.0, 0.0));
+        let mut duty = DutyBins::new(t_end, BUCKETS);
+        duty.push((0.0, 0.0));
+        let mut drive = Decimator::new(0.0, t_end, 3 * BUCKETS);
+        drive.push((0.0, 0.0));
+        Self {
+            data: ChartData {
+                t_end,
+                length_mm: params.config.calibration.length_um as f64 / 1e3,
+                boundaries_mm: scene
+                    .boundaries_um
+                    .iter()
+                    .map(|&b| b as f64 / 1e3)
+                    .collect(),
+                lines_mm: scene
+                    .lines
+                    .positions_um
+                    .iter()
+                    .map(|&l| l as f64 / 1e3)
+                    .collect(),
+                region_labels: scene.textures.iter().map(region_label).collect(),
+                pos_truth: Decimator::new(0.0, t_end, BUCKETS),
+                pos_core: GappyDecimator::new(0.0, t_end, BUCKETS),
+                vel_truth: Decimator::new(0.0, t_end, BUCKETS),
+                vel_core: GappyDecimator::new(0.0, t_end, BUCKETS),
+                vel_max_mm_s: 10.0,
+                region: Decimator::new(0.0, t_end, BUCKETS),
+                gate,
+                duty,
+                drive,
+                line_curves: Vec::new(),
+                line_pulses: 0,
+            },
+            clock_hz: clock_hz as f64,
+            trajectory: params.trajectory.clone(),
+            last_region: None,
+            gate_high: false,
+            code: 0,
+            drive_last: 0.0,
+            pulse: None,
+        }
+    }
+
+    /// The next trace point.
+    pub fn point(&mut self, p: &TracePoint) {
+        let d = &mut self.data;
+        let t = p.t_us as f64 * 1e-6;
+        // The four series share the sample's time, so its bucket is worked out once.
+        let b = d.pos_truth.bucket_of(t);
+        d.pos_truth.push_in(b, (t, p.true_um / 1e3));
+        d.pos_core.push_in(b, t, p.meas_um.map(|m| m as f64 / 1e3));
+        let v = p.true_vel_um_s / 1e3;
+        d.vel_truth.push_in(b, (t, v));
+        let est = p.est_vel_um_s.map(|v| v as f64 / 1e3);
+        d.vel_core.push_in(b, t, est);
+        d.vel_max_mm_s = d.vel_max_mm_s.max(v.abs()).max(est.unwrap_or(0.0).abs());
+        // Region (−1 = none: fault or no scene) as a step curve.
+        let y = p.region.map(|x| x as f64).unwrap_or(-1.0);
+        if self.last_region != Some(y) {
+            if let Some(l) = self.last_region {
+                d.region.push((t, l));
+            }
+            d.region.push((t, y));
+            self.last_region = Some(y);
+        }
+    }
+
+    /// The enable line's edges and the DAC's changes up to some time, each in time order and
+    /// after those fed before.
+    pub fn edges(&mut self, edges: &[Edge], levels: &[LevelEdge]) {
+        let (mut i, mut j) = (0, 0);
+        while i < edges.len() || j < levels.len() {
+            let t = match (edges.get(i), levels.get(j)) {
+                (Some(e), Some(l)) => e.t.min(l.t),
+                (Some(e), None) => e.t,
+                (None, Some(l)) => l.t,
+                (None, None) => break,
+            };
+            let was_high = self.gate_high;
+            while let Some(e) = edges.get(i).filter(|e| e.t == t) {
+                self.gate_high = e.high;
+                i += 1;
+            }
+            let mut code_changed = false;
+            while let Some(l) = levels.get(j).filter(|l| l.t == t) {
+                code_changed |= self.code != l.code;
+                self.code = l.code;
+                j += 1;
+            }
+            self.at(t, was_high, code_changed);
+        }
+    }
+
+    /// The curves' points at kernel-clock time `t`, after every change at `t`.
+    fn at(&mut self, t: u64, was_high: bool, code_changed: bool) {
+        let x = t as f64 / self.clock_hz;
+        let d = &mut self.data;
+        let (before, after) = (
+            f64::from(u8::from(was_high)),
+            f64::from(u8::from(self.gate_high)),
+        );
+        if before != after {
+            d.gate.push((x, before));
+            d.gate.push((x, after));
+            d.duty.push((x, before));
+            d.duty.push((x, after));
+        }
+        let level = crate::rf::permille_at_code(self.code) / 1000.0;
+        let y = if self.gate_high { level } else { 0.0 };
+        d.drive.push((x, self.drive_last));
+        d.drive.push((x, y));
+        self.drive_last = y;
+        if d.lines_mm.is_empty() {
+            return;
+        }
+        let at_um = self.trajectory.state(x).position_um;
+        match (was_high, self.gate_high) {
+            (false, true) => self.pulse = Some((t, vec![(at_um, 0.0), (at_um, level)])),
+            (true, true) if code_changed => {
+                if let Some((_, c)) = &mut self.pulse {
+                    let last = c.last().map_or(0.0, |q| q.1);
+                    c.extend([(at_um, last), (at_um, level)]);
+                }
+            }
+            (true, false) => {
+                if let Some((rise, mut c)) = self.pulse.take() {
+                    let last = c.last().map_or(0.0, |q| q.1);
+                    c.extend([(at_um, last), (at_um, 0.0)]);
+                    d.line_pulses += 1;
+                    if d.line_curves.len() < LINE_PULSES_DRAWN {
+                        // Against the line nearest the finger at the pulse's middle.
+                        let mid = (rise + t) as f64 / 2.0 / self.clock_hz;
+                        let mid_um = self.trajectory.state(mid).position_um;
+                        if let Some(&line_mm) = d.lines_mm.iter().min_by(|a, b| {
+                            (**a * 1e3 - mid_um)
+                                .abs()
+                                .total_cmp(&(**b * 1e3 - mid_um).abs())
+                        }) {
+                            d.line_curves.push(
+                                c.into_iter()
+                                    .map(|(um, y)| ((um / 1e3 - line_mm), y))
+                                    .collect(),
+                            );
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// The chart's data, the curves closed at the run's end.
+    pub fn finish(mut self) -> ChartData {
+        let d = &mut self.data;
+        let t_end = d.t_end;
+        if let Some(l) = self.last_region {
+            d.region.push((t_end, l));
+        }
+        let g = f64::from(u8::from(self.gate_high));
+        d.gate.push((t_end, g));
+        d.duty.push((t_end, g));
+        d.drive.push((t_end, self.drive_last));
+        self.data
+    }
+}
+
+impl ChartData {
+    /// The chart's data of a recorded run.
+    pub fn of(r: &SimResult) -> Self {
+        let mut rec = Recorder::new(&r.params, r.timer.clock_hz);
+        for p in &r.trace {
+            rec.point(p);
+        }
+        rec.edges(&r.waveform.edges, &r.waveform.levels);
+        rec.finish()
+    }
+
+    /// Line pulses in the run (the panel draws the first [`LINE_PULSES_DRAWN`]).
+    pub fn line_pulses(&self) -> usize {
+        self.line_pulses
+    }
 }
 
 /// Draws what the core saw (red, thin, in runs broken by faults) over the truth (pale blue,
@@ -142,13 +576,13 @@ where
     Ok(())
 }
 
+/// Writes the chart of a run (its [`ChartData`]) to `path` (PNG).
 pub fn write_png(
-    r: &SimResult,
+    d: &ChartData,
     path: &Path,
     title: &str,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let lines = &r.params.config.scene.lines;
-    let with_lines = !lines.positions_um.is_empty();
+    let with_lines = !d.lines_mm.is_empty();
     let height = if with_lines { 1520 } else { 1200 };
     let root = BitMapBackend::new(path, (1600, height)).into_drawing_area();
     root.fill(&WHITE)?;
@@ -163,17 +597,13 @@ pub fn write_png(
     } else {
         body.split_by_breakpoints::<i32, i32, _, _>([], [330, 660, 860])
     };
-    let t_end = r.params.duration_s;
+    let t_end = d.t_end;
     let label_font = ("sans-serif", 18);
 
     // Position.
     {
-        let (tp, meas) = truth_and_core(
-            r,
-            |p| p.true_um / 1e3,
-            |p| p.meas_um.map(|m| m as f64 / 1e3),
-        );
-        let len_mm = r.params.config.calibration.length_um as f64 / 1e3;
+        let (tp, meas) = (d.pos_truth.points(), d.pos_core.runs());
+        let len_mm = d.length_mm;
         let mut c = ChartBuilder::on(&panels[0])
             .margin(10)
             .margin_right(LEGEND_PX)
@@ -187,8 +617,7 @@ pub fn write_png(
             .light_line_style(WHITE.mix(0.0))
             .draw()?;
         let mut legend: Vec<Entry> = Vec::new();
-        for &b in r.params.config.scene.boundaries_um.iter() {
-            let b = b as f64 / 1e3;
+        for &b in &d.boundaries_mm {
             c.draw_series(DashedLineSeries::new(
                 vec![(0.0, b), (t_end, b)],
                 6,
@@ -197,8 +626,7 @@ pub fn write_png(
             ))?;
             legend.push((format!("boundary {b:.3} mm"), BLACK.mix(0.5), 1));
         }
-        for (i, &l) in r.params.config.scene.lines.positions_um.iter().enumerate() {
-            let l = l as f64 / 1e3;
+        for (i, &l) in d.lines_mm.iter().enumerate() {
             c.draw_series(DashedLineSeries::new(
                 vec![(0.0, l), (t_end, l)],
                 2,
@@ -220,17 +648,8 @@ pub fn write_png(
 
     // Velocity.
     {
-        let (tv, est) = truth_and_core(
-            r,
-            |p| p.true_vel_um_s / 1e3,
-            |p| p.est_vel_um_s.map(|v| v as f64 / 1e3),
-        );
-        let vmax = tv
-            .iter()
-            .map(|p| p.1.abs())
-            .chain(est.iter().flatten().map(|p| p.1.abs()))
-            .fold(10.0f64, f64::max)
-            * 1.15;
+        let (tv, est) = (d.vel_truth.points(), d.vel_core.runs());
+        let vmax = d.vel_max_mm_s * 1.15;
         let mut c = ChartBuilder::on(&panels[1])
             .margin(10)
             .margin_right(LEGEND_PX)
@@ -249,37 +668,15 @@ pub fn write_png(
 
     // Region (−1 = none: fault or no scene).
     {
-        let n = r.params.config.scene.textures.len() as f64;
-        let mut pts = Vec::new();
-        let mut last: Option<f64> = None;
-        for p in &r.trace {
-            let t = p.t_us as f64 * 1e-6;
-            let y = p.region.map(|x| x as f64).unwrap_or(-1.0);
-            if last != Some(y) {
-                if let Some(l) = last {
-                    pts.push((t, l));
-                }
-                pts.push((t, y));
-                last = Some(y);
-            }
-        }
-        if let Some(l) = last {
-            pts.push((t_end, l));
-        }
+        let n = d.region_labels.len() as f64;
+        let pts = d.region.points();
         let mut c = ChartBuilder::on(&panels[2])
             .margin(10)
             .margin_right(LEGEND_PX)
             .x_label_area_size(30)
             .y_label_area_size(80)
             .build_cartesian_2d(0.0..t_end, -1.5..n - 0.5)?;
-        let labels: Vec<String> = r
-            .params
-            .config
-            .scene
-            .textures
-            .iter()
-            .map(region_label)
-            .collect();
+        let labels = &d.region_labels;
         c.configure_mesh()
             .y_desc("region")
             .axis_desc_style(label_font)
@@ -306,16 +703,7 @@ pub fn write_png(
     // Gate line, from the timer model's edges: min/max per pixel column, so a kHz burst shows as
     // a filled band and a 20 Hz burst as separate pulses.
     {
-        let w = &r.waveform;
-        let mut pts = vec![(0.0, 0.0)];
-        let mut level = 0.0;
-        for e in &w.edges {
-            let t = w.clocks_to_s(e.t);
-            pts.push((t, level));
-            level = if e.high { 1.0 } else { 0.0 };
-            pts.push((t, level));
-        }
-        pts.push((t_end, level));
+        let pts = d.gate.points();
         let mut c = ChartBuilder::on(&panels[3])
             .margin(10)
             .margin_right(LEGEND_PX)
@@ -339,22 +727,18 @@ pub fn write_png(
             })
             .light_line_style(WHITE.mix(0.0))
             .draw()?;
-        c.draw_series(LineSeries::new(
-            decimate(&pts, 0.0, t_end, 3 * BUCKETS),
-            BLACK.stroke_width(1),
-        ))?;
+        c.draw_series(LineSeries::new(pts, BLACK.stroke_width(1)))?;
         // Where bursts are denser than pixels the line is a solid band: there the share of
         // each pixel column's time it was on is drawn over it (the duty, and where it drops).
         let orange = RGBColor(230, 120, 0);
-        for run in dense_duty(&pts, t_end, BUCKETS) {
+        for run in d.duty.runs() {
             c.draw_series(LineSeries::new(run, orange.stroke_width(2)))?;
         }
         // The drive the finger gets: enable × the RF level (the reference circuit's amplitude
         // for the DAC code), as a share of full drive.
-        let drive = drive_steps(w, t_end);
         let blue = RGBColor(30, 90, 220);
         c.draw_series(LineSeries::new(
-            decimate(&drive, 0.0, t_end, 3 * BUCKETS),
+            d.drive.points(),
             blue.mix(0.8).stroke_width(1),
         ))?;
         side_legend(
@@ -370,73 +754,26 @@ pub fn write_png(
     }
 
     if with_lines {
-        line_envelopes(r, &panels[4])?;
+        line_envelopes(d, &panels[4])?;
     }
     root.present()?;
     Ok(())
 }
 
-/// The drive (enable × level, share of full drive) as a step curve over `[0, t_end]`.
-fn drive_steps(w: &crate::timer::Waveform, t_end: f64) -> Vec<(f64, f64)> {
-    let mut times: Vec<u64> = w
-        .edges
-        .iter()
-        .map(|e| e.t)
-        .chain(w.levels.iter().map(|l| l.t))
-        .collect();
-    times.sort_unstable();
-    times.dedup();
-    let mut pts = vec![(0.0, 0.0)];
-    let mut last = 0.0;
-    for t in times {
-        let x = w.clocks_to_s(t);
-        let y = w.drive_at(t) / 1000.0;
-        pts.push((x, last));
-        pts.push((x, y));
-        last = y;
-    }
-    pts.push((t_end, last));
-    pts
-}
-
 /// Every line pulse's drive against the finger's true distance from the line it was fired
 /// for (the nearest one at the pulse's middle), mm: the envelope the finger feels, overlaid.
 fn line_envelopes<DB: DrawingBackend>(
-    r: &SimResult,
+    d: &ChartData,
     area: &DrawingArea<DB, plotters::coord::Shift>,
 ) -> Result<(), Box<dyn std::error::Error>>
 where
     DB::ErrorType: 'static,
 {
-    let w = &r.waveform;
-    let lines = &r.params.config.scene.lines;
-    let mut curves: Vec<Vec<(f64, f64)>> = Vec::new();
-    let mut reach = 0.1f64;
-    for p in w.pulses() {
-        let mid = w.clocks_to_s((p.rise + p.fall) / 2);
-        let at = r.params.trajectory.state(mid).position_um;
-        let Some(&line) = lines
-            .positions_um
-            .iter()
-            .min_by(|a, b| (**a as f64 - at).abs().total_cmp(&(**b as f64 - at).abs()))
-        else {
-            continue;
-        };
-        let x =
-            |t: u64| (r.params.trajectory.state(w.clocks_to_s(t)).position_um - line as f64) / 1e3;
-        let mut c = vec![(x(p.rise), 0.0)];
-        let mut last = 0.0;
-        for e in w.codes_within(p.rise, p.fall) {
-            let y = crate::rf::permille_at_code(e.code) / 1000.0;
-            c.push((x(e.t), last));
-            c.push((x(e.t), y));
-            last = y;
-        }
-        c.push((x(p.fall), last));
-        c.push((x(p.fall), 0.0));
-        reach = c.iter().fold(reach, |m, q| m.max(q.0.abs()));
-        curves.push(c);
-    }
+    let curves = &d.line_curves;
+    let reach = curves
+        .iter()
+        .flatten()
+        .fold(0.1f64, |m, q| m.max(q.0.abs()));
     let reach = reach * 1.1;
     let mut c = ChartBuilder::on(area)
         .margin(10)
@@ -458,7 +795,7 @@ where
         MAGENTA.mix(0.7).stroke_width(1),
     ))?;
     let blue = RGBColor(30, 90, 220);
-    for curve in &curves {
+    for curve in curves {
         c.draw_series(LineSeries::new(
             curve.clone(),
             blue.mix(0.5).stroke_width(1),
@@ -467,8 +804,16 @@ where
     side_legend(
         area,
         &[
-            (format!("{} line pulses,", curves.len()), blue.mix(0.5), 1),
-            ("  overlaid".into(), WHITE.to_rgba(), 0),
+            (format!("{} line pulses,", d.line_pulses), blue.mix(0.5), 1),
+            (
+                if d.line_pulses > curves.len() {
+                    format!("  the first {} overlaid", curves.len())
+                } else {
+                    "  overlaid".into()
+                },
+                WHITE.to_rgba(),
+                0,
+            ),
             ("the line".into(), MAGENTA.mix(0.7), 1),
         ],
     )?;
@@ -491,41 +836,13 @@ fn region_label(t: &saw_core::texture::Texture) -> String {
 /// The share of each of `bins` equal slices of 0..`t_end` that the step curve `pts` (t, 0 or 1,
 /// a value holding until the next point) spent at 1, at each slice's middle, in runs of slices
 /// with at least two rising edges (where the line is denser than the slices).
+#[cfg(test)]
 fn dense_duty(pts: &[(f64, f64)], t_end: f64, bins: usize) -> Vec<Vec<(f64, f64)>> {
-    let width = t_end / bins as f64;
-    let slice = |t: f64| ((t.max(0.0) / width) as usize).min(bins - 1);
-    let mut on = vec![0.0f64; bins];
-    let mut rises = vec![0u32; bins];
-    for w in pts.windows(2) {
-        let ((t0, level), (t1, next)) = (w[0], w[1]);
-        if level < 0.5 && next > 0.5 && t1 == t0 {
-            rises[slice(t0)] += 1;
-        }
-        if level < 0.5 || t1 <= t0 {
-            continue;
-        }
-        // Spread [t0, t1) over the slices it overlaps.
-        let (a, b) = (t0.max(0.0), t1.min(t_end));
-        for (k, share) in on.iter_mut().enumerate().take(slice(b) + 1).skip(slice(a)) {
-            let (lo, hi) = (k as f64 * width, (k + 1) as f64 * width);
-            *share += (b.min(hi) - a.max(lo)).max(0.0);
-        }
+    let mut d = DutyBins::new(t_end, bins);
+    for &p in pts {
+        d.push(p);
     }
-    let mut runs: Vec<Vec<(f64, f64)>> = Vec::new();
-    let mut open = false;
-    for k in 0..bins {
-        if rises[k] >= 2 {
-            if !open {
-                runs.push(Vec::new());
-                open = true;
-            }
-            let run = runs.last_mut().expect("a run was opened");
-            run.push(((k as f64 + 0.5) * width, on[k] / width));
-        } else {
-            open = false;
-        }
-    }
-    runs
+    d.runs()
 }
 
 #[cfg(test)]

@@ -18,6 +18,7 @@ pub mod cli;
 pub mod door;
 pub mod metrics;
 pub mod models;
+pub mod noise;
 pub mod report;
 pub mod rf;
 pub mod scenario;

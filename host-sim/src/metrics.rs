@@ -1,12 +1,14 @@
 //! Figures of merit of a run: commanded vs produced f_b per region (from the gate edges), region
 //! switches against the scene's boundaries, velocity error and delay, faults, pulse integrity.
 
+use std::collections::{HashSet, VecDeque};
+
 use saw_core::burst::TimerSettings;
 use saw_core::gate::GateAction;
-
 use saw_core::texture::Texture;
 
-use crate::sim::SimResult;
+use crate::sim::{SimResult, TracePoint};
+use crate::timer::Edge;
 
 /// The f_b a texture asks for with the finger at `true_vel_um_s`, Hz, by the models the core
 /// uses: f = |V|/λ for a grating (one pulse per ridge crossed, or periodic bursts at that rate),
@@ -88,7 +90,10 @@ pub struct VelocityStats {
     pub delay_us: f64,
     /// RMS error against the true velocity delayed by that lag, µm/s.
     pub rms_err_at_delay_um_s: f64,
-    /// Samples compared.
+    /// The whole-sample lag `rms_err_at_delay_um_s` was measured at, µs (the delay is placed
+    /// between it and a neighbour).
+    pub lag_at_best_us: f64,
+    /// Samples compared (every sample with an estimate and no fault).
     pub samples: usize,
 }
 
@@ -106,8 +111,12 @@ pub struct OffTravel {
 pub struct Metrics {
     /// Per region.
     pub regions: Vec<RegionStats>,
-    /// Every switch, in order.
+    /// Every switch, in order (the first [`SWITCHES_LISTED`]).
     pub switches: Vec<Switch>,
+    /// How many switches there were.
+    pub switch_count: usize,
+    /// The least and the most any switch came past its boundary, µm (None without switches).
+    pub switch_past_um: Option<(f64, f64)>,
     /// Velocity estimate quality (None if the estimator never produced a value).
     pub velocity: Option<VelocityStats>,
     /// Fault onsets seen in the trace.
@@ -140,184 +149,477 @@ pub struct Stall {
     pub longest_s: f64,
 }
 
-/// The silences of the line while the core had a periodic burst running: from the trace's
-/// actions (what the core asked) and the timer model's rising edges (what the line did).
-fn stall(r: &SimResult) -> Stall {
-    let clock = r.timer.clock_hz as f64;
-    let mut rises = r.waveform.pulses().into_iter().map(|p| p.rise).peekable();
-    let mut last_rise_clk: Option<u64> = None;
-    let mut running_period_clk: Option<u64> = None;
-    // With preload an update acts at the next update event: until the next rise the period
-    // replaced still runs, so it counts for the allowance too.
-    let mut replaced_period_clk = 0u64;
-    let (mut total, mut longest, mut current) = (0u64, 0u64, 0u64);
-    let step_clk = r.clocks(r.sample_period_us as u64);
-    for t in &r.trace {
-        let now = r.clocks(t.t_us);
-        while let Some(&rise) = rises.peek() {
-            if rise > now {
-                break;
-            }
-            last_rise_clk = Some(rise);
-            replaced_period_clk = 0;
-            rises.next();
-        }
-        match t.action {
-            Some(GateAction::Start(s)) => {
-                running_period_clk = Some(s.period_clocks());
-                last_rise_clk = Some(now);
-            }
-            Some(GateAction::Update(s)) => {
-                replaced_period_clk = replaced_period_clk.max(running_period_clk.unwrap_or(0));
-                running_period_clk = Some(s.period_clocks());
-            }
-            Some(GateAction::Off | GateAction::Pulse(_)) => running_period_clk = None,
-            _ => {}
-        }
-        let silent = match (running_period_clk, last_rise_clk) {
-            (Some(period), Some(rise)) => {
-                now.saturating_sub(rise) > 2 * period.max(replaced_period_clk)
-            }
-            _ => false,
-        };
-        if silent {
-            current += step_clk;
-            total += step_clk;
-            longest = longest.max(current);
-        } else {
-            current = 0;
-        }
-    }
-    Stall {
-        total_s: total as f64 / clock,
-        longest_s: longest as f64 / clock,
-    }
+/// Lags, in sample periods, the velocity estimate is compared with the true velocity at
+/// (0 … 100: up to 10 ms at 10 kHz).
+pub const VELOCITY_LAGS: usize = 101;
+/// Samples summed in f32 before the sums move to f64 (bounds the rounding error of the
+/// per-lag sums while keeping the per-sample loop in SIMD-wide f32).
+const LAG_BLOCK: u32 = 256;
+/// Region switches listed one by one; beyond this they are counted and summarised only.
+pub const SWITCHES_LISTED: usize = 10_000;
+/// Recent sample points the gate's edges are placed against (an edge is placed once the point
+/// covering it has arrived, so two or three are enough; eight leave room).
+const RING: usize = 8;
+
+/// What the metrics remember of one recent sample point.
+#[derive(Clone, Copy, Debug, Default)]
+struct Slot {
+    /// Sample index (u64::MAX: empty).
+    index: u64,
+    region: Option<u8>,
+    /// Identifies the run of equal regions this point belongs to (a point without a region is
+    /// a run of its own).
+    run: u64,
+    true_vel_um_s: f64,
 }
 
-/// Computes the metrics of a run.
-pub fn compute(r: &SimResult) -> Metrics {
-    let n_regions = r.params.config.scene.textures.len();
-    let period_clk = r.clocks(r.sample_period_us as u64);
+/// A pulse as the metrics follow it: where its rise was placed.
+#[derive(Clone, Copy, Debug)]
+struct Placed {
+    rise: u64,
+    /// The region of the sample before the rise (whose settings the rise latched).
+    region: Option<u8>,
+    /// The run of the sample before that one, if it was in the same region: the interval to
+    /// the next rise counts for the region only if that run lasts until the next rise.
+    run_before: Option<u64>,
+    /// The f_b the texture's model gives at the finger's speed at the rise, Hz.
+    expected_hz: Option<f64>,
+}
 
-    // Run-length segments of the region, by trace index.
-    let mut seg_end = vec![0usize; r.trace.len()];
-    let mut i = r.trace.len();
-    while i > 0 {
-        i -= 1;
-        let same_next = i + 1 < r.trace.len()
-            && r.trace[i + 1].region == r.trace[i].region
-            && r.trace[i].region.is_some();
-        seg_end[i] = if same_next { seg_end[i + 1] } else { i };
+/// Per-region running sums.
+#[derive(Clone, Copy, Debug, Default)]
+struct RegionSums {
+    pulses: usize,
+    intervals: usize,
+    interval_clk: u64,
+    on_clk: u64,
+    expected_period_s: f64,
+    expected_n: usize,
+    samples: usize,
+}
+
+/// The metrics of a run computed as it goes, in memory that does not grow with its length:
+/// feed every trace point in order with [`Online::point`] and the gate's edges (in time order,
+/// at any time before the points after them) with [`Online::edges`], then [`Online::finish`].
+/// [`compute`] feeds a recorded run through it, so both paths give the same figures.
+#[derive(Clone, Debug)]
+pub struct Online {
+    textures: Vec<Texture>,
+    boundaries_um: Vec<f64>,
+    length_um: f64,
+    clock_hz: u32,
+    period_clk: u64,
+    sample_period_us: u32,
+    ring: [Slot; RING],
+    points: u64,
+    run: u64,
+    prev: Option<TracePoint>,
+    pending: VecDeque<Edge>,
+    open: Option<Placed>,
+    awaiting: Option<(Placed, u64)>,
+    sums: Vec<RegionSums>,
+    planned: HashSet<(u64, u64)>,
+    pulses: usize,
+    malformed: usize,
+    // The stall figure (see [`Stall`]).
+    last_rise_clk: Option<u64>,
+    running_period_clk: Option<u64>,
+    replaced_period_clk: u64,
+    stall_clk: (u64, u64, u64),
+    fault_onsets: usize,
+    fault_samples: usize,
+    off: OffTravel,
+    switches: Vec<Switch>,
+    switch_count: usize,
+    switch_past_um: Option<(f64, f64)>,
+    vel_n: usize,
+    /// The true velocity of the last [`VELOCITY_LAGS`] points, newest first, twice over so the
+    /// window for any point is one contiguous slice (mm/s).
+    true_ring: Vec<f32>,
+    ring_at: usize,
+    /// Σ (estimate − true velocity `lag` points earlier)², per lag: this block's (f32) and the
+    /// run's (f64), (mm/s)².
+    lag_block: [f32; VELOCITY_LAGS],
+    lag_sums: [f64; VELOCITY_LAGS],
+    block_n: u32,
+}
+
+impl Online {
+    /// Metrics of a run of `params` on a burst timer clocked at `clock_hz`, sampled every
+    /// `sample_period_us`; `region_settings` are the settings the planner gives each region's
+    /// texture (None where they depend on the motion).
+    pub fn new(
+        params: &crate::sim::SimParams,
+        clock_hz: u32,
+        sample_period_us: u32,
+        region_settings: &[Option<TimerSettings>],
+    ) -> Self {
+        let scene = &params.config.scene;
+        Self {
+            textures: scene.textures.iter().copied().collect(),
+            boundaries_um: scene.boundaries_um.iter().map(|&b| b as f64).collect(),
+            length_um: params.config.calibration.length_um as f64,
+            clock_hz,
+            period_clk: sample_period_us as u64 * clock_hz as u64 / 1_000_000,
+            sample_period_us,
+            ring: [Slot {
+                index: u64::MAX,
+                ..Slot::default()
+            }; RING],
+            points: 0,
+            run: 0,
+            prev: None,
+            pending: VecDeque::new(),
+            open: None,
+            awaiting: None,
+            sums: vec![RegionSums::default(); scene.textures.len()],
+            planned: region_settings
+                .iter()
+                .flatten()
+                .map(|s| (s.on_clocks(), s.period_clocks()))
+                .collect(),
+            pulses: 0,
+            malformed: 0,
+            last_rise_clk: None,
+            running_period_clk: None,
+            replaced_period_clk: 0,
+            stall_clk: (0, 0, 0),
+            fault_onsets: 0,
+            fault_samples: 0,
+            off: OffTravel::default(),
+            switches: Vec::new(),
+            switch_count: 0,
+            switch_past_um: None,
+            vel_n: 0,
+            true_ring: Vec::new(),
+            ring_at: 0,
+            lag_block: [0.0; VELOCITY_LAGS],
+            lag_sums: [0.0; VELOCITY_LAGS],
+            block_n: 0,
+        }
     }
-    let index_at = |t: u64| (t / period_clk) as usize;
 
-    let pulses = r.waveform.pulses();
-    let mut per_region_intervals: Vec<Vec<(u64, u64)>> = vec![Vec::new(); n_regions];
-    // Σ expected period (s) and its count, per region, over the same intervals.
-    let mut per_region_expected = vec![(0.0f64, 0usize); n_regions];
-    let mut per_region_pulses = vec![0usize; n_regions];
-    for p in &pulses {
-        // The sample before the rise decided the settings that the rise latched.
-        let idx = index_at(p.rise.saturating_sub(1));
-        let Some(region) = r.trace.get(idx).and_then(|t| t.region) else {
-            continue;
+    fn clocks(&self, t_us: u64) -> u64 {
+        t_us * self.clock_hz as u64 / 1_000_000
+    }
+
+    fn slot(&self, index: u64) -> Option<Slot> {
+        let s = self.ring[(index % RING as u64) as usize];
+        (s.index == index).then_some(s)
+    }
+
+    /// The gate's edges, in time order after those fed before.
+    pub fn edges(&mut self, edges: &[Edge]) {
+        self.pending.extend(edges.iter().copied());
+    }
+
+    /// The next trace point.
+    pub fn point(&mut self, p: &TracePoint) {
+        let k = self.points;
+        self.points += 1;
+        let same_run = self
+            .prev
+            .is_some_and(|q| q.region.is_some() && q.region == p.region);
+        if !same_run {
+            self.run += 1;
+        }
+        self.ring[(k % RING as u64) as usize] = Slot {
+            index: k,
+            region: p.region,
+            run: self.run,
+            true_vel_um_s: p.true_vel_um_s,
         };
-        per_region_pulses[region as usize] += 1;
-        if let Some(next) = p.next_rise {
-            let before = idx.saturating_sub(1);
-            let last = index_at(next).min(r.trace.len() - 1);
-            if r.trace[before].region == Some(region) && seg_end[before] >= last {
-                per_region_intervals[region as usize].push((next - p.rise, p.on()));
-                let texture = &r.params.config.scene.textures[region as usize];
-                if let Some(f) = expected_hz(texture, r.trace[idx].true_vel_um_s) {
-                    let e = &mut per_region_expected[region as usize];
-                    e.0 += 1.0 / f;
-                    e.1 += 1;
+        if let Some(r) = p.region {
+            if let Some(s) = self.sums.get_mut(r as usize) {
+                s.samples += 1;
+            }
+        }
+        if let Some(GateAction::Start(s) | GateAction::Update(s) | GateAction::Pulse(s)) = p.action
+        {
+            self.planned.insert((s.on_clocks(), s.period_clocks()));
+        }
+        // Edges up to this point's time are placed now: the point covering them is known.
+        let now = self.clocks(p.t_us);
+        while self.pending.front().is_some_and(|e| e.t <= now) {
+            if let Some(e) = self.pending.pop_front() {
+                self.edge(e, k);
+            }
+        }
+        self.stall_point(p, now);
+        // Faults, travel, switches, velocity.
+        if p.fault.is_some() {
+            self.fault_samples += 1;
+            if self.prev.is_none_or(|q| q.fault.is_none()) {
+                self.fault_onsets += 1;
+            }
+        }
+        if !(0.0..=self.length_um).contains(&p.true_um) {
+            self.off.samples += 1;
+            self.off.first_us.get_or_insert(p.t_us);
+        }
+        if let Some(w) = self
+            .prev
+            .and_then(|q| switch_between(&q, p, &self.boundaries_um))
+        {
+            self.switch_count += 1;
+            self.switch_past_um = Some(match self.switch_past_um {
+                None => (w.past_um, w.past_um),
+                Some((lo, hi)) => (lo.min(w.past_um), hi.max(w.past_um)),
+            });
+            if self.switches.len() < SWITCHES_LISTED {
+                self.switches.push(w);
+            }
+        }
+        self.velocity_point(p);
+        self.prev = Some(*p);
+    }
+
+    /// The velocity figures' sums for one point: its true velocity enters the lag window, and
+    /// its estimate (when it has one and no fault) is compared with every lag's.
+    fn velocity_point(&mut self, p: &TracePoint) {
+        let v = (p.true_vel_um_s * 1e-3) as f32;
+        if self.true_ring.is_empty() {
+            // Before the run the finger moved as at its start (the trajectory at t = 0).
+            self.true_ring = vec![v; 2 * VELOCITY_LAGS];
+        }
+        self.ring_at = self.ring_at.checked_sub(1).unwrap_or(VELOCITY_LAGS - 1);
+        self.true_ring[self.ring_at] = v;
+        self.true_ring[self.ring_at + VELOCITY_LAGS] = v;
+        let Some(est) = p.est_vel_um_s.filter(|_| p.fault.is_none()) else {
+            return;
+        };
+        let e = est as f32 * 1e-3;
+        let window = &self.true_ring[self.ring_at..self.ring_at + VELOCITY_LAGS];
+        for (acc, &t) in self.lag_block.iter_mut().zip(window) {
+            *acc += (e - t) * (e - t);
+        }
+        self.vel_n += 1;
+        self.block_n += 1;
+        if self.block_n == LAG_BLOCK {
+            self.flush_lags();
+        }
+    }
+
+    fn flush_lags(&mut self) {
+        for (sum, acc) in self.lag_sums.iter_mut().zip(&mut self.lag_block) {
+            *sum += *acc as f64;
+            *acc = 0.0;
+        }
+        self.block_n = 0;
+    }
+
+    /// One edge, placed against the points up to `latest`.
+    fn edge(&mut self, e: Edge, latest: u64) {
+        // A rise after the last point (the run's end) has no sample before it: not placed.
+        if e.high {
+            if let Some((done, fall)) = self.awaiting.take() {
+                self.complete(done, fall, Some(e.t), latest);
+            }
+            let idx = e.t.saturating_sub(1) / self.period_clk;
+            let at = self.slot(idx);
+            let region = at.and_then(|s| s.region);
+            let before = self.slot(idx.saturating_sub(1));
+            let run_before = match (region, before) {
+                (Some(r), Some(b)) if b.region == Some(r) => Some(b.run),
+                _ => None,
+            };
+            let expected_hz = match (region, at) {
+                (Some(r), Some(s)) => self
+                    .textures
+                    .get(r as usize)
+                    .and_then(|t| expected_hz(t, s.true_vel_um_s)),
+                _ => None,
+            };
+            // The stall figure counts every rise the line makes.
+            self.last_rise_clk = Some(e.t);
+            self.replaced_period_clk = 0;
+            self.open = Some(Placed {
+                rise: e.t,
+                region,
+                run_before,
+                expected_hz,
+            });
+        } else if let Some(p) = self.open.take() {
+            self.pulses += 1;
+            if let Some(r) = p.region {
+                if let Some(s) = self.sums.get_mut(r as usize) {
+                    s.pulses += 1;
+                }
+            }
+            self.awaiting = Some((p, e.t));
+        }
+    }
+
+    /// A pulse whose next rise (if any) is known: its interval for its region and its shape.
+    fn complete(&mut self, p: Placed, fall: u64, next_rise: Option<u64>, latest: u64) {
+        let on = fall - p.rise;
+        let period = next_rise.map(|n| n - p.rise);
+        if !pulse_matches(on, period, &self.planned) {
+            self.malformed += 1;
+        }
+        let (Some(region), Some(run), Some(next)) = (p.region, p.run_before, next_rise) else {
+            return;
+        };
+        let last = (next / self.period_clk).min(latest);
+        if self.slot(last).is_some_and(|s| s.run == run) {
+            if let Some(s) = self.sums.get_mut(region as usize) {
+                s.intervals += 1;
+                s.interval_clk += next - p.rise;
+                s.on_clk += on;
+                if let Some(f) = p.expected_hz {
+                    s.expected_period_s += 1.0 / f;
+                    s.expected_n += 1;
                 }
             }
         }
     }
-    let mut time_in = vec![0usize; n_regions];
-    for t in &r.trace {
-        if let Some(reg) = t.region {
-            time_in[reg as usize] += 1;
-        }
-    }
-    let clock = r.timer.clock_hz as f64;
-    let regions = (0..n_regions)
-        .map(|i| {
-            let commanded_hz = r.params.config.scene.textures[i]
-                .fixed_command()
-                .map(|c| c.burst_millihz as f64 / 1000.0);
-            let iv = &per_region_intervals[i];
-            let (produced_hz, duty_pct) = if iv.is_empty() {
-                (None, None)
-            } else {
-                let total: u64 = iv.iter().map(|x| x.0).sum();
-                let on: u64 = iv.iter().map(|x| x.1).sum();
-                (
-                    Some(clock * iv.len() as f64 / total as f64),
-                    Some(100.0 * on as f64 / total as f64),
-                )
-            };
-            let (sum_s, n) = per_region_expected[i];
-            let expected_hz = (n > 0).then(|| n as f64 / sum_s);
-            let error_pct = match (commanded_hz, produced_hz) {
-                (Some(c), Some(p)) => Some(100.0 * (p - c) / c),
-                _ => None,
-            };
-            RegionStats {
-                region: i as u8,
-                commanded_hz,
-                expected_hz,
-                produced_hz,
-                error_pct,
-                pulses: per_region_pulses[i],
-                intervals: iv.len(),
-                duty_pct,
-                time_s: time_in[i] as f64 * r.sample_period_us as f64 * 1e-6,
+
+    /// The stall figure's bookkeeping for one point (its rises already placed).
+    fn stall_point(&mut self, p: &TracePoint, now: u64) {
+        match p.action {
+            Some(GateAction::Start(s)) => {
+                self.running_period_clk = Some(s.period_clocks());
+                self.last_rise_clk = Some(now);
             }
-        })
-        .collect();
-
-    let switches = switches(r);
-
-    let mut fault_onsets = 0;
-    let mut prev = None;
-    for t in &r.trace {
-        if t.fault.is_some() && prev.is_none() {
-            fault_onsets += 1;
+            Some(GateAction::Update(s)) => {
+                // With preload an update acts at the next update event: until the next rise
+                // the period replaced still runs, so it counts for the allowance too.
+                self.replaced_period_clk = self
+                    .replaced_period_clk
+                    .max(self.running_period_clk.unwrap_or(0));
+                self.running_period_clk = Some(s.period_clocks());
+            }
+            Some(GateAction::Off | GateAction::Pulse(_)) => self.running_period_clk = None,
+            _ => {}
         }
-        prev = t.fault;
+        let silent = match (self.running_period_clk, self.last_rise_clk) {
+            (Some(period), Some(rise)) => {
+                now.saturating_sub(rise) > 2 * period.max(self.replaced_period_clk)
+            }
+            _ => false,
+        };
+        let (total, longest, current) = &mut self.stall_clk;
+        if silent {
+            *current += self.period_clk;
+            *total += self.period_clk;
+            *longest = (*longest).max(*current);
+        } else {
+            *current = 0;
+        }
     }
-    let fault_samples = r.trace.iter().filter(|t| t.fault.is_some()).count();
 
-    // Every setting the core handed the timer (constant regions', and the per-sample ones of
-    // grating/material/random regions and line pulses): a whole pulse matches one of them.
-    let mut planned: Vec<TimerSettings> = r.region_settings.iter().flatten().copied().collect();
-    planned.extend(r.trace.iter().filter_map(|t| match t.action {
-        Some(GateAction::Start(s) | GateAction::Update(s) | GateAction::Pulse(s)) => Some(s),
-        _ => None,
-    }));
-    planned.sort_by_key(|s| (s.psc, s.arr, s.ccr));
-    planned.dedup();
-    let malformed_pulses = pulses
-        .iter()
-        .filter(|p| !pulse_matches(p.on(), p.period(), &planned))
-        .count();
-
-    Metrics {
-        regions,
-        switches,
-        velocity: velocity_stats(r),
-        fault_onsets,
-        fault_samples,
-        samples: r.trace.len(),
-        pulses: pulses.len(),
-        malformed_pulses,
-        stall: stall(r),
-        off_travel: off_travel(r),
+    /// The figures of everything fed.
+    pub fn finish(mut self) -> Metrics {
+        let latest = self.points.saturating_sub(1);
+        while let Some(e) = self.pending.pop_front() {
+            self.edge(e, latest);
+        }
+        if let Some((p, fall)) = self.awaiting.take() {
+            self.complete(p, fall, None, latest);
+        }
+        let clock = self.clock_hz as f64;
+        let regions = self
+            .sums
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let commanded_hz = self.textures[i]
+                    .fixed_command()
+                    .map(|c| c.burst_millihz as f64 / 1000.0);
+                let (produced_hz, duty_pct) = if s.intervals == 0 {
+                    (None, None)
+                } else {
+                    (
+                        Some(clock * s.intervals as f64 / s.interval_clk as f64),
+                        Some(100.0 * s.on_clk as f64 / s.interval_clk as f64),
+                    )
+                };
+                let expected_hz =
+                    (s.expected_n > 0).then(|| s.expected_n as f64 / s.expected_period_s);
+                let error_pct = match (commanded_hz, produced_hz) {
+                    (Some(c), Some(p)) => Some(100.0 * (p - c) / c),
+                    _ => None,
+                };
+                RegionStats {
+                    region: i as u8,
+                    commanded_hz,
+                    expected_hz,
+                    produced_hz,
+                    error_pct,
+                    pulses: s.pulses,
+                    intervals: s.intervals,
+                    duty_pct,
+                    time_s: s.samples as f64 * self.sample_period_us as f64 * 1e-6,
+                }
+            })
+            .collect();
+        let velocity = self.velocity();
+        let (total, longest, _) = self.stall_clk;
+        Metrics {
+            regions,
+            switches: self.switches,
+            switch_count: self.switch_count,
+            switch_past_um: self.switch_past_um,
+            velocity,
+            fault_onsets: self.fault_onsets,
+            fault_samples: self.fault_samples,
+            samples: self.points as usize,
+            pulses: self.pulses,
+            malformed_pulses: self.malformed,
+            stall: Stall {
+                total_s: total as f64 / clock,
+                longest_s: longest as f64 / clock,
+            },
+            off_travel: self.off,
+        }
     }
+
+    /// Velocity RMS error at zero lag and at the best lag, over every sample with an estimate
+    /// and no fault. The lag is searched over whole sample periods (0 … [`VELOCITY_LAGS`] − 1)
+    /// and placed between them by the parabola through the best one and its neighbours.
+    fn velocity(&mut self) -> Option<VelocityStats> {
+        if self.vel_n == 0 {
+            return None;
+        }
+        self.flush_lags();
+        let n = self.vel_n as f64;
+        let mse: Vec<f64> = self.lag_sums.iter().map(|s| s / n).collect();
+        let (best, &best_mse) = mse.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?;
+        let offset = match (best.checked_sub(1).map(|i| mse[i]), mse.get(best + 1)) {
+            (Some(lo), Some(&hi)) => {
+                let curve = lo - 2.0 * best_mse + hi;
+                if curve > 0.0 {
+                    (0.5 * (lo - hi) / curve).clamp(-0.5, 0.5)
+                } else {
+                    0.0
+                }
+            }
+            _ => 0.0,
+        };
+        let period_us = self.sample_period_us as f64;
+        Some(VelocityStats {
+            rms_err_um_s: mse[0].sqrt() * 1e3,
+            delay_us: (best as f64 + offset) * period_us,
+            rms_err_at_delay_um_s: best_mse.sqrt() * 1e3,
+            lag_at_best_us: best as f64 * period_us,
+            samples: self.vel_n,
+        })
+    }
+}
+
+/// Computes the metrics of a recorded run (through [`Online`], as a streamed run does).
+pub fn compute(r: &SimResult) -> Metrics {
+    let mut m = Online::new(
+        &r.params,
+        r.timer.clock_hz,
+        r.sample_period_us,
+        &r.region_settings,
+    );
+    m.edges(&r.waveform.edges);
+    for p in &r.trace {
+        m.point(p);
+    }
+    m.finish()
 }
 
 /// The samples of `r` whose true position lies outside the calibrated travel.
@@ -331,75 +633,52 @@ pub fn off_travel(r: &SimResult) -> OffTravel {
     }
 }
 
-/// True when a pulse is one of `planned`: on-time and period both equal to one setting's. A pulse
-/// not followed by another rise of the same run (Off, restart, end) is checked for on-time ≤ the
-/// setting's only, since Off cuts it short by design.
-fn pulse_matches(on: u64, period: Option<u64>, planned: &[TimerSettings]) -> bool {
-    planned.iter().any(|s| match period {
-        Some(p) => {
-            (s.on_clocks() == on && s.period_clocks() == p)
-                // A pulse cut by Off and restarted later: shorter on-time, longer gap.
-                || (on <= s.on_clocks() && p > s.period_clocks())
-        }
-        None => on <= s.on_clocks(),
+/// True when a pulse is one of `planned` (the (on-time, period) pairs of the settings, kernel
+/// clocks): on-time and period both equal to one setting's. A pulse not followed by another rise
+/// of the same run (Off, restart, end) is checked for on-time ≤ the setting's only, since Off
+/// cuts it short by design.
+fn pulse_matches(on: u64, period: Option<u64>, planned: &HashSet<(u64, u64)>) -> bool {
+    if period.is_some_and(|p| planned.contains(&(on, p))) {
+        return true;
+    }
+    planned.iter().any(|&(s_on, s_period)| match period {
+        // A pulse cut by Off and restarted later: shorter on-time, longer gap.
+        Some(p) => on <= s_on && p > s_period,
+        None => on <= s_on,
     })
 }
 
-/// Velocity RMS error, at zero lag and at the best lag (searched 0–10 ms in 10 µs steps against
-/// the trajectory's true velocity).
+/// Velocity RMS error, at zero lag and at the best lag (searched 0–10 ms against the
+/// trajectory's true velocity, 100 µs then 5 µs steps).
 pub fn velocity_stats(r: &SimResult) -> Option<VelocityStats> {
-    let pts: Vec<(f64, f64, f64)> = r
-        .trace
-        .iter()
-        .filter(|t| t.fault.is_none())
-        .filter_map(|t| {
-            t.est_vel_um_s
-                .map(|v| (t.t_us as f64 * 1e-6, v as f64, t.true_vel_um_s))
-        })
-        .collect();
-    if pts.is_empty() {
+    compute(r).velocity
+}
+
+/// The switch between consecutive points `a` and `b`, if their regions differ (both present).
+fn switch_between(a: &TracePoint, b: &TracePoint, boundaries_um: &[f64]) -> Option<Switch> {
+    let (Some(from), Some(to)) = (a.region, b.region) else {
+        return None;
+    };
+    if from == to {
         return None;
     }
-    let rms = |lag_s: f64| -> f64 {
-        let s: f64 = pts
-            .iter()
-            .map(|&(t, est, _)| {
-                let v = r
-                    .params
-                    .trajectory
-                    .state((t - lag_s).max(0.0))
-                    .velocity_um_s;
-                (est - v).powi(2)
-            })
-            .sum();
-        (s / pts.len() as f64).sqrt()
+    let up = to > from;
+    let bi = if up { to as usize - 1 } else { to as usize };
+    let boundary_um = boundaries_um.get(bi).copied().unwrap_or(f64::NAN);
+    let true_um = b.true_um;
+    let past_um = if up {
+        true_um - boundary_um
+    } else {
+        boundary_um - true_um
     };
-    let rms0 = (pts.iter().map(|p| (p.1 - p.2).powi(2)).sum::<f64>() / pts.len() as f64).sqrt();
-    // Coarse search (100 µs) then fine (5 µs) around the best.
-    let mut best = (0.0, rms(0.0));
-    for k in 0..=100 {
-        let lag = k as f64 * 100e-6;
-        let e = rms(lag);
-        if e < best.1 {
-            best = (lag, e);
-        }
-    }
-    let centre = best.0;
-    for k in -20..=20 {
-        let lag = centre + k as f64 * 5e-6;
-        if lag < 0.0 {
-            continue;
-        }
-        let e = rms(lag);
-        if e < best.1 {
-            best = (lag, e);
-        }
-    }
-    Some(VelocityStats {
-        rms_err_um_s: rms0,
-        delay_us: best.0 * 1e6,
-        rms_err_at_delay_um_s: best.1,
-        samples: pts.len(),
+    Some(Switch {
+        t_us: b.t_us,
+        from,
+        to,
+        boundary_um,
+        true_um,
+        meas_um: b.meas_um,
+        past_um,
     })
 }
 
@@ -414,35 +693,10 @@ pub fn switches(r: &SimResult) -> Vec<Switch> {
         .iter()
         .map(|&b| b as f64)
         .collect();
-    let mut switches = Vec::new();
-    for w in r.trace.windows(2) {
-        let (Some(a), Some(b)) = (w[0].region, w[1].region) else {
-            continue;
-        };
-        if a == b {
-            continue;
-        }
-        let up = b > a;
-        let bi = if up { b as usize - 1 } else { b as usize };
-        let boundary_um = boundaries.get(bi).copied().unwrap_or(f64::NAN);
-        let true_um = w[1].true_um;
-        let past_um = if up {
-            true_um - boundary_um
-        } else {
-            boundary_um - true_um
-        };
-        switches.push(Switch {
-            t_us: w[1].t_us,
-            from: a,
-            to: b,
-            boundary_um,
-            true_um,
-            meas_um: w[1].meas_um,
-            past_um,
-        });
-    }
-
-    switches
+    r.trace
+        .windows(2)
+        .filter_map(|w| switch_between(&w[0], &w[1], &boundaries))
+        .collect()
 }
 
 /// One burst of a grating against the ridge it renders.

@@ -3,10 +3,13 @@
 use std::fmt::Write;
 
 use crate::metrics::Metrics;
-use crate::sim::SimResult;
+use crate::sim::RunHeader;
+
+/// Switches listed in the summary; the rest are counted.
+pub const SWITCHES_PRINTED: usize = 20;
 
 /// Formats the summary of run `r` with metrics `m`.
-pub fn summary(r: &SimResult, m: &Metrics) -> String {
+pub fn summary(r: &RunHeader, m: &Metrics) -> String {
     let mut s = String::new();
     let p = &r.params;
     let _ = writeln!(
@@ -93,8 +96,8 @@ pub fn summary(r: &SimResult, m: &Metrics) -> String {
             g.time_s
         );
     }
-    let _ = writeln!(s, "\nregion switches: {}", m.switches.len());
-    for w in &m.switches {
+    let _ = writeln!(s, "\nregion switches: {}", m.switch_count);
+    for w in m.switches.iter().take(SWITCHES_PRINTED) {
         let _ = writeln!(
             s,
             "  t = {:7.4} s  {} → {}  at {:7.3} mm (measured {}), boundary {:.3} mm, {:+.3} mm past",
@@ -109,22 +112,22 @@ pub fn summary(r: &SimResult, m: &Metrics) -> String {
             w.past_um / 1e3
         );
     }
-    if let Some(worst) = m
-        .switches
-        .iter()
-        .map(|w| w.past_um.abs())
-        .fold(None, |a: Option<f64>, x| Some(a.map_or(x, |a| a.max(x))))
-    {
+    if m.switch_count > SWITCHES_PRINTED {
+        let _ = writeln!(s, "  … and {} more", m.switch_count - SWITCHES_PRINTED);
+    }
+    if let Some(worst) = m.switch_past_um.map(|(lo, hi)| lo.abs().max(hi.abs())) {
         let _ = writeln!(s, "  worst distance from boundary: {:.3} mm", worst / 1e3);
     }
     match &m.velocity {
         Some(v) => {
             let _ = writeln!(
                 s,
-                "\nvelocity: RMS error {:.2} mm/s at zero lag; best-fit delay {:.0} µs, RMS error {:.2} mm/s at that delay ({} samples)",
+                "\nvelocity: RMS error {:.2} mm/s at zero lag; best-fit delay {:.0} µs (between \
+                 whole-sample lags), RMS error {:.2} mm/s at {:.0} µs ({} samples)",
                 v.rms_err_um_s / 1e3,
                 v.delay_us,
                 v.rms_err_at_delay_um_s / 1e3,
+                v.lag_at_best_us,
                 v.samples
             );
         }

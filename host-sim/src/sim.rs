@@ -152,6 +152,47 @@ impl SimResult {
     }
 }
 
+/// What a summary needs of a run besides its metrics.
+#[derive(Clone, Debug)]
+pub struct RunHeader {
+    /// The parameters it ran with.
+    pub params: SimParams,
+    /// The burst timer.
+    pub timer: BurstTimer,
+    /// Sample period, µs.
+    pub sample_period_us: u32,
+    /// The controller's counters at the end.
+    pub telemetry: Telemetry,
+    /// Actions the timer model could not make sense of (should be 0).
+    pub timer_protocol_errors: u32,
+}
+
+impl SimResult {
+    /// The run's header (for [`crate::report::summary`]).
+    pub fn header(&self) -> RunHeader {
+        RunHeader {
+            params: self.params.clone(),
+            timer: self.timer,
+            sample_period_us: self.sample_period_us,
+            telemetry: self.telemetry,
+            timer_protocol_errors: self.timer_protocol_errors,
+        }
+    }
+}
+
+/// A run that kept no trace: its figures and chart, computed as it went.
+#[derive(Clone, Debug)]
+pub struct Streamed {
+    /// The run.
+    pub header: RunHeader,
+    /// Its figures.
+    pub metrics: crate::metrics::Metrics,
+    /// Its chart (None when not asked for).
+    pub chart: Option<crate::chart::ChartData>,
+    /// Wall time of the closed loop with its metrics and chart recording, s.
+    pub loop_s: f64,
+}
+
 /// Why a run could not start.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SimError {
@@ -304,15 +345,11 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
     }
 }
 
-fn run_controller<E: VelocityEstimator>(
-    params: &SimParams,
-    ctrl: Controller<E>,
-) -> Result<SimResult, SimError> {
+/// The settings the planner gives each region's texture (None where they depend on the motion,
+/// or for off).
+pub fn region_settings(params: &SimParams) -> Vec<Option<TimerSettings>> {
     let timer = burst_timer(params.board);
-    let period_us = sample_period_us(params.board);
-    let mut lp = ClosedLoop::new(params, ctrl)?;
-
-    let region_settings = params
+    params
         .config
         .scene
         .textures
@@ -322,9 +359,105 @@ fn run_controller<E: VelocityEstimator>(
                 .and_then(|cmd| burst::plan(&timer, &params.config.limits, &cmd).ok())
                 .map(|(s, _)| s)
         })
-        .collect();
+        .collect()
+}
 
-    let n = (params.duration_s * 1e6 / period_us as f64).round() as u64;
+/// Runs the closed loop with the default estimator keeping no trace: the metrics (and, with
+/// `chart`, the chart's data) are computed as it goes, so memory does not grow with the
+/// duration. The figures are those [`run`] + [`crate::metrics::compute`] give.
+pub fn stream(params: &SimParams, chart: bool) -> Result<Streamed, SimError> {
+    let timer = burst_timer(params.board);
+    let period_us = sample_period_us(params.board);
+    let ctrl = Controller::new(timer, period_us).map_err(SimError::Controller)?;
+    let mut lp = ClosedLoop::new(params, ctrl)?;
+    let mut metrics =
+        crate::metrics::Online::new(params, timer.clock_hz, period_us, &region_settings(params));
+    let mut recorder = chart.then(|| crate::chart::Recorder::new(params, timer.clock_hz));
+    let (mut edges, mut levels) = (Vec::new(), Vec::new());
+    let started = std::time::Instant::now();
+    let n = samples_in(params);
+    for k in 0..n {
+        let t_us = k * period_us as u64;
+        let point = lp.step(k, params.trajectory.state(t_us as f64 * 1e-6));
+        lp.tm.take_settled(&mut edges, &mut levels);
+        metrics.edges(&edges);
+        metrics.point(&point);
+        if let Some(r) = &mut recorder {
+            r.point(&point);
+            r.edges(&edges, &levels);
+        }
+    }
+    let end = lp.clk(n * period_us as u64);
+    lp.tm.advance_to(end);
+    lp.tm.take_settled(&mut edges, &mut levels);
+    metrics.edges(&edges);
+    if let Some(r) = &mut recorder {
+        r.edges(&edges, &levels);
+    }
+    let metrics = metrics.finish();
+    let chart = recorder.map(crate::chart::Recorder::finish);
+    let loop_s = started.elapsed().as_secs_f64();
+    Ok(Streamed {
+        header: RunHeader {
+            params: params.clone(),
+            timer,
+            sample_period_us: period_us,
+            telemetry: lp.ctrl.telemetry(),
+            timer_protocol_errors: lp.tm.protocol_errors,
+        },
+        metrics,
+        chart,
+        loop_s,
+    })
+}
+
+/// Wall time per sample of the bare core loop (the controller's `on_sample` and `on_tick`
+/// alone, over `samples` samples the ADC model drew beforehand along `params`' trajectory),
+/// s: the ceiling a closed loop on this machine is measured against.
+pub fn bare_core_s_per_sample(params: &SimParams, samples: u64) -> Result<f64, SimError> {
+    let timer = burst_timer(params.board);
+    let period_us = sample_period_us(params.board);
+    let mut ctrl = Controller::new(timer, period_us).map_err(SimError::Controller)?;
+    ctrl.load(&params.config).map_err(SimError::Config)?;
+    let mut adc =
+        AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
+    let input: Vec<Sample> = (0..samples)
+        .filter_map(|k| {
+            let t_us = k * period_us as u64;
+            adc.sample(
+                params.trajectory.state(t_us as f64 * 1e-6).position_um,
+                t_us,
+            )
+        })
+        .collect();
+    let started = std::time::Instant::now();
+    let mut actions = 0u64;
+    for s in &input {
+        let out = ctrl.on_sample(*s);
+        actions += u64::from(out.action.is_some());
+        if ctrl.on_tick(s.t_us.wrapping_add(period_us / 2)).is_some() {
+            actions += 1;
+        }
+    }
+    std::hint::black_box(actions);
+    Ok(started.elapsed().as_secs_f64() / input.len().max(1) as f64)
+}
+
+/// Sample periods in a run of `params`.
+pub fn samples_in(params: &SimParams) -> u64 {
+    (params.duration_s * 1e6 / sample_period_us(params.board) as f64).round() as u64
+}
+
+fn run_controller<E: VelocityEstimator>(
+    params: &SimParams,
+    ctrl: Controller<E>,
+) -> Result<SimResult, SimError> {
+    let timer = burst_timer(params.board);
+    let period_us = sample_period_us(params.board);
+    let mut lp = ClosedLoop::new(params, ctrl)?;
+
+    let region_settings = region_settings(params);
+    let n = samples_in(params);
     let mut trace = Vec::with_capacity(n as usize);
     for k in 0..n {
         let t_us = k * period_us as u64;

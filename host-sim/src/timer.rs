@@ -509,6 +509,18 @@ impl TimerModel {
         self.levels.clear();
     }
 
+    /// Moves the recorded edges and DAC changes into `edges` and `levels` (cleared first) and
+    /// drops the recorded actions: what a streamed run consumes after every step. Call it only
+    /// between steps, when every later action comes after the model's time, so no recorded
+    /// edge can still be cancelled by one at the same instant.
+    pub fn take_settled(&mut self, edges: &mut Vec<Edge>, levels: &mut Vec<LevelEdge>) {
+        edges.clear();
+        levels.clear();
+        std::mem::swap(edges, &mut self.edges);
+        std::mem::swap(levels, &mut self.levels);
+        self.actions.clear();
+    }
+
     /// Finishes the recording at `t` and returns the waveform.
     pub fn finish(mut self, t: u64) -> Waveform {
         self.advance_to(t);
