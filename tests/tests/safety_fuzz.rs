@@ -467,17 +467,17 @@ fn fuzz(seed: u64, cases: usize) {
 
 #[test]
 fn caps_hold_on_the_waveform_seed_1() {
-    fuzz(0xCA95, 40);
+    fuzz(0xCA95, 60);
 }
 
 #[test]
 fn caps_hold_on_the_waveform_seed_2() {
-    fuzz(0x5A3D_0002, 40);
+    fuzz(0x5A3D_0002, 60);
 }
 
 #[test]
 fn caps_hold_on_the_waveform_seed_3() {
-    fuzz(0x5A3D_0003, 40);
+    fuzz(0x5A3D_0003, 60);
 }
 
 /// Core issue found by the fuzz above: after an Off (sensor fault, or a region with texture Off)
