@@ -5,10 +5,12 @@
 # on thumbv7em-none-eabihf — rustup targets are not needed), the lld-22 linker, QEMU for Arm,
 # libfontconfig1-dev (host-side plotting) and, for the board model (board-model/, test-only, GPL),
 # libunicorn-dev with libclang-dev (bindgen), and Chromium with chromedriver for the web panel's
-# browser test (saw/tests/browser.rs). apt is skipped entirely when everything is present.
+# browser test (saw/tests/browser.rs), and g++ for libFuzzer (libfuzzer-sys builds it from C++
+# source) with cargo-fuzz for the fuzz targets (scripts/fuzz.sh). apt is skipped entirely when
+# everything is present.
 set -euo pipefail
 
-PACKAGES=(rustc-web cargo-web rust-web-src lld-22 qemu-system-arm libfontconfig1-dev libunicorn-dev libclang-dev chromium chromium-driver)
+PACKAGES=(rustc-web cargo-web rust-web-src lld-22 qemu-system-arm libfontconfig1-dev libunicorn-dev libclang-dev chromium chromium-driver g++)
 
 export DEBIAN_FRONTEND=noninteractive
 
@@ -48,6 +50,15 @@ if defmt-print --version >/dev/null 2>&1 || "$HOME/.cargo/bin/defmt-print" --ver
 else
     echo "setup: installing defmt-print (cargo install --locked)"
     RUSTC=/usr/bin/rustc /usr/bin/cargo install defmt-print --locked
+fi
+
+# cargo-fuzz runs the fuzz targets on Debian's rustc (scripts/fuzz.sh, CI's fuzz step); skipped
+# when present. cargo finds it in ~/.cargo/bin.
+if cargo-fuzz --version >/dev/null 2>&1 || "$HOME/.cargo/bin/cargo-fuzz" --version >/dev/null 2>&1; then
+    echo "setup: cargo-fuzz already installed"
+else
+    echo "setup: installing cargo-fuzz (cargo install --locked)"
+    RUSTC=/usr/bin/rustc /usr/bin/cargo install cargo-fuzz --locked
 fi
 
 # What the firmware build will use.

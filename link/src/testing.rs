@@ -1,6 +1,11 @@
 //! Test helpers the link's tests, the fuzz targets (`fuzz/`) and the corpus replay share: a
 //! board over the real core ([`CoreBoard`]) and the entry points that take bytes from outside
-//! exactly as the firmware does ([`link_bytes`], [`scene_file_bytes`]).
+//! exactly as the firmware does ([`link_bytes`], [`scene_file_bytes`]), and the
+//! structure-aware scene files of the `scene_struct` target ([`scene_struct_bytes`]).
+
+mod scene_toml;
+
+pub use scene_toml::scene_toml;
 
 use embassy_futures::block_on;
 use saw_core::burst::BurstTimer;
@@ -158,6 +163,12 @@ pub fn scene_file_bytes(data: &[u8]) -> bool {
             false
         }
     }
+}
+
+/// The `scene_struct` target's bytes: choices that build a scene file ([`scene_toml`]), read
+/// as [`scene_file_bytes`] reads a file. Returns whether it was accepted; never panics.
+pub fn scene_struct_bytes(data: &[u8]) -> bool {
+    scene_file_bytes(scene_toml(data).as_bytes())
 }
 
 /// One request of every kind (`Request::VARIANTS` of them), as a host sends them.

@@ -1,6 +1,8 @@
 //! The fuzz corpora (`fuzz/corpus/<target>/`, kept in the repository) replayed through the same
 //! entry points the fuzz targets call (`saw_link::testing`), on the stable toolchain: every
-//! input a fuzzer ever kept is answered without a panic, on every `cargo test`.
+//! input a fuzzer ever kept is answered without a panic, on every `cargo test`. A `scene_struct`
+//! input is the fuzzer's choices: it is replayed as the TOML text they build, read as
+//! `scene_file` reads a file.
 //!
 //! `cargo test -p saw-link --test fuzz_corpus -- --ignored write_the_seed_inputs` (re)writes the
 //! seed inputs: every request kind framed as the host sends it, through both doors of
@@ -10,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use saw_link::frame::{self, Receiver, MAX_ENCODED};
 use saw_link::msg::{Header, PROTOCOL_VERSION};
-use saw_link::testing::{link_bytes, scene_file_bytes};
+use saw_link::testing::{link_bytes, scene_file_bytes, scene_struct_bytes, scene_toml};
 
 fn corpus(target: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -104,4 +106,32 @@ fn every_scene_file_input_kept_is_read() {
         }
     }
     assert!(accepted >= 5, "{accepted} of {} accepted", all.len());
+}
+
+#[test]
+fn every_scene_struct_input_kept_is_read() {
+    let all = inputs("scene_struct");
+    assert!(all.len() >= 100, "{} inputs", all.len());
+    let accepted = all.iter().filter(|(_, b)| scene_struct_bytes(b)).count();
+    // The corpus keeps what reached new code, past the reader into the controller's checks:
+    // many of its scenes are accepted, and among them the shapes the planted panics need.
+    assert!(
+        accepted >= all.len() / 10,
+        "{accepted} of {} accepted",
+        all.len()
+    );
+    let read = |b: &[u8]| {
+        saw_core::scene_file::load_for_board(
+            "s.toml",
+            &scene_toml(b),
+            saw_link::testing::TIMER,
+            100,
+        )
+    };
+    let six_lines = all
+        .iter()
+        .filter_map(|(_, b)| read(b).ok())
+        .filter(|c| c.scene.lines.positions_um.len() >= 6)
+        .count();
+    assert!(six_lines >= 1, "no accepted scene with 6 or more lines");
 }

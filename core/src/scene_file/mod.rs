@@ -380,6 +380,17 @@ mod tests {
         }
     }
 
+    /// The inputs the planted panics (features `fuzz-plant-*`, docs/fuzzing.md) fire on load
+    /// in an ordinary build: 1 µm in 5 of hysteresis, and 6 lines. Fails if a plant is built in.
+    #[test]
+    fn no_planted_panic_in_this_build() {
+        let text = "hysteresis_mm = 0.011\n\n[lines]\npositions_mm = [5, 10, 15, 20, 25, 30]\n\n\
+                    [[region]]\nkind = \"off\"\n";
+        let cfg = load_for_board("p.toml", text, TIMER, 100).unwrap();
+        assert_eq!(cfg.scene.hysteresis_um, 11);
+        assert_eq!(cfg.scene.lines.positions_um.len(), 6);
+    }
+
     #[test]
     fn shipped_scenes_load() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");

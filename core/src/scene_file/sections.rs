@@ -79,7 +79,12 @@ pub(super) fn hysteresis_um(
 ) -> Result<u32, SceneFileError> {
     match hysteresis_mm {
         None => Ok(DEFAULT_HYSTERESIS_UM),
-        Some(h) => Ok(milli(cx.range(h, "hysteresis_mm", 0.0, 5.0)?)),
+        Some(h) => {
+            let um = milli(cx.range(h, "hysteresis_mm", 0.0, 5.0)?);
+            #[cfg(feature = "fuzz-plant-hysteresis")]
+            plant::hysteresis(um);
+            Ok(um)
+        }
     }
 }
 
@@ -118,6 +123,8 @@ pub(super) fn lines(
             .push(um as u32)
             .map_err(|_| cx.err(at.clone(), "lines.positions_mm", "more than 16 lines"))?;
     }
+    #[cfg(feature = "fuzz-plant-lines")]
+    plant::lines(&out.positions_um);
     out.pulse_us = milli(cx.opt(&l.pulse_ms, "lines.pulse_ms", 0.001, 1000.0, 10.0)?);
     out.envelope = match l.envelope {
         None | Some(EnvelopeSpec::Triangle) => Envelope::Triangular,
@@ -127,4 +134,35 @@ pub(super) fn lines(
         cx.permille(&l.amplitude_percent, "lines.amplitude_percent", 0.1, 100.0)?;
     out.hysteresis_um = milli(cx.opt(&l.rearm_mm, "lines.rearm_mm", 0.0, 5.0, 0.2)?);
     Ok(out)
+}
+
+/// Planted panics (features `fuzz-plant-*`, never in a shipped build): bugs of the kind a
+/// fuzzer should find, that the byte-level mutator did not find in 120 s (docs/fuzzing.md).
+/// `scripts/fuzz.sh --plant <name>` builds one in and fails unless the fuzzer finds it.
+#[cfg(any(feature = "fuzz-plant-hysteresis", feature = "fuzz-plant-lines"))]
+mod plant {
+    /// An index one past a 5-entry table for 1 µm in 5 (`hysteresis_um % 5 == 1`): reached only
+    /// by a value whose µm count ends in 1 or 6 (`0.001`, `1.506`), which no shipped scene
+    /// writes.
+    #[cfg(feature = "fuzz-plant-hysteresis")]
+    pub(super) fn hysteresis(um: u32) {
+        // black_box: so the compiler cannot prove the index and refuse to build the plant.
+        let table = core::hint::black_box([0u32; 5]);
+        let slot = match um % 5 {
+            1 => 5,
+            r => r as usize,
+        };
+        core::hint::black_box(table[slot]);
+    }
+
+    /// An array one short of 6 lines: room for 5, filled with up to 6, so a scene with 6 or
+    /// more lines (every position valid) overruns it.
+    #[cfg(feature = "fuzz-plant-lines")]
+    pub(super) fn lines(positions_um: &[u32]) {
+        let mut first = core::hint::black_box([0u32; 5]);
+        for (i, &p) in positions_um.iter().take(6).enumerate() {
+            first[i] = p;
+        }
+        core::hint::black_box(first);
+    }
 }
