@@ -52,11 +52,15 @@ fn decimate(points: &[(f64, f64)], t0: f64, t1: f64, buckets: usize) -> Vec<(f64
 /// (t s, value) points.
 type Series = Vec<(f64, f64)>;
 
+/// A bucket's lowest point and when it arrived, and its highest and when (arrival u64::MAX:
+/// none yet).
+type Extremes = ((f64, f64), u64, (f64, f64), u64);
+
 /// Min/max decimation done as the points arrive: the points themselves while there are at most
 /// `2 × buckets` of them, then per bucket of `[t0, t1]` its lowest and highest point (in the
 /// order they came), so a run of any length is drawn from bounded memory, spikes kept — the
 /// same points [`decimate`] gives for the whole series.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Decimator {
     t0: f64,
     /// Buckets per second.
@@ -64,7 +68,7 @@ pub struct Decimator {
     buckets: usize,
     raw: Option<Series>,
     /// Per bucket: (lowest, its arrival, highest, its arrival); empty buckets have no arrival.
-    minmax: Vec<((f64, f64), u64, (f64, f64), u64)>,
+    minmax: Vec<Extremes>,
     arrivals: u64,
 }
 
@@ -156,7 +160,7 @@ impl Decimator {
 /// A quantity the core may not have (None during a fault), decimated in runs broken where it is
 /// missing: one [`Decimator`] per run while the runs are few, then one for all with the breaks
 /// kept at bucket resolution.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct GappyDecimator {
     t0: f64,
     t1: f64,
@@ -221,7 +225,7 @@ impl GappyDecimator {
 }
 
 /// Accumulates [`dense_duty`]'s figures from a step curve fed point by point.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 struct DutyBins {
     t_end: f64,
     width: f64,
@@ -286,11 +290,11 @@ impl DutyBins {
 }
 
 /// Line pulses drawn on the line panel (the first ones; the legend gives the total).
-pub const LINE_PULSES_DRAWN: usize = 400;
+pub const LINE_PULSES_DRAWN: usize = 100;
 
 /// Everything the chart draws, in memory bounded by the chart's width, not the run's length:
 /// fed point by point and edge by edge by [`Recorder`].
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ChartData {
     t_end: f64,
     length_mm: f64,
@@ -470,11 +474,12 @@ impl Recorder {
                                 .abs()
                                 .total_cmp(&(**b * 1e3 - mid_um).abs())
                         }) {
-                            d.line_curves.push(
-                                c.into_iter()
-                                    .map(|(um, y)| ((um / 1e3 - line_mm), y))
-                                    .collect(),
-                            );
+                            let mut curve: Series = c
+                                .into_iter()
+                                .map(|(um, y)| ((um / 1e3 - line_mm), y))
+                                .collect();
+                            curve.shrink_to_fit();
+                            d.line_curves.push(curve);
                         }
                     }
                 }
@@ -507,6 +512,31 @@ impl ChartData {
         }
         rec.edges(&r.waveform.edges, &r.waveform.levels);
         rec.finish()
+    }
+
+    /// Heap the data holds, bytes: bounded by the chart's buckets and [`LINE_PULSES_DRAWN`],
+    /// whatever the run's length.
+    pub fn heap_bytes(&self) -> usize {
+        let series = |d: &Decimator| {
+            d.raw.as_ref().map_or(0, |r| r.capacity() * 16) + d.minmax.capacity() * 48
+        };
+        let gappy = |g: &GappyDecimator| {
+            g.runs.capacity() * std::mem::size_of::<Decimator>()
+                + g.runs.iter().map(series).sum::<usize>()
+        };
+        series(&self.pos_truth)
+            + series(&self.vel_truth)
+            + series(&self.region)
+            + series(&self.gate)
+            + series(&self.drive)
+            + gappy(&self.pos_core)
+            + gappy(&self.vel_core)
+            + self.duty.on.capacity() * 12
+            + self
+                .line_curves
+                .iter()
+                .map(|c| c.capacity() * 16)
+                .sum::<usize>()
     }
 
     /// Line pulses in the run (the panel draws the first [`LINE_PULSES_DRAWN`]).

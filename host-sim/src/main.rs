@@ -70,6 +70,7 @@ const BARE_CORE_SAMPLES: u64 = 200_000;
 fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> {
     let started = Instant::now();
     let Plan { params, scenario } = plan;
+    let mut memory: Vec<(f64, u64)> = Vec::new();
     // A scenario's expectations look at the whole trace; a plain run keeps none (constant
     // memory whatever its duration) and computes its figures and chart as it goes.
     let (header, m, data, recorded) = match &scenario {
@@ -80,7 +81,19 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
             (r.header(), m, data, Some(r))
         }
         None => {
-            let st = sim::stream(&params, true)?;
+            // Resident memory at simulated 10 s, 100 s, 1000 s, … and the end: flat, since
+            // nothing grows with the duration.
+            let period_s = sim::sample_period_us(params.board) as f64 * 1e-6;
+            let n = sim::samples_in(&params);
+            let mut next_mark = (10.0 / period_s) as u64;
+            let st = sim::stream_with(&params, true, |k| {
+                if k + 1 == next_mark || k + 1 == n {
+                    if let Some(b) = sim::resident_bytes() {
+                        memory.push(((k + 1) as f64 * period_s, b));
+                    }
+                    next_mark *= 10;
+                }
+            })?;
             let data = st.chart.ok_or("the streamed run kept no chart")?;
             (st.header, st.metrics, data, None)
         }
@@ -134,6 +147,13 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
         per_sample / bare,
         started.elapsed().as_secs_f64()
     );
+    if memory.len() > 1 {
+        let marks: Vec<String> = memory
+            .iter()
+            .map(|(t, b)| format!("{:.1} MB at {t:.0} s", *b as f64 / 1e6))
+            .collect();
+        println!("resident memory: {}", marks.join(", "));
+    }
     if let (Some(sc), Some(r)) = (scenario, recorded) {
         let fails = sc.check(&r, &m);
         if fails.is_empty() {

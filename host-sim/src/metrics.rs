@@ -86,13 +86,11 @@ pub struct Switch {
 pub struct VelocityStats {
     /// RMS of estimate − true velocity at the same instant, µm/s.
     pub rms_err_um_s: f64,
-    /// The lag that best aligns the estimate with the true velocity, µs.
+    /// The lag that best aligns the estimate with the true velocity, µs (a whole number of
+    /// sample periods).
     pub delay_us: f64,
     /// RMS error against the true velocity delayed by that lag, µm/s.
     pub rms_err_at_delay_um_s: f64,
-    /// The whole-sample lag `rms_err_at_delay_um_s` was measured at, µs (the delay is placed
-    /// between it and a neighbour).
-    pub lag_at_best_us: f64,
     /// Samples compared (every sample with an estimate and no fault).
     pub samples: usize,
 }
@@ -575,8 +573,10 @@ impl Online {
     }
 
     /// Velocity RMS error at zero lag and at the best lag, over every sample with an estimate
-    /// and no fault. The lag is searched over whole sample periods (0 … [`VELOCITY_LAGS`] − 1)
-    /// and placed between them by the parabola through the best one and its neighbours.
+    /// and no fault. The lag is searched over whole sample periods (0 … [`VELOCITY_LAGS`] − 1):
+    /// between them the error against a trajectory with reversals (a triangle's velocity is a
+    /// square wave) moves in steps as samples cross the reversal, so a finer lag is no better
+    /// defined (`host-sim/tests/streaming.rs` checks the lag found against a 5 µs search).
     fn velocity(&mut self) -> Option<VelocityStats> {
         if self.vel_n == 0 {
             return None;
@@ -585,23 +585,11 @@ impl Online {
         let n = self.vel_n as f64;
         let mse: Vec<f64> = self.lag_sums.iter().map(|s| s / n).collect();
         let (best, &best_mse) = mse.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?;
-        let offset = match (best.checked_sub(1).map(|i| mse[i]), mse.get(best + 1)) {
-            (Some(lo), Some(&hi)) => {
-                let curve = lo - 2.0 * best_mse + hi;
-                if curve > 0.0 {
-                    (0.5 * (lo - hi) / curve).clamp(-0.5, 0.5)
-                } else {
-                    0.0
-                }
-            }
-            _ => 0.0,
-        };
         let period_us = self.sample_period_us as f64;
         Some(VelocityStats {
             rms_err_um_s: mse[0].sqrt() * 1e3,
-            delay_us: (best as f64 + offset) * period_us,
+            delay_us: best as f64 * period_us,
             rms_err_at_delay_um_s: best_mse.sqrt() * 1e3,
-            lag_at_best_us: best as f64 * period_us,
             samples: self.vel_n,
         })
     }

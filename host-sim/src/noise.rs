@@ -7,7 +7,10 @@
 //! rails (where clamping cannot bite) round(v + nᵢ) = ⌊v⌋ + qᵢ with qᵢ = ⌊f + nᵢ + ½⌋ and
 //! f = v − ⌊v⌋, so the sum is oversample·⌊v⌋ + Q where Q = Σ qᵢ depends only on f and σ. Its
 //! exact distribution is the oversample-fold convolution of qᵢ's (from the normal CDF); it is
-//! tabulated at f = j / [`BINS`] for j = 0 … BINS and drawn from with an alias table. An f
+//! tabulated at f = j / [`BINS`] for j = 0 … BINS and drawn by inverting its CDF, found through
+//! a guide table in about one step. One 64-bit draw serves a sample: 32 bits pick the grid
+//! point, 32 the value. (rand_distr's `WeightedAliasIndex` takes three draws and twice the
+//! time; this is the loop's hottest function.) An f
 //! between two grid points picks the upper table with probability equal to its position between
 //! them, so the mean is exact wherever the mean is linear in f (σ ≳ ½ LSB) and the
 //! distribution is a mixture of its neighbours' within 1/BINS LSB.
@@ -20,9 +23,7 @@
 
 use std::sync::Arc;
 
-use rand::Rng;
-use rand_distr::weighted::WeightedAliasIndex;
-use rand_distr::Distribution;
+use rand::RngCore;
 
 /// Grid points per LSB of the ideal value's fraction.
 pub const BINS: usize = 64;
@@ -32,6 +33,8 @@ pub const MIN_SIGMA_LSB: f64 = 0.25;
 pub const MAX_SIGMA_LSB: f64 = 8.0;
 /// The per-conversion noise is cut at this many σ (mass beyond it: 2.6 × 10⁻¹²).
 pub const TAIL_SIGMAS: f64 = 7.0;
+/// Guide entries per value of the sum: more make the search's first guess right more often.
+const GUIDE_PER_VALUE: usize = 4;
 /// Probability below which the tails of a convolution are dropped.
 const NEGLIGIBLE: f64 = 1e-16;
 
@@ -40,8 +43,56 @@ const NEGLIGIBLE: f64 = 1e-16;
 struct Grid {
     /// The smallest Q in the table.
     min_q: i64,
-    /// Index into the support, drawn in O(1).
-    alias: WeightedAliasIndex<f64>,
+    /// P(Q ≤ min_q + i) × 2³², saturated at 2³² − 1 (the search stops at the last entry).
+    /// u32 keeps a grid point's table small enough to stay in cache.
+    cdf: Vec<u32>,
+    /// For each of [`GUIDE_PER_VALUE`] × `cdf.len()` equal slices of the draws, the first entry
+    /// the slice can end in: the search starts there and seldom takes a step.
+    guide: Vec<u16>,
+}
+
+impl Grid {
+    fn new(min_q: i64, pmf: &[f64]) -> Option<Self> {
+        let total: f64 = pmf.iter().sum();
+        if total.is_nan() || total <= 0.0 {
+            return None;
+        }
+        if pmf.len() > u16::MAX as usize {
+            return None;
+        }
+        let mut acc = 0.0;
+        let cdf: Vec<u32> = pmf
+            .iter()
+            .map(|p| {
+                acc += p / total;
+                (acc * 4_294_967_296.0).round().min(u32::MAX as f64) as u32
+            })
+            .collect();
+        let last = cdf.len() - 1;
+        let n = (GUIDE_PER_VALUE * cdf.len()) as u64;
+        let mut guide = Vec::with_capacity(n as usize);
+        let mut i = 0usize;
+        for g in 0..n {
+            let start = (g << 32) / n;
+            while i < last && cdf[i] as u64 <= start {
+                i += 1;
+            }
+            guide.push(i as u16);
+        }
+        Some(Self { min_q, cdf, guide })
+    }
+
+    /// The value a 32-bit uniform `u` stands for.
+    #[inline]
+    fn value(&self, u: u32) -> i64 {
+        let n = self.guide.len() as u64;
+        let mut i = self.guide[((u as u64 * n) >> 32) as usize] as usize;
+        let last = self.cdf.len() - 1;
+        while i < last && self.cdf[i] <= u {
+            i += 1;
+        }
+        self.min_q + i as i64
+    }
 }
 
 /// The tables for one σ and one oversampling count (shared by clones of the ADC model).
@@ -124,8 +175,7 @@ impl SumTable {
             .map(|j| {
                 let f = j as f64 / BINS as f64;
                 let (min_q, pmf) = sum_of(trim(conversion_pmf(f, sigma_lsb)), oversample);
-                let alias = WeightedAliasIndex::new(pmf).ok()?;
-                Some(Grid { min_q, alias })
+                Grid::new(min_q, &pmf)
             })
             .collect::<Option<Vec<_>>>()?;
         Some(Self {
@@ -148,19 +198,17 @@ impl SumTable {
     }
 
     /// One draw of Σ round(v + nᵢ) for ideal value `v_lsb` (callers check [`Self::serves`]).
-    pub fn draw<R: Rng + ?Sized>(&self, v_lsb: f64, rng: &mut R) -> u32 {
+    #[inline]
+    pub fn draw<R: RngCore + ?Sized>(&self, v_lsb: f64, rng: &mut R) -> u32 {
         // v ≥ 0 where the table serves, so truncation is the floor (and avoids a libm call on
         // targets without SSE4.1's roundsd).
         let floor = v_lsb as i64 as f64;
         let x = (v_lsb - floor) * BINS as f64;
         let lower = (x as usize).min(BINS - 1);
-        let j = if rng.random::<f64>() < x - lower as f64 {
-            lower + 1
-        } else {
-            lower
-        };
-        let g = &self.grid[j];
-        let q = g.min_q + g.alias.sample(rng) as i64;
+        let r = rng.next_u64();
+        // The high half picks the grid point above with probability x − lower.
+        let above = ((r >> 32) as f64) < (x - lower as f64) * 4_294_967_296.0;
+        let q = self.grid[lower + usize::from(above)].value(r as u32);
         (self.oversample as i64 * floor as i64 + q).max(0) as u32
     }
 }
@@ -170,7 +218,7 @@ mod tests {
     use super::*;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
-    use rand_distr::Normal;
+    use rand_distr::{Distribution, Normal};
 
     /// The reference: each conversion drawn, rounded and summed, as the ADC model's slow path.
     fn per_conversion(v: f64, sigma: f64, n: u32, rng: &mut ChaCha8Rng) -> u32 {

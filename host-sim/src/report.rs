@@ -122,12 +122,11 @@ pub fn summary(r: &RunHeader, m: &Metrics) -> String {
         Some(v) => {
             let _ = writeln!(
                 s,
-                "\nvelocity: RMS error {:.2} mm/s at zero lag; best-fit delay {:.0} µs (between \
-                 whole-sample lags), RMS error {:.2} mm/s at {:.0} µs ({} samples)",
+                "\nvelocity: RMS error {:.2} mm/s at zero lag; best-fit delay {:.0} µs (in whole \
+                 samples), RMS error {:.2} mm/s at that delay ({} samples)",
                 v.rms_err_um_s / 1e3,
                 v.delay_us,
                 v.rms_err_at_delay_um_s / 1e3,
-                v.lag_at_best_us,
                 v.samples
             );
         }

@@ -366,6 +366,23 @@ pub fn region_settings(params: &SimParams) -> Vec<Option<TimerSettings>> {
 /// `chart`, the chart's data) are computed as it goes, so memory does not grow with the
 /// duration. The figures are those [`run`] + [`crate::metrics::compute`] give.
 pub fn stream(params: &SimParams, chart: bool) -> Result<Streamed, SimError> {
+    stream_with(params, chart, |_| {})
+}
+
+/// The process's resident memory now, bytes (Linux's /proc/self/statm; None elsewhere).
+pub fn resident_bytes() -> Option<u64> {
+    let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
+    let pages: u64 = statm.split_whitespace().nth(1)?.parse().ok()?;
+    Some(pages * 4096)
+}
+
+/// [`stream`], calling `at_sample` with each sample's index after it is processed (for
+/// progress and memory checkpoints).
+pub fn stream_with(
+    params: &SimParams,
+    chart: bool,
+    mut at_sample: impl FnMut(u64),
+) -> Result<Streamed, SimError> {
     let timer = burst_timer(params.board);
     let period_us = sample_period_us(params.board);
     let ctrl = Controller::new(timer, period_us).map_err(SimError::Controller)?;
@@ -386,6 +403,7 @@ pub fn stream(params: &SimParams, chart: bool) -> Result<Streamed, SimError> {
             r.point(&point);
             r.edges(&edges, &levels);
         }
+        at_sample(k);
     }
     let end = lp.clk(n * period_us as u64);
     lp.tm.advance_to(end);
