@@ -150,6 +150,11 @@ pub struct Args {
     /// counter wraps (47.7 s at 90 MHz); the summary reports malformed pulses and stalls.
     #[arg(long)]
     pub no_preload: bool,
+    /// Draw every ADC conversion's noise (16 Gaussian draws per sample) instead of the sum's
+    /// tabulated exact distribution (one draw): the reference the fast path is measured
+    /// against, several times slower (docs/streaming.md).
+    #[arg(long)]
+    pub per_conversion: bool,
     /// Scene file (TOML, see scenes/); default: the built-in default scene.
     #[arg(long, value_name = "FILE")]
     pub scene: Option<PathBuf>,
@@ -296,7 +301,7 @@ fn given(m: &ArgMatches, id: &str) -> Option<String> {
 }
 
 /// The flags without a value.
-const SWITCHES: [&str; 1] = ["no_preload"];
+const SWITCHES: [&str; 2] = ["no_preload", "per_conversion"];
 
 /// A run the flags describe: its parameters, and the scenario it checks (if `--scenario`).
 #[derive(Debug)]
@@ -340,7 +345,7 @@ pub fn scene_label(args: &Args) -> String {
 }
 
 /// The flags [`Args::scenario`] sets itself.
-const SCENARIO_SETS: [&str; 12] = [
+const SCENARIO_SETS: [&str; 13] = [
     "trajectory",
     "speed",
     "from",
@@ -352,6 +357,7 @@ const SCENARIO_SETS: [&str; 12] = [
     "seed",
     "board",
     "no_preload",
+    "per_conversion",
     "scene",
 ];
 
@@ -463,6 +469,7 @@ pub fn plan(args: &Args, m: &ArgMatches) -> Result<Plan, Refusal> {
         .with_noise(args.noise, args.seed)
         .with_offset(args.offset);
     params.preload = !args.no_preload;
+    params.adc.per_conversion = args.per_conversion;
     Ok(Plan {
         params,
         scenario: None,
