@@ -24,6 +24,30 @@ pub enum FaultKind {
     Short,
     /// No samples arrive (DMA stalled, ADC stopped): exercises the stale watchdog.
     Dropout,
+    /// Every conversion off by `offset_lsb` 12-bit LSB (clamped to the converter's range):
+    /// interference or a bouncing wiper. A window of one sample period is a single-sample spike.
+    Spike {
+        /// Added to every conversion, 12-bit LSB.
+        offset_lsb: i16,
+    },
+    /// An offset that grows from 0 at the window's start by `lsb_per_s` (a warming reference, a
+    /// wearing track), added to every conversion and clamped like a spike.
+    Drift {
+        /// Growth of the offset, 12-bit LSB per second.
+        lsb_per_s: i32,
+    },
+}
+
+impl FaultKind {
+    /// The offset this kind adds to each conversion `since_start_us` into its window, 12-bit
+    /// LSB (0 for the kinds that replace the reading instead).
+    pub fn offset_lsb_at(&self, since_start_us: u64) -> f64 {
+        match *self {
+            FaultKind::Spike { offset_lsb } => offset_lsb as f64,
+            FaultKind::Drift { lsb_per_s } => lsb_per_s as f64 * since_start_us as f64 * 1e-6,
+            FaultKind::Open | FaultKind::Short | FaultKind::Dropout => 0.0,
+        }
+    }
 }
 
 /// A fault over `[start_us, end_us)`.
@@ -176,11 +200,31 @@ impl AdcModel {
             Some(FaultKind::Dropout) => return None,
             Some(FaultKind::Open) => 0,
             Some(FaultKind::Short) => (CONVERSION_FULL_SCALE - 1) * self.params.oversample,
+            Some(FaultKind::Spike { .. } | FaultKind::Drift { .. }) => {
+                self.shifted_sum(position_um, t_us)
+            }
             None => (0..self.params.oversample)
                 .map(|_| self.convert(position_um))
                 .sum(),
         };
         Some(Sample::from_sum(sum, t_us as u32))
+    }
+
+    /// The summed conversions at `t_us` inside a spike or drift window: each conversion as
+    /// usual, then the window's offset added and the result clamped to the converter's range
+    /// (a spike near an end can reach a rail, as a real one would). Kept out of [`Self::sample`]
+    /// so the fault-free path stays as it is.
+    fn shifted_sum(&mut self, position_um: f64, t_us: u64) -> u32 {
+        let extra_lsb = self
+            .params
+            .faults
+            .iter()
+            .find(|f| f.contains(t_us))
+            .map_or(0.0, |f| f.kind.offset_lsb_at(t_us - f.start_us));
+        let top = (CONVERSION_FULL_SCALE - 1) as f64;
+        (0..self.params.oversample)
+            .map(|_| (self.convert(position_um) as f64 + extra_lsb).round().clamp(0.0, top) as u32)
+            .sum()
     }
 }
 
