@@ -385,7 +385,17 @@ pub fn run_episode(seed: u64, episode: u64, samples: u64, plant: Plant) -> Episo
         );
         edges.clear();
     }
-    check.finish(clk((local0 + samples) * period_us));
+    // The timer runs on to the episode's end (the last step stopped at its tick), so a pulse
+    // that rose late is judged whole.
+    let end = clk((local0 + samples) * period_us);
+    lp.tm.advance_to(end);
+    lp.tm.drain_edges_into(&mut edges);
+    for e in &edges {
+        digest.update(&(e.t - base_clk).to_le_bytes());
+        digest.update(&[u8::from(e.high)]);
+    }
+    check.step(None, &edges, end);
+    check.finish(end);
     if lp.tm.protocol_errors > 0 {
         check.violate(
             Rule::TimerProtocol,

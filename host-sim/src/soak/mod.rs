@@ -100,7 +100,7 @@ pub struct Found {
     pub violation: Violation,
     /// Its episode.
     pub episode: u64,
-    /// `host-sim soak …` running its episode up to that sample.
+    /// `host-sim soak …` running its episode by itself.
     pub reproduce: String,
 }
 
@@ -158,8 +158,10 @@ pub struct Summary {
     pub plant: Plant,
 }
 
-/// The command that reruns episode `episode` of `seed` up to global sample `sample`.
-pub fn reproduce(seed: u64, sample: u64, plant: Plant) -> String {
+/// The command that reruns by itself the episode of `seed` holding global sample `sample`, its
+/// first `samples` samples (as many as the soak ran of it: a violation can be judged a few
+/// samples after the one it names, at a pulse's fall or the next rise).
+pub fn reproduce(seed: u64, sample: u64, samples: u64, plant: Plant) -> String {
     let from = sample - sample % EPISODE_SAMPLES;
     let plant = match plant {
         Plant::None => String::new(),
@@ -171,8 +173,7 @@ pub fn reproduce(seed: u64, sample: u64, plant: Plant) -> String {
         ),
     };
     format!(
-        "host-sim soak --seed {seed} --from {from} --samples {}{plant}",
-        sample - from + 1
+        "host-sim soak --seed {seed} --from {from} --samples {samples}{plant}"
     )
 }
 
@@ -283,7 +284,7 @@ fn add(s: &mut Summary, r: &EpisodeReport, opts: &SoakOptions) {
             s.found.push(Found {
                 violation: v.clone(),
                 episode: r.episode,
-                reproduce: reproduce(opts.seed, v.sample, opts.plant),
+                reproduce: reproduce(opts.seed, v.sample, r.samples, opts.plant),
             });
         }
     }
