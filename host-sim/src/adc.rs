@@ -223,7 +223,11 @@ impl AdcModel {
             .map_or(0.0, |f| f.kind.offset_lsb_at(t_us - f.start_us));
         let top = (CONVERSION_FULL_SCALE - 1) as f64;
         (0..self.params.oversample)
-            .map(|_| (self.convert(position_um) as f64 + extra_lsb).round().clamp(0.0, top) as u32)
+            .map(|_| {
+                (self.convert(position_um) as f64 + extra_lsb)
+                    .round()
+                    .clamp(0.0, top) as u32
+            })
             .sum()
     }
 }

@@ -30,7 +30,10 @@ fn a_short_soak_keeps_every_rule() {
             assert!(*n > 0, "seed {seed}: no {kind} fault injected");
         }
         assert!(s.off_samples > 100, "seed {seed}");
-        assert!(s.reloads > 0 && s.boundary_moves > 0 && s.broken > 0, "seed {seed}");
+        assert!(
+            s.reloads > 0 && s.boundary_moves > 0 && s.broken > 0,
+            "seed {seed}"
+        );
         assert!(s.refusal_samples > 200, "seed {seed}");
     }
 }

@@ -252,10 +252,8 @@ impl LineCheck {
             }
             let at_action = action.filter(|(ta, _)| *ta == e.t).map(|(_, a)| a);
             if e.high {
-                let started = matches!(
-                    at_action,
-                    Some(GateAction::Start(_) | GateAction::Pulse(_))
-                );
+                let started =
+                    matches!(at_action, Some(GateAction::Start(_) | GateAction::Pulse(_)));
                 if let (true, Some(a)) = (started, at_action) {
                     self.action(a);
                     action = None;

@@ -234,10 +234,14 @@ pub fn run_episode(seed: u64, episode: u64, samples: u64, plant: Plant) -> Episo
         .collect();
     events.sort_by_key(|e| e.0);
 
-    let params = SimParams::new(board, crate::trajectory::Trajectory::Rest { at_um: 0.0 }, 0.0)
-        .with_config(cfg.clone())
-        .with_faults(faults)
-        .with_noise(noise, noise_seed);
+    let params = SimParams::new(
+        board,
+        crate::trajectory::Trajectory::Rest { at_um: 0.0 },
+        0.0,
+    )
+    .with_config(cfg.clone())
+    .with_faults(faults)
+    .with_noise(noise, noise_seed);
     let ctrl = match Controller::new(timer, period_us as u32) {
         Ok(c) => c,
         Err(e) => return refused_board(report, global0, &e.to_string()),
@@ -378,11 +382,7 @@ pub fn run_episode(seed: u64, episode: u64, samples: u64, plant: Plant) -> Episo
             digest.update(&(e.t - base_clk).to_le_bytes());
             digest.update(&[u8::from(e.high)]);
         }
-        check.step(
-            point.action.map(|a| (action_t, a)),
-            &edges,
-            lp.tm.now(),
-        );
+        check.step(point.action.map(|a| (action_t, a)), &edges, lp.tm.now());
         edges.clear();
     }
     // The timer runs on to the episode's end (the last step stopped at its tick), so a pulse

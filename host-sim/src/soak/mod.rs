@@ -48,13 +48,13 @@ const PERIOD_US: u64 = 100;
              1 on any violation."
 )]
 pub struct SoakArgs {
-    #[arg(long, value_name = "N", default_value_t = 1_000_000, help = SAMPLES.help("Samples to run, 100 µs each (10^7 = 16.7 min of use)"), value_parser = SAMPLES.parser())]
+    #[arg(long, value_name = "N", allow_hyphen_values = true, default_value_t = 1_000_000, help = SAMPLES.help("Samples to run, 100 µs each (10^7 = 16.7 min of use)"), value_parser = SAMPLES.parser())]
     pub samples: u64,
-    #[arg(long, value_name = "S", default_value_t = 1, help = SEED.help("Seed: the same seed gives the same scenes, faults and checksum"), value_parser = SEED.parser())]
+    #[arg(long, value_name = "S", allow_hyphen_values = true, default_value_t = 1, help = SEED.help("Seed: the same seed gives the same scenes, faults and checksum"), value_parser = SEED.parser())]
     pub seed: u64,
-    #[arg(long, value_name = "K", default_value_t = 0, help = format!("{}, a multiple of {EPISODE_SAMPLES} (an episode's first sample): reruns part of a soak, as a violation's line says", FROM.help("First global sample to run")), value_parser = from_parser)]
+    #[arg(long, value_name = "K", allow_hyphen_values = true, default_value_t = 0, help = format!("{}, a multiple of {EPISODE_SAMPLES} (an episode's first sample): reruns part of a soak, as a violation's line says", FROM.help("First global sample to run")), value_parser = from_parser)]
     pub from: u64,
-    #[arg(long, value_name = "T", help = THREADS.help("Worker threads [default: all cores]"), value_parser = THREADS.parser_usize())]
+    #[arg(long, value_name = "T", allow_hyphen_values = true, help = format!("{} [default: all cores]", THREADS.help("Worker threads")), value_parser = THREADS.parser_usize())]
     pub threads: Option<usize>,
     /// Print one JSON object instead of the summary.
     #[arg(long)]
@@ -172,9 +172,7 @@ pub fn reproduce(seed: u64, sample: u64, samples: u64, plant: Plant) -> String {
                 .unwrap_or_default()
         ),
     };
-    format!(
-        "host-sim soak --seed {seed} --from {from} --samples {samples}{plant}"
-    )
+    format!("host-sim soak --seed {seed} --from {from} --samples {samples}{plant}")
 }
 
 /// Multiples of 2^32 µs in `(from_us, to_us]`.
@@ -188,12 +186,9 @@ pub fn run(opts: &SoakOptions) -> Summary {
     let first = opts.from / EPISODE_SAMPLES;
     let end = opts.from.saturating_add(opts.samples);
     let last = end.div_ceil(EPISODE_SAMPLES);
-    let pool = opts.threads.and_then(|n| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build()
-            .ok()
-    });
+    let pool = opts
+        .threads
+        .and_then(|n| rayon::ThreadPoolBuilder::new().num_threads(n).build().ok());
     let threads = pool
         .as_ref()
         .map_or_else(rayon::current_num_threads, |p| p.current_num_threads());
@@ -206,7 +201,10 @@ pub fn run(opts: &SoakOptions) -> Summary {
         wall_s: 0.0,
         ratio: 0.0,
         threads,
-        wraps: wraps_between(opts.from * PERIOD_US, end * PERIOD_US),
+        wraps: wraps_between(
+            opts.from.saturating_mul(PERIOD_US),
+            end.saturating_mul(PERIOD_US),
+        ),
         wraps_in_episode: 0,
         pulses: 0,
         faults: gen::SOAK_FAULTS.iter().map(|k| (*k, 0)).collect(),
@@ -364,7 +362,8 @@ pub fn run_from_env() -> Option<ExitCode> {
     if cmd != "soak" {
         return None;
     }
-    let argv = std::iter::once(std::ffi::OsString::from("host-sim soak")).chain(rest.iter().cloned());
+    let argv =
+        std::iter::once(std::ffi::OsString::from("host-sim soak")).chain(rest.iter().cloned());
     let a = match SoakArgs::try_parse_from(argv) {
         Ok(a) => a,
         Err(e) => e.exit(),
