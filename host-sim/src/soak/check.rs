@@ -120,6 +120,8 @@ struct High {
     /// The settings that raised it (None: nothing the checker knows of).
     settings: Option<TimerSettings>,
     caps: Caps,
+    /// Raised by a `Pulse`: the timer stops at the end of its one period.
+    one_pulse: bool,
 }
 
 /// The last complete pulse, waiting for the next rise (its duty window's end).
@@ -129,7 +131,8 @@ struct Done {
     on: u64,
     settings: Option<TimerSettings>,
     caps: Caps,
-    /// Ended by an `Off` (the timer stopped): no update event may raise the line after it.
+    /// Ended by an `Off`, or a one-pulse (the timer stopped): no update event may raise the line
+    /// after it.
     cut: bool,
 }
 
@@ -258,7 +261,8 @@ impl LineCheck {
                     self.action(a);
                     action = None;
                 }
-                self.rise(e.t, started);
+                let one_pulse = matches!(at_action, Some(GateAction::Pulse(_)));
+                self.rise(e.t, started, one_pulse);
             } else {
                 self.fall(e.t, matches!(at_action, Some(GateAction::Off)));
             }
@@ -283,7 +287,7 @@ impl LineCheck {
         }
     }
 
-    fn rise(&mut self, r: u64, started: bool) {
+    fn rise(&mut self, r: u64, started: bool, one_pulse: bool) {
         let sample = self.sample_at(r);
         let settings = if started {
             self.active
@@ -318,7 +322,7 @@ impl LineCheck {
                             "a rise {period} clocks after the previous one with no start, where \
                              {}",
                             match (d.cut, expected) {
-                                (true, _) => "an Off had stopped the timer".to_string(),
+                                (true, _) => "an Off or a one-pulse had stopped the timer".to_string(),
                                 (false, Some(p)) => format!("the period is {p} clocks"),
                                 (false, None) => "no settings were running".to_string(),
                             }
@@ -337,6 +341,7 @@ impl LineCheck {
             rise: r,
             settings,
             caps: self.caps,
+            one_pulse,
         });
     }
 
@@ -369,7 +374,8 @@ impl LineCheck {
             on,
             settings: h.settings,
             caps: h.caps,
-            cut,
+            // After a one-pulse, as after an Off, the counter has stopped.
+            cut: cut || h.one_pulse,
         });
     }
 
