@@ -147,6 +147,11 @@ struct Span {
 /// Violations kept per episode with their detail (all are counted).
 pub const KEPT_PER_EPISODE: usize = 8;
 
+/// True when `s` keeps the line high through its whole period (CCR above ARR: 100 % duty).
+fn continuous(s: &TimerSettings) -> bool {
+    s.ccr > s.arr
+}
+
 /// The online checker of one episode's enable line.
 #[derive(Clone, Debug)]
 pub struct LineCheck {
@@ -156,6 +161,9 @@ pub struct LineCheck {
     /// Global index of local sample 0.
     global_of_local0: u64,
     caps: Caps,
+    /// The caps before the last scene change, and the time the core first saw the new scene.
+    before: Caps,
+    changed_at: Option<u64>,
     high: Option<High>,
     done: Option<Done>,
     /// What the timer runs and what waits in its preload registers, as the core's actions say.
@@ -184,6 +192,8 @@ impl LineCheck {
             period_clocks: period_clocks.max(1),
             global_of_local0,
             caps: Caps::of(limits, &timer),
+            before: Caps::of(limits, &timer),
+            changed_at: None,
             high: None,
             done: None,
             active: None,
@@ -212,10 +222,19 @@ impl LineCheck {
         }
     }
 
-    /// A scene with `limits` was loaded: its caps from now on, and the pulses in flight judged
-    /// against the looser of old and new.
-    pub fn scene(&mut self, limits: &SafetyLimits) {
+    /// A scene with `limits` was loaded, the core seeing it from the sample at kernel-clock time
+    /// `at`: its caps from then on, and the pulses in flight judged against the looser of old and
+    /// new. The timer model has run only up to the previous sample, so a pulse rising up to `at`
+    /// is the old scene's too (an update event loading what the old scene preloaded).
+    pub fn scene(&mut self, limits: &SafetyLimits, at: u64) {
         let caps = Caps::of(limits, &self.timer);
+        if self.changed_at.is_none_or(|c| at > c) {
+            self.before = self.caps;
+        } else {
+            // Several loads at one sample: all of them were in force.
+            self.before.loosen(self.caps);
+        }
+        self.changed_at = Some(at);
         self.caps = caps;
         if let Some(h) = self.high.as_mut() {
             h.caps.loosen(caps);
@@ -314,7 +333,10 @@ impl LineCheck {
             }
             if !started {
                 let expected = d.settings.map(|s| s.period_clocks());
-                if d.cut || expected != Some(period) {
+                // A line that never falls within its period (100 % duty) merges periods into
+                // one pulse: only an Off or a one-pulse before it is wrong then.
+                let merged = d.settings.is_some_and(|s| continuous(&s));
+                if d.cut || !(merged || expected == Some(period)) {
                     self.violate(
                         Rule::Doubled,
                         sample,
@@ -337,10 +359,14 @@ impl LineCheck {
                 "a rise with no start and no pulse before it".to_string(),
             );
         }
+        let mut caps = self.caps;
+        if self.changed_at.is_some_and(|c| r <= c) {
+            caps.loosen(self.before);
+        }
         self.high = Some(High {
             rise: r,
             settings,
-            caps: self.caps,
+            caps,
             one_pulse,
         });
     }
@@ -353,7 +379,9 @@ impl LineCheck {
         let on = f - h.rise;
         self.judge_high(h.rise, f, on, &h.caps);
         let planned = h.settings.map(|s| s.on_clocks());
-        let whole = planned == Some(on);
+        // 100 % duty: high across whole periods until an Off or new settings end it; the
+        // on-time cap above is its rule.
+        let whole = planned == Some(on) || h.settings.is_some_and(|s| continuous(&s));
         let short_by_off = cut && planned.is_some_and(|p| on <= p);
         if !(whole || short_by_off) {
             self.violate(
