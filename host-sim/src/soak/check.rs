@@ -344,7 +344,8 @@ impl LineCheck {
                             "a rise {period} clocks after the previous one with no start, where \
                              {}",
                             match (d.cut, expected) {
-                                (true, _) => "an Off or a one-pulse had stopped the timer".to_string(),
+                                (true, _) =>
+                                    "an Off or a one-pulse had stopped the timer".to_string(),
                                 (false, Some(p)) => format!("the period is {p} clocks"),
                                 (false, None) => "no settings were running".to_string(),
                             }

@@ -118,13 +118,7 @@ struct FaultRef {
 impl FaultRef {
     /// Whether sample period `t_us` must be off, given the fault the ADC model has then and the
     /// running scene's stale limit.
-    fn off(
-        &mut self,
-        t_us: u64,
-        period_us: u64,
-        stale_us: u64,
-        fault: Option<FaultKind>,
-    ) -> bool {
+    fn off(&mut self, t_us: u64, period_us: u64, stale_us: u64, fault: Option<FaultKind>) -> bool {
         match fault {
             Some(FaultKind::Open | FaultKind::Short) => {
                 self.last_sample_us = Some(t_us);
@@ -494,4 +488,3 @@ fn refused_board(mut report: EpisodeReport, global0: u64, why: &str) -> EpisodeR
     });
     report
 }
-
