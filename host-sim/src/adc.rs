@@ -311,6 +311,50 @@ mod tests {
         assert!((sd - 12.0).abs() < 1.0, "{sd}");
     }
 
+    /// A spike adds its offset to every conversion of its window and clamps at the rail; a
+    /// drift's offset grows from 0 at its start.
+    #[test]
+    fn spikes_and_drift_shift_the_reading() {
+        let faults = vec![
+            FaultWindow {
+                kind: FaultKind::Spike { offset_lsb: 100 },
+                start_us: 100,
+                end_us: 200,
+            },
+            FaultWindow {
+                kind: FaultKind::Spike {
+                    offset_lsb: -i16::MAX,
+                },
+                start_us: 200,
+                end_us: 300,
+            },
+            FaultWindow {
+                kind: FaultKind::Drift { lsb_per_s: 1_000 },
+                start_us: 1_000_000,
+                end_us: 2_000_000,
+            },
+        ];
+        let mut adc = AdcModel::new(
+            Calibration::default(),
+            AdcParams {
+                noise_lsb_rms: 0.0,
+                faults,
+                ..AdcParams::default()
+            },
+        )
+        .unwrap();
+        let clean = adc.sample(30_000.0, 0).unwrap().code;
+        assert_eq!(adc.sample(30_000.0, 100).unwrap().code, clean + 100 * 16);
+        assert_eq!(adc.sample(30_000.0, 200).unwrap().code, 0);
+        assert_eq!(adc.sample(30_000.0, 1_000_000).unwrap().code, clean);
+        // Half a second in: 500 LSB on each of the 16 conversions.
+        assert_eq!(
+            adc.sample(30_000.0, 1_500_000).unwrap().code,
+            clean + 500 * 16
+        );
+        assert_eq!(adc.sample(30_000.0, 2_000_000).unwrap().code, clean);
+    }
+
     /// The ADC model's refusals read as sentences (the calibration's is the core's own).
     #[test]
     fn errors_read_as_sentences() {

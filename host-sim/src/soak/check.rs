@@ -64,6 +64,11 @@ impl Rule {
         Rule::TimerProtocol,
     ];
 
+    /// Its place in [`Rule::ALL`].
+    pub fn index(self) -> usize {
+        Rule::ALL.iter().position(|r| *r == self).unwrap_or(0)
+    }
+
     /// The rule's name as printed.
     pub fn name(self) -> &'static str {
         match self {
@@ -174,6 +179,8 @@ pub struct LineCheck {
     pub pulses: u64,
     /// Violations found (all of them).
     pub count: u64,
+    /// Violations found, by [`Rule::index`].
+    pub by_rule: [u64; Rule::ALL.len()],
     /// The first [`KEPT_PER_EPISODE`] violations.
     pub kept: Vec<Violation>,
 }
@@ -201,6 +208,7 @@ impl LineCheck {
             spans: VecDeque::new(),
             pulses: 0,
             count: 0,
+            by_rule: [0; Rule::ALL.len()],
             kept: Vec::new(),
         }
     }
@@ -213,6 +221,7 @@ impl LineCheck {
     /// Records a violation at global sample `sample`.
     pub fn violate(&mut self, rule: Rule, sample: u64, detail: String) {
         self.count += 1;
+        self.by_rule[rule.index()] += 1;
         if self.kept.len() < KEPT_PER_EPISODE {
             self.kept.push(Violation {
                 rule,

@@ -92,6 +92,8 @@ pub struct EpisodeReport {
     pub off_samples: u64,
     /// Violations found.
     pub violations: u64,
+    /// Violations found, by [`Rule::index`].
+    pub by_rule: [u64; Rule::ALL.len()],
     /// The first few, with their global sample index.
     pub kept: Vec<Violation>,
     /// Whether the episode crossed the core's 2^32 µs wrap.
@@ -416,6 +418,7 @@ pub fn run_episode(seed: u64, episode: u64, samples: u64, plant: Plant) -> Episo
     report.checksum = digest.finalize();
     report.pulses = check.pulses;
     report.violations = check.count;
+    report.by_rule = check.by_rule;
     report.kept = check.kept;
     report
 }
@@ -481,6 +484,7 @@ fn stretched(s: TimerSettings) -> TimerSettings {
 /// violation rather than a panic.
 fn refused_board(mut report: EpisodeReport, global0: u64, why: &str) -> EpisodeReport {
     report.violations = 1;
+    report.by_rule[Rule::TimerProtocol.index()] += 1;
     report.kept.push(Violation {
         rule: Rule::TimerProtocol,
         sample: global0,

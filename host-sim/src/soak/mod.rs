@@ -268,14 +268,8 @@ fn add(s: &mut Summary, r: &EpisodeReport, opts: &SoakOptions) {
     s.broken += r.broken;
     s.refusal_samples += r.refusal_samples;
     s.violations += r.violations;
-    // By rule: the kept ones; an episode's violations past those are counted apart (the rule
-    // is known only for the kept ones, and memory stays constant).
-    let kept = r.kept.len() as u64;
-    for v in &r.kept {
-        *s.by_rule.entry(v.rule.name()).or_default() += 1;
-    }
-    if r.violations > kept {
-        *s.by_rule.entry("more in the same episodes").or_default() += r.violations - kept;
+    for (rule, n) in Rule::ALL.iter().zip(r.by_rule) {
+        *s.by_rule.entry(rule.name()).or_default() += n;
     }
     for v in &r.kept {
         if s.found.len() < KEPT {
