@@ -30,6 +30,30 @@ pub enum FaultKind {
     Short,
     /// No samples arrive (DMA stalled, ADC stopped): exercises the stale watchdog.
     Dropout,
+    /// Every conversion off by `offset_lsb` 12-bit LSB (clamped to the converter's range):
+    /// interference or a bouncing wiper. A window of one sample period is a single-sample spike.
+    Spike {
+        /// Added to every conversion, 12-bit LSB.
+        offset_lsb: i16,
+    },
+    /// An offset that grows from 0 at the window's start by `lsb_per_s` (a warming reference, a
+    /// wearing track), added to every conversion and clamped like a spike.
+    Drift {
+        /// Growth of the offset, 12-bit LSB per second.
+        lsb_per_s: i32,
+    },
+}
+
+impl FaultKind {
+    /// The offset this kind adds to each conversion `since_start_us` into its window, 12-bit
+    /// LSB (0 for the kinds that replace the reading instead).
+    pub fn offset_lsb_at(&self, since_start_us: u64) -> f64 {
+        match *self {
+            FaultKind::Spike { offset_lsb } => offset_lsb as f64,
+            FaultKind::Drift { lsb_per_s } => lsb_per_s as f64 * since_start_us as f64 * 1e-6,
+            FaultKind::Open | FaultKind::Short | FaultKind::Dropout => 0.0,
+        }
+    }
 }
 
 /// A fault over `[start_us, end_us)`.
@@ -207,9 +231,33 @@ impl AdcModel {
             Some(FaultKind::Dropout) => return None,
             Some(FaultKind::Open) => 0,
             Some(FaultKind::Short) => (CONVERSION_FULL_SCALE - 1) * self.params.oversample,
+            Some(FaultKind::Spike { .. } | FaultKind::Drift { .. }) => {
+                self.shifted_sum(position_um, t_us)
+            }
             None => self.sum_of_conversions(position_um),
         };
         Some(Sample::from_sum(sum, t_us as u32))
+    }
+
+    /// The summed conversions at `t_us` inside a spike or drift window: each conversion as
+    /// usual, then the window's offset added and the result clamped to the converter's range
+    /// (a spike near an end can reach a rail, as a real one would). Kept out of [`Self::sample`]
+    /// so the fault-free path stays as it is.
+    fn shifted_sum(&mut self, position_um: f64, t_us: u64) -> u32 {
+        let extra_lsb = self
+            .params
+            .faults
+            .iter()
+            .find(|f| f.contains(t_us))
+            .map_or(0.0, |f| f.kind.offset_lsb_at(t_us - f.start_us));
+        let top = (CONVERSION_FULL_SCALE - 1) as f64;
+        (0..self.params.oversample)
+            .map(|_| {
+                (self.convert(position_um) as f64 + extra_lsb)
+                    .round()
+                    .clamp(0.0, top) as u32
+            })
+            .sum()
     }
 }
 
@@ -290,6 +338,50 @@ mod tests {
         let sd = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / xs.len() as f64).sqrt();
         // 16 conversions of σ = 3 LSB summed: σ = 3 × √16 = 12 codes.
         assert!((sd - 12.0).abs() < 1.0, "{sd}");
+    }
+
+    /// A spike adds its offset to every conversion of its window and clamps at the rail; a
+    /// drift's offset grows from 0 at its start.
+    #[test]
+    fn spikes_and_drift_shift_the_reading() {
+        let faults = vec![
+            FaultWindow {
+                kind: FaultKind::Spike { offset_lsb: 100 },
+                start_us: 100,
+                end_us: 200,
+            },
+            FaultWindow {
+                kind: FaultKind::Spike {
+                    offset_lsb: -i16::MAX,
+                },
+                start_us: 200,
+                end_us: 300,
+            },
+            FaultWindow {
+                kind: FaultKind::Drift { lsb_per_s: 1_000 },
+                start_us: 1_000_000,
+                end_us: 2_000_000,
+            },
+        ];
+        let mut adc = AdcModel::new(
+            Calibration::default(),
+            AdcParams {
+                noise_lsb_rms: 0.0,
+                faults,
+                ..AdcParams::default()
+            },
+        )
+        .unwrap();
+        let clean = adc.sample(30_000.0, 0).unwrap().code;
+        assert_eq!(adc.sample(30_000.0, 100).unwrap().code, clean + 100 * 16);
+        assert_eq!(adc.sample(30_000.0, 200).unwrap().code, 0);
+        assert_eq!(adc.sample(30_000.0, 1_000_000).unwrap().code, clean);
+        // Half a second in: 500 LSB on each of the 16 conversions.
+        assert_eq!(
+            adc.sample(30_000.0, 1_500_000).unwrap().code,
+            clean + 500 * 16
+        );
+        assert_eq!(adc.sample(30_000.0, 2_000_000).unwrap().code, clean);
     }
 
     /// The ADC model's refusals read as sentences (the calibration's is the core's own).

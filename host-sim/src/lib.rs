@@ -9,6 +9,7 @@
 //! - [`chart`]: a PNG of a run;
 //! - [`scenario`]: TOML scenario files with expectations;
 //! - [`report`]: the human summary the CLI prints;
+//! - [`soak`]: `host-sim soak`, random scenes, fingers and faults checked online for hours of use;
 //! - [`cli`]: the simulator's command line; [`door`]: the value parsers of every command's flags.
 
 pub mod adc;
@@ -24,5 +25,6 @@ pub mod rf;
 pub mod scenario;
 pub mod serve;
 pub mod sim;
+pub mod soak;
 pub mod timer;
 pub mod trajectory;

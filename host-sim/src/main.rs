@@ -34,6 +34,10 @@ fn main() -> ExitCode {
     if let Some(code) = host_sim::serve::run_from_env() {
         return code;
     }
+    // `host-sim soak …`: the safety rules over random scenes, fingers and faults (docs/soak.md).
+    if let Some(code) = host_sim::soak::run_from_env() {
+        return code;
+    }
     // `host-sim model …` and `host-sim tile-to-scene …`: physical models (docs/models.md).
     if let Some(code) = host_sim::models::cli::run_from_env() {
         return code;

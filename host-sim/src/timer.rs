@@ -521,6 +521,21 @@ impl TimerModel {
         self.actions.clear();
     }
 
+    /// Moves the edges recorded so far to the end of `out` and forgets the recorded actions and
+    /// DAC levels (the level and the running period stay): a consumer that checks the line as
+    /// it goes (`host-sim soak`) keeps constant memory however long it runs. Call it between
+    /// steps: an edge at the last processed time is final once no action can come at that time.
+    pub fn drain_edges_into(&mut self, out: &mut Vec<Edge>) {
+        out.append(&mut self.edges);
+        self.actions.clear();
+        self.levels.clear();
+    }
+
+    /// The time up to which the waveform has been generated, kernel clocks.
+    pub fn now(&self) -> u64 {
+        self.now
+    }
+
     /// Finishes the recording at `t` and returns the waveform.
     pub fn finish(mut self, t: u64) -> Waveform {
         self.advance_to(t);

@@ -16,42 +16,19 @@
 //! sample period after the stale limit of silence) until the 16th good sample after it: the
 //! fault windows the harness injected are the reference, not the core's own fault report.
 //! Each seed also counts pulses per texture kind and asserts every kind produced some, so the
-//! fuzz cannot quietly shrink back to the easy cases.
+//! fuzz cannot quietly shrink back to the easy cases. The generators live in
+//! `host_sim::soak::gen`, shared with `host-sim soak`, which runs the same rules online for
+//! hours of simulated use.
 
 use host_sim::adc::{FaultKind, FaultWindow};
 use host_sim::sim::{self, SimParams, SimResult};
-use host_sim::trajectory::{Piece, Trajectory};
+use host_sim::soak::gen::{random_config, random_faults, random_trajectory};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use saw_core::burst::{BurstCommand, SafetyLimits};
 use saw_core::controller::RECOVERY_SAMPLES;
-use saw_core::gate::{DriveMode, GateAction};
-use saw_core::texture::{Envelope, Grating, GratingRender, Lines, Material, RandomBurst, Texture};
+use saw_core::gate::GateAction;
+use saw_core::texture::{GratingRender, Texture};
 use saw_core::Config;
-
-fn log_uniform(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> f64 {
-    lo * (hi / lo).powf(rng.random::<f64>())
-}
-
-/// A duty for a texture: usually within the cap (planned up to it), now and then above it (the
-/// load must refuse it).
-fn duty(rng: &mut ChaCha8Rng, cap: u16) -> u16 {
-    if rng.random_bool(0.03) {
-        rng.random_range(1..=1000)
-    } else if rng.random_bool(0.3) {
-        cap
-    } else {
-        rng.random_range(1..=cap)
-    }
-}
-
-fn min_speed(rng: &mut ChaCha8Rng) -> u32 {
-    if rng.random_bool(0.3) {
-        0
-    } else {
-        rng.random_range(0..=40_000)
-    }
-}
 
 /// Texture kinds as counted in the coverage tally.
 const KINDS: [&str; 6] = [
@@ -72,186 +49,6 @@ fn kind_of(t: &Texture) -> Option<usize> {
         Texture::Random(_) => 4,
         _ => return None,
     })
-}
-
-fn random_texture(rng: &mut ChaCha8Rng, max_hz: u32, cap: u16) -> Texture {
-    match rng.random_range(0..11) {
-        0 => Texture::Off,
-        1 | 2 => Texture::Constant(BurstCommand {
-            burst_millihz: (log_uniform(rng, 0.5, max_hz as f64) * 1000.0) as u32,
-            duty_permille: duty(rng, cap),
-        }),
-        3..=6 => {
-            let position = rng.random_bool(0.5);
-            let wavelength_um = log_uniform(rng, 150.0, 12_000.0) as u32;
-            Texture::Grating(Grating {
-                wavelength_um,
-                duty_permille: duty(rng, cap),
-                min_speed_um_s: min_speed(rng),
-                amplitude_permille: rng.random_range(1..=1000),
-                render: if position {
-                    GratingRender::PositionPhase
-                } else {
-                    GratingRender::VelocitySynthesis
-                },
-                // Below half the period, as the position renderer requires.
-                rearm_um: rng.random_range(0..wavelength_um.div_ceil(2)),
-            })
-        }
-        7 | 8 => Texture::Material(Material {
-            delta_mu: rng.random_range(0.0..1.5),
-            normal_force_n: log_uniform(rng, 0.05, 5.0) as f32,
-            // ω0 = √(k/m) from a few Hz to above every board's f_b limit (clamped).
-            mass_kg: log_uniform(rng, 1e-5, 1e-2) as f32,
-            stiffness_n_per_m: log_uniform(rng, 10.0, 1e5) as f32,
-            duty_permille: duty(rng, cap),
-            min_speed_um_s: min_speed(rng),
-        }),
-        _ => Texture::Random(RandomBurst {
-            center_millihz: (log_uniform(rng, 1.0, max_hz as f64) * 1000.0) as u32,
-            spread_permille: rng.random_range(0..=999),
-            amplitude_permille: rng.random_range(1..=1000),
-            amplitude_spread_permille: rng.random_range(0..=1000),
-            duty_permille: duty(rng, cap),
-            seed: rng.random(),
-        }),
-    }
-}
-
-fn random_lines(rng: &mut ChaCha8Rng, max_on_time_us: u32) -> Lines {
-    let mut lines = Lines::default();
-    if rng.random_bool(0.5) {
-        return lines;
-    }
-    let mut p: Vec<u32> = (0..rng.random_range(1..=16))
-        .map(|_| rng.random_range(1_000..62_000))
-        .collect();
-    p.sort();
-    p.dedup();
-    for x in p {
-        lines.positions_um.push(x).unwrap();
-    }
-    lines.pulse_us =
-        log_uniform(rng, 50.0, max_on_time_us.max(50) as f64).min(max_on_time_us as f64) as u32;
-    lines.envelope = if rng.random_bool(0.5) {
-        Envelope::Triangular
-    } else {
-        Envelope::Rectangular
-    };
-    lines.amplitude_permille = rng.random_range(1..=1000);
-    lines.hysteresis_um = rng.random_range(0..=2_000);
-    lines
-}
-
-fn random_config(rng: &mut ChaCha8Rng, max_hz: u32) -> Config {
-    let mut cfg = saw_core::default_config();
-    cfg.limits = SafetyLimits {
-        max_duty_permille: if rng.random_bool(0.2) {
-            rng.random_range(1..=1000)
-        } else {
-            rng.random_range(50..=600)
-        },
-        max_on_time_us: log_uniform(rng, 20.0, 100_000.0) as u32,
-        // Full drive: the random textures draw amplitudes up to 1000 ‰ and must stay loadable.
-        max_level_permille: 1000,
-    };
-    cfg.stale_after_us = rng.random_range(300..=10_000);
-    let n = rng.random_range(1..=8usize);
-    let mut b: Vec<u32> = (1..n).map(|_| rng.random_range(1_000..62_000)).collect();
-    b.sort();
-    cfg.scene.boundaries_um.clear();
-    for x in b {
-        cfg.scene.boundaries_um.push(x).unwrap();
-    }
-    cfg.scene.hysteresis_um = rng.random_range(0..=300);
-    // Lines only fire where no burst runs: scenes with lines get more bare regions.
-    cfg.scene.lines = random_lines(rng, cfg.limits.max_on_time_us);
-    let bare = if cfg.scene.lines.positions_um.is_empty() {
-        0.0
-    } else {
-        0.4
-    };
-    cfg.scene.textures.clear();
-    for _ in 0..n {
-        let t = if rng.random_bool(bare) {
-            Texture::Off
-        } else {
-            random_texture(rng, max_hz, cfg.limits.max_duty_permille)
-        };
-        cfg.scene.textures.push(t).unwrap();
-    }
-    cfg.scene.drive = if rng.random_bool(0.5) {
-        DriveMode::Standing
-    } else {
-        DriveMode::Progressive
-    };
-    cfg
-}
-
-fn random_motion(rng: &mut ChaCha8Rng) -> Trajectory {
-    let a = rng.random_range(500.0..62_500.0);
-    let b = rng.random_range(500.0..62_500.0);
-    let v = log_uniform(rng, 2_000.0, 400_000.0);
-    match rng.random_range(0..6) {
-        0 => Trajectory::Rest { at_um: a },
-        1 => Trajectory::Triangle {
-            a_um: a,
-            b_um: b,
-            speed_um_s: v,
-        },
-        2 => Trajectory::Sine {
-            a_um: a,
-            b_um: b,
-            period_s: rng.random_range(0.05..1.0),
-        },
-        3 => Trajectory::Reversal {
-            from_um: a,
-            turn_um: b,
-            speed_um_s: v,
-        },
-        4 => {
-            // At most 24 mm in the 0.4 s run: stays on the substrate.
-            let s = v.min(60_000.0);
-            Trajectory::Constant {
-                from_um: a,
-                speed_um_s: if a < 31_500.0 { s } else { -s },
-            }
-        }
-        _ => Trajectory::Ramp {
-            from_um: 31_500.0,
-            v0_um_s: 0.0,
-            accel_um_s2: rng.random_range(-1e7..1e7),
-            v_max_um_s: v,
-        },
-    }
-}
-
-fn random_trajectory(rng: &mut ChaCha8Rng) -> Trajectory {
-    if rng.random_bool(0.7) {
-        return random_motion(rng);
-    }
-    let pieces = (0..rng.random_range(2..=4))
-        .map(|_| Piece {
-            trajectory: random_motion(rng),
-            duration_s: rng.random_range(0.03..0.2),
-        })
-        .collect();
-    Trajectory::Piecewise { pieces }
-}
-
-fn random_faults(rng: &mut ChaCha8Rng, duration_us: u64) -> Vec<FaultWindow> {
-    let n = [0, 0, 1, 1, 2][rng.random_range(0..5)];
-    (0..n)
-        .map(|_| {
-            let start_us = rng.random_range(0..duration_us * 3 / 4);
-            FaultWindow {
-                kind: [FaultKind::Open, FaultKind::Short, FaultKind::Dropout]
-                    [rng.random_range(0..3)],
-                start_us,
-                end_us: start_us + log_uniform(rng, 50.0, 40_000.0) as u64,
-            }
-        })
-        .collect()
 }
 
 /// Sample periods `[k·P, (k+1)·P)` in which the line must be low, from the injected faults as
@@ -286,7 +83,8 @@ fn must_be_off(r: &SimResult, faults: &[FaultWindow], stale_after_us: u32) -> Ve
                 }
                 recovering.is_some()
             }
-            None => {
+            // The fuzz injects no offsets; were one here, it would read as a good sample.
+            None | Some(FaultKind::Spike { .. } | FaultKind::Drift { .. }) => {
                 last_sample = Some(t);
                 match recovering {
                     Some(0) | None => {

@@ -1,0 +1,466 @@
+//! The soak's online checks of the enable line: every edge the timer model records is judged as
+//! it arrives against the caps, the sensor faults injected and the actions the core issued, in
+//! constant memory (nothing here grows with the run).
+//!
+//! The rules, in kernel clocks of the burst timer (see `docs/soak.md`):
+//! - **on-time**: a pulse (rise to fall, or to the end of the episode while still high) lasts at
+//!   most the on-time cap ([`SafetyLimits::max_on_time_clocks`]);
+//! - **duty**: a pulse's on-time over the time from its rise to the next rise is at most the duty
+//!   cap (the window `safety_fuzz` and the gate's rest use);
+//! - **fault**: the line is low in every sample period the injected faults say must be off
+//!   (from the first sample at a rail, or a sample period after the stale limit of silence,
+//!   until the 16th good sample after), the rule of `tests/tests/safety_fuzz.rs`;
+//! - **runt**: a pulse ended by the timer (not by an `Off`) lasts exactly the on-time of the
+//!   settings that raised it; one ended by an `Off` at most that;
+//! - **doubled**: a rise that no `Start` or `Pulse` caused comes exactly one period (of the
+//!   settings running) after the previous rise, and never after an `Off`.
+//!
+//! A scene reload changes the caps mid-pulse; a pulse is judged against the most generous caps
+//! of the scenes in force between its rise and the moment judged (the pulse in flight at a
+//! reload was planned under the old ones).
+
+use std::collections::VecDeque;
+
+use saw_core::burst::{BurstTimer, SafetyLimits, TimerSettings};
+use saw_core::gate::GateAction;
+
+use crate::timer::Edge;
+
+/// What a violation broke.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Rule {
+    /// A pulse longer than the on-time cap.
+    OnTime,
+    /// On-time over rise-to-next-rise above the duty cap.
+    Duty,
+    /// The line high where an injected fault says it must be off.
+    OnDuringFault,
+    /// The line high at the end of a sample period the core itself reports faulted.
+    OnWhileReportedFault,
+    /// A pulse that ended (by the timer) at another on-time than planned.
+    Runt,
+    /// A rise no start caused, at another time than one period after the previous rise.
+    Doubled,
+    /// A refused scene changed what the controller does.
+    RefusalChangedScene,
+    /// A scene broken on purpose was accepted.
+    BrokenSceneAccepted,
+    /// The timer model got an action it could not make sense of.
+    TimerProtocol,
+}
+
+impl Rule {
+    /// Every rule, in the order the summary lists them.
+    pub const ALL: [Rule; 9] = [
+        Rule::OnTime,
+        Rule::Duty,
+        Rule::OnDuringFault,
+        Rule::OnWhileReportedFault,
+        Rule::Runt,
+        Rule::Doubled,
+        Rule::RefusalChangedScene,
+        Rule::BrokenSceneAccepted,
+        Rule::TimerProtocol,
+    ];
+
+    /// Its place in [`Rule::ALL`].
+    pub fn index(self) -> usize {
+        Rule::ALL.iter().position(|r| *r == self).unwrap_or(0)
+    }
+
+    /// The rule's name as printed.
+    pub fn name(self) -> &'static str {
+        match self {
+            Rule::OnTime => "on-time above the cap",
+            Rule::Duty => "duty above the cap",
+            Rule::OnDuringFault => "line high during a sensor fault",
+            Rule::OnWhileReportedFault => "line high while the core reports a fault",
+            Rule::Runt => "runt or stretched pulse",
+            Rule::Doubled => "doubled pulse",
+            Rule::RefusalChangedScene => "a refused scene changed the running one",
+            Rule::BrokenSceneAccepted => "a broken scene was accepted",
+            Rule::TimerProtocol => "timer protocol error",
+        }
+    }
+}
+
+/// One broken rule, where: the global sample index reproduces it (with the run's seed).
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct Violation {
+    /// The rule.
+    pub rule: Rule,
+    /// Global sample index (0 = the soak's first sample at seed S) of the sample period in
+    /// which the rule broke.
+    pub sample: u64,
+    /// What was measured, in a sentence.
+    pub detail: String,
+}
+
+/// The caps of a scene in kernel clocks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Caps {
+    on_clocks: u64,
+    duty_permille: u64,
+}
+
+impl Caps {
+    fn of(limits: &SafetyLimits, timer: &BurstTimer) -> Self {
+        Self {
+            on_clocks: limits.max_on_time_clocks(timer),
+            duty_permille: limits.max_duty_permille as u64,
+        }
+    }
+
+    fn loosen(&mut self, other: Caps) {
+        self.on_clocks = self.on_clocks.max(other.on_clocks);
+        self.duty_permille = self.duty_permille.max(other.duty_permille);
+    }
+}
+
+/// The line high since `rise`.
+#[derive(Clone, Copy, Debug)]
+struct High {
+    rise: u64,
+    /// The settings that raised it (None: nothing the checker knows of).
+    settings: Option<TimerSettings>,
+    caps: Caps,
+    /// Raised by a `Pulse`: the timer stops at the end of its one period.
+    one_pulse: bool,
+}
+
+/// The last complete pulse, waiting for the next rise (its duty window's end).
+#[derive(Clone, Copy, Debug)]
+struct Done {
+    rise: u64,
+    on: u64,
+    settings: Option<TimerSettings>,
+    caps: Caps,
+    /// Ended by an `Off`, or a one-pulse (the timer stopped): no update event may raise the line
+    /// after it.
+    cut: bool,
+}
+
+/// Sample periods `[a, b)` (kernel clocks) in which the line must be low.
+#[derive(Clone, Copy, Debug)]
+struct Span {
+    a: u64,
+    b: u64,
+    reported: bool,
+}
+
+/// Violations kept per episode with their detail (all are counted).
+pub const KEPT_PER_EPISODE: usize = 8;
+
+/// True when `s` keeps the line high through its whole period (CCR above ARR: 100 % duty).
+fn continuous(s: &TimerSettings) -> bool {
+    s.ccr > s.arr
+}
+
+/// The online checker of one episode's enable line.
+#[derive(Clone, Debug)]
+pub struct LineCheck {
+    timer: BurstTimer,
+    /// One sample period, kernel clocks (clocks / period = the local sample index).
+    period_clocks: u64,
+    /// Global index of local sample 0.
+    global_of_local0: u64,
+    caps: Caps,
+    /// The caps before the last scene change, and the time the core first saw the new scene.
+    before: Caps,
+    changed_at: Option<u64>,
+    high: Option<High>,
+    done: Option<Done>,
+    /// What the timer runs and what waits in its preload registers, as the core's actions say.
+    active: Option<TimerSettings>,
+    pending: Option<TimerSettings>,
+    spans: VecDeque<Span>,
+    /// Pulses judged.
+    pub pulses: u64,
+    /// Violations found (all of them).
+    pub count: u64,
+    /// Violations found, by [`Rule::index`].
+    pub by_rule: [u64; Rule::ALL.len()],
+    /// The first [`KEPT_PER_EPISODE`] violations.
+    pub kept: Vec<Violation>,
+}
+
+impl LineCheck {
+    /// A checker for `timer`, samples every `period_clocks`, the local sample index 0 being
+    /// global sample `global_of_local0`, the first scene's caps `limits`.
+    pub fn new(
+        timer: BurstTimer,
+        period_clocks: u64,
+        global_of_local0: u64,
+        limits: &SafetyLimits,
+    ) -> Self {
+        Self {
+            timer,
+            period_clocks: period_clocks.max(1),
+            global_of_local0,
+            caps: Caps::of(limits, &timer),
+            before: Caps::of(limits, &timer),
+            changed_at: None,
+            high: None,
+            done: None,
+            active: None,
+            pending: None,
+            spans: VecDeque::new(),
+            pulses: 0,
+            count: 0,
+            by_rule: [0; Rule::ALL.len()],
+            kept: Vec::new(),
+        }
+    }
+
+    /// The global sample index of the sample period holding kernel-clock time `t`.
+    pub fn sample_at(&self, t: u64) -> u64 {
+        (t / self.period_clocks).wrapping_add(self.global_of_local0)
+    }
+
+    /// Records a violation at global sample `sample`.
+    pub fn violate(&mut self, rule: Rule, sample: u64, detail: String) {
+        self.count += 1;
+        self.by_rule[rule.index()] += 1;
+        if self.kept.len() < KEPT_PER_EPISODE {
+            self.kept.push(Violation {
+                rule,
+                sample,
+                detail,
+            });
+        }
+    }
+
+    /// A scene with `limits` was loaded, the core seeing it from the sample at kernel-clock time
+    /// `at`: its caps from then on, and the pulses in flight judged against the looser of old and
+    /// new. The timer model has run only up to the previous sample, so a pulse rising up to `at`
+    /// is the old scene's too (an update event loading what the old scene preloaded).
+    pub fn scene(&mut self, limits: &SafetyLimits, at: u64) {
+        let caps = Caps::of(limits, &self.timer);
+        if self.changed_at.is_none_or(|c| at > c) {
+            self.before = self.caps;
+        } else {
+            // Several loads at one sample: all of them were in force.
+            self.before.loosen(self.caps);
+        }
+        self.changed_at = Some(at);
+        self.caps = caps;
+        if let Some(h) = self.high.as_mut() {
+            h.caps.loosen(caps);
+        }
+        if let Some(d) = self.done.as_mut() {
+            d.caps.loosen(caps);
+        }
+    }
+
+    /// The line must be low over local sample period `k` (pushed before that sample is run).
+    pub fn must_be_off(&mut self, k: u64) {
+        let (a, b) = (k * self.period_clocks, (k + 1) * self.period_clocks);
+        match self.spans.back_mut() {
+            Some(s) if s.b == a => s.b = b,
+            _ => self.spans.push_back(Span {
+                a,
+                b,
+                reported: false,
+            }),
+        }
+    }
+
+    /// One step's output: the core's action at `action_t` (if any) and the edges the timer
+    /// recorded since the last call, in time order. `now` is the time up to which the timer
+    /// has run.
+    pub fn step(&mut self, action: Option<(u64, GateAction)>, edges: &[Edge], now: u64) {
+        let mut action = action;
+        for e in edges {
+            // Edges before the action come first. At its very time, the timer's own edges (an
+            // update event's) precede it, except a Start's or Pulse's rise and an Off's fall,
+            // which it makes.
+            if let Some((ta, a)) = action {
+                if e.t > ta {
+                    self.action(a);
+                    action = None;
+                }
+            }
+            let at_action = action.filter(|(ta, _)| *ta == e.t).map(|(_, a)| a);
+            if e.high {
+                let started =
+                    matches!(at_action, Some(GateAction::Start(_) | GateAction::Pulse(_)));
+                if let (true, Some(a)) = (started, at_action) {
+                    self.action(a);
+                    action = None;
+                }
+                let one_pulse = matches!(at_action, Some(GateAction::Pulse(_)));
+                self.rise(e.t, started, one_pulse);
+            } else {
+                self.fall(e.t, matches!(at_action, Some(GateAction::Off)));
+            }
+        }
+        if let Some((_, a)) = action {
+            self.action(a);
+        }
+        self.prune(now);
+    }
+
+    fn action(&mut self, a: GateAction) {
+        match a {
+            GateAction::Start(s) | GateAction::Pulse(s) => {
+                self.active = Some(s);
+                self.pending = None;
+            }
+            GateAction::Update(s) => self.pending = Some(s),
+            GateAction::Off => {
+                self.active = None;
+                self.pending = None;
+            }
+        }
+    }
+
+    fn rise(&mut self, r: u64, started: bool, one_pulse: bool) {
+        let sample = self.sample_at(r);
+        let settings = if started {
+            self.active
+        } else {
+            // An update event: the preloaded settings take over.
+            let s = self.pending.take().or(self.active);
+            self.active = s;
+            s
+        };
+        if let Some(d) = self.done.take() {
+            let period = r - d.rise;
+            if d.on * 1000 > period * d.caps.duty_permille {
+                self.violate(
+                    Rule::Duty,
+                    self.sample_at(d.rise),
+                    format!(
+                        "a pulse on for {} clocks, the next rise {period} clocks after its own: \
+                         {:.1} ‰ against a cap of {} ‰",
+                        d.on,
+                        d.on as f64 * 1000.0 / period as f64,
+                        d.caps.duty_permille
+                    ),
+                );
+            }
+            if !started {
+                let expected = d.settings.map(|s| s.period_clocks());
+                // A line that never falls within its period (100 % duty) merges periods into
+                // one pulse: only an Off or a one-pulse before it is wrong then.
+                let merged = d.settings.is_some_and(|s| continuous(&s));
+                if d.cut || !(merged || expected == Some(period)) {
+                    self.violate(
+                        Rule::Doubled,
+                        sample,
+                        format!(
+                            "a rise {period} clocks after the previous one with no start, where \
+                             {}",
+                            match (d.cut, expected) {
+                                (true, _) =>
+                                    "an Off or a one-pulse had stopped the timer".to_string(),
+                                (false, Some(p)) => format!("the period is {p} clocks"),
+                                (false, None) => "no settings were running".to_string(),
+                            }
+                        ),
+                    );
+                }
+            }
+        } else if !started {
+            self.violate(
+                Rule::Doubled,
+                sample,
+                "a rise with no start and no pulse before it".to_string(),
+            );
+        }
+        let mut caps = self.caps;
+        if self.changed_at.is_some_and(|c| r <= c) {
+            caps.loosen(self.before);
+        }
+        self.high = Some(High {
+            rise: r,
+            settings,
+            caps,
+            one_pulse,
+        });
+    }
+
+    fn fall(&mut self, f: u64, cut: bool) {
+        let Some(h) = self.high.take() else {
+            return;
+        };
+        self.pulses += 1;
+        let on = f - h.rise;
+        self.judge_high(h.rise, f, on, &h.caps);
+        let planned = h.settings.map(|s| s.on_clocks());
+        // 100 % duty: high across whole periods until an Off or new settings end it; the
+        // on-time cap above is its rule.
+        let whole = planned == Some(on) || h.settings.is_some_and(|s| continuous(&s));
+        let short_by_off = cut && planned.is_some_and(|p| on <= p);
+        if !(whole || short_by_off) {
+            self.violate(
+                Rule::Runt,
+                self.sample_at(h.rise),
+                format!(
+                    "a pulse on for {on} clocks, ended by {}, where {}",
+                    if cut { "an Off" } else { "the timer" },
+                    match planned {
+                        Some(p) => format!("{p} clocks were planned"),
+                        None => "no settings were running".to_string(),
+                    }
+                ),
+            );
+        }
+        self.done = Some(Done {
+            rise: h.rise,
+            on,
+            settings: h.settings,
+            caps: h.caps,
+            // After a one-pulse, as after an Off, the counter has stopped.
+            cut: cut || h.one_pulse,
+        });
+    }
+
+    /// The line high over `[rise, until)`: the on-time cap and the fault spans.
+    fn judge_high(&mut self, rise: u64, until: u64, on: u64, caps: &Caps) {
+        if on > caps.on_clocks {
+            self.violate(
+                Rule::OnTime,
+                self.sample_at(rise),
+                format!(
+                    "the line high for {on} clocks against an on-time cap of {} clocks",
+                    caps.on_clocks
+                ),
+            );
+        }
+        for i in 0..self.spans.len() {
+            let s = self.spans[i];
+            if s.reported || s.a >= until || s.b <= rise {
+                continue;
+            }
+            self.spans[i].reported = true;
+            let t = s.a.max(rise);
+            self.violate(
+                Rule::OnDuringFault,
+                self.sample_at(t),
+                format!(
+                    "the line high from {} clocks into a sample period the injected faults \
+                     keep off",
+                    t % self.period_clocks
+                ),
+            );
+        }
+    }
+
+    /// Spans no pulse can reach any more: before the current rise, or before `now`.
+    fn prune(&mut self, now: u64) {
+        let horizon = self.high.map_or(now, |h| h.rise);
+        while self.spans.front().is_some_and(|s| s.b <= horizon) {
+            self.spans.pop_front();
+        }
+    }
+
+    /// The episode ends at `end`: a pulse still high is judged up to there.
+    pub fn finish(&mut self, end: u64) {
+        if let Some(h) = self.high.take() {
+            self.judge_high(h.rise, end, end.saturating_sub(h.rise), &h.caps);
+        }
+        self.spans.clear();
+    }
+}
