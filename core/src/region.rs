@@ -222,11 +222,17 @@ impl RegionMap {
     pub fn track(&self, current: u8, position_um: i32) -> u8 {
         let b = &self.boundaries_um;
         let h = self.hysteresis_um;
-        let mut r = current as usize;
-        while r < b.len() && position_um >= b[r] + h {
+        // A region past the last one is the last one; `get` keeps the per-sample path free of
+        // bounds checks (scripts/panic-check.sh).
+        let mut r = (current as usize).min(b.len());
+        while b.get(r).is_some_and(|&edge| position_um >= edge + h) {
             r += 1;
         }
-        while r > 0 && position_um < b[r - 1] - h {
+        while r
+            .checked_sub(1)
+            .and_then(|i| b.get(i))
+            .is_some_and(|&edge| position_um < edge - h)
+        {
             r -= 1;
         }
         r as u8
