@@ -245,6 +245,19 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
                     u.region.reserved(),
                     u.headroom()
                 );
+                // The deepest frames' return addresses (odd words in flash) from the lowest
+                // overwritten word up: where the deepest stack was reached (llvm-addr2line -f -i).
+                if std::env::var("BOARD_MODEL_TRACE").is_ok_and(|v| v == "stack") {
+                    let mut b = vec![0u8; 1024];
+                    let _ = m.uc.mem_read(u.lowest as u64, &mut b);
+                    let ra: Vec<String> = b
+                        .chunks(4)
+                        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                        .filter(|v| v & 1 == 1 && (0x0800_0000..0x0808_0000).contains(v))
+                        .map(|v| format!("0x{:08X}", v & !1))
+                        .collect();
+                    println!("return addresses above the deepest word: {}", ra.join(" "));
+                }
             }
             println!(
                 "pc 0x{pc:08X}; {:.4} s of board time, {} instructions, {} exceptions, {:.1} % asleep, in {:.2} s",

@@ -270,6 +270,17 @@ mod tests {
     }
 
     #[test]
+    fn a_region_past_the_last_is_the_last_and_never_panics() {
+        // Three regions (0–2). The tracker used to index the boundaries with `current` and
+        // panicked on 3+; now it starts from the last region and tracks from there.
+        let m = map();
+        assert_eq!(m.track(3, 50_000), 2);
+        assert_eq!(m.track(200, 50_000), 2);
+        assert_eq!(m.track(u8::MAX, 100), 0);
+        assert_eq!(m.track(7, 30_000), 1);
+    }
+
+    #[test]
     fn bad_layouts_rejected() {
         assert_eq!(
             RegionMap::new(3, &[40_000, 20_000], 63_000, 100),
