@@ -9,7 +9,11 @@
 #    machine), and its tests on the firmware images (faults, panic path, findings of issue #9);
 # 2. `board-model check` per board: boot log, clock tree, 15 MHz carrier from registers and
 #    edges, 10 000 samples/s, the closed loop against host-sim, duty/on-time caps, sensor-to-gate
-#    latency, rail fault, watchdog reset, RF level (DAC on PA4). JSON summaries in target/board-model/<board>.json.
+#    latency, rail fault, watchdog reset, RF level (DAC on PA4), the host link and saves, 2 m/s
+#    strokes with an open wiper, and the deepest stack over all of those runs (the region below
+#    the initial SP is painted before reset) against what flip-link reserves: fails under 1 KiB
+#    of headroom. JSON summaries in target/board-model/<board>.json;
+# 3. a summary per board: flash, static RAM, stack reserved, deepest, headroom.
 # Needs firmware/target/<board>.elf (scripts/build-firmware.sh) and defmt-print (scripts/setup.sh).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -22,8 +26,8 @@ for b in "${BOARDS[@]}"; do
     [ -f "$SAW_FIRMWARE_DIR/$b.elf" ] || { echo "board-model: $SAW_FIRMWARE_DIR/$b.elf is missing: run scripts/build-firmware.sh first" >&2; exit 1; }
 done
 # The model shares the host workspace's target directory (host-sim and its dependencies are
-# built once).
-export CARGO_TARGET_DIR="$ROOT/target"
+# built once), unless CARGO_TARGET_DIR names another.
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$ROOT/target}"
 cd "$ROOT/board-model"
 echo "== board model: tests"
 cargo test --release
@@ -31,7 +35,26 @@ cargo build --release --bin board-model
 fail=0
 for b in "${BOARDS[@]}"; do
     echo "== board model: $b"
-    "$ROOT/target/release/board-model" check --board "$b" --elf "$SAW_FIRMWARE_DIR/$b.elf" \
+    "$CARGO_TARGET_DIR/release/board-model" check --board "$b" --elf "$SAW_FIRMWARE_DIR/$b.elf" \
         --json-file "$OUT/$b.json" || fail=1
+done
+
+if command -v size >/dev/null 2>&1; then SIZE=size; else SIZE=llvm-size-22; fi
+echo
+echo "== firmware: flash, static RAM and stack (deepest over every board-model run above)"
+for b in "${BOARDS[@]}"; do
+    flash=$("$SIZE" -A "$SAW_FIRMWARE_DIR/$b.elf" | awk '$1 ~ /^\.(vector_table|text|rodata|data|gnu\.sgstubs)$/ { s += $2 } END { print s + 0 }')
+    python3 - "$OUT/$b.json" "$b" "$flash" <<'PY' || fail=1
+import json, sys
+path, board, flash = sys.argv[1], sys.argv[2], int(sys.argv[3])
+s = json.load(open(path)).get("stack")
+if not s:
+    sys.exit(f"{board}: no stack measurement in {path}")
+r = s["region"]
+reserved, deepest = r["top"] - r["bottom"], r["top"] - s["lowest"]
+print(f"{board}: flash {flash} B, static RAM {r['static_bytes']} B, stack reserved {reserved} B "
+      f"({'below the statics: flip-link' if r['flipped'] else 'above the statics'}), "
+      f"deepest {deepest} B, headroom {reserved - deepest} B")
+PY
 done
 exit "$fail"

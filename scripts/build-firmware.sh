@@ -6,9 +6,16 @@
 #
 # Uses Debian's toolchain: /usr/bin/cargo + /usr/bin/rustc with RUSTC_BOOTSTRAP=1 so that
 # `-Zbuild-std=core` rebuilds core for thumbv7em-none-eabihf from rust-web-src (Debian ships no
-# prebuilt thumb target); links with ld.lld-22. All of that is on this command line, not in
-# firmware/.cargo/config.toml, which stays plain stable cargo for rustup users (`cargo run
-# --release` there builds and flashes). ELFs are copied to firmware/target/<board>.elf.
+# prebuilt thumb target); links with flip-link (the linker firmware/.cargo/config.toml names:
+# statics at the top of RAM, the stack below them, so an overflow faults instead of corrupting
+# them), which runs `rust-lld` from PATH: here a link to ld.lld-22 in a directory put first on
+# PATH, so the linker is the one setup.sh installs whatever else is on the machine. The Debian
+# specifics are on this command line, not in firmware/.cargo/config.toml, which stays plain
+# stable cargo for rustup users (`cargo run --release` there builds and flashes). ELFs are
+# copied to firmware/target/<board>.elf.
+#
+# PANIC_CHECK_PLANT=1 builds with the feature `plant-sample-unwrap` (an unwrap on the sample
+# path, for the panic check's own test) and leaves firmware/target/<board>-plant.elf instead.
 # Fails if a build fails or an image's flash (vector table + text + rodata + data) > 128 KiB:
 # on the F446 that is sectors 0–4 (4 × 16 + 64 KiB, RM0390 §3.3 table 4), leaving sector 5 as a
 # guard before the scene store's sectors 6–7; the G474's store sits in its last pages. The host
@@ -25,10 +32,22 @@ BOARDS=("$@")
 
 export RUSTC=/usr/bin/rustc
 export RUSTC_BOOTSTRAP=1
-export CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER=ld.lld-22
 CARGO=/usr/bin/cargo
 BUILD_STD=-Zbuild-std=core
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$FW/target}"
+
+# flip-link (scripts/setup.sh installs it) and the rust-lld it runs: ld.lld-22.
+if command -v flip-link >/dev/null 2>&1; then FLIP_LINK=$(command -v flip-link)
+elif [ -x "$HOME/.cargo/bin/flip-link" ]; then FLIP_LINK="$HOME/.cargo/bin/flip-link"
+else echo "build-firmware: flip-link not found: run scripts/setup.sh (cargo install flip-link --locked)" >&2; exit 1; fi
+LLD_DIR="$CARGO_TARGET_DIR/lld-22-as-rust-lld"
+mkdir -p "$LLD_DIR"
+ln -sf /usr/bin/ld.lld-22 "$LLD_DIR/rust-lld"
+export PATH="$LLD_DIR:$PATH"
+export CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER="$FLIP_LINK"
+PLANT=()
+SUFFIX=""
+if [ "${PANIC_CHECK_PLANT:-0}" = 1 ]; then PLANT=(--features plant-sample-unwrap); SUFFIX="-plant"; fi
 
 if command -v size >/dev/null 2>&1; then SIZE=size
 elif command -v llvm-size-22 >/dev/null 2>&1; then SIZE=llvm-size-22
@@ -49,16 +68,17 @@ for board in "${BOARDS[@]}"; do
         nucleo-g474re) feat=(--no-default-features --features nucleo-g474re) ;;
         *) echo "build-firmware: unknown board '$board'" >&2; exit 2 ;;
     esac
-    echo "==> $board: (cd firmware && RUSTC=$RUSTC RUSTC_BOOTSTRAP=1 CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER=ld.lld-22 $CARGO build --release $BUILD_STD ${feat[*]})"
+    feat+=("${PLANT[@]}")
+    echo "==> $board: (cd firmware && PATH=$LLD_DIR:\$PATH RUSTC=$RUSTC RUSTC_BOOTSTRAP=1 CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER=$FLIP_LINK $CARGO build --release $BUILD_STD ${feat[*]})"
     start=$(date +%s)
     (cd "$FW" && "$CARGO" build --release "$BUILD_STD" "${feat[@]}")
     secs=$(( $(date +%s) - start ))
     elf="$CARGO_TARGET_DIR/$TARGET/release/saw-firmware"
-    cp "$elf" "$CARGO_TARGET_DIR/$board.elf"
+    cp "$elf" "$CARGO_TARGET_DIR/$board$SUFFIX.elf"
     flash=$(sections "$elf" .vector_table .text .rodata .data .gnu.sgstubs)
     ram=$(sections "$elf" .data .bss .uninit)
     pct=$(awk -v f="$flash" -v b="$BUDGET" 'BEGIN { printf "%.1f", 100 * f / b }')
-    line="$board: flash $flash B ($pct % of $BUDGET_KIB KiB budget), ram $ram B (static; + stack), built in ${secs} s -> firmware/target/$board.elf"
+    line="$board: flash $flash B ($pct % of $BUDGET_KIB KiB budget), ram $ram B (static; + stack), built in ${secs} s -> firmware/target/$board$SUFFIX.elf"
     echo "$line"
     "$SIZE" -A "$elf" | awk '$1 ~ /^\.(vector_table|text|rodata|data|bss|uninit)$/ { printf "    %-14s %8d\n", $1, $2 }'
     summary+=("$line")

@@ -6,8 +6,8 @@
 # libfontconfig1-dev (host-side plotting) and, for the board model (board-model/, test-only, GPL),
 # libunicorn-dev with libclang-dev (bindgen), and Chromium with chromedriver for the web panel's
 # browser test (saw/tests/browser.rs), and g++ for libFuzzer (libfuzzer-sys builds it from C++
-# source) with cargo-fuzz for the fuzz targets (scripts/fuzz.sh). apt is skipped entirely when
-# everything is present.
+# source). apt is skipped entirely when everything is present. Then the cargo-installed tools:
+# defmt-print, cargo-fuzz (the fuzz targets, scripts/fuzz.sh) and flip-link.
 set -euo pipefail
 
 PACKAGES=(rustc-web cargo-web rust-web-src lld-22 qemu-system-arm libfontconfig1-dev libunicorn-dev libclang-dev chromium chromium-driver g++)
@@ -59,6 +59,18 @@ if cargo-fuzz --version >/dev/null 2>&1 || "$HOME/.cargo/bin/cargo-fuzz" --versi
 else
     echo "setup: installing cargo-fuzz (cargo install --locked)"
     RUSTC=/usr/bin/rustc /usr/bin/cargo install cargo-fuzz --locked
+fi
+
+# flip-link links the firmware images (firmware/.cargo/config.toml: the stack below the statics,
+# so an overflow faults instead of corrupting them); skipped when present. RUSTC names Debian's
+# compiler: under rustup, flip-link's own rust-toolchain.toml would ask for a toolchain that
+# may not be installed.
+# (flip-link has no --version: it would hand the flag to the linker.)
+if command -v flip-link >/dev/null 2>&1 || [ -x "$HOME/.cargo/bin/flip-link" ]; then
+    echo "setup: flip-link already installed"
+else
+    echo "setup: installing flip-link (cargo install --locked)"
+    RUSTC=/usr/bin/rustc /usr/bin/cargo install flip-link --locked
 fi
 
 # What the firmware build will use.

@@ -2,10 +2,12 @@
 # Runs every test: installs what is missing (no-op when present), the host workspace's tests
 # (core, boards, host simulation, scenario tests), the fuzz targets for a short budget each and a
 # planted parser panic the fuzzer must find (scripts/fuzz.sh), both boards' firmware release
-# builds with their flash/RAM sizes checked against the budget, the core on an emulated
-# Cortex-M4F (scripts/emu.sh), the firmware images on the board model (scripts/board-model.sh),
-# a soak of 10^7 samples with faults and scene events (host-sim soak, docs/soak.md), and the
-# cargo-mutants mutants of the core lines changed since the last landing (scripts/mutants-ci.sh).
+# builds with their flash/RAM sizes checked against the budget, the panic check of the
+# per-sample path with its planted defect (scripts/panic-check.sh), the core on an emulated
+# Cortex-M4F (scripts/emu.sh), the firmware images on the board model (scripts/board-model.sh,
+# which also measures the stack against what flip-link leaves it), a soak of 10^7 samples with
+# faults and scene events (host-sim soak, docs/soak.md), and the cargo-mutants mutants of the
+# core lines changed since the last landing (scripts/mutants-ci.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/setup.sh
@@ -19,6 +21,8 @@ NEW_INPUTS=$(mktemp -d) TIME=15 ./scripts/fuzz.sh
 TIME=60 ./scripts/fuzz.sh --plant lines
 echo "== firmware builds"
 ./scripts/build-firmware.sh
+echo "== panic check of the per-sample path (and its planted unwrap)"
+PANIC_CHECK_PLANT=1 ./scripts/panic-check.sh
 ./scripts/emu.sh
 ./scripts/board-model.sh
 echo "== soak: 10^7 samples (16.7 min of use) with faults and scene events (docs/soak.md)"

@@ -180,6 +180,8 @@ pub struct Report {
     pub emulated_s: f64,
     pub instructions: u64,
     pub wall_s: f64,
+    /// The deepest stack over every run of the check (`stack.rs`).
+    pub stack: Option<crate::stack::Use>,
 }
 
 impl Report {
@@ -421,6 +423,7 @@ pub fn all(board: BoardKind, elf: &Path, duration_s: f64) -> Result<Report, Stri
         emulated_s: o.end as f64 / TICKS_PER_S as f64,
         instructions: o.instructions,
         wall_s: o.wall_s,
+        stack: None,
         checks,
     };
     Ok(rep)
@@ -1341,4 +1344,61 @@ pub fn rf_level_panic(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String
             reset.map_or("— (none)".into(), |r| format!("{:.4} s", r as f64 / TICKS_PER_S as f64))
         ),
     )])
+}
+
+/// Stack the images must leave untouched below their deepest use, bytes: a margin for what the
+/// model's runs do not reach (a deeper defmt argument, an interrupt nesting the runs missed).
+pub const STACK_MARGIN_BYTES: u32 = 1024;
+
+/// The harshest trajectory for the stack the other runs lack: 2 m/s strokes over the whole
+/// travel (a region change every few ms, the velocity estimator at its limits) with an open
+/// wiper for 50 ms in the middle (fault entry and recovery), 1.2 s of board time.
+pub fn fast_strokes(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
+    let mut opts = Options::new(board, elf, 1.2);
+    opts.trajectory = host_sim::trajectory::Trajectory::Triangle {
+        a_um: 1_500.0,
+        b_um: 61_500.0,
+        speed_um_s: 2_000_000.0,
+    };
+    opts.adc.faults = vec![FaultWindow {
+        kind: FaultKind::Open,
+        start_us: 300_000,
+        end_us: 350_000,
+    }];
+    let (o, _m) = run::run(&opts)?;
+    let changes = o.log.iter().filter(|l| l.text.contains("region")).count();
+    Ok(vec![check(
+        "fast strokes (2 m/s) with an open wiper: runs to the end",
+        o.stop.is_none(),
+        match &o.stop {
+            None => format!("1.2 s of board time, {changes} region log lines"),
+            Some(s) => format!("the run stopped: {s}"),
+        },
+    )])
+}
+
+/// The deepest stack of every run of this process against the region flip-link leaves it.
+pub fn stack(u: Option<crate::stack::Use>) -> Vec<Check> {
+    let Some(u) = u else {
+        return vec![check(
+            "stack headroom",
+            false,
+            "no stack measurement: the image lacks __sdata/__ebss or its initial SP is outside RAM",
+        )];
+    };
+    let r = &u.region;
+    vec![check(
+        "stack headroom",
+        u.headroom() >= STACK_MARGIN_BYTES,
+        format!(
+            "deepest {} B of {} B reserved (0x{:08X}..0x{:08X}{}), headroom {} B (at least {STACK_MARGIN_BYTES} B), statics {} B",
+            u.deepest(),
+            r.reserved(),
+            r.bottom,
+            r.top,
+            if r.flipped { ", statics above: flip-link" } else { ", statics below" },
+            u.headroom(),
+            r.static_bytes
+        ),
+    )]
 }

@@ -570,6 +570,9 @@ fn describe(name: &str, base: u32, u: Unmodelled) -> String {
 pub struct Machine {
     pub uc: Unicorn<'static, Sim>,
     pub image: Image,
+    /// The main stack's region, painted at construction (`stack.rs`); None if the image lacks
+    /// the symbols that bound it.
+    pub stack: Option<crate::stack::Region>,
 }
 
 fn uc_err(e: uc_error) -> String {
@@ -722,8 +725,15 @@ impl Machine {
         )
         .map_err(uc_err)?;
         let ram = uc.get_data().chip.ram.clone();
-        for (b, s) in ram {
+        for &(b, s) in &ram {
             uc.mem_map(b as u64, s as u64, Prot::ALL).map_err(uc_err)?;
+        }
+        // The stack painted once, before the first reset: RAM keeps it through system resets,
+        // so the high-water mark covers every boot of the run.
+        let stack = crate::stack::Region::of(&image, flash_base, &ram).ok();
+        if let Some(r) = &stack {
+            uc.mem_write(r.bottom as u64, &crate::stack::paint(r))
+                .map_err(uc_err)?;
         }
         // Peripheral space (APB/AHB1 at 0x4000_0000, AHB2 at 0x4800_0000 / 0x5000_0000): one
         // MMIO window routed by address; an address nothing claims stops the run.
@@ -960,7 +970,7 @@ impl Machine {
             }
         })
         .map_err(uc_err)?;
-        let mut m = Machine { uc, image };
+        let mut m = Machine { uc, image, stack };
         m.reset_core()?;
         {
             let s = m.uc.get_data_mut();
@@ -1031,6 +1041,14 @@ impl Machine {
         self.uc
             .mem_write(addr as u64, bytes)
             .map_err(|e| format!("{e:?}"))
+    }
+
+    /// The deepest the main stack has reached since the machine was built (its paint).
+    pub fn stack_use(&self) -> Option<crate::stack::Use> {
+        let r = self.stack?;
+        let mut mem = vec![0u8; r.reserved() as usize];
+        self.uc.mem_read(r.bottom as u64, &mut mem).ok()?;
+        Some(crate::stack::measure(&r, &mem))
     }
 
     /// Virtual time now.

@@ -52,6 +52,23 @@ enum Cmd {
         #[arg(long, default_value_t = 0.1, value_parser = run_duration, allow_negative_numbers = true)]
         duration: f64,
     },
+    /// Every path from the per-sample roots into a panic function, from the image's Thumb code
+    /// (direct calls and tail calls; indirect branches counted, not followed); exits 1 if there
+    /// is one, 2 on a usage error (a root that names no function).
+    PanicCheck {
+        /// The firmware ELF (scripts/build-firmware.sh leaves firmware/target/<board>.elf).
+        #[arg(long)]
+        elf: PathBuf,
+        /// A root function: its demangled name without the hash, or a prefix ending in `*`.
+        /// Repeat for every root.
+        #[arg(long, required = true)]
+        root: Vec<String>,
+        /// Functions whose panic paths are accepted, one per line: `name-or-prefix* | reason`
+        /// (`#` starts a comment). The traversal does not enter them and lists them with their
+        /// reason.
+        #[arg(long)]
+        allow_file: Option<PathBuf>,
+    },
 }
 
 /// clap prints "invalid value '<v>' for '--duration <DURATION>': " before these, so they state
@@ -116,6 +133,11 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
                 rep.extend(check::save(kind, &elf)?);
                 rep.extend(check::stream_cost(kind, &elf)?);
             }
+            // Last: the deepest stack over every run above.
+            rep.extend(check::fast_strokes(kind, &elf)?);
+            let deepest = saw_board_model::stack::take_deepest();
+            rep.stack = deepest;
+            rep.extend(check::stack(deepest));
             rep.wall_s = started.elapsed().as_secs_f64();
             let text = serde_json::to_string_pretty(&rep).map_err(|e| e.to_string())?;
             if let Some(f) = &json_file {
@@ -145,6 +167,11 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
                 ExitCode::FAILURE
             })
         }
+        Cmd::PanicCheck {
+            elf,
+            root,
+            allow_file,
+        } => panic_check(&elf, &root, allow_file.as_deref()),
         Cmd::Run {
             board,
             elf,
@@ -211,6 +238,27 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
             if let Some(s) = &o.stop {
                 println!("stopped: {s}");
             }
+            if let Some(u) = o.stack {
+                println!(
+                    "stack: deepest {} B of {} B reserved, headroom {} B",
+                    u.deepest(),
+                    u.region.reserved(),
+                    u.headroom()
+                );
+                // The deepest frames' return addresses (odd words in flash) from the lowest
+                // overwritten word up: where the deepest stack was reached (llvm-addr2line -f -i).
+                if std::env::var("BOARD_MODEL_TRACE").is_ok_and(|v| v == "stack") {
+                    let mut b = vec![0u8; 1024];
+                    let _ = m.uc.mem_read(u.lowest as u64, &mut b);
+                    let ra: Vec<String> = b
+                        .chunks(4)
+                        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                        .filter(|v| v & 1 == 1 && (0x0800_0000..0x0808_0000).contains(v))
+                        .map(|v| format!("0x{:08X}", v & !1))
+                        .collect();
+                    println!("return addresses above the deepest word: {}", ra.join(" "));
+                }
+            }
             println!(
                 "pc 0x{pc:08X}; {:.4} s of board time, {} instructions, {} exceptions, {:.1} % asleep, in {:.2} s",
                 o.end as f64 / 3.6e9,
@@ -226,4 +274,100 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
             })
         }
     }
+}
+
+/// Reads the allow file: `pattern | reason` per line.
+fn allow_list(path: &std::path::Path) -> Result<Vec<(String, String)>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let (pat, why) = line.split_once('|').ok_or_else(|| {
+            format!(
+                "{}:{}: an entry is `function | reason`, and this line has no `|`",
+                path.display(),
+                n + 1
+            )
+        })?;
+        let (pat, why) = (pat.trim(), why.trim());
+        if why.is_empty() {
+            return Err(format!(
+                "{}:{}: `{pat}` is allowed without a reason; write why its panics cannot happen",
+                path.display(),
+                n + 1
+            ));
+        }
+        out.push((pat.to_string(), why.to_string()));
+    }
+    Ok(out)
+}
+
+fn panic_check(
+    elf: &std::path::Path,
+    roots: &[String],
+    allow_file: Option<&std::path::Path>,
+) -> Result<ExitCode, String> {
+    use saw_board_model::panic_check;
+    let started = std::time::Instant::now();
+    let g = panic_check::graph(elf)?;
+    let allowed = match allow_file {
+        Some(p) => allow_list(p)?,
+        None => Vec::new(),
+    };
+    let mut root_ix = Vec::new();
+    for r in roots {
+        let m = g.matching(r);
+        if m.is_empty() {
+            return Err(format!(
+                "--root {r:?} names no function in {} (inlined? give it #[inline(never)])",
+                elf.display()
+            ));
+        }
+        root_ix.extend(m);
+    }
+    let f = g.check(&root_ix, &allowed);
+    let name = |i: usize| g.funcs[i].name.as_str();
+    println!(
+        "panic-check {}: {} roots, {} functions reachable, {} panic paths, {} indirect branches not followed ({:.2} s)",
+        elf.display(),
+        f.roots.len(),
+        f.reachable,
+        f.panics.len(),
+        f.indirect.len(),
+        started.elapsed().as_secs_f64()
+    );
+    for &r in &f.roots {
+        println!("  root {} @ 0x{:08X}", name(r), g.funcs[r].addr);
+    }
+    for (i, why) in &f.allowed_reached {
+        println!("  allowed, not entered: {} ({why})", name(*i));
+    }
+    for (i, ind) in &f.indirect {
+        println!(
+            "  indirect, not followed: `{}` at 0x{:08X} in {}",
+            ind.what,
+            ind.site,
+            name(*i)
+        );
+    }
+    for c in &f.panics {
+        println!("  PANIC PATH:");
+        for (k, &(i, site)) in c.iter().enumerate() {
+            if k == 0 {
+                println!("      {}", name(i));
+            } else {
+                println!("   -> {}   (from 0x{site:08X})", name(i));
+            }
+        }
+    }
+    Ok(if f.panics.is_empty() {
+        println!("ok: no panic function is reachable from the roots");
+        ExitCode::SUCCESS
+    } else {
+        println!("FAIL: {} panic paths from the roots", f.panics.len());
+        ExitCode::FAILURE
+    })
 }

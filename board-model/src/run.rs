@@ -85,6 +85,9 @@ pub struct LogLine {
 
 /// What a run produced.
 pub struct Outcome {
+    /// The deepest the main stack reached in this run (the painted region's lowest overwritten
+    /// word), if the image's stack region is known.
+    pub stack: Option<crate::stack::Use>,
     pub stop: Option<Stop>,
     /// Virtual time reached, master ticks.
     pub end: Time,
@@ -225,6 +228,10 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
     }
     let per_sample =
         def.adc_oversample as usize / if opts.board == BoardKind::G474 { 16 } else { 1 };
+    let stack = m.stack_use();
+    if let Some(u) = stack {
+        crate::stack::record(u);
+    }
     let s = m.sim();
     let raw_log = s.log.clone();
     let log = decode(&opts.elf, &raw_log)?;
@@ -240,6 +247,7 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
         .map(|&(t, _)| t)
         .collect();
     let out = Outcome {
+        stack,
         stop,
         end: m.now(),
         t0: t0.get(),

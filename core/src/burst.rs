@@ -410,9 +410,11 @@ impl FastPlanner {
             period = self.min_period_clocks as u64;
         }
         let psc = (period - 1) >> self.counter_bits;
-        let ticks = period / (psc + 1);
+        // ≥ 1 even if psc were u64::MAX: no division-by-zero check on the per-sample path.
+        let psc_div = psc.saturating_add(1);
+        let ticks = period / psc_div;
         let wanted = ((ticks * self.duty_q16) >> 16).max(1);
-        let cap = ((ticks * self.cap_duty_q16) >> 16).min(self.max_on_clocks / (psc + 1));
+        let cap = ((ticks * self.cap_duty_q16) >> 16).min(self.max_on_clocks / psc_div);
         if cap == 0 {
             return None;
         }

@@ -241,7 +241,8 @@ impl PositionMapper {
         }
         let offset = code as i32 - self.cal.code_at_start as i32;
         let um = ((offset as i64 * self.um_per_code_q16 as i64) >> 16) as i32;
-        Ok(um.clamp(0, self.cal.length_um as i32))
+        // max/min, not clamp: clamp panics when its bounds cross, and this runs per sample.
+        Ok(um.max(0).min(self.cal.length_um as i32))
     }
 
     /// The code at which position `um` reads (inverse map, for host models and tests).

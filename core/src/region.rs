@@ -222,11 +222,17 @@ impl RegionMap {
     pub fn track(&self, current: u8, position_um: i32) -> u8 {
         let b = &self.boundaries_um;
         let h = self.hysteresis_um;
-        let mut r = current as usize;
-        while r < b.len() && position_um >= b[r] + h {
+        // A region past the last one is the last one; `get` keeps the per-sample path free of
+        // bounds checks (scripts/panic-check.sh).
+        let mut r = (current as usize).min(b.len());
+        while b.get(r).is_some_and(|&edge| position_um >= edge + h) {
             r += 1;
         }
-        while r > 0 && position_um < b[r - 1] - h {
+        while r
+            .checked_sub(1)
+            .and_then(|i| b.get(i))
+            .is_some_and(|&edge| position_um < edge - h)
+        {
             r -= 1;
         }
         r as u8
@@ -261,6 +267,17 @@ mod tests {
         // A jump over several regions lands in the right one.
         assert_eq!(m.track(0, 50_000), 2);
         assert_eq!(m.track(2, 100), 0);
+    }
+
+    #[test]
+    fn a_region_past_the_last_is_the_last_and_never_panics() {
+        // Three regions (0–2). The tracker used to index the boundaries with `current` and
+        // panicked on 3+; now it starts from the last region and tracks from there.
+        let m = map();
+        assert_eq!(m.track(3, 50_000), 2);
+        assert_eq!(m.track(200, 50_000), 2);
+        assert_eq!(m.track(u8::MAX, 100), 0);
+        assert_eq!(m.track(7, 30_000), 1);
     }
 
     #[test]

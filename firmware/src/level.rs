@@ -220,7 +220,9 @@ impl RfLevel {
             self.plan = plan;
             self.psc = psc;
             self.key = Some((peak_permille, pulse_clocks));
-            Some((embassy_time::Instant::now() - t0).as_micros() as u32)
+            // Saturating: Instant − Instant panics if the clock went backwards (it cannot, but
+            // this runs on the sample path: scripts/panic-check.sh).
+            Some(embassy_time::Instant::now().saturating_duration_since(t0).as_micros() as u32)
         } else {
             None
         };
@@ -239,7 +241,9 @@ impl RfLevel {
         // The table is complete before the stream can read it.
         fence(Ordering::SeqCst);
         let dhr = pac::DAC1.dhr12r(DAC_CH1).as_ptr() as u32;
-        self.dma.arm(&self.table[..n], dhr);
+        // `n` ≤ the table's length by triangle_plan; the min makes that visible to the compiler,
+        // so the sample path has no bounds check here (scripts/panic-check.sh).
+        self.dma.arm(&self.table[..n.min(MAX_ENVELOPE_ENTRIES)], dhr);
         // CC1 DMA request on (RM0390 §16.4.4 TIMx_DIER.CC1DE; CCDS = 0: on the CC1 event, not
         // on update, §16.4.2).
         t.dier().modify(|w| w.set_ccde(0, true));
@@ -267,7 +271,7 @@ impl RfLevel {
         let plan = EnvelopePlan { entries: MAX_ENVELOPE_ENTRIES, step_clocks: 1 };
         triangle(&BOARD.rf_level.table, 1000, &plan, &mut self.table[..]);
         self.key = None;
-        (embassy_time::Instant::now() - t0).as_micros() as u32
+        embassy_time::Instant::now().saturating_duration_since(t0).as_micros() as u32
     }
 }
 

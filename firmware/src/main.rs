@@ -248,6 +248,39 @@ async fn boot_scene(
 // `EMBEDDED_SCENE: Option<&[u8]>` and `EMBEDDED_SCENE_FILE: &str`, written by build.rs.
 include!(concat!(env!("OUT_DIR"), "/scene.rs"));
 
+/// Stamps a batch's samples and queues them for `control`; returns the time of the next sample.
+/// The sampler's per-sample work, never inlined: a root of the panic check (see `sample_step`).
+#[inline(never)]
+fn deliver(batch: &board::Batch, next_t: Option<u32>, now_us: u32, dropped: &mut u32) -> u32 {
+    let n = batch.codes.len() as u32;
+    // The newest sample in the ring buffer has landed by now, so the batch's first one was taken
+    // no later than `latest`, and (one landing per period) less than two periods before it. The
+    // count carries on while it stays in that window; it is re-anchored at `latest` at start,
+    // after lost samples, and whenever it would stamp a sample later than now — the core's stale
+    // check (now − t, wrapping) must never see a sample from the future.
+    let latest = now_us.wrapping_sub(batch.backlog.wrapping_add(n).wrapping_sub(1).wrapping_mul(SAMPLE_PERIOD_US));
+    let mut t_us = match next_t {
+        Some(t) if latest.wrapping_sub(t) < 2 * SAMPLE_PERIOD_US => t,
+        _ => latest,
+    };
+    for &code in &batch.codes {
+        if !queue_sample(Sample { code, t_us }) {
+            // Control task is behind; the stale watchdog covers a stuck consumer.
+            *dropped = dropped.wrapping_add(1);
+        }
+        t_us = t_us.wrapping_add(SAMPLE_PERIOD_US);
+    }
+    t_us
+}
+
+/// Queues a sample for `control`; false if the queue is full. Never inlined: the panic check's
+/// allow list (scripts/panic-check.allow) names it for the channel's RefCell borrow, which
+/// cannot fail.
+#[inline(never)]
+fn queue_sample(sample: Sample) -> bool {
+    SAMPLES.try_send(sample).is_ok()
+}
+
 #[embassy_executor::task]
 async fn sampler(mut s: board::Sampler) {
     // Acquisition restarts, and samples the control task had no room for.
@@ -262,27 +295,8 @@ async fn sampler(mut s: board::Sampler) {
     loop {
         match s.read().await {
             Ok(batch) => {
-                let n = batch.codes.len() as u32;
-                // The newest sample in the ring buffer has landed by now, so the batch's first
-                // one was taken no later than `latest`, and (one landing per period) less than
-                // two periods before it. The count carries on while it stays in that window; it
-                // is re-anchored at `latest` at start, after lost samples, and whenever it would
-                // stamp a sample later than now — the core's stale check (now − t, wrapping)
-                // must never see a sample from the future.
                 let now = Instant::now().as_micros() as u32;
-                let latest = now.wrapping_sub((batch.backlog + n - 1) * SAMPLE_PERIOD_US);
-                let mut t_us = match next_t {
-                    Some(t) if latest.wrapping_sub(t) < 2 * SAMPLE_PERIOD_US => t,
-                    _ => latest,
-                };
-                for &code in &batch.codes {
-                    if SAMPLES.try_send(Sample { code, t_us }).is_err() {
-                        // Control task is behind; the stale watchdog covers a stuck consumer.
-                        dropped = dropped.wrapping_add(1);
-                    }
-                    t_us = t_us.wrapping_add(SAMPLE_PERIOD_US);
-                }
-                next_t = Some(t_us);
+                next_t = Some(deliver(&batch, next_t, now, &mut dropped));
             }
             Err(fault) => {
                 next_t = None;
@@ -302,6 +316,40 @@ async fn sampler(mut s: board::Sampler) {
     }
 }
 
+/// One sample through the core onto the burst gate and the RF level, and into the telemetry
+/// stream: all the control loop does per sample. Never inlined, so the panic check
+/// (scripts/panic-check.sh) can root at it: nothing reachable from here may panic.
+#[inline(never)]
+fn sample_step(ctrl: &mut Controller, burst: &mut BurstGate, tap: &mut link::StreamTap, sample: Sample) {
+    let out = ctrl.on_sample(sample);
+    // The panic check's planted defect (feature plant-sample-unwrap, never in a real image): an
+    // index from the sample that can fall outside its table, unwrapped.
+    #[cfg(feature = "plant-sample-unwrap")]
+    core::hint::black_box([1u8, 2, 3, 4].get(usize::from(sample.code & 7)).copied().unwrap());
+    // Drive mode, then amplitude, then the line (saw-core's order).
+    saw_core::controller::apply(&out, burst);
+    if tap.take() {
+        tap.push(saw_link::msg::Record {
+            time_us: sample.t_us,
+            position_um: out.position_um,
+            velocity_um_s: out.velocity_um_s,
+            region: out.region,
+            burst_millihz: ctrl.telemetry().burst_millihz,
+            bursting: burst.line() != rf::Line::Off,
+            fault: out.fault,
+        });
+    }
+}
+
+/// The stale-sensor watchdog's tick (every WATCHDOG_PERIOD): a sensor that stopped delivering
+/// turns RF off. Never inlined, for the panic check's roots (see `sample_step`).
+#[inline(never)]
+fn tick_step(ctrl: &mut Controller, burst: &mut BurstGate, now_us: u32) {
+    if let Some(a) = ctrl.on_tick(now_us) {
+        burst.apply(a);
+    }
+}
+
 #[embassy_executor::task]
 async fn control(
     mut ctrl: Controller,
@@ -318,27 +366,8 @@ async fn control(
     let mut tap = link::StreamTap::new();
     loop {
         match select(SAMPLES.receive(), watchdog.next()).await {
-            Either::First(sample) => {
-                let out = ctrl.on_sample(sample);
-                // Drive mode, then amplitude, then the line (saw-core's order).
-                saw_core::controller::apply(&out, &mut burst);
-                if tap.take() {
-                    tap.push(saw_link::msg::Record {
-                        time_us: sample.t_us,
-                        position_um: out.position_um,
-                        velocity_um_s: out.velocity_um_s,
-                        region: out.region,
-                        burst_millihz: ctrl.telemetry().burst_millihz,
-                        bursting: burst.line() != rf::Line::Off,
-                        fault: out.fault,
-                    });
-                }
-            }
-            Either::Second(()) => {
-                if let Some(a) = ctrl.on_tick(Instant::now().as_micros() as u32) {
-                    burst.apply(a);
-                }
-            }
+            Either::First(sample) => sample_step(&mut ctrl, &mut burst, &mut tap, sample),
+            Either::Second(()) => tick_step(&mut ctrl, &mut burst, Instant::now().as_micros() as u32),
         }
         // Between samples: a scene compiled by the link, a counters request, a save's hold.
         if let Some(quiet) = link::service(&mut ctrl) {

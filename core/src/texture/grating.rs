@@ -142,7 +142,9 @@ impl RidgeTracker {
         wavelength_um: i32,
         rearm_um: i32,
     ) -> Option<Crossing> {
-        let cell = position_um.div_euclid(wavelength_um);
+        // Checked: div_euclid panics on a zero divisor (and on i32::MIN / -1). `validate` refuses
+        // a wavelength of 0, so None never happens; it would read as no crossing.
+        let cell = position_um.checked_div_euclid(wavelength_um)?;
         let offset = position_um - cell * wavelength_um;
         // The nearest ridge and the distance to it.
         let (near, dist) = if offset * 2 < wavelength_um {
@@ -317,7 +319,9 @@ impl Ridges {
                 .unwrap_or(u64::MAX),
             None => u64::MAX,
         }
-        .clamp(self.min_on_clocks, self.max_on_clocks);
+        // max/min, not clamp (which panics if the bounds cross; `new` checked they do not).
+        .max(self.min_on_clocks)
+        .min(self.max_on_clocks);
         // `new` checked that both ends of the clamp render, so one_pulse cannot fail here; if it
         // did, the ridge would be skipped like one that comes too soon.
         let settings = if too_soon {

@@ -198,7 +198,9 @@ impl SlotClock {
         // *before* the grid (signed offset < −⌊p/2⌋) lands at ≥ 2³¹, past `gap_us`: time that
         // ran backwards is a gap (restart) like a long silence, not a duplicate.
         let rounded = t_us.wrapping_sub(grid).wrapping_add(self.half_us);
-        let p = self.period_us;
+        // ≥ 10 already (every estimator's constructor runs `check_period`); the max lets the compiler drop the division's
+        // zero check from the per-sample path (scripts/panic-check.sh).
+        let p = self.period_us.max(1);
         let (slots, on_grid) = if rounded < p {
             return Tick::Duplicate;
         } else if rounded < self.two_periods_us {

@@ -48,6 +48,10 @@ impl<const K: usize> BackwardDifference<K> {
 }
 
 impl<const K: usize> VelocityEstimator for BackwardDifference<K> {
+    #[allow(
+        clippy::indexing_slicing,
+        reason = "ring indices stay below the ring's length: each is reduced mod the length or is `head`/`newest`, which only ever take such values"
+    )]
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
         match self.sampler.step(t_us) {
             Step::Repeat => return self.sampler.last_out(),

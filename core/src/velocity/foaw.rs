@@ -85,6 +85,10 @@ impl<const N: usize> Foaw<N> {
     }
 
     /// Sample `i` steps back (0 = newest) as (position relative to the newest, slots back).
+    #[allow(
+        clippy::indexing_slicing,
+        reason = "ring indices stay below the ring's length: each is reduced mod the length or is `head`/`newest`, which only ever take such values"
+    )]
     fn back(&self, i: usize) -> (f32, f32) {
         let (x0, s0) = self.ring[self.newest];
         let (x, s) = self.ring[(self.newest + N - i) % N];
@@ -140,6 +144,10 @@ impl<const N: usize> Foaw<N> {
 }
 
 impl<const N: usize> VelocityEstimator for Foaw<N> {
+    #[allow(
+        clippy::indexing_slicing,
+        reason = "ring indices stay below the ring's length: each is reduced mod the length or is `head`/`newest`, which only ever take such values"
+    )]
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
         match self.sampler.step(t_us) {
             Step::Repeat => return self.sampler.last_out(),

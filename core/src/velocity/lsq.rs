@@ -50,6 +50,10 @@ impl<const N: usize> LsqSlope<N> {
 impl<const N: usize> LsqSlope<N> {
     /// Adds a position at the next slot, dropping the oldest once the window is full.
     #[inline(always)]
+    #[allow(
+        clippy::indexing_slicing,
+        reason = "ring indices stay below the ring's length: each is reduced mod the length or is `head`/`newest`, which only ever take such values"
+    )]
     fn push(&mut self, position_um: i32) {
         let x = position_um as i64;
         if self.len < N {
@@ -58,12 +62,15 @@ impl<const N: usize> LsqSlope<N> {
             self.window[(self.head + self.len) % N] = position_um;
             self.len += 1;
         } else {
-            let oldest = self.window[self.head] as i64;
+            // `head` < N always; the `% N` (an AND for N = 32) shows it to the compiler, so no
+            // bounds check stays on the per-sample path (scripts/panic-check.sh).
+            let head = self.head % N;
+            let oldest = self.window[head] as i64;
             // Every remaining entry's index drops by one; the newest enters at N − 1.
             self.weighted += -(self.sum - oldest) + (N as i64 - 1) * x;
             self.sum += x - oldest;
-            self.window[self.head] = position_um;
-            self.head = (self.head + 1) % N;
+            self.window[head] = position_um;
+            self.head = (head + 1) % N;
         }
     }
 
@@ -107,11 +114,13 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
             Tick::Duplicate => return self.sampler.last_out(),
             Tick::Gap => self.clear(),
             Tick::Slots(m) if m > 1 && self.len > 0 => {
-                // Lost samples: fill their slots on the line between the neighbours.
-                let newest = self.window[(self.head + self.len - 1) % N];
-                let (a, b) = (newest as i64, position_um as i64);
-                for k in 1..m as i64 {
-                    self.push((a + (b - a) * k / m as i64) as i32);
+                // Lost samples: fill their slots on the line between the neighbours. The newest
+                // is at (head + len − 1) mod N, always inside the window: `get` is never None.
+                if let Some(&newest) = self.window.get((self.head + self.len - 1) % N) {
+                    let (a, b) = (newest as i64, position_um as i64);
+                    for k in 1..m as i64 {
+                        self.push((a + (b - a) * k / m as i64) as i32);
+                    }
                 }
             }
             Tick::First | Tick::Slots(_) => {}
