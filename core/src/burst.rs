@@ -306,12 +306,16 @@ impl SafetyLimits {
         Ok(())
     }
 
-    /// Largest compare value allowed for a period of `arr + 1` ticks at prescaler `psc`.
+    /// Largest compare value allowed for a period of `arr + 1` ticks at prescaler `psc`: at
+    /// most `arr`, so the line falls for at least one tick every period. (In PWM mode 1 the
+    /// output is high while CNT < CCR, RM0390 §18.3.9 / RM0440 §29.3.16; CNT runs 0 … ARR, so a
+    /// CCR above ARR never lets it fall and a 100 % duty cap would make the carrier continuous,
+    /// past any on-time cap — the soak found 4.4 ms against a 1.36 ms cap.)
     pub fn max_ccr(&self, timer: &BurstTimer, psc: u16, arr: u32) -> u32 {
         let period = arr as u64 + 1;
         let by_duty = period * self.max_duty_permille as u64 / 1000;
         let by_time = self.max_on_time_clocks(timer) / (psc as u64 + 1);
-        by_duty.min(by_time) as u32
+        by_duty.min(by_time).min(arr as u64) as u32
     }
 
     /// Rejects a burst duty that is zero, above 100 % or above the duty cap.
@@ -343,9 +347,11 @@ impl SafetyLimits {
     }
 
     /// True when periodic bursts `s` stay inside both caps (multiplies only: it runs on every
-    /// gate change).
+    /// gate change). The line must fall every period (`ccr ≤ arr`, see [`Self::max_ccr`]), or
+    /// its on-time is the whole run however short each period is.
     pub fn allows(&self, timer: &BurstTimer, s: &TimerSettings) -> bool {
-        s.ccr as u64 * 1000 <= (s.arr as u64 + 1) * self.max_duty_permille as u64
+        s.ccr <= s.arr
+            && s.ccr as u64 * 1000 <= (s.arr as u64 + 1) * self.max_duty_permille as u64
             && s.on_clocks() <= self.max_on_time_clocks(timer)
     }
 }
@@ -414,7 +420,10 @@ impl FastPlanner {
         let psc_div = psc.saturating_add(1);
         let ticks = period / psc_div;
         let wanted = ((ticks * self.duty_q16) >> 16).max(1);
-        let cap = ((ticks * self.cap_duty_q16) >> 16).min(self.max_on_clocks / psc_div);
+        // At most ticks − 1: the line falls every period (see `SafetyLimits::max_ccr`).
+        let cap = ((ticks * self.cap_duty_q16) >> 16)
+            .min(self.max_on_clocks / psc_div)
+            .min(ticks - 1);
         if cap == 0 {
             return None;
         }
@@ -589,6 +598,31 @@ mod tests {
         // The smallest pulse is one tick.
         let one = T16.one_pulse(0).unwrap();
         assert_eq!((one.psc, one.arr, one.ccr), (0, 1, 1));
+    }
+
+    /// A 100 % duty under a 100 % cap still lets the line fall for a tick every period (CCR ≤
+    /// ARR in PWM mode 1): otherwise the carrier is continuous, past any on-time cap. Both
+    /// planners, and `allows` refuses a compare value past the period.
+    #[test]
+    fn the_line_falls_every_period_even_at_full_duty() {
+        let limits = SafetyLimits {
+            max_duty_permille: 1000,
+            max_on_time_us: 5_000,
+            ..SafetyLimits::default()
+        };
+        let full = BurstCommand {
+            burst_millihz: 1_000_000,
+            duty_permille: 1000,
+        };
+        let (s, capped) = plan(&TEST_TIMER, &limits, &full).unwrap();
+        assert_eq!((s.psc, s.arr, s.ccr, capped), (0, 89_999, 89_999, true));
+        let fast = FastPlanner::new(&TEST_TIMER, &limits, 1000).unwrap();
+        let (f, _) = fast.plan_hz(1000.0).unwrap();
+        assert_eq!((f.psc, f.arr, f.ccr), (0, 89_999, 89_999));
+        assert!(limits.allows(&TEST_TIMER, &s));
+        let never_falls = TimerSettings { ccr: 90_000, ..s };
+        assert!(!limits.allows(&TEST_TIMER, &never_falls));
+        assert_eq!(limits.max_ccr(&TEST_TIMER, 0, 89_999), 89_999);
     }
 
     /// A duty exactly at the cap is rendered exactly: the cap is taken over the whole period

@@ -161,6 +161,9 @@ pub struct Controller<E: VelocityEstimator = DefaultEstimator> {
     /// sample on the M4 in spilled registers).
     level_cap_permille: u16,
     drive_pending: bool,
+    /// A scene was installed and no sample has run since: its caps are checked against the
+    /// burst the old scene left running at the next tick (see [`Controller::on_tick`]).
+    caps_pending: bool,
     telemetry: Telemetry,
 }
 
@@ -192,6 +195,7 @@ impl<E: VelocityEstimator> Controller<E> {
             lines: LineTracker::default(),
             amplitude: None,
             drive_pending: false,
+            caps_pending: false,
             telemetry: Telemetry {
                 position_um: -1,
                 region: u8::MAX,
@@ -235,6 +239,7 @@ impl<E: VelocityEstimator> Controller<E> {
         self.region = None;
         self.lines.reset();
         self.drive_pending = true;
+        self.caps_pending = true;
     }
 
     /// The burst timer this controller plans for.
@@ -256,6 +261,8 @@ impl<E: VelocityEstimator> Controller<E> {
     pub fn on_sample(&mut self, sample: Sample) -> Output {
         self.telemetry.samples = self.telemetry.samples.wrapping_add(1);
         self.last_sample_us = Some(sample.t_us);
+        // This sample plans under the installed scene's caps.
+        self.caps_pending = false;
         let t_us = sample.t_us;
         // Without a scene nothing has ever driven the gate (a load only replaces a scene), so
         // there is nothing to switch off.
@@ -433,7 +440,22 @@ impl<E: VelocityEstimator> Controller<E> {
     /// Checks the stale-sensor watchdog at `now_us`; call it from a timer at least every few
     /// sample periods. Returns the off action when the sensor has gone quiet.
     pub fn on_tick(&mut self, now_us: u32) -> Option<GateAction> {
-        let stale_after = self.active.as_ref()?.stale_after_us;
+        let active = self.active.as_ref()?;
+        let stale_after = active.stale_after_us;
+        // A scene installed since the last sample may have tightened the caps. The burst the
+        // old scene left running reloads its settings every period until a sample re-plans it,
+        // which a dropout can put off for up to the stale limit: stop it now if the new caps
+        // do not allow it (the soak found 200 µs pulses running on under a 38 µs cap).
+        if core::mem::take(&mut self.caps_pending) {
+            let limits = active.limits;
+            if let Some(r) = self.gate.running() {
+                if !limits.allows(&self.timer, &r) {
+                    let action = self.gate.force_off(now_us, &self.timer, &limits);
+                    self.count_action(action);
+                    return action;
+                }
+            }
+        }
         let last = self.last_sample_us?;
         if now_us.wrapping_sub(last) > stale_after && self.fault != Some(SensorFault::Stale) {
             return self.enter_fault(SensorFault::Stale, now_us).action;
@@ -676,6 +698,41 @@ mod tests {
         assert_eq!(c.on_tick(last + 5_001), Some(GateAction::Off));
         assert_eq!(c.on_tick(t + 7_000), None);
         assert_eq!(c.telemetry().faults, 1);
+    }
+
+    /// A scene with a tighter on-time cap, installed while no samples come (a dropout shorter
+    /// than the stale limit), stops the burst the old scene left running at the next tick
+    /// instead of letting it reload its 20 ms pulses until a sample arrives; a scene whose caps
+    /// allow the running burst leaves it alone, and a tick after a sample has nothing to redo.
+    #[test]
+    fn tighter_caps_stop_the_running_burst_at_the_next_tick() {
+        let mut c = loaded();
+        let mut t = 0;
+        let (out, _) = feed(&mut c, 5_000.0, &mut t, 3);
+        let Some(running) = c.gate.running() else {
+            panic!("no burst running: {out:?}")
+        };
+        assert_eq!(running.on_clocks(), TIMER.clock_hz as u64 / 50);
+        let mut loose = default_config();
+        loose.limits.max_on_time_us = 30_000;
+        c.load(&loose).unwrap();
+        assert_eq!(
+            c.on_tick(t),
+            None,
+            "the running burst is inside the new caps"
+        );
+        let mut tight = default_config();
+        tight.limits.max_on_time_us = 10_000;
+        c.load(&tight).unwrap();
+        assert_eq!(c.on_tick(t + 10), Some(GateAction::Off));
+        assert_eq!(c.gate.running(), None);
+        assert_eq!(c.on_tick(t + 20), None);
+        // After a sample the new scene's own plan runs: nothing left for a tick to stop.
+        c.load(&default_config()).unwrap();
+        feed(&mut c, 5_000.0, &mut t, 1);
+        c.load(&tight).unwrap();
+        feed(&mut c, 5_000.0, &mut t, 1);
+        assert_eq!(c.on_tick(t), None);
     }
 
     /// The ports: `poll` takes one sample from a source, runs it and applies the action to the
