@@ -101,7 +101,9 @@ pub fn core_run(
 ) -> RenderStats {
     let p = SimParams::new(&NUCLEO_F446RE, trajectory, duration_s)
         .with_config(grating_config(render))
-        .with_noise(noise_lsb, seed);
+        .with_noise(noise_lsb, seed)
+        // docs/renderers.md's figures were measured on this stream.
+        .with_reference_noise();
     let r = match estimator {
         Some(e) => sim::run_with(&p, e),
         None => sim::run(&p),
