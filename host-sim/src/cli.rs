@@ -32,7 +32,12 @@ pub const NOISE: Range = Range::new(0.0, 100.0, "LSB RMS");
 /// ADC offset per conversion: at most the 12-bit span either way.
 pub const OFFSET: Range = Range::new(-4095.0, 4095.0, "LSB");
 /// Simulated time: ten minutes at 10 kHz is 6 million trace points (about 0.7 GB).
-pub const DURATION: Range = Range::new(0.01, 600.0, "s");
+/// Simulated time of a plain run, s: up to a day, since a plain run keeps no trace (memory flat
+/// in the duration, docs/streaming.md).
+pub const DURATION: Range = Range::new(0.01, 86_400.0, "s");
+/// Simulated time of a scenario, s: its expectations look at the whole trace, which it keeps
+/// (about 100 B per sample).
+pub const SCENARIO_DURATION: Range = Range::new(0.01, 600.0, "s");
 /// Noise seed.
 pub const SEED: Whole = Whole::new(0, u64::MAX);
 /// The default run's time when the motion has no end of its own, s.
@@ -377,13 +382,14 @@ pub fn plan(args: &Args, m: &ArgMatches) -> Result<Plan, Refusal> {
         let params = sc
             .params()
             .map_err(|e| Refusal::Run(format!("{}: {e}", path.display()).into()))?;
-        if !(DURATION.lo..=DURATION.hi).contains(&params.duration_s) {
+        if !(SCENARIO_DURATION.lo..=SCENARIO_DURATION.hi).contains(&params.duration_s) {
             return Err(Refusal::Run(
                 format!(
-                    "{}: the scenario lasts {} s; it must last {}",
+                    "{}: the scenario lasts {} s; it must last {} (a scenario keeps its whole \
+                     trace)",
                     path.display(),
                     params.duration_s,
-                    DURATION.span()
+                    SCENARIO_DURATION.span()
                 )
                 .into(),
             ));

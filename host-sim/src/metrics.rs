@@ -154,7 +154,7 @@ pub const VELOCITY_LAGS: usize = 101;
 /// per-lag sums while keeping the per-sample loop in SIMD-wide f32).
 const LAG_BLOCK: u32 = 256;
 /// Region switches listed one by one; beyond this they are counted and summarised only.
-pub const SWITCHES_LISTED: usize = 10_000;
+pub const SWITCHES_LISTED: usize = 1_000;
 /// Recent sample points the gate's edges are placed against (an edge is placed once the point
 /// covering it has arrived, so two or three are enough; eight leave room).
 const RING: usize = 8;

@@ -109,12 +109,12 @@ flag_test!(offset:
 );
 
 flag_test!(duration:
-    ["--duration", "0"] => "error: invalid value '0' for '--duration <S>': must be from 0.01 to 600 s",
-    ["--duration=-1"] => "error: invalid value '-1' for '--duration <S>': must be from 0.01 to 600 s",
-    ["--duration", "601"] => "error: invalid value '601' for '--duration <S>': must be from 0.01 to 600 s",
-    ["--duration=nan"] => "error: invalid value 'nan' for '--duration <S>': must be a finite number from 0.01 to 600 s",
-    ["--duration=inf"] => "error: invalid value 'inf' for '--duration <S>': must be a finite number from 0.01 to 600 s",
-    ["--duration", "1e400"] => "error: invalid value '1e400' for '--duration <S>': must be a finite number from 0.01 to 600 s",
+    ["--duration", "0"] => "error: invalid value '0' for '--duration <S>': must be from 0.01 to 86400 s",
+    ["--duration=-1"] => "error: invalid value '-1' for '--duration <S>': must be from 0.01 to 86400 s",
+    ["--duration", "86401"] => "error: invalid value '86401' for '--duration <S>': must be from 0.01 to 86400 s",
+    ["--duration=nan"] => "error: invalid value 'nan' for '--duration <S>': must be a finite number from 0.01 to 86400 s",
+    ["--duration=inf"] => "error: invalid value 'inf' for '--duration <S>': must be a finite number from 0.01 to 86400 s",
+    ["--duration", "1e400"] => "error: invalid value '1e400' for '--duration <S>': must be a finite number from 0.01 to 86400 s",
 );
 
 flag_test!(seed:
@@ -363,7 +363,7 @@ fn help_states_unit_and_range_of_every_simulator_flag() {
         "Acceleration of --trajectory ramp, m/s² (0.01 to 100)",
         "ADC noise per conversion (12-bit), LSB RMS (0 to 100)",
         "ADC offset per conversion (12-bit), LSB (-4095 to 4095)",
-        "Simulated time, s (0.01 to 600) [default: 3; constant and ramp: until the finger reaches --to; reversal: until it is back at --from]",
+        "Simulated time, s (0.01 to 86400) [default: 3; constant and ramp: until the finger reaches --to; reversal: until it is back at --from]",
         "Noise seed (0 to 18446744073709551615)",
     ] {
         assert!(text.lines().any(|l| l.trim() == line), "missing {line:?} in\n{text}");
@@ -525,7 +525,7 @@ proptest! {
         for flag in [speed, from, to, accel, noise, offset, seed] {
             args.extend(flag);
         }
-        // Always a duration: without one, constant/ramp/reversal last their trip (up to 600 s).
+        // Always a duration: without one, constant/ramp/reversal last their trip (up to 86 400 s).
         args.push(format!("--duration={duration}"));
         never_panics(&args)?;
     }
