@@ -37,13 +37,9 @@ BUILD_STD=-Zbuild-std=core
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$FW/target}"
 
 # flip-link (scripts/setup.sh installs it) and the rust-lld it runs: ld.lld-22.
-if command -v flip-link >/dev/null 2>&1; then FLIP_LINK=$(command -v flip-link)
-elif [ -x "$HOME/.cargo/bin/flip-link" ]; then FLIP_LINK="$HOME/.cargo/bin/flip-link"
-else echo "build-firmware: flip-link not found: run scripts/setup.sh (cargo install flip-link --locked)" >&2; exit 1; fi
 LLD_DIR="$CARGO_TARGET_DIR/lld-22-as-rust-lld"
-mkdir -p "$LLD_DIR"
-ln -sf /usr/bin/ld.lld-22 "$LLD_DIR/rust-lld"
-export PATH="$LLD_DIR:$PATH"
+source "$ROOT/scripts/flip-link-env.sh"
+flip_link_env build-firmware "$LLD_DIR"
 export CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER="$FLIP_LINK"
 PLANT=()
 SUFFIX=""

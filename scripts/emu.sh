@@ -40,13 +40,9 @@ step "image build (firmware/emu, thumbv7em-none-eabihf, DEFMT_LOG=info)"
 # Target, link scripts and linker (flip-link) come from firmware/.cargo/config.toml (inherited);
 # the Debian toolchain specifics (core from source, ld.lld-22 as the rust-lld flip-link runs)
 # are given here, as in scripts/build-firmware.sh.
-if command -v flip-link >/dev/null 2>&1; then FLIP_LINK=$(command -v flip-link)
-elif [ -x "$HOME/.cargo/bin/flip-link" ]; then FLIP_LINK="$HOME/.cargo/bin/flip-link"
-else echo "emu: flip-link not found: run scripts/setup.sh (cargo install flip-link --locked)" >&2; exit 1; fi
-LLD_DIR="$EMU/target/lld-22-as-rust-lld"
-mkdir -p "$LLD_DIR"
-ln -sf /usr/bin/ld.lld-22 "$LLD_DIR/rust-lld"
-(cd "$EMU" && PATH="$LLD_DIR:$PATH" GOLDEN_DIR="$GOLDEN_DIR" DEFMT_LOG=info RUSTC=/usr/bin/rustc RUSTC_BOOTSTRAP=1 \
+source "$ROOT/scripts/flip-link-env.sh"
+flip_link_env emu "$EMU/target/lld-22-as-rust-lld"
+(cd "$EMU" && GOLDEN_DIR="$GOLDEN_DIR" DEFMT_LOG=info RUSTC=/usr/bin/rustc RUSTC_BOOTSTRAP=1 \
     CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER="$FLIP_LINK" /usr/bin/cargo build --release -Zbuild-std=core)
 
 step "QEMU mps2-an386 (cortex-m4, -icount shift=0, semihosting)"
