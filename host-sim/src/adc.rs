@@ -227,29 +227,31 @@ impl AdcModel {
     /// The control sample at `t_us` for a finger at `position_um`, or None during a dropout.
     /// `t_us` is simulation time; the sample carries it truncated to the core's wrapping u32.
     pub fn sample(&mut self, position_um: f64, t_us: u64) -> Option<Sample> {
-        let sum = match self.fault_at(t_us) {
+        // The window is looked up once: a spike or drift needs its start as well as its kind.
+        let window = self
+            .params
+            .faults
+            .iter()
+            .find(|f| f.contains(t_us))
+            .copied();
+        let sum = match window.map(|f| f.kind) {
             Some(FaultKind::Dropout) => return None,
             Some(FaultKind::Open) => 0,
             Some(FaultKind::Short) => (CONVERSION_FULL_SCALE - 1) * self.params.oversample,
-            Some(FaultKind::Spike { .. } | FaultKind::Drift { .. }) => {
-                self.shifted_sum(position_um, t_us)
+            Some(kind @ (FaultKind::Spike { .. } | FaultKind::Drift { .. })) => {
+                let since_us = t_us - window.map_or(t_us, |f| f.start_us);
+                self.shifted_sum(position_um, kind.offset_lsb_at(since_us))
             }
             None => self.sum_of_conversions(position_um),
         };
         Some(Sample::from_sum(sum, t_us as u32))
     }
 
-    /// The summed conversions at `t_us` inside a spike or drift window: each conversion as
-    /// usual, then the window's offset added and the result clamped to the converter's range
-    /// (a spike near an end can reach a rail, as a real one would). Kept out of [`Self::sample`]
-    /// so the fault-free path stays as it is.
-    fn shifted_sum(&mut self, position_um: f64, t_us: u64) -> u32 {
-        let extra_lsb = self
-            .params
-            .faults
-            .iter()
-            .find(|f| f.contains(t_us))
-            .map_or(0.0, |f| f.kind.offset_lsb_at(t_us - f.start_us));
+    /// The summed conversions inside a spike or drift window, whose offset is `extra_lsb` now:
+    /// each conversion as usual, then the offset added and the result clamped to the
+    /// converter's range (a spike near an end can reach a rail, as a real one would). Kept out
+    /// of [`Self::sample`] so the fault-free path stays as it is.
+    fn shifted_sum(&mut self, position_um: f64, extra_lsb: f64) -> u32 {
         let top = (CONVERSION_FULL_SCALE - 1) as f64;
         (0..self.params.oversample)
             .map(|_| {

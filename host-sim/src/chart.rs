@@ -13,7 +13,9 @@ use crate::timer::{Edge, LevelEdge};
 /// Points per trace after decimation (min/max per bucket, so spikes survive).
 const BUCKETS: usize = 1_500;
 
-/// Min/max decimation of `(t, y)` points (sorted by t) into `buckets` buckets over `[t0, t1]`.
+/// Min/max decimation of `(t, y)` points (sorted by t) into `buckets` buckets over `[t0, t1]`,
+/// over the whole series at once: the reference [`Decimator`] is tested against.
+#[cfg(test)]
 fn decimate(points: &[(f64, f64)], t0: f64, t1: f64, buckets: usize) -> Vec<(f64, f64)> {
     if points.len() <= 2 * buckets {
         return points.to_vec();
@@ -546,25 +548,24 @@ impl ChartData {
 }
 
 /// Draws what the core saw (red, thin, in runs broken by faults) over the truth (pale blue,
-/// wide), decimated to the panel's width, and the legend beside the plot: `(runs, label, line
-/// width)` and `(truth, line width)`.
+/// wide), both already decimated to the panel's width by the [`Recorder`], and the legend
+/// beside the plot: `(runs, label, line width)` and `(truth, line width)`.
 fn core_against_truth<'a, DB: DrawingBackend + 'a>(
     c: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     (core, label, core_width): (&[Vec<(f64, f64)>], &str, u32),
     (truth, truth_width): (&[(f64, f64)], u32),
-    t_end: f64,
 ) -> Result<Vec<Entry>, Box<dyn std::error::Error>>
 where
     DB::ErrorType: 'static,
 {
     // The truth first, wide and pale, so the core's thin line stays visible on top of it.
     c.draw_series(LineSeries::new(
-        decimate(truth, 0.0, t_end, BUCKETS),
+        truth.iter().copied(),
         BLUE.mix(0.35).stroke_width(truth_width),
     ))?;
     for run in core {
         c.draw_series(LineSeries::new(
-            decimate(run, 0.0, t_end, BUCKETS),
+            run.iter().copied(),
             RED.stroke_width(core_width),
         ))?;
     }
@@ -671,7 +672,6 @@ pub fn write_png(
             &mut c,
             (&meas, "measured", 1),
             (&tp, 5),
-            t_end,
         )?);
         side_legend(&panels[0], &legend)?;
     }
@@ -692,7 +692,7 @@ pub fn write_png(
             .label_style(("sans-serif", 15))
             .light_line_style(WHITE.mix(0.0))
             .draw()?;
-        let legend = core_against_truth(&mut c, (&est, "estimated (core)", 1), (&tv, 5), t_end)?;
+        let legend = core_against_truth(&mut c, (&est, "estimated (core)", 1), (&tv, 5))?;
         side_legend(&panels[1], &legend)?;
     }
 
@@ -877,7 +877,27 @@ fn dense_duty(pts: &[(f64, f64)], t_end: f64, bins: usize) -> Vec<Vec<(f64, f64)
 
 #[cfg(test)]
 mod duty_tests {
-    use super::dense_duty;
+    use super::{decimate, dense_duty, Decimator};
+
+    /// The decimator fed point by point gives the points the whole-series decimation gives: a
+    /// noisy series with spikes, long enough to turn to buckets, and a short one kept raw.
+    #[test]
+    fn decimator_matches_the_whole_series_decimation() {
+        for n in [500usize, 20_000] {
+            let pts: Vec<(f64, f64)> = (0..n)
+                .map(|i| {
+                    let t = i as f64 / n as f64 * 3.0;
+                    let spike = if i % 997 == 0 { 50.0 } else { 0.0 };
+                    (t, (t * 7.0).sin() + ((i * 7919) % 13) as f64 * 0.01 + spike)
+                })
+                .collect();
+            let mut d = Decimator::new(0.0, 3.0, 300);
+            for &p in &pts {
+                d.push(p);
+            }
+            assert_eq!(d.points(), decimate(&pts, 0.0, 3.0, 300), "{n} points");
+        }
+    }
 
     /// A step curve of `hz` bursts at 40 % duty over 1 s, as the gate panel builds it.
     fn square(hz: f64) -> Vec<(f64, f64)> {

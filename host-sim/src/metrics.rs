@@ -610,17 +610,6 @@ pub fn compute(r: &SimResult) -> Metrics {
     m.finish()
 }
 
-/// The samples of `r` whose true position lies outside the calibrated travel.
-pub fn off_travel(r: &SimResult) -> OffTravel {
-    let len = r.params.config.calibration.length_um as f64;
-    let mut off = r.trace.iter().filter(|p| !(0.0..=len).contains(&p.true_um));
-    let first_us = off.next().map(|p| p.t_us);
-    OffTravel {
-        samples: off.count() + usize::from(first_us.is_some()),
-        first_us,
-    }
-}
-
 /// True when a pulse is one of `planned` (the (on-time, period) pairs of the settings, kernel
 /// clocks): on-time and period both equal to one setting's. A pulse not followed by another rise
 /// of the same run (Off, restart, end) is checked for on-time ≤ the setting's only, since Off
@@ -634,12 +623,6 @@ fn pulse_matches(on: u64, period: Option<u64>, planned: &HashSet<(u64, u64)>) ->
         Some(p) => on <= s_on && p > s_period,
         None => on <= s_on,
     })
-}
-
-/// Velocity RMS error, at zero lag and at the best lag (searched 0–10 ms against the
-/// trajectory's true velocity, 100 µs then 5 µs steps).
-pub fn velocity_stats(r: &SimResult) -> Option<VelocityStats> {
-    compute(r).velocity
 }
 
 /// The switch between consecutive points `a` and `b`, if their regions differ (both present).

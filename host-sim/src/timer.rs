@@ -510,7 +510,8 @@ impl TimerModel {
     }
 
     /// Moves the recorded edges and DAC changes into `edges` and `levels` (cleared first) and
-    /// drops the recorded actions: what a streamed run consumes after every step. Call it only
+    /// drops the recorded actions: what a streamed run (`sim::stream`) and the soak consume
+    /// after every step, so they keep constant memory however long they run. Call it only
     /// between steps, when every later action comes after the model's time, so no recorded
     /// edge can still be cancelled by one at the same instant.
     pub fn take_settled(&mut self, edges: &mut Vec<Edge>, levels: &mut Vec<LevelEdge>) {
@@ -519,16 +520,6 @@ impl TimerModel {
         std::mem::swap(edges, &mut self.edges);
         std::mem::swap(levels, &mut self.levels);
         self.actions.clear();
-    }
-
-    /// Moves the edges recorded so far to the end of `out` and forgets the recorded actions and
-    /// DAC levels (the level and the running period stay): a consumer that checks the line as
-    /// it goes (`host-sim soak`) keeps constant memory however long it runs. Call it between
-    /// steps: an edge at the last processed time is final once no action can come at that time.
-    pub fn drain_edges_into(&mut self, out: &mut Vec<Edge>) {
-        out.append(&mut self.edges);
-        self.actions.clear();
-        self.levels.clear();
     }
 
     /// The time up to which the waveform has been generated, kernel clocks.

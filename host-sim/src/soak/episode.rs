@@ -20,7 +20,7 @@ use super::check::{LineCheck, Rule, Violation};
 use super::gen;
 use crate::adc::{FaultKind, FaultWindow};
 use crate::sim::{burst_timer, sample_period_us, ClosedLoop, SimParams};
-use crate::timer::Edge;
+use crate::timer::{Edge, LevelEdge};
 
 /// Samples per episode: 1 s at the boards' 10 kHz. Episode `e` holds global samples
 /// `e · EPISODE_SAMPLES ..` and is drawn from (seed, e) alone.
@@ -271,6 +271,8 @@ pub fn run_episode(seed: u64, episode: u64, samples: u64, plant: Plant) -> Episo
     let mut fref = FaultRef::default();
     let mut digest = CRC64.digest();
     let mut edges: Vec<Edge> = Vec::new();
+    // The DAC changes the timer hands over with the edges: no rule reads them.
+    let mut levels: Vec<LevelEdge> = Vec::new();
     let base_clk = clk(t0_us);
     let mut next_event = 0;
     // The controller as it was before a refused load, and the last sample to compare it on.
@@ -386,23 +388,16 @@ pub fn run_episode(seed: u64, episode: u64, samples: u64, plant: Plant) -> Episo
                 format!("the line high with the core reporting {:?}", point.fault),
             );
         }
-        lp.tm.drain_edges_into(&mut edges);
-        for e in &edges {
-            digest.update(&(e.t - base_clk).to_le_bytes());
-            digest.update(&[u8::from(e.high)]);
-        }
+        lp.tm.take_settled(&mut edges, &mut levels);
+        hash_edges(&mut digest, &edges, base_clk);
         check.step(point.action.map(|a| (action_t, a)), &edges, lp.tm.now());
-        edges.clear();
     }
     // The timer runs on to the episode's end (the last step stopped at its tick), so a pulse
     // that rose late is judged whole.
     let end = clk((local0 + samples) * period_us);
     lp.tm.advance_to(end);
-    lp.tm.drain_edges_into(&mut edges);
-    for e in &edges {
-        digest.update(&(e.t - base_clk).to_le_bytes());
-        digest.update(&[u8::from(e.high)]);
-    }
+    lp.tm.take_settled(&mut edges, &mut levels);
+    hash_edges(&mut digest, &edges, base_clk);
     check.step(None, &edges, end);
     check.finish(end);
     if lp.tm.protocol_errors > 0 {
@@ -424,6 +419,15 @@ pub fn run_episode(seed: u64, episode: u64, samples: u64, plant: Plant) -> Episo
 }
 
 /// A random scene, loadable or not (about one in ten is refused: that is a refusal too).
+/// Adds `edges` to the episode's checksum: each edge's time from the episode's start and its
+/// level.
+fn hash_edges(digest: &mut crc::Digest<'_, u64>, edges: &[Edge], base_clk: u64) {
+    for e in edges {
+        digest.update(&(e.t - base_clk).to_le_bytes());
+        digest.update(&[u8::from(e.high)]);
+    }
+}
+
 fn loadable_or_not(rng: &mut ChaCha8Rng, timer: &saw_core::burst::BurstTimer) -> Config {
     gen::random_config(rng, timer.max_burst_hz)
 }
