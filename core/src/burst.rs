@@ -60,7 +60,8 @@ impl BurstTimer {
     }
 
     /// One-pulse settings with the line high for `on_clocks` kernel clocks (rounded down to a
-    /// whole tick, at least one): high for the whole count, one tick low at the end.
+    /// whole tick, at least one), starting one tick after the counter (see
+    /// [`GateAction::Pulse`](crate::gate::GateAction::Pulse)): `arr = ccr = ticks`.
     pub fn one_pulse(&self, on_clocks: u64) -> Result<TimerSettings, BurstError> {
         let span = 1u64 << self.counter_bits.min(32);
         let psc = on_clocks / span;
@@ -82,6 +83,43 @@ impl BurstTimer {
     }
 }
 
+impl BurstTimer {
+    /// One-pulse settings whose line rises `delay_clocks` after the counter starts (rounded
+    /// down to whole ticks, at least one) and stays high for `on_clocks` (rounded down, at
+    /// least one tick): the counter runs 0..=arr and the line is high for its last `ccr` ticks,
+    /// `arr = delay_ticks + ccr − 1`. The hybrid renderer starts a ridge's burst inside the
+    /// sample period this way. Err when delay and pulse together do not fit the counter at one
+    /// prescaler value.
+    pub fn delayed_pulse(
+        &self,
+        delay_clocks: u64,
+        on_clocks: u64,
+    ) -> Result<TimerSettings, BurstError> {
+        let span = 1u64 << self.counter_bits.min(32);
+        let total = delay_clocks.saturating_add(on_clocks);
+        let psc = total / span;
+        if psc > u16::MAX as u64 {
+            let to_us =
+                |clocks: u64| clocks.saturating_mul(1_000_000) / self.clock_hz.max(1) as u64;
+            return Err(BurstError::PulseTooLong {
+                pulse_us: to_us(total),
+                max_us: to_us(self.longest_period_clocks() - 1),
+            });
+        }
+        let tick = psc + 1;
+        let on_ticks = (on_clocks / tick).max(1);
+        let delay_ticks = (delay_clocks / tick).max(1);
+        // It fits: total < tick · span, so ⌊delay/tick⌋ + ⌊on/tick⌋ ≤ span − 1, and the two
+        // one-tick floors add at most one tick between them (a zero delay with a pulse shorter
+        // than a tick cannot happen at psc > 0), so arr ≤ span − 1.
+        Ok(TimerSettings {
+            psc: psc as u16,
+            arr: (delay_ticks + on_ticks - 1) as u32,
+            ccr: on_ticks as u32,
+        })
+    }
+}
+
 /// Register values for one burst waveform.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -90,7 +128,9 @@ pub struct TimerSettings {
     pub psc: u16,
     /// Auto-reload: the period is arr + 1 ticks.
     pub arr: u32,
-    /// Compare: the enable line is high for the first ccr ticks of each period.
+    /// Compare: the enable line is high for the first ccr ticks of each period (periodic
+    /// bursts), or for the last ccr ticks of the count (one-pulses, see
+    /// [`GateAction::Pulse`](crate::gate::GateAction::Pulse)).
     pub ccr: u32,
 }
 
@@ -103,6 +143,12 @@ impl TimerSettings {
     /// On-time in kernel-clock cycles.
     pub fn on_clocks(&self) -> u64 {
         (self.psc as u64 + 1) * self.ccr as u64
+    }
+
+    /// As a one-pulse: kernel clocks from the counter's start to the line's rise, (arr + 1 −
+    /// ccr) ticks (one tick for [`BurstTimer::one_pulse`]).
+    pub fn pulse_delay_clocks(&self) -> u64 {
+        (self.psc as u64 + 1) * (self.arr as u64 + 1).saturating_sub(self.ccr as u64)
     }
 
     /// The burst frequency these settings produce, mHz.
@@ -501,6 +547,48 @@ pub(crate) const TEST_TIMER: BurstTimer = BurstTimer {
 
 #[cfg(test)]
 mod tests {
+    /// The delay and the pulse share one prescaler; both stay whole ticks, and a one-pulse is
+    /// the delayed pulse with a delay of one tick.
+    #[test]
+    fn delayed_pulses_rise_after_their_delay() {
+        let t32 = BurstTimer {
+            clock_hz: 90_000_000,
+            counter_bits: 32,
+            max_burst_hz: 5_000,
+        };
+        let s = t32.delayed_pulse(4_500, 36_000).unwrap();
+        assert_eq!((s.psc, s.arr, s.ccr), (0, 40_499, 36_000));
+        assert_eq!((s.pulse_delay_clocks(), s.on_clocks()), (4_500, 36_000));
+        let one = t32.one_pulse(36_000).unwrap();
+        assert_eq!(t32.delayed_pulse(1, 36_000).unwrap(), one);
+        assert_eq!(one.pulse_delay_clocks(), 1);
+        // A zero delay still rises one tick in: CCR = 0 would be high from CNT = 0, which PWM
+        // mode 2 cannot do after UG from a stopped counter.
+        assert_eq!(t32.delayed_pulse(0, 36_000).unwrap(), one);
+        let t16 = BurstTimer {
+            counter_bits: 16,
+            ..t32
+        };
+        // 90 000 clocks do not fit 2^16 ticks: prescaler 2, so 15 000 + 30 000 ticks.
+        let s = t16.delayed_pulse(30_000, 60_000).unwrap();
+        assert_eq!((s.psc, s.arr, s.ccr), (1, 44_999, 30_000));
+        assert_eq!((s.pulse_delay_clocks(), s.on_clocks()), (30_000, 60_000));
+        // Odd clocks round down to whole ticks, never up: the on-time cannot grow.
+        let s = t16.delayed_pulse(30_001, 60_001).unwrap();
+        assert_eq!((s.pulse_delay_clocks(), s.on_clocks()), (30_000, 60_000));
+        // Past the last prescaler value: refused, naming the length.
+        let long = (1u64 << 16) * 65_536;
+        assert!(matches!(
+            t16.delayed_pulse(long / 2, long / 2),
+            Err(BurstError::PulseTooLong { .. })
+        ));
+        // The one-tick delay floor at the top of the counter: the count still fits.
+        let s = t16.delayed_pulse(0, 65_535).unwrap();
+        assert_eq!((s.psc, s.arr, s.ccr), (0, 65_535, 65_535));
+        let s = t16.delayed_pulse(0, 65_536).unwrap();
+        assert_eq!((s.psc, s.arr, s.ccr), (1, 32_768, 32_768));
+    }
+
     use super::*;
 
     const T32: BurstTimer = BurstTimer {

@@ -16,8 +16,12 @@ pub enum GateAction {
     /// While running: write the settings to the preload registers; they take effect at the next
     /// update event, so the current period finishes untouched (no runt, no doubled pulse).
     Update(TimerSettings),
-    /// One pulse (a tangible line): one-pulse mode, the line high for the first `ccr` ticks, then
-    /// low with the counter stopped at the update event.
+    /// One pulse (a tangible line, a ridge): one-pulse mode from a stopped counter, which
+    /// counts 0..=arr once and stops at the update event. The line is high for the last `ccr`
+    /// ticks of the count, CNT = arr + 1 − ccr ..= arr, and low before and after: PWM mode 2
+    /// with CCR = arr + 1 − ccr. [`BurstTimer::one_pulse`] rises one tick after the start
+    /// (arr = ccr); [`BurstTimer::delayed_pulse`] later, inside the sample period (the hybrid
+    /// renderer's predicted crossing).
     Pulse(TimerSettings),
 }
 
