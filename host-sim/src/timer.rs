@@ -197,8 +197,18 @@ struct Running {
     end_ticks: u64,
     /// What the next update event loads.
     pending: Option<TimerSettings>,
-    /// One-pulse mode (OPM): the update event ending this period stops the counter.
+    /// One-pulse mode (OPM): the update event ending this period stops the counter, and the
+    /// line follows PWM mode 2 (low while CNT < arr + 1 − ccr, high from there to the end).
     one_pulse: bool,
+    /// A one-pulse's line has risen.
+    risen: bool,
+}
+
+impl Running {
+    /// The tick at which a one-pulse's line rises (PWM mode 2: CNT = CCR = arr + 1 − ccr).
+    fn rise_ticks(&self) -> u64 {
+        self.end_ticks.saturating_sub(self.ccr as u64)
+    }
 }
 
 /// A triangle being played: the DMA's table and the envelope timer's steps.
@@ -375,8 +385,19 @@ impl TimerModel {
             let end = r.t0 + r.end_ticks * tick;
             // TIM8 counts (gated) while this counter runs: the envelope's entries up to here.
             self.play_to(t, end);
+            if r.one_pulse {
+                // PWM mode 2 in OPM: one rise at CNT = CCR; the line falls with the update
+                // event that stops the counter (below).
+                let rise = r.t0 + r.rise_ticks() * tick;
+                if !r.risen && r.ccr > 0 && rise < end && rise <= t {
+                    r.risen = true;
+                    self.running = Some(r);
+                    self.set_level(rise, true);
+                    continue;
+                }
+            }
             let fall = r.t0 + r.ccr as u64 * tick;
-            if self.high && fall < end && fall <= t {
+            if !r.one_pulse && self.high && fall < end && fall <= t {
                 self.set_level(fall, false);
                 continue;
             }
@@ -413,8 +434,9 @@ impl TimerModel {
     fn start(&mut self, t: u64, s: TimerSettings, one_pulse: bool) {
         self.level.playing = None;
         if one_pulse && self.level.envelope == Envelope::Triangular {
-            // The pulse is high for `ccr` ticks from CNT = 1 (firmware: PWM mode 2, CCR = 1);
-            // TIM2 is enabled for the whole count, and TIM8 steps through it.
+            // The pulse is high for the last `ccr` ticks of the count (firmware: PWM mode 2,
+            // CCR = arr + 1 − ccr, one tick for a line's pulse); TIM2 is enabled for the whole
+            // count, and TIM8 steps through it from CEN: the core never delays a triangle.
             let tick = s.psc as u64 + 1;
             let pulse_clocks = s.ccr as u64 * tick;
             let env_clocks =
@@ -447,8 +469,10 @@ impl TimerModel {
             end_ticks: s.arr as u64 + 1,
             pending: None,
             one_pulse,
+            risen: false,
         });
-        self.set_level(t, s.ccr > 0);
+        // A one-pulse starts low and rises at CNT = arr + 1 − ccr (`advance_to`).
+        self.set_level(t, !one_pulse && s.ccr > 0);
     }
 
     /// Applies `action` at kernel-clock time `t`.
@@ -555,6 +579,26 @@ mod tests {
 
     fn s(arr: u32, ccr: u32) -> TimerSettings {
         TimerSettings { psc: 0, arr, ccr }
+    }
+
+    /// PWM mode 2 in one-pulse mode (RM0390 §17.3.10): low while CNT < CCR = arr + 1 − ccr,
+    /// high to the update event at arr + 1, which stops the counter.
+    #[test]
+    fn one_pulses_rise_at_their_compare_and_fall_at_the_update() {
+        let edges = |settings: TimerSettings| {
+            let mut t = TimerModel::new(1_000, 32, true);
+            t.apply(10, GateAction::Pulse(settings));
+            let w = t.finish(10 + 1_000);
+            w.edges.iter().map(|e| (e.t, e.high)).collect::<Vec<_>>()
+        };
+        // A line's pulse: one tick low, then 40 ticks high.
+        assert_eq!(edges(s(40, 40)), vec![(11, true), (51, false)]);
+        // A delayed ridge pulse: 25 ticks low, 40 high.
+        assert_eq!(edges(s(64, 40)), vec![(35, true), (75, false)]);
+        // With a prescaler the ticks are psc + 1 clocks.
+        let mut p = s(64, 40);
+        p.psc = 2;
+        assert_eq!(edges(p), vec![(10 + 75, true), (10 + 195, false)]);
     }
 
     #[test]
