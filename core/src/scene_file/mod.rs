@@ -277,6 +277,10 @@ mod tests {
             (v.render, v.rearm_um),
             (GratingRender::VelocitySynthesis, 200)
         );
+        let h = g("[[region]]\nkind = \"grating\"\nwavelength_mm = 0.2\nrender = \"hybrid\"\n");
+        assert_eq!((h.render, h.rearm_um), (GratingRender::Hybrid, 50));
+        let e = err("[[region]]\nkind = \"grating\"\nwavelength_mm = 0.2\nrender = \"hybrid\"\nrearm_mm = 0.1\n");
+        assert!(e.message.contains("half the period"), "{e}");
         let e = err("[[region]]\nkind = \"grating\"\nwavelength_mm = 1\nrearm_mm = 0.5\n");
         assert_eq!((e.line, e.field.as_str()), (4, "region[0].rearm_mm"), "{e}");
         assert!(e.message.contains("half the period"), "{e}");

@@ -185,6 +185,7 @@ impl Region<'_> {
         let render = match self.spec.render.as_ref().map(|r| *r.get_ref()) {
             None | Some(RenderSpec::Position) => GratingRender::PositionPhase,
             Some(RenderSpec::Velocity) => GratingRender::VelocitySynthesis,
+            Some(RenderSpec::Hybrid) => GratingRender::Hybrid,
         };
         let rearm_um = self.rearm_um(&base)?;
         Ok(Texture::Grating(Grating {

@@ -71,11 +71,13 @@ pub(super) enum Drive {
     Progressive,
 }
 
-/// How a grating is rendered (`render = "position"`, the default, or `"velocity"`).
+/// How a grating is rendered (`render = "position"`, the default, `"hybrid"` or
+/// `"velocity"`).
 #[derive(Deserialize, Clone, Copy)]
 #[serde(rename_all = "kebab-case")]
 pub(super) enum RenderSpec {
     Position,
+    Hybrid,
     Velocity,
 }
 

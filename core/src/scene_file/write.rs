@@ -140,6 +140,7 @@ pub fn to_scene_file(config: &Config, title: &str) -> String {
                     match g.render {
                         GratingRender::PositionPhase => "position",
                         GratingRender::VelocitySynthesis => "velocity",
+                        GratingRender::Hybrid => "hybrid",
                     }
                 ));
                 line(std::format!(

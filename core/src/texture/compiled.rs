@@ -149,7 +149,7 @@ impl Compiled {
             Texture::Grating(g) => {
                 g.validate(length_um)?;
                 let c = match g.render {
-                    GratingRender::PositionPhase => {
+                    GratingRender::PositionPhase | GratingRender::Hybrid => {
                         Compiled::Ridges(Ridges::new(g, timer, limits, sample_period_us)?)
                     }
                     GratingRender::VelocitySynthesis => {

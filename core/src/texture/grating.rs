@@ -8,6 +8,12 @@
 //!   measured 7–15 µm RMS at 20–200 mm/s against 63–344 µm for velocity synthesis
 //!   (docs/estimators.md). A ridge that fired is disarmed until the finger is `rearm_um` clear
 //!   of it, so noise on a ridge fires nothing and a real back-and-forth fires once per crossing.
+//! - [`GratingRender::Hybrid`]: position phase, but on a steady stroke each crossing is
+//!   predicted inside the coming sample period from a line through the last 32 positions
+//!   (texture::predict) and the burst is started there by a delayed one-pulse
+//!   ([`BurstTimer::delayed_pulse`]) instead of on the first sample past the ridge, which is up
+//!   to one sample of travel late (20 µm at 200 mm/s and 10 kHz). Below the trust speed, after
+//!   a gap, a glitch or a reversal (the line is emptied) it is position phase.
 //! - [`GratingRender::VelocitySynthesis`]: periodic bursts at f = |V|/λ on the burst timer. Its
 //!   frequency is right but its phase is free, and the estimator's lag puts the bursts
 //!   v × 3.3 ms behind the ridges. Below `min_speed_um_s` no bursts are made (at rest the
@@ -17,6 +23,7 @@ use crate::burst::{BurstError, BurstTimer, FastPlanner, SafetyLimits, TimerSetti
 
 use super::compiled::{Moment, Render, Request, Want};
 use super::motion::MotionGate;
+use super::predict::{Line, LineFit, TRUST_SPEED_UM_S};
 use super::{SpreadParam, TextureError};
 
 /// How a grating turns motion into bursts.
@@ -29,6 +36,10 @@ pub enum GratingRender {
     PositionPhase,
     /// Periodic bursts at f = |V|/λ (see the module doc).
     VelocitySynthesis,
+    /// Position phase with each crossing predicted inside the sample period and the burst
+    /// started there by a delayed one-pulse (see the module doc); position phase itself when
+    /// the prediction is not trusted.
+    Hybrid,
 }
 
 /// Default re-arm distance of a ridge, µm: 8.7 σ of the position noise at 3 LSB with 16×
@@ -94,7 +105,7 @@ impl Grating {
                 permille: self.amplitude_permille,
             });
         }
-        if self.render == GratingRender::PositionPhase
+        if self.render != GratingRender::VelocitySynthesis
             && self.rearm_um.saturating_mul(2) >= self.wavelength_um
         {
             return Err(TextureError::BadRearm {
@@ -214,6 +225,26 @@ pub(crate) struct Ridges {
     /// The last position accepted, and a jump waiting for confirmation.
     last_um: Option<i32>,
     jump_um: Option<i32>,
+    /// The hybrid renderer's prediction, when the grating is rendered that way.
+    hybrid: Option<Predictor>,
+}
+
+/// The hybrid renderer's state (see [`GratingRender::Hybrid`]).
+#[derive(Clone, Copy, Debug)]
+struct Predictor {
+    fit: LineFit,
+    sample_period_us: u32,
+    /// One sample period in timer clocks, as f32 for the delay.
+    period_clocks: f32,
+    /// |slope| from which the line is trusted, µm per sample.
+    trust_um: f32,
+    /// Sample periods per second, to turn the slope into a speed.
+    samples_per_s: f32,
+    /// The ridge fired last (by prediction or by position), until the finger is `rearm_um`
+    /// clear of it: neither path fires it again before.
+    last_fired: Option<i32>,
+    /// The trusted line's end at the previous sample, µm: where this sample's window starts.
+    prev_end_um: Option<f32>,
 }
 
 /// The fastest the slider is taken to move, µm/s: a step between two samples that would need
@@ -239,6 +270,11 @@ impl Ridges {
         // Both extremes must be renderable, so no crossing is ever refused by the timer.
         timer.one_pulse(max_on_clocks)?;
         timer.one_pulse(min_on_clocks)?;
+        if g.render == GratingRender::Hybrid {
+            // The longest pulse delayed by a whole period: every prediction renders too.
+            let period_clocks = sample_period_us as u64 * clock / 1_000_000;
+            timer.delayed_pulse(period_clocks, max_on_clocks)?;
+        }
         Ok(Self {
             wavelength_um: g.wavelength_um as i32,
             rearm_um: g.rearm_um as i32,
@@ -256,6 +292,15 @@ impl Ridges {
                 .min(i32::MAX as u64) as i32,
             last_um: None,
             jump_um: None,
+            hybrid: (g.render == GratingRender::Hybrid).then(|| Predictor {
+                fit: LineFit::default(),
+                sample_period_us,
+                period_clocks: (sample_period_us as u64 * clock / 1_000_000) as f32,
+                trust_um: (TRUST_SPEED_UM_S as u64 * sample_period_us as u64) as f32 / 1e6,
+                samples_per_s: 1e6 / sample_period_us.max(1) as f32,
+                last_fired: None,
+                prev_end_um: None,
+            }),
         })
     }
 
@@ -292,23 +337,146 @@ impl Ridges {
     ) -> (Want, Option<TimerSettings>, u32) {
         let mut want = Want::Periodic;
         if !self.plausible(position_um) {
+            if let Some(h) = self.hybrid.as_mut() {
+                h.fit.reset();
+            }
             return (want, None, 0);
         }
         if let Some((lo, hi)) = self.on_span_um {
+            // Signed: a predicted pulse starts after the sample that fired it.
             let long_enough = self
                 .last_pulse_us
-                .is_some_and(|t0| t_us.wrapping_sub(t0) >= self.min_on_us);
+                .is_some_and(|t0| t_us.wrapping_sub(t0) as i32 >= self.min_on_us as i32);
             if (position_um < lo || position_um > hi) && long_enough {
                 self.on_span_um = None;
                 want = Want::EndPulse;
             }
         }
-        let Some(c) = self
+        let crossing = self
             .tracker
-            .update(position_um, self.wavelength_um, self.rearm_um)
-        else {
+            .update(position_um, self.wavelength_um, self.rearm_um);
+        let mut crossing = crossing;
+        if let Some(h) = self.hybrid.as_mut() {
+            let line = h.fit.push(position_um, t_us, h.sample_period_us);
+            // The last ridge fired re-arms once the finger is `rearm_um` clear of it.
+            let here_um = line.map_or(position_um as f32, |l| l.end_um);
+            if let Some(k) = h.last_fired {
+                let dist_um = (here_um - (k * self.wavelength_um) as f32).abs();
+                if dist_um > self.rearm_um as f32 {
+                    h.last_fired = None;
+                }
+            }
+            let trusted = line.filter(|l| l.slope_um.abs() >= h.trust_um);
+            let from_um = match (trusted, h.prev_end_um) {
+                // The line's window joins the last one's: (previous end, end + slope].
+                (Some(_), Some(prev)) => prev,
+                (Some(l), None) => l.end_um - l.slope_um,
+                (None, _) => 0.0,
+            };
+            h.prev_end_um = trusted.map(|l| l.end_um);
+            if let Some(line) = trusted {
+                // On a trusted line a raw crossing is only noise's opinion, unless it is of a
+                // ridge behind the line's window that nothing fired (the line was not yet
+                // trusted when the finger passed it): that one fires now, as position phase.
+                let behind = crossing.filter(|c| {
+                    let r_um = (c.ridge * self.wavelength_um) as f32;
+                    let passed = if line.slope_um > 0.0 {
+                        r_um <= from_um
+                    } else {
+                        r_um >= from_um
+                    };
+                    passed && c.skipped == 0 && h.last_fired != Some(c.ridge)
+                });
+                if let Some(c) = behind {
+                    let out = self.fire(c, velocity_um_s, 0, want, t_us, timer);
+                    if out.1.is_some() {
+                        if let Some(h) = self.hybrid.as_mut() {
+                            h.last_fired = Some(c.ridge);
+                        }
+                    }
+                    return out;
+                }
+                return self.predict(line, from_um, want, t_us, timer);
+            }
+            // Position phase, but not a ridge the prediction already fired.
+            if crossing.is_some_and(|c| h.last_fired == Some(c.ridge) && c.skipped == 0) {
+                crossing = None;
+            }
+        }
+        let Some(c) = crossing else {
             return (want, None, 0);
         };
+        let out = self.fire(c, velocity_um_s, 0, want, t_us, timer);
+        if out.1.is_some() {
+            if let Some(h) = self.hybrid.as_mut() {
+                h.last_fired = Some(c.ridge);
+            }
+        }
+        out
+    }
+
+    /// The hybrid's step on a trusted line: the first ridge at or past where the line was one
+    /// period ago (so a ridge the line passed since is still fired, now), fired if the line
+    /// reaches it within the coming period, the burst delayed to the crossing.
+    fn predict(
+        &mut self,
+        line: Line,
+        from_um: f32,
+        want: Want,
+        t_us: u32,
+        timer: &BurstTimer,
+    ) -> (Want, Option<TimerSettings>, u32) {
+        let Some(h) = self.hybrid.as_ref() else {
+            return (want, None, 0);
+        };
+        let up = line.slope_um > 0.0;
+        // The first ridge past `from_um` in the direction of motion. Positions are 0..=1 m:
+        // the cast truncates towards 0, which is the floor there.
+        let from_floor_um = from_um as i32;
+        let Some(cell) = from_floor_um.checked_div_euclid(self.wavelength_um) else {
+            return (want, None, 0);
+        };
+        let ridge = if up { cell + 1 } else { cell };
+        let already = h.last_fired == Some(ridge);
+        let fraction = ((ridge * self.wavelength_um) as f32 - line.end_um) / line.slope_um;
+        if already || fraction > 1.0 {
+            return (want, None, 0);
+        }
+        let delay_clocks = (fraction.max(0.0) * h.period_clocks) as u64;
+        let delay_us = (fraction.max(0.0) * h.sample_period_us as f32) as u32;
+        let speed_um_s = (line.slope_um.abs() * h.samples_per_s) as i32;
+        let c = Crossing {
+            ridge,
+            skipped: 0,
+            up,
+        };
+        let out = self.fire(
+            c,
+            Some(speed_um_s),
+            delay_clocks,
+            want,
+            t_us.wrapping_add(delay_us),
+            timer,
+        );
+        if out.1.is_some() {
+            if let Some(h) = self.hybrid.as_mut() {
+                h.last_fired = Some(ridge);
+            }
+        }
+        out
+    }
+
+    /// Fires crossing `c` with a pulse starting `delay_clocks` after now, at `start_us`.
+    fn fire(
+        &mut self,
+        c: Crossing,
+        velocity_um_s: Option<i32>,
+        delay_clocks: u64,
+        want: Want,
+        start_us: u32,
+        timer: &BurstTimer,
+    ) -> (Want, Option<TimerSettings>, u32) {
+        let t_us = start_us;
         let too_soon = self
             .last_pulse_us
             .is_some_and(|last| t_us.wrapping_sub(last) < self.min_spacing_us);
@@ -327,7 +495,7 @@ impl Ridges {
         let settings = if too_soon {
             None
         } else {
-            timer.one_pulse(on).ok()
+            timer.delayed_pulse(delay_clocks, on).ok()
         };
         let Some(settings) = settings else {
             return (want, None, c.skipped + 1);
@@ -351,6 +519,11 @@ impl Render for Ridges {
         self.on_span_um = None;
         self.last_um = None;
         self.jump_um = None;
+        if let Some(h) = self.hybrid.as_mut() {
+            h.fit.reset();
+            h.last_fired = None;
+            h.prev_end_um = None;
+        }
     }
 
     #[inline]

@@ -24,6 +24,7 @@ pub mod grating;
 pub mod lines;
 pub mod material;
 mod motion;
+pub mod predict;
 pub mod random;
 
 pub use grating::{Grating, GratingRender};

@@ -197,6 +197,7 @@ pub fn encode_config<S: Sink>(s: &mut S, c: &Config) {
                 s.u8(match g.render {
                     GratingRender::PositionPhase => 0,
                     GratingRender::VelocitySynthesis => 1,
+                    GratingRender::Hybrid => 2,
                 });
                 s.u32(g.rearm_um);
             }
@@ -281,6 +282,7 @@ pub fn decode_config(r: &mut Reader) -> Config {
                 amplitude_permille: r.u16(),
                 render: match r.u8() {
                     0 => GratingRender::PositionPhase,
+                    2 => GratingRender::Hybrid,
                     _ => GratingRender::VelocitySynthesis,
                 },
                 rearm_um: r.u32(),

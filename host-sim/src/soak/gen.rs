@@ -59,7 +59,12 @@ pub fn random_texture(rng: &mut ChaCha8Rng, max_hz: u32, cap: u16) -> Texture {
                 min_speed_um_s: min_speed(rng),
                 amplitude_permille: rng.random_range(1..=1000),
                 render: if position {
-                    GratingRender::PositionPhase
+                    // Position phase or the hybrid (position phase with predicted crossings).
+                    if rng.random_bool(0.5) {
+                        GratingRender::Hybrid
+                    } else {
+                        GratingRender::PositionPhase
+                    }
                 } else {
                     GratingRender::VelocitySynthesis
                 },

@@ -57,7 +57,7 @@ const KINDS: &[(&str, &[Key])] = &[
             DUTY,
             SPEED,
             AMPLITUDE,
-            ("render", Str(&["position", "velocity", "phase"])),
+            ("render", Str(&["position", "velocity", "hybrid", "phase"])),
             ("rearm_mm", Num(0.0, 0.5)),
         ],
     ),
