@@ -603,7 +603,8 @@ fn write_report(
          Placement error = true finger position at the burst's rising edge − the nearest ridge, µm, \
          signed along the motion (positive: late). Position phase and velocity synthesis are the \
          core's renderers in the closed-loop simulation (NUCLEO-F446RE, default estimator, gate, \
-         timer model); the hybrid is a host model (see `host_sim::bench::renderers`). On-time error: \
+         timer model), as is the hybrid (position phase with the crossing predicted inside the \
+         sample period, `render = \"hybrid\"`). On-time error: \
          RMS of (on − duty·λ/|V|)/(duty·λ/|V|) with the true speed. Skipped: ridge crossings the \
          core counted without a pulse.\n"
     );
@@ -626,6 +627,37 @@ fn write_report(
             r.rms_err_um,
             r.worst_err_um,
             opt(r.on_rms_pct)
+        );
+    }
+    // Worst placement against λ for the three renderers, with the physical floor.
+    let sweep = renderers::placement_sweep(opts.seed, 3);
+    let (sigma_um, fitted_um, tick_um) = renderers::floor(opts.seed);
+    let _ = writeln!(
+        w,
+        "\n### Worst placement against λ (0.1–4 mm), 20–200 mm/s, 3 noise seeds\n\n\
+         A stroke there and back over 24 mm at each speed (turning half a period from the \
+         ridges), 2 LSB. Physical floor: one sample's position σ = {sigma_um:.1} µm (ADC model); \
+         3 σ of the hybrid's fitted position = {fitted_um:.1} µm; one timer tick of travel at \
+         200 mm/s = {tick_um:.4} µm. Chart: `charts/renderers-placement-vs-wavelength.png`.\n"
+    );
+    let _ = writeln!(
+        w,
+        "| renderer | λ mm | speed mm/s | worst µm | RMS µm | bursts / ridges | skipped | λ/20 µm |"
+    );
+    let _ = writeln!(w, "|---|---:|---:|---:|---:|---:|---:|---:|");
+    for p in &sweep {
+        let _ = writeln!(
+            w,
+            "| {} | {} | {} | {:.1} | {:.1} | {} / {} | {} | {:.0} |",
+            p.renderer,
+            p.wavelength_um as f64 / 1000.0,
+            p.speed_mm_s,
+            p.worst_um,
+            p.rms_um,
+            p.bursts,
+            p.ridges,
+            p.skipped,
+            p.wavelength_um as f64 / 20.0
         );
     }
     let _ = writeln!(
@@ -748,7 +780,7 @@ fn write_report(
     let mut render_curves: Vec<charts::Curve> = [
         ("position phase", methods::Family::Lsq),
         ("velocity synthesis", methods::Family::Foaw),
-        ("hybrid (host model)", methods::Family::Median),
+        ("hybrid", methods::Family::Median),
     ]
     .into_iter()
     .map(|(name, family)| charts::Curve {
@@ -776,9 +808,53 @@ fn write_report(
         "worst |placement error|, µm (log)",
         &render_curves,
     )?;
+    // Worst placement against λ: the three renderers at 20 and 200 mm/s, the floor, λ/20.
+    let families = [
+        ("position phase", methods::Family::Lsq),
+        ("velocity synthesis", methods::Family::Foaw),
+        ("hybrid", methods::Family::Median),
+    ];
+    let mut wl_curves: Vec<charts::Curve> = Vec::new();
+    for (name, family) in families {
+        for mm_s in [20.0, 200.0] {
+            wl_curves.push(charts::Curve {
+                name: format!("{name}, {mm_s} mm/s"),
+                family,
+                points: sweep
+                    .iter()
+                    .filter(|p| p.renderer == name && p.speed_mm_s == mm_s)
+                    .map(|p| (p.wavelength_um as f64 / 1000.0, p.worst_um.max(0.1)))
+                    .collect(),
+            });
+        }
+    }
+    let lambdas = renderers::SWEEP_WAVELENGTHS_UM.map(|l| l as f64 / 1000.0);
+    for (name, y) in [
+        ("floor: 3 σ of the fitted position".to_string(), fitted_um),
+        ("floor: one sample's σ".to_string(), sigma_um),
+        ("position phase floor: one sample of travel at 200 mm/s".to_string(), 20.0),
+    ] {
+        wl_curves.push(charts::Curve {
+            name,
+            family: methods::Family::Difference,
+            points: lambdas.iter().map(|&l| (l, y)).collect(),
+        });
+    }
+    wl_curves.push(charts::Curve {
+        name: "target: λ/20".to_string(),
+        family: methods::Family::Difference,
+        points: lambdas.iter().map(|&l| (l, l * 1000.0 / 20.0)).collect(),
+    });
+    charts::curves(
+        &charts_dir.join("renderers-placement-vs-wavelength.png"),
+        "Grating bursts: worst distance from the ridge against λ (2 LSB, 10 kHz, 3 seeds)",
+        "λ, mm (log)",
+        "worst |placement error|, µm (log)",
+        &wl_curves,
+    )?;
     let _ = writeln!(
         w,
-        "\nCharts: `charts/estimators-error-vs-delay.png`, `charts/estimators-mixed-error-vs-delay.png`, \
+        "\nCharts: `charts/renderers-placement-vs-wavelength.png`, `charts/estimators-error-vs-delay.png`, `charts/estimators-mixed-error-vs-delay.png`, \
          `charts/estimators-error-vs-cost.png`, `charts/estimators-error-vs-speed.png`, \
          `charts/estimators-error-vs-noise.png`, `charts/renderers-placement-vs-speed.png`."
     );
