@@ -13,7 +13,11 @@
 #    strokes with an open wiper, and the deepest stack over all of those runs (the region below
 #    the initial SP is painted before reset) against what flip-link reserves: fails under 1 KiB
 #    of headroom. JSON summaries in target/board-model/<board>.json;
-# 3. a summary per board: flash, static RAM, stack reserved, deepest, headroom.
+# 3. `board-model delayed-pulse` per board on firmware/target/<board>-selftest.elf (issue #17's
+#    delayed one-pulse fired at boot by the self-test image: rise arr + 1 − ccr ticks after CEN,
+#    high ccr ticks, docs/board-model.md); skipped, saying so, when that image is missing
+#    (`SELFTEST=1 scripts/build-firmware.sh` builds it; scripts/test.sh does);
+# 4. a summary per board: flash, static RAM, stack reserved, deepest, headroom.
 # Needs firmware/target/<board>.elf (scripts/build-firmware.sh) and defmt-print (scripts/setup.sh).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -37,6 +41,12 @@ for b in "${BOARDS[@]}"; do
     echo "== board model: $b"
     "$CARGO_TARGET_DIR/release/board-model" check --board "$b" --elf "$SAW_FIRMWARE_DIR/$b.elf" \
         --json-file "$OUT/$b.json" || fail=1
+    st="$SAW_FIRMWARE_DIR/$b-selftest.elf"
+    if [ -f "$st" ]; then
+        "$CARGO_TARGET_DIR/release/board-model" delayed-pulse --board "$b" --elf "$st" || fail=1
+    else
+        echo "board model: $b: delayed-pulse check SKIPPED: no $st (SELFTEST=1 scripts/build-firmware.sh)"
+    fi
 done
 
 if command -v size >/dev/null 2>&1; then SIZE=size; else SIZE=llvm-size-22; fi

@@ -16,6 +16,10 @@
 #
 # PANIC_CHECK_PLANT=1 builds with the feature `plant-sample-unwrap` (an unwrap on the sample
 # path, for the panic check's own test) and leaves firmware/target/<board>-plant.elf instead.
+# SELFTEST=1 builds with `selftest-delayed-pulse` (one delayed one-pulse at boot, for the board
+# model's delayed-pulse check) and leaves firmware/target/<board>-selftest.elf; SELFTEST=plant
+# adds the planted defect `plant-pulse-no-delay` (CCR = 1: the delay ignored) and leaves
+# firmware/target/<board>-selftest-plant.elf, which that check must fail.
 # Fails if a build fails or an image's flash (vector table + text + rodata + data) > 128 KiB:
 # on the F446 that is sectors 0–4 (4 × 16 + 64 KiB, RM0390 §3.3 table 4), leaving sector 5 as a
 # guard before the scene store's sectors 6–7; the G474's store sits in its last pages. The host
@@ -44,6 +48,12 @@ export CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER="$FLIP_LINK"
 PLANT=()
 SUFFIX=""
 if [ "${PANIC_CHECK_PLANT:-0}" = 1 ]; then PLANT=(--features plant-sample-unwrap); SUFFIX="-plant"; fi
+case "${SELFTEST:-0}" in
+    0) ;;
+    1) PLANT+=(--features selftest-delayed-pulse); SUFFIX="$SUFFIX-selftest" ;;
+    plant) PLANT+=(--features selftest-delayed-pulse,plant-pulse-no-delay); SUFFIX="$SUFFIX-selftest-plant" ;;
+    *) echo "build-firmware: SELFTEST is 0, 1 or plant, not '$SELFTEST'" >&2; exit 2 ;;
+esac
 
 if command -v size >/dev/null 2>&1; then SIZE=size
 elif command -v llvm-size-22 >/dev/null 2>&1; then SIZE=llvm-size-22

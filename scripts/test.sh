@@ -5,7 +5,8 @@
 # builds with their flash/RAM sizes checked against the budget, the panic check of the
 # per-sample path with its planted defect (scripts/panic-check.sh), the core on an emulated
 # Cortex-M4F (scripts/emu.sh), the firmware images on the board model (scripts/board-model.sh,
-# which also measures the stack against what flip-link leaves it), a soak of 10^7 samples with
+# which also measures the stack against what flip-link leaves it, and runs the self-test images'
+# delayed one-pulse), a soak of 10^7 samples with
 # faults and scene events (host-sim soak, docs/soak.md), and the cargo-mutants mutants of the
 # core lines changed since the last landing (scripts/mutants-ci.sh).
 set -euo pipefail
@@ -21,6 +22,8 @@ NEW_INPUTS=$(mktemp -d) TIME=15 ./scripts/fuzz.sh
 TIME=60 ./scripts/fuzz.sh --plant lines
 echo "== firmware builds"
 ./scripts/build-firmware.sh
+# The self-test images for the board model's delayed-pulse check (firmware/src/selftest.rs).
+SELFTEST=1 ./scripts/build-firmware.sh
 echo "== panic check of the per-sample path (and its planted unwrap)"
 PANIC_CHECK_PLANT=1 ./scripts/panic-check.sh
 ./scripts/emu.sh

@@ -1402,3 +1402,148 @@ pub fn stack(u: Option<crate::stack::Use>) -> Vec<Check> {
         ),
     )]
 }
+
+/// What the self-test image logs about its delayed pulse (`firmware/src/selftest.rs`):
+/// "self-test: delayed pulse psc P arr A ccr C: …".
+fn selftest_settings(o: &Outcome) -> Option<(u64, u64, u64)> {
+    let line = o
+        .log
+        .iter()
+        .find(|l| l.text.starts_with("self-test: delayed pulse psc "))?;
+    let num = |key: &str| -> Option<u64> {
+        let i = line.text.find(key)? + key.len();
+        line.text[i..]
+            .chars()
+            .take_while(|c| c.is_ascii_digit())
+            .collect::<String>()
+            .parse()
+            .ok()
+    };
+    Some((num(" psc ")?, num(" arr ")?, num(" ccr ")?))
+}
+
+/// Issue #17's delayed one-pulse, on an image built with `selftest-delayed-pulse`
+/// (`SELFTEST=1 scripts/build-firmware.sh` → `<board>-selftest.elf`): at boot, with the RF arm
+/// still low, the port fires one `GateAction::Pulse` whose settings (logged) have arr > ccr,
+/// then asks for the same pulse with a triangular envelope. Measured against the settings, on
+/// the recorded pins: the rise on PA0 (IDT A) lands arr + 1 − ccr timer ticks after the CEN
+/// write — to the tick: CEN starts the counter at the next kernel clock edge, so the distance
+/// is delay × tick plus less than one kernel clock — the line stays high exactly ccr ticks and
+/// falls at the update event; PB10 (IDT B, standing drive) the same; no other edge before the
+/// arm rises (the counter stopped by itself, the delayed triangle refused with the line off);
+/// and the rectangular level was latched by the DAC at CEN (TRGO = enable), before the rise.
+pub fn delayed_pulse(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
+    let opts = Options::new(board, elf, 0.05);
+    let (o, _m) = run::run(&opts)?;
+    let mut checks = Vec::new();
+    if let Some(s) = &o.stop {
+        return Ok(vec![check(
+            "delayed pulse: runs",
+            false,
+            format!("the run stopped: {s}"),
+        )]);
+    }
+    let Some((psc, arr, ccr)) = selftest_settings(&o) else {
+        return Ok(vec![check(
+            "delayed pulse: self-test line",
+            false,
+            "no `self-test: delayed pulse psc …` line: is this an image built with SELFTEST=1 scripts/build-firmware.sh?",
+        )]);
+    };
+    let tick = ticks_per_cycle(burst_clk(board)) * (psc + 1);
+    let (delay, on) = ((arr + 1).saturating_sub(ccr), ccr);
+    // The self-test's pulse is TIM2's first start: the first CR1 write with CEN set.
+    let cen = o
+        .writes
+        .iter()
+        .find(|w| w.addr == 0x4000_0000 && w.value & w.mask & 1 != 0)
+        .map(|w| w.at);
+    let arm = o.pins[PIN_RF_ARM]
+        .iter()
+        .find(|e| e.high)
+        .map_or(o.end, |e| e.at);
+    let Some(cen) = cen else {
+        return Ok(vec![check(
+            "delayed pulse: CEN",
+            false,
+            "TIM2 was never started",
+        )]);
+    };
+    let window = |pin: usize| -> Vec<(Time, bool)> {
+        o.pins[pin]
+            .iter()
+            .filter(|e| e.at >= cen && e.at < arm)
+            .map(|e| (e.at, e.high))
+            .collect()
+    };
+    let (a, b) = (window(PIN_BURST_A), window(PIN_BURST_B));
+    let (rise, fall) = match a.as_slice() {
+        [(r, true), (f, false), ..] => (Some(*r), Some(*f)),
+        [(r, true)] => (Some(*r), None),
+        _ => (None, None),
+    };
+    let fmt_ticks = |d: Time| format!("{} ticks + {} master ticks", d / tick, d % tick);
+    let rise_after = rise.map(|r| r - cen);
+    checks.push(check(
+        "delayed pulse: rise arr + 1 − ccr ticks after CEN",
+        rise_after.is_some_and(|d| d / tick == delay),
+        format!(
+            "settings psc {psc} arr {arr} ccr {ccr} (tick {:.2} ns); PA0 rose {} after the CEN write ({}); expected {delay} ticks ({:.3} µs) plus less than one kernel clock",
+            tick as f64 * 1e9 / TICKS_PER_S as f64,
+            rise_after.map_or("never".into(), fmt_ticks),
+            fmt_us(rise_after.map(us)),
+            us(delay * tick)
+        ),
+    ));
+    let high = rise.zip(fall).map(|(r, f)| f - r);
+    checks.push(check(
+        "delayed pulse: high for ccr ticks, then low at the update event",
+        high == Some(on * tick) && a.len() == 2,
+        format!(
+            "PA0 high for {} ({}), {} edges from CEN until the RF arm rose; expected exactly {on} ticks ({:.3} µs) and 2 edges",
+            high.map_or("— (no whole pulse)".into(), fmt_ticks),
+            fmt_us(high.map(us)),
+            a.len(),
+            us(on * tick)
+        ),
+    ));
+    checks.push(check(
+        "delayed pulse: IDT B (PB10) the same in standing drive",
+        b == a,
+        format!(
+            "PB10 edges {:?} µs after CEN, PA0 {:?}",
+            b.iter().map(|e| (us(e.0 - cen), e.1)).collect::<Vec<_>>(),
+            a.iter().map(|e| (us(e.0 - cen), e.1)).collect::<Vec<_>>()
+        ),
+    ));
+    let log_line = |part: &str| o.log.iter().find(|l| l.text.contains(part)).map(|l| l.text.clone());
+    let stopped = log_line("self-test: delayed pulse over");
+    let refused = log_line("self-test: delayed triangle");
+    checks.push(check(
+        "delayed pulse: the counter stopped itself; a delayed triangle refused",
+        stopped.as_deref().is_some_and(|l| l.ends_with("counter stopped"))
+            && refused.as_deref().is_some_and(|l| l.contains("line Off, refused 1")),
+        format!(
+            "{}; {}",
+            stopped.unwrap_or_else(|| "no `delayed pulse over` line".into()),
+            refused.unwrap_or_else(|| "no `delayed triangle` line".into())
+        ),
+    ));
+    let level = rise.map(|r| dac_at(&o.dac, r));
+    let want_code = board.def().rf_level.table.code(1000);
+    checks.push(check(
+        "delayed pulse: the level latched at CEN, before the rise",
+        level.is_some_and(|d| d.driven && d.code == want_code && d.at >= cen),
+        match level {
+            Some(d) => format!(
+                "DAC code {} (driven {}) from {:.3} µs after CEN, the rise at {}; expected code {want_code} (1000 ‰) latched at or after CEN",
+                d.code,
+                d.driven,
+                us(d.at.saturating_sub(cen)),
+                fmt_us(rise_after.map(us))
+            ),
+            None => "no rise".into(),
+        },
+    ));
+    Ok(checks)
+}

@@ -52,6 +52,18 @@ enum Cmd {
         #[arg(long, default_value_t = 0.1, value_parser = run_duration, allow_negative_numbers = true)]
         duration: f64,
     },
+    /// Issue #17's delayed one-pulse on a self-test image (`SELFTEST=1 scripts/build-firmware.sh`
+    /// leaves firmware/target/<board>-selftest.elf): its rise, on-time, IDT B, the counter's own
+    /// stop, the refused delayed triangle and the level latched before the rise, against the
+    /// settings the image logs; exits 1 if any fails, 2 on a usage error.
+    DelayedPulse {
+        /// Board: nucleo-f446re or nucleo-g474re.
+        #[arg(long)]
+        board: String,
+        /// The self-test ELF.
+        #[arg(long)]
+        elf: PathBuf,
+    },
     /// Every path from the per-sample roots into a panic function, from the image's Thumb code
     /// (direct calls and tail calls; indirect branches counted, not followed); exits 1 if there
     /// is one, 2 on a usage error (a root that names no function).
@@ -162,6 +174,24 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
                 );
             }
             Ok(if rep.passed() {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            })
+        }
+        Cmd::DelayedPulse { board, elf } => {
+            let kind = BoardKind::parse(&board)?;
+            let checks = check::delayed_pulse(kind, &elf)?;
+            println!("board model: {} running {} (delayed pulse)", kind.name(), elf.display());
+            for c in &checks {
+                println!(
+                    "  {} {}: {}",
+                    if c.pass { "ok  " } else { "FAIL" },
+                    c.name,
+                    c.detail
+                );
+            }
+            Ok(if checks.iter().all(|c| c.pass) {
                 ExitCode::SUCCESS
             } else {
                 ExitCode::FAILURE

@@ -16,6 +16,8 @@ mod board;
 mod level;
 mod link;
 mod rf;
+#[cfg(feature = "selftest-delayed-pulse")]
+mod selftest;
 mod store;
 
 use defmt::{info, unwrap, warn};
@@ -143,6 +145,9 @@ async fn main(spawner: Spawner) {
         counter_bits: BOARD.burst_timer_bits,
         max_burst_hz: BOARD.max_burst_hz,
     };
+    // Test images only: one delayed pulse, RF arm still low (src/selftest.rs).
+    #[cfg(feature = "selftest-delayed-pulse")]
+    selftest::delayed_pulse(&mut burst, &timer).await;
     let mut ctrl = unwrap!(Controller::new(timer, SAMPLE_PERIOD_US));
     let mut store = store::open(parts.store);
     let (config, prepared, source) = boot_scene(&timer, store.as_mut()).await;

@@ -66,6 +66,9 @@ pub struct BurstStats {
     pub table_rebuilds: u32,
     /// Longest table rebuild so far, µs.
     pub rebuild_us_max: u32,
+    /// Delayed one-pulses asked with a triangular envelope, refused (line off): TIM8 would play
+    /// the table from the counter's start, not from the rise (`BurstGate::pulse`).
+    pub delayed_triangles_refused: u32,
 }
 
 /// What the enable lines are doing.
@@ -208,17 +211,36 @@ impl BurstGate {
         self.line = Line::Running;
     }
 
-    /// One pulse of `s.ccr` ticks. PWM mode 1 + OPM would leave the line HIGH after the pulse
-    /// (the counter stops at 0 and 0 < CCR), so this uses PWM mode 2 with a 1-tick delay:
-    /// CCR = 1, ARR = ccr → the line is high for CNT = 1..=ccr (ccr ticks), then the update
-    /// event stops the counter at 0 where PWM mode 2 is inactive.
+    /// One pulse (`GateAction::Pulse`): from a stopped counter, one-pulse mode counts
+    /// CNT = 0..=ARR once and the update event at the wrap clears CEN (RM0390 §17.3.10 One-pulse
+    /// mode, §17.4.1 CR1.OPM; RM0440's TIM2–TIM5 "One-pulse mode" alike). PWM mode 2 (OCxM = 111)
+    /// holds OCxREF low while CNT < CCRx and high from CNT = CCRx (RM0390 §17.3.9 PWM mode;
+    /// RM0440 "PWM mode" alike), so ARR = `s.arr` and CCR = `s.arr + 1 − s.ccr` (`pulse_ccr`)
+    /// put the line high for the count's last `s.ccr` ticks, CNT = arr + 1 − ccr ..= arr: the
+    /// rise comes (arr + 1 − ccr) ticks after CEN (`TimerSettings::pulse_delay_clocks`; one tick
+    /// for `BurstTimer::one_pulse`, whose arr = ccr gives CCR = 1, the pulse the port always
+    /// fired; up to a sample period for `BurstTimer::delayed_pulse`), and the update event stops
+    /// the counter at 0, where PWM mode 2 is low again. The manual's condition for a correct
+    /// pulse, CNT < CCRx ≤ ARR before the start (in particular 0 < CCRx), holds for 1 ≤ ccr ≤ arr.
+    /// (PWM mode 1 + OPM would leave the line HIGH after the pulse: stopped at 0 < CCR.)
     ///
-    /// The level, with TIM2's TRGO = enable (high exactly while the one-pulse runs): flat at
-    /// code(level), TIM8 in reset mode so CEN's rising TRGO latches it at the pulse's start; or
-    /// a triangle peaking at the level, TIM8 gated by TRGO and the DMA playing the table.
+    /// The level, with TIM2's TRGO = enable (CNT_EN: high from CEN until the update event, the
+    /// delay included): flat at code(level), TIM8 in reset mode, so CEN's rising TRGO latches it
+    /// at the counter's start — before a delayed rise, which is harmless: the enable line is
+    /// still low; or a triangle peaking at the level, TIM8 gated by TRGO from the counter's start
+    /// and the DMA playing the table over `s.ccr` ticks. A delayed triangle would therefore
+    /// start its table the delay early and end it the delay before the line falls. The core
+    /// never asks for one (lines, the only triangles, use `BurstTimer::one_pulse`); if it did,
+    /// the port refuses it: the line off, counted in `stats.delayed_triangles_refused`.
     fn pulse(&mut self, s: &TimerSettings) {
         if s.ccr == 0 {
             self.off();
+            return;
+        }
+        let ccr = pulse_ccr(s);
+        if self.envelope == Envelope::Triangular && ccr != 1 {
+            self.off();
+            self.stats.delayed_triangles_refused = self.stats.delayed_triangles_refused.wrapping_add(1);
             return;
         }
         self.tim.stop();
@@ -239,9 +261,11 @@ impl BurstGate {
         }
         self.set_trgo(Mms::ENABLE);
         self.tim.regs_gp32().cr1().modify(|w| w.set_opm(true));
-        self.write(s.psc, s.ccr, 1);
+        self.write(s.psc, s.arr, ccr);
         self.tim.reset();
         self.tim.generate_update_event();
+        // From force-inactive straight to PWM mode 2 at CNT = 0 < CCR: OCxREF stays low (no
+        // comparison change), and rises at the CNT = CCR change.
         self.set_mode(OutputCompareMode::PwmMode2);
         self.tim.start();
         self.line = Line::Pulse;
@@ -265,6 +289,28 @@ impl BurstGate {
     pub fn line(&self) -> Line {
         self.line
     }
+
+    /// TIM2's CR1.CEN: the counter runs (a one-pulse clears it at its update event).
+    #[cfg(feature = "selftest-delayed-pulse")]
+    pub fn counting(&self) -> bool {
+        self.tim.regs_gp32().cr1().read().cen()
+    }
+}
+
+/// CCR of a one-pulse in PWM mode 2 (see `BurstGate::pulse`): arr + 1 − ccr, the count at
+/// which the line rises. The core gives 1 ≤ ccr ≤ arr (`delayed_pulse`: arr = delay + ccr − 1,
+/// delay ≥ 1; `one_pulse`: arr = ccr), where this is exact and in 1..=arr. Saturating for
+/// anything else, never a panic or a wrap on the sample path: ccr > arr gives CCR = 1, the
+/// line high for CNT = 1..=arr, arr ticks — shorter than asked, never longer; `arr + 1` cannot
+/// overflow at arr = u32::MAX, as arr − ccr ≤ u32::MAX − 1 once ccr ≥ 1 (`pulse` turns ccr = 0
+/// into Off before this), and the add saturates regardless.
+/// The planted defect `plant-pulse-no-delay` (never in a real image) writes CCR = 1, the
+/// port's value before delayed pulses: the board model's delayed-pulse check must catch it.
+fn pulse_ccr(s: &TimerSettings) -> u32 {
+    if cfg!(feature = "plant-pulse-no-delay") {
+        return 1;
+    }
+    s.arr.saturating_sub(s.ccr).saturating_add(1)
 }
 
 impl BurstOutput for BurstGate {
@@ -316,7 +362,9 @@ impl BurstOutput for BurstGate {
         // mid-burst goes straight from force-inactive to PWM, deliberately *not* through Frozen
         // (compare `start`): OCxREF then keeps its forced-low level until the comparison result
         // next changes (RM0390 §17.3.9), i.e. B's first pulse starts whole at the next counter
-        // wrap — never a partial pulse from mid-period. (In a one-pulse, B simply stays low.)
+        // wrap — never a partial pulse from mid-period. In a one-pulse the same rule makes B
+        // rise with A at CNT = CCR if switched on during the delay, and stay low if switched on
+        // after the rise (the next comparison change is the update event, to low).
         // Switching B off is immediate and may cut its current pulse short: less on-time only.
         let b = match (self.drive, self.line) {
             (DriveMode::Progressive, _) | (_, Line::Off) => OutputCompareMode::ForceInactive,

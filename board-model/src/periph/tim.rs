@@ -1645,6 +1645,77 @@ mod tests {
         assert!(!h.t.channel_level(1));
     }
 
+    /// A delayed one-pulse as `BurstGate::pulse` writes it since #17 (RM0390 §17.3.10 One-pulse
+    /// mode: "tDELAY is defined by the value written in TIMx_CCR1", the pulse lasts
+    /// ARR − CCR1 + 1; PWM mode 2, §17.3.9: OCxREF low while CNT < CCRx, high from CCRx):
+    /// settings arr 9, ccr 4 → ARR = 9, CCR = arr + 1 − ccr = 6. The line is low for CNT = 0..=5
+    /// (6 ticks), high for CNT = 6..=9 (4 ticks), low at the wrap where the update event clears
+    /// CEN; TRGO in enable mode is high from CEN to that update. At PSC 0 and PSC 2 (a tick of
+    /// 40 and 120 master ticks), and CCR anywhere in 1..=ARR: high for exactly the last
+    /// ARR + 1 − CCR ticks.
+    #[test]
+    fn one_pulse_pwm2_rises_at_ccr_anywhere_in_the_count() {
+        for (psc, arr, ccr_reg) in [
+            (0u32, 9u32, 6u32),
+            (2, 9, 6),
+            (0, 9, 1),
+            (0, 9, 9),
+            (1, 40_499, 4_500),
+        ] {
+            let tick = 40 * (psc as u64 + 1);
+            let mut h = H::new(2, 90 * MHZ);
+            h.t.record_channel(1, true);
+            h.t.record_channel(3, true);
+            burst_gate_new(&mut h);
+            h.w(0, CR2, 0b001 << 4);
+            burst_load(&mut h, 0, true, psc, arr, ccr_reg);
+            h.w(0, CCMR1, PWM2 | OCPE);
+            h.w(0, CCMR2, PWM2 | OCPE);
+            h.log.events.clear();
+            h.w(0, CR1, CR1_ARPE | CR1_OPM | CR1_CEN);
+            h.adv(tick * (arr as u64 + 10));
+            let rise = tick * ccr_reg as u64;
+            let fall = tick * (arr as u64 + 1);
+            let want = vec![(rise, true), (fall, false)];
+            assert_eq!(h.edges(1), want, "psc {psc} arr {arr} ccr {ccr_reg}");
+            assert_eq!(h.edges(3), want, "CH3 the same");
+            let lv: Vec<(Time, bool)> = h
+                .log
+                .events
+                .iter()
+                .filter_map(|e| match e.1 {
+                    Event::TrgoLevel { timer: 2, high } => Some((e.0, high)),
+                    _ => None,
+                })
+                .collect();
+            assert_eq!(lv, vec![(0, true), (fall, false)], "TRGO = CNT_EN");
+            assert_eq!(h.r(fall + 1, CR1) & CR1_CEN, 0, "stopped at the update");
+            assert_eq!(h.r(fall + 1, CNT), 0);
+            assert!(!h.t.channel_level(1));
+        }
+    }
+
+    /// `set_drive` during a delayed pulse: CH3 switched from force-inactive to PWM mode 2 while
+    /// CNT < CCR rises with CH1 at CNT = CCR (the comparison changes there); switched after the
+    /// rise it stays low (the next change is the update event, to low) — RM0390 §17.3.9's rule.
+    #[test]
+    fn one_pulse_pwm2_channel_switched_on_mid_count() {
+        for (switch_at, want3) in [(120, vec![(240, true), (400, false)]), (280, vec![])] {
+            let mut h = H::new(2, 90 * MHZ);
+            h.t.record_channel(1, true);
+            h.t.record_channel(3, true);
+            burst_gate_new(&mut h);
+            burst_load(&mut h, 0, true, 0, 9, 6);
+            h.w(0, CCMR1, PWM2 | OCPE);
+            h.w(0, CR1, CR1_ARPE | CR1_OPM | CR1_CEN);
+            h.adv(switch_at);
+            h.w(switch_at, CCMR2, PWM2 | OCPE);
+            h.adv(10_000);
+            assert_eq!(h.edges(1), vec![(240, true), (400, false)]);
+            assert_eq!(h.edges(3), want3, "CH3 switched on at {switch_at}");
+        }
+    }
+
     #[test]
     fn trgo_on_update_at_10_khz() {
         // The boards' ADC trigger: TIM3 at 90 MHz, PSC 0, ARR 8999 → 9000 cycles = 360 000 ticks

@@ -378,6 +378,9 @@ pub fn encode_output<S: Sink>(s: &mut S, o: &Output) {
             (GateAction::Pulse(t), Some(Envelope::Triangular)) => (5, Some(t)),
         };
         s.u8(kind);
+        // A pulse's delay (issue #17: the line rises arr + 1 − ccr ticks after the start,
+        // `TimerSettings::pulse_delay_clocks`) rides in arr: a delayed pulse is encoded, compared
+        // and printed (the DIFF line's defmt `TimerSettings`) with psc, arr and ccr like any other.
         if let Some(t) = ts {
             s.u16(t.psc);
             s.u32(t.arr);

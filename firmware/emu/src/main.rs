@@ -225,13 +225,20 @@ fn compare(name: &str, n: usize, expected: &[u8]) -> (u32, u32, u32) {
                 beyond += 1;
             }
             if diff <= 3 {
+                // A one-pulse's delay (arr + 1 − ccr ticks, issue #17) spelled out in clocks.
+                let delay = |o: &Output| match o.action {
+                    Some(saw_core::gate::GateAction::Pulse(t)) => t.pulse_delay_clocks(),
+                    _ => 0,
+                };
                 defmt::println!(
-                    "DIFF vector={=str} sample={=u32} within_tol={=bool}\n  target: {}\n  host:   {}",
+                    "DIFF vector={=str} sample={=u32} within_tol={=bool}\n  target: {} (pulse delay {=u64} clocks)\n  host:   {} (pulse delay {=u64} clocks)",
                     name,
                     i as u32,
                     ok,
                     o,
-                    want
+                    delay(o),
+                    want,
+                    delay(&want)
                 );
             }
         }
