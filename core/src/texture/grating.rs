@@ -458,10 +458,10 @@ impl Ridges {
             t_us.wrapping_add(delay_us),
             timer,
         );
-        if out.1.is_some() {
-            if let Some(h) = self.hybrid.as_mut() {
-                h.last_fired = Some(ridge);
-            }
+        // Fired, or skipped (too soon after the last pulse): either way this ridge is done,
+        // so a skip is counted once and never fired late on a later sample.
+        if let Some(h) = self.hybrid.as_mut() {
+            h.last_fired = Some(ridge);
         }
         out
     }
