@@ -442,8 +442,10 @@ impl Ridges {
         if already || fraction > 1.0 {
             return (want, None, 0);
         }
-        let delay_clocks = (fraction.max(0.0) * h.period_clocks) as u64;
-        let delay_us = (fraction.max(0.0) * h.sample_period_us as f32) as u32;
+        // Rounded to the nearest clock and µs (the cast truncates; a fraction of 0.7 in f32
+        // is 0.699999988).
+        let delay_clocks = (fraction.max(0.0) * h.period_clocks + 0.5) as u64;
+        let delay_us = (fraction.max(0.0) * h.sample_period_us as f32 + 0.5) as u32;
         let speed_um_s = (line.slope_um.abs() * h.samples_per_s) as i32;
         let c = Crossing {
             ridge,
@@ -582,7 +584,10 @@ impl Render for Synthesis {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
+    use std::vec;
+    use std::vec::Vec;
 
     fn crossings(t: &mut RidgeTracker, path: impl Iterator<Item = i32>) -> (u32, u32) {
         let (mut fired, mut skipped) = (0, 0);
@@ -756,6 +761,125 @@ mod tests {
     }
 
     const TIMER: BurstTimer = crate::burst::TEST_TIMER;
+
+    fn hybrid(wavelength_um: u32) -> Ridges {
+        let g = Grating {
+            render: GratingRender::Hybrid,
+            ..Grating::new(wavelength_um)
+        };
+        Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap()
+    }
+
+    /// Every pulse of a run of positions sampled every 100 µs (None: a dropped sample): (sample
+    /// index, settings). The velocity handed in is the true one; the hybrid uses its line.
+    fn pulses(
+        r: &mut Ridges,
+        path: impl Iterator<Item = Option<i32>>,
+        v_um_s: i32,
+    ) -> Vec<(u32, TimerSettings)> {
+        let mut out = Vec::new();
+        for (k, p) in path.enumerate() {
+            let Some(um) = p else { continue };
+            let (want, s, skipped) = r.step(um, Some(v_um_s), k as u32 * 100, &TIMER);
+            assert_eq!(skipped, 0, "sample {k}");
+            if want == Want::Pulse {
+                out.push((k as u32, s.unwrap()));
+            }
+        }
+        out
+    }
+
+    /// Hand-worked: a noiseless 100 mm/s ramp, x = 503 + 10·k µm at sample k. The ridge at
+    /// 1 mm is crossed at k = 49.7; the line is exact, so the sample at k = 49 fires it delayed
+    /// by 0.7 of a period, 70 µs = 6 300 clocks at 90 MHz, and the pulse lasts duty·λ/V =
+    /// 0.4 · 1 mm / 100 mm/s = 4 ms = 360 000 clocks. Ridge 2 mm: k = 149.7, the same.
+    #[test]
+    fn the_hybrid_fires_at_the_predicted_crossing() {
+        let mut r = hybrid(1_000);
+        let got = pulses(&mut r, (0..200).map(|k| Some(503 + 10 * k)), 100_000);
+        let expected = TIMER.delayed_pulse(6_300, 360_000).unwrap();
+        assert_eq!((expected.arr, expected.ccr), (366_299, 360_000));
+        assert_eq!(got, vec![(49, expected), (149, expected)]);
+        // Going down: x = 2 497 − 10·k crosses 2 mm at k = 49.7 and 1 mm at k = 149.7.
+        let mut r = hybrid(1_000);
+        let got = pulses(&mut r, (0..200).map(|k| Some(2_497 - 10 * k)), -100_000);
+        assert_eq!(got, vec![(49, expected), (149, expected)]);
+        // Position phase on the same ramp: the first sample past the ridge, undelayed.
+        let g = Grating::new(1_000);
+        let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
+        let got = pulses(&mut r, (0..200).map(|k| Some(503 + 10 * k)), 100_000);
+        let one = TIMER.one_pulse(360_000).unwrap();
+        assert_eq!(got, vec![(50, one), (150, one)]);
+    }
+
+    /// The line is trusted from 10 mm/s (1 µm per sample at 10 kHz): at 9 mm/s the ridge is
+    /// fired by position phase on the first sample past it, at 11 mm/s predicted.
+    #[test]
+    fn below_the_trust_speed_the_hybrid_is_position_phase() {
+        // 9 µm/sample ... 0.9 µm/sample: x = 700 + 0.9·k crosses 1 mm at k = 333.3.
+        let mut r = hybrid(1_000);
+        let path = (0..400).map(|k| Some(700 + (9 * k) / 10));
+        let got = pulses(&mut r, path, 9_000);
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].0, 334, "{got:?}");
+        assert_eq!(got[0].1.pulse_delay_clocks(), 1, "undelayed: {got:?}");
+        // 1.1 µm/sample: x = 700 + ⌊1.1·k⌋ µm. The staircase sits 0.45 µm below 700 + 1.1·k on
+        // average, so the line reaches 1 mm at k ≈ 273.1 (the raw sample reads 1 000 at
+        // k = 273): predicted at k = 273, a tenth of a period ahead.
+        let mut r = hybrid(1_000);
+        let path = (0..400).map(|k| Some(700 + (11 * k) / 10));
+        let got = pulses(&mut r, path, 11_000);
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].0, 273, "{got:?}");
+        assert!(got[0].1.pulse_delay_clocks() > 1, "predicted: {got:?}");
+    }
+
+    /// A dropped sample empties the line: the next ridge within 32 samples is position phase,
+    /// the one after is predicted again. A glitch the position guard rejects does the same.
+    #[test]
+    fn a_gap_or_a_glitch_empties_the_line() {
+        let ramp = |k: i32| 503 + 10 * k;
+        // Sample 40 missing: the ridge at k = 49.7 is fired by position phase at k = 50.
+        let mut r = hybrid(1_000);
+        let path = (0..200).map(|k| (k != 40).then_some(ramp(k)));
+        let got = pulses(&mut r, path, 100_000);
+        assert_eq!(got.iter().map(|g| g.0).collect::<Vec<_>>(), vec![50, 149]);
+        assert_eq!(got[0].1.pulse_delay_clocks(), 1);
+        assert_eq!(got[1].1.pulse_delay_clocks(), 6_300);
+        // A 3 mm spike at sample 40: rejected by the guard, and the line starts over.
+        let mut r = hybrid(1_000);
+        let path = (0..200).map(|k| Some(if k == 40 { ramp(k) + 3_000 } else { ramp(k) }));
+        let got = pulses(&mut r, path, 100_000);
+        assert_eq!(got.iter().map(|g| g.0).collect::<Vec<_>>(), vec![50, 149]);
+        assert_eq!(got[0].1.pulse_delay_clocks(), 1);
+        assert_eq!(got[1].1.pulse_delay_clocks(), 6_300);
+    }
+
+    /// A reversal: up at 100 mm/s to 1.2 mm, then straight back down. The ridge at 1 mm is
+    /// crossed twice and fired twice (predicted going up; going down the line, bent away by
+    /// the turn, is emptied and position phase fires it), never a third time.
+    #[test]
+    fn a_reversal_empties_the_line_and_fires_each_crossing_once() {
+        let x = |k: i32| {
+            if k <= 70 {
+                503 + 10 * k
+            } else {
+                1_203 - 10 * (k - 70)
+            }
+        };
+        let mut r = hybrid(1_000);
+        let got = pulses(&mut r, (0..110).map(|k| Some(x(k))), 100_000);
+        let ks: Vec<u32> = got.iter().map(|g| g.0).collect();
+        assert_eq!(ks.len(), 2, "{got:?}");
+        assert_eq!(ks[0], 49);
+        // Down through 1 mm at k = 90.3: 21 samples after the turn, inside the line's refill.
+        assert_eq!(ks[1], 91, "{got:?}");
+        assert_eq!(
+            got[1].1.pulse_delay_clocks(),
+            1,
+            "position phase after the turn"
+        );
+    }
 
     /// The span a ridge pulse stays on over, to the µm: going up over the ridge at 6 mm it is
     /// [6 mm − rearm, 6 mm + duty·λ]; the pulse is cut one µm outside either end, not on it.
