@@ -500,10 +500,10 @@ impl Gate {
             }
             (
                 State::Running {
+                    settings: running,
                     since_us,
                     on_us,
                     duty_ppm: d,
-                    ..
                 },
                 Some(s),
             ) => {
@@ -516,7 +516,13 @@ impl Gate {
                     && reaches_back
                     && !self.burst_fits(since_us, t_us, on_us_new, d_new, window_us, limits)
                 {
-                    return None;
+                    // Held back: the running settings go on, if the caps (a new scene's) still
+                    // allow them; if not, the line goes off.
+                    if limits.allows(timer, &running) {
+                        return None;
+                    }
+                    self.leave_running(t_us);
+                    return Some(GateAction::Off);
                 }
                 self.state = State::Running {
                     settings: s,
@@ -889,6 +895,49 @@ mod tests {
             None,
             "a running burst is not a pulse"
         );
+    }
+
+    /// An Update held back (it would break the window) keeps the running settings only while
+    /// the caps allow them: after a scene lowered the duty cap below them, the line goes off
+    /// (the soak found a random texture's 41.5 % burst running on under a new 30.3 % cap).
+    #[test]
+    fn a_held_update_under_new_caps_turns_the_line_off() {
+        let l = SafetyLimits::default();
+        let mut g = Gate::default();
+        for k in 0..3 {
+            g.pulse(P10, k * P10_US, &T, &l);
+        }
+        let s = TimerSettings {
+            psc: 0,
+            arr: 89_999,
+            ccr: 36_000,
+        };
+        assert_eq!(g.request(Some(s), 40_000, &T, &l), Some(GateAction::Start(s)));
+        let lower = SafetyLimits {
+            max_duty_permille: 300,
+            ..l
+        };
+        let longer = TimerSettings {
+            psc: 0,
+            arr: 899_999,
+            ccr: 270_000,
+        };
+        assert!(lower.allows(&T, &longer) && !lower.allows(&T, &s));
+        assert_eq!(g.request(Some(longer), 40_100, &T, &lower), Some(GateAction::Off));
+        assert_eq!(g.running(), None);
+        // Under the old caps the same Update is only held back.
+        let mut g = Gate::default();
+        for k in 0..3 {
+            g.pulse(P10, k * P10_US, &T, &l);
+        }
+        g.request(Some(s), 40_000, &T, &l);
+        let longer50 = TimerSettings {
+            psc: 0,
+            arr: 899_999,
+            ccr: 450_000,
+        };
+        assert_eq!(g.request(Some(longer50), 40_100, &T, &l), None);
+        assert_eq!(g.running(), Some(s));
     }
 
     /// A Start raises the line at once, so it waits a µs after the last on-time; a pulse,
