@@ -586,8 +586,7 @@ impl Gate {
         timer: &BurstTimer,
         limits: &SafetyLimits,
     ) -> Option<GateAction> {
-        if settings.on_clocks() > limits.max_on_time_clocks(timer) || settings.ccr > settings.arr
-        {
+        if settings.on_clocks() > limits.max_on_time_clocks(timer) || settings.ccr > settings.arr {
             return self.force_off(t_us, timer, limits);
         }
         let window_us = self.catch_up(t_us, limits);
@@ -747,10 +746,7 @@ mod tests {
         assert_eq!(g.pulse(P10, 14 * P10_US, &T, &l), None);
         assert_eq!(g.pulse(P10, 200_000, &T, &l), None);
         assert_eq!(g.pulse(P10, 290_013, &T, &l), None);
-        assert_eq!(
-            g.pulse(P10, 290_014, &T, &l),
-            Some(GateAction::Pulse(P10))
-        );
+        assert_eq!(g.pulse(P10, 290_014, &T, &l), Some(GateAction::Pulse(P10)));
     }
 
     /// A pulse its texture ends early counts the on-time it spent: cut after 4 ms, 14 whole
@@ -912,7 +908,10 @@ mod tests {
             arr: 89_999,
             ccr: 36_000,
         };
-        assert_eq!(g.request(Some(s), 40_000, &T, &l), Some(GateAction::Start(s)));
+        assert_eq!(
+            g.request(Some(s), 40_000, &T, &l),
+            Some(GateAction::Start(s))
+        );
         let lower = SafetyLimits {
             max_duty_permille: 300,
             ..l
@@ -923,7 +922,10 @@ mod tests {
             ccr: 270_000,
         };
         assert!(lower.allows(&T, &longer) && !lower.allows(&T, &s));
-        assert_eq!(g.request(Some(longer), 40_100, &T, &lower), Some(GateAction::Off));
+        assert_eq!(
+            g.request(Some(longer), 40_100, &T, &lower),
+            Some(GateAction::Off)
+        );
         assert_eq!(g.running(), None);
         // Under the old caps the same Update is only held back.
         let mut g = Gate::default();

@@ -275,7 +275,10 @@ fn windowed_duty(r: &SimResult, cfg: &saw_core::Config, case: &str) -> f64 {
     };
     let mut worst = 0.0f64;
     for p in &pulses {
-        for (a, b) in [(p.fall.saturating_sub(window), p.fall), (p.rise, p.rise + window)] {
+        for (a, b) in [
+            (p.fall.saturating_sub(window), p.fall),
+            (p.rise, p.rise + window),
+        ] {
             let on = on_within(a, b);
             assert!(
                 on * 1000 <= window * cfg.limits.max_duty_permille as u64,
@@ -359,7 +362,10 @@ fn the_mixed_motion_skips_no_ridge() {
         .with_config(cfg.clone())
         .with_noise(2.0, 0)
         .with_reference_noise();
-    let mut runs = vec![("reference stream".to_string(), sim::run(&reference).unwrap())];
+    let mut runs = vec![(
+        "reference stream".to_string(),
+        sim::run(&reference).unwrap(),
+    )];
     for seed in 0..4 {
         runs.push((
             format!("seed {seed}"),

@@ -155,5 +155,9 @@ fn ridges_the_duty_cap_refuses_are_counted_and_logged() {
         };
         5_900.0 + 1_000.0 * k + at
     });
-    assert_eq!((t.ridge_pulses, t.ridges_skipped, lines), (6, 4, 4), "{t:?}");
+    assert_eq!(
+        (t.ridge_pulses, t.ridges_skipped, lines),
+        (6, 4, 4),
+        "{t:?}"
+    );
 }

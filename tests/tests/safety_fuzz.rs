@@ -164,8 +164,16 @@ fn check_run(case: usize, cfg: &Config, faults: &[FaultWindow], r: &SimResult, t
             _ => None,
         })
         .collect();
-    let pulses: Vec<(u64, u64)> = r.waveform.pulses().iter().map(|p| (p.rise, p.fall)).collect();
-    let window = r.clocks(saw_tests::stated_window_us(cap, cfg.limits.max_on_time_us as u64));
+    let pulses: Vec<(u64, u64)> = r
+        .waveform
+        .pulses()
+        .iter()
+        .map(|p| (p.rise, p.fall))
+        .collect();
+    let window = r.clocks(saw_tests::stated_window_us(
+        cap,
+        cfg.limits.max_on_time_us as u64,
+    ));
     match saw_tests::windowed_duty(&saw_tests::on_times(&pulses, &starts), cap, window) {
         Ok(worst) => tally.worst_duty = tally.worst_duty.max(worst),
         Err(e) => panic!("case {case}: {e}"),
@@ -313,7 +321,10 @@ fn restart_after_off_respects_the_duty_cap() {
     let w = tm.finish(clk(t));
     let cap = cfg.limits.max_duty_permille as u64;
     let pulses: Vec<(u64, u64)> = w.pulses().iter().map(|p| (p.rise, p.fall)).collect();
-    let window = clk(saw_tests::stated_window_us(cap, cfg.limits.max_on_time_us as u64));
+    let window = clk(saw_tests::stated_window_us(
+        cap,
+        cfg.limits.max_on_time_us as u64,
+    ));
     // Start actions are not recorded here: every on-time counts as from its own source, so no
     // window gets the one-run allowance (stricter than the rule).
     let starts: Vec<(u64, bool)> = pulses.iter().map(|&(r, _)| (r, false)).collect();

@@ -169,8 +169,13 @@ pub fn check_caps(
             return (0, first, end);
         }
         let mut sum = prefix[end] - prefix[first];
-        sum -= a.saturating_sub(on[first].rise).min(on[first].fall - on[first].rise);
-        sum -= on[end - 1].fall.saturating_sub(b).min(on[end - 1].fall - on[end - 1].rise);
+        sum -= a
+            .saturating_sub(on[first].rise)
+            .min(on[first].fall - on[first].rise);
+        sum -= on[end - 1]
+            .fall
+            .saturating_sub(b)
+            .min(on[end - 1].fall - on[end - 1].rise);
         (sum, first, end)
     };
     let mut run_longest = std::collections::HashMap::new();
