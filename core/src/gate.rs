@@ -96,9 +96,7 @@ const PPM: u64 = 1_000_000;
 pub fn duty_window_us(limits: &SafetyLimits) -> u32 {
     let cap = limits.max_duty_permille.clamp(1, 1000) as u64;
     let own_us = (limits.max_on_time_us as u64 * 1000).div_ceil(cap);
-    own_us
-        .max(DUTY_WINDOW_US as u64)
-        .min(MAX_DUTY_WINDOW_US as u64) as u32
+    own_us.clamp(DUTY_WINDOW_US as u64, MAX_DUTY_WINDOW_US as u64) as u32
 }
 
 /// On-time the duty cap allows in one window, µs (rounded down).

@@ -111,8 +111,7 @@ pub fn log_sweep_millihz(n: usize) -> Vec<u32> {
 pub fn stated_window_us(duty_permille: u64, on_us: u64) -> u64 {
     (on_us * 1000)
         .div_ceil(duty_permille.max(1))
-        .max(300_000)
-        .min(1 << 30)
+        .clamp(300_000, 1 << 30)
 }
 
 /// One on-time of a recorded line, kernel clocks, with the Start or Pulse it came from.

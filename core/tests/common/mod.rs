@@ -11,8 +11,7 @@ use saw_core::gate::GateAction;
 pub fn stated_window_us(duty_permille: u64, on_us: u64) -> u64 {
     (on_us * 1000)
         .div_ceil(duty_permille.max(1))
-        .max(300_000)
-        .min(1 << 30)
+        .clamp(300_000, 1 << 30)
 }
 
 /// One on-interval of the line: kernel clocks `[rise, fall)`, the Start or Pulse that raised it

@@ -30,8 +30,7 @@ use std::collections::VecDeque;
 fn stated_window_us(limits: &SafetyLimits) -> u64 {
     (limits.max_on_time_us as u64 * 1000)
         .div_ceil(limits.max_duty_permille.max(1) as u64)
-        .max(300_000)
-        .min(1 << 30)
+        .clamp(300_000, 1 << 30)
 }
 
 use saw_core::burst::{BurstTimer, SafetyLimits, TimerSettings};
