@@ -63,39 +63,308 @@ pub trait BurstOutput {
     fn set_drive(&mut self, _mode: DriveMode) {}
 }
 
+/// Length of the sliding window over which the duty cap holds, µs: in every window of this
+/// length the line is on for at most cap × window (see [`duty_window_us`] for the window a
+/// scene actually gets, and `docs/duty-window.md` for why 300 ms).
+///
+/// The cap protects the transducer and the RF amplifier from heating, which integrates over a
+/// thermal time constant τ: for a first-order stage, a window-duty ≤ c over every window W
+/// bounds the peak rise to P·R_th·(1 − e^(−cW/τ))/(1 − e^(−W/τ)), within 8 % of the continuous
+/// c·P·R_th for τ ≥ 1 s (the substrate and the amplifier's package and heat sink). The window
+/// must also hold a slow ridge's longest pulse and the fast ridges after it: a pulse of 50 ms
+/// (the default on-time cap) followed by ridges at 40 % needs W ≥ 50 ms·(1 − 0.4)/(0.5 − 0.4)
+/// = 300 ms at the default 50 % cap.
+pub const DUTY_WINDOW_US: u32 = 300_000;
+
+/// Longest duty window, µs (2^30, 17.9 min): times in the window stay well inside the ±2^31 µs
+/// a wrapping µs clock can order.
+pub const MAX_DUTY_WINDOW_US: u32 = 1 << 30;
+
+/// Slots the duty window is cut into (the accounting's resolution: 5 ms of a 300 ms window).
+const WINDOW_SLOTS: u32 = 60;
+/// Slots kept: the window's 60, the partial ones at both ends and spare; a power of two so the
+/// ring index wraps by a mask.
+const RING_SLOTS: usize = 64;
+const RING_MASK: usize = RING_SLOTS - 1;
+/// One, in parts per million (duty fractions are ppm, rounded up).
+const PPM: u64 = 1_000_000;
+
+/// The duty window a scene gets, µs: [`DUTY_WINDOW_US`], or longer when the scene's own caps
+/// need it — never shorter than on-time cap / duty cap, the pulse-plus-rest of its longest
+/// pulse (what the per-pulse rule held), so that pulse (and any burst inside the caps) fits a
+/// window by itself. At most [`MAX_DUTY_WINDOW_US`].
+pub fn duty_window_us(limits: &SafetyLimits) -> u32 {
+    let cap = limits.max_duty_permille.clamp(1, 1000) as u64;
+    let own_us = (limits.max_on_time_us as u64 * 1000).div_ceil(cap);
+    own_us.clamp(DUTY_WINDOW_US as u64, MAX_DUTY_WINDOW_US as u64) as u32
+}
+
+/// On-time the duty cap allows in one window, µs (rounded down).
+fn window_budget_us(limits: &SafetyLimits, window_us: u32) -> u64 {
+    window_us as u64 * limits.max_duty_permille.min(1000) as u64 / 1000
+}
+
+/// Duty of periodic settings, ppm, rounded up.
+fn duty_ppm(s: &TimerSettings) -> u64 {
+    (s.ccr as u64 * PPM).div_ceil(s.arr as u64 + 1)
+}
+
+/// The line's recent on-time, as an upper bound per slot of time, in a fixed ring (no
+/// allocation). Slot 0 (the head) starts at `head_start_us` and holds everything recorded from
+/// there on; slot k ≥ 1 covers `[head_start − k·slot, head_start − (k−1)·slot)`.
+///
+/// What it guarantees, for every time x: the line's true on-time from x to the present is at
+/// most [`DutyLedger::on_since`]`(x)`: the sum of the newer slots plus the on-time of x's own
+/// slot, clipped to the length of that slot after x. One-pulses are recorded where they were
+/// (their real, delayed place, rounded outwards); a periodic burst as its duty times its run
+/// plus one partial period at its end (what its timer can put in any stretch of the run). Each
+/// fallback only ever moves on-time later or counts more of it: a re-cut for new caps moves it
+/// all into the head slot, on-time older than the ring is older than any window.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct DutyLedger {
+    /// On-time per slot, µs (upper bound, saturating).
+    on_us: [u32; RING_SLOTS],
+    /// Ring index of slot 0.
+    head: usize,
+    /// Start of slot 0, µs (wrapping).
+    head_start_us: u32,
+    /// Slot length, µs; 0 before the first use.
+    slot_us: u32,
+    /// Nothing recorded ends after this time, µs (wrapping).
+    recorded_until_us: u32,
+}
+
+impl Default for DutyLedger {
+    fn default() -> Self {
+        Self {
+            on_us: [0; RING_SLOTS],
+            head: 0,
+            head_start_us: 0,
+            slot_us: 0,
+            recorded_until_us: 0,
+        }
+    }
+}
+
+impl DutyLedger {
+    /// `t_us` relative to the head slot's start, µs (signed: the clock wraps).
+    fn offset(&self, t_us: u32) -> i64 {
+        t_us.wrapping_sub(self.head_start_us) as i32 as i64
+    }
+
+    /// On-time of slot `back` (0 = head).
+    fn slot(&self, back: usize) -> u64 {
+        let i = self.head.wrapping_sub(back) & RING_MASK;
+        self.on_us.get(i).copied().unwrap_or(0) as u64
+    }
+
+    fn add_to_slot(&mut self, back: usize, on_us: u64) {
+        let i = self.head.wrapping_sub(back) & RING_MASK;
+        if let Some(s) = self.on_us.get_mut(i) {
+            *s = s.saturating_add(on_us.min(u32::MAX as u64) as u32);
+        }
+    }
+
+    /// Slot `back`'s span as offsets `[lo, hi)`; the head's has no end (it takes anything
+    /// recorded after its start).
+    fn span(&self, back: usize) -> (i64, i64) {
+        let s = self.slot_us as i64;
+        if back == 0 {
+            (0, i64::MAX)
+        } else {
+            let lo = -(back as i64) * s;
+            (lo, lo + s)
+        }
+    }
+
+    fn total(&self) -> u64 {
+        self.on_us.iter().map(|&u| u as u64).sum()
+    }
+
+    /// Rolls the ring forward to `t_us` for a window of `window_us`. New caps (another slot
+    /// length) re-cut it conservatively: all on-time recorded moves to now. True when it found
+    /// a silence longer than the ring and forgot everything.
+    fn advance(&mut self, t_us: u32, window_us: u32) -> bool {
+        let slot_us = window_us.div_ceil(WINDOW_SLOTS).max(1);
+        if self.slot_us != slot_us {
+            let total = self.total();
+            *self = Self {
+                slot_us,
+                head_start_us: t_us,
+                recorded_until_us: t_us,
+                ..Self::default()
+            };
+            self.add_to_slot(0, total);
+            return false;
+        }
+        let elapsed = self.offset(t_us);
+        let span = RING_SLOTS as i64 * slot_us as i64;
+        if elapsed < slot_us as i64 && elapsed > -span {
+            // Inside the head slot, or a call a little late (a timer tick behind a sample).
+            return false;
+        }
+        let steps = elapsed.unsigned_abs() / slot_us as u64;
+        if elapsed < 0 || steps >= RING_SLOTS as u64 {
+            // Nothing for longer than the ring (far before the head means the clock wrapped
+            // past 2^31 µs of silence): all of it is older than any window.
+            *self = Self {
+                slot_us,
+                head_start_us: t_us,
+                recorded_until_us: t_us,
+                ..Self::default()
+            };
+            return true;
+        }
+        for _ in 0..steps {
+            self.head = (self.head + 1) & RING_MASK;
+            if let Some(s) = self.on_us.get_mut(self.head) {
+                *s = 0;
+            }
+        }
+        self.head_start_us = self
+            .head_start_us
+            .wrapping_add((steps * slot_us as u64) as u32);
+        false
+    }
+
+    /// Records on-time over `[from_us, to_us)`: `rate_ppm` of each slot's share (rounded up),
+    /// plus `extra_us` in the slot holding its end.
+    fn add(&mut self, from_us: u32, to_us: u32, rate_ppm: u64, extra_us: u64) {
+        let (a, b) = (self.offset(from_us), self.offset(to_us));
+        if b < a || (b == a && extra_us == 0) {
+            return;
+        }
+        let last = (b - 1).max(a);
+        for back in 0..RING_SLOTS {
+            let (lo, hi) = self.span(back);
+            let overlap = b.min(hi) - a.max(lo);
+            let mut on = if overlap > 0 {
+                (overlap as u64 * rate_ppm).div_ceil(PPM)
+            } else {
+                0
+            };
+            if last >= lo && last < hi {
+                on += extra_us;
+            }
+            if on > 0 {
+                self.add_to_slot(back, on);
+            }
+        }
+        if self.offset(to_us) > self.offset(self.recorded_until_us) {
+            self.recorded_until_us = to_us;
+        }
+    }
+
+    /// Records the line fully on over `[from_us, to_us)`.
+    fn add_on(&mut self, from_us: u32, to_us: u32) {
+        self.add(from_us, to_us, PPM, 0);
+    }
+
+    /// Upper bound of the line's on-time from offset `x` to the present, µs.
+    fn on_since(&self, x: i64) -> u64 {
+        let until = self.offset(self.recorded_until_us);
+        if x >= until {
+            return 0;
+        }
+        let mut sum = 0;
+        for back in 0..RING_SLOTS {
+            let (lo, hi) = self.span(back);
+            let on = self.slot(back);
+            if x >= lo {
+                let after = (hi.min(until) - x).max(0) as u64;
+                return sum + on.min(after);
+            }
+            sum += on;
+        }
+        sum
+    }
+
+    /// True when a burst starting at offset `reference` keeps the cap over every window that
+    /// also holds on-time recorded before it: for every x in `[from, to)` with on-time recorded
+    /// after x, `on_since(x) + reserve ≤ slack + d·(reference − x)`, in ppm·µs (`reserve_e6`:
+    /// the burst's partial period, `slack_e6`: (cap − d)·W, `d_ppm`: the burst's duty).
+    ///
+    /// Within a slot `on_since(x)` rises at rate 1 as x moves back until it holds the slot's
+    /// whole on-time, then stays, while the right side rises at rate d ≤ 1: the worst x of a
+    /// slot is where its on-time is used up, clipped to the range.
+    fn burst_fits(
+        &self,
+        from: i64,
+        to: i64,
+        reference: i64,
+        reserve_e6: u64,
+        slack_e6: u64,
+        d_ppm: u64,
+    ) -> bool {
+        let until = self.offset(self.recorded_until_us);
+        let fits = |on_us: u64, x: i64| {
+            on_us == 0
+                || on_us * PPM + reserve_e6 <= slack_e6 + d_ppm * (reference - x).max(0) as u64
+        };
+        let mut newer = 0;
+        let mut oldest_lo = 0;
+        for back in 0..RING_SLOTS {
+            let (lo, hi) = self.span(back);
+            let end = hi.min(until);
+            let on = self.slot(back);
+            let (a, b) = (lo.max(from), end.min(to));
+            if a < b {
+                let x = (end - on as i64).clamp(a, b - 1);
+                if !fits(newer + on.min((end - x) as u64), x) {
+                    return false;
+                }
+            }
+            newer += on;
+            oldest_lo = lo;
+        }
+        // Before the ring: everything recorded counts; the latest x there is the worst.
+        let b = oldest_lo.min(to);
+        from >= b || fits(newer, b - 1)
+    }
+}
+
 /// What the enable line is doing.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 enum State {
     #[default]
     Off,
-    Running(TimerSettings),
-    /// A one-pulse was fired at `start_us`; the hardware ends it by itself at `end_us`
-    /// (wrapping). Until then only a fault ([`Gate::force_off`]) or its texture
-    /// ([`Gate::end_pulse`]) may cut it.
-    Pulse {
-        start_us: u32,
-        end_us: u32,
+    /// Periodic bursts of `settings` since `since_us`; `on_us` and `duty_ppm` are the longest
+    /// on-time (µs, rounded up) and highest duty issued since the Start: an Update only takes
+    /// effect at the next update event, so the hardware may still run earlier settings.
+    Running {
+        settings: TimerSettings,
+        since_us: u32,
+        on_us: u64,
+        duty_ppm: u64,
     },
+    /// A one-pulse: the line is on over `[start_us, end_us)` (wrapping; after the pulse's
+    /// delay, rounded outwards), and the hardware ends it by itself. Until then only a fault
+    /// ([`Gate::force_off`]) or its texture ([`Gate::end_pulse`]) may cut it.
+    Pulse { start_us: u32, end_us: u32 },
 }
 
-/// The gate's state machine: emits only the actions that change the line, and keeps the duty
-/// cap across transitions.
+/// The gate's state machine: emits only the actions that change the line, and holds the duty
+/// cap over a sliding window ([`duty_window_us`]) across every transition.
 ///
-/// The timer keeps the cap within a burst by itself (each period is long enough for its
-/// on-time). Across an Off or a one-pulse it cannot: a restart would begin a new on-time at
-/// once. So on leaving a running burst at `t` the gate assumes the worst — that burst's last
-/// pulse ran its whole on-time up to `t` — and lets the line on again only after
-/// `t + on × (1000 − cap)/cap`; after a one-pulse, only after `start + on × 1000/cap`.
+/// In every window the on-time stays at most cap × window, with one exception the timer
+/// covers: a window whose on-time all comes from one run of periodic bursts (Start to Off)
+/// is held by the timer's per-period cap, at most cap × window plus (1 − cap) × its longest
+/// on-time (a partial period). A pulse fires only if it keeps the window ending at its end
+/// within the cap (the worst window holding it, as nothing follows it yet); a burst starts (or
+/// is updated to a longer on-time or a higher duty) only if every window holding on-time from
+/// before it and the burst's worst (duty × time + one partial period) stays within the cap.
+/// The on-time cap holds per pulse as before, and the line is low for at least a tick between
+/// two on-times.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Gate {
     state: State,
-    /// The line may go on again from this time (µs, wrapping), if set.
-    earliest_on_us: Option<u32>,
-    /// Longest on-time issued since the last Start, clocks. An Update only takes effect at the
-    /// next update event, so the hardware may still be running an earlier, longer on-time.
-    max_on_clocks: u64,
+    ledger: DutyLedger,
+    /// The line may have been on until this time (µs, wrapping): a Start, which raises the line
+    /// at once, must come after it.
+    off_from_us: Option<u32>,
 }
 
 /// True while `t_us` is before `deadline_us` (both wrapping µs).
@@ -103,24 +372,11 @@ fn before(t_us: u32, deadline_us: u32) -> bool {
     (t_us.wrapping_sub(deadline_us) as i32) < 0
 }
 
-/// µs the line must stay off after an on-time of `on_clocks`, so on/(on + rest) ≤ cap.
-fn rest_us(on_clocks: u64, timer: &BurstTimer, limits: &SafetyLimits) -> u32 {
-    rest_after_us(timer.clocks_to_us_ceil(on_clocks), limits)
-}
-
-/// µs the line must stay off after an on-time of `on_us`, so on/(on + rest) ≤ cap.
-fn rest_after_us(on_us: u64, limits: &SafetyLimits) -> u32 {
-    let cap = limits.max_duty_permille.max(1) as u64;
-    (on_us * (1000 - cap.min(1000)))
-        .div_ceil(cap)
-        .min(u32::MAX as u64 / 2) as u32
-}
-
 impl Gate {
     /// The periodic settings the line is running, if any.
     pub fn running(&self) -> Option<TimerSettings> {
         match self.state {
-            State::Running(s) => Some(s),
+            State::Running { settings, .. } => Some(settings),
             _ => None,
         }
     }
@@ -129,33 +385,81 @@ impl Gate {
     /// staying off. [`Gate::request`] returns at once then; callers may skip it (and the caps).
     pub fn steady(&self, desired: Option<TimerSettings>) -> bool {
         match (self.state, desired) {
-            (State::Running(r), Some(s)) => r == s,
+            (State::Running { settings, .. }, Some(s)) => settings == s,
             (State::Off, None) => true,
             _ => false,
         }
     }
 
-    fn may_go_on(&self, t_us: u32) -> bool {
-        self.earliest_on_us.is_none_or(|e| !before(t_us, e))
+    /// Brings the window's accounting to `t_us`: the ring rolled, and a pulse that has ended by
+    /// itself recorded.
+    fn catch_up(&mut self, t_us: u32, limits: &SafetyLimits) -> u32 {
+        let window_us = duty_window_us(limits);
+        let silence = self.ledger.advance(t_us, window_us);
+        // Deadlines are forgotten once passed, or after a silence longer than the ring (past
+        // 2^31 µs the wrapping clock would show them ahead again).
+        if silence || self.off_from_us.is_some_and(|f| before(f, t_us)) {
+            self.off_from_us = None;
+        }
+        if silence && matches!(self.state, State::Pulse { .. }) {
+            self.state = State::Off;
+        }
+        if let State::Pulse { start_us, end_us } = self.state {
+            if !before(t_us, end_us) {
+                self.ledger.add_on(start_us, end_us);
+                self.off_from_us = Some(end_us);
+                self.state = State::Off;
+            }
+        }
+        window_us
     }
 
-    /// Leaving a running burst at `t_us`: the worst-case rest before the line may go on again.
-    fn leave_running(
-        &mut self,
-        s: &TimerSettings,
+    /// Leaving a running burst at `t_us`: its worst on-time is recorded — its duty over the
+    /// run plus the partial period at the end, (1 − duty) × its longest on-time.
+    fn leave_running(&mut self, t_us: u32) {
+        if let State::Running {
+            since_us,
+            on_us,
+            duty_ppm,
+            ..
+        } = self.state
+        {
+            let partial_us = ((PPM - duty_ppm.min(PPM)) * on_us).div_ceil(PPM);
+            self.ledger.add(since_us, t_us, duty_ppm, partial_us);
+            self.off_from_us = Some(t_us);
+        }
+        self.state = State::Off;
+    }
+
+    /// True when a burst of on-time `on_us` and duty `d_ppm` from `since_us` keeps the cap
+    /// over every window from `t_us − window` that holds on-time from before it.
+    fn burst_fits(
+        &self,
+        since_us: u32,
         t_us: u32,
-        timer: &BurstTimer,
+        on_us: u64,
+        d_ppm: u64,
+        window_us: u32,
         limits: &SafetyLimits,
-    ) {
-        let on = self.max_on_clocks.max(s.on_clocks());
-        self.earliest_on_us = Some(t_us.wrapping_add(rest_us(on, timer, limits)));
+    ) -> bool {
+        let cap_ppm = limits.max_duty_permille.min(1000) as u64 * 1000;
+        let reference = self.ledger.offset(since_us);
+        self.ledger.burst_fits(
+            self.ledger.offset(t_us) - window_us as i64,
+            reference,
+            reference,
+            (PPM - d_ppm.min(PPM)) * on_us,
+            cap_ppm.saturating_sub(d_ppm) * window_us as u64,
+            d_ppm,
+        )
     }
 
     /// Moves towards `desired` (None = off) at time `t_us`; returns the action to apply, if
     /// anything changes. Unchanged settings return at once (this runs every sample). Settings
     /// outside the caps are refused (line off): the planner never makes them, so this only fires
-    /// on a bug, and then on the safe side. A start inside the rest after an Off or a pulse is
-    /// held back (None) and happens on the first request after the rest.
+    /// on a bug, and then on the safe side. A start (or an update to a longer on-time or a
+    /// higher duty) that would break the windowed cap is held back (None), as is a start while
+    /// a pulse is on; it happens on the first request that fits.
     pub fn request(
         &mut self,
         desired: Option<TimerSettings>,
@@ -166,67 +470,113 @@ impl Gate {
         if self.steady(desired) {
             return None;
         }
+        let window_us = self.catch_up(t_us, limits);
         let desired = desired.filter(|s| limits.allows(timer, s));
         match (self.state, desired) {
-            (State::Pulse { end_us, .. }, None) if before(t_us, end_us) => None,
-            (State::Off | State::Pulse { .. }, None) => {
-                self.state = State::Off;
-                None
-            }
-            (State::Running(r), None) => {
-                self.leave_running(&r, t_us, timer, limits);
-                self.state = State::Off;
+            // Still on (an ended pulse was caught up): the hardware ends it.
+            (State::Pulse { .. }, _) => None,
+            (State::Off, None) => None,
+            (State::Running { .. }, None) => {
+                self.leave_running(t_us);
                 Some(GateAction::Off)
             }
-            (State::Off | State::Pulse { .. }, Some(s)) => {
-                if !self.may_go_on(t_us) {
+            (State::Off, Some(s)) => {
+                let on_us = timer.clocks_to_us_ceil(s.on_clocks());
+                let d_ppm = duty_ppm(&s);
+                let after_off = self.off_from_us.is_none_or(|f| before(f, t_us));
+                if !after_off || !self.burst_fits(t_us, t_us, on_us, d_ppm, window_us, limits) {
                     return None;
                 }
-                self.state = State::Running(s);
-                self.max_on_clocks = s.on_clocks();
+                self.off_from_us = None;
+                self.state = State::Running {
+                    settings: s,
+                    since_us: t_us,
+                    on_us,
+                    duty_ppm: d_ppm,
+                };
                 Some(GateAction::Start(s))
             }
-            (State::Running(_), Some(s)) => {
-                self.state = State::Running(s);
-                self.max_on_clocks = self.max_on_clocks.max(s.on_clocks());
+            (
+                State::Running {
+                    settings: running,
+                    since_us,
+                    on_us,
+                    duty_ppm: d,
+                },
+                Some(s),
+            ) => {
+                let on_us_new = on_us.max(timer.clocks_to_us_ceil(s.on_clocks()));
+                let d_new = d.max(duty_ppm(&s));
+                let grows = on_us_new > on_us || d_new > d;
+                // Windows reaching back before the run hold its past too.
+                let reaches_back = t_us.wrapping_sub(since_us) < window_us;
+                if grows
+                    && reaches_back
+                    && !self.burst_fits(since_us, t_us, on_us_new, d_new, window_us, limits)
+                {
+                    // Held back: the running settings go on, if the caps (a new scene's) still
+                    // allow them; if not, the line goes off.
+                    if limits.allows(timer, &running) {
+                        return None;
+                    }
+                    self.leave_running(t_us);
+                    return Some(GateAction::Off);
+                }
+                self.state = State::Running {
+                    settings: s,
+                    since_us,
+                    on_us: on_us_new,
+                    duty_ppm: d_new,
+                };
                 Some(GateAction::Update(s))
             }
         }
     }
 
-    /// Turns the line off now, whatever it does (faults): also cuts a pulse short.
+    /// Turns the line off now, whatever it does (faults): also cuts a pulse short, which then
+    /// counts the on-time it spent.
     pub fn force_off(
         &mut self,
         t_us: u32,
-        timer: &BurstTimer,
+        _timer: &BurstTimer,
         limits: &SafetyLimits,
     ) -> Option<GateAction> {
         let was = self.state;
-        if let State::Running(r) = was {
-            self.leave_running(&r, t_us, timer, limits);
-        }
-        self.state = State::Off;
+        self.catch_up(t_us, limits);
+        self.cut(t_us);
         (was != State::Off).then_some(GateAction::Off)
     }
 
+    /// The line off at `t_us`: a running burst or a pulse still on is recorded up to here.
+    fn cut(&mut self, t_us: u32) {
+        match self.state {
+            State::Running { .. } => self.leave_running(t_us),
+            State::Pulse { start_us, .. } => {
+                if before(start_us, t_us) {
+                    self.ledger.add_on(start_us, t_us);
+                }
+                self.off_from_us = Some(t_us);
+                self.state = State::Off;
+            }
+            State::Off => {}
+        }
+    }
+
     /// Ends a running one-pulse early at `t_us` (its texture says the finger has left the
-    /// ridge); the rest then follows the on-time actually spent. Nothing when no pulse is on.
+    /// ridge); the window then counts the on-time actually spent. Nothing when no pulse is on.
     pub fn end_pulse(&mut self, t_us: u32, limits: &SafetyLimits) -> Option<GateAction> {
-        let State::Pulse { start_us, end_us } = self.state else {
-            return None;
-        };
-        if !before(t_us, end_us) {
+        self.catch_up(t_us, limits);
+        if !matches!(self.state, State::Pulse { .. }) {
             return None;
         }
-        let on = t_us.wrapping_sub(start_us);
-        self.state = State::Off;
-        self.earliest_on_us = Some(t_us.wrapping_add(rest_after_us(on as u64, limits)));
+        self.cut(t_us);
         Some(GateAction::Off)
     }
 
-    /// Fires one pulse of `settings` (a line) at `t_us`. Refused (None, nothing changes) while a
-    /// burst runs or inside the rest after one, since the pulse would add its on-time to an
-    /// on-time already spent; refused (line off) above the on-time cap.
+    /// Fires one pulse of `settings` (a line) at `t_us`: the line is on over
+    /// `[t + delay, t + delay + on)`. Refused (None, nothing changes) while a burst runs or a
+    /// pulse is on, or when its on-time would break the windowed duty cap; refused (line off)
+    /// above the on-time cap, or with a compare above the period (no delay before the rise).
     pub fn pulse(
         &mut self,
         settings: TimerSettings,
@@ -234,19 +584,32 @@ impl Gate {
         timer: &BurstTimer,
         limits: &SafetyLimits,
     ) -> Option<GateAction> {
-        if settings.on_clocks() > limits.max_on_time_clocks(timer) {
+        if settings.on_clocks() > limits.max_on_time_clocks(timer) || settings.ccr > settings.arr {
             return self.force_off(t_us, timer, limits);
         }
-        if matches!(self.state, State::Running(_)) || !self.may_go_on(t_us) {
+        let window_us = self.catch_up(t_us, limits);
+        if self.state != State::Off || self.off_from_us.is_some_and(|f| before(t_us, f)) {
             return None;
         }
-        let end_us = t_us.wrapping_add(timer.clocks_to_us_ceil(settings.on_clocks()) as u32);
+        // The line rises `delay` after the start and falls `delay + on` after it: the rise
+        // rounded down, the fall up, so the on-time is never under-counted.
+        let delay_clocks = settings.pulse_delay_clocks();
+        let clock_hz = timer.clock_hz.max(1) as u64;
+        let delay_us = delay_clocks * 1_000_000 / clock_hz;
+        let end_us = timer.clocks_to_us_ceil(delay_clocks + settings.on_clocks());
+        let on_us = end_us - delay_us;
+        let budget_us = window_budget_us(limits, window_us);
+        if on_us > budget_us || end_us > window_us as u64 {
+            return None;
+        }
+        let window_from = self.ledger.offset(t_us) + end_us as i64 - window_us as i64;
+        if self.ledger.on_since(window_from) + on_us > budget_us {
+            return None;
+        }
         self.state = State::Pulse {
-            start_us: t_us,
-            end_us,
+            start_us: t_us.wrapping_add(delay_us as u32),
+            end_us: t_us.wrapping_add(end_us as u32),
         };
-        self.earliest_on_us =
-            Some(end_us.wrapping_add(rest_us(settings.on_clocks(), timer, limits)));
         Some(GateAction::Pulse(settings))
     }
 }
@@ -260,6 +623,15 @@ mod tests {
         counter_bits: 32,
         max_burst_hz: 5_000,
     };
+
+    /// 10 ms one-pulse at 90 MHz: one tick of delay (0 µs rounded down), the fall at
+    /// ⌈900 001 / 90⌉ = 10 001 µs: 10 001 µs counted.
+    const P10: TimerSettings = TimerSettings {
+        psc: 0,
+        arr: 900_000,
+        ccr: 900_000,
+    };
+    const P10_US: u32 = 10_001;
 
     #[test]
     fn transitions() {
@@ -296,100 +668,207 @@ mod tests {
         assert_eq!(g.running(), None);
     }
 
-    /// 20 Hz at 40 %: 20 ms on. After an Off the line stays off for 20 ms (cap 50 %).
+    /// The window is 300 ms, or on-time cap / duty cap when that is longer, up to 2^30 µs.
     #[test]
-    fn restart_after_off_waits_out_the_rest() {
+    fn window_length() {
+        let l = SafetyLimits::default();
+        assert_eq!(duty_window_us(&l), 300_000);
+        let long = SafetyLimits {
+            max_on_time_us: 200_000,
+            ..l
+        };
+        assert_eq!(duty_window_us(&long), 400_000);
+        let tiny_cap = SafetyLimits {
+            max_duty_permille: 1,
+            max_on_time_us: 10_000_000,
+            ..l
+        };
+        assert_eq!(duty_window_us(&tiny_cap), 1 << 30);
+        assert_eq!(window_budget_us(&l, 300_000), 150_000);
+    }
+
+    /// 20 Hz at 50 % (25 ms on), cut at 30 ms: recorded as 50 % of 30 ms plus half an on-time,
+    /// 27.5 ms, the last 12.5 ms in the 25–30 ms slot. A restart (another 50 % burst, whose
+    /// own partial period is 12.5 ms) must keep every window holding both within 50 %: by hand,
+    /// slot 20–25 ms is the worst, x = 22.5 ms: 15 + 2.5 + 12.5 ≤ 0.5 × (t − 22.5 ms), so
+    /// t ≥ 82.5 ms. (The true waveform needs 75 ms: the ledger is 7.5 ms conservative.)
+    #[test]
+    fn restart_after_off_waits_until_the_window_fits() {
         let l = SafetyLimits::default();
         let s = TimerSettings {
             psc: 0,
             arr: 4_499_999,
-            ccr: 1_800_000,
+            ccr: 2_250_000,
         };
         let mut g = Gate::default();
-        g.request(Some(s), 0, &T, &l);
+        assert_eq!(g.request(Some(s), 0, &T, &l), Some(GateAction::Start(s)));
         assert_eq!(g.force_off(30_000, &T, &l), Some(GateAction::Off));
         assert_eq!(g.request(Some(s), 31_000, &T, &l), None);
-        assert_eq!(g.request(Some(s), 49_999, &T, &l), None);
+        assert_eq!(g.request(Some(s), 82_499, &T, &l), None);
         assert_eq!(
-            g.request(Some(s), 50_000, &T, &l),
+            g.request(Some(s), 82_500, &T, &l),
             Some(GateAction::Start(s))
         );
-        // An Update to a short on-time just before the Off: the hardware may still run the long
-        // one until its update event, so the rest is still the long one's.
+        // An Update to a short on-time just before the Off: the hardware may still run the
+        // long one until its update event, so the record is the long one's (same wait).
         let short = TimerSettings {
             psc: 0,
             arr: 89_999,
-            ccr: 36_000,
+            ccr: 45_000,
         };
-        g.request(Some(short), 60_000, &T, &l);
-        g.force_off(60_100, &T, &l);
-        assert_eq!(g.request(Some(short), 79_999, &T, &l), None);
-        assert!(g.request(Some(short), 80_100, &T, &l).is_some());
+        assert_eq!(
+            g.request(Some(short), 82_600, &T, &l),
+            Some(GateAction::Update(short))
+        );
+        g.force_off(112_500, &T, &l);
+        assert_eq!(g.request(Some(short), 112_500, &T, &l), None, "not at once");
+        // Recorded: 50 % of 82.5–112.5 ms and the long one's 12.5 ms in the 110–115 ms slot
+        // (13.75 ms there). The new burst's own partial period is 0.25 ms. By hand the worst is
+        // slot 105–110 ms at x = 107.5 ms: 13.75 + 2.5 + 0.25 ≤ 0.5 × (t − 107.5 ms).
+        assert_eq!(g.request(Some(short), 140_499, &T, &l), None);
+        assert!(g.request(Some(short), 140_500, &T, &l).is_some());
     }
 
-    /// The gate keeps time as wrapping µs, so a deadline can be at most 2^31 − 1 µs (35.8 min)
-    /// ahead. Limits a scene file accepts never come near it (1 s on at a 0.1 % cap rests
-    /// 999 s), but `SafetyLimits` built in code can: a 3 s pulse at 1 ‰ would rest 50 min. The
-    /// rest is clamped to 2^31 − 1 µs rather than wrapping into the past, which would let the
-    /// line on again at once.
+    /// 10 ms pulses back to back (a tick apart): 14 fit the 150 ms a 300 ms window allows at
+    /// 50 %, the 15th does not; it fires once the window ending at its end has room — by hand,
+    /// when the first 15 µs of the first pulse have left it (t = 290 014 µs).
     #[test]
-    fn rest_beyond_the_clock_range_is_clamped_not_wrapped() {
-        let l = SafetyLimits {
-            max_duty_permille: 1,
-            max_on_time_us: 10_000_000,
-            ..SafetyLimits::default()
-        };
-        // 3 s at 90 MHz.
-        let p = TimerSettings {
-            psc: 0,
-            arr: 270_000_000,
-            ccr: 270_000_000,
-        };
-        let small = TimerSettings {
-            psc: 0,
-            arr: 89_999,
-            ccr: 80,
-        };
+    fn pulses_fill_the_window_and_no_more() {
+        let l = SafetyLimits::default();
+        let mut g = Gate::default();
+        for k in 0..14 {
+            let t = k * P10_US;
+            assert_eq!(g.pulse(P10, t, &T, &l), Some(GateAction::Pulse(P10)), "{k}");
+            assert_eq!(g.pulse(P10, t + P10_US - 1, &T, &l), None, "still on");
+        }
+        assert_eq!(g.pulse(P10, 14 * P10_US, &T, &l), None);
+        assert_eq!(g.pulse(P10, 200_000, &T, &l), None);
+        assert_eq!(g.pulse(P10, 290_013, &T, &l), None);
+        assert_eq!(g.pulse(P10, 290_014, &T, &l), Some(GateAction::Pulse(P10)));
+    }
+
+    /// A pulse its texture ends early counts the on-time it spent: cut after 4 ms, 14 whole
+    /// pulses still fit after it (4 + 14 × 10.001 ≤ 150 ms), not 13 (as if it had run).
+    #[test]
+    fn an_ended_pulse_counts_what_it_spent() {
+        let l = SafetyLimits::default();
+        let mut g = Gate::default();
+        assert_eq!(g.pulse(P10, 0, &T, &l), Some(GateAction::Pulse(P10)));
+        assert_eq!(g.end_pulse(4_000, &l), Some(GateAction::Off));
+        assert_eq!(g.end_pulse(4_001, &l), None, "nothing left to end");
+        for k in 0..14 {
+            let t = 4_000 + k * P10_US;
+            assert_eq!(g.pulse(P10, t, &T, &l), Some(GateAction::Pulse(P10)), "{k}");
+        }
+        assert_eq!(g.pulse(P10, 4_000 + 14 * P10_US, &T, &l), None);
+        // A fault cuts a pulse the same way.
+        let mut g = Gate::default();
+        g.pulse(P10, 0, &T, &l);
+        assert_eq!(g.force_off(4_000, &T, &l), Some(GateAction::Off));
+        for k in 0..14 {
+            assert!(g.pulse(P10, 4_000 + k * P10_US, &T, &l).is_some(), "{k}");
+        }
+    }
+
+    /// A delayed pulse is on over [t + delay, t + delay + on): 50 µs then 10 ms. It is on (or
+    /// about to be) until t + 10 050 µs; the next pulse may start there, not before.
+    #[test]
+    fn a_delayed_pulse_counts_where_it_is() {
+        let l = SafetyLimits::default();
+        let p = T.delayed_pulse(4_500, 900_000).unwrap();
+        assert_eq!(p.pulse_delay_clocks(), 4_500);
         let mut g = Gate::default();
         assert_eq!(g.pulse(p, 0, &T, &l), Some(GateAction::Pulse(p)));
-        let end_us = 3_000_000u32;
-        assert_eq!(g.request(Some(small), end_us + 1_000, &T, &l), None);
-        assert_eq!(g.request(Some(small), 1_000_000_000, &T, &l), None);
-        let clamp_us = (1u32 << 31) - 1;
-        assert_eq!(g.request(Some(small), end_us + clamp_us - 1, &T, &l), None);
-        assert_eq!(
-            g.request(Some(small), end_us + clamp_us, &T, &l),
-            Some(GateAction::Start(small))
-        );
+        assert_eq!(g.pulse(p, 10_049, &T, &l), None);
+        assert_eq!(g.request(Some(P10), 10_049, &T, &l), None);
+        assert_eq!(g.pulse(p, 10_050, &T, &l), Some(GateAction::Pulse(p)));
+        // Cut before its rise it has spent nothing: 15 pulses of 10 ms fit after it.
+        let mut g = Gate::default();
+        g.pulse(p, 0, &T, &l);
+        assert_eq!(g.end_pulse(40, &l), Some(GateAction::Off));
+        for k in 0..14 {
+            assert!(g.pulse(P10, 40 + k * P10_US, &T, &l).is_some(), "{k}");
+        }
+    }
+
+    /// Every deadline and slot works across the wrap of the µs clock: the same 14 pulses fit
+    /// and the 15th does not when the train starts 50 ms before the wrap.
+    #[test]
+    fn the_window_works_across_the_clock_wrap() {
+        let l = SafetyLimits::default();
+        let t0 = u32::MAX - 50_000;
+        let mut g = Gate::default();
+        for k in 0..14 {
+            let t = t0.wrapping_add(k * P10_US);
+            assert_eq!(g.pulse(P10, t, &T, &l), Some(GateAction::Pulse(P10)), "{k}");
+        }
+        assert_eq!(g.pulse(P10, t0.wrapping_add(14 * P10_US), &T, &l), None);
+        assert_eq!(g.pulse(P10, t0.wrapping_add(290_013), &T, &l), None);
+        assert!(g.pulse(P10, t0.wrapping_add(290_014), &T, &l).is_some());
+    }
+
+    /// The ring holds 64 slots of 5 ms: a call late by less than the ring (a timer tick behind
+    /// a sample) keeps the record, a silence longer than the ring forgets it, and so does one
+    /// past 2^31 µs, which the wrapping clock shows as far in the past.
+    #[test]
+    fn the_ring_forgets_only_what_no_window_holds() {
+        let l = SafetyLimits::default();
+        let full = |g: &mut Gate| {
+            for k in 0..14 {
+                g.pulse(P10, k * P10_US, &T, &l);
+            }
+        };
+        let mut g = Gate::default();
+        full(&mut g);
+        let end = 14 * P10_US;
+        // A call 100 µs behind the last one forgets nothing: the window is still full.
+        assert_eq!(g.request(None, end + 1_000, &T, &l), None);
+        assert_eq!(g.pulse(P10, end + 900, &T, &l), None);
+        assert_eq!(g.pulse(P10, end + 1_000, &T, &l), None);
+        // 320 ms of ring after the last pulse (the ring's head moved to it): all gone.
+        let mut g = Gate::default();
+        full(&mut g);
+        assert!(g.pulse(P10, end + 330_000, &T, &l).is_some());
+        let mut g = Gate::default();
+        full(&mut g);
+        let far = end.wrapping_add((1 << 31) + 1_000);
+        assert!(g.pulse(P10, far, &T, &l).is_some());
+    }
+
+    /// New caps (another window) re-cut the record conservatively: everything recorded counts
+    /// as just spent, so the new window's budget (200 ms of 400 ms) holds 140 ms more... less
+    /// what was already spent: 5 pulses of 10 ms, not 6.
+    #[test]
+    fn new_caps_recount_the_past_as_recent() {
+        let l = SafetyLimits::default();
+        let long = SafetyLimits {
+            max_on_time_us: 200_000,
+            ..l
+        };
+        let mut g = Gate::default();
+        for k in 0..14 {
+            g.pulse(P10, k * P10_US, &T, &l);
+        }
+        let t0 = 14 * P10_US;
+        for k in 0..5 {
+            assert!(g.pulse(P10, t0 + k * P10_US, &T, &long).is_some(), "{k}");
+        }
+        assert_eq!(g.pulse(P10, t0 + 5 * P10_US, &T, &long), None);
     }
 
     #[test]
     fn pulses_end_by_themselves_but_faults_cut_them() {
         let l = SafetyLimits::default();
-        let p = TimerSettings {
-            psc: 0,
-            arr: 900_000,
-            ccr: 900_000,
-        };
         let mut g = Gate::default();
-        assert_eq!(g.pulse(p, 0, &T, &l), Some(GateAction::Pulse(p)));
+        assert_eq!(g.pulse(P10, 0, &T, &l), Some(GateAction::Pulse(P10)));
         // A texture asking for nothing during the pulse does not make the gate forget it: a
         // fault must still cut it.
         assert_eq!(g.request(None, 50, &T, &l), None);
         assert_eq!(g.force_off(100, &T, &l), Some(GateAction::Off));
-        // 10 ms pulse at a 50 % cap: nothing on again before 20 ms.
-        assert_eq!(g.pulse(p, 19_999, &T, &l), None);
-        assert_eq!(g.pulse(p, 20_000, &T, &l), Some(GateAction::Pulse(p)));
+        assert_eq!(g.pulse(P10, 100, &T, &l), Some(GateAction::Pulse(P10)));
         // After the pulse nothing is left to switch off.
         assert_eq!(g.request(None, 45_000, &T, &l), None);
         assert_eq!(g.end_pulse(45_000, &l), None);
-        // Ended early after 4 ms: the rest is 4 ms, not the 10 ms pulse's.
-        assert_eq!(g.pulse(p, 50_000, &T, &l), Some(GateAction::Pulse(p)));
-        assert_eq!(g.end_pulse(54_000, &l), Some(GateAction::Off));
-        assert_eq!(g.pulse(p, 57_999, &T, &l), None);
-        assert_eq!(g.pulse(p, 58_000, &T, &l), Some(GateAction::Pulse(p)));
-        assert_eq!(g.end_pulse(68_000, &l), None, "ended by itself");
-        assert_eq!(g.request(None, 80_000, &T, &l), None);
         let too_long = TimerSettings {
             psc: 0,
             arr: 9_000_000,
@@ -403,12 +882,83 @@ mod tests {
             ccr: 400,
         };
         g.request(Some(s), 100_000, &T, &l);
-        assert_eq!(g.pulse(p, 100_100, &T, &l), None);
+        assert_eq!(g.pulse(P10, 100_100, &T, &l), None);
         assert_eq!(g.running(), Some(s));
         assert_eq!(
             g.end_pulse(100_200, &l),
             None,
             "a running burst is not a pulse"
         );
+    }
+
+    /// An Update held back (it would break the window) keeps the running settings only while
+    /// the caps allow them: after a scene lowered the duty cap below them, the line goes off
+    /// (the soak found a random texture's 41.5 % burst running on under a new 30.3 % cap).
+    #[test]
+    fn a_held_update_under_new_caps_turns_the_line_off() {
+        let l = SafetyLimits::default();
+        let mut g = Gate::default();
+        for k in 0..3 {
+            g.pulse(P10, k * P10_US, &T, &l);
+        }
+        let s = TimerSettings {
+            psc: 0,
+            arr: 89_999,
+            ccr: 36_000,
+        };
+        assert_eq!(
+            g.request(Some(s), 40_000, &T, &l),
+            Some(GateAction::Start(s))
+        );
+        let lower = SafetyLimits {
+            max_duty_permille: 300,
+            ..l
+        };
+        let longer = TimerSettings {
+            psc: 0,
+            arr: 899_999,
+            ccr: 270_000,
+        };
+        assert!(lower.allows(&T, &longer) && !lower.allows(&T, &s));
+        assert_eq!(
+            g.request(Some(longer), 40_100, &T, &lower),
+            Some(GateAction::Off)
+        );
+        assert_eq!(g.running(), None);
+        // Under the old caps the same Update is only held back.
+        let mut g = Gate::default();
+        for k in 0..3 {
+            g.pulse(P10, k * P10_US, &T, &l);
+        }
+        g.request(Some(s), 40_000, &T, &l);
+        let longer50 = TimerSettings {
+            psc: 0,
+            arr: 899_999,
+            ccr: 450_000,
+        };
+        assert_eq!(g.request(Some(longer50), 40_100, &T, &l), None);
+        assert_eq!(g.running(), Some(s));
+    }
+
+    /// A Start raises the line at once, so it waits a µs after the last on-time; a pulse,
+    /// which rises a tick after its start, may start where the last one ended.
+    #[test]
+    fn the_line_falls_between_two_on_times() {
+        let l = SafetyLimits::default();
+        let s = TimerSettings {
+            psc: 0,
+            arr: 89_999,
+            ccr: 9_000,
+        };
+        let mut g = Gate::default();
+        g.pulse(P10, 0, &T, &l);
+        assert_eq!(g.request(Some(s), P10_US, &T, &l), None);
+        assert_eq!(
+            g.request(Some(s), P10_US + 1, &T, &l),
+            Some(GateAction::Start(s))
+        );
+        assert_eq!(g.request(None, 20_000, &T, &l), Some(GateAction::Off));
+        assert_eq!(g.request(Some(s), 20_000, &T, &l), None);
+        assert!(g.pulse(P10, 20_000, &T, &l).is_some());
     }
 }

@@ -4,9 +4,9 @@
 //! - A file the reader accepts, run through a [`Controller`] under a finger sweeping the
 //!   substrate (with rail blips), drives an enable line that keeps the caps *as written in the
 //!   file* (`[limits]`, read here with the `toml` crate, not through the core): every pulse's
-//!   on-time ≤ the on-time cap, on-time / (rise to next rise) ≤ the duty cap, in kernel clocks of
-//!   a PWM-mode-1 timer modelled below from the gate actions alone; and the line is low while a
-//!   sample sits at a rail.
+//!   on-time ≤ the on-time cap, the on-time in every duty window (docs/duty-window.md) ≤ the
+//!   duty cap, in kernel clocks of a timer modelled in `common` from the gate actions alone; and
+//!   the line is low while a sample sits at a rail.
 //! - A file it refuses yields one sentence `file:line:column: `field`: message` whose field is
 //!   a scene field (or, for text that is not TOML, the key on the line it points at). Generated
 //!   files with one value put out of range must be refused at exactly that field and line; the
@@ -18,12 +18,14 @@
 
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
-use saw_core::burst::{BurstTimer, TimerSettings};
-use saw_core::gate::GateAction;
+use saw_core::burst::BurstTimer;
 use saw_core::position::PositionMapper;
 use saw_core::sample::Sample;
 use saw_core::scene_file::{load_for_board, SceneFileError};
 use saw_core::{Config, Controller};
+
+mod common;
+use common::LineModel;
 
 const TIMER: BurstTimer = BurstTimer {
     clock_hz: 90_000_000,
@@ -62,107 +64,8 @@ fn caps_as_written(text: &str) -> (u64, u64) {
     (duty_permille, on_us)
 }
 
-/// A burst timer in PWM mode 1 with preload, from the gate actions alone: the enable line's
-/// on-intervals in kernel clocks.
-struct LineModel {
-    clock_hz: u64,
-    /// (start of the current period, active settings, settings for the next update, one-pulse).
-    run: Option<(u64, TimerSettings, Option<TimerSettings>, bool)>,
-    /// On-intervals [rise, fall), in time order; touching ones are one pulse.
-    on: Vec<(u64, u64)>,
-    protocol_errors: u32,
-}
-
-impl LineModel {
-    fn new(timer: &BurstTimer) -> Self {
-        Self {
-            clock_hz: timer.clock_hz as u64,
-            run: None,
-            on: Vec::new(),
-            protocol_errors: 0,
-        }
-    }
-
-    fn clocks(&self, t_us: u64) -> u64 {
-        t_us * self.clock_hz / 1_000_000
-    }
-
-    fn open(&mut self, t0: u64, s: &TimerSettings) {
-        let fall = t0 + (s.psc as u64 + 1) * s.ccr as u64;
-        if fall > t0 {
-            self.on.push((t0, fall));
-        }
-    }
-
-    /// Runs whole periods up to `t`: each update event loads the preloaded settings.
-    fn advance(&mut self, t: u64) {
-        while let Some((t0, s, pending, one)) = self.run {
-            let end = t0 + (s.psc as u64 + 1) * (s.arr as u64 + 1);
-            if end > t {
-                break;
-            }
-            if one {
-                self.run = None;
-                break;
-            }
-            let s = pending.unwrap_or(s);
-            self.run = Some((end, s, None, false));
-            self.open(end, &s);
-        }
-    }
-
-    /// Line low now: cuts the interval in progress.
-    fn cut(&mut self, t: u64) {
-        if let Some(last) = self.on.last_mut() {
-            if last.1 > t {
-                last.1 = t;
-            }
-            if last.1 <= last.0 {
-                self.on.pop();
-            }
-        }
-    }
-
-    fn apply(&mut self, t_us: u64, a: GateAction) {
-        let t = self.clocks(t_us);
-        self.advance(t);
-        match a {
-            GateAction::Off => {
-                self.cut(t);
-                self.run = None;
-            }
-            GateAction::Start(s) | GateAction::Pulse(s) => {
-                self.cut(t);
-                self.run = Some((t, s, None, matches!(a, GateAction::Pulse(_))));
-                self.open(t, &s);
-            }
-            GateAction::Update(s) => match &mut self.run {
-                Some((_, _, pending, false)) => *pending = Some(s),
-                _ => self.protocol_errors += 1,
-            },
-        }
-    }
-
-    /// Pulses (touching intervals merged) as (rise, fall, next rise).
-    fn pulses(&self) -> Vec<(u64, u64, Option<u64>)> {
-        let mut merged: Vec<(u64, u64)> = Vec::new();
-        for &(r, f) in &self.on {
-            match merged.last_mut() {
-                Some(m) if m.1 >= r => m.1 = m.1.max(f),
-                _ => merged.push((r, f)),
-            }
-        }
-        (0..merged.len())
-            .map(|i| (merged[i].0, merged[i].1, merged.get(i + 1).map(|m| m.0)))
-            .collect()
-    }
-
-    fn high_within(&self, from: u64, to: u64) -> bool {
-        self.on.iter().any(|&(r, f)| r < to && f > from)
-    }
-}
-
-/// Checks the line against the caps: every pulse's on-time and its on-time over rise-to-rise.
+/// Checks the line against the caps as written: every pulse's on-time, and the on-time in
+/// every duty window (common::check_caps).
 fn check_caps(
     line: &LineModel,
     duty_permille: u64,
@@ -171,27 +74,9 @@ fn check_caps(
 ) -> Result<(), TestCaseError> {
     prop_assert_eq!(line.protocol_errors, 0, "{}: Update while stopped", what);
     let max_on = on_us * line.clock_hz / 1_000_000;
-    for (rise, fall, next) in line.pulses() {
-        let on = fall - rise;
-        prop_assert!(
-            on <= max_on,
-            "{}: pulse at {} clocks on for {} > on-time cap {} clocks",
-            what,
-            rise,
-            on,
-            max_on
-        );
-        if let Some(n) = next {
-            prop_assert!(
-                on * 1000 <= (n - rise) * duty_permille,
-                "{}: pulse at {} clocks on for {}, next rise {} later: above {} ‰",
-                what,
-                rise,
-                on,
-                n - rise,
-                duty_permille
-            );
-        }
+    let window = line.clocks(common::stated_window_us(duty_permille, on_us));
+    if let Err(e) = common::check_caps(&line.on, duty_permille, max_on, window) {
+        return Err(TestCaseError::fail(format!("{what}: {e}")));
     }
     Ok(())
 }

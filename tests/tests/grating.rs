@@ -8,7 +8,7 @@ use host_sim::adc::{FaultKind, FaultWindow};
 use host_sim::bench::renderers::grating_config;
 use host_sim::metrics;
 use host_sim::sim::{self, SimParams, SimResult};
-use host_sim::trajectory::Trajectory;
+use host_sim::trajectory::{Piece, Trajectory};
 use saw_boards::NUCLEO_F446RE;
 use saw_core::texture::{Grating, GratingRender, Texture};
 
@@ -248,4 +248,141 @@ fn a_rail_mid_stroke_cuts_the_grating() {
         .waveform
         .rises_in(clk(120_000.0), clk(300_000.0))
         .is_empty());
+}
+
+/// The duty window the docs state for the default caps (docs/duty-window.md): 300 ms, in which
+/// the line may be on for at most 50 %.
+const WINDOW_S: f64 = 0.3;
+
+/// Checks the recorded line against the caps, from its edges alone: every pulse within the
+/// on-time cap, and the on-time in every 300 ms window (ending at every fall and starting at
+/// every rise: a window's on-time is largest with an end there) within the duty cap. No burst
+/// runs here (position phase fires one-pulses), so no window has the timer's allowance.
+/// Returns the highest windowed duty seen.
+fn windowed_duty(r: &SimResult, cfg: &saw_core::Config, case: &str) -> f64 {
+    let clock = r.waveform.clock_hz as f64;
+    let pulses = r.waveform.pulses();
+    let max_on = cfg.limits.max_on_time_us as u64 * r.waveform.clock_hz as u64 / 1_000_000;
+    for p in &pulses {
+        assert!(p.on() <= max_on, "{case}: a pulse on for {} clocks", p.on());
+    }
+    let window = (WINDOW_S * clock) as u64;
+    let on_within = |a: u64, b: u64| -> u64 {
+        pulses
+            .iter()
+            .map(|p| p.fall.min(b).saturating_sub(p.rise.max(a)))
+            .sum()
+    };
+    let mut worst = 0.0f64;
+    for p in &pulses {
+        for (a, b) in [
+            (p.fall.saturating_sub(window), p.fall),
+            (p.rise, p.rise + window),
+        ] {
+            let on = on_within(a, b);
+            assert!(
+                on * 1000 <= window * cfg.limits.max_duty_permille as u64,
+                "{case}: {on} clocks on in the window {a}..{b} clocks"
+            );
+            worst = worst.max(on as f64 / window as f64);
+        }
+    }
+    worst
+}
+
+/// 20 mm/s from 10.5 mm to `step_um`, then 200 mm/s to 38.5 mm: the step a slow ridge
+/// crossing (20 ms pulse at λ = 1 mm, 40 %) followed by a fast stroke makes, ending half a
+/// period past the last ridge so its pulse is whole. Returns the trajectory and its duration.
+fn step(step_um: f64) -> (Trajectory, f64) {
+    let slow_s = (step_um - 10_500.0) / 20_000.0;
+    let fast_s = (38_500.0 - step_um) / 200_000.0;
+    let pieces = vec![
+        Piece {
+            trajectory: Trajectory::Constant {
+                from_um: 10_500.0,
+                speed_um_s: 20_000.0,
+            },
+            duration_s: slow_s,
+        },
+        Piece {
+            trajectory: Trajectory::Constant {
+                from_um: step_um,
+                speed_um_s: 200_000.0,
+            },
+            duration_s: fast_s,
+        },
+    ];
+    (Trajectory::Piecewise { pieces }, slow_s + fast_s)
+}
+
+/// Issue #17: a 20 → 200 mm/s step at λ = 1 mm — 4 ridges at 20 mm/s (20 ms pulses), then 24
+/// at 200 mm/s — skips no ridge, over step points across the slow ridge's cell (the worst, the
+/// step right after a slow pulse, is 14.4–14.5 mm) and 2 LSB noise seeds; one pulse per ridge
+/// crossed, every 300 ms window within 50 %, every pulse within 50 ms. Under the per-pulse rule
+/// (main before #17) the 20 ms rest after the last slow pulse skipped the ~3 ridges the fast
+/// stroke crosses in it.
+#[test]
+fn a_slow_to_fast_step_skips_no_ridge() {
+    let cfg = grating_config(GratingRender::PositionPhase);
+    let mut worst = (0.0f64, String::new());
+    for step_um in [14_200.0, 14_400.0, 14_450.0, 14_500.0, 14_700.0] {
+        for seed in 0..6 {
+            let (traj, d) = step(step_um);
+            let r = run(cfg.clone(), traj, d, 2.0, seed);
+            let case = format!("step at {step_um} µm, seed {seed}");
+            let ridges = metrics::ridges_crossed(&r, LAMBDA_UM);
+            let bursts = r.waveform.pulses().len() as u64;
+            let duty = windowed_duty(&r, &cfg, &case);
+            eprintln!(
+                "{case}: {bursts} bursts / {ridges} ridges, {} skipped, windowed duty {:.1} %",
+                r.telemetry.ridges_skipped,
+                duty * 100.0
+            );
+            assert_eq!(ridges, 28, "{case}");
+            assert_eq!(r.telemetry.ridges_skipped, 0, "{case}");
+            assert_eq!(bursts, ridges, "{case}: one burst per ridge");
+            assert_eq!(r.timer_protocol_errors, 0);
+            if duty > worst.0 {
+                worst = (duty, case);
+            }
+        }
+    }
+    eprintln!("worst windowed duty {:.1} % ({})", worst.0 * 100.0, worst.1);
+}
+
+/// The bench's mixed motion (rest, slow sine to 21 mm/s, fast sine to 300 mm/s; λ = 1 mm):
+/// no ridge skipped (the per-pulse rule skipped 2 of 190 on the bench's reference stream),
+/// every window within the cap, every pulse within the on-time cap; on the reference stream
+/// and on 2 LSB noise seeds.
+#[test]
+fn the_mixed_motion_skips_no_ridge() {
+    let cfg = grating_config(GratingRender::PositionPhase);
+    let (traj, d) = host_sim::bench::scenario::mixed();
+    let reference = SimParams::new(&NUCLEO_F446RE, traj.clone(), d)
+        .with_config(cfg.clone())
+        .with_noise(2.0, 0)
+        .with_reference_noise();
+    let mut runs = vec![(
+        "reference stream".to_string(),
+        sim::run(&reference).unwrap(),
+    )];
+    for seed in 0..4 {
+        runs.push((
+            format!("seed {seed}"),
+            run(cfg.clone(), traj.clone(), d, 2.0, seed),
+        ));
+    }
+    for (case, r) in runs {
+        let ridges = metrics::ridges_crossed(&r, LAMBDA_UM);
+        let bursts = r.waveform.pulses().len() as u64;
+        let duty = windowed_duty(&r, &cfg, &case);
+        eprintln!(
+            "mixed, {case}: {bursts} bursts / {ridges} ridges, {} skipped, windowed duty {:.1} %",
+            r.telemetry.ridges_skipped,
+            duty * 100.0
+        );
+        assert_eq!(r.telemetry.ridges_skipped, 0, "{case}");
+        assert!(ridges >= 180, "{case}: {ridges} ridges");
+        assert_eq!(r.timer_protocol_errors, 0);
+    }
 }

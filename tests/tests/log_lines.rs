@@ -104,11 +104,13 @@ fn region_lines_are_rate_limited_and_count_what_they_leave_out() {
 }
 
 /// Ridges the duty cap will not let fire are counted and logged, and a steady stroke logs
-/// nothing of the kind. A position-phase grating (λ = 1 mm, 40 %, default caps of 50 %): the
-/// finger crosses the 6 mm ridge at 20 mm/s at 25 ms and stays on it, so the pulse runs its
-/// whole 0.4 mm / 20 mm/s = 20 ms and the cap's rest another 20 ms, to 65 ms. From 50 ms it
-/// moves at 200 mm/s: the 7, 8 and 9 mm ridges come at 54.5, 59.5 and 64.5 ms, inside the rest
-/// (three skipped, a log line each); the 10 mm ridge at 69.5 ms fires.
+/// nothing of the kind. A position-phase grating (λ = 1 mm, 40 %, default caps: 50 % over a
+/// 300 ms window): a finger that crawls over each ridge at 8 mm/s (0.4 mm in 50 ms, from 0.1 mm
+/// before it to 0.3 mm past) and darts to the next at 200 mm/s (0.7 mm in 3.5 ms) keeps each
+/// pulse on for about 38 ms of every 53.5 ms, 71 %: the window's 150 ms hold four such pulses,
+/// so about every other ridge after the first four is refused — counted, with a log line each.
+/// (Under the per-pulse rule a 20 → 200 mm/s step skipped ridges too; it no longer does:
+/// tests/grating.rs.)
 #[test]
 fn ridges_the_duty_cap_refuses_are_counted_and_logged() {
     capture_logs();
@@ -119,12 +121,12 @@ fn ridges_the_duty_cap_refuses_are_counted_and_logged() {
     let _ = cfg.scene.textures.push(saw_core::texture::Texture::Grating(
         saw_core::texture::Grating::new(1_000),
     ));
-    let run = |path: &dyn Fn(u32) -> f32| {
+    let run_for = |n: u32, path: &dyn Fn(u32) -> f32| {
         let mut ctrl = Controller::new(host_sim::sim::burst_timer(board), 100).unwrap();
         ctrl.load(&cfg).unwrap();
         let mapper = *ctrl.mapper().unwrap();
         take_logs();
-        for i in 0..2_000u32 {
+        for i in 0..n {
             let code = mapper.code_at_um(path(i)) as u16;
             ctrl.on_sample(Sample {
                 code,
@@ -138,13 +140,24 @@ fn ridges_the_duty_cap_refuses_are_counted_and_logged() {
         (ctrl.telemetry(), skipped_lines)
     };
     // Steady 20 mm/s from 5.5 mm: four ridges, each fired.
-    let (t, lines) = run(&|i| 5_500.0 + 2.0 * i as f32);
+    let (t, lines) = run_for(2_000, &|i| 5_500.0 + 2.0 * i as f32);
     assert_eq!((t.ridge_pulses, t.ridges_skipped, lines), (4, 0, 0));
     // 20 mm/s to 6.1 mm (30 ms), rest there 20 ms, then 200 mm/s.
-    let (t, lines) = run(&|i| match i {
-        0..300 => 5_500.0 + 2.0 * i as f32,
-        300..500 => 6_100.0,
-        _ => 6_100.0 + 20.0 * (i - 500) as f32,
+    // Crawl over each ridge, dart to the next: 535 samples a ridge, from 5.9 mm. The 6 mm ridge,
+    // rearm_um from the start, is an arrival, not a crossing: 10 ridges (7–16 mm) are crossed.
+    // Measured: the first four fire, then every other one (6 fired, 4 refused).
+    let (t, lines) = run_for(6_000, &|i| {
+        let (k, j) = ((i / 535) as f32, i % 535);
+        let at = if j < 500 {
+            0.8 * j as f32
+        } else {
+            400.0 + 20.0 * (j - 500) as f32
+        };
+        5_900.0 + 1_000.0 * k + at
     });
-    assert_eq!((t.ridges_skipped, lines), (3, 3), "{t:?}");
+    assert_eq!(
+        (t.ridge_pulses, t.ridges_skipped, lines),
+        (6, 4, 4),
+        "{t:?}"
+    );
 }

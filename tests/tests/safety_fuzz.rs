@@ -10,9 +10,10 @@
 //! watchdog or not).
 //!
 //! On the enable line the timer model recorded, every pulse is checked against the caps the
-//! scene was given: on-time ≤ the on-time cap, and on-time / (rise to next rise) ≤ the duty cap,
-//! in kernel clocks, whatever produced the pulse (a burst period, a restart after an Off, a
-//! ridge or line one-pulse). The line must be low from the first sample at a rail (or from a
+//! scene was given: on-time ≤ the on-time cap, and the on-time in every duty window (300 ms, or
+//! on-time cap / duty cap when longer: docs/duty-window.md) ≤ the duty cap × the window (a window
+//! inside one periodic run: plus the timer's partial period), in kernel clocks, whatever produced
+//! the pulses (burst periods, restarts after an Off, ridge or line one-pulses). The line must be low from the first sample at a rail (or from a
 //! sample period after the stale limit of silence) until the 16th good sample after it: the
 //! fault windows the harness injected are the reference, not the core's own fault report.
 //! Each seed also counts pulses per texture kind and asserts every kind produced some, so the
@@ -140,19 +141,6 @@ fn check_run(case: usize, cfg: &Config, faults: &[FaultWindow], r: &SimResult, t
             pl.on()
         );
         tally.worst_on = tally.worst_on.max(pl.on() as f64 / max_on as f64);
-        if let Some(period) = pl.period() {
-            assert!(
-                pl.on() * 1000 <= period * cap,
-                "case {case}: pulse at {} clocks on for {} clocks, next rise {} clocks after: \
-                 duty above the {cap} ‰ cap",
-                pl.rise,
-                pl.on(),
-                period
-            );
-            tally.worst_duty = tally
-                .worst_duty
-                .max(pl.on() as f64 * 1000.0 / (period * cap) as f64);
-        }
         // Bursts by the region under the finger; ridge and line one-pulses are counted below,
         // from the controller.
         let at = r.trace_at_clock(pl.rise);
@@ -166,6 +154,29 @@ fn check_run(case: usize, cfg: &Config, faults: &[FaultWindow], r: &SimResult, t
         {
             tally.by_kind[k] += 1;
         }
+    }
+    let starts: Vec<(u64, bool)> = r
+        .trace
+        .iter()
+        .filter_map(|t| match t.action {
+            Some(GateAction::Start(_)) => Some((r.clocks(t.t_us), true)),
+            Some(GateAction::Pulse(_)) => Some((r.clocks(t.t_us), false)),
+            _ => None,
+        })
+        .collect();
+    let pulses: Vec<(u64, u64)> = r
+        .waveform
+        .pulses()
+        .iter()
+        .map(|p| (p.rise, p.fall))
+        .collect();
+    let window = r.clocks(saw_tests::stated_window_us(
+        cap,
+        cfg.limits.max_on_time_us as u64,
+    ));
+    match saw_tests::windowed_duty(&saw_tests::on_times(&pulses, &starts), cap, window) {
+        Ok(worst) => tally.worst_duty = tally.worst_duty.max(worst),
+        Err(e) => panic!("case {case}: {e}"),
     }
     tally.by_kind[1] += r.telemetry.ridge_pulses as usize;
     tally.by_kind[5] += r.telemetry.line_pulses as usize;
@@ -254,9 +265,11 @@ fn fuzz(seed: u64, cases: usize) {
         t.off_spans,
         t.cut
     );
-    // Caps reached, not merely respected from afar.
+    // Caps reached, not merely respected from afar. (A duty window fills less than a single
+    // period did: seed 1's fullest window holds 86 % of its cap, the others 97 and 101 % — above
+    // 100 % only inside one periodic run, the timer's partial period.)
     assert!(
-        t.worst_duty > 0.9 && t.worst_on > 0.9,
+        t.worst_duty > 0.85 && t.worst_on > 0.9,
         "{} {}",
         t.worst_duty,
         t.worst_on
@@ -283,8 +296,10 @@ fn caps_hold_on_the_waveform_seed_3() {
 /// on-time is followed by a new one less than a period later: on-time / rise-to-rise exceeds the
 /// duty cap (fuzz case: 24.85 ms on, next rise 29.1 ms later = 85 % against an 80.8 % cap, after
 /// a 2.6 ms rail fault). The core needs a hold-off before a Start (e.g. not before the previous
-/// period would have ended). Fixed in saw-core's gate: after an Off the line rests
-/// on × (1000 − cap)/cap before it may start again.
+/// period would have ended). Fixed in saw-core's gate: after an Off the line rested
+/// on × (1000 − cap)/cap before it could start again; since issue #17 a Start waits until every
+/// duty window holding the cut run and the new one fits the cap (docs/duty-window.md), which is
+/// what is checked here.
 #[test]
 fn restart_after_off_respects_the_duty_cap() {
     let board = &saw_boards::NUCLEO_F446RE;
@@ -305,14 +320,17 @@ fn restart_after_off_respects_the_duty_cap() {
     }
     let w = tm.finish(clk(t));
     let cap = cfg.limits.max_duty_permille as u64;
-    for p in w.pulses() {
-        if let Some(period) = p.period() {
-            assert!(
-                p.on() * 1000 <= period * cap,
-                "pulse {} clocks on, next rise after {} clocks: duty above {cap} ‰",
-                p.on(),
-                period
-            );
-        }
+    let pulses: Vec<(u64, u64)> = w.pulses().iter().map(|p| (p.rise, p.fall)).collect();
+    let window = clk(saw_tests::stated_window_us(
+        cap,
+        cfg.limits.max_on_time_us as u64,
+    ));
+    // Start actions are not recorded here: every on-time counts as from its own source, so no
+    // window gets the one-run allowance (stricter than the rule).
+    let starts: Vec<(u64, bool)> = pulses.iter().map(|&(r, _)| (r, false)).collect();
+    let on = saw_tests::on_times(&pulses, &starts);
+    assert!(pulses.len() > 1);
+    if let Err(e) = saw_tests::windowed_duty(&on, cap, window) {
+        panic!("{e}");
     }
 }

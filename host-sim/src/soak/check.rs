@@ -5,8 +5,12 @@
 //! The rules, in kernel clocks of the burst timer (see `docs/soak.md`):
 //! - **on-time**: a pulse (rise to fall, or to the end of the episode while still high) lasts at
 //!   most the on-time cap ([`SafetyLimits::max_on_time_clocks`]);
-//! - **duty**: a pulse's on-time over the time from its rise to the next rise is at most the duty
-//!   cap (the window `safety_fuzz` and the gate's rest use);
+//! - **duty**: the on-time in every duty window (300 ms, or on-time cap / duty cap when longer:
+//!   docs/duty-window.md) is at most the duty cap × the window, judged for the windows ending at
+//!   every fall and starting at every rise (a window's on-time is largest with an end there); a
+//!   window whose on-time all comes from one periodic run may hold (1 − cap) × its longest
+//!   on-time more (the timer's partial period). Windows holding a scene change are not judged
+//!   (on-time spent under the old caps cannot be undone);
 //! - **fault**: the line is low in every sample period the injected faults say must be off
 //!   (from the first sample at a rail, or a sample period after the stale limit of silence,
 //!   until the 16th good sample after), the rule of `tests/tests/safety_fuzz.rs`;
@@ -21,6 +25,14 @@
 
 use std::collections::VecDeque;
 
+/// The duty window the docs state (docs/duty-window.md), µs: 300 ms, or on-time cap / duty cap
+/// when longer, at most 2^30 µs. Written from the statement, not taken from the gate.
+fn stated_window_us(limits: &SafetyLimits) -> u64 {
+    (limits.max_on_time_us as u64 * 1000)
+        .div_ceil(limits.max_duty_permille.max(1) as u64)
+        .clamp(300_000, 1 << 30)
+}
+
 use saw_core::burst::{BurstTimer, SafetyLimits, TimerSettings};
 use saw_core::gate::GateAction;
 
@@ -32,7 +44,7 @@ use crate::timer::Edge;
 pub enum Rule {
     /// A pulse longer than the on-time cap.
     OnTime,
-    /// On-time over rise-to-next-rise above the duty cap.
+    /// On-time in a duty window above the duty cap.
     Duty,
     /// The line high where an injected fault says it must be off.
     OnDuringFault,
@@ -102,6 +114,7 @@ pub struct Violation {
 struct Caps {
     on_clocks: u64,
     duty_permille: u64,
+    window_clocks: u64,
 }
 
 impl Caps {
@@ -109,13 +122,29 @@ impl Caps {
         Self {
             on_clocks: limits.max_on_time_clocks(timer),
             duty_permille: limits.max_duty_permille as u64,
+            window_clocks: stated_window_us(limits) * timer.clock_hz as u64 / 1_000_000,
         }
     }
 
     fn loosen(&mut self, other: Caps) {
         self.on_clocks = self.on_clocks.max(other.on_clocks);
         self.duty_permille = self.duty_permille.max(other.duty_permille);
+        self.window_clocks = self.window_clocks.max(other.window_clocks);
     }
+}
+
+/// One on-time of the line, kept while a duty window may still hold it.
+#[derive(Clone, Copy, Debug)]
+struct OnTime {
+    rise: u64,
+    fall: u64,
+    /// The Start or Pulse that raised it (counted).
+    source: u64,
+    periodic: bool,
+    /// On-time of every on-time before it (a running sum: a window's share in O(log n)).
+    before: u64,
+    /// Longest on-time of its run up to here.
+    run_longest: u64,
 }
 
 /// The line high since `rise`.
@@ -127,15 +156,15 @@ struct High {
     caps: Caps,
     /// Raised by a `Pulse`: the timer stops at the end of its one period.
     one_pulse: bool,
+    /// The Start or Pulse it belongs to.
+    source: u64,
 }
 
-/// The last complete pulse, waiting for the next rise (its duty window's end).
+/// The last complete pulse, waiting for the next rise (to judge it as doubled or not).
 #[derive(Clone, Copy, Debug)]
 struct Done {
     rise: u64,
-    on: u64,
     settings: Option<TimerSettings>,
-    caps: Caps,
     /// Ended by an `Off`, or a one-pulse (the timer stopped): no update event may raise the line
     /// after it.
     cut: bool,
@@ -175,6 +204,14 @@ pub struct LineCheck {
     active: Option<TimerSettings>,
     pending: Option<TimerSettings>,
     spans: VecDeque<Span>,
+    /// On-times a duty window may still hold, in time order.
+    recent: VecDeque<OnTime>,
+    /// Rises whose window (starting there) is not yet over, with its length.
+    open_windows: VecDeque<(u64, u64)>,
+    /// Scene changes a window may still hold.
+    changes: VecDeque<u64>,
+    /// Starts and Pulses seen.
+    sources: u64,
     /// Pulses judged.
     pub pulses: u64,
     /// Violations found (all of them).
@@ -206,6 +243,10 @@ impl LineCheck {
             active: None,
             pending: None,
             spans: VecDeque::new(),
+            recent: VecDeque::new(),
+            open_windows: VecDeque::new(),
+            changes: VecDeque::new(),
+            sources: 0,
             pulses: 0,
             count: 0,
             by_rule: [0; Rule::ALL.len()],
@@ -244,12 +285,10 @@ impl LineCheck {
             self.before.loosen(self.caps);
         }
         self.changed_at = Some(at);
+        self.changes.push_back(at);
         self.caps = caps;
         if let Some(h) = self.high.as_mut() {
             h.caps.loosen(caps);
-        }
-        if let Some(d) = self.done.as_mut() {
-            d.caps.loosen(caps);
         }
     }
 
@@ -327,19 +366,6 @@ impl LineCheck {
         };
         if let Some(d) = self.done.take() {
             let period = r - d.rise;
-            if d.on * 1000 > period * d.caps.duty_permille {
-                self.violate(
-                    Rule::Duty,
-                    self.sample_at(d.rise),
-                    format!(
-                        "a pulse on for {} clocks, the next rise {period} clocks after its own: \
-                         {:.1} ‰ against a cap of {} ‰",
-                        d.on,
-                        d.on as f64 * 1000.0 / period as f64,
-                        d.caps.duty_permille
-                    ),
-                );
-            }
             if !started {
                 let expected = d.settings.map(|s| s.period_clocks());
                 // A line that never falls within its period (100 % duty) merges periods into
@@ -373,12 +399,17 @@ impl LineCheck {
         if self.changed_at.is_some_and(|c| r <= c) {
             caps.loosen(self.before);
         }
+        if started {
+            self.sources += 1;
+        }
         self.high = Some(High {
             rise: r,
             settings,
             caps,
             one_pulse,
+            source: self.sources,
         });
+        self.open_windows.push_back((r, self.caps.window_clocks));
     }
 
     fn fall(&mut self, f: u64, cut: bool) {
@@ -407,11 +438,12 @@ impl LineCheck {
                 ),
             );
         }
+        self.push_on(h.rise, f, h.source, !h.one_pulse);
+        let w = self.caps.window_clocks;
+        self.judge_window(f.saturating_sub(w), f);
         self.done = Some(Done {
             rise: h.rise,
-            on,
             settings: h.settings,
-            caps: h.caps,
             // After a one-pulse, as after an Off, the counter has stopped.
             cut: cut || h.one_pulse,
         });
@@ -448,11 +480,126 @@ impl LineCheck {
         }
     }
 
-    /// Spans no pulse can reach any more: before the current rise, or before `now`.
+    /// Spans no pulse can reach any more: before the current rise, or before `now`; windows
+    /// starting at a rise judged once over; on-times and scene changes no window can hold.
     fn prune(&mut self, now: u64) {
         let horizon = self.high.map_or(now, |h| h.rise);
         while self.spans.front().is_some_and(|s| s.b <= horizon) {
             self.spans.pop_front();
+        }
+        self.judge_open_windows(now);
+        let w = self.caps.window_clocks;
+        let keep_from = self
+            .open_windows
+            .front()
+            .map_or(now, |&(r, _)| r)
+            .min(horizon)
+            .saturating_sub(w);
+        while self.recent.front().is_some_and(|o| o.fall <= keep_from) {
+            self.recent.pop_front();
+        }
+        while self.changes.front().is_some_and(|&c| c < keep_from) {
+            self.changes.pop_front();
+        }
+    }
+
+    /// Keeps an on-time for the windows that may hold it.
+    fn push_on(&mut self, rise: u64, fall: u64, source: u64, periodic: bool) {
+        let (before, run_longest) = match self.recent.back() {
+            Some(o) => (
+                o.before + (o.fall - o.rise),
+                if o.source == source { o.run_longest } else { 0 },
+            ),
+            None => (0, 0),
+        };
+        self.recent.push_back(OnTime {
+            rise,
+            fall,
+            source,
+            periodic,
+            before,
+            run_longest: run_longest.max(fall - rise),
+        });
+    }
+
+    /// Judges the windows starting at a rise that are over by `now`.
+    fn judge_open_windows(&mut self, now: u64) {
+        while let Some(&(r, w)) = self.open_windows.front() {
+            if r + w > now {
+                break;
+            }
+            self.open_windows.pop_front();
+            self.judge_window(r, r + w);
+        }
+    }
+
+    /// The duty rule over `[a, b)` with the caps in force (a window holding a scene change is
+    /// not judged).
+    fn judge_window(&mut self, a: u64, b: u64) {
+        if self.changes.iter().any(|&c| c > a && c < b) {
+            return;
+        }
+        // The on-times touching [a, b): a run of `recent` (time order), and the one still high.
+        let first = self.recent.partition_point(|o| o.fall <= a);
+        let end = self.recent.partition_point(|o| o.rise < b);
+        let mut on = 0;
+        let mut ends: Option<(OnTime, OnTime)> = None;
+        if first < end {
+            if let (Some(&f), Some(&l)) = (self.recent.get(first), self.recent.get(end - 1)) {
+                on = l.before + (l.fall - l.rise) - f.before;
+                on -= a.saturating_sub(f.rise).min(f.fall - f.rise);
+                on -= l.fall.saturating_sub(b).min(l.fall - l.rise);
+                ends = Some((f, l));
+            }
+        }
+        if let Some(h) = self.high.filter(|h| h.rise < b) {
+            on += b - h.rise.max(a);
+            let still = OnTime {
+                rise: h.rise,
+                fall: b,
+                source: h.source,
+                periodic: !h.one_pulse,
+                before: 0,
+                run_longest: b - h.rise,
+            };
+            ends = Some((ends.map_or(still, |e| e.0), still));
+        }
+        let Some((f, l)) = ends else {
+            return;
+        };
+        let all_periodic = f.periodic;
+        let sources = (f.source, l.source);
+        // The run's longest on-time up to the window's end: the last kept on-time's running
+        // maximum, and the one still high.
+        let kept_last = if first < end {
+            self.recent.get(end - 1).map_or(0, |o| o.run_longest)
+        } else {
+            0
+        };
+        let longest = l.run_longest.max(kept_last);
+        // A window over by the last change is the old scene's (its on-time was spent under it).
+        let mut caps = self.caps;
+        if self.changed_at.is_some_and(|c| b <= c) {
+            caps.loosen(self.before);
+        }
+        let one_run = all_periodic && sources.0 == sources.1;
+        let allowance = if one_run {
+            (1000 - caps.duty_permille.min(1000)) * longest
+        } else {
+            0
+        };
+        if on * 1000 > caps.duty_permille * (b - a) + allowance {
+            self.violate(
+                Rule::Duty,
+                self.sample_at(a),
+                format!(
+                    "{on} clocks on in a duty window of {} clocks: {:.1} ‰ against a cap of {} ‰{}",
+                    b - a,
+                    on as f64 * 1000.0 / (b - a) as f64,
+                    caps.duty_permille,
+                    if one_run { " (one periodic run)" } else { "" }
+                ),
+            );
         }
     }
 
@@ -460,7 +607,14 @@ impl LineCheck {
     pub fn finish(&mut self, end: u64) {
         if let Some(h) = self.high.take() {
             self.judge_high(h.rise, end, end.saturating_sub(h.rise), &h.caps);
+            self.push_on(h.rise, end, h.source, !h.one_pulse);
+        }
+        // Windows still open are judged up to the end (the line is low after it).
+        while let Some((r, w)) = self.open_windows.pop_front() {
+            self.judge_window(r, r + w);
         }
         self.spans.clear();
+        self.recent.clear();
+        self.changes.clear();
     }
 }
