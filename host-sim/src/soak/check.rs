@@ -203,6 +203,9 @@ pub struct LineCheck {
     /// What the timer runs and what waits in its preload registers, as the core's actions say.
     active: Option<TimerSettings>,
     pending: Option<TimerSettings>,
+    /// A one-pulse's rise: arr + 1 − ccr ticks after its action (PWM mode 2 in one-pulse mode,
+    /// `GateAction::Pulse`), which may fall in a later step than the action.
+    pulse_rise_at: Option<u64>,
     spans: VecDeque<Span>,
     /// On-times a duty window may still hold, in time order.
     recent: VecDeque<OnTime>,
@@ -242,6 +245,7 @@ impl LineCheck {
             done: None,
             active: None,
             pending: None,
+            pulse_rise_at: None,
             spans: VecDeque::new(),
             recent: VecDeque::new(),
             open_windows: VecDeque::new(),
@@ -316,35 +320,44 @@ impl LineCheck {
             // which it makes.
             if let Some((ta, a)) = action {
                 if e.t > ta {
-                    self.action(a);
+                    self.action(ta, a);
                     action = None;
                 }
             }
             let at_action = action.filter(|(ta, _)| *ta == e.t).map(|(_, a)| a);
             if e.high {
-                let started =
-                    matches!(at_action, Some(GateAction::Start(_) | GateAction::Pulse(_)));
-                if let (true, Some(a)) = (started, at_action) {
-                    self.action(a);
+                // A Start rises at its action; a Pulse's rise comes later (`pulse_rise_at`).
+                let started = matches!(at_action, Some(GateAction::Start(_)));
+                if let (true, Some((ta, a))) = (started, action) {
+                    self.action(ta, a);
                     action = None;
                 }
-                let one_pulse = matches!(at_action, Some(GateAction::Pulse(_)));
-                self.rise(e.t, started, one_pulse);
+                let pulse = self.pulse_rise_at == Some(e.t);
+                if pulse {
+                    self.pulse_rise_at = None;
+                }
+                self.rise(e.t, started || pulse, pulse);
             } else {
                 self.fall(e.t, matches!(at_action, Some(GateAction::Off)));
             }
         }
-        if let Some((_, a)) = action {
-            self.action(a);
+        if let Some((ta, a)) = action {
+            self.action(ta, a);
         }
         self.prune(now);
     }
 
-    fn action(&mut self, a: GateAction) {
+    fn action(&mut self, ta: u64, a: GateAction) {
+        self.pulse_rise_at = None;
         match a {
-            GateAction::Start(s) | GateAction::Pulse(s) => {
+            GateAction::Start(s) => {
                 self.active = Some(s);
                 self.pending = None;
+            }
+            GateAction::Pulse(s) => {
+                self.active = Some(s);
+                self.pending = None;
+                self.pulse_rise_at = Some(ta + s.pulse_delay_clocks());
             }
             GateAction::Update(s) => self.pending = Some(s),
             GateAction::Off => {
