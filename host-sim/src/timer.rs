@@ -273,6 +273,8 @@ pub struct TimerModel {
     pub actions: Vec<(u64, GateAction)>,
     level: LevelPort,
     levels: Vec<LevelEdge>,
+    /// The code of the last level change handed out by [`TimerModel::take_settled`].
+    drained_code: Option<u16>,
 }
 
 impl TimerModel {
@@ -292,6 +294,7 @@ impl TimerModel {
             // [`TimerModel::with_level`].
             level: LevelPort::new(rf_level::REFERENCE_TABLE, clock_hz),
             levels: Vec::new(),
+            drained_code: None,
         }
     }
 
@@ -327,7 +330,12 @@ impl TimerModel {
         if self.levels.last().is_some_and(|e| e.t == t) {
             self.levels.pop();
         }
-        if self.levels.last().map(|e| e.code) != Some(code) {
+        // Against the last change recorded, drained ones included: a latch of the code
+        // already out is no change, whether or not `take_settled` has taken the edge that set
+        // it (a one-pulse latches its level a tick before its rise, so a drain can fall
+        // between them).
+        let last = self.levels.last().map(|e| e.code).or(self.drained_code);
+        if last != Some(code) {
             self.levels.push(LevelEdge { t, code });
         }
     }
@@ -528,6 +536,9 @@ impl TimerModel {
     /// Drops the recorded edges and actions (the level and the running period stay): a run
     /// that never ends (the virtual board) keeps constant memory.
     pub fn forget_history(&mut self) {
+        if let Some(l) = self.levels.last() {
+            self.drained_code = Some(l.code);
+        }
         self.edges.clear();
         self.actions.clear();
         self.levels.clear();
@@ -539,6 +550,9 @@ impl TimerModel {
     /// between steps, when every later action comes after the model's time, so no recorded
     /// edge can still be cancelled by one at the same instant.
     pub fn take_settled(&mut self, edges: &mut Vec<Edge>, levels: &mut Vec<LevelEdge>) {
+        if let Some(l) = self.levels.last() {
+            self.drained_code = Some(l.code);
+        }
         edges.clear();
         levels.clear();
         std::mem::swap(edges, &mut self.edges);
