@@ -404,11 +404,7 @@ impl AdcModel {
     /// sample, the sum scaled to the core's 16-conversion code. With every effect off this is
     /// exactly [`Self::sample`] at the stamp's position (same draws, same codes), and so it is
     /// during a fault window.
-    pub fn sample_moving(
-        &mut self,
-        position_at: &dyn Fn(f64) -> f64,
-        t_us: u64,
-    ) -> Option<Sample> {
+    pub fn sample_moving(&mut self, position_at: &dyn Fn(f64) -> f64, t_us: u64) -> Option<Sample> {
         let t_s = t_us as f64 * 1e-6;
         if !self.params.silicon_effects() || self.fault_at(t_us).is_some() {
             return self.sample(position_at(t_s), t_us);

@@ -115,8 +115,10 @@ pub struct Silicon {
     pub dma_cycles_per_transfer: f64,
     /// The modes swept.
     pub modes: Vec<AdcMode>,
-    /// Today's mode and conversions per sample (at 10 kHz).
+    /// The previous default's mode and conversions per sample (at 10 kHz).
     pub today: (usize, u32),
+    /// The board's default now (`saw_boards`): mode and conversions per sample (at 10 kHz).
+    pub default: (usize, u32),
 }
 
 impl Silicon {
@@ -161,6 +163,7 @@ pub fn f446() -> Silicon {
             mode(3, 3.0),
         ],
         today: (0, 16),
+        default: (0, 16),
     }
 }
 
@@ -198,6 +201,8 @@ pub fn g474() -> Silicon {
             mode(1, 2.5),
         ],
         today: (0, 16),
+        // One ADC at 24.5 cycles, 64 conversions (nucleo_g474re.rs).
+        default: (2, 64),
     }
 }
 
@@ -536,7 +541,12 @@ pub fn sweep(si: &Silicon, opts: &BudgetOptions) -> Vec<Point> {
         let clean_lags: Vec<f64> = ests
             .iter()
             .map(|(k, e)| {
-                design_lag_us(*k, e.name.starts_with("med3"), rate, m as f64 * mode.step_s() * 1e6)
+                design_lag_us(
+                    *k,
+                    e.name.starts_with("med3"),
+                    rate,
+                    m as f64 * mode.step_s() * 1e6,
+                )
             })
             .collect();
         let per_seed: Vec<Vec<(f64, f64)>> = (0..opts.seeds)
@@ -627,7 +637,7 @@ pub fn best_at_lag(points: &[Point], lag_ms: f64) -> Option<&Point> {
 
 /// Draws one board's chart: lag against noise, one point per configuration (the Pareto-useful
 /// ones: for each configuration, every window), target lines, infeasible points as crosses.
-pub fn chart(path: &Path, title: &str, points: &[Point]) -> Result<(), String> {
+pub fn chart(path: &Path, title: &str, si: &Silicon, points: &[Point]) -> Result<(), String> {
     let root = BitMapBackend::new(path, (1400, 900)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let mut chart = ChartBuilder::on(&root)
@@ -635,10 +645,7 @@ pub fn chart(path: &Path, title: &str, points: &[Point]) -> Result<(), String> {
         .margin(15)
         .x_label_area_size(50)
         .y_label_area_size(70)
-        .build_cartesian_2d(
-            (0.1f64..4.0f64).log_scale(),
-            (0.1f64..30.0f64).log_scale(),
-        )
+        .build_cartesian_2d((0.2f64..5.0f64).log_scale(), (0.1f64..30.0f64).log_scale())
         .map_err(|e| e.to_string())?;
     chart
         .configure_mesh()
@@ -657,7 +664,7 @@ pub fn chart(path: &Path, title: &str, points: &[Point]) -> Result<(), String> {
         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], red.stroke_width(2)));
     chart
         .draw_series(LineSeries::new(
-            vec![(0.1, TARGET_NOISE_MM_S), (4.0, TARGET_NOISE_MM_S)],
+            vec![(0.2, TARGET_NOISE_MM_S), (5.0, TARGET_NOISE_MM_S)],
             red.stroke_width(2),
         ))
         .map_err(|e| e.to_string())?;
@@ -671,7 +678,7 @@ pub fn chart(path: &Path, title: &str, points: &[Point]) -> Result<(), String> {
         let c = colour(rate);
         let ok: Vec<(f64, f64)> = points
             .iter()
-            .filter(|p| p.rate_hz == rate && p.settles && p.lag_ms > 0.1)
+            .filter(|p| p.rate_hz == rate && p.settles && (0.2..5.0).contains(&p.shown_lag_ms()))
             .map(|p| (p.shown_lag_ms(), p.noise_mm_s.clamp(0.1, 30.0)))
             .collect();
         chart
@@ -681,7 +688,7 @@ pub fn chart(path: &Path, title: &str, points: &[Point]) -> Result<(), String> {
             .legend(move |(x, y)| Circle::new((x + 10, y), 4, c.filled()));
         let bad: Vec<(f64, f64)> = points
             .iter()
-            .filter(|p| p.rate_hz == rate && !p.settles && p.lag_ms > 0.1)
+            .filter(|p| p.rate_hz == rate && !p.settles && (0.2..5.0).contains(&p.shown_lag_ms()))
             .map(|p| (p.shown_lag_ms(), p.noise_mm_s.clamp(0.1, 30.0)))
             .collect();
         chart
@@ -693,11 +700,25 @@ pub fn chart(path: &Path, title: &str, points: &[Point]) -> Result<(), String> {
             ))
             .legend(move |(x, y)| Cross::new((x + 10, y), 4, c.stroke_width(1)));
     }
-    // The pick and today's default, labelled.
-    let today = points.iter().find(|p| {
-        p.rate_hz == 10_000 && p.conversions == 16 && p.estimator == "med3+lsq32" && p.settles
-    });
-    for (p, label) in [(today, "today"), (pick(points), "pick")] {
+    // The previous default, the default now and the pick, labelled.
+    let at = |(mi, c): (usize, u32)| {
+        points.iter().find(|p| {
+            p.mode == si.modes[mi].name
+                && p.rate_hz == 10_000
+                && p.conversions == c
+                && p.estimator == "med3+lsq32"
+        })
+    };
+    let previous = if si.default == si.today {
+        None
+    } else {
+        at(si.today)
+    };
+    for (p, label) in [
+        (previous, "previous default"),
+        (at(si.default), "default"),
+        (pick(points), "meets both"),
+    ] {
         if let Some(p) = p {
             chart
                 .draw_series(std::iter::once(Circle::new(
@@ -794,6 +815,7 @@ pub fn run(opts: &BudgetOptions) -> Result<Vec<Point>, String> {
                 "{}: lag against velocity noise per ADC configuration (floor {} LSB, {} Hz corner)",
                 si.board.name, opts.floor_lsb, opts.floor_corner_hz
             ),
+            si,
             &pts,
         )?;
         let _ = writeln!(w, "## {}\n", si.board.name);
@@ -822,29 +844,40 @@ pub fn run(opts: &BudgetOptions) -> Result<Vec<Point>, String> {
                 }
             );
         }
-        let _ = writeln!(w, "\nPick (both targets met, lowest CPU + DMA load):\n\n{HEADER}");
+        let _ = writeln!(
+            w,
+            "\nPick (both targets met, lowest CPU + DMA load):\n\n{HEADER}"
+        );
         match pick(&pts) {
             Some(p) => row(w, p),
             None => {
-                let _ = writeln!(w, "| {} | none meets both targets | | | | | | | | | | | | | | |", si.board.name);
+                let _ = writeln!(
+                    w,
+                    "| {} | none meets both targets | | | | | | | | | | | | | | |",
+                    si.board.name
+                );
             }
         }
-        let _ = writeln!(w, "\nToday's configuration under the same model, and the lowest noise at each lag limit:\n\n{HEADER}");
-        let (tm, tc) = si.today;
-        if let Some(p) = pts.iter().find(|p| {
-            p.mode == si.modes[tm].name
-                && p.rate_hz == 10_000
-                && p.conversions == tc
-                && p.estimator == "med3+lsq32"
-        }) {
-            row(w, p);
+        let _ = writeln!(w, "\nThe previous default under the same model, the board's default now, and the lowest noise at each lag limit:\n\n{HEADER}");
+        for (mi, c) in [si.today, si.default] {
+            if let Some(p) = pts.iter().find(|p| {
+                p.mode == si.modes[mi].name
+                    && p.rate_hz == 10_000
+                    && p.conversions == c
+                    && p.estimator == "med3+lsq32"
+            }) {
+                row(w, p);
+            }
         }
         for lag in [0.6, 0.7, 0.8, 1.0, 1.2, 1.7] {
             if let Some(p) = best_at_lag(&pts, lag) {
                 row(w, p);
             }
         }
-        let _ = writeln!(w, "\nEvery configuration with lag ≤ 1 ms and noise ≤ 3 mm/s:\n\n{HEADER}");
+        let _ = writeln!(
+            w,
+            "\nEvery configuration with lag ≤ 1 ms and noise ≤ 3 mm/s:\n\n{HEADER}"
+        );
         for p in pts
             .iter()
             .filter(|p| p.lag_ms <= 1.0 && p.noise_mm_s <= 3.0)
@@ -931,7 +964,10 @@ pub fn run_from_env() -> Option<std::process::ExitCode> {
                     None => {}
                 }
             }
-            println!("wrote {}", opts.out_dir.join("conversion-budget-results.md").display());
+            println!(
+                "wrote {}",
+                opts.out_dir.join("conversion-budget-results.md").display()
+            );
             Some(std::process::ExitCode::SUCCESS)
         }
         Err(e) => {
