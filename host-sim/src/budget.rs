@@ -190,7 +190,7 @@ pub fn g474() -> Silicon {
         hold_pf: 5.0,
         source: "DS12288 C_ADC 5 pF; R_ADC 11.5 kΩ effective, fitted to the R_AIN-max table as \
                  read in firmware/src/board/g474.rs (assumption, values from memory)",
-        wait_states: "4 WS at 150 MHz, range 1 (RM0440 §3.3.3, table 9), ART accelerator on",
+        wait_states: "4 WS at 150 MHz, range 1 normal mode (RM0440 §3.3.3), ART accelerator on",
         dma_cycles_per_transfer: 4.0,
         modes: vec![
             mode(1, 92.5),
