@@ -487,12 +487,17 @@ pub fn rail_fault(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     let t0 = o.t0.unwrap_or(0);
     let start = t0 + TICKS_PER_S * 105 / 1000;
     let stop = t0 + TICKS_PER_S * 305 / 1000;
-    // The first trigger inside the window and the sample period.
+    // The first trigger whose conversions are all faulted, and the sample period. The ADC holds
+    // its input at the end of each sampling time, so a trigger up to one sampling time before
+    // the onset still converts only faulted input; 0.5 µs is under the shortest of the boards'
+    // (the G474's 24.5 cycles at 37.5 MHz = 653 ns since the conversion budget; the F446's 56
+    // cycles = 2.5 µs). The 1 µs this was before let a G474 trigger 0.7 µs ahead of the onset
+    // count, whose first conversion is held 47 ns before it.
     let first = o
         .triggers
         .iter()
         .copied()
-        .find(|&t| t + TICKS_PER_S / 1_000_000 >= start)
+        .find(|&t| t + TICKS_PER_S / 2_000_000 >= start)
         .unwrap_or(start);
     let period = TICKS_PER_S / board.def().sample_rate_hz as u64;
     let deadline = first + period;

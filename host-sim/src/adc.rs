@@ -10,6 +10,20 @@
 //! The sum is drawn in one step from its exact distribution ([`crate::noise::SumTable`]) where
 //! that is valid, and conversion by conversion elsewhere (near the rails, tiny or huge σ, or
 //! when [`AdcParams::per_conversion`] asks for it).
+//!
+//! Silicon effects for the conversion budget (`docs/conversion-budget.md`), each off by default
+//! so the published figures do not move, and used only through [`AdcModel::sample_moving`]:
+//! - [`Settling`]: the sample-and-hold capacitor charging through the rheostat's Thevenin
+//!   resistance R·u(1 − u) for the programmed sampling time (a deterministic, position-dependent
+//!   error: the fraction exp(−t_s/τ) of the step from the charge the capacitor kept from its
+//!   previous conversion; interleaved ADCs each keep their own), and an optional capacitor at
+//!   the pin (an RC low-pass, i.e. lag);
+//! - a noise floor common to every conversion of a sample ([`AdcParams::floor_lsb_rms`]):
+//!   reference, supply and wiper noise below the sample rate, which oversampling cannot average;
+//! - the conversion window ([`AdcParams::conversion_window_us`]): the conversions are spread over
+//!   time before the sample's stamp, so the sample is the mean position over that window;
+//! - any number of conversions per sample, scaled back to the core's 16-conversion code (the
+//!   G474 oversampler's right shift, or the F446's software sum shifted).
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -90,6 +104,70 @@ pub struct AdcParams {
     /// Draw every conversion instead of the sum's tabulated distribution (the reference the
     /// fast path is measured against; about 10× slower).
     pub per_conversion: bool,
+    /// Sampling-time settling through the rheostat; None: every conversion sees the pin's
+    /// voltage exactly (the model of every published figure).
+    pub settling: Option<Settling>,
+    /// Noise common to every conversion of one sample (it does not average down with
+    /// oversampling), 12-bit LSB RMS; 0: none.
+    pub floor_lsb_rms: f64,
+    /// Corner of that noise's first-order spectrum, Hz: consecutive samples Δt apart are
+    /// correlated by exp(−2π·f_c·Δt).
+    pub floor_corner_hz: f64,
+    /// Span of one sample's conversions, ending at its timestamp, µs (evenly spaced; the
+    /// sample's effective time is the span's centre); 0: all at the timestamp.
+    pub conversion_window_us: f64,
+}
+
+/// The sample-and-hold capacitor against the rheostat (STM32 ADC input model: the source
+/// resistance in series with the sampling switch R_ADC charging C_ADC for t_s).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settling {
+    /// Programmed sampling time, ns.
+    pub sampling_time_ns: f64,
+    /// End-to-end resistance of the rheostat wired as a divider, Ω: its Thevenin resistance at
+    /// wiper fraction u is R·u(1 − u) (R/4 at mid travel).
+    pub pot_ohm: f64,
+    /// The ADC's sampling switch resistance R_ADC, Ω.
+    pub switch_ohm: f64,
+    /// The ADC's hold capacitor C_ADC, pF.
+    pub hold_pf: f64,
+    /// A capacitor from the pin to ground, nF (0: none fitted). It low-passes the pin with
+    /// τ = R_s·C (lag) and, being charged, hands the hold capacitor the pin's voltage at once.
+    pub pin_nf: f64,
+    /// Interleaved ADCs sampling the pin in turn, each with its own hold capacitor.
+    pub adcs: u32,
+}
+
+impl Settling {
+    /// Thevenin resistance of the rheostat at a conversion value of `v_lsb` (12-bit), Ω.
+    pub fn source_ohm(&self, v_lsb: f64) -> f64 {
+        let u = (v_lsb / CONVERSION_FULL_SCALE as f64).clamp(0.0, 1.0);
+        self.pot_ohm * u * (1.0 - u)
+    }
+
+    /// The fraction of the step from the held voltage that is left after the sampling time at
+    /// `v_lsb`: exp(−t_s / ((R_s + R_ADC)·C_ADC)). With a pin capacitor the hold capacitor
+    /// charges from it through R_ADC alone (C_pin ≫ C_ADC, so the charge it gives is ignored).
+    pub fn residual_fraction(&self, v_lsb: f64) -> f64 {
+        let r_ohm = if self.pin_nf > 0.0 {
+            self.switch_ohm
+        } else {
+            self.source_ohm(v_lsb) + self.switch_ohm
+        };
+        // Ω × pF = ps: τ in ns is R·C / 1000.
+        let tau_ns = r_ohm * self.hold_pf * 1e-3;
+        if tau_ns <= 0.0 {
+            0.0
+        } else {
+            (-self.sampling_time_ns / tau_ns).exp()
+        }
+    }
+
+    /// Sampling time needed for a full-scale step to settle within `lsb` (12-bit) at the worst
+    /// source resistance (mid travel), ns: τ·ln(4096 / lsb).
+    pub fn needed_ns(pot_ohm: f64, switch_ohm: f64, hold_pf: f64, lsb: f64) -> f64 {
+        (pot_ohm / 4.0 + switch_ohm) * hold_pf * 1e-3 * (CONVERSION_FULL_SCALE as f64 / lsb).ln()
+    }
 }
 
 impl Default for AdcParams {
@@ -101,6 +179,10 @@ impl Default for AdcParams {
             seed: 1,
             faults: Vec::new(),
             per_conversion: false,
+            settling: None,
+            floor_lsb_rms: 0.0,
+            floor_corner_hz: 1_000.0,
+            conversion_window_us: 0.0,
         }
     }
 }
@@ -112,6 +194,28 @@ impl AdcParams {
         self.seed = seed;
         self
     }
+
+    /// True when a silicon effect of the conversion budget is on (or the conversions per sample
+    /// are not the core's 16): [`AdcModel::sample_moving`] then draws conversion by conversion.
+    pub fn silicon_effects(&self) -> bool {
+        self.settling.is_some()
+            || self.floor_lsb_rms > 0.0
+            || self.conversion_window_us > 0.0
+            || self.oversample != OVERSAMPLE
+    }
+}
+
+/// What the silicon effects remember between conversions.
+#[derive(Clone, Debug, Default)]
+struct Held {
+    /// Each interleaved ADC's hold capacitor, 12-bit LSB (None before its first conversion).
+    caps_lsb: Vec<Option<f64>>,
+    /// The ADC that converts next.
+    next_adc: usize,
+    /// The pin capacitor's voltage, 12-bit LSB, and when it was last brought up to date, s.
+    pin: Option<(f64, f64)>,
+    /// The noise floor's value, 12-bit LSB, and the time of the sample it was drawn for, µs.
+    floor: Option<(f64, u64)>,
 }
 
 /// The rheostat and ADC.
@@ -122,6 +226,7 @@ pub struct AdcModel {
     rng: ChaCha8Rng,
     noise: Option<Normal<f64>>,
     table: Option<SumTable>,
+    held: Held,
 }
 
 /// Why an ADC model could not be built.
@@ -134,6 +239,13 @@ pub enum AdcError {
         /// The noise asked for, LSB RMS.
         noise_lsb_rms: f64,
     },
+    /// A silicon-effect parameter that is negative, non-finite or zero where it must count.
+    BadSilicon {
+        /// Which parameter.
+        what: &'static str,
+        /// Its value.
+        value: f64,
+    },
 }
 
 impl std::fmt::Display for AdcError {
@@ -143,6 +255,10 @@ impl std::fmt::Display for AdcError {
             AdcError::BadNoise { noise_lsb_rms } => write!(
                 f,
                 "ADC noise {noise_lsb_rms} LSB RMS must be finite and at least 0 LSB"
+            ),
+            AdcError::BadSilicon { what, value } => write!(
+                f,
+                "ADC {what} {value} must be finite and at least 0 (and a count at least 1)"
             ),
         }
     }
@@ -173,12 +289,47 @@ impl AdcModel {
         } else {
             SumTable::new(params.noise_lsb_rms, params.oversample)
         };
+        for (what, v) in [
+            ("noise floor", params.floor_lsb_rms),
+            ("noise floor corner", params.floor_corner_hz),
+            ("conversion window", params.conversion_window_us),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(AdcError::BadSilicon { what, value: v });
+            }
+        }
+        if let Some(s) = &params.settling {
+            for (what, v) in [
+                ("sampling time", s.sampling_time_ns),
+                ("rheostat resistance", s.pot_ohm),
+                ("switch resistance", s.switch_ohm),
+                ("hold capacitor", s.hold_pf),
+                ("pin capacitor", s.pin_nf),
+            ] {
+                if !v.is_finite() || v < 0.0 {
+                    return Err(AdcError::BadSilicon { what, value: v });
+                }
+            }
+            if s.adcs == 0 {
+                return Err(AdcError::BadSilicon {
+                    what: "interleaved ADC count",
+                    value: 0.0,
+                });
+            }
+        }
+        if params.oversample == 0 {
+            return Err(AdcError::BadSilicon {
+                what: "conversions per sample",
+                value: 0.0,
+            });
+        }
         Ok(Self {
             mapper,
             params,
             rng,
             noise,
             table,
+            held: Held::default(),
         })
     }
 
@@ -245,6 +396,95 @@ impl AdcModel {
             None => self.sum_of_conversions(position_um),
         };
         Some(Sample::from_sum(sum, t_us as u32))
+    }
+
+    /// The control sample at `t_us` for a finger whose position at time t (s) is
+    /// `position_at(t)`, with the silicon effects of [`AdcParams`]: each conversion of the
+    /// window at its own time and through the hold capacitor, the noise floor common to the
+    /// sample, the sum scaled to the core's 16-conversion code. With every effect off this is
+    /// exactly [`Self::sample`] at the stamp's position (same draws, same codes), and so it is
+    /// during a fault window.
+    pub fn sample_moving(&mut self, position_at: &dyn Fn(f64) -> f64, t_us: u64) -> Option<Sample> {
+        let t_s = t_us as f64 * 1e-6;
+        if !self.params.silicon_effects() || self.fault_at(t_us).is_some() {
+            return self.sample(position_at(t_s), t_us);
+        }
+        let m = self.params.oversample;
+        let window_s = self.params.conversion_window_us * 1e-6;
+        let floor = self.floor_at(t_us);
+        let top = (CONVERSION_FULL_SCALE - 1) as f64;
+        let mut sum = 0.0f64;
+        for i in 0..m {
+            // Evenly spread, the last ending at the stamp: the window's centre is the sample's
+            // effective time.
+            let t_conv_s = t_s - window_s + (i as f64 + 0.5) * window_s / m as f64;
+            let ideal = self.ideal_conversion(position_at(t_conv_s)) + self.params.offset_lsb;
+            let held = self.settle(ideal, t_conv_s);
+            let mut v = held + floor;
+            if let Some(n) = &self.noise {
+                v += n.sample(&mut self.rng);
+            }
+            sum += v.round().clamp(0.0, top);
+        }
+        // The core's code is the sum of 16 conversions: scale with rounding (the G474
+        // oversampler's shift rounds; the F446's software sum is shifted the same way).
+        let code = (sum * OVERSAMPLE as f64 / m as f64).round() as u32;
+        Some(Sample::from_sum(code, t_us as u32))
+    }
+
+    /// The noise floor for the sample at `t_us`: a first-order (Ornstein–Uhlenbeck) process of
+    /// σ = `floor_lsb_rms`, drawn exactly from its value at the previous sample.
+    fn floor_at(&mut self, t_us: u64) -> f64 {
+        let sigma = self.params.floor_lsb_rms;
+        if sigma <= 0.0 {
+            return 0.0;
+        }
+        let z: f64 = rand_distr::StandardNormal.sample(&mut self.rng);
+        let v = match self.held.floor {
+            Some((prev, t_prev)) if t_us > t_prev => {
+                let dt_s = (t_us - t_prev) as f64 * 1e-6;
+                let a = (-2.0 * std::f64::consts::PI * self.params.floor_corner_hz * dt_s).exp();
+                a * prev + sigma * (1.0 - a * a).sqrt() * z
+            }
+            Some((prev, _)) => prev,
+            None => sigma * z,
+        };
+        self.held.floor = Some((v, t_us));
+        v
+    }
+
+    /// The voltage one conversion holds when the pin's ideal value is `ideal_lsb` at `t_s`:
+    /// the pin capacitor (if fitted) low-passes the source, then the converting ADC's hold
+    /// capacitor closes the fraction 1 − exp(−t_s/τ) of the gap from the charge it kept.
+    fn settle(&mut self, ideal_lsb: f64, t_s: f64) -> f64 {
+        let Some(s) = self.params.settling else {
+            return ideal_lsb;
+        };
+        let pin = if s.pin_nf > 0.0 {
+            let tau_s = s.source_ohm(ideal_lsb) * s.pin_nf * 1e-9;
+            let v = match self.held.pin {
+                Some((v, t_prev)) if tau_s > 0.0 => {
+                    let a = (-(t_s - t_prev).max(0.0) / tau_s).exp();
+                    ideal_lsb + (v - ideal_lsb) * a
+                }
+                _ => ideal_lsb,
+            };
+            self.held.pin = Some((v, t_s));
+            v
+        } else {
+            ideal_lsb
+        };
+        if self.held.caps_lsb.len() != s.adcs as usize {
+            self.held.caps_lsb = vec![None; s.adcs as usize];
+        }
+        let k = self.held.next_adc % s.adcs as usize;
+        self.held.next_adc = (k + 1) % s.adcs as usize;
+        let held = match self.held.caps_lsb[k] {
+            Some(prev) => pin + (prev - pin) * s.residual_fraction(pin),
+            None => pin,
+        };
+        self.held.caps_lsb[k] = Some(held);
+        held
     }
 
     /// The summed conversions inside a spike or drift window, whose offset is `extra_lsb` now:

@@ -113,7 +113,7 @@ fn parse_level(s: &str) -> Result<log::LevelFilter, String> {
     name = "host-sim",
     version,
     after_help = "Other commands of this binary: host-sim model --help, host-sim tile-to-scene \
-                  --help, host-sim bench --help."
+                  --help, host-sim bench --help, host-sim budget --help."
 )]
 pub struct Args {
     /// Trajectory kind.

@@ -14,6 +14,7 @@
 
 pub mod adc;
 pub mod bench;
+pub mod budget;
 pub mod chart;
 pub mod cli;
 pub mod door;

@@ -25,6 +25,10 @@ fn main() -> ExitCode {
     if let Some(code) = host_sim::bench::run_from_env() {
         return code;
     }
+    // `host-sim budget …`: lag against noise per ADC configuration (docs/conversion-budget.md).
+    if let Some(code) = host_sim::budget::run_from_env() {
+        return code;
+    }
     // `host-sim serve …`: a virtual board behind a pty, for `saw` (docs/link.md). It logs
     // what the firmware logs (boot scene, refusals) at info.
     if std::env::args().nth(1).as_deref() == Some("serve") {
