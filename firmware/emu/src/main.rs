@@ -295,7 +295,8 @@ fn single(texture: Texture, lines: bool) -> Config {
     cfg
 }
 
-fn texture_costs(g: &Golden, traj: &str, n: usize) {
+/// The one-region scenes of the per-kind table: (kind, texture, with the lines scene's lines).
+fn kind_cases() -> [(&'static str, Texture, bool); 7] {
     let random = RandomBurst {
         center_millihz: 40_000,
         spread_permille: 300,
@@ -308,7 +309,7 @@ fn texture_costs(g: &Golden, traj: &str, n: usize) {
         render: GratingRender::VelocitySynthesis,
         ..Grating::new(1_000)
     };
-    let cases: [(&str, Texture, bool); 7] = [
+    [
         ("off", Texture::Off, false),
         ("constant", Texture::constant_hz(80), false),
         ("grating", Texture::Grating(Grating::new(1_000)), false),
@@ -316,7 +317,11 @@ fn texture_costs(g: &Golden, traj: &str, n: usize) {
         ("material", Texture::Material(Material::fig5(0.3)), false),
         ("random", Texture::Random(random), false),
         ("lines+off", Texture::Off, true),
-    ];
+    ]
+}
+
+fn texture_costs(g: &Golden, traj: &str, n: usize) {
+    let cases = kind_cases();
     let overhead = loop_overhead(n);
     for (kind, texture, lines) in cases {
         let mut ctl = new_controller(g, &single(texture, lines));
@@ -507,6 +512,26 @@ fn stage_costs(n: usize) {
     );
 }
 
+/// Profiling build (`EMU_PROFILE=<kind>/<trajectory>` at build time, scripts/emu-profile.sh):
+/// replays only that one-region scene over the default scene's vector of that trajectory, so
+/// QEMU's per-instruction trace holds one case.
+fn profile(g: &Golden, case: &str) -> ! {
+    let (kind, traj) = case.split_once('/').unwrap_or((case, "back-and-forth"));
+    let mut want = [0u8; 48];
+    let want = join(&mut want, "default", traj);
+    let n = load_bench_inputs(g, want);
+    for (k, texture, lines) in kind_cases() {
+        if k == kind {
+            let mut ctl = new_controller(g, &single(texture, lines));
+            let cost = replay(&mut ctl, n);
+            report("PROFILE", case, n, per_sample_x10(cost, 0, n));
+            debug::exit(debug::EXIT_SUCCESS);
+        }
+    }
+    defmt::error!("EMU_PROFILE: no kind {=str}", kind);
+    fail()
+}
+
 #[entry]
 fn main() -> ! {
     let mut cp = cortex_m::Peripherals::take().unwrap_or_else(|| fail());
@@ -530,6 +555,9 @@ fn main() -> ! {
         INSTR_PER_TICK
     );
 
+    if let Some(case) = option_env!("EMU_PROFILE") {
+        profile(&g, case);
+    }
     let ok = equivalence_and_scene_costs(&g);
     for traj in ["back-and-forth", "rest"] {
         let mut want = [0u8; 48];
