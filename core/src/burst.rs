@@ -387,9 +387,9 @@ impl SafetyLimits {
         }
     }
 
-    /// The on-time cap in kernel-clock cycles.
+    /// The on-time cap in kernel-clock cycles, ⌊µs · clock / 10^6⌋ (a gate pulse checks it).
     pub fn max_on_time_clocks(&self, timer: &BurstTimer) -> u64 {
-        self.max_on_time_us as u64 * timer.clock_hz as u64 / 1_000_000
+        div_by_million(self.max_on_time_us as u64 * timer.clock_hz as u64)
     }
 
     /// True when periodic bursts `s` stay inside both caps (multiplies only: it runs on every
@@ -409,6 +409,21 @@ impl SafetyLimits {
         on_clocks <= u64::MAX / 1_000_000
             && on_clocks * 1_000_000 <= self.max_on_time_us as u64 * timer.clock_hz as u64
     }
+}
+
+/// ⌊x / 10^6⌋ without a u64 division (a ~200-instruction library call on the M4F): ⌊x / 10^6⌋
+/// = ⌊⌊x / 2^6⌋ / 15 625⌋, and the second division is done as long division in 32- and 16-bit
+/// digits, each remainder below 15 625 < 2^16 so every partial dividend fits 32 bits: three
+/// hardware divides.
+fn div_by_million(x: u64) -> u64 {
+    const D: u32 = 15_625;
+    let y = x >> 6;
+    let hi = (y >> 32) as u32;
+    let (q_hi, r) = (hi / D, hi % D);
+    let mid = (r << 16) | ((y >> 16) as u32 & 0xffff);
+    let (q_mid, r) = (mid / D, mid % D);
+    let lo = (r << 16) | (y as u32 & 0xffff);
+    ((q_hi as u64) << 32) | ((q_mid as u64) << 16) | (lo / D) as u64
 }
 
 /// Per-sample planner for textures whose f_b changes with motion: the divisions and cap
@@ -753,6 +768,27 @@ mod tests {
         // The smallest pulse is one tick.
         let one = T16.one_pulse(0).unwrap();
         assert_eq!((one.psc, one.arr, one.ccr), (0, 1, 1));
+    }
+
+    /// The division-free ⌊x / 10^6⌋ against the u64 division: edges of every digit and
+    /// pseudo-random values over the whole u64 range.
+    #[test]
+    fn divides_by_a_million_exactly() {
+        let mut lcg = 0x9e37_79b9_7f4a_7c15u64;
+        let mut xs = std::vec![0, 1, 999_999, 1_000_000, 1_000_001, u64::MAX, u64::MAX - 1];
+        for shift in 0..64 {
+            let p = 1u64 << shift;
+            xs.extend([p - 1, p, p + 1, p.wrapping_mul(1_000_000)]);
+        }
+        for _ in 0..100_000 {
+            lcg = lcg
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            xs.push(lcg >> (lcg % 64));
+        }
+        for x in xs {
+            assert_eq!(div_by_million(x), x / 1_000_000, "{x}");
+        }
     }
 
     /// A 100 % duty under a 100 % cap still lets the line fall for a tick every period (CCR ≤

@@ -22,6 +22,11 @@ pub struct LsqSlope<const N: usize> {
     sampler: Sampler,
     /// µm/s per unit of 2·Σ(k − (N−1)/2)·x_k, Q32: 6·10⁶ / (N (N²−1) T_s).
     gain_q32: i64,
+    /// The range of the centred sum whose product with `gain_q32` fits i64 (the checked
+    /// multiply's range, worked out once: a 64-bit overflow check is ~16 instructions on the
+    /// M4F, a range test ~6).
+    centred_min: i64,
+    centred_max: i64,
 }
 
 impl<const N: usize> LsqSlope<N> {
@@ -43,6 +48,10 @@ impl<const N: usize> LsqSlope<N> {
             weighted: 0,
             sampler: Sampler::new(sample_period_us),
             gain_q32,
+            // Truncating divisions: c · g ≤ MAX ⟺ c ≤ ⌊MAX / g⌋ and c · g ≥ MIN ⟺ c ≥ ⌈MIN / g⌉
+            // for g > 0; a zero gain never overflows.
+            centred_min: i64::MIN.checked_div(gain_q32).unwrap_or(i64::MIN),
+            centred_max: i64::MAX.checked_div(gain_q32).unwrap_or(i64::MAX),
         })
     }
 }
@@ -83,15 +92,12 @@ impl<const N: usize> LsqSlope<N> {
         let centred2 = 2 * self.weighted - (N as i64 - 1) * self.sum;
         // Rounded to the nearest µm/s. The product fits i64 for any real window (N = 32,
         // T_s = 100 µs, a full 63 mm jump: 2.5·10¹⁷); a pathological one saturates.
-        let v = match centred2.checked_mul(self.gain_q32) {
-            Some(p) => (p + (1 << 31)) >> 32,
-            None => {
-                if centred2 > 0 {
-                    i64::MAX >> 32
-                } else {
-                    i64::MIN >> 32
-                }
-            }
+        let v = if (self.centred_min..=self.centred_max).contains(&centred2) {
+            (centred2 * self.gain_q32 + (1 << 31)) >> 32
+        } else if centred2 > 0 {
+            i64::MAX >> 32
+        } else {
+            i64::MIN >> 32
         };
         Some(v.clamp(i32::MIN as i64, i32::MAX as i64) as i32)
     }
@@ -143,6 +149,30 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
 mod tests {
     use super::*;
     use crate::velocity::EstimatorError;
+
+    /// The precomputed range is exactly where the product with the gain does not overflow
+    /// (the checked multiply it replaced), for several windows and periods.
+    #[test]
+    fn the_range_test_is_the_checked_multiply() {
+        fn check<const N: usize>(period_us: u32) {
+            let e = LsqSlope::<N>::new(period_us).unwrap();
+            for c in [e.centred_min, e.centred_max] {
+                for d in -2..=2i64 {
+                    let c = c.saturating_add(d);
+                    assert_eq!(
+                        (e.centred_min..=e.centred_max).contains(&c),
+                        c.checked_mul(e.gain_q32).is_some(),
+                        "N {N} T {period_us} c {c}"
+                    );
+                }
+            }
+        }
+        check::<2>(10);
+        check::<32>(100);
+        check::<64>(100);
+        check::<16>(100_000);
+        check::<1024>(100_000);
+    }
 
     #[test]
     fn exact_on_a_ramp() {
