@@ -197,6 +197,33 @@ fn replay<E: VelocityEstimator>(ctl: &mut Controller<E>, n: usize) -> u64 {
     })
 }
 
+/// Samples before the "steady" worst: the first sample (scene announcement, region lookup) and
+/// the estimator's filling window (median of 3 + 32) cost once per scene or fault.
+const WORST_FROM: usize = 64;
+
+/// Runs the samples through `ctl` one at a time, each timed alone; returns the costliest
+/// sample's instructions (less `empty`, an empty measurement's; ±40: one SysTick tick) and its
+/// index, over all samples and over those from [`WORST_FROM`] on.
+fn replay_worst<E: VelocityEstimator>(
+    ctl: &mut Controller<E>,
+    n: usize,
+    empty: u64,
+) -> ((u64, usize), (u64, usize)) {
+    let samples = unsafe { &*core::ptr::addr_of!(SAMPLES) };
+    let outputs = unsafe { &mut *core::ptr::addr_of_mut!(OUTPUTS) };
+    let (mut worst, mut steady) = ((0, 0), (0, 0));
+    for (i, (s, o)) in samples[..n].iter().zip(outputs[..n].iter_mut()).enumerate() {
+        let cost = measure(|| *o = ctl.on_sample(*black_box(s))).saturating_sub(empty);
+        if cost > worst.0 {
+            worst = (cost, i);
+        }
+        if i >= WORST_FROM && cost > steady.0 {
+            steady = (cost, i);
+        }
+    }
+    (worst, steady)
+}
+
 fn new_controller(g: &Golden, cfg: &Config) -> Controller {
     let mut ctl = Controller::new(g.timer, g.period_us).unwrap_or_else(|_| fail());
     if ctl.load(cfg).is_err() {
@@ -329,6 +356,17 @@ fn texture_costs(g: &Golden, traj: &str, n: usize) {
         let mut case = [0u8; 48];
         let case = join(&mut case, kind, traj);
         report("COST-TEXTURE", case, n, per_sample_x10(cost, overhead, n));
+        let mut ctl = new_controller(g, &single(texture, lines));
+        let ((worst, at), (steady, steady_at)) = replay_worst(&mut ctl, n, measure(|| {}));
+        defmt::println!(
+            "COST-WORST case={=str} n={=u32} worst={=u64} at={=u32} steady={=u64} steady_at={=u32}",
+            case,
+            n as u32,
+            worst,
+            at as u32,
+            steady,
+            steady_at as u32
+        );
     }
 }
 
