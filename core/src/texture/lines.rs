@@ -217,6 +217,11 @@ pub(crate) struct LineTracker {
     /// a step or two, not a scan.
     lo: u8,
     hi: u8,
+    /// Set when the last sample visited no line and its window lay between two neighbouring
+    /// lines (exclusive bounds; `i32::MIN` / `i32::MAX` past the ends): every line was
+    /// settled on the side the finger is clear of. A window still inside that gap changes
+    /// nothing, so the sample returns at once (a finger resting or moving between lines).
+    gap: Option<(i32, i32)>,
 }
 
 impl LineTracker {
@@ -227,6 +232,7 @@ impl LineTracker {
         self.ahead_um = [0; MAX_LINES];
         self.settled_below = 0;
         self.settled_above = 0;
+        self.gap = None;
     }
 
     /// Forgets everything, the running pulse's window too (a fault has cut the line).
@@ -306,6 +312,11 @@ impl LineTracker {
         let h = lines.hysteresis_um as i32;
         let (up, down) = (position_um + lead_um.max(0), position_um + lead_um.min(0));
         let (floor, ceil) = (down.min(position_um - h), up.max(position_um + h));
+        if let Some((below, above)) = self.gap {
+            if below < floor && ceil < above {
+                return None;
+            }
+        }
         let at = |i: usize| lines.positions_um.get(i).map(|&l| l as i32);
         let n = lines.positions_um.len();
         // lo: lines strictly below `floor`; hi: lines at or below `ceil`.
@@ -331,6 +342,10 @@ impl LineTracker {
         let mut todo = (to_hi & !below_window)
             | (below_window & !self.settled_above)
             | (above_window & !self.settled_below);
+        self.gap = (todo == 0).then(|| {
+            let below = lo.checked_sub(1).and_then(at).unwrap_or(i32::MIN);
+            (below, at(lo).unwrap_or(i32::MAX))
+        });
         let mut fired = None;
         while todo != 0 {
             let i = todo.trailing_zeros() as usize;
