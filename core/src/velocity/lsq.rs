@@ -17,7 +17,9 @@ pub struct LsqSlope<const N: usize> {
     len: usize,
     /// Σ x_k over the window.
     sum: i64,
-    /// Σ k·x_k with k = 0 for the oldest entry.
+    /// While filling: Σ k·x_k with k = 0 for the oldest entry (W). Once full: the centred sum
+    /// 2W − (N − 1)·Σx the slope is made of, kept up to date directly (it saves recomputing it
+    /// from W every sample).
     weighted: i64,
     sampler: Sampler,
     /// µm/s per unit of 2·Σ(k − (N−1)/2)·x_k, Q32: 6·10⁶ / (N (N²−1) T_s).
@@ -70,13 +72,18 @@ impl<const N: usize> LsqSlope<N> {
             self.sum += x;
             self.window[(self.head + self.len) % N] = position_um;
             self.len += 1;
+            if self.len == N {
+                self.weighted = 2 * self.weighted - (N as i64 - 1) * self.sum;
+            }
         } else {
             // `head` < N always; the `% N` (an AND for N = 32) shows it to the compiler, so no
             // bounds check stays on the per-sample path (scripts/panic-check.sh).
             let head = self.head % N;
             let oldest = self.window[head] as i64;
-            // Every remaining entry's index drops by one; the newest enters at N − 1.
-            self.weighted += -(self.sum - oldest) + (N as i64 - 1) * x;
+            // Every remaining entry's index drops by one and the newest enters at N − 1:
+            // W' = W − (S − oldest) + (N − 1)x and S' = S − oldest + x, so the centred sum
+            // C = 2W − (N − 1)S moves by C' − C = −2S + (N + 1)·oldest + (N − 1)x.
+            self.weighted += -2 * self.sum + (N as i64 + 1) * oldest + (N as i64 - 1) * x;
             self.sum += x - oldest;
             self.window[head] = position_um;
             self.head = (head + 1) % N;
@@ -89,7 +96,7 @@ impl<const N: usize> LsqSlope<N> {
         if self.len < N {
             return None;
         }
-        let centred2 = 2 * self.weighted - (N as i64 - 1) * self.sum;
+        let centred2 = self.weighted;
         // Rounded to the nearest µm/s. The product fits i64 for any real window (N = 32,
         // T_s = 100 µs, a full 63 mm jump: 2.5·10¹⁷); a pathological one saturates.
         let v = if (self.centred_min..=self.centred_max).contains(&centred2) {
