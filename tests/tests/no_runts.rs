@@ -259,10 +259,7 @@ fn preload_keeps_every_pulse_whole_under_a_velocity_grating() {
             // ≈ 0.87 s at 40 – 200 Hz: over 80 bursts, and more updates than periods.
             let updates = assert_whole(&name, &wave, &writes, errors, 80);
             let n = wave.pulses().len();
-            assert!(
-                updates >= 2 * n,
-                "{name}: {updates} updates for {n} pulses"
-            );
+            assert!(updates >= 2 * n, "{name}: {updates} updates for {n} pulses");
         }
     }
 }
