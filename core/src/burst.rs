@@ -770,6 +770,57 @@ mod tests {
         assert_eq!((one.psc, one.arr, one.ccr), (0, 1, 1));
     }
 
+    /// The 32-bit path of `plan_hz` gives what the u64 arithmetic (`plan_u64`, the planner's
+    /// code before #17) gives, on a 32-bit and two 16-bit timers, under loose and tight caps,
+    /// from below the timer's range to above the board's limit; and every plan keeps the line
+    /// falling each period and stays inside both caps (`allows`).
+    #[test]
+    fn the_32_bit_path_plans_as_the_u64_one() {
+        let slow16 = BurstTimer {
+            clock_hz: 1_000_000,
+            counter_bits: 16,
+            max_burst_hz: 5_000,
+        };
+        let caps = [
+            SafetyLimits::default(),
+            SafetyLimits {
+                max_duty_permille: 1000,
+                max_on_time_us: 5_000,
+                ..SafetyLimits::default()
+            },
+            SafetyLimits {
+                max_duty_permille: 30,
+                max_on_time_us: 37,
+                ..SafetyLimits::default()
+            },
+        ];
+        let mut planned = 0;
+        for timer in [T32, T16, slow16] {
+            for limits in caps {
+                for duty in [1, 30, 400, limits.max_duty_permille] {
+                    let Ok(fast) = FastPlanner::new(&timer, &limits, duty) else {
+                        continue; // a duty above the cap is refused at load
+                    };
+                    let mut hz = 1e-3f32;
+                    while hz < 2e4 {
+                        let period_f = fast.clock_hz / hz;
+                        let want = (period_f <= fast.max_period_f)
+                            .then(|| fast.plan_u64(period_f))
+                            .flatten();
+                        let got = fast.plan_hz(hz);
+                        assert_eq!(got, want, "{timer:?} {limits:?} duty {duty} at {hz} Hz");
+                        if let Some((s, _)) = got {
+                            assert!(s.ccr <= s.arr && limits.allows(&timer, &s), "{s:?}");
+                            planned += 1;
+                        }
+                        hz *= 1.0137;
+                    }
+                }
+            }
+        }
+        assert!(planned > 10_000, "{planned}");
+    }
+
     /// The division-free ⌊x / 10^6⌋ against the u64 division: edges of every digit and
     /// pseudo-random values over the whole u64 range.
     #[test]
