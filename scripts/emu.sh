@@ -9,11 +9,13 @@
 #      SysTick at 25 MHz = 40 instructions per tick: deterministic counts);
 #   4. decodes the defmt stream with defmt-print against the ELF;
 #   5. checks (golden check): every vector bit-exact with the host (f32 scenes: ARR/CCR ±1 tick
-#      allowed, none needed so far), the expected log lines, the default scene ≤ 400
-#      instructions/sample and an unused grating region costing nothing; prints the cost table;
+#      allowed, none needed so far), the expected log lines, every scene and every texture kind
+#      ≤ 400 instructions/sample on average (issue #17; the costliest single sample is reported)
+#      and an unused grating region costing nothing; prints the cost table;
 #   6. checks the firmware's release ELFs (both boards) and the emulator image for f64 and
 #      soft-float helpers (allow-list: the two f32<->u64 conversion helpers, and only when their
-#      sole caller is saw_core::burst::FastPlanner::plan_hz — see docs/target-cost.md).
+#      callers are saw_core::burst::FastPlanner::new (scene load) or FastPlanner::plan_u64 (periods
+#      of 2^32 clocks and more) — off the per-sample path; see docs/target-cost.md).
 #
 # Exits non-zero on any failure. Outputs in target/emu/ (raw.bin, decoded.log, target-cost.md).
 set -euo pipefail
@@ -74,9 +76,11 @@ done
 # does those in hardware, so a helper means a wrong target/float ABI or a stray f64).
 SOFT='^(__aeabi_(d[a-z0-9]*|f(add|sub|rsub|mul|div|cmp[a-z]*)|u?[il]2[fd]|f2u?[il]z|f2d)|__(add|sub|mul|div)[sd]f3|__(eq|ne|lt|le|gt|ge|unord|cmp|neg|powi)[sd]f2|__fix(uns)?[sd]f[sdt]i|__float(un)?[sdt]i[sd]f|__extendsfdf2|__truncdfsf2)$'
 # Narrow allow-list: f32 <-> u64 conversions (no FPv4-SP instruction exists for them), only when
-# every call comes from saw_core::burst::FastPlanner::plan_hz.
+# every call comes from saw_core::burst::FastPlanner::new (the longest period as an f32, once per
+# scene load) or FastPlanner::plan_u64 (the planner's path for periods of 2^32 clocks and more,
+# below 0.021 Hz on 90 MHz); plan_hz itself converts with the FPU's f32 -> u32 instruction.
 ALLOW='^__aeabi_(f2ulz|ul2f)$'
-ALLOW_CALLER='FastPlanner7plan_hz'
+ALLOW_CALLER='FastPlanner(3new|8plan_u64)'
 float_fail=0
 for elf in "$ROOT/firmware/target/nucleo-f446re.elf" "$ROOT/firmware/target/nucleo-g474re.elf" "$ELF"; do
     name=$(basename "$elf")
@@ -88,7 +92,7 @@ for elf in "$ROOT/firmware/target/nucleo-f446re.elf" "$ROOT/firmware/target/nucl
             callers=$("$OBJDUMP" -d --no-show-raw-insn "$elf" | awk -v s="<$s>" '
                 /^[0-9a-f]+ <.*>:$/ { fn = $2 }
                 ($0 ~ /\tb(l|\.w|l\.w)?\t/ || $0 ~ /\tb\t/) && index($0, s) { print fn }' | sort -u)
-            others=$(printf '%s\n' "$callers" | grep -v "$ALLOW_CALLER" | grep -v '^$' || true)
+            others=$(printf '%s\n' "$callers" | grep -Ev "$ALLOW_CALLER" | grep -v '^$' || true)
             if [ -n "$others" ]; then
                 bad+=("$s (called from: $(echo $others))")
             else

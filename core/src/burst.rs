@@ -387,9 +387,9 @@ impl SafetyLimits {
         }
     }
 
-    /// The on-time cap in kernel-clock cycles.
+    /// The on-time cap in kernel-clock cycles, ⌊µs · clock / 10^6⌋ (a gate pulse checks it).
     pub fn max_on_time_clocks(&self, timer: &BurstTimer) -> u64 {
-        self.max_on_time_us as u64 * timer.clock_hz as u64 / 1_000_000
+        div_by_million(self.max_on_time_us as u64 * timer.clock_hz as u64)
     }
 
     /// True when periodic bursts `s` stay inside both caps (multiplies only: it runs on every
@@ -398,26 +398,56 @@ impl SafetyLimits {
     pub fn allows(&self, timer: &BurstTimer, s: &TimerSettings) -> bool {
         s.ccr <= s.arr
             && s.ccr as u64 * 1000 <= (s.arr as u64 + 1) * self.max_duty_permille as u64
-            && s.on_clocks() <= self.max_on_time_clocks(timer)
+            && self.on_clocks_within_cap(timer, s.on_clocks())
+    }
+
+    /// `on_clocks ≤ max_on_time_clocks(timer)` without its u64 division (a library call of
+    /// ~200 instructions on the M4F, and `allows` runs on every changed burst): for integers,
+    /// n ≤ ⌊x / 10^6⌋ ⟺ n · 10^6 ≤ x. An `on_clocks` whose product would overflow u64 is
+    /// above every cap (x < 2^64).
+    fn on_clocks_within_cap(&self, timer: &BurstTimer, on_clocks: u64) -> bool {
+        on_clocks <= u64::MAX / 1_000_000
+            && on_clocks * 1_000_000 <= self.max_on_time_us as u64 * timer.clock_hz as u64
     }
 }
 
+/// ⌊x / 10^6⌋ without a u64 division (a ~200-instruction library call on the M4F): ⌊x / 10^6⌋
+/// = ⌊⌊x / 2^6⌋ / 15 625⌋, and the second division is done as long division in 32- and 16-bit
+/// digits, each remainder below 15 625 < 2^16 so every partial dividend fits 32 bits: three
+/// hardware divides.
+fn div_by_million(x: u64) -> u64 {
+    const D: u32 = 15_625;
+    let y = x >> 6;
+    let hi = (y >> 32) as u32;
+    let (q_hi, r) = (hi / D, hi % D);
+    let mid = (r << 16) | ((y >> 16) as u32 & 0xffff);
+    let (q_mid, r) = (mid / D, mid % D);
+    let lo = (r << 16) | (y as u32 & 0xffff);
+    ((q_hi as u64) << 32) | ((q_mid as u64) << 16) | (lo / D) as u64
+}
+
 /// Per-sample planner for textures whose f_b changes with motion: the divisions and cap
-/// arithmetic of [`plan`] are done once at scene load, leaving a float divide, a shift and an
-/// integer divide per call.
+/// arithmetic of [`plan`] are done once at scene load, leaving a float divide, a float → u32
+/// conversion (one instruction on the FPv4-SP) and, only when the prescaler is in use, one
+/// 32-bit integer divide per call. Periods of 2^32 clocks or more (below 0.021 Hz at 90 MHz)
+/// take a u64 path with the same rounding.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FastPlanner {
     clock_hz: f32,
     counter_bits: u8,
     /// Shortest period the board renders, kernel clocks.
     min_period_clocks: u32,
-    /// Longest period before the prescaler overflows, kernel clocks.
-    max_period_clocks: u64,
-    /// Requested duty as a Q16 fraction.
-    duty_q16: u64,
-    /// The duty cap as a Q16 fraction, floored so it never rounds above the cap.
-    cap_duty_q16: u64,
+    /// Longest period before the prescaler overflows, kernel clocks, as an f32 (converted once
+    /// here, not per call).
+    max_period_f: f32,
+    /// Requested duty as a Q16 fraction (≤ 65 536).
+    duty_q16: u32,
+    /// The duty cap as a Q16 fraction, floored so it never rounds above the cap (≤ 65 536).
+    cap_duty_q16: u32,
     max_on_clocks: u64,
+    /// `max_on_clocks` saturated to u32 (the 32-bit path: a cap above `u32::MAX` clocks is
+    /// above every period that path plans, so it never binds there).
+    max_on_clocks_u32: u32,
 }
 
 impl FastPlanner {
@@ -432,14 +462,16 @@ impl FastPlanner {
         let min_period = (timer.clock_hz as u64)
             .div_ceil(timer.max_burst_hz.max(1) as u64)
             .max(2);
+        let max_on_clocks = limits.max_on_time_clocks(timer);
         Ok(Self {
             clock_hz: timer.clock_hz as f32,
             counter_bits: timer.counter_bits,
             min_period_clocks: min_period.min(u32::MAX as u64) as u32,
-            max_period_clocks: timer.longest_period_clocks(),
-            duty_q16: (duty_permille as u64 * 65_536) / 1000,
-            cap_duty_q16: (limits.max_duty_permille as u64 * 65_536) / 1000,
-            max_on_clocks: limits.max_on_time_clocks(timer),
+            max_period_f: timer.longest_period_clocks() as f32,
+            duty_q16: ((duty_permille as u64 * 65_536) / 1000) as u32,
+            cap_duty_q16: ((limits.max_duty_permille as u64 * 65_536) / 1000) as u32,
+            max_on_clocks,
+            max_on_clocks_u32: max_on_clocks.min(u32::MAX as u64) as u32,
         })
     }
 
@@ -447,15 +479,65 @@ impl FastPlanner {
     /// limit are clamped to it; the flag says so, so the caller can log it (never alias silently).
     // Negated comparisons on purpose: a NaN fails them and is refused like zero.
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    #[inline]
     pub fn plan_hz(&self, hz: f32) -> Option<(TimerSettings, bool)> {
         if !(hz > 0.0) {
             return None;
         }
         let period_f = self.clock_hz / hz;
         // The longest period, psc = 65 535 with a full counter, is itself representable.
-        if !(period_f <= self.max_period_clocks as f32) {
+        if !(period_f <= self.max_period_f) {
             return None;
         }
+        if period_f < 4_294_967_296.0 {
+            self.plan_u32(period_f as u32)
+        } else {
+            self.plan_u64(period_f)
+        }
+    }
+
+    /// `plan_hz` for a period below 2^32 clocks: the same arithmetic in 32 bits (products in
+    /// 64), no division at all when the period fits the counter unprescaled.
+    #[inline]
+    fn plan_u32(&self, period: u32) -> Option<(TimerSettings, bool)> {
+        let clamped = period < self.min_period_clocks;
+        let period = if clamped {
+            self.min_period_clocks
+        } else {
+            period
+        };
+        // A 32-bit counter holds every such period at psc = 0 (the shift by 32 is None).
+        let psc = (period - 1)
+            .checked_shr(self.counter_bits as u32)
+            .unwrap_or(0);
+        let (ticks, max_on) = if psc == 0 {
+            (period, self.max_on_clocks_u32)
+        } else {
+            // ≥ 2: psc < 2^16 here; saturating only so no overflow check is compiled in.
+            let psc_div = psc.saturating_add(1);
+            (period / psc_div, self.max_on_clocks_u32 / psc_div)
+        };
+        let ticks = ticks as u64;
+        let wanted = ((ticks * self.duty_q16 as u64) >> 16).max(1);
+        // At most ticks − 1: the line falls every period (see `SafetyLimits::max_ccr`).
+        let cap = ((ticks * self.cap_duty_q16 as u64) >> 16)
+            .min(max_on as u64)
+            .min(ticks - 1);
+        if cap == 0 {
+            return None;
+        }
+        let settings = TimerSettings {
+            psc: psc as u16,
+            arr: (ticks - 1) as u32,
+            ccr: wanted.min(cap) as u32,
+        };
+        Some((settings, clamped))
+    }
+
+    /// `plan_hz` for periods of 2^32 clocks and more (a prescaled 32-bit counter, or the
+    /// 16-bit counter's single longest period): u64 arithmetic, as before the 32-bit path.
+    #[inline(never)]
+    fn plan_u64(&self, period_f: f32) -> Option<(TimerSettings, bool)> {
         let mut period = period_f as u64;
         let clamped = period < self.min_period_clocks as u64;
         if clamped {
@@ -465,9 +547,9 @@ impl FastPlanner {
         // ≥ 1 even if psc were u64::MAX: no division-by-zero check on the per-sample path.
         let psc_div = psc.saturating_add(1);
         let ticks = period / psc_div;
-        let wanted = ((ticks * self.duty_q16) >> 16).max(1);
+        let wanted = ((ticks * self.duty_q16 as u64) >> 16).max(1);
         // At most ticks − 1: the line falls every period (see `SafetyLimits::max_ccr`).
-        let cap = ((ticks * self.cap_duty_q16) >> 16)
+        let cap = ((ticks * self.cap_duty_q16 as u64) >> 16)
             .min(self.max_on_clocks / psc_div)
             .min(ticks - 1);
         if cap == 0 {
@@ -686,6 +768,78 @@ mod tests {
         // The smallest pulse is one tick.
         let one = T16.one_pulse(0).unwrap();
         assert_eq!((one.psc, one.arr, one.ccr), (0, 1, 1));
+    }
+
+    /// The 32-bit path of `plan_hz` gives what the u64 arithmetic (`plan_u64`, the planner's
+    /// code before #17) gives, on a 32-bit and two 16-bit timers, under loose and tight caps,
+    /// from below the timer's range to above the board's limit; and every plan keeps the line
+    /// falling each period and stays inside both caps (`allows`).
+    #[test]
+    fn the_32_bit_path_plans_as_the_u64_one() {
+        let slow16 = BurstTimer {
+            clock_hz: 1_000_000,
+            counter_bits: 16,
+            max_burst_hz: 5_000,
+        };
+        let caps = [
+            SafetyLimits::default(),
+            SafetyLimits {
+                max_duty_permille: 1000,
+                max_on_time_us: 5_000,
+                ..SafetyLimits::default()
+            },
+            SafetyLimits {
+                max_duty_permille: 30,
+                max_on_time_us: 37,
+                ..SafetyLimits::default()
+            },
+        ];
+        let mut planned = 0;
+        for timer in [T32, T16, slow16] {
+            for limits in caps {
+                for duty in [1, 30, 400, limits.max_duty_permille] {
+                    let Ok(fast) = FastPlanner::new(&timer, &limits, duty) else {
+                        continue; // a duty above the cap is refused at load
+                    };
+                    let mut hz = 1e-3f32;
+                    while hz < 2e4 {
+                        let period_f = fast.clock_hz / hz;
+                        let want = (period_f <= fast.max_period_f)
+                            .then(|| fast.plan_u64(period_f))
+                            .flatten();
+                        let got = fast.plan_hz(hz);
+                        assert_eq!(got, want, "{timer:?} {limits:?} duty {duty} at {hz} Hz");
+                        if let Some((s, _)) = got {
+                            assert!(s.ccr <= s.arr && limits.allows(&timer, &s), "{s:?}");
+                            planned += 1;
+                        }
+                        hz *= 1.0137;
+                    }
+                }
+            }
+        }
+        assert!(planned > 10_000, "{planned}");
+    }
+
+    /// The division-free ⌊x / 10^6⌋ against the u64 division: edges of every digit and
+    /// pseudo-random values over the whole u64 range.
+    #[test]
+    fn divides_by_a_million_exactly() {
+        let mut lcg = 0x9e37_79b9_7f4a_7c15u64;
+        let mut xs = std::vec![0, 1, 999_999, 1_000_000, 1_000_001, u64::MAX, u64::MAX - 1];
+        for shift in 0..64 {
+            let p = 1u64 << shift;
+            xs.extend([p - 1, p, p + 1, p.wrapping_mul(1_000_000)]);
+        }
+        for _ in 0..100_000 {
+            lcg = lcg
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            xs.push(lcg >> (lcg % 64));
+        }
+        for x in xs {
+            assert_eq!(div_by_million(x), x / 1_000_000, "{x}");
+        }
     }
 
     /// A 100 % duty under a 100 % cap still lets the line fall for a tick every period (CCR ≤

@@ -228,9 +228,12 @@ fn preload_keeps_every_pulse_whole_across_scene_reloads() {
 }
 
 /// A velocity-synthesis grating, λ = 0.5 mm, under a finger at 60 mm/s ± 40 mm/s (2 Hz swing),
-/// 6 → 60 mm in 0.9 s, ±3 LSB of noise per sample: f_b = |V|/λ swings 40 – 200 Hz and the
-/// estimate moves on nearly every sample, so the gate updates many times within each period.
-/// The speed never drops below the grating's 7.5 mm/s stop threshold: one Start, then Updates.
+/// 6 → 60 mm in 0.9 s, ±3 LSB of noise per sample: f_b = |V|/λ swings 40 – 200 Hz. The
+/// texture keeps its plan while the speed stays within 2^-5 of the one it was planned at
+/// (`texture::motion::PLAN_HOLD`), so the gate updates on every 3 % of speed change: about
+/// twice per burst period here (it was ten times and more when every sample re-planned), so
+/// many periods still take an update mid-period. The speed never drops below the grating's
+/// 7.5 mm/s stop threshold: one Start, then Updates.
 #[test]
 fn preload_keeps_every_pulse_whole_under_a_velocity_grating() {
     let grating = Grating {
@@ -253,13 +256,10 @@ fn preload_keeps_every_pulse_whole_under_a_velocity_grating() {
             }
             let (wave, writes, errors) = rig.finish();
             let name = format!("{name} grating, seed {seed:#x}");
-            // ≈ 0.87 s at 40 – 200 Hz: over 80 bursts, and many more updates than periods.
+            // ≈ 0.87 s at 40 – 200 Hz: over 80 bursts, and more updates than periods.
             let updates = assert_whole(&name, &wave, &writes, errors, 80);
             let n = wave.pulses().len();
-            assert!(
-                updates >= 10 * n,
-                "{name}: {updates} updates for {n} pulses"
-            );
+            assert!(updates >= 2 * n, "{name}: {updates} updates for {n} pulses");
         }
     }
 }

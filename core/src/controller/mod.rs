@@ -249,7 +249,18 @@ impl<E: VelocityEstimator> Controller<E> {
 
     /// Counters and last values, for telemetry.
     pub fn telemetry(&self) -> Telemetry {
-        self.telemetry
+        // The running burst's frequency is worked out here, when asked, not on every gate
+        // action (a u64 division per changed sample for a velocity-driven texture). Every
+        // state change of the gate goes through `count_action`, which used to fill it from
+        // `gate.running()` the same way, so the figure is the same.
+        Telemetry {
+            burst_millihz: self
+                .gate
+                .running()
+                .map(|s| s.produced_millihz(self.timer.clock_hz) as u32)
+                .unwrap_or(0),
+            ..self.telemetry
+        }
     }
 
     /// The position mapper of the active configuration.
@@ -551,11 +562,6 @@ impl<E: VelocityEstimator> Controller<E> {
     fn count_action(&mut self, action: Option<GateAction>) {
         if action.is_some() {
             self.telemetry.gate_actions = self.telemetry.gate_actions.wrapping_add(1);
-            self.telemetry.burst_millihz = self
-                .gate
-                .running()
-                .map(|s| s.produced_millihz(self.timer.clock_hz) as u32)
-                .unwrap_or(0);
         }
     }
 }

@@ -105,6 +105,10 @@ impl From<BurstError> for CompileError {
 
 /// A region's texture, compiled: only what its per-sample path needs.
 #[derive(Clone, Debug)]
+#[allow(
+    clippy::large_enum_variant,
+    reason = "no_std without an allocator: nothing to box into; the regions' textures sit in a heapless Vec, read in place per sample (the lint fired once FastPlanner shrank to 32-bit fields and the random texture with it)"
+)]
 pub(crate) enum Compiled {
     Off,
     /// A constant texture: its timer settings, planned once.

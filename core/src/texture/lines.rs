@@ -205,6 +205,23 @@ pub(crate) struct LineTracker {
     ahead_um: [i32; MAX_LINES],
     /// Start of the running line pulse, while in its pulse + rest window.
     pulse_start_us: Option<u32>,
+    /// Bit i: line i is armed from below with no fired offset (`armed = Below`, `ahead = 0`).
+    /// A sample with the finger (and its lead) more than the hysteresis below such a line
+    /// changes nothing for it, so [`Self::update_ahead`] skips it.
+    settled_below: u32,
+    /// Bit i: line i is armed from above with no fired offset; skipped likewise while the
+    /// finger is clear above it.
+    settled_above: u32,
+    /// Window of the last sample, as indices into the (sorted) lines: lines `..lo` lay below
+    /// it, lines `hi..` above it. Carried from sample to sample so finding the next window is
+    /// a step or two, not a scan.
+    lo: u8,
+    hi: u8,
+    /// Set when the last sample visited no line and its window lay between two neighbouring
+    /// lines (exclusive bounds; `i32::MIN` / `i32::MAX` past the ends): every line was
+    /// settled on the side the finger is clear of. A window still inside that gap changes
+    /// nothing, so the sample returns at once (a finger resting or moving between lines).
+    gap: Option<(i32, i32)>,
 }
 
 impl LineTracker {
@@ -213,6 +230,9 @@ impl LineTracker {
     pub(crate) fn reset(&mut self) {
         self.armed = [None; MAX_LINES];
         self.ahead_um = [0; MAX_LINES];
+        self.settled_below = 0;
+        self.settled_above = 0;
+        self.gap = None;
     }
 
     /// Forgets everything, the running pulse's window too (a fault has cut the line).
@@ -273,6 +293,14 @@ impl LineTracker {
     /// it (signed: the direction of motion; only a lead towards the line counts). Returns the
     /// index of a line fired, if any. A line re-arms once the finger is `hysteresis_um` clear
     /// of both the line and where it fired.
+    ///
+    /// Only the lines this sample can change are visited: those inside the window
+    /// [min(p + lead⁻, p − h), max(p + lead⁺, p + h)] around the position p, and those outside
+    /// it that are not settled on the side the finger is clear of (just fired, not re-armed,
+    /// or armed from the other side: a jump across a line still fires it). For every other
+    /// line the full update is a no-op (see [`Self::update_line`]), so the result is the same
+    /// as visiting all of them, in the same (ascending) order. Needs the lines sorted, which
+    /// [`Lines::validate`] enforces.
     pub(crate) fn update_ahead(
         &mut self,
         lines: &Lines,
@@ -283,12 +311,121 @@ impl LineTracker {
         // within 5 mm: plain i32 sums cannot overflow.
         let h = lines.hysteresis_um as i32;
         let (up, down) = (position_um + lead_um.max(0), position_um + lead_um.min(0));
+        let (floor, ceil) = (down.min(position_um - h), up.max(position_um + h));
+        if let Some((below, above)) = self.gap {
+            if below < floor && ceil < above {
+                return None;
+            }
+        }
+        let at = |i: usize| lines.positions_um.get(i).map(|&l| l as i32);
+        let n = lines.positions_um.len();
+        // lo: lines strictly below `floor`; hi: lines at or below `ceil`.
+        let mut lo = (self.lo as usize).min(n);
+        while lo > 0 && at(lo - 1).is_some_and(|l| l >= floor) {
+            lo -= 1;
+        }
+        while at(lo).is_some_and(|l| l < floor) {
+            lo += 1;
+        }
+        let mut hi = (self.hi as usize).min(n).max(lo);
+        while hi > lo && at(hi - 1).is_some_and(|l| l > ceil) {
+            hi -= 1;
+        }
+        while at(hi).is_some_and(|l| l <= ceil) {
+            hi += 1;
+        }
+        (self.lo, self.hi) = (lo as u8, hi as u8);
+        let below_window = 1u32.wrapping_shl(lo as u32).wrapping_sub(1);
+        let to_hi = 1u32.wrapping_shl(hi as u32).wrapping_sub(1);
+        let all = 1u32.wrapping_shl(n as u32).wrapping_sub(1);
+        let above_window = all & !to_hi;
+        let mut todo = (to_hi & !below_window)
+            | (below_window & !self.settled_above)
+            | (above_window & !self.settled_below);
+        self.gap = (todo == 0).then(|| {
+            let below = lo.checked_sub(1).and_then(at).unwrap_or(i32::MIN);
+            (below, at(lo).unwrap_or(i32::MAX))
+        });
+        let mut fired = None;
+        while todo != 0 {
+            let i = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            if self.update_line(i, at(i), position_um, up, down, h) {
+                fired = Some(i as u8);
+            }
+        }
+        fired
+    }
+
+    /// One line's update: fires it (true) when crossed from the side it was armed on, and
+    /// re-arms it once the finger is `h` clear of both the line and where it fired.
+    #[inline(always)]
+    fn update_line(
+        &mut self,
+        i: usize,
+        line: Option<i32>,
+        position_um: i32,
+        up: i32,
+        down: i32,
+        h: i32,
+    ) -> bool {
+        let (Some(line), Some(armed), Some(ahead)) =
+            (line, self.armed.get_mut(i), self.ahead_um.get_mut(i))
+        else {
+            return false;
+        };
+        let crossed = match *armed {
+            Some(Side::Below) => up >= line,
+            Some(Side::Above) => down <= line,
+            None => false,
+        };
+        if crossed {
+            *armed = None;
+            *ahead = position_um - line;
+        }
+        if position_um < line + (*ahead).min(0) - h {
+            *armed = Some(Side::Below);
+            *ahead = 0;
+        } else if position_um > line + (*ahead).max(0) + h {
+            *armed = Some(Side::Above);
+            *ahead = 0;
+        }
+        let bit = 1u32.wrapping_shl(i as u32);
+        let settled = *ahead == 0;
+        if settled && *armed == Some(Side::Below) {
+            self.settled_below |= bit;
+        } else {
+            self.settled_below &= !bit;
+        }
+        if settled && *armed == Some(Side::Above) {
+            self.settled_above |= bit;
+        } else {
+            self.settled_above &= !bit;
+        }
+        crossed
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The visit-every-line update (the code before the window), as the reference.
+    fn reference(
+        armed: &mut [Option<Side>; MAX_LINES],
+        ahead_um: &mut [i32; MAX_LINES],
+        lines: &Lines,
+        position_um: i32,
+        lead_um: i32,
+    ) -> Option<u8> {
+        let h = lines.hysteresis_um as i32;
+        let (up, down) = (position_um + lead_um.max(0), position_um + lead_um.min(0));
         let mut fired = None;
         for (i, ((&line, armed), ahead)) in lines
             .positions_um
             .iter()
-            .zip(self.armed.iter_mut())
-            .zip(self.ahead_um.iter_mut())
+            .zip(armed.iter_mut())
+            .zip(ahead_um.iter_mut())
             .enumerate()
         {
             let line = line as i32;
@@ -312,11 +449,55 @@ impl LineTracker {
         }
         fired
     }
-}
 
-#[cfg(test)]
-mod tests {
-    use super::*;
+    /// The windowed update fires and re-arms exactly as visiting every line does: random
+    /// walks with leads both ways, dither on lines, jumps across several lines (a fault's
+    /// recovery), resets, and scenes of 0 to 16 lines with lines closer than the hysteresis.
+    #[test]
+    fn the_window_changes_nothing() {
+        let mut lcg = 0x2545_f491u32;
+        let mut rnd = |m: u32| {
+            lcg = lcg.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (lcg >> 8) % m.max(1)
+        };
+        let mut fires = 0;
+        for scene in 0..300 {
+            let mut l = Lines {
+                hysteresis_um: 50 + rnd(1_000),
+                ..Lines::default()
+            };
+            let count = scene % (MAX_LINES + 1);
+            let mut at = 0;
+            for _ in 0..count {
+                at += 1 + rnd(4_000);
+                let _ = l.positions_um.push(at);
+            }
+            let mut t = LineTracker::default();
+            let (mut armed, mut ahead) = ([None; MAX_LINES], [0; MAX_LINES]);
+            let mut p = rnd(at + 2_000) as i32;
+            for step in 0..3_000 {
+                p += match rnd(100) {
+                    0 => rnd(60_000) as i32 - 30_000,
+                    1..=30 => rnd(41) as i32 - 20,
+                    _ => rnd(401) as i32 - 150,
+                };
+                if step % 997 == 0 {
+                    t.reset();
+                    (armed, ahead) = ([None; MAX_LINES], [0; MAX_LINES]);
+                }
+                let lead = rnd(4_001) as i32 - 2_000;
+                let want = reference(&mut armed, &mut ahead, &l, p, lead);
+                assert_eq!(
+                    t.update_ahead(&l, p, lead),
+                    want,
+                    "scene {scene} step {step}"
+                );
+                assert_eq!((t.armed, t.ahead_um), (armed, ahead));
+                fires += want.is_some() as u32;
+            }
+        }
+        assert!(fires > 1_000, "{fires}");
+    }
 
     fn lines() -> Lines {
         let mut l = Lines::default();

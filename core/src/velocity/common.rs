@@ -158,6 +158,9 @@ pub(crate) enum Tick {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SlotClock {
     period_us: u32,
+    /// max(period, 1), non-zero by type: the per-sample division needs no zero check and the
+    /// tick no `max` (the estimators' constructors refuse periods below 10 µs anyway).
+    step_us: core::num::NonZeroU32,
     /// ⌊period/2⌋: added to the offset from the grid so that whole periods round to nearest.
     half_us: u32,
     /// 2 periods: a rounded offset below this (and not below one period) is one slot.
@@ -175,6 +178,10 @@ impl SlotClock {
     pub(crate) const fn new(period_us: u32) -> Self {
         Self {
             period_us,
+            step_us: match core::num::NonZeroU32::new(period_us) {
+                Some(p) => p,
+                None => core::num::NonZeroU32::MIN,
+            },
             half_us: period_us / 2,
             two_periods_us: period_us.saturating_mul(2),
             gap_us: period_us.saturating_mul(MAX_BRIDGED_SLOTS + 1),
@@ -198,15 +205,16 @@ impl SlotClock {
         // *before* the grid (signed offset < −⌊p/2⌋) lands at ≥ 2³¹, past `gap_us`: time that
         // ran backwards is a gap (restart) like a long silence, not a duplicate.
         let rounded = t_us.wrapping_sub(grid).wrapping_add(self.half_us);
-        // ≥ 10 already (every estimator's constructor runs `check_period`); the max lets the compiler drop the division's
-        // zero check from the per-sample path (scripts/panic-check.sh).
-        let p = self.period_us.max(1);
+        // ≥ 10 already (every estimator's constructor runs `check_period`); non-zero by type,
+        // so the division has no zero check on the per-sample path (scripts/panic-check.sh).
+        let step = self.step_us;
+        let p = step.get();
         let (slots, on_grid) = if rounded < p {
             return Tick::Duplicate;
         } else if rounded < self.two_periods_us {
             (1, grid.wrapping_add(p))
         } else if rounded < self.gap_us {
-            let slots = rounded / p;
+            let slots = rounded / step;
             (slots, grid.wrapping_add(slots * p))
         } else {
             self.grid_us = Some(t_us);

@@ -17,11 +17,18 @@ pub struct LsqSlope<const N: usize> {
     len: usize,
     /// Σ x_k over the window.
     sum: i64,
-    /// Σ k·x_k with k = 0 for the oldest entry.
+    /// While filling: Σ k·x_k with k = 0 for the oldest entry (W). Once full: the centred sum
+    /// 2W − (N − 1)·Σx the slope is made of, kept up to date directly (it saves recomputing it
+    /// from W every sample).
     weighted: i64,
     sampler: Sampler,
     /// µm/s per unit of 2·Σ(k − (N−1)/2)·x_k, Q32: 6·10⁶ / (N (N²−1) T_s).
     gain_q32: i64,
+    /// The range of the centred sum whose product with `gain_q32` fits i64 (the checked
+    /// multiply's range, worked out once: a 64-bit overflow check is ~16 instructions on the
+    /// M4F, a range test ~6).
+    centred_min: i64,
+    centred_max: i64,
 }
 
 impl<const N: usize> LsqSlope<N> {
@@ -43,6 +50,10 @@ impl<const N: usize> LsqSlope<N> {
             weighted: 0,
             sampler: Sampler::new(sample_period_us),
             gain_q32,
+            // Truncating divisions: c · g ≤ MAX ⟺ c ≤ ⌊MAX / g⌋ and c · g ≥ MIN ⟺ c ≥ ⌈MIN / g⌉
+            // for g > 0; a zero gain never overflows.
+            centred_min: i64::MIN.checked_div(gain_q32).unwrap_or(i64::MIN),
+            centred_max: i64::MAX.checked_div(gain_q32).unwrap_or(i64::MAX),
         })
     }
 }
@@ -61,13 +72,18 @@ impl<const N: usize> LsqSlope<N> {
             self.sum += x;
             self.window[(self.head + self.len) % N] = position_um;
             self.len += 1;
+            if self.len == N {
+                self.weighted = 2 * self.weighted - (N as i64 - 1) * self.sum;
+            }
         } else {
             // `head` < N always; the `% N` (an AND for N = 32) shows it to the compiler, so no
             // bounds check stays on the per-sample path (scripts/panic-check.sh).
             let head = self.head % N;
             let oldest = self.window[head] as i64;
-            // Every remaining entry's index drops by one; the newest enters at N − 1.
-            self.weighted += -(self.sum - oldest) + (N as i64 - 1) * x;
+            // Every remaining entry's index drops by one and the newest enters at N − 1:
+            // W' = W − (S − oldest) + (N − 1)x and S' = S − oldest + x, so the centred sum
+            // C = 2W − (N − 1)S moves by C' − C = −2S + (N + 1)·oldest + (N − 1)x.
+            self.weighted += -2 * self.sum + (N as i64 + 1) * oldest + (N as i64 - 1) * x;
             self.sum += x - oldest;
             self.window[head] = position_um;
             self.head = (head + 1) % N;
@@ -80,18 +96,15 @@ impl<const N: usize> LsqSlope<N> {
         if self.len < N {
             return None;
         }
-        let centred2 = 2 * self.weighted - (N as i64 - 1) * self.sum;
+        let centred2 = self.weighted;
         // Rounded to the nearest µm/s. The product fits i64 for any real window (N = 32,
         // T_s = 100 µs, a full 63 mm jump: 2.5·10¹⁷); a pathological one saturates.
-        let v = match centred2.checked_mul(self.gain_q32) {
-            Some(p) => (p + (1 << 31)) >> 32,
-            None => {
-                if centred2 > 0 {
-                    i64::MAX >> 32
-                } else {
-                    i64::MIN >> 32
-                }
-            }
+        let v = if (self.centred_min..=self.centred_max).contains(&centred2) {
+            (centred2 * self.gain_q32 + (1 << 31)) >> 32
+        } else if centred2 > 0 {
+            i64::MAX >> 32
+        } else {
+            i64::MIN >> 32
         };
         Some(v.clamp(i32::MIN as i64, i32::MAX as i64) as i32)
     }
@@ -143,6 +156,30 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
 mod tests {
     use super::*;
     use crate::velocity::EstimatorError;
+
+    /// The precomputed range is exactly where the product with the gain does not overflow
+    /// (the checked multiply it replaced), for several windows and periods.
+    #[test]
+    fn the_range_test_is_the_checked_multiply() {
+        fn check<const N: usize>(period_us: u32) {
+            let e = LsqSlope::<N>::new(period_us).unwrap();
+            for c in [e.centred_min, e.centred_max] {
+                for d in -2..=2i64 {
+                    let c = c.saturating_add(d);
+                    assert_eq!(
+                        (e.centred_min..=e.centred_max).contains(&c),
+                        c.checked_mul(e.gain_q32).is_some(),
+                        "N {N} T {period_us} c {c}"
+                    );
+                }
+            }
+        }
+        check::<2>(10);
+        check::<32>(100);
+        check::<64>(100);
+        check::<16>(100_000);
+        check::<1024>(100_000);
+    }
 
     #[test]
     fn exact_on_a_ramp() {

@@ -197,6 +197,33 @@ fn replay<E: VelocityEstimator>(ctl: &mut Controller<E>, n: usize) -> u64 {
     })
 }
 
+/// Samples before the "steady" worst: the first sample (scene announcement, region lookup) and
+/// the estimator's filling window (median of 3 + 32) cost once per scene or fault.
+const WORST_FROM: usize = 64;
+
+/// Runs the samples through `ctl` one at a time, each timed alone; returns the costliest
+/// sample's instructions (less `empty`, an empty measurement's; ±40: one SysTick tick) and its
+/// index, over all samples and over those from [`WORST_FROM`] on.
+fn replay_worst<E: VelocityEstimator>(
+    ctl: &mut Controller<E>,
+    n: usize,
+    empty: u64,
+) -> ((u64, usize), (u64, usize)) {
+    let samples = unsafe { &*core::ptr::addr_of!(SAMPLES) };
+    let outputs = unsafe { &mut *core::ptr::addr_of_mut!(OUTPUTS) };
+    let (mut worst, mut steady) = ((0, 0), (0, 0));
+    for (i, (s, o)) in samples[..n].iter().zip(outputs[..n].iter_mut()).enumerate() {
+        let cost = measure(|| *o = ctl.on_sample(*black_box(s))).saturating_sub(empty);
+        if cost > worst.0 {
+            worst = (cost, i);
+        }
+        if i >= WORST_FROM && cost > steady.0 {
+            steady = (cost, i);
+        }
+    }
+    (worst, steady)
+}
+
 fn new_controller(g: &Golden, cfg: &Config) -> Controller {
     let mut ctl = Controller::new(g.timer, g.period_us).unwrap_or_else(|_| fail());
     if ctl.load(cfg).is_err() {
@@ -302,7 +329,8 @@ fn single(texture: Texture, lines: bool) -> Config {
     cfg
 }
 
-fn texture_costs(g: &Golden, traj: &str, n: usize) {
+/// The one-region scenes of the per-kind table: (kind, texture, with the lines scene's lines).
+fn kind_cases() -> [(&'static str, Texture, bool); 7] {
     let random = RandomBurst {
         center_millihz: 40_000,
         spread_permille: 300,
@@ -315,7 +343,7 @@ fn texture_costs(g: &Golden, traj: &str, n: usize) {
         render: GratingRender::VelocitySynthesis,
         ..Grating::new(1_000)
     };
-    let cases: [(&str, Texture, bool); 7] = [
+    [
         ("off", Texture::Off, false),
         ("constant", Texture::constant_hz(80), false),
         ("grating", Texture::Grating(Grating::new(1_000)), false),
@@ -323,7 +351,11 @@ fn texture_costs(g: &Golden, traj: &str, n: usize) {
         ("material", Texture::Material(Material::fig5(0.3)), false),
         ("random", Texture::Random(random), false),
         ("lines+off", Texture::Off, true),
-    ];
+    ]
+}
+
+fn texture_costs(g: &Golden, traj: &str, n: usize) {
+    let cases = kind_cases();
     let overhead = loop_overhead(n);
     for (kind, texture, lines) in cases {
         let mut ctl = new_controller(g, &single(texture, lines));
@@ -331,6 +363,17 @@ fn texture_costs(g: &Golden, traj: &str, n: usize) {
         let mut case = [0u8; 48];
         let case = join(&mut case, kind, traj);
         report("COST-TEXTURE", case, n, per_sample_x10(cost, overhead, n));
+        let mut ctl = new_controller(g, &single(texture, lines));
+        let ((worst, at), (steady, steady_at)) = replay_worst(&mut ctl, n, measure(|| {}));
+        defmt::println!(
+            "COST-WORST case={=str} n={=u32} worst={=u64} at={=u32} steady={=u64} steady_at={=u32}",
+            case,
+            n as u32,
+            worst,
+            at as u32,
+            steady,
+            steady_at as u32
+        );
     }
 }
 
@@ -514,6 +557,26 @@ fn stage_costs(n: usize) {
     );
 }
 
+/// Profiling build (`EMU_PROFILE=<kind>/<trajectory>` at build time, scripts/emu-profile.sh):
+/// replays only that one-region scene over the default scene's vector of that trajectory, so
+/// QEMU's per-instruction trace holds one case.
+fn profile(g: &Golden, case: &str) -> ! {
+    let (kind, traj) = case.split_once('/').unwrap_or((case, "back-and-forth"));
+    let mut want = [0u8; 48];
+    let want = join(&mut want, "default", traj);
+    let n = load_bench_inputs(g, want);
+    for (k, texture, lines) in kind_cases() {
+        if k == kind {
+            let mut ctl = new_controller(g, &single(texture, lines));
+            let cost = replay(&mut ctl, n);
+            report("PROFILE", case, n, per_sample_x10(cost, 0, n));
+            debug::exit(debug::EXIT_SUCCESS);
+        }
+    }
+    defmt::error!("EMU_PROFILE: no kind {=str}", kind);
+    fail()
+}
+
 #[entry]
 fn main() -> ! {
     let mut cp = cortex_m::Peripherals::take().unwrap_or_else(|| fail());
@@ -537,6 +600,9 @@ fn main() -> ! {
         INSTR_PER_TICK
     );
 
+    if let Some(case) = option_env!("EMU_PROFILE") {
+        profile(&g, case);
+    }
     let ok = equivalence_and_scene_costs(&g);
     for traj in ["back-and-forth", "rest"] {
         let mut want = [0u8; 48];
