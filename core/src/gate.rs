@@ -236,13 +236,23 @@ impl DutyLedger {
             return;
         }
         let last = (b - 1).max(a);
-        for back in 0..RING_SLOTS {
+        // Only the slots from `last`'s to `a`'s can overlap (slot k ≥ 1 holds offsets
+        // [−k·slot, −(k−1)·slot), so offset x < 0 is in slot ⌈−x / slot⌉): a pulse touches one
+        // or two, not the ring's 64 (the M4F cost of a ridge pulse, docs/target-cost.md).
+        let slot = self.slot_us.max(1) as i64;
+        let back_of = |x: i64| if x >= 0 { 0 } else { (-x + slot - 1) / slot } as usize;
+        let newest = back_of(last).min(RING_SLOTS);
+        let oldest = back_of(a).min(RING_SLOTS - 1);
+        for back in newest..=oldest {
             let (lo, hi) = self.span(back);
             let overlap = b.min(hi) - a.max(lo);
-            let mut on = if overlap > 0 {
-                (overlap as u64 * rate_ppm).div_ceil(PPM)
-            } else {
+            let mut on = if overlap <= 0 {
                 0
+            } else if rate_ppm == PPM {
+                // Fully on (a one-pulse): no division.
+                overlap as u64
+            } else {
+                (overlap as u64 * rate_ppm).div_ceil(PPM)
             };
             if last >= lo && last < hi {
                 on += extra_us;

@@ -23,7 +23,7 @@ use crate::burst::{BurstError, BurstTimer, FastPlanner, SafetyLimits, TimerSetti
 
 use super::compiled::{Moment, Render, Request, Want};
 use super::motion::MotionGate;
-use super::predict::{Line, LineFit, TRUST_SPEED_UM_S};
+use super::predict::{Line, LineFit, INNOVATION_GATE_UM, TRUST_SPEED_UM_S};
 use super::{SpreadParam, TextureError};
 
 /// How a grating turns motion into bursts.
@@ -125,6 +125,8 @@ pub(crate) struct RidgeTracker {
     cell: Option<i32>,
     /// The ridge (index k, at kλ) that fired last and is not yet re-armed.
     disarmed: Option<i32>,
+    /// Start of `cell`, kλ µm: a sample inside the same cell needs no division.
+    cell_lo_um: i32,
 }
 
 /// A ridge crossing seen on one sample.
@@ -153,10 +155,26 @@ impl RidgeTracker {
         wavelength_um: i32,
         rearm_um: i32,
     ) -> Option<Crossing> {
-        // Checked: div_euclid panics on a zero divisor (and on i32::MIN / -1). `validate` refuses
-        // a wavelength of 0, so None never happens; it would read as no crossing.
-        let cell = position_um.checked_div_euclid(wavelength_um)?;
-        let offset = position_um - cell * wavelength_um;
+        // Most samples stay in the cell of the last: no division then (the M4F's per-sample
+        // cost). `wrapping_sub`: positions are 0..=1 m, the difference cannot overflow.
+        let same = self.cell.filter(|_| {
+            let offset = position_um.wrapping_sub(self.cell_lo_um);
+            offset >= 0 && offset < wavelength_um
+        });
+        if same.is_some() && self.disarmed.is_none() {
+            return None;
+        }
+        let cell = match same {
+            Some(c) => c,
+            // Checked: div_euclid panics on a zero divisor (and on i32::MIN / -1). `validate`
+            // refuses a wavelength of 0, so None never happens; it would read as no crossing.
+            None => {
+                let c = position_um.checked_div_euclid(wavelength_um)?;
+                self.cell_lo_um = c.wrapping_mul(wavelength_um);
+                c
+            }
+        };
+        let offset = position_um.wrapping_sub(self.cell_lo_um);
         // The nearest ridge and the distance to it.
         let (near, dist) = if offset * 2 < wavelength_um {
             (cell, offset)
@@ -395,6 +413,18 @@ impl Ridges {
                         }
                     }
                     return out;
+                }
+                // The ridges nearest the raw position bound every candidate: one within reach of
+                // the line (two periods of travel, plus how far the raw sample may sit from the
+                // line) is its cell's edge above or below. Far from both, nothing to predict.
+                let reach_um = 2.0 * line.slope_um.abs() + INNOVATION_GATE_UM + 8.0;
+                let lo_um = self.tracker.cell_lo_um as f32;
+                let hi_um = lo_um + self.wavelength_um as f32;
+                let far = self.tracker.cell.is_some()
+                    && (line.end_um - lo_um).abs() > reach_um
+                    && (hi_um - line.end_um).abs() > reach_um;
+                if far {
+                    return (want, None, 0);
                 }
                 return self.predict(line, from_um, want, t_us, timer);
             }

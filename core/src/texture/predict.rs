@@ -120,10 +120,13 @@ impl LineFit {
                 .wrapping_add((N as i32 - 1).wrapping_mul(position_um));
             self.sum_um = self.sum_um.wrapping_sub(oldest).wrapping_add(position_um);
         }
-        // 12·Σ(i − c)·y = 12·Σi·y − 6(N − 1)·Σy, in i64: 12·Σi·y overflows i32 on a long
-        // substrate, while the result (slope × N(N² − 1)) is small on any real stroke.
-        let num = 12 * self.moment_um as i64 - 6 * (N as i64 - 1) * self.sum_um as i64;
-        let num = num.clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+        // 12·Σ(i − c)·y = 12·Σi·y − 6(N − 1)·Σy, wrapping: 12·Σi·y overflows i32 on a long
+        // substrate, but the sums are kept mod 2^32 and the result (slope × N(N² − 1)) fits
+        // i32 for any slope under 65 mm per sample, so the wrapped difference is exact.
+        let num = self
+            .moment_um
+            .wrapping_mul(12)
+            .wrapping_sub(self.sum_um.wrapping_mul(6 * (N as i32 - 1)));
         let slope_um = num as f32 / SLOPE_DEN;
         let end_um = self.sum_um as f32 / N as f32 + slope_um * ((N - 1) as f32 / 2.0);
         self.expected_um = Some(end_um + slope_um);
