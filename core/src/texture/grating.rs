@@ -313,8 +313,12 @@ impl Ridges {
             hybrid: (g.render == GratingRender::Hybrid).then(|| Predictor {
                 fit: LineFit::default(),
                 sample_period_us,
-                period_clocks: (sample_period_us as u64 * clock / 1_000_000) as f32,
-                trust_um: (TRUST_SPEED_UM_S as u64 * sample_period_us as u64) as f32 / 1e6,
+                // Via u32 (a period is far below 2^32 clocks): u64 → f32 is a soft-float
+                // helper on the M4F, which the firmware keeps off its paths (scripts/emu.sh).
+                period_clocks: (sample_period_us as u64 * clock / 1_000_000).min(u32::MAX as u64)
+                    as u32 as f32,
+                // In f32 from u32s: u64 → f32 is a soft-float helper on the M4F.
+                trust_um: TRUST_SPEED_UM_S as f32 * sample_period_us as f32 / 1e6,
                 samples_per_s: 1e6 / sample_period_us.max(1) as f32,
                 last_fired: None,
                 prev_end_um: None,
@@ -474,7 +478,8 @@ impl Ridges {
         }
         // Rounded to the nearest clock and µs (the cast truncates; a fraction of 0.7 in f32
         // is 0.699999988).
-        let delay_clocks = (fraction.max(0.0) * h.period_clocks + 0.5) as u64;
+        // f32 → u32 is one FPU instruction; → u64 a soft-float helper.
+        let delay_clocks = (fraction.max(0.0) * h.period_clocks + 0.5) as u32 as u64;
         let delay_us = (fraction.max(0.0) * h.sample_period_us as f32 + 0.5) as u32;
         let speed_um_s = (line.slope_um.abs() * h.samples_per_s) as i32;
         let c = Crossing {

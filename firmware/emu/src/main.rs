@@ -330,7 +330,7 @@ fn single(texture: Texture, lines: bool) -> Config {
 }
 
 /// The one-region scenes of the per-kind table: (kind, texture, with the lines scene's lines).
-fn kind_cases() -> [(&'static str, Texture, bool); 7] {
+fn kind_cases() -> [(&'static str, Texture, bool); 8] {
     let random = RandomBurst {
         center_millihz: 40_000,
         spread_permille: 300,
@@ -343,11 +343,16 @@ fn kind_cases() -> [(&'static str, Texture, bool); 7] {
         render: GratingRender::VelocitySynthesis,
         ..Grating::new(1_000)
     };
+    let hybrid = Grating {
+        render: GratingRender::Hybrid,
+        ..Grating::new(1_000)
+    };
     [
         ("off", Texture::Off, false),
         ("constant", Texture::constant_hz(80), false),
         ("grating", Texture::Grating(Grating::new(1_000)), false),
         ("grating-velocity", Texture::Grating(synth), false),
+        ("grating-hybrid", Texture::Grating(hybrid), false),
         ("material", Texture::Material(Material::fig5(0.3)), false),
         ("random", Texture::Random(random), false),
         ("lines+off", Texture::Off, true),
