@@ -601,14 +601,18 @@ impl LineCheck {
         } else {
             0
         };
-        if on * 1000 > caps.duty_permille * (b - a) + allowance {
+        // Against the window of the caps in force: a window the new scene's length cuts out of
+        // the old scene's on-time (a change shortened the window) lies inside one of the old
+        // scene's longer windows, whose budget is its cap × its length.
+        let budget_clocks = (b - a).max(caps.window_clocks);
+        if on * 1000 > caps.duty_permille * budget_clocks + allowance {
             self.violate(
                 Rule::Duty,
                 self.sample_at(a),
                 format!(
                     "{on} clocks on in a duty window of {} clocks: {:.1} ‰ against a cap of {} ‰{}",
-                    b - a,
-                    on as f64 * 1000.0 / (b - a) as f64,
+                    budget_clocks,
+                    on as f64 * 1000.0 / budget_clocks as f64,
                     caps.duty_permille,
                     if one_run { " (one periodic run)" } else { "" }
                 ),
