@@ -63,27 +63,10 @@ impl BurstTimer {
     /// whole tick, at least one), starting one tick after the counter (see
     /// [`GateAction::Pulse`](crate::gate::GateAction::Pulse)): `arr = ccr = ticks`.
     pub fn one_pulse(&self, on_clocks: u64) -> Result<TimerSettings, BurstError> {
-        let span = 1u64 << self.counter_bits.min(32);
-        let psc = on_clocks / span;
-        if psc > u16::MAX as u64 {
-            let to_us =
-                |clocks: u64| clocks.saturating_mul(1_000_000) / self.clock_hz.max(1) as u64;
-            return Err(BurstError::PulseTooLong {
-                pulse_us: to_us(on_clocks),
-                max_us: to_us(self.longest_period_clocks() - 1),
-            });
-        }
-        // psc + 1 > on_clocks / span, so ticks < span: it fits the counter.
-        let ticks = (on_clocks / (psc + 1)).max(1) as u32;
-        Ok(TimerSettings {
-            psc: psc as u16,
-            arr: ticks,
-            ccr: ticks,
-        })
+        // A zero delay is rounded up to the one tick PWM mode 2 needs.
+        self.delayed_pulse(0, on_clocks)
     }
-}
 
-impl BurstTimer {
     /// One-pulse settings whose line rises `delay_clocks` after the counter starts (rounded
     /// down to whole ticks, at least one) and stays high for `on_clocks` (rounded down, at
     /// least one tick): the counter runs 0..=arr and the line is high for its last `ccr` ticks,
