@@ -18,7 +18,7 @@ echo "== fuzz: every target 15 s, then a planted panic that must be found (docs/
 # New inputs go to a scratch directory: CI reads the kept corpus and leaves it as it is. 15 s
 # each: the fuzz workspace's build from scratch takes most of the step's ~2.5 min share of CI
 # (docs/fuzzing.md, "In CI").
-NEW_INPUTS=$(mktemp -d) TIME=15 ./scripts/fuzz.sh
+NEW_INPUTS=$(mktemp -d) TIME=10 ./scripts/fuzz.sh
 TIME=60 ./scripts/fuzz.sh --plant lines
 echo "== firmware builds"
 ./scripts/build-firmware.sh
