@@ -257,9 +257,7 @@ impl DutyLedger {
             if last >= lo && last < hi {
                 on += extra_us;
             }
-            if on > 0 {
-                self.add_to_slot(back, on);
-            }
+            self.add_to_slot(back, on);
         }
         if self.offset(to_us) > self.offset(self.recorded_until_us) {
             self.recorded_until_us = to_us;
