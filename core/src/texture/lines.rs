@@ -222,6 +222,10 @@ pub(crate) struct LineTracker {
     /// settled on the side the finger is clear of. A window still inside that gap changes
     /// nothing, so the sample returns at once (a finger resting or moving between lines).
     gap: Option<(i32, i32)>,
+    /// Lines visited by [`Self::update_ahead`] (tests: the visit is the optimisation, and only
+    /// a count can tell a visit of more lines, which changes no result, from the right one).
+    #[cfg(test)]
+    visits: u32,
 }
 
 impl LineTracker {
@@ -350,6 +354,10 @@ impl LineTracker {
         while todo != 0 {
             let i = todo.trailing_zeros() as usize;
             todo &= todo - 1;
+            #[cfg(test)]
+            {
+                self.visits += 1;
+            }
             if self.update_line(i, at(i), position_um, up, down, h) {
                 fired = Some(i as u8);
             }
@@ -504,6 +512,44 @@ mod tests {
         let _ = l.positions_um.push(10_000);
         let _ = l.positions_um.push(20_000);
         l
+    }
+
+    /// Only the lines a sample can change are visited (the M4F cost of `update_ahead`, issue
+    /// #17): with the finger resting or moving between two lines, clear of both by more than
+    /// the hysteresis, none once they have settled; inside one line's hysteresis, that line
+    /// alone. Visiting more would change no result, so only this count catches it.
+    #[test]
+    fn only_the_lines_a_sample_can_change_are_visited() {
+        let mut l = lines();
+        let _ = l.positions_um.push(31_500);
+        let h = l.hysteresis_um as i32;
+        let mut t = LineTracker::default();
+        for _ in 0..3 {
+            assert_eq!(t.update_ahead(&l, 15_000, 0), None);
+        }
+        t.visits = 0;
+        for p in (15_000..16_000).step_by(10) {
+            assert_eq!(t.update_ahead(&l, p, 0), None);
+        }
+        assert_eq!(t.visits, 0, "between the lines");
+        // Up to half the hysteresis below the line at 20 mm, and resting there.
+        for p in (16_000..20_000 - h / 2).step_by(10) {
+            assert_eq!(t.update_ahead(&l, p, 0), None);
+        }
+        t.visits = 0;
+        for _ in 0..10 {
+            assert_eq!(t.update_ahead(&l, 20_000 - h / 2, 0), None);
+        }
+        assert_eq!(t.visits, 10, "the line at 20 mm alone");
+        // Back down between the lines: none again once clear.
+        for p in (15_000..20_000 - h / 2).rev().step_by(10) {
+            assert_eq!(t.update_ahead(&l, p, 0), None);
+        }
+        t.visits = 0;
+        for _ in 0..10 {
+            assert_eq!(t.update_ahead(&l, 15_000, 0), None);
+        }
+        assert_eq!(t.visits, 0, "between the lines, coming back");
     }
 
     #[test]

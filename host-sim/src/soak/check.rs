@@ -592,7 +592,8 @@ impl LineCheck {
         let longest = l.run_longest.max(kept_last);
         // A window over by the last change is the old scene's (its on-time was spent under it).
         let mut caps = self.caps;
-        if self.changed_at.is_some_and(|c| b <= c) {
+        let old_scene = self.changed_at.is_some_and(|c| b <= c);
+        if old_scene {
             caps.loosen(self.before);
         }
         let one_run = all_periodic && sources.0 == sources.1;
@@ -601,10 +602,14 @@ impl LineCheck {
         } else {
             0
         };
-        // Against the window of the caps in force: a window the new scene's length cuts out of
-        // the old scene's on-time (a change shortened the window) lies inside one of the old
-        // scene's longer windows, whose budget is its cap × its length.
-        let budget_clocks = (b - a).max(caps.window_clocks);
+        // A window the new scene's length cuts out of the old scene's on-time (a reload
+        // shortened the window) lies inside one of the old scene's longer windows, whose budget
+        // is its cap × its length; any other window is judged over its own span.
+        let budget_clocks = if old_scene {
+            (b - a).max(caps.window_clocks)
+        } else {
+            b - a
+        };
         if on * 1000 > caps.duty_permille * budget_clocks + allowance {
             self.violate(
                 Rule::Duty,
