@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 ./scripts/setup.sh
 echo "== host tests"
 cargo test --workspace
-echo "== fuzz: every target 15 s, then a planted panic that must be found (docs/fuzzing.md)"
+echo "== fuzz: every target 10 s, then a planted panic that must be found (docs/fuzzing.md)"
 # New inputs go to a scratch directory: CI reads the kept corpus and leaves it as it is. 15 s
 # each: the fuzz workspace's build from scratch takes most of the step's ~2.5 min share of CI
 # (docs/fuzzing.md, "In CI").
