@@ -1,6 +1,8 @@
 //! Gate stage: the last word on the RF enable line — faults force it off, caps are re-checked,
 //! and only changes reach the hardware port.
 
+use core::num::NonZeroU64;
+
 use crate::burst::{BurstTimer, SafetyLimits, TimerSettings};
 pub use crate::texture::Envelope;
 
@@ -94,8 +96,10 @@ const PPM: u64 = 1_000_000;
 /// pulse (what the per-pulse rule held), so that pulse (and any burst inside the caps) fits a
 /// window by itself. At most [`MAX_DUTY_WINDOW_US`].
 pub fn duty_window_us(limits: &SafetyLimits) -> u32 {
-    let cap = limits.max_duty_permille.clamp(1, 1000) as u64;
-    let own_us = (limits.max_on_time_us as u64 * 1000).div_ceil(cap);
+    // A NonZero divisor: no divide-by-zero check on the per-sample path (catch_up).
+    let cap =
+        NonZeroU64::new(limits.max_duty_permille.clamp(1, 1000) as u64).unwrap_or(NonZeroU64::MIN);
+    let own_us = (limits.max_on_time_us as u64 * 1000 + cap.get() - 1) / cap;
     own_us.clamp(DUTY_WINDOW_US as u64, MAX_DUTY_WINDOW_US as u64) as u32
 }
 
@@ -204,7 +208,8 @@ impl DutyLedger {
             // Inside the head slot, or a call a little late (a timer tick behind a sample).
             return false;
         }
-        let steps = elapsed.unsigned_abs() / slot_us as u64;
+        let steps =
+            elapsed.unsigned_abs() / NonZeroU64::new(slot_us as u64).unwrap_or(NonZeroU64::MIN);
         if elapsed < 0 || steps >= RING_SLOTS as u64 {
             // Nothing for longer than the ring (far before the head means the clock wrapped
             // past 2^31 µs of silence): all of it is older than any window.
@@ -239,8 +244,16 @@ impl DutyLedger {
         // Only the slots from `last`'s to `a`'s can overlap (slot k ≥ 1 holds offsets
         // [−k·slot, −(k−1)·slot), so offset x < 0 is in slot ⌈−x / slot⌉): a pulse touches one
         // or two, not the ring's 64 (the M4F cost of a ridge pulse, docs/target-cost.md).
-        let slot = self.slot_us.max(1) as i64;
-        let back_of = |x: i64| if x >= 0 { 0 } else { (-x + slot - 1) / slot } as usize;
+        // A NonZero divisor: no divide-by-zero check on the per-sample path (board-model
+        // panic-check found one here with a plain `max(1)`).
+        let slot = NonZeroU64::new(self.slot_us as u64).unwrap_or(NonZeroU64::MIN);
+        let back_of = |x: i64| {
+            if x >= 0 {
+                0
+            } else {
+                ((x.unsigned_abs() + slot.get() - 1) / slot) as usize
+            }
+        };
         let newest = back_of(last).min(RING_SLOTS);
         let oldest = back_of(a).min(RING_SLOTS - 1);
         for back in newest..=oldest {
