@@ -489,10 +489,11 @@ pub fn rail_fault(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     let stop = t0 + TICKS_PER_S * 305 / 1000;
     // The first trigger whose conversions are all faulted, and the sample period. The ADC holds
     // its input at the end of each sampling time, so a trigger up to one sampling time before
-    // the onset still converts only faulted input; 0.5 µs is under the shortest of the boards'
-    // (the G474's 24.5 cycles at 37.5 MHz = 653 ns since the conversion budget; the F446's 56
-    // cycles = 2.5 µs). The 1 µs this was before let a G474 trigger 0.7 µs ahead of the onset
-    // count, whose first conversion is held 47 ns before it.
+    // the onset still converts only faulted input; 0.5 µs is under the shortest sampling time
+    // either board uses or has tried (the G474's 92.5 cycles at 37.5 MHz = 2.47 µs, 24.5 cycles
+    // = 653 ns in the conversion budget's pick; the F446's 56 cycles = 2.5 µs). The 1 µs this
+    // was before let a 24.5-cycle G474 trigger 0.7 µs ahead of the onset count, whose first
+    // conversion is held 47 ns before it.
     let first = o
         .triggers
         .iter()

@@ -21,9 +21,7 @@ pub use nucleo_g474re::NUCLEO_G474RE;
 pub const CARRIER_HZ: u32 = 15_000_000;
 /// Position sample rate delivered to the control core (Hz).
 pub const SAMPLE_RATE_HZ: u32 = 10_000;
-/// The scale of a position sample: the sum of this many 12-bit conversions (16 × 12-bit =
-/// 0..=65 520). A board may convert more per sample and shift the sum back to this scale (the
-/// G474's oversampler: 64 conversions, right shift 2; `docs/conversion-budget.md`).
+/// ADC conversions summed into one 16-bit position sample (16 × 12-bit = 0..=65 520).
 pub const ADC_OVERSAMPLE: u32 = 16;
 /// Highest burst frequency the textures use (Hz).
 pub const MAX_BURST_HZ: u32 = 2_000;
@@ -261,36 +259,10 @@ pub enum Oversampling {
 }
 
 impl Oversampling {
-    /// Conversions per sample.
     pub const fn conversions(&self) -> u32 {
         match *self {
             Oversampling::Software { conversions } => conversions,
             Oversampling::Hardware { ratio, .. } => ratio,
-        }
-    }
-
-    /// How many conversions the delivered code is the sum of (the core's scale): the sum
-    /// shifted right by `shift` is the sum of `ratio >> shift` (exact only when `ratio` is a
-    /// power of two the shift divides, which [`Self::is_valid`] checks).
-    pub const fn code_conversions(&self) -> u32 {
-        match *self {
-            Oversampling::Software { conversions } => conversions,
-            Oversampling::Hardware { ratio, shift } => ratio >> shift,
-        }
-    }
-
-    /// The G474 oversampler's limits (RM0440 §21.4.30): ratio a power of two from 2 to 256,
-    /// shift 0 to 8 and no larger than the ratio's log2 (so the shift only scales).
-    pub const fn is_valid(&self) -> bool {
-        match *self {
-            Oversampling::Software { conversions } => conversions >= 1,
-            Oversampling::Hardware { ratio, shift } => {
-                ratio >= 2
-                    && ratio <= 256
-                    && ratio.is_power_of_two()
-                    && shift <= 8
-                    && shift <= ratio.trailing_zeros()
-            }
         }
     }
 }
@@ -312,7 +284,7 @@ pub struct AdcDef {
     pub trigger_extsel: u8,
     /// Trigger events per output sample. 1 on both boards: on the F446 one trigger runs a
     /// 16-rank regular sequence (the same channel in every rank, summed in software), on the
-    /// G474 one trigger runs the 64× hardware oversampler (shift 2).
+    /// G474 one trigger runs the 16× hardware oversampler.
     pub triggers_per_sample: u32,
 }
 
@@ -506,11 +478,10 @@ impl BoardDef {
             && self.burst_timer_bits == 32
             && self.burst_ticks_at_min_hz() <= self.burst_counter_max()
             && self.max_burst_hz == MAX_BURST_HZ
-            // ADC: 10 kHz, codes on the 16-conversion scale, trigger rate exactly reachable.
+            // ADC: 10 kHz, 16 conversions, trigger rate exactly reachable.
             && self.sample_rate_hz == SAMPLE_RATE_HZ
             && self.adc_oversample == ADC_OVERSAMPLE
-            && self.adc.oversampling.is_valid()
-            && self.adc.oversampling.code_conversions() == ADC_OVERSAMPLE
+            && self.adc.oversampling.conversions() == ADC_OVERSAMPLE
             && self.adc.trigger_timer_clk_hz == c.timer_clk_hz(self.adc.trigger_bus)
             && self.adc_trigger_hz() == self.sample_rate_hz * self.adc.triggers_per_sample
             && self.adc.trigger_timer_clk_hz

@@ -99,12 +99,9 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
             af: None,
             header: "A1 (CN8-2), morpho CN7-30",
         },
-        // 64 conversions summed and shifted right by 2: the 16-conversion code the core
-        // expects, with half the white noise of 16 (docs/conversion-budget.md: the budget's
-        // pick for one ADC at 24.5-cycle sampling, 63 µs of the 100 µs period).
         oversampling: Oversampling::Hardware {
-            ratio: 4 * ADC_OVERSAMPLE,
-            shift: 2,
+            ratio: ADC_OVERSAMPLE,
+            shift: 0,
         },
         trigger_timer: "TIM3",
         trigger_bus: Bus::Apb1,

@@ -1,8 +1,8 @@
 //! NUCLEO-G474RE binding: RCC from `saw_boards::NUCLEO_G474RE`, pins, ADC acquisition.
 //!
 //! ADC: TIM3 TRGO (update, 10 kHz) triggers ADC1 (TIM3_TRGO external trigger); each trigger runs
-//! the 64× hardware oversampler on the wiper (PA1 = ADC1_IN2) with shift 2, so DR holds the sum
-//! of 64 conversions divided by 4 — the 16-bit, 16-conversion-scale code — directly; DMA1 channel 1 (via DMAMUX) moves it into a circular buffer.
+//! the 16× hardware oversampler on the wiper (PA1 = ADC1_IN2) with shift 0, so DR holds the
+//! 16-bit sum directly; DMA1 channel 1 (via DMAMUX) moves it into a circular buffer.
 use embassy_stm32::adc::{vals, Adc, AdcChannel, AdcConfig, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
 use embassy_stm32::pac;
@@ -39,11 +39,10 @@ const _: () = assert!(matches!(PLLM, PllPreDiv::DIV6));
 const _: () = assert!(matches!(PLLN, PllMul::MUL75));
 const _: () = assert!(matches!(PLLR, PllRDiv::DIV2));
 
-// Hardware oversampler: ratio 64 (OVSR = 5), shift 2 (OVSS = 2) → DR = sum of 64 conversions / 4,
-// the 16-conversion code the core expects (RM0440 §21.4.30; docs/conversion-budget.md).
+// Hardware oversampler: ratio 16 (OVSR = 3), shift 0 (OVSS = 0) → DR = sum of 16 conversions.
 const OVS: (u8, u8) = match BOARD.adc.oversampling {
-    Oversampling::Hardware { ratio: 64, shift: 2 } => (5, 2),
-    _ => panic!("G474 binding expects the 64x hardware oversampler with shift 2"),
+    Oversampling::Hardware { ratio: 16, shift } => (3, shift as u8),
+    _ => panic!("G474 binding expects the 16x hardware oversampler"),
 };
 
 /// Embassy configuration: HSE 24 MHz crystal → PLL (M 6, N 75, R 2) → SYSCLK 150 MHz,
@@ -261,19 +260,13 @@ pub fn dac_wait_ready() {
 /// R_ADC, N = 12 (ln 2^14 = 9.70), C_ADC = 5 pF, f_ADC = 150 MHz / 4 = 37.5 MHz (embassy's
 /// PRESC for ≤ 60 MHz). 24.5 cycles (653 ns): < 13.2 kΩ − R_ADC by the formula, but the
 /// datasheet's "maximum ADC R_AIN" table (which includes pad and parasitics; values from memory,
-/// not re-checked here) puts ~650 ns near 2 kΩ for 1/4 LSB. The conversion budget
-/// (docs/conversion-budget.md) fits an effective R_ADC of 11.5 kΩ to that reading and asks for a
-/// full-scale step within 0.5 LSB at 2.5 kΩ: 14 kΩ × 5 pF × ln 8192 = 631 ns, so 24.5 cycles
-/// (653 ns) settle, with 3.5 % to spare (the hold capacitor keeps its charge between conversions
-/// of the same pin, so the step a conversion actually sees is far smaller). 64 × (24.5 + 12.5)
-/// cycles = 63.1 µs per trigger, inside the 100 µs period.
-const SAMPLE_TIME: SampleTime = SampleTime::CYCLES24_5;
-const _: () = assert!(
-    BOARD.adc.oversampling.conversions() * 37 * 1_000_000 / (BOARD.sysclk_hz / 4)
-        < 1_000_000 / BOARD.sample_rate_hz
-);
+/// not re-checked here) puts ~650 ns near 2 kΩ — no margin for 2.5 kΩ. 92.5 cycles (2.47 µs):
+/// < 50 kΩ − R_ADC by the formula, ~7 kΩ scaled from that table. 16 × (92.5 + 12.5) cycles =
+/// 44.8 µs per trigger, inside the 100 µs period (the F446's 16 conversions take 48 µs).
+const SAMPLE_TIME: SampleTime = SampleTime::CYCLES92_5;
+const _: () = assert!(16 * 105 * 1_000_000 / (BOARD.sysclk_hz / 4) < 1_000_000 / BOARD.sample_rate_hz);
 
-/// Samples delivered per `read` (each is one trigger = 64 oversampled conversions, shifted by 2).
+/// Samples delivered per `read` (each is one trigger = 16 oversampled conversions).
 pub const SAMPLES_PER_READ: usize = 2;
 const DMA_LEN: usize = 2 * SAMPLES_PER_READ;
 /// DMA1 channel index of `DMA1_CH1` (channel 1 in RM0440 numbering is index 0 in the PAC).
@@ -296,7 +289,7 @@ impl Sampler {
         let mut cfg = AdcConfig::default();
         cfg.oversampling_ratio = Some(OVS.0);
         cfg.oversampling_shift = Some(OVS.1);
-        // Regular oversampling, all 64 conversions done after a single trigger (TROVS = 0),
+        // Regular oversampling, all 16 conversions done after a single trigger (TROVS = 0),
         // continued mode (ROVSM = 0).
         cfg.oversampling_mode = Some((vals::Rovsm::CONTINUED, vals::Trovs::AUTOMATIC, true));
         // The EXTSEL code documented in saw-boards must be the one embassy uses for TIM3_TRGO.
@@ -325,7 +318,7 @@ impl Sampler {
         self.trigger.start();
     }
 
-    /// Wait for the next samples (each already the 16-bit code: 64 conversions summed, >> 2). On an overrun
+    /// Wait for the next samples (each already the 16-bit sum of 16 conversions). On an overrun
     /// or a stall the acquisition is restarted before this returns the fault.
     pub async fn read(&mut self) -> Result<Batch, AdcFault> {
         let mut codes = [0u16; SAMPLES_PER_READ];
