@@ -7,6 +7,8 @@
 //! → gate. What a texture does lives with the texture; this file only keeps the order, the
 //! fault state, the swap and the telemetry.
 
+use core::cell::Cell;
+
 use heapless::Vec;
 
 use crate::burst::{BurstTimer, SafetyLimits, TimerSettings};
@@ -165,6 +167,11 @@ pub struct Controller<E: VelocityEstimator = DefaultEstimator> {
     /// burst the old scene left running at the next tick (see [`Controller::on_tick`]).
     caps_pending: bool,
     telemetry: Telemetry,
+    /// The running burst's frequency as [`Controller::telemetry`] last worked it out, keyed by
+    /// the period it came from, (psc, arr, mHz): the firmware's stream asks at every record, and
+    /// the u64 division (~170 instructions on the M4, `__aeabi_uldivmod`) is paid once per
+    /// period, not per record (the board model's stream-cost check: +10 % → +2 % per sample).
+    burst_memo: Cell<Option<(u16, u32, u32)>>,
 }
 
 impl Controller<DefaultEstimator> {
@@ -201,6 +208,7 @@ impl<E: VelocityEstimator> Controller<E> {
                 region: u8::MAX,
                 ..Telemetry::default()
             },
+            burst_memo: Cell::new(None),
         }
     }
 
@@ -253,12 +261,19 @@ impl<E: VelocityEstimator> Controller<E> {
         // action (a u64 division per changed sample for a velocity-driven texture). Every
         // state change of the gate goes through `count_action`, which used to fill it from
         // `gate.running()` the same way, so the figure is the same.
+        let burst_millihz = match self.gate.running() {
+            None => 0,
+            Some(s) => match self.burst_memo.get() {
+                Some((psc, arr, millihz)) if (psc, arr) == (s.psc, s.arr) => millihz,
+                _ => {
+                    let millihz = s.produced_millihz(self.timer.clock_hz) as u32;
+                    self.burst_memo.set(Some((s.psc, s.arr, millihz)));
+                    millihz
+                }
+            },
+        };
         Telemetry {
-            burst_millihz: self
-                .gate
-                .running()
-                .map(|s| s.produced_millihz(self.timer.clock_hz) as u32)
-                .unwrap_or(0),
+            burst_millihz,
             ..self.telemetry
         }
     }
@@ -632,6 +647,36 @@ mod tests {
         });
         assert_eq!(out.action, None);
         assert_eq!(out.region, None);
+    }
+
+    /// Telemetry's burst frequency follows the running burst through every region and back
+    /// (the default scene's 20 / 80 / 1000 Hz; TEST_TIMER's 90 MHz divides each exactly), and
+    /// reads 0 with the line off: the memo of the last division is keyed by the period, so a
+    /// stale figure from the previous region would show here.
+    #[test]
+    fn telemetry_follows_the_running_burst() {
+        let mut c = loaded();
+        let mut t = 0;
+        assert_eq!(c.telemetry().burst_millihz, 0);
+        for (um, millihz) in [
+            (5_000.0, 20_000),
+            (30_000.0, 80_000),
+            (55_000.0, 1_000_000),
+            (30_000.0, 80_000),
+            (5_000.0, 20_000),
+            (55_000.0, 1_000_000),
+        ] {
+            // Long enough at each spot for the duty window to let the burst start.
+            let _ = feed(&mut c, um, &mut t, 3_000);
+            assert_eq!(c.telemetry().burst_millihz, millihz, "at {um} um");
+            // Asked twice, the same figure (the memo's path).
+            assert_eq!(c.telemetry().burst_millihz, millihz, "at {um} um, again");
+        }
+        let mut cfg = default_config();
+        cfg.scene.textures[2] = Texture::Off;
+        c.load(&cfg).unwrap();
+        let _ = feed(&mut c, 55_000.0, &mut t, 10);
+        assert_eq!(c.telemetry().burst_millihz, 0);
     }
 
     #[test]
