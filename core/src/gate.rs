@@ -1,7 +1,7 @@
 //! Gate stage: the last word on the RF enable line — faults force it off, caps are re-checked,
 //! and only changes reach the hardware port.
 
-use core::num::NonZeroU64;
+use core::num::{NonZeroU32, NonZeroU64};
 
 use crate::burst::{BurstTimer, SafetyLimits, TimerSettings};
 pub use crate::texture::Envelope;
@@ -99,7 +99,14 @@ pub fn duty_window_us(limits: &SafetyLimits) -> u32 {
     // A NonZero divisor: no divide-by-zero check on the per-sample path (catch_up).
     let cap =
         NonZeroU64::new(limits.max_duty_permille.clamp(1, 1000) as u64).unwrap_or(NonZeroU64::MIN);
-    let own_us = (limits.max_on_time_us as u64 * 1000 + cap.get() - 1) / cap;
+    let num = limits.max_on_time_us as u64 * 1000 + cap.get() - 1;
+    // Every sample that touches the gate asks for this: in u32 (the M4's hardware divide) when
+    // it fits, as it does for any on-time cap under 4.29 s; a u64 division is a library call
+    // of ~100 instructions there.
+    let own_us = match (u32::try_from(num), NonZeroU32::new(cap.get() as u32)) {
+        (Ok(n), Some(c)) => (n / c) as u64,
+        _ => num / cap,
+    };
     own_us.clamp(DUTY_WINDOW_US as u64, MAX_DUTY_WINDOW_US as u64) as u32
 }
 
@@ -282,8 +289,46 @@ impl DutyLedger {
         self.add(from_us, to_us, PPM, 0);
     }
 
-    /// Upper bound of the line's on-time from offset `x` to the present, µs.
+    /// Upper bound of the line's on-time from offset `x` to the present, µs: every slot newer
+    /// than x's, plus x's own clipped to its length after x.
+    ///
+    /// Worked from the old end: the ring's total less the slots older than x's. A pulse asks
+    /// about the window's start, a few slots from the ring's end, so this adds 64 words and a
+    /// few slots instead of walking ~60 slots in i64 span arithmetic (issue #17's cost).
     fn on_since(&self, x: i64) -> u64 {
+        let until = self.offset(self.recorded_until_us);
+        if x >= until {
+            return 0;
+        }
+        let total: u64 = self.on_us.iter().map(|&u| u as u64).sum();
+        // x's slot: the newest k with −k·slot ≤ x, i.e. ⌈−x / slot⌉ (0 for x ≥ 0), in u32 (a
+        // hardware divide) once x is known to lie inside the ring.
+        let back = if x >= 0 {
+            0
+        } else {
+            let ring_us = RING_SLOTS as u64 * self.slot_us as u64;
+            let before_us = x.unsigned_abs();
+            if before_us > ring_us {
+                return total;
+            }
+            // ≤ 64 slots of at most ⌈MAX_DUTY_WINDOW_US / 60⌉ µs: inside u32; before_us ≥ 1.
+            let slot = NonZeroU32::new(self.slot_us).unwrap_or(NonZeroU32::MIN);
+            let before_us = u32::try_from(before_us).unwrap_or(u32::MAX);
+            ((before_us - 1) / slot + 1) as usize
+        };
+        if back >= RING_SLOTS {
+            return total;
+        }
+        let older: u64 = (back + 1..RING_SLOTS).map(|k| self.slot(k)).sum();
+        let (_, hi) = self.span(back);
+        let on = self.slot(back);
+        let after = (hi.min(until) - x).max(0) as u64;
+        total - older - on + on.min(after)
+    }
+
+    /// [`Self::on_since`] by walking from the head (the reference it is tested against).
+    #[cfg(test)]
+    fn on_since_walk(&self, x: i64) -> u64 {
         let until = self.offset(self.recorded_until_us);
         if x >= until {
             return 0;
@@ -549,6 +594,15 @@ impl Gate {
         if self.steady(desired) {
             return None;
         }
+        // A one-pulse still on: the hardware ends it, and nothing changes until then — the
+        // first call after its end records it (`catch_up`). Returning here spares the samples
+        // under every pulse the ledger's roll (a grating's ridge pulses cover ~a third of its
+        // samples at 200 mm/s). The bound keeps a deadline seen across a wrapped clock out.
+        if let State::Pulse { end_us, .. } = self.state {
+            if before(t_us, end_us) && end_us.wrapping_sub(t_us) <= MAX_DUTY_WINDOW_US {
+                return None;
+            }
+        }
         let window_us = self.catch_up(t_us, limits);
         let desired = desired.filter(|s| limits.allows(timer, s));
         match (self.state, desired) {
@@ -753,6 +807,74 @@ mod tests {
                 "{:?}", args
             );
         }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 4096, ..Default::default() })]
+        /// `on_since` from the ring's old end gives what the walk from the head gives, for x
+        /// anywhere from after the last record to far before the ring, on every slot length.
+        #[test]
+        fn on_since_from_the_old_end_is_the_walk(
+            slot_us in 1u32..20_000,
+            head in 0usize..RING_SLOTS,
+            head_start_us: u32,
+            until_back in -30_000i64..70_000,
+            fill in proptest::collection::vec((0u32..3, 0u32..30_000), RING_SLOTS),
+            x_slots in -80i64..3,
+            x_shift: u32,
+        ) {
+            let mut on_us = [0u32; RING_SLOTS];
+            for (slot, (kind, us)) in on_us.iter_mut().zip(&fill) {
+                *slot = match kind { 0 => 0, 1 => us % slot_us, _ => *us };
+            }
+            let l = DutyLedger {
+                on_us,
+                head,
+                head_start_us,
+                slot_us,
+                recorded_until_us: head_start_us.wrapping_sub(until_back as i32 as u32),
+            };
+            let x = x_slots * slot_us as i64 + (x_shift % (2 * slot_us)) as i64 - slot_us as i64;
+            proptest::prop_assert_eq!(l.on_since(x), l.on_since_walk(x), "x {}", x);
+            // Exactly on slot boundaries too.
+            let xb = x_slots * slot_us as i64;
+            proptest::prop_assert_eq!(l.on_since(xb), l.on_since_walk(xb), "x {}", xb);
+        }
+    }
+
+    /// While a one-pulse is on, a request changes nothing (the hardware ends it); the first one
+    /// after its end starts the burst. A sample after a silence of ~3·2^30 µs, whose wrapped
+    /// clock puts it 2^30 + 1 ms *before* the pulse's end, is not "still on": the ledger
+    /// forgets the silence and the burst starts.
+    #[test]
+    fn a_pulse_holds_requests_until_its_end_but_not_across_a_wrapped_clock() {
+        let l = SafetyLimits::default();
+        let a = TimerSettings {
+            psc: 0,
+            arr: 999,
+            ccr: 400,
+        };
+        let t0 = 5_000_000u32;
+        let mut g = Gate::default();
+        assert_eq!(g.pulse(P10, t0, &T, &l), Some(GateAction::Pulse(P10)));
+        let end = t0 + P10_US;
+        assert_eq!(g.request(Some(a), t0 + 100, &T, &l), None);
+        assert_eq!(g.request(Some(a), end - 1, &T, &l), None);
+        let after = g;
+        // The pulse's 10 ms fit a 50 % cap with room for the burst: it starts once the line
+        // has been low for a while after the end (at the end itself the fall is recorded).
+        let mut ended = after;
+        assert_eq!(ended.request(Some(a), end, &T, &l), None);
+        assert_eq!(
+            ended.request(Some(a), end + 1, &T, &l),
+            Some(GateAction::Start(a))
+        );
+        let mut wrapped = after;
+        let t = end.wrapping_sub((1 << 30) + 1_000);
+        assert_eq!(
+            wrapped.request(Some(a), t, &T, &l),
+            Some(GateAction::Start(a))
+        );
     }
 
     #[test]
