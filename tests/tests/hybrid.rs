@@ -4,23 +4,13 @@
 //! ridge; and it falls back to position phase where the prediction is not trusted.
 
 use host_sim::adc::{FaultKind, FaultWindow};
+use host_sim::bench::renderers::grating_config_at;
 use host_sim::metrics;
 use host_sim::sim::{self, SimParams, SimResult};
 use host_sim::trajectory::Trajectory;
 use saw_boards::NUCLEO_F446RE;
 use saw_core::gate::GateAction;
-use saw_core::texture::{Grating, GratingRender, Texture};
-
-fn config(render: GratingRender, wavelength_um: u32) -> saw_core::Config {
-    let mut cfg = saw_core::default_config();
-    cfg.scene.boundaries_um.clear();
-    cfg.scene.textures.clear();
-    let _ = cfg.scene.textures.push(Texture::Grating(Grating {
-        render,
-        ..Grating::new(wavelength_um)
-    }));
-    cfg
-}
+use saw_core::texture::GratingRender;
 
 /// Forth and back over 20 mm at `speed_um_s`, turning half a period from the ridges.
 fn stroke(wavelength_um: u32, speed_um_s: f64) -> (Trajectory, f64) {
@@ -110,7 +100,7 @@ fn hybrid_bursts_land_within_ten_microns_on_a_steady_stroke() {
                 let v = mm_s * 1_000.0;
                 let (traj, d) = stroke(wavelength_um, v);
                 let r = run(SimParams::new(&NUCLEO_F446RE, traj, d)
-                    .with_config(config(GratingRender::Hybrid, wavelength_um))
+                    .with_config(grating_config_at(GratingRender::Hybrid, wavelength_um))
                     .with_noise(2.0, seed));
                 let s = score(&r, wavelength_um, v);
                 let case = format!("λ {wavelength_um} µm, {mm_s} mm/s, seed {seed}");
@@ -144,7 +134,7 @@ fn hybrid_bursts_land_within_ten_microns_on_a_steady_stroke() {
 fn below_the_trust_speed_the_hybrid_is_position_phase() {
     let (traj, d) = stroke(1_000, 5_000.0);
     let r = run(SimParams::new(&NUCLEO_F446RE, traj, d / 4.0)
-        .with_config(config(GratingRender::Hybrid, 1_000))
+        .with_config(grating_config_at(GratingRender::Hybrid, 1_000))
         .with_noise(2.0, 1));
     let s = score(&r, 1_000, 5_000.0);
     assert!(s.ridges >= 4, "{}", s.ridges);
@@ -153,7 +143,7 @@ fn below_the_trust_speed_the_hybrid_is_position_phase() {
     // Just above it: predicted.
     let (traj, d) = stroke(1_000, 15_000.0);
     let r = run(SimParams::new(&NUCLEO_F446RE, traj, d / 4.0)
-        .with_config(config(GratingRender::Hybrid, 1_000))
+        .with_config(grating_config_at(GratingRender::Hybrid, 1_000))
         .with_noise(2.0, 1));
     let s = score(&r, 1_000, 15_000.0);
     assert_eq!(s.bursts as u64, s.ridges);
@@ -175,7 +165,7 @@ fn a_dropped_sample_or_a_glitch_falls_back_for_one_window() {
             end_us: 100_100,
         }];
         let r = run(SimParams::new(&NUCLEO_F446RE, traj, 0.15)
-            .with_config(config(GratingRender::Hybrid, 200))
+            .with_config(grating_config_at(GratingRender::Hybrid, 200))
             .with_noise(2.0, 3)
             .with_faults(faults));
         let pulse_rises = pulses(&r);
@@ -214,7 +204,7 @@ fn a_reversal_on_a_ridge_fires_it_once_and_falls_back() {
             speed_um_s: 100_000.0,
         };
         let r = run(SimParams::new(&NUCLEO_F446RE, traj, 0.04)
-            .with_config(config(GratingRender::Hybrid, 200))
+            .with_config(grating_config_at(GratingRender::Hybrid, 200))
             .with_noise(2.0, seed));
         let hits = metrics::ridge_hits(&r, 200.0);
         // Bursts within 150 µm of the turn at 12 mm (t = 20 ms): at most one.
