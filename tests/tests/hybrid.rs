@@ -23,20 +23,19 @@ fn stroke(wavelength_um: u32, speed_um_s: f64) -> (Trajectory, f64) {
     (t, 2.0 * 20_000.0 / speed_um_s)
 }
 
-/// The line needs its 32-sample window (3.2 ms at 10 kHz) after a turn; until then the
+/// The line needs its 64-sample window (6.4 ms at 10 kHz) after a turn; until then the
 /// renderer is position phase. Hits this soon after a turn are scored apart.
-const SETTLE_S: f64 = 0.0035;
+const SETTLE_S: f64 = 0.0067;
 
 /// Seeds of the ADC noise per case.
 const SEEDS: std::ops::Range<u64> = 0..6;
 
-/// Worst |placement error| on a steady stroke, stated in docs/estimators.md: 10.2 µm, the worst
-/// of these 42 runs (10.15 µm, λ = 1 mm at 200 mm/s, seed 4; 10.00 at λ = 0.2 mm, 100 mm/s,
-/// seed 3), asserted as stated. The issue asks 10 µm: this is the noise floor, not the method.
-/// The line's end has σ = 0.35 of the position noise per sample (≈ 11 µm at 2 LSB with 16
-/// conversions, so ≈ 3.8 µm), and the worst of ~1 100 bursts is ≈ 2.7 σ of that; more
-/// conversions per sample (docs/conversion-budget.md) lower it.
-const STATED_STEADY_WORST_UM: f64 = 10.2;
+/// Worst |placement error| on a steady stroke, stated in docs/estimators.md: 6.7 µm, the worst
+/// of these 42 runs (6.61 µm, λ = 0.2 mm at 100 mm/s, seed 0), asserted as stated against the
+/// issue's 10 µm. The line's end has σ = 0.25 of one sample's position noise (8.1 µm at 2 LSB
+/// with 16 conversions, so 2.0 µm), and the worst of ~1 100 bursts is ≈ 3.3 σ of that. With the
+/// 32-sample line it was 10.2 µm.
+const STATED_STEADY_WORST_UM: f64 = 6.7;
 
 struct Score {
     steady_worst_um: f64,
@@ -125,7 +124,7 @@ fn hybrid_bursts_land_within_ten_microns_on_a_steady_stroke() {
             }
         }
     }
-    eprintln!("hybrid steady worst {:.1} µm ({})", worst.0, worst.1);
+    eprintln!("hybrid steady worst {:.2} µm ({})", worst.0, worst.1);
 }
 
 /// Below the trust speed (10 mm/s) the line is not trusted: every burst comes from position
@@ -152,7 +151,7 @@ fn below_the_trust_speed_the_hybrid_is_position_phase() {
     assert!(s.delayed * 2 >= s.bursts, "{} of {}", s.delayed, s.bursts);
 }
 
-/// A dropped sample and a glitch each empty the line: the ridges within the next 3.2 ms are
+/// A dropped sample and a glitch each empty the line: the ridges within the next 6.4 ms are
 /// position phase (undelayed), and every ridge still gets one burst.
 #[test]
 fn a_dropped_sample_or_a_glitch_falls_back_for_one_window() {
@@ -171,7 +170,7 @@ fn a_dropped_sample_or_a_glitch_falls_back_for_one_window() {
         let pulse_rises = pulses(&r);
         let after: Vec<_> = pulse_rises
             .iter()
-            .filter(|(t, _)| *t > 0.1001 && *t < 0.1001 + 0.0031)
+            .filter(|(t, _)| *t > 0.1001 && *t < 0.1001 + 0.0063)
             .collect();
         assert!(!after.is_empty(), "{kind:?}: no ridge in the window");
         assert!(
@@ -180,7 +179,7 @@ fn a_dropped_sample_or_a_glitch_falls_back_for_one_window() {
         );
         let later = pulse_rises
             .iter()
-            .filter(|(t, _)| *t > 0.106)
+            .filter(|(t, _)| *t > 0.1066)
             .collect::<Vec<_>>();
         let delayed = later.iter().filter(|(_, d)| *d).count();
         assert!(
@@ -229,5 +228,29 @@ fn a_reversal_on_a_ridge_fires_it_once_and_falls_back() {
             s.bursts,
             s.ridges
         );
+    }
+}
+
+/// The bench's mixed motion (reversals, sines up to 300 mm/s and 10 m/s², 2 LSB): where the
+/// 64-sample line's acceleration bias would show, the newer half's line takes over
+/// (`DISAGREE_UM`). Stated in docs/estimators.md over seeds 2026–2029: hybrid RMS at most
+/// 7.3 µm (7.09–7.24) and worst at most 20 µm (16.6–19.9), 0 ridges skipped; position phase on the same streams
+/// RMS at least 15 µm (asserted: the hybrid at most half of it on every seed).
+#[test]
+fn on_the_mixed_motion_the_hybrid_halves_position_phase() {
+    use host_sim::bench::{renderers::core_run, scenario};
+    let (mixed, d) = scenario::mixed();
+    for seed in 2026..2030 {
+        let h = core_run(GratingRender::Hybrid, "mixed".into(), mixed.clone(), d, 2.0, seed, None);
+        let p = core_run(GratingRender::PositionPhase, "mixed".into(), mixed.clone(), d, 2.0, seed, None);
+        eprintln!(
+            "seed {seed}: hybrid RMS {:.2} worst {:.2} µm, skipped {:?}; position phase RMS {:.2} worst {:.2}",
+            h.rms_err_um, h.worst_err_um, h.skipped, p.rms_err_um, p.worst_err_um
+        );
+        assert!(h.rms_err_um <= 7.3, "seed {seed}: RMS {}", h.rms_err_um);
+        assert!(h.worst_err_um <= 20.0, "seed {seed}: worst {}", h.worst_err_um);
+        assert_eq!(h.skipped, Some(0), "seed {seed}");
+        assert!(p.rms_err_um >= 15.0, "seed {seed}: position phase RMS {}", p.rms_err_um);
+        assert!(2.0 * h.rms_err_um <= p.rms_err_um, "seed {seed}");
     }
 }

@@ -824,27 +824,28 @@ mod tests {
         out
     }
 
-    /// Hand-worked: a noiseless 100 mm/s ramp, x = 503 + 10·k µm at sample k. The ridge at
-    /// 1 mm is crossed at k = 49.7; the line is exact, so the sample at k = 49 fires it delayed
-    /// by 0.7 of a period, 70 µs = 6 300 clocks at 90 MHz, and the pulse lasts duty·λ/V =
-    /// 0.4 · 1 mm / 100 mm/s = 4 ms = 360 000 clocks. Ridge 2 mm: k = 149.7, the same.
+    /// Hand-worked: a noiseless 100 mm/s ramp, x = 303 + 10·k µm at sample k. The ridge at
+    /// 1 mm is crossed at k = 69.7, after the line's 64-sample window has filled (k = 63); the
+    /// line is exact, so the sample at k = 69 fires it delayed by 0.7 of a period, 70 µs =
+    /// 6 300 clocks at 90 MHz, and the pulse lasts duty·λ/V = 0.4 · 1 mm / 100 mm/s = 4 ms =
+    /// 360 000 clocks. Ridge 2 mm: k = 169.7, the same.
     #[test]
     fn the_hybrid_fires_at_the_predicted_crossing() {
         let mut r = hybrid(1_000);
-        let got = pulses(&mut r, (0..200).map(|k| Some(503 + 10 * k)), 100_000);
+        let got = pulses(&mut r, (0..220).map(|k| Some(303 + 10 * k)), 100_000);
         let expected = TIMER.delayed_pulse(6_300, 360_000).unwrap();
         assert_eq!((expected.arr, expected.ccr), (366_299, 360_000));
-        assert_eq!(got, vec![(49, expected), (149, expected)]);
-        // Going down: x = 2 497 − 10·k crosses 2 mm at k = 49.7 and 1 mm at k = 149.7.
+        assert_eq!(got, vec![(69, expected), (169, expected)]);
+        // Going down: x = 2 697 − 10·k crosses 2 mm at k = 69.7 and 1 mm at k = 169.7.
         let mut r = hybrid(1_000);
-        let got = pulses(&mut r, (0..200).map(|k| Some(2_497 - 10 * k)), -100_000);
-        assert_eq!(got, vec![(49, expected), (149, expected)]);
+        let got = pulses(&mut r, (0..220).map(|k| Some(2_697 - 10 * k)), -100_000);
+        assert_eq!(got, vec![(69, expected), (169, expected)]);
         // Position phase on the same ramp: the first sample past the ridge, undelayed.
         let g = Grating::new(1_000);
         let mut r = Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap();
-        let got = pulses(&mut r, (0..200).map(|k| Some(503 + 10 * k)), 100_000);
+        let got = pulses(&mut r, (0..220).map(|k| Some(303 + 10 * k)), 100_000);
         let one = TIMER.one_pulse(360_000).unwrap();
-        assert_eq!(got, vec![(50, one), (150, one)]);
+        assert_eq!(got, vec![(70, one), (170, one)]);
     }
 
     /// The line is trusted from 10 mm/s (1 µm per sample at 10 kHz): at 9 mm/s the ridge is
@@ -869,23 +870,24 @@ mod tests {
         assert!(got[0].1.pulse_delay_clocks() > 1, "predicted: {got:?}");
     }
 
-    /// A dropped sample empties the line: the next ridge within 32 samples is position phase,
+    /// A dropped sample empties the line: the next ridge within 64 samples is position phase,
     /// the one after is predicted again. A glitch the position guard rejects does the same.
     #[test]
     fn a_gap_or_a_glitch_empties_the_line() {
-        let ramp = |k: i32| 503 + 10 * k;
-        // Sample 40 missing: the ridge at k = 49.7 is fired by position phase at k = 50.
+        // Unbroken, this ramp's ridges at k = 69.7 and 169.7 are both predicted (above).
+        let ramp = |k: i32| 303 + 10 * k;
+        // Sample 66 missing: the ridge at k = 69.7 is fired by position phase at k = 70.
         let mut r = hybrid(1_000);
-        let path = (0..200).map(|k| (k != 40).then_some(ramp(k)));
+        let path = (0..220).map(|k| (k != 66).then_some(ramp(k)));
         let got = pulses(&mut r, path, 100_000);
-        assert_eq!(got.iter().map(|g| g.0).collect::<Vec<_>>(), vec![50, 149]);
+        assert_eq!(got.iter().map(|g| g.0).collect::<Vec<_>>(), vec![70, 169]);
         assert_eq!(got[0].1.pulse_delay_clocks(), 1);
         assert_eq!(got[1].1.pulse_delay_clocks(), 6_300);
-        // A 3 mm spike at sample 40: rejected by the guard, and the line starts over.
+        // A 3 mm spike at sample 66: rejected by the guard, and the line starts over.
         let mut r = hybrid(1_000);
-        let path = (0..200).map(|k| Some(if k == 40 { ramp(k) + 3_000 } else { ramp(k) }));
+        let path = (0..220).map(|k| Some(if k == 66 { ramp(k) + 3_000 } else { ramp(k) }));
         let got = pulses(&mut r, path, 100_000);
-        assert_eq!(got.iter().map(|g| g.0).collect::<Vec<_>>(), vec![50, 149]);
+        assert_eq!(got.iter().map(|g| g.0).collect::<Vec<_>>(), vec![70, 169]);
         assert_eq!(got[0].1.pulse_delay_clocks(), 1);
         assert_eq!(got[1].1.pulse_delay_clocks(), 6_300);
     }
@@ -896,19 +898,19 @@ mod tests {
     #[test]
     fn a_reversal_empties_the_line_and_fires_each_crossing_once() {
         let x = |k: i32| {
-            if k <= 70 {
-                503 + 10 * k
+            if k <= 90 {
+                303 + 10 * k
             } else {
-                1_203 - 10 * (k - 70)
+                1_203 - 10 * (k - 90)
             }
         };
         let mut r = hybrid(1_000);
-        let got = pulses(&mut r, (0..110).map(|k| Some(x(k))), 100_000);
+        let got = pulses(&mut r, (0..130).map(|k| Some(x(k))), 100_000);
         let ks: Vec<u32> = got.iter().map(|g| g.0).collect();
         assert_eq!(ks.len(), 2, "{got:?}");
-        assert_eq!(ks[0], 49);
-        // Down through 1 mm at k = 90.3: 21 samples after the turn, inside the line's refill.
-        assert_eq!(ks[1], 91, "{got:?}");
+        assert_eq!(ks[0], 69);
+        // Down through 1 mm at k = 110.3: 21 samples after the turn, inside the line's refill.
+        assert_eq!(ks[1], 111, "{got:?}");
         assert_eq!(
             got[1].1.pulse_delay_clocks(),
             1,

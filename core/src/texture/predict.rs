@@ -4,8 +4,8 @@
 //!
 //! Why a line and not the velocity estimator: the estimator's slope is centred half its window
 //! back (1.65 ms at 10 kHz) and says nothing about *where* the finger is; the line's end point
-//! is the finger's position at the newest sample with the noise of a 32-sample average
-//! (σ·√((4N − 2)/(N(N + 1))) = 0.35 σ), which is what places a burst inside the period.
+//! is the finger's position at the newest sample with the noise of a 64-sample average
+//! (σ·√((4N − 2)/(N(N + 1))) = 0.25 σ), which is what places a burst inside the period.
 //!
 //! The line is trusted only on a steady stroke: a full window of consecutive samples (a gap, a
 //! dropped sample or a rejected glitch empties it), a speed above the trust speed, and every
@@ -13,9 +13,15 @@
 //! hard acceleration bends the path away from the line and empties it too). Otherwise the
 //! renderer falls back to position phase.
 
-/// Samples in the fit: 3.2 ms at 10 kHz. 16 gave 4–5 µm RMS on the host model but a worst
-/// error above 10 µm at 2 LSB; 32 halves the end point's noise variance.
-pub const FIT_SAMPLES: usize = 32;
+/// Samples in the fit: 6.4 ms at 10 kHz. 16 gave 4–5 µm RMS on the host model but a worst
+/// error above 10 µm at 2 LSB; 32 halved the end point's noise variance and left the closed
+/// loop's steady worst at 10.2 µm (its 3 σ floor 8.4 µm); 64 halves it again (σ 0.35 → 0.25 of
+/// one sample's): steady worst 6.6 µm (`tests/tests/hybrid.rs`). The price is the refill: after
+/// a turn, a gap or a glitch the renderer is position phase for 6.4 ms instead of 3.2; the per
+/// sample cost is the same (O(1) sums), the ring 128 B larger. Under acceleration the longer
+/// window's bias (four times the 32-sample line's) is handed to its newer half
+/// ([`DISAGREE_UM`]).
+pub const FIT_SAMPLES: usize = 64;
 
 /// Trust speed, µm/s: below it the line's slope is too close to its noise (0.23 µm per sample
 /// RMS at 3 LSB, 10 kHz) to say which way the finger goes, and position phase places bursts
@@ -28,9 +34,20 @@ pub const TRUST_SPEED_UM_S: u32 = 10_000;
 /// slope has turned.
 pub const INNOVATION_GATE_UM: f32 = 72.0;
 
+/// Largest distance, µm, between the ends of the full window's line and of its newer half's
+/// before the half's is used. On a steady stroke the two differ by noise alone: σ·√(0.1225 −
+/// 0.0611) = 0.25 σ (the full window's end is the efficient estimate, so the difference's
+/// variance is the difference of the variances), 3.0 µm at 3 LSB; 9 µm is 3 σ of it. An
+/// acceleration bends the path, and the full window's end, whose bias grows with the square
+/// of its length, leaves the half's by more: then the half's line, four times less biased,
+/// places the burst (the bench's mixed motion: RMS 19 µm on the full window alone, against 6
+/// on a 32-sample line).
+pub const DISAGREE_UM: f32 = 9.0;
+
 const N: usize = FIT_SAMPLES;
-/// Σ(i − (N−1)/2)², i = 0..N: N(N² − 1)/12, the slope's denominator, times 12.
-const SLOPE_DEN: f32 = (N * (N * N - 1)) as f32;
+/// The newer half of the window.
+const H: usize = FIT_SAMPLES / 2;
+const _: () = assert!(N == 2 * H && N.is_power_of_two());
 
 /// The running line fit.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,8 +58,11 @@ pub(crate) struct LineFit {
     count: usize,
     /// Σ y over the window.
     sum_um: i32,
-    /// Σ i·y, i = 0 for the oldest: at most 496 · 10^6 µm for a 1 m substrate, inside i32.
+    /// Σ i·y, i = 0 for the oldest: at most 2 016 · 10^6 µm for a 1 m substrate, inside i32
+    /// (and kept wrapping, so exactness does not depend on it).
     moment_um: i32,
+    /// The same two sums over the newest [`H`] samples (fewer while filling).
+    half: Sums,
     last_t_us: u32,
     /// Where the line said the next sample would be, µm.
     expected_um: Option<f32>,
@@ -56,6 +76,7 @@ impl Default for LineFit {
             count: 0,
             sum_um: 0,
             moment_um: 0,
+            half: Sums::default(),
             last_t_us: 0,
             expected_um: None,
         }
@@ -78,6 +99,7 @@ impl LineFit {
         self.head = 0;
         self.sum_um = 0;
         self.moment_um = 0;
+        self.half = Sums::default();
         self.expected_um = None;
     }
 
@@ -94,6 +116,15 @@ impl LineFit {
         if !on_grid || off_line {
             self.reset();
         }
+        // The newer half slides by one: its oldest (age H − 1, at ring position head + count −
+        // H: count − H while filling, head + H once full) leaves once it holds H samples.
+        let leaving = (self.half.count == H)
+            .then(|| {
+                let at = (self.head + self.count).wrapping_sub(H) & (N - 1);
+                self.ring.get(at).copied()
+            })
+            .flatten();
+        self.half.push(position_um, leaving);
         if self.count < N {
             // Filling: the new sample's index is `count`.
             if let Some(slot) = self.ring.get_mut(self.count) {
@@ -120,18 +151,68 @@ impl LineFit {
                 .wrapping_add((N as i32 - 1).wrapping_mul(position_um));
             self.sum_um = self.sum_um.wrapping_sub(oldest).wrapping_add(position_um);
         }
-        // 12·Σ(i − c)·y = 12·Σi·y − 6(N − 1)·Σy, wrapping: 12·Σi·y overflows i32 on a long
-        // substrate, but the sums are kept mod 2^32 and the result (slope × N(N² − 1)) fits
-        // i32 for any slope under 65 mm per sample, so the wrapped difference is exact.
-        let num = self
-            .moment_um
-            .wrapping_mul(12)
-            .wrapping_sub(self.sum_um.wrapping_mul(6 * (N as i32 - 1)));
-        let slope_um = num as f32 / SLOPE_DEN;
-        let end_um = self.sum_um as f32 / N as f32 + slope_um * ((N - 1) as f32 / 2.0);
-        self.expected_um = Some(end_um + slope_um);
-        Some(Line { end_um, slope_um })
+        let full = line_of(self.sum_um, self.moment_um, N);
+        let half = line_of(self.half.sum_um, self.half.moment_um, H);
+        let line = if (full.end_um - half.end_um).abs() <= DISAGREE_UM {
+            full
+        } else {
+            half
+        };
+        self.expected_um = Some(line.end_um + line.slope_um);
+        Some(line)
     }
+
+    /// The newer half's line (tests).
+    #[cfg(test)]
+    fn half_line(&self) -> Line {
+        line_of(self.half.sum_um, self.half.moment_um, H)
+    }
+}
+
+/// Σy and Σi·y over a sliding window of up to [`H`] samples, i = 0 for the oldest (wrapping).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+struct Sums {
+    count: usize,
+    sum_um: i32,
+    moment_um: i32,
+}
+
+impl Sums {
+    /// Adds a sample; `leaving` is the oldest, which leaves once the window is full.
+    fn push(&mut self, position_um: i32, leaving: Option<i32>) {
+        match leaving {
+            Some(oldest) if self.count == H => {
+                self.moment_um = self
+                    .moment_um
+                    .wrapping_sub(self.sum_um.wrapping_sub(oldest))
+                    .wrapping_add((H as i32 - 1).wrapping_mul(position_um));
+                self.sum_um = self.sum_um.wrapping_sub(oldest).wrapping_add(position_um);
+            }
+            _ => {
+                self.moment_um = self
+                    .moment_um
+                    .wrapping_add((self.count as i32).wrapping_mul(position_um));
+                self.sum_um = self.sum_um.wrapping_add(position_um);
+                self.count = (self.count + 1).min(H);
+            }
+        }
+    }
+}
+
+/// The least-squares line through `n` samples from their Σy and Σi·y, at the newest.
+///
+/// 12·Σ(i − c)·y = 12·Σi·y − 6(n − 1)·Σy, wrapping: 12·Σi·y overflows i32 on a long substrate,
+/// but the sums are kept mod 2^32 and the result (slope × n(n² − 1)) fits i32 for any slope
+/// under 8 mm per sample (80 m/s) at n = 64, so the wrapped difference is exact.
+#[inline(always)]
+fn line_of(sum_um: i32, moment_um: i32, n: usize) -> Line {
+    let num = moment_um
+        .wrapping_mul(12)
+        .wrapping_sub(sum_um.wrapping_mul(6 * (n as i32 - 1)));
+    // Σ(i − (n−1)/2)², i = 0..n: n(n² − 1)/12, the slope's denominator, times 12.
+    let slope_um = num as f32 / (n * (n * n - 1)) as f32;
+    let end_um = sum_um as f32 / n as f32 + slope_um * ((n - 1) as f32 / 2.0);
+    Line { end_um, slope_um }
 }
 
 #[cfg(test)]
@@ -153,7 +234,7 @@ mod tests {
         assert_eq!(fill(&mut fit, |k| 1_000 + 7 * k, 0, N as i32 - 1), None);
         let line = fill(&mut fit, |k| 1_000 + 7 * k, N as i32 - 1, N as i32).unwrap();
         assert_eq!(line.slope_um, 7.0);
-        assert_eq!(line.end_um, (1_000 + 7 * 31) as f32);
+        assert_eq!(line.end_um, (1_000 + 7 * (N as i32 - 1)) as f32);
         // Sliding keeps it exact (and the sums small-error free: integers).
         let line = fill(&mut fit, |k| 1_000 + 7 * k, N as i32, 500).unwrap();
         assert_eq!(line.slope_um, 7.0);
@@ -195,6 +276,56 @@ mod tests {
             let got = got.expect("window full");
             assert!((got.slope_um as f64 - slope).abs() < 1e-4, "{k}");
             assert!((got.end_um as f64 - end).abs() < 2e-3, "{k}");
+            // The newer half's sums against a direct fit over the newest H.
+            let xs = &xs[N - H..];
+            let c = (H as f64 - 1.0) / 2.0;
+            let mean = xs.iter().sum::<f64>() / H as f64;
+            let slope = xs
+                .iter()
+                .enumerate()
+                .map(|(i, v)| (i as f64 - c) * (v - mean))
+                .sum::<f64>()
+                / (H as f64 * (H as f64 * H as f64 - 1.0) / 12.0);
+            let half = fit.half_line();
+            assert!((half.slope_um as f64 - slope).abs() < 1e-4, "{k}");
+            assert!(
+                (half.end_um as f64 - (mean + slope * c)).abs() < 2e-3,
+                "{k}"
+            );
+        }
+    }
+
+    /// Under acceleration the full window's end lags the path; when it leaves the newer half's
+    /// end by more than [`DISAGREE_UM`], the half's line is the one returned (and predicts the
+    /// next sample). Hand-worked: y = 20·k + a·k²/2 µm. The least-squares line through n
+    /// samples of a parabola misses its newest by a·(n − 1)(n − 2)/12: at a = 0.01 µm per
+    /// sample² (1 m/s² at 10 kHz) 3.26 µm for n = 64 and 0.78 for n = 32, within 9 µm of each
+    /// other, so the full line is used; at a = 0.05 (5 m/s²) 16.3 against 3.9: the half's.
+    #[test]
+    fn an_acceleration_hands_the_line_to_the_newer_half() {
+        for (a, uses_half) in [(0.01f64, false), (0.05, true)] {
+            let y = |k: i32| (20.0 * k as f64 + a * (k as f64).powi(2) / 2.0).round() as i32;
+            let mut fit = LineFit::default();
+            let mut line = None;
+            for k in 0..N as i32 + 20 {
+                line = fit.push(y(k), k as u32 * 100, 100);
+            }
+            let line = line.expect("full");
+            let k = N as i32 + 19;
+            let truth = y(k) as f32;
+            let half = fit.half_line();
+            assert_eq!(line == half, uses_half, "a {a}: {line:?} {half:?}");
+            let bias = |n: f64| a * (n - 1.0) * (n - 2.0) / 12.0;
+            let used = if uses_half {
+                bias(H as f64)
+            } else {
+                bias(N as f64)
+            };
+            assert!(
+                ((truth - line.end_um) as f64 - used).abs() < 0.6,
+                "a {a}: end {} truth {truth}",
+                line.end_um
+            );
         }
     }
 
@@ -203,13 +334,14 @@ mod tests {
     fn gaps_and_jumps_start_over() {
         let ramp = |k: i32| 10_000 + 5 * k;
         let mut fit = LineFit::default();
-        fill(&mut fit, ramp, 0, 40);
+        assert!(fill(&mut fit, ramp, 0, N as i32 + 8).is_some());
         // One period missing (200 µs step): no line until the window refills.
-        assert_eq!(fit.push(ramp(41), 4_100, 100), None);
-        for k in 42..41 + N as i32 - 1 {
+        let g = N as i32 + 9;
+        assert_eq!(fit.push(ramp(g), g as u32 * 100, 100), None);
+        for k in g + 1..g + N as i32 - 1 {
             assert_eq!(fit.push(ramp(k), k as u32 * 100, 100), None, "{k}");
         }
-        let k = 41 + N as i32 - 1;
+        let k = g + N as i32 - 1;
         assert!(fit.push(ramp(k), k as u32 * 100, 100).is_some());
         // Jitter within half a period keeps it.
         assert!(fit
@@ -220,13 +352,14 @@ mod tests {
         assert_eq!(fit.push(ramp(k) + 80, k as u32 * 100, 100), None);
         // 70 µm off: kept.
         let mut fit = LineFit::default();
-        fill(&mut fit, ramp, 0, 40);
-        assert!(fit.push(ramp(40) + 70, 4_000, 100).is_some());
+        fill(&mut fit, ramp, 0, N as i32 + 8);
+        let k = N as i32 + 8;
+        assert!(fit.push(ramp(k) + 70, k as u32 * 100, 100).is_some());
         // The clock wrapping through u32::MAX is one period like any other.
         let mut fit = LineFit::default();
         let t0 = u32::MAX - 1_000;
         let mut line = None;
-        for k in 0..40u32 {
+        for k in 0..N as u32 + 8 {
             line = fit.push(ramp(k as i32), t0.wrapping_add(k * 100), 100);
         }
         assert_eq!(line.unwrap().slope_um, 5.0);

@@ -636,14 +636,14 @@ fn write_report(
         w,
         "\n### Worst placement against λ (0.1–4 mm), 20–200 mm/s, 3 noise seeds\n\n\
          A stroke there and back over 24 mm at each speed (turning half a period from the \
-         ridges), 2 LSB. Steady: more than 3.5 ms after a turn (the hybrid's 32-sample line \
+         ridges), 2 LSB. Steady: more than 6.7 ms after a turn (the hybrid's 64-sample line \
          refills after a reversal, and it is position phase until then). Physical floor: one sample's position σ = {sigma_um:.1} µm (ADC model); \
          3 σ of the hybrid's fitted position = {fitted_um:.1} µm; one timer tick of travel at \
          200 mm/s = {tick_um:.4} µm. Chart: `charts/renderers-placement-vs-wavelength.png`.\n"
     );
     let _ = writeln!(
         w,
-        "| renderer | λ mm | speed mm/s | worst µm (steady) | RMS µm (steady) | worst µm within 3.5 ms of a turn | bursts / ridges | skipped | λ/20 µm |"
+        "| renderer | λ mm | speed mm/s | worst µm (steady) | RMS µm (steady) | worst µm within 6.7 ms of a turn | bursts / ridges | skipped | λ/20 µm |"
     );
     let _ = writeln!(w, "|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     for p in &sweep {

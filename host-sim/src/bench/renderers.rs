@@ -8,7 +8,7 @@
 //!   NUCLEO-F446RE, rheostat/ADC model, the default estimator, the gate and the preload timer
 //!   model); the bursts are the recorded gate waveform's pulses (`metrics::ridge_hits`).
 //! - **hybrid** (`GratingRender::Hybrid`) is position phase with each crossing predicted inside
-//!   the sample period from a 32-sample line fit and the burst started there by a delayed
+//!   the sample period from a 64-sample line fit and the burst started there by a delayed
 //!   one-pulse; position phase where the line is not trusted. It replaced the host model of
 //!   earlier rounds (a 16-sample line, 4–5 µm RMS).
 //!
@@ -211,9 +211,9 @@ pub fn run(seed: u64) -> Vec<RenderStats> {
 /// coarse grating).
 pub const SWEEP_WAVELENGTHS_UM: [u32; 6] = [100, 200, 500, 1_000, 2_000, 4_000];
 
-/// Bursts this soon after a turn are scored apart: the hybrid's 32-sample line (3.2 ms at
+/// Bursts this soon after a turn are scored apart: the hybrid's 64-sample line (6.4 ms at
 /// 10 kHz) refills there.
-pub const SETTLE_S: f64 = 0.0035;
+pub const SETTLE_S: f64 = 0.0067;
 
 /// One renderer at one λ and speed, over several noise seeds.
 #[derive(Clone, Debug, PartialEq)]
