@@ -47,10 +47,10 @@ const BUDGET: u64 = 400;
 /// docs/target-cost.md) and fail only above their ceiling here, about 3 % over the worst row
 /// measured, so a regression still fails. Remove a line once its kind is under the budget.
 /// The position-phase grating pays the windowed duty ledger on every pulse; the hybrid also
-/// its 32-sample line fit; the material's reversals pay the ledger on each burst start.
+/// its 64-sample line fit; the material's reversals pay the ledger on each burst start.
 const OVER_BUDGET: [(&str, f64); 3] = [
     ("grating/", 455.0),
-    ("grating-hybrid/", 570.0),
+    ("grating-hybrid/", 615.0),
     ("material/", 455.0),
 ];
 
