@@ -246,6 +246,20 @@ mod tests {
         assert_eq!(line.end_um, (900_000 - 20 * 299) as f32);
     }
 
+    /// The least-squares line through `xs` (f64, directly): (slope, value at the newest).
+    fn direct_fit(xs: &[f64]) -> (f64, f64) {
+        let n = xs.len() as f64;
+        let c = (n - 1.0) / 2.0;
+        let mean = xs.iter().sum::<f64>() / n;
+        let slope = xs
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64 - c) * (v - mean))
+            .sum::<f64>()
+            / (n * (n * n - 1.0) / 12.0);
+        (slope, mean + slope * c)
+    }
+
     /// A symmetric ±d alternation about a level: slope 0, end at the level ± the fit's share
     /// of the last point's offset. Checks the moment update against a direct sum.
     #[test]
@@ -263,35 +277,17 @@ mod tests {
             for (i, v) in xs.iter_mut().enumerate() {
                 *v = y(k + 1 - N as i32 + i as i32) as f64;
             }
-            let c = (N as f64 - 1.0) / 2.0;
-            let mean = xs.iter().sum::<f64>() / N as f64;
-            let slope = xs
-                .iter()
-                .enumerate()
-                .map(|(i, v)| (i as f64 - c) * (v - mean))
-                .sum::<f64>()
-                / (N as f64 * (N as f64 * N as f64 - 1.0) / 12.0);
-            let end = mean + slope * c;
-            // Off the line by more than the gate? Then the fit restarted; this path stays on.
+            // Off the line by more than the gate? Then the fit restarted; this path stays on
+            // (and the two ends agree, so the full window's line is the one returned).
             let got = got.expect("window full");
+            let (slope, end) = direct_fit(&xs);
             assert!((got.slope_um as f64 - slope).abs() < 1e-4, "{k}");
             assert!((got.end_um as f64 - end).abs() < 2e-3, "{k}");
             // The newer half's sums against a direct fit over the newest H.
-            let xs = &xs[N - H..];
-            let c = (H as f64 - 1.0) / 2.0;
-            let mean = xs.iter().sum::<f64>() / H as f64;
-            let slope = xs
-                .iter()
-                .enumerate()
-                .map(|(i, v)| (i as f64 - c) * (v - mean))
-                .sum::<f64>()
-                / (H as f64 * (H as f64 * H as f64 - 1.0) / 12.0);
+            let (slope, end) = direct_fit(&xs[N - H..]);
             let half = fit.half_line();
             assert!((half.slope_um as f64 - slope).abs() < 1e-4, "{k}");
-            assert!(
-                (half.end_um as f64 - (mean + slope * c)).abs() < 2e-3,
-                "{k}"
-            );
+            assert!((half.end_um as f64 - end).abs() < 2e-3, "{k}");
         }
     }
 
