@@ -241,16 +241,40 @@ fn on_the_mixed_motion_the_hybrid_halves_position_phase() {
     use host_sim::bench::{renderers::core_run, scenario};
     let (mixed, d) = scenario::mixed();
     for seed in 2026..2030 {
-        let h = core_run(GratingRender::Hybrid, "mixed".into(), mixed.clone(), d, 2.0, seed, None);
-        let p = core_run(GratingRender::PositionPhase, "mixed".into(), mixed.clone(), d, 2.0, seed, None);
+        let h = core_run(
+            GratingRender::Hybrid,
+            "mixed".into(),
+            mixed.clone(),
+            d,
+            2.0,
+            seed,
+            None,
+        );
+        let p = core_run(
+            GratingRender::PositionPhase,
+            "mixed".into(),
+            mixed.clone(),
+            d,
+            2.0,
+            seed,
+            None,
+        );
         eprintln!(
             "seed {seed}: hybrid RMS {:.2} worst {:.2} µm, skipped {:?}; position phase RMS {:.2} worst {:.2}",
             h.rms_err_um, h.worst_err_um, h.skipped, p.rms_err_um, p.worst_err_um
         );
         assert!(h.rms_err_um <= 7.3, "seed {seed}: RMS {}", h.rms_err_um);
-        assert!(h.worst_err_um <= 20.0, "seed {seed}: worst {}", h.worst_err_um);
+        assert!(
+            h.worst_err_um <= 20.0,
+            "seed {seed}: worst {}",
+            h.worst_err_um
+        );
         assert_eq!(h.skipped, Some(0), "seed {seed}");
-        assert!(p.rms_err_um >= 15.0, "seed {seed}: position phase RMS {}", p.rms_err_um);
+        assert!(
+            p.rms_err_um >= 15.0,
+            "seed {seed}: position phase RMS {}",
+            p.rms_err_um
+        );
         assert!(2.0 * h.rms_err_um <= p.rms_err_um, "seed {seed}");
     }
 }
