@@ -341,6 +341,35 @@ impl Ridges {
         ok
     }
 
+    /// [`Self::step_as`] for this grating's renderer.
+    #[inline(always)]
+    pub(crate) fn step(
+        &mut self,
+        position_um: i32,
+        velocity_um_s: Option<i32>,
+        t_us: u32,
+        timer: &BurstTimer,
+    ) -> (Want, Option<TimerSettings>, u32) {
+        if self.hybrid.is_some() {
+            self.step_hybrid(position_um, velocity_um_s, t_us, timer)
+        } else {
+            self.step_as::<false>(position_um, velocity_um_s, t_us, timer)
+        }
+    }
+
+    /// The hybrid's copy, a call of its own: inlined into the controller it spills the
+    /// sample path's registers (M4F: +30 instructions per sample, `scripts/emu.sh`).
+    #[inline(never)]
+    fn step_hybrid(
+        &mut self,
+        position_um: i32,
+        velocity_um_s: Option<i32>,
+        t_us: u32,
+        timer: &BurstTimer,
+    ) -> (Want, Option<TimerSettings>, u32) {
+        self.step_as::<true>(position_um, velocity_um_s, t_us, timer)
+    }
+
     /// What to do on this sample, the pulse's settings, and the ridges passed without a pulse.
     ///
     /// A pulse's length is set from the speed, duty·λ/|V|, so at a steady speed the timer ends
@@ -350,7 +379,12 @@ impl Ridges {
     /// (and its duty rest) over the next ridge. With the speed unknown (the estimator's first
     /// window after a start or a fault) the timer is set to the on-time cap and position alone
     /// ends the pulse.
-    pub(crate) fn step(
+    ///
+    /// `HYBRID` says whether the grating is rendered by prediction (it must match
+    /// `self.hybrid`): two copies, so the position-phase one carries none of the prediction's
+    /// code and registers on the M4F.
+    #[inline(always)]
+    fn step_as<const HYBRID: bool>(
         &mut self,
         position_um: i32,
         velocity_um_s: Option<i32>,
@@ -359,7 +393,7 @@ impl Ridges {
     ) -> (Want, Option<TimerSettings>, u32) {
         let mut want = Want::Periodic;
         if !self.plausible(position_um) {
-            if let Some(h) = self.hybrid.as_mut() {
+            if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
                 h.fit.reset();
             }
             return (want, None, 0);
@@ -378,7 +412,7 @@ impl Ridges {
             .tracker
             .update(position_um, self.wavelength_um, self.rearm_um);
         let mut crossing = crossing;
-        if let Some(h) = self.hybrid.as_mut() {
+        if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
             let line = h.fit.push(position_um, t_us, h.sample_period_us);
             // The last ridge fired re-arms once the finger is `rearm_um` clear of it.
             let here_um = line.map_or(position_um as f32, |l| l.end_um);
@@ -412,7 +446,7 @@ impl Ridges {
                 if let Some(c) = behind {
                     let out = self.fire(c, velocity_um_s, 0, want, t_us, timer);
                     if out.1.is_some() {
-                        if let Some(h) = self.hybrid.as_mut() {
+                        if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
                             h.last_fired = Some(c.ridge);
                         }
                     }
@@ -442,7 +476,7 @@ impl Ridges {
         };
         let out = self.fire(c, velocity_um_s, 0, want, t_us, timer);
         if out.1.is_some() {
-            if let Some(h) = self.hybrid.as_mut() {
+            if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
                 h.last_fired = Some(c.ridge);
             }
         }
@@ -563,7 +597,9 @@ impl Render for Ridges {
         }
     }
 
-    #[inline]
+    // Every sample from the controller's one call site (`Compiled::request`): inlined, so the
+    // sample's fields stay in registers.
+    #[inline(always)]
     fn request(&mut self, now: &Moment<'_>) -> Request {
         let (want, settings, skipped) =
             self.step(now.position_um, now.velocity_um_s, now.t_us, now.timer);
@@ -607,7 +643,9 @@ impl Render for Synthesis {
         self.motion.reset();
     }
 
-    #[inline]
+    // Every sample from the controller's one call site (`Compiled::request`): inlined, so the
+    // sample's fields stay in registers.
+    #[inline(always)]
     fn request(&mut self, now: &Moment<'_>) -> Request {
         let inv_wavelength_per_um = self.inv_wavelength_per_um;
         self.motion

@@ -157,7 +157,8 @@ impl Render for StickSlip {
         self.motion.reset();
     }
 
-    #[inline]
+    // Every sample from the controller's one call site (`Compiled::request`): inlined.
+    #[inline(always)]
     fn request(&mut self, now: &Moment<'_>) -> Request {
         let consts = &self.consts;
         self.motion

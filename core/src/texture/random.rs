@@ -123,7 +123,8 @@ impl Render for RandomDraws {
         self.next_draw_us = None;
     }
 
-    #[inline]
+    // Every sample from the controller's one call site (`Compiled::request`): inlined.
+    #[inline(always)]
     fn request(&mut self, now: &Moment<'_>) -> Request {
         // A new draw once the running burst has had its whole period; until then keep it.
         let due = self

@@ -24,9 +24,10 @@ pub struct LsqSlope<const N: usize> {
     sampler: Sampler,
     /// µm/s per unit of 2·Σ(k − (N−1)/2)·x_k, Q32: 6·10⁶ / (N (N²−1) T_s).
     gain_q32: i64,
-    /// The range of the centred sum whose product with `gain_q32` fits i64 (the checked
-    /// multiply's range, worked out once: a 64-bit overflow check is ~16 instructions on the
-    /// M4F, a range test ~6).
+    /// The range of the centred sum whose rounded product with `gain_q32` is an i32 speed:
+    /// inside it the product neither overflows i64 nor needs clamping, outside the speed
+    /// saturates (worked out once: one range test on the M4F instead of a 64-bit overflow
+    /// check and a 64-bit clamp).
     centred_min: i64,
     centred_max: i64,
 }
@@ -50,10 +51,8 @@ impl<const N: usize> LsqSlope<N> {
             weighted: 0,
             sampler: Sampler::new(sample_period_us),
             gain_q32,
-            // Truncating divisions: c · g ≤ MAX ⟺ c ≤ ⌊MAX / g⌋ and c · g ≥ MIN ⟺ c ≥ ⌈MIN / g⌉
-            // for g > 0; a zero gain never overflows.
-            centred_min: i64::MIN.checked_div(gain_q32).unwrap_or(i64::MIN),
-            centred_max: i64::MAX.checked_div(gain_q32).unwrap_or(i64::MAX),
+            centred_min: speed_range(gain_q32).0,
+            centred_max: speed_range(gain_q32).1,
         })
     }
 }
@@ -96,17 +95,21 @@ impl<const N: usize> LsqSlope<N> {
         if self.len < N {
             return None;
         }
-        let centred2 = self.weighted;
-        // Rounded to the nearest µm/s. The product fits i64 for any real window (N = 32,
-        // T_s = 100 µs, a full 63 mm jump: 2.5·10¹⁷); a pathological one saturates.
-        let v = if (self.centred_min..=self.centred_max).contains(&centred2) {
-            (centred2 * self.gain_q32 + (1 << 31)) >> 32
+        Some(self.speed(self.weighted))
+    }
+
+    /// The speed, µm/s, of centred sum `centred2`, rounded to nearest and saturating. Any real
+    /// window is inside the range (N = 32, T_s = 100 µs, a full 63 mm jump: 3·10⁸ µm/s of
+    /// 2.1·10⁹); a pathological one saturates.
+    #[inline(always)]
+    fn speed(&self, centred2: i64) -> i32 {
+        if (self.centred_min..=self.centred_max).contains(&centred2) {
+            ((centred2 * self.gain_q32 + (1 << 31)) >> 32) as i32
         } else if centred2 > 0 {
-            i64::MAX >> 32
+            i32::MAX
         } else {
-            i64::MIN >> 32
-        };
-        Some(v.clamp(i32::MIN as i64, i32::MAX as i64) as i32)
+            i32::MIN
+        }
     }
 
     /// Empties the window (the sampler is the caller's).
@@ -118,7 +121,29 @@ impl<const N: usize> LsqSlope<N> {
     }
 }
 
+/// The centred sums c whose speed ⌊(c·g + 2³¹) / 2³²⌋ lies in i32, for a gain g ≥ 0: the
+/// speed grows with c, so it is the interval between the smallest c reaching i32::MIN and
+/// the largest staying at or below i32::MAX (in i128, where c·g cannot overflow), narrowed
+/// to where c·g + 2³¹ fits i64. A zero gain gives speed 0 for every c.
+fn speed_range(gain_q32: i64) -> (i64, i64) {
+    if gain_q32 <= 0 {
+        return (i64::MIN, i64::MAX);
+    }
+    let g = gain_q32 as i128;
+    let half = 1i128 << 31;
+    // c·g + 2³¹ ≤ (MAX + 1)·2³² − 1 and c·g + 2³¹ ≥ MIN·2³², each also within i64.
+    let hi =
+        ((((i32::MAX as i128 + 1) << 32) - 1 - half).min(i64::MAX as i128 - half)).div_euclid(g);
+    // c·g + 2³¹ ≥ MIN·2³² = −2⁶³ holds for every c·g that fits i64 (−2⁶³ + 2³¹ floors to
+    // MIN too): the lower end is where the product itself would overflow.
+    let lo = -((1i128 << 63) / g);
+    (lo as i64, hi as i64)
+}
+
 impl<const N: usize> VelocityEstimator for LsqSlope<N> {
+    // Once per sample from one call site: inlined, so the window's fields stay in registers
+    // (a call costs the M4F a prologue, spills and an epilogue every sample).
+    #[inline(always)]
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
         // The clock's own tick, not `Sampler::step`: on a gap the clock has restarted on this
         // sample already, keeping its sub-µs grid phase (`step` would restart it from scratch, as
@@ -157,22 +182,37 @@ mod tests {
     use super::*;
     use crate::velocity::EstimatorError;
 
-    /// The precomputed range is exactly where the product with the gain does not overflow
-    /// (the checked multiply it replaced), for several windows and periods.
+    /// Inside the precomputed range and just outside it the speed is the exact rounded,
+    /// saturated product (worked in i128), for several windows and periods, and the range's
+    /// ends are where it stops being representable without a clamp.
     #[test]
-    fn the_range_test_is_the_checked_multiply() {
+    fn the_range_test_is_the_exact_saturated_product() {
         fn check<const N: usize>(period_us: u32) {
             let e = LsqSlope::<N>::new(period_us).unwrap();
-            for c in [e.centred_min, e.centred_max] {
+            let exact = |c: i64| {
+                let v = ((c as i128 * e.gain_q32 as i128) + (1 << 31)) >> 32;
+                v.clamp(i32::MIN as i128, i32::MAX as i128) as i32
+            };
+            for c in [e.centred_min, e.centred_max, 0, i64::MIN, i64::MAX] {
                 for d in -2..=2i64 {
                     let c = c.saturating_add(d);
-                    assert_eq!(
-                        (e.centred_min..=e.centred_max).contains(&c),
-                        c.checked_mul(e.gain_q32).is_some(),
-                        "N {N} T {period_us} c {c}"
-                    );
+                    assert_eq!(e.speed(c), exact(c), "N {N} T {period_us} c {c}");
                 }
             }
+            // The ends are tight: one further out needs the clamp or overflows i64.
+            let wide = |c: i64| {
+                c.checked_mul(e.gain_q32)
+                    .and_then(|p| p.checked_add(1 << 31))
+                    .is_none_or(|p| i32::try_from(p >> 32).is_err())
+            };
+            assert!(
+                !wide(e.centred_max) && wide(e.centred_max + 1),
+                "N {N} T {period_us}"
+            );
+            assert!(
+                !wide(e.centred_min) && wide(e.centred_min - 1),
+                "N {N} T {period_us}"
+            );
         }
         check::<2>(10);
         check::<32>(100);

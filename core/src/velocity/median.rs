@@ -55,6 +55,7 @@ fn median3(a: i32, b: i32, c: i32) -> i32 {
 }
 
 impl<E: VelocityEstimator> VelocityEstimator for Median3<E> {
+    #[inline(always)]
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
         // A gap (or time run backwards, which wraps to a huge offset): start the window over.
         if t_us.wrapping_sub(self.t_mid).wrapping_add(self.half_us) >= self.gap_us {
