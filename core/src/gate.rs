@@ -120,6 +120,30 @@ fn duty_ppm(s: &TimerSettings) -> u64 {
     (s.ccr as u64 * PPM).div_ceil(s.arr as u64 + 1)
 }
 
+/// The on-time of `s`, µs rounded up, when it is above `floor_us`; otherwise `floor_us` (or
+/// less). A velocity-driven burst changes its settings on most samples but seldom grows: the
+/// test ⌈x / y⌉ ≤ f ⟺ x ≤ f · y is a multiply, where the on-time is a u64 division (a
+/// library call of ~100 instructions on the M4F), done only when the burst grows.
+fn on_us_above(timer: &BurstTimer, s: &TimerSettings, floor_us: u64) -> u64 {
+    let on_clocks = s.on_clocks();
+    match (
+        on_clocks.checked_mul(1_000_000),
+        floor_us.checked_mul(timer.clock_hz.max(1) as u64),
+    ) {
+        (Some(x), Some(y)) if x <= y => floor_us,
+        _ => timer.clocks_to_us_ceil(on_clocks),
+    }
+}
+
+/// The duty of `s`, ppm rounded up, when it is above `floor_ppm`; otherwise `floor_ppm` (or
+/// less), without the division (see [`on_us_above`]).
+fn duty_ppm_above(s: &TimerSettings, floor_ppm: u64) -> u64 {
+    match floor_ppm.checked_mul(s.arr as u64 + 1) {
+        Some(y) if s.ccr as u64 * PPM <= y => floor_ppm,
+        _ => duty_ppm(s),
+    }
+}
+
 /// The line's recent on-time, as an upper bound per slot of time, in a fixed ring (no
 /// allocation). Slot 0 (the head) starts at `head_start_us` and holds everything recorded from
 /// there on; slot k ≥ 1 covers `[head_start − k·slot, head_start − (k−1)·slot)`.
@@ -638,8 +662,8 @@ impl Gate {
                 },
                 Some(s),
             ) => {
-                let on_us_new = on_us.max(timer.clocks_to_us_ceil(s.on_clocks()));
-                let d_new = d.max(duty_ppm(&s));
+                let on_us_new = on_us.max(on_us_above(timer, &s, on_us));
+                let d_new = d.max(duty_ppm_above(&s, d));
                 let grows = on_us_new > on_us || d_new > d;
                 // Windows reaching back before the run hold its past too.
                 let reaches_back = t_us.wrapping_sub(since_us) < window_us;
@@ -759,6 +783,42 @@ mod tests {
 
     /// 10 ms one-pulse at 90 MHz: one tick of delay (0 µs rounded down), the fall at
     /// ⌈900 001 / 90⌉ = 10 001 µs: 10 001 µs counted.
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 4096, ..Default::default() })]
+        /// The growth tests give the divisions' answer: max(floor, value) is the same whether
+        /// the value is divided out or the multiply says it is not above the floor, on both
+        /// sides of the floor (floors drawn near the value) and at the u64 edge (the floor's
+        /// product overflows: the division decides).
+        #[test]
+        fn the_growth_tests_are_the_divisions(
+            psc in 0u16..=u16::MAX,
+            // Up to 2^32 / 2^16 clocks' worth of ticks: on-times whose µs fit the u64
+            // product of the division itself.
+            // (Short periods too, where one ppm of rounding is a whole tick of on-time.)
+            arr in proptest::prop_oneof![0u32..2_000, 0u32..=(u32::MAX >> 4)],
+            ccr_frac in 0u32..=1000,
+            nudge in -3i64..=3,
+            far in proptest::bool::ANY,
+            clock_hz in 1u32..=u32::MAX,
+        ) {
+            let ccr = (arr as u64 * ccr_frac as u64 / 1000) as u32;
+            let s = TimerSettings { psc, arr, ccr };
+            let timer = BurstTimer { clock_hz, ..crate::burst::TEST_TIMER };
+            let on_us = (s.on_clocks() as u128 * 1_000_000).div_ceil(clock_hz as u128);
+            let duty = (ccr as u128 * PPM as u128).div_ceil(arr as u128 + 1);
+            let near = |v: u128| if far { u64::MAX - 2 } else { (v as i128 + nudge as i128).clamp(0, u64::MAX as i128) as u64 };
+            let (f_on, f_duty) = (near(on_us), near(duty));
+            proptest::prop_assert_eq!(
+                f_on.max(on_us_above(&timer, &s, f_on)) as u128,
+                (f_on as u128).max(on_us)
+            );
+            proptest::prop_assert_eq!(
+                f_duty.max(duty_ppm_above(&s, f_duty)) as u128,
+                (f_duty as u128).max(duty)
+            );
+        }
+    }
+
     const P10: TimerSettings = TimerSettings {
         psc: 0,
         arr: 900_000,
