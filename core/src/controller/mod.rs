@@ -158,6 +158,10 @@ pub struct Controller<E: VelocityEstimator = DefaultEstimator> {
     clamp_log: LogLimit,
     lines: LineTracker,
     amplitude: Option<u16>,
+    /// The permille last asked of [`Self::set_amplitude`], before the cap (`u16::MAX`: none
+    /// since the cap last changed). A texture asks for the same amplitude on almost every
+    /// sample: one compare settles it then, instead of capping and comparing again.
+    amplitude_asked: u16,
     /// The active scene's level cap, ‰ (a copy: read once per sample where the amplitude is
     /// set; fetched from the scene there instead, it cost every scene ~20 instructions per
     /// sample on the M4 in spilled registers).
@@ -201,6 +205,7 @@ impl<E: VelocityEstimator> Controller<E> {
             clamp_log: LogLimit::default(),
             lines: LineTracker::default(),
             amplitude: None,
+            amplitude_asked: u16::MAX,
             drive_pending: false,
             caps_pending: false,
             telemetry: Telemetry {
@@ -241,6 +246,8 @@ impl<E: VelocityEstimator> Controller<E> {
             active.limits.max_on_time_us
         );
         self.level_cap_permille = active.limits.max_level_permille;
+        // The same ask may give another level under the new cap.
+        self.amplitude_asked = u16::MAX;
         self.active = Some(active);
         // The old region index and line arming mean nothing in the new layout (a running line
         // pulse keeps its window: the gate may be in its rest).
@@ -458,7 +465,8 @@ impl<E: VelocityEstimator> Controller<E> {
                 region, skipped
             );
         }
-        if request.amplitude != u16::MAX {
+        // u16::MAX leaves the amplitude as it is; the same ask as the last changes nothing.
+        if request.amplitude != u16::MAX && request.amplitude != self.amplitude_asked {
             out.amplitude_permille = self.set_amplitude(request.amplitude);
         }
     }
@@ -550,6 +558,7 @@ impl<E: VelocityEstimator> Controller<E> {
 
     /// The level cap is the last word: full drive and the top of a random spread play at it.
     fn set_amplitude(&mut self, permille: u16) -> Option<u16> {
+        self.amplitude_asked = permille;
         let permille = permille.min(self.level_cap_permille);
         (self.amplitude != Some(permille)).then(|| {
             self.amplitude = Some(permille);
@@ -1281,6 +1290,24 @@ mod tests {
         let sent: std::vec::Vec<u16> = outs.iter().filter_map(|o| o.amplitude_permille).collect();
         assert!(!sent.is_empty());
         assert!(sent.iter().all(|&a| a == 500), "{sent:?}");
+    }
+
+    /// A new level cap re-applies the amplitude the texture keeps asking for: the ask is the
+    /// same (full drive), the level under the new cap is not, and it is sent on the first
+    /// sample after the load — and not again while nothing changes.
+    #[test]
+    fn a_new_level_cap_reapplies_an_unchanged_ask() {
+        let mut c = loaded();
+        let mut t = 0;
+        let outs = stroke(&mut c, 1_000.0, 2_000.0, &mut t, 200);
+        let sent: std::vec::Vec<u16> = outs.iter().filter_map(|o| o.amplitude_permille).collect();
+        assert_eq!(sent, [1000]);
+        let mut cfg = default_config();
+        cfg.limits.max_level_permille = 500;
+        c.load(&cfg).unwrap();
+        let outs = stroke(&mut c, 2_000.0, 3_000.0, &mut t, 200);
+        let sent: std::vec::Vec<u16> = outs.iter().filter_map(|o| o.amplitude_permille).collect();
+        assert_eq!(sent, [500]);
     }
 
     /// A fault ends a line pulse's window with the pulse: after recovering inside what would
