@@ -46,13 +46,10 @@ const BUDGET: u64 = 400;
 /// Issue #17 not met for these: their rows are over [`BUDGET`] (measured on this commit, see
 /// docs/target-cost.md) and fail only above their ceiling here, about 3 % over the worst row
 /// measured, so a regression still fails. Remove a line once its kind is under the budget.
-/// The position-phase grating pays the windowed duty ledger on every pulse; the hybrid also
-/// its 64-sample line fit; the material's reversals pay the ledger on each burst start.
-const OVER_BUDGET: [(&str, f64); 3] = [
-    ("grating/", 420.0),
-    ("grating-hybrid/", 610.0),
-    ("material/", 420.0),
-];
+/// The hybrid pays its 64-sample line fit on every sample; the material's reversals pay the
+/// windowed duty ledger's check on each burst start and growth (the position-phase grating
+/// is under the budget since stop 27 and checked against it).
+const OVER_BUDGET: [(&str, f64); 2] = [("grating-hybrid/", 595.0), ("material/", 415.0)];
 
 struct VecSink(Vec<u8>);
 impl Sink for VecSink {
