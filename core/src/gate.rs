@@ -816,8 +816,6 @@ mod tests {
         max_burst_hz: 5_000,
     };
 
-    /// 10 ms one-pulse at 90 MHz: one tick of delay (0 µs rounded down), the fall at
-    /// ⌈900 001 / 90⌉ = 10 001 µs: 10 001 µs counted.
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig { cases: 4096, ..Default::default() })]
         /// The growth tests give the divisions' answer: max(floor, value) is the same whether
@@ -886,6 +884,8 @@ mod tests {
         }
     }
 
+    /// 10 ms one-pulse at 90 MHz: one tick of delay (0 µs rounded down), the fall at
+    /// ⌈900 001 / 90⌉ = 10 001 µs: 10 001 µs counted.
     const P10: TimerSettings = TimerSettings {
         psc: 0,
         arr: 900_000,
