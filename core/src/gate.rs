@@ -352,8 +352,9 @@ impl DutyLedger {
     /// than x's, plus x's own clipped to its length after x.
     ///
     /// Worked from the old end: the ring's total less the slots older than x's. A pulse asks
-    /// about the window's start, a few slots from the ring's end, so this reads the kept total, subtracts a
-    /// few slots instead of walking ~60 slots in i64 span arithmetic (issue #17's cost).
+    /// about the window's start, a few slots from the ring's end, so this reads the kept total
+    /// and subtracts a few slots instead of walking ~60 slots in i64 span arithmetic (issue
+    /// #17's cost).
     fn on_since(&self, x: i64) -> u64 {
         let until = self.offset(self.recorded_until_us);
         if x >= until {

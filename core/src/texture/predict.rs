@@ -55,14 +55,10 @@ pub(crate) struct LineFit {
     ring: [i32; N],
     /// Index of the oldest sample in `ring` once full; the next write goes there.
     head: usize,
-    count: usize,
-    /// Σ y over the window.
-    sum_um: i32,
-    /// Σ i·y, i = 0 for the oldest: at most 2 016 · 10^6 µm for a 1 m substrate, inside i32
-    /// (and kept wrapping, so exactness does not depend on it).
-    moment_um: i32,
+    /// The sums over the whole window (its `count` is the window's fill).
+    full: Sums<N>,
     /// The same two sums over the newest [`H`] samples (fewer while filling).
-    half: Sums,
+    half: Sums<H>,
     last_t_us: u32,
     /// Where the line said the next sample would be, µm.
     expected_um: Option<f32>,
@@ -73,9 +69,7 @@ impl Default for LineFit {
         Self {
             ring: [0; N],
             head: 0,
-            count: 0,
-            sum_um: 0,
-            moment_um: 0,
+            full: Sums::default(),
             half: Sums::default(),
             last_t_us: 0,
             expected_um: None,
@@ -95,10 +89,8 @@ pub(crate) struct Line {
 impl LineFit {
     /// Empties the window (a gap, a glitch, a region change, a fault).
     pub(crate) fn reset(&mut self) {
-        self.count = 0;
         self.head = 0;
-        self.sum_um = 0;
-        self.moment_um = 0;
+        self.full = Sums::default();
         self.half = Sums::default();
         self.expected_um = None;
     }
@@ -116,43 +108,35 @@ impl LineFit {
         if !on_grid || off_line {
             self.reset();
         }
-        // The newer half slides by one: its oldest (age H − 1, at ring position head + count −
-        // H: count − H while filling, head + H once full) leaves once it holds H samples.
-        let leaving = (self.half.count == H)
-            .then(|| {
-                let at = (self.head + self.count).wrapping_sub(H) & (N - 1);
-                self.ring.get(at).copied()
-            })
-            .flatten();
-        self.half.push(position_um, leaving);
-        if self.count < N {
+        // The newer half slides by one once it holds H samples: its oldest (age H − 1, at ring
+        // position head + count − H: count − H while filling, head + H once full) leaves.
+        let count = self.full.count;
+        if self.half.count == H {
+            let at = (self.head + count).wrapping_sub(H) & (N - 1);
+            let oldest = self.ring.get(at).copied().unwrap_or(0);
+            self.half.slide(position_um, oldest);
+        } else {
+            self.half.fill(position_um);
+        }
+        if count < N {
             // Filling: the new sample's index is `count`.
-            if let Some(slot) = self.ring.get_mut(self.count) {
+            if let Some(slot) = self.ring.get_mut(count) {
                 *slot = position_um;
             }
-            self.sum_um = self.sum_um.wrapping_add(position_um);
-            self.moment_um = self
-                .moment_um
-                .wrapping_add((self.count as i32).wrapping_mul(position_um));
-            self.count += 1;
-            if self.count < N {
+            self.full.fill(position_um);
+            if count + 1 < N {
                 return None;
             }
         } else {
-            // Sliding: every index drops by one, the oldest leaves, the newest enters at N − 1.
             let oldest = self.ring.get(self.head).copied().unwrap_or(0);
             if let Some(slot) = self.ring.get_mut(self.head) {
                 *slot = position_um;
             }
             self.head = if self.head + 1 == N { 0 } else { self.head + 1 };
-            self.moment_um = self
-                .moment_um
-                .wrapping_sub(self.sum_um.wrapping_sub(oldest))
-                .wrapping_add((N as i32 - 1).wrapping_mul(position_um));
-            self.sum_um = self.sum_um.wrapping_sub(oldest).wrapping_add(position_um);
+            self.full.slide(position_um, oldest);
         }
-        let full = line_of(self.sum_um, self.moment_um, N);
-        let half = line_of(self.half.sum_um, self.half.moment_um, H);
+        let full = self.full.line();
+        let half = self.half.line();
         let line = if (full.end_um - half.end_um).abs() <= DISAGREE_UM {
             full
         } else {
@@ -165,37 +149,46 @@ impl LineFit {
     /// The newer half's line (tests).
     #[cfg(test)]
     fn half_line(&self) -> Line {
-        line_of(self.half.sum_um, self.half.moment_um, H)
+        self.half.line()
     }
 }
 
-/// Σy and Σi·y over a sliding window of up to [`H`] samples, i = 0 for the oldest (wrapping).
+/// Σy and Σi·y over a sliding window of up to `W` samples, i = 0 for the oldest (wrapping:
+/// Σi·y is at most 2 016 · 10^6 µm for W = 64 on a 1 m substrate, inside i32, and exactness
+/// does not depend on it).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
-struct Sums {
+struct Sums<const W: usize> {
     count: usize,
     sum_um: i32,
     moment_um: i32,
 }
 
-impl Sums {
-    /// Adds a sample; `leaving` is the oldest, which leaves once the window is full.
-    fn push(&mut self, position_um: i32, leaving: Option<i32>) {
-        match leaving {
-            Some(oldest) if self.count == H => {
-                self.moment_um = self
-                    .moment_um
-                    .wrapping_sub(self.sum_um.wrapping_sub(oldest))
-                    .wrapping_add((H as i32 - 1).wrapping_mul(position_um));
-                self.sum_um = self.sum_um.wrapping_sub(oldest).wrapping_add(position_um);
-            }
-            _ => {
-                self.moment_um = self
-                    .moment_um
-                    .wrapping_add((self.count as i32).wrapping_mul(position_um));
-                self.sum_um = self.sum_um.wrapping_add(position_um);
-                self.count = (self.count + 1).min(H);
-            }
-        }
+impl<const W: usize> Sums<W> {
+    /// Adds a sample to a window not yet full: its index is `count`.
+    #[inline(always)]
+    fn fill(&mut self, position_um: i32) {
+        self.moment_um = self
+            .moment_um
+            .wrapping_add((self.count as i32).wrapping_mul(position_um));
+        self.sum_um = self.sum_um.wrapping_add(position_um);
+        self.count += 1;
+    }
+
+    /// Slides a full window by one: every index drops by one, `oldest` leaves, the new
+    /// sample enters at W − 1.
+    #[inline(always)]
+    fn slide(&mut self, position_um: i32, oldest: i32) {
+        self.moment_um = self
+            .moment_um
+            .wrapping_sub(self.sum_um.wrapping_sub(oldest))
+            .wrapping_add((W as i32 - 1).wrapping_mul(position_um));
+        self.sum_um = self.sum_um.wrapping_sub(oldest).wrapping_add(position_um);
+    }
+
+    /// The least-squares line through the window's samples, at the newest (full window).
+    #[inline(always)]
+    fn line(&self) -> Line {
+        line_of(self.sum_um, self.moment_um, W)
     }
 }
 

@@ -43,6 +43,7 @@ impl<const N: usize> LsqSlope<N> {
         let denom = n * (n * n - 1) * sample_period_us as i64;
         let gain_q32 = ((6_000_000i128 << 32) + denom as i128 / 2) / denom as i128;
         let gain_q32 = gain_q32 as i64;
+        let (centred_min, centred_max) = speed_range(gain_q32);
         Ok(Self {
             window: [0; N],
             head: 0,
@@ -51,8 +52,8 @@ impl<const N: usize> LsqSlope<N> {
             weighted: 0,
             sampler: Sampler::new(sample_period_us),
             gain_q32,
-            centred_min: speed_range(gain_q32).0,
-            centred_max: speed_range(gain_q32).1,
+            centred_min,
+            centred_max,
         })
     }
 }
