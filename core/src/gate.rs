@@ -406,10 +406,14 @@ impl DutyLedger {
         sum
     }
 
-    /// True when a burst starting at offset `reference` keeps the cap over every window that
+    /// Whether a burst starting at offset `reference` keeps the cap over every window that
     /// also holds on-time recorded before it: for every x in `[from, to)` with on-time recorded
     /// after x, `on_since(x) + reserve ≤ slack + d·(reference − x)`, in ppm·µs (`reserve_e6`:
     /// the burst's partial period, `slack_e6`: (cap − d)·W, `d_ppm`: the burst's duty).
+    ///
+    /// Some(room) when it does: room is the least `slack + d·(reference − x) − on_since(x)`
+    /// over those x, the largest reserve that would still fit (u64::MAX when no x holds
+    /// on-time); [`Headroom`] keeps it so a growing burst is not walked again. None when not.
     ///
     /// Within a slot `on_since(x)` rises at rate 1 as x moves back until it holds the slot's
     /// whole on-time, then stays, while the right side rises at rate d ≤ 1: the worst x of a
@@ -422,11 +426,17 @@ impl DutyLedger {
         reserve_e6: u64,
         slack_e6: u64,
         d_ppm: u64,
-    ) -> bool {
+    ) -> Option<u64> {
         let until = self.offset(self.recorded_until_us);
-        let fits = |on_us: u64, x: i64| {
-            on_us == 0
-                || on_us * PPM + reserve_e6 <= slack_e6 + d_ppm * (reference - x).max(0) as u64
+        let mut room_e6 = u64::MAX;
+        // Room left at x beyond on-time `on_us` after it, if the reserve fits there too.
+        let mut fits = |on_us: u64, x: i64| {
+            if on_us == 0 {
+                return true;
+            }
+            let left = (slack_e6 + d_ppm * (reference - x).max(0) as u64).checked_sub(on_us * PPM);
+            room_e6 = room_e6.min(left.unwrap_or(0));
+            left.is_some_and(|l| reserve_e6 <= l)
         };
         let mut newer = 0;
         let mut oldest_lo = 0;
@@ -440,7 +450,7 @@ impl DutyLedger {
         // slot arithmetic (~62 per slot in i64 on the M4, ~4 000 for the ring): the first
         // Start after boot, an idle spell or a new scene's re-cut.
         if self.total() == 0 {
-            return true;
+            return Some(u64::MAX);
         }
         for back in 0..RING_SLOTS {
             let (lo, hi) = self.span(back);
@@ -451,14 +461,14 @@ impl DutyLedger {
                 if on == 0 {
                     if newer != 0 && empty_checked_at != Some(newer) {
                         if !fits(newer, b - 1) {
-                            return false;
+                            return None;
                         }
                         empty_checked_at = Some(newer);
                     }
                 } else {
                     let x = (end - on as i64).clamp(a, b - 1);
                     if !fits(newer + on.min((end - x) as u64), x) {
-                        return false;
+                        return None;
                     }
                 }
             }
@@ -467,7 +477,7 @@ impl DutyLedger {
         }
         // Before the ring: everything recorded counts; the latest x there is the worst.
         let b = oldest_lo.min(to);
-        from >= b || fits(newer, b - 1)
+        (from >= b || fits(newer, b - 1)).then_some(room_e6)
     }
 
     /// [`Self::burst_fits`] without its skips: every slot in range checked at its worst x (the
@@ -481,11 +491,17 @@ impl DutyLedger {
         reserve_e6: u64,
         slack_e6: u64,
         d_ppm: u64,
-    ) -> bool {
+    ) -> Option<u64> {
         let until = self.offset(self.recorded_until_us);
-        let fits = |on_us: u64, x: i64| {
-            on_us == 0
-                || on_us * PPM + reserve_e6 <= slack_e6 + d_ppm * (reference - x).max(0) as u64
+        let mut room_e6 = u64::MAX;
+        // Room left at x beyond on-time `on_us` after it, if the reserve fits there too.
+        let mut fits = |on_us: u64, x: i64| {
+            if on_us == 0 {
+                return true;
+            }
+            let left = (slack_e6 + d_ppm * (reference - x).max(0) as u64).checked_sub(on_us * PPM);
+            room_e6 = room_e6.min(left.unwrap_or(0));
+            left.is_some_and(|l| reserve_e6 <= l)
         };
         let mut newer = 0;
         let mut oldest_lo = 0;
@@ -497,14 +513,14 @@ impl DutyLedger {
             if a < b {
                 let x = (end - on as i64).clamp(a, b - 1);
                 if !fits(newer + on.min((end - x) as u64), x) {
-                    return false;
+                    return None;
                 }
             }
             newer += on;
             oldest_lo = lo;
         }
         let b = oldest_lo.min(to);
-        from >= b || fits(newer, b - 1)
+        (from >= b || fits(newer, b - 1)).then_some(room_e6)
     }
 }
 
@@ -549,6 +565,44 @@ pub struct Gate {
     /// The line may have been on until this time (µs, wrapping): a Start, which raises the line
     /// at once, must come after it.
     off_from_us: Option<u32>,
+    /// What the running burst's last window walk found room for.
+    headroom: Option<Headroom>,
+}
+
+/// The room a running burst's last window walk ([`DutyLedger::burst_fits`]) found, kept so a
+/// burst that grows again (a velocity-driven one slowing down grows on most samples) is
+/// admitted by a multiply instead of a walk of the ring (up to ~9 000 instructions on the
+/// M4F, issue #17).
+///
+/// Sound for the rest of the run: while a burst runs nothing is recorded, so the ledger's
+/// on-time before the run only rolls out of the ring, and the windows still to check start
+/// later (x from t − W): a later walk checks a subset of the same x against no more on-time.
+/// A duty d' ≥ d moves each x's right side, (cap − d')·W + d'·(reference − x), by
+/// (d' − d)·(reference − x − W) ≥ −(d' − d)·(W − 1), as reference − x ≥ 1. So a growth to
+/// on-time o' and duty d' fits when (1 − d')·o' + (d' − d)·(W − 1) ≤ room; when not, the walk
+/// decides (and finds the room again). Only for the window and cap it was found under; a
+/// re-cut of the ledger (new caps) forgets it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct Headroom {
+    /// The largest reserve (partial period × (1 − d)), ppm·µs, that fitted every window.
+    room_e6: u64,
+    /// The duty the room was found for, ppm.
+    d_ppm: u64,
+    window_us: u32,
+    cap_ppm: u64,
+}
+
+impl Headroom {
+    /// True when a burst of on-time `on_us` and duty `d_ppm` fits by this room alone.
+    fn admits(&self, on_us: u64, d_ppm: u64, window_us: u32, cap_ppm: u64) -> bool {
+        if window_us != self.window_us || cap_ppm != self.cap_ppm || d_ppm < self.d_ppm {
+            return false;
+        }
+        let need = ((PPM - d_ppm.min(PPM)) as u128 * on_us as u128)
+            + (d_ppm - self.d_ppm) as u128 * window_us.saturating_sub(1) as u128;
+        need <= self.room_e6 as u128
+    }
 }
 
 /// True while `t_us` is before `deadline_us` (both wrapping µs).
@@ -579,7 +633,12 @@ impl Gate {
     /// itself recorded.
     fn catch_up(&mut self, t_us: u32, limits: &SafetyLimits) -> u32 {
         let window_us = duty_window_us(limits);
+        let slot_us = self.ledger.slot_us;
         let silence = self.ledger.advance(t_us, window_us);
+        if self.ledger.slot_us != slot_us {
+            // Re-cut: the on-time moved to now, where the kept room did not count it.
+            self.headroom = None;
+        }
         // Deadlines are forgotten once passed, or after a silence longer than the ring (past
         // 2^31 µs the wrapping clock would show them ahead again).
         if silence || self.off_from_us.is_some_and(|f| before(f, t_us)) {
@@ -616,9 +675,10 @@ impl Gate {
     }
 
     /// True when a burst of on-time `on_us` and duty `d_ppm` from `since_us` keeps the cap
-    /// over every window from `t_us − window` that holds on-time from before it.
+    /// over every window from `t_us − window` that holds on-time from before it: by the room
+    /// kept from this run's last walk, or else by walking the ledger (which keeps its room).
     fn burst_fits(
-        &self,
+        &mut self,
         since_us: u32,
         t_us: u32,
         on_us: u64,
@@ -627,15 +687,30 @@ impl Gate {
         limits: &SafetyLimits,
     ) -> bool {
         let cap_ppm = limits.max_duty_permille.min(1000) as u64 * 1000;
+        if self
+            .headroom
+            .is_some_and(|h| h.admits(on_us, d_ppm, window_us, cap_ppm))
+        {
+            return true;
+        }
         let reference = self.ledger.offset(since_us);
-        self.ledger.burst_fits(
+        let room = self.ledger.burst_fits(
             self.ledger.offset(t_us) - window_us as i64,
             reference,
             reference,
             (PPM - d_ppm.min(PPM)) * on_us,
             cap_ppm.saturating_sub(d_ppm) * window_us as u64,
             d_ppm,
-        )
+        );
+        if let Some(room_e6) = room {
+            self.headroom = Some(Headroom {
+                room_e6,
+                d_ppm,
+                window_us,
+                cap_ppm,
+            });
+        }
+        room.is_some()
     }
 
     /// Moves towards `desired` (None = off) at time `t_us`; returns the action to apply, if
@@ -677,6 +752,8 @@ impl Gate {
                 let on_us = timer.clocks_to_us_ceil(s.on_clocks());
                 let d_ppm = duty_ppm(&s);
                 let after_off = self.off_from_us.is_none_or(|f| before(f, t_us));
+                // A new run: the last one's room counted other windows.
+                self.headroom = None;
                 if !after_off || !self.burst_fits(t_us, t_us, on_us, d_ppm, window_us, limits) {
                     return None;
                 }
@@ -881,6 +958,161 @@ mod tests {
                     _ => { g.force_off(t, &timer, l); }
                 }
                 proptest::prop_assert_eq!(g.ledger.total(), g.ledger.ring_sum(), "op {} at {}", i, t);
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 4096, ..Default::default() })]
+        /// A kept room admits only what a walk admits later in the same run: a burst that fitted
+        /// at t1 (walked) and grows at t2 ≥ t1, the ledger rolled to t2, on-time and duty drawn
+        /// around the first (a duty below the walked one is never admitted by the room), over
+        /// ledgers with empty, partial and over-full slots and windows of every slot length.
+        #[test]
+        fn a_kept_room_admits_only_what_a_later_walk_admits(
+            slot_us in 1u32..20_000,
+            w_short in 0u32..60,
+            head in 0usize..RING_SLOTS,
+            head_start_us: u32,
+            until_back in 0u32..70_000,
+            fill in proptest::collection::vec((0u32..5, 0u32..30_000), RING_SLOTS),
+            t1_in_head in 0u32..20_000,
+            since_back in 0u32..1_000_000,
+            later_us in 0u32..1_300_000,
+            cap_ppm in 1u64..=1_000_000,
+            d1_ppm in 0u64..=1_000_000,
+            on1_us in 0u64..60_000,
+            d_step in -500i64..3_000,
+            on_step in -1_000i64..3_000,
+            at_edge: bool,
+            since_at_until: bool,
+            w2_short in proptest::option::of(0u32..60),
+            cap2_ppm in proptest::option::of(1u64..=1_000_000),
+        ) {
+            let mut on_us = [0u32; RING_SLOTS];
+            for (slot, (kind, us)) in on_us.iter_mut().zip(&fill) {
+                // Empty, partial, a few µs (where the duty's bound is tight), over-full.
+                *slot = match kind { 0 | 1 => 0, 2 => us % slot_us, 3 => us % 4, _ => *us };
+            }
+            let mut l = DutyLedger::of_slots(on_us, head, head_start_us, slot_us, head_start_us.wrapping_sub(until_back));
+            // A window whose slot length is the ledger's (so the roll below does not re-cut).
+            let w = 60 * slot_us - w_short.min(60 * slot_us - 1);
+            let t1 = head_start_us.wrapping_add(t1_in_head % slot_us);
+            // A run from anywhere in the window, or from just after the last record (where the
+            // room is tightest in the duty: reference − x is smallest there).
+            let until = head_start_us.wrapping_sub(until_back);
+            let since = if since_at_until { until.wrapping_add(since_back % 4) } else { t1.wrapping_sub(since_back % w) };
+            let since_back = t1.wrapping_sub(since);
+            if since_back >= w {
+                return Ok(());
+            }
+            let walk = |l: &DutyLedger, t: u32, on: u64, d: u64, w: u32, cap_ppm: u64| {
+                let reference = l.offset(since);
+                l.burst_fits(
+                    l.offset(t) - w as i64,
+                    reference,
+                    reference,
+                    (PPM - d) * on,
+                    cap_ppm.saturating_sub(d) * w as u64,
+                    d,
+                )
+            };
+            let Some(room_e6) = walk(&l, t1, on1_us, d1_ppm, w, cap_ppm) else {
+                return Ok(());
+            };
+            let kept = Headroom { room_e6, d_ppm: d1_ppm, window_us: w, cap_ppm };
+            let d2 = (d1_ppm as i64 + d_step).clamp(0, PPM as i64) as u64;
+            // At the edge: the longest on-time the room admits at d2 under the first caps.
+            let edge = (d2 < PPM).then(|| {
+                room_e6.saturating_sub(d2.saturating_sub(d1_ppm) * (w as u64 - 1)) / (PPM - d2)
+            });
+            let on2 = match edge {
+                Some(e) if at_edge => e.min(1 << 32),
+                _ => (on1_us as i64 + on_step).max(0) as u64,
+            };
+            // Caps of the same slot length (no re-cut), or another duty cap.
+            let w2 = w2_short.map_or(w, |s| 60 * slot_us - s.min(60 * slot_us - 1));
+            let cap2 = cap2_ppm.unwrap_or(cap_ppm);
+            if !kept.admits(on2, d2, w2, cap2) {
+                return Ok(());
+            }
+            // Only while the run's windows reach back before it (the gate checks no other).
+            let t2 = t1.wrapping_add(later_us % (w - since_back));
+            proptest::prop_assert!(!l.advance(t2, w2));
+            proptest::prop_assert!(walk(&l, t2, on2, d2, w2, cap2).is_some(), "t2 {} on {} d {}", t2, on2, d2);
+        }
+    }
+
+    /// The room's duty bound is tight where the last on-time ends just before the run: 1 µs
+    /// recorded at [999, 1000) µs, a run from 1000 µs at d = 40 %, 100 % cap, W = 300 ms. By
+    /// hand: the worst x is 999, room = 0.6·W + 0.4·1 − 1 (×10⁶) = 179 999 400 000 ppm·µs. At
+    /// d' = 70 % the worst window's right side is 0.3·W + 0.7 − 1 = 89 999 700 000, so the
+    /// longest on-time that fits is 89 999 700 000 / 0.3·10⁶ = 299 999 µs: the room admits it
+    /// (room − 0.3·(W − 1)·10⁶ is exactly that), not one µs more.
+    #[test]
+    fn the_room_admits_a_higher_duty_up_to_the_edge() {
+        let w = DUTY_WINDOW_US;
+        let mut l = DutyLedger::default();
+        assert!(!l.advance(0, w));
+        l.add_on(999, 1_000);
+        let cap_ppm = PPM;
+        let walk = |on_us: u64, d: u64| {
+            l.burst_fits(
+                1_000 - w as i64,
+                1_000,
+                1_000,
+                (PPM - d) * on_us,
+                (cap_ppm - d) * w as u64,
+                d,
+            )
+        };
+        let room_e6 = walk(0, 400_000).expect("fits");
+        assert_eq!(room_e6, 179_999_400_000);
+        let kept = Headroom {
+            room_e6,
+            d_ppm: 400_000,
+            window_us: w,
+            cap_ppm,
+        };
+        assert!(kept.admits(299_999, 700_000, w, cap_ppm));
+        assert!(walk(299_999, 700_000).is_some());
+        assert!(!kept.admits(300_000, 700_000, w, cap_ppm));
+        assert!(walk(300_000, 700_000).is_none());
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 512, ..Default::default() })]
+        /// The gate with its kept room answers every request as the gate that walks the ledger
+        /// each time: random trains of growing and shrinking bursts, pulses, offs and new caps.
+        #[test]
+        fn the_kept_room_changes_no_answer(
+            ops in proptest::collection::vec((0u8..6, 1u32..20_000, 1u32..4_000_000, 200u32..=1000), 1..120),
+        ) {
+            let timer = crate::burst::TEST_TIMER;
+            // Another cap and slot length; and two windows of one slot length (600 000 and
+            // 599 950 µs: 10 000 µs slots), which the ledger does not re-cut between.
+            let caps = [
+                SafetyLimits::default(),
+                SafetyLimits { max_on_time_us: 200_000, max_duty_permille: 450, ..SafetyLimits::default() },
+                SafetyLimits { max_on_time_us: 300_000, ..SafetyLimits::default() },
+                SafetyLimits { max_on_time_us: 299_975, ..SafetyLimits::default() },
+            ];
+            let (mut kept, mut walked) = (Gate::default(), Gate::default());
+            let mut t = 0u32;
+            for (i, &(op, dt_us, on_clocks, duty_permille)) in ops.iter().enumerate() {
+                t = t.wrapping_add(dt_us);
+                let l = &caps[if i % 11 == 10 { 1 } else if i < 60 { 0 } else { 2 + i % 5 / 4 }];
+                let arr = (on_clocks as u64 * 1000 / duty_permille as u64) as u32;
+                let burst = TimerSettings { psc: 0, arr, ccr: on_clocks.min(arr) };
+                walked.headroom = None;
+                let (a, b) = match op {
+                    0 => (kept.pulse(P10, t, &timer, l), walked.pulse(P10, t, &timer, l)),
+                    1..=3 => (kept.request(Some(burst), t, &timer, l), walked.request(Some(burst), t, &timer, l)),
+                    4 => (kept.request(None, t, &timer, l), walked.request(None, t, &timer, l)),
+                    _ => (kept.force_off(t, &timer, l), walked.force_off(t, &timer, l)),
+                };
+                proptest::prop_assert_eq!(a, b, "op {} at {}", i, t);
+                proptest::prop_assert_eq!((kept.state, kept.ledger, kept.off_from_us), (walked.state, walked.ledger, walked.off_from_us), "op {}", i);
             }
         }
     }
