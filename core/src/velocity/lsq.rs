@@ -8,6 +8,13 @@
 use super::common::{check_period, Sampler, Tick};
 use super::{EstimatorError, VelocityEstimator};
 
+/// Longest window [`LsqSlope`] takes: its sums are kept in wrapping 32-bit arithmetic, exact
+/// while the slope's centred sum Σ(2k − (N − 1))·x_k fits i32. That sum does not change when
+/// every position moves by the same amount, and is at most N²/4 times the spread of the
+/// window's positions: 1 024 × spread at N = 64, so any window spread under 2.09 m (the
+/// substrate is at most 1 m: `position::MAX_LENGTH_UM`).
+pub const LSQ_MAX_WINDOW: usize = 64;
+
 /// Least-squares slope over the last `N` samples, integer arithmetic.
 #[derive(Clone, Debug)]
 pub struct LsqSlope<const N: usize> {
@@ -15,12 +22,15 @@ pub struct LsqSlope<const N: usize> {
     /// Index of the oldest entry once full.
     head: usize,
     len: usize,
-    /// Σ x_k over the window.
-    sum: i64,
-    /// While filling: Σ k·x_k with k = 0 for the oldest entry (W). Once full: the centred sum
-    /// 2W − (N − 1)·Σx the slope is made of, kept up to date directly (it saves recomputing it
-    /// from W every sample).
-    weighted: i64,
+    /// Σ x_k over the window, wrapping: it reaches the slope only through the centred sum's
+    /// update, whose true value fits i32 ([`LSQ_MAX_WINDOW`]), so the wrapped result is exact.
+    /// (In i32 rather than i64: the M4F adds and multiplies it in one instruction instead of
+    /// two to four, ~25 per sample, `docs/target-cost.md`.)
+    sum: i32,
+    /// While filling: Σ k·x_k with k = 0 for the oldest entry (W), wrapping. Once full: the
+    /// centred sum 2W − (N − 1)·Σx the slope is made of, kept up to date directly (it saves
+    /// recomputing it from W every sample).
+    weighted: i32,
     sampler: Sampler,
     /// µm/s per unit of 2·Σ(k − (N−1)/2)·x_k, Q32: 6·10⁶ / (N (N²−1) T_s).
     gain_q32: i64,
@@ -28,8 +38,8 @@ pub struct LsqSlope<const N: usize> {
     /// inside it the product neither overflows i64 nor needs clamping, outside the speed
     /// saturates (worked out once: one range test on the M4F instead of a 64-bit overflow
     /// check and a 64-bit clamp).
-    centred_min: i64,
-    centred_max: i64,
+    centred_min: i32,
+    centred_max: i32,
 }
 
 impl<const N: usize> LsqSlope<N> {
@@ -37,6 +47,12 @@ impl<const N: usize> LsqSlope<N> {
     pub fn new(sample_period_us: u32) -> Result<Self, EstimatorError> {
         if N < 2 {
             return Err(EstimatorError::WindowTooShort { window: N, min: 2 });
+        }
+        if N > LSQ_MAX_WINDOW {
+            return Err(EstimatorError::WindowTooLong {
+                window: N,
+                max: LSQ_MAX_WINDOW,
+            });
         }
         check_period(sample_period_us)?;
         let n = N as i64;
@@ -66,25 +82,35 @@ impl<const N: usize> LsqSlope<N> {
         reason = "ring indices stay below the ring's length: each is reduced mod the length or is `head`/`newest`, which only ever take such values"
     )]
     fn push(&mut self, position_um: i32) {
-        let x = position_um as i64;
+        // Wrapping throughout: exact mod 2^32, and the centred sum's true value fits i32.
+        let x = position_um;
         if self.len < N {
-            self.weighted += self.len as i64 * x;
-            self.sum += x;
+            self.weighted = self
+                .weighted
+                .wrapping_add((self.len as i32).wrapping_mul(x));
+            self.sum = self.sum.wrapping_add(x);
             self.window[(self.head + self.len) % N] = position_um;
             self.len += 1;
             if self.len == N {
-                self.weighted = 2 * self.weighted - (N as i64 - 1) * self.sum;
+                self.weighted = self
+                    .weighted
+                    .wrapping_mul(2)
+                    .wrapping_sub((N as i32 - 1).wrapping_mul(self.sum));
             }
         } else {
             // `head` < N always; the `% N` (an AND for N = 32) shows it to the compiler, so no
             // bounds check stays on the per-sample path (scripts/panic-check.sh).
             let head = self.head % N;
-            let oldest = self.window[head] as i64;
+            let oldest = self.window[head];
             // Every remaining entry's index drops by one and the newest enters at N − 1:
             // W' = W − (S − oldest) + (N − 1)x and S' = S − oldest + x, so the centred sum
             // C = 2W − (N − 1)S moves by C' − C = −2S + (N + 1)·oldest + (N − 1)x.
-            self.weighted += -2 * self.sum + (N as i64 + 1) * oldest + (N as i64 - 1) * x;
-            self.sum += x - oldest;
+            self.weighted = self
+                .weighted
+                .wrapping_sub(self.sum.wrapping_mul(2))
+                .wrapping_add((N as i32 + 1).wrapping_mul(oldest))
+                .wrapping_add((N as i32 - 1).wrapping_mul(x));
+            self.sum = self.sum.wrapping_add(x.wrapping_sub(oldest));
             self.window[head] = position_um;
             self.head = (head + 1) % N;
         }
@@ -103,9 +129,9 @@ impl<const N: usize> LsqSlope<N> {
     /// window is inside the range (N = 32, T_s = 100 µs, a full 63 mm jump: 3·10⁸ µm/s of
     /// 2.1·10⁹); a pathological one saturates.
     #[inline(always)]
-    fn speed(&self, centred2: i64) -> i32 {
+    fn speed(&self, centred2: i32) -> i32 {
         if (self.centred_min..=self.centred_max).contains(&centred2) {
-            ((centred2 * self.gain_q32 + (1 << 31)) >> 32) as i32
+            ((centred2 as i64 * self.gain_q32 + (1 << 31)) >> 32) as i32
         } else if centred2 > 0 {
             i32::MAX
         } else {
@@ -122,13 +148,13 @@ impl<const N: usize> LsqSlope<N> {
     }
 }
 
-/// The centred sums c whose speed ⌊(c·g + 2³¹) / 2³²⌋ lies in i32, for a gain g ≥ 0: the
-/// speed grows with c, so it is the interval between the smallest c reaching i32::MIN and
-/// the largest staying at or below i32::MAX (in i128, where c·g cannot overflow), narrowed
-/// to where c·g + 2³¹ fits i64. A zero gain gives speed 0 for every c.
-fn speed_range(gain_q32: i64) -> (i64, i64) {
+/// The centred sums c (an i32) whose speed ⌊(c·g + 2³¹) / 2³²⌋ lies in i32, for a gain g ≥ 0:
+/// the speed grows with c, so it is the interval between the smallest c reaching i32::MIN
+/// and the largest staying at or below i32::MAX (in i128, where c·g cannot overflow),
+/// narrowed to where c·g + 2³¹ fits i64 and to i32. A zero gain gives speed 0 for every c.
+fn speed_range(gain_q32: i64) -> (i32, i32) {
     if gain_q32 <= 0 {
-        return (i64::MIN, i64::MAX);
+        return (i32::MIN, i32::MAX);
     }
     let g = gain_q32 as i128;
     let half = 1i128 << 31;
@@ -138,7 +164,8 @@ fn speed_range(gain_q32: i64) -> (i64, i64) {
     // c·g + 2³¹ ≥ MIN·2³² = −2⁶³ holds for every c·g that fits i64 (−2⁶³ + 2³¹ floors to
     // MIN too): the lower end is where the product itself would overflow.
     let lo = -((1i128 << 63) / g);
-    (lo as i64, hi as i64)
+    let to_i32 = |c: i128| c.clamp(i32::MIN as i128, i32::MAX as i128) as i32;
+    (to_i32(lo), to_i32(hi))
 }
 
 impl<const N: usize> VelocityEstimator for LsqSlope<N> {
@@ -190,28 +217,30 @@ mod tests {
     fn the_range_test_is_the_exact_saturated_product() {
         fn check<const N: usize>(period_us: u32) {
             let e = LsqSlope::<N>::new(period_us).unwrap();
-            let exact = |c: i64| {
+            let exact = |c: i32| {
                 let v = ((c as i128 * e.gain_q32 as i128) + (1 << 31)) >> 32;
                 v.clamp(i32::MIN as i128, i32::MAX as i128) as i32
             };
-            for c in [e.centred_min, e.centred_max, 0, i64::MIN, i64::MAX] {
-                for d in -2..=2i64 {
+            for c in [e.centred_min, e.centred_max, 0, i32::MIN, i32::MAX] {
+                for d in -2..=2i32 {
                     let c = c.saturating_add(d);
                     assert_eq!(e.speed(c), exact(c), "N {N} T {period_us} c {c}");
                 }
             }
-            // The ends are tight: one further out needs the clamp or overflows i64.
+            // The ends are tight: one further out needs the clamp or overflows i64, unless
+            // the end is i32's own.
             let wide = |c: i64| {
                 c.checked_mul(e.gain_q32)
                     .and_then(|p| p.checked_add(1 << 31))
                     .is_none_or(|p| i32::try_from(p >> 32).is_err())
             };
+            let (lo, hi) = (e.centred_min as i64, e.centred_max as i64);
             assert!(
-                !wide(e.centred_max) && wide(e.centred_max + 1),
+                !wide(hi) && (hi == i32::MAX as i64 || wide(hi + 1)),
                 "N {N} T {period_us}"
             );
             assert!(
-                !wide(e.centred_min) && wide(e.centred_min - 1),
+                !wide(lo) && (lo == i32::MIN as i64 || wide(lo - 1)),
                 "N {N} T {period_us}"
             );
         }
@@ -219,7 +248,60 @@ mod tests {
         check::<32>(100);
         check::<64>(100);
         check::<16>(100_000);
-        check::<1024>(100_000);
+        check::<64>(100_000);
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 512, ..Default::default() })]
+        /// The wrapping i32 sums give the exact slope: every output equals the least-squares
+        /// centred sum of the last N positions worked in i128 (times the gain, rounded and
+        /// saturated), over positions anywhere on a 1 m substrate, jumps from one end to the
+        /// other included, at the longest window and a short one.
+        #[test]
+        fn the_wrapping_sums_are_the_exact_slope(
+            xs in proptest::collection::vec(
+                proptest::prop_oneof![0i32..=1_000_000, 499_990i32..500_010, proptest::strategy::Just(0), proptest::strategy::Just(1_000_000)],
+                1..300,
+            ),
+        ) {
+            fn run<const N: usize>(xs: &[i32]) -> Result<(), proptest::test_runner::TestCaseError> {
+                let mut e = LsqSlope::<N>::new(10).unwrap();
+                for (i, &x) in xs.iter().enumerate() {
+                    let got = e.update(x, i as u32 * 10);
+                    let want = (i + 1 >= N).then(|| {
+                        let c: i128 = xs[i + 1 - N..=i]
+                            .iter()
+                            .enumerate()
+                            .map(|(k, &x)| (2 * k as i128 - (N as i128 - 1)) * x as i128)
+                            .sum();
+                        let v = (c * e.gain_q32 as i128 + (1 << 31)) >> 32;
+                        v.clamp(i32::MIN as i128, i32::MAX as i128) as i32
+                    });
+                    proptest::prop_assert_eq!(got, want, "N {} sample {}", N, i);
+                }
+                Ok(())
+            }
+            run::<64>(&xs)?;
+            run::<7>(&xs)?;
+        }
+    }
+
+    /// A window longer than the sums keep exact is refused, with a sentence naming both.
+    #[test]
+    fn a_window_past_the_exact_sums_is_refused() {
+        assert!(LsqSlope::<LSQ_MAX_WINDOW>::new(100).is_ok());
+        let e = LsqSlope::<65>::new(100).unwrap_err();
+        assert_eq!(
+            e,
+            EstimatorError::WindowTooLong {
+                window: 65,
+                max: 64
+            }
+        );
+        assert_eq!(
+            std::format!("{e}"),
+            "a velocity window of 65 samples is longer than the 64 the estimator keeps exact"
+        );
     }
 
     #[test]
