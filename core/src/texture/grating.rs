@@ -149,6 +149,7 @@ impl RidgeTracker {
     /// Updates with a position; returns the armed ridge crossed since the last sample, if any.
     /// On the first sample the nearest ridge, if within `rearm_um`, starts disarmed: arriving
     /// at rest on a ridge is not a crossing.
+    #[inline(always)]
     pub(crate) fn update(
         &mut self,
         position_um: i32,
@@ -328,6 +329,7 @@ impl Ridges {
 
     /// False for a single-sample glitch: a step the slider cannot make, not (yet) confirmed by
     /// a second sample near it. A real jump (after a gap) costs one sample.
+    #[inline(always)]
     fn plausible(&mut self, position_um: i32) -> bool {
         let near = |a: i32, b: i32| a.abs_diff(b) <= self.max_step_um as u32;
         let ok = self.last_um.is_none_or(|last| near(last, position_um))
