@@ -580,8 +580,10 @@ pub struct Gate {
 /// A duty d' ≥ d moves each x's right side, (cap − d')·W + d'·(reference − x), by
 /// (d' − d)·(reference − x − W) ≥ −(d' − d)·(W − 1), as reference − x ≥ 1. So a growth to
 /// on-time o' and duty d' fits when (1 − d')·o' + (d' − d)·(W − 1) ≤ room; when not, the walk
-/// decides (and finds the room again). Only for the window and cap it was found under; a
-/// re-cut of the ledger (new caps) forgets it.
+/// decides (and finds the room again). Used only at or after the walk's time (a request
+/// stamped before it, a clock glitch, sees windows the walk did not check: it walks) and
+/// under the window and cap it was found under (others walk); a re-cut of the ledger (new
+/// caps) forgets it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 struct Headroom {
@@ -591,12 +593,19 @@ struct Headroom {
     d_ppm: u64,
     window_us: u32,
     cap_ppm: u64,
+    /// When the walk was made, µs (wrapping).
+    at_us: u32,
 }
 
 impl Headroom {
-    /// True when a burst of on-time `on_us` and duty `d_ppm` fits by this room alone.
-    fn admits(&self, on_us: u64, d_ppm: u64, window_us: u32, cap_ppm: u64) -> bool {
-        if window_us != self.window_us || cap_ppm != self.cap_ppm || d_ppm < self.d_ppm {
+    /// True when a burst of on-time `on_us` and duty `d_ppm`, asked at `t_us`, fits by this
+    /// room alone.
+    fn admits(&self, on_us: u64, d_ppm: u64, t_us: u32, window_us: u32, cap_ppm: u64) -> bool {
+        if window_us != self.window_us
+            || cap_ppm != self.cap_ppm
+            || d_ppm < self.d_ppm
+            || before(t_us, self.at_us)
+        {
             return false;
         }
         let need = ((PPM - d_ppm.min(PPM)) as u128 * on_us as u128)
@@ -689,7 +698,7 @@ impl Gate {
         let cap_ppm = limits.max_duty_permille.min(1000) as u64 * 1000;
         if self
             .headroom
-            .is_some_and(|h| h.admits(on_us, d_ppm, window_us, cap_ppm))
+            .is_some_and(|h| h.admits(on_us, d_ppm, t_us, window_us, cap_ppm))
         {
             return true;
         }
@@ -708,6 +717,7 @@ impl Gate {
                 d_ppm,
                 window_us,
                 cap_ppm,
+                at_us: t_us,
             });
         }
         room.is_some()
@@ -1020,7 +1030,7 @@ mod tests {
             let Some(room_e6) = walk(&l, t1, on1_us, d1_ppm, w, cap_ppm) else {
                 return Ok(());
             };
-            let kept = Headroom { room_e6, d_ppm: d1_ppm, window_us: w, cap_ppm };
+            let kept = Headroom { room_e6, d_ppm: d1_ppm, window_us: w, cap_ppm, at_us: t1 };
             let d2 = (d1_ppm as i64 + d_step).clamp(0, PPM as i64) as u64;
             // At the edge: the longest on-time the room admits at d2 under the first caps.
             let edge = (d2 < PPM).then(|| {
@@ -1033,11 +1043,11 @@ mod tests {
             // Caps of the same slot length (no re-cut), or another duty cap.
             let w2 = w2_short.map_or(w, |s| 60 * slot_us - s.min(60 * slot_us - 1));
             let cap2 = cap2_ppm.unwrap_or(cap_ppm);
-            if !kept.admits(on2, d2, w2, cap2) {
-                return Ok(());
-            }
             // Only while the run's windows reach back before it (the gate checks no other).
             let t2 = t1.wrapping_add(later_us % (w - since_back));
+            if !kept.admits(on2, d2, t2, w2, cap2) {
+                return Ok(());
+            }
             proptest::prop_assert!(!l.advance(t2, w2));
             proptest::prop_assert!(walk(&l, t2, on2, d2, w2, cap2).is_some(), "t2 {} on {} d {}", t2, on2, d2);
         }
@@ -1073,20 +1083,66 @@ mod tests {
             d_ppm: 400_000,
             window_us: w,
             cap_ppm,
+            at_us: 1_000,
         };
-        assert!(kept.admits(299_999, 700_000, w, cap_ppm));
+        assert!(kept.admits(299_999, 700_000, 1_000, w, cap_ppm));
         assert!(walk(299_999, 700_000).is_some());
-        assert!(!kept.admits(300_000, 700_000, w, cap_ppm));
+        assert!(!kept.admits(300_000, 700_000, 1_000, w, cap_ppm));
         assert!(walk(300_000, 700_000).is_none());
+    }
+
+    /// A room is not used for a request stamped before its walk (a clock glitch forward, then
+    /// back): that request's windows start earlier than any the walk checked. 50 ms on at
+    /// [40, 90) ms, a 50 % run from 340 ms, 50 % cap: walked at 360 ms the windows start at
+    /// 60 ms and hold 30 ms of it, room (0.5 − 0.5)·W + 0.5·(340 − 60) ms − 30 ms = 110 ms,
+    /// which admits a 215 ms on-time's reserve (0.5 × 215 = 107.5 ms). At 350 ms the windows
+    /// start at 50 ms and hold 40 ms: room 0.5 × 290 − 40 = 105 ms, and the walk refuses it.
+    /// (Found by review: without the time check the room admitted it.)
+    #[test]
+    fn a_room_is_not_used_before_its_walk() {
+        let w = DUTY_WINDOW_US;
+        let mut l = DutyLedger::default();
+        l.advance(90_000, w);
+        l.add_on(40_000, 90_000);
+        l.advance(200_000, w);
+        l.advance(360_000, w);
+        let (since, t1, t2, d, cap_ppm) = (340_000u32, 360_000u32, 350_000u32, PPM / 2, PPM / 2);
+        let walk = |t: u32, on: u64| {
+            let r = l.offset(since);
+            l.burst_fits(
+                l.offset(t) - w as i64,
+                r,
+                r,
+                (PPM - d) * on,
+                (cap_ppm - d) * w as u64,
+                d,
+            )
+        };
+        let room_e6 = walk(t1, 0).expect("fits at t1");
+        assert_eq!(room_e6, 110_000 * PPM);
+        assert!(walk(t1, 215_000).is_some());
+        assert!(walk(t2, 215_000).is_none());
+        let kept = Headroom {
+            room_e6,
+            d_ppm: d,
+            window_us: w,
+            cap_ppm,
+            at_us: t1,
+        };
+        assert!(kept.admits(215_000, d, t1, w, cap_ppm));
+        assert!(kept.admits(215_000, d, t1 + 1, w, cap_ppm));
+        assert!(!kept.admits(215_000, d, t2, w, cap_ppm));
     }
 
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig { cases: 512, ..Default::default() })]
         /// The gate with its kept room answers every request as the gate that walks the ledger
-        /// each time: random trains of growing and shrinking bursts, pulses, offs and new caps.
+        /// each time: random trains of growing and shrinking bursts, pulses, offs and new caps,
+        /// on a clock that now and then steps back.
         #[test]
         fn the_kept_room_changes_no_answer(
-            ops in proptest::collection::vec((0u8..6, 1u32..20_000, 1u32..4_000_000, 200u32..=1000), 1..120),
+            // Steps mostly forward, now and then a little back (a late stamp, a clock glitch).
+            ops in proptest::collection::vec((0u8..6, -3_000i32..20_000, 1u32..4_000_000, 200u32..=1000), 1..120),
         ) {
             let timer = crate::burst::TEST_TIMER;
             // Another cap and slot length; and two windows of one slot length (600 000 and
@@ -1100,7 +1156,7 @@ mod tests {
             let (mut kept, mut walked) = (Gate::default(), Gate::default());
             let mut t = 0u32;
             for (i, &(op, dt_us, on_clocks, duty_permille)) in ops.iter().enumerate() {
-                t = t.wrapping_add(dt_us);
+                t = t.wrapping_add(dt_us as u32);
                 let l = &caps[if i % 11 == 10 { 1 } else if i < 60 { 0 } else { 2 + i % 5 / 4 }];
                 let arr = (on_clocks as u64 * 1000 / duty_permille as u64) as u32;
                 let burst = TimerSettings { psc: 0, arr, ccr: on_clocks.min(arr) };

@@ -8,12 +8,15 @@
 use super::common::{check_period, Sampler, Tick};
 use super::{EstimatorError, VelocityEstimator};
 
-/// Longest window [`LsqSlope`] takes: its sums are kept in wrapping 32-bit arithmetic, exact
-/// while the slope's centred sum Σ(2k − (N − 1))·x_k fits i32. That sum does not change when
-/// every position moves by the same amount, and is at most N²/4 times the spread of the
-/// window's positions: 1 024 × spread at N = 64, so any window spread under 2.09 m (the
-/// substrate is at most 1 m: `position::MAX_LENGTH_UM`).
-pub const LSQ_MAX_WINDOW: usize = 64;
+/// Longest window whose sums [`LsqSlope`] keeps in 32-bit arithmetic (wrapping): exact while
+/// the slope's centred sum Σ(2k − (N − 1))·x_k fits i32. That sum does not change when every
+/// position moves by the same amount and is at most N²/4 times the spread of the window's
+/// positions: 1 024 × spread at N = 64, so any window spread under 2.09 m (the substrate is at
+/// most 1 m: `position::MAX_LENGTH_UM`). On the M4F a 32-bit add or multiply is one
+/// instruction where a 64-bit one is two to four (−12 per sample, `docs/target-cost.md`).
+/// Longer windows (the conversion-budget study's, up to 256) keep them in i64, exact for any
+/// positions.
+pub const LSQ_NARROW_WINDOW: usize = 64;
 
 /// Least-squares slope over the last `N` samples, integer arithmetic.
 #[derive(Clone, Debug)]
@@ -22,15 +25,15 @@ pub struct LsqSlope<const N: usize> {
     /// Index of the oldest entry once full.
     head: usize,
     len: usize,
-    /// Σ x_k over the window, wrapping: it reaches the slope only through the centred sum's
-    /// update, whose true value fits i32 ([`LSQ_MAX_WINDOW`]), so the wrapped result is exact.
-    /// (In i32 rather than i64: the M4F adds and multiplies it in one instruction instead of
-    /// two to four, ~25 per sample, `docs/target-cost.md`.)
-    sum: i32,
-    /// While filling: Σ k·x_k with k = 0 for the oldest entry (W), wrapping. Once full: the
-    /// centred sum 2W − (N − 1)·Σx the slope is made of, kept up to date directly (it saves
-    /// recomputing it from W every sample).
-    weighted: i32,
+    /// Σ x_k over the window. Up to [`LSQ_NARROW_WINDOW`] samples it is kept mod 2^32 (the
+    /// low word, sign-extended): it reaches the slope only through the centred sum's update,
+    /// whose true value fits i32 there, so the wrapped result is exact.
+    sum: i64,
+    /// While filling: Σ k·x_k with k = 0 for the oldest entry (W). Once full: the centred sum
+    /// 2W − (N − 1)·Σx the slope is made of, kept up to date directly (it saves recomputing it
+    /// from W every sample). Mod 2^32 like `sum` for a narrow window; the centred sum is then
+    /// exact.
+    weighted: i64,
     sampler: Sampler,
     /// µm/s per unit of 2·Σ(k − (N−1)/2)·x_k, Q32: 6·10⁶ / (N (N²−1) T_s).
     gain_q32: i64,
@@ -38,8 +41,8 @@ pub struct LsqSlope<const N: usize> {
     /// inside it the product neither overflows i64 nor needs clamping, outside the speed
     /// saturates (worked out once: one range test on the M4F instead of a 64-bit overflow
     /// check and a 64-bit clamp).
-    centred_min: i32,
-    centred_max: i32,
+    centred_min: i64,
+    centred_max: i64,
 }
 
 impl<const N: usize> LsqSlope<N> {
@@ -47,12 +50,6 @@ impl<const N: usize> LsqSlope<N> {
     pub fn new(sample_period_us: u32) -> Result<Self, EstimatorError> {
         if N < 2 {
             return Err(EstimatorError::WindowTooShort { window: N, min: 2 });
-        }
-        if N > LSQ_MAX_WINDOW {
-            return Err(EstimatorError::WindowTooLong {
-                window: N,
-                max: LSQ_MAX_WINDOW,
-            });
         }
         check_period(sample_period_us)?;
         let n = N as i64;
@@ -82,37 +79,59 @@ impl<const N: usize> LsqSlope<N> {
         reason = "ring indices stay below the ring's length: each is reduced mod the length or is `head`/`newest`, which only ever take such values"
     )]
     fn push(&mut self, position_um: i32) {
-        // Wrapping throughout: exact mod 2^32, and the centred sum's true value fits i32.
-        let x = position_um;
+        // `head` < N always; the `% N` (an AND for N = 32) shows it to the compiler, so no
+        // bounds check stays on the per-sample path (scripts/panic-check.sh).
+        let head = self.head % N;
         if self.len < N {
-            self.weighted = self
-                .weighted
-                .wrapping_add((self.len as i32).wrapping_mul(x));
-            self.sum = self.sum.wrapping_add(x);
-            self.window[(self.head + self.len) % N] = position_um;
+            self.fill(position_um);
+            self.window[(head + self.len) % N] = position_um;
             self.len += 1;
-            if self.len == N {
-                self.weighted = self
-                    .weighted
-                    .wrapping_mul(2)
-                    .wrapping_sub((N as i32 - 1).wrapping_mul(self.sum));
-            }
-        } else {
-            // `head` < N always; the `% N` (an AND for N = 32) shows it to the compiler, so no
-            // bounds check stays on the per-sample path (scripts/panic-check.sh).
-            let head = self.head % N;
-            let oldest = self.window[head];
-            // Every remaining entry's index drops by one and the newest enters at N − 1:
-            // W' = W − (S − oldest) + (N − 1)x and S' = S − oldest + x, so the centred sum
-            // C = 2W − (N − 1)S moves by C' − C = −2S + (N + 1)·oldest + (N − 1)x.
-            self.weighted = self
-                .weighted
-                .wrapping_sub(self.sum.wrapping_mul(2))
-                .wrapping_add((N as i32 + 1).wrapping_mul(oldest))
+            return;
+        }
+        let oldest = self.window[head];
+        // Every remaining entry's index drops by one and the newest enters at N − 1:
+        // W' = W − (S − oldest) + (N − 1)x and S' = S − oldest + x, so the centred sum
+        // C = 2W − (N − 1)S moves by C' − C = −2S + (N + 1)·oldest + (N − 1)x.
+        if N <= LSQ_NARROW_WINDOW {
+            let (s, c, x, o) = (self.sum as i32, self.weighted as i32, position_um, oldest);
+            let c = c
+                .wrapping_sub(s.wrapping_mul(2))
+                .wrapping_add((N as i32 + 1).wrapping_mul(o))
                 .wrapping_add((N as i32 - 1).wrapping_mul(x));
-            self.sum = self.sum.wrapping_add(x.wrapping_sub(oldest));
-            self.window[head] = position_um;
-            self.head = (head + 1) % N;
+            self.weighted = c as i64;
+            self.sum = s.wrapping_add(x.wrapping_sub(o)) as i64;
+        } else {
+            let (x, o) = (position_um as i64, oldest as i64);
+            self.weighted += -2 * self.sum + (N as i64 + 1) * o + (N as i64 - 1) * x;
+            self.sum += x - o;
+        }
+        self.window[head] = position_um;
+        self.head = (head + 1) % N;
+    }
+
+    /// Adds a sample to a window not yet full (its index is `len`); the last one turns Σk·x_k
+    /// into the centred sum.
+    #[inline(always)]
+    fn fill(&mut self, position_um: i32) {
+        if N <= LSQ_NARROW_WINDOW {
+            let (s, w, x) = (self.sum as i32, self.weighted as i32, position_um);
+            let w = w.wrapping_add((self.len as i32).wrapping_mul(x));
+            let s = s.wrapping_add(x);
+            let w = if self.len + 1 == N {
+                w.wrapping_mul(2)
+                    .wrapping_sub((N as i32 - 1).wrapping_mul(s))
+            } else {
+                w
+            };
+            self.sum = s as i64;
+            self.weighted = w as i64;
+        } else {
+            let x = position_um as i64;
+            self.weighted += self.len as i64 * x;
+            self.sum += x;
+            if self.len + 1 == N {
+                self.weighted = 2 * self.weighted - (N as i64 - 1) * self.sum;
+            }
         }
     }
 
@@ -127,11 +146,13 @@ impl<const N: usize> LsqSlope<N> {
 
     /// The speed, µm/s, of centred sum `centred2`, rounded to nearest and saturating. Any real
     /// window is inside the range (N = 32, T_s = 100 µs, a full 63 mm jump: 3·10⁸ µm/s of
-    /// 2.1·10⁹); a pathological one saturates.
+    /// 2.1·10⁹). A pathological window saturates when it is wider than
+    /// [`LSQ_NARROW_WINDOW`]; a narrow one's positions must lie within 2.09 m of each other
+    /// (beyond, its 32-bit sums wrap), as the controller's, within the substrate, do.
     #[inline(always)]
-    fn speed(&self, centred2: i32) -> i32 {
+    fn speed(&self, centred2: i64) -> i32 {
         if (self.centred_min..=self.centred_max).contains(&centred2) {
-            ((centred2 as i64 * self.gain_q32 + (1 << 31)) >> 32) as i32
+            ((centred2 * self.gain_q32 + (1 << 31)) >> 32) as i32
         } else if centred2 > 0 {
             i32::MAX
         } else {
@@ -148,13 +169,13 @@ impl<const N: usize> LsqSlope<N> {
     }
 }
 
-/// The centred sums c (an i32) whose speed ⌊(c·g + 2³¹) / 2³²⌋ lies in i32, for a gain g ≥ 0:
-/// the speed grows with c, so it is the interval between the smallest c reaching i32::MIN
-/// and the largest staying at or below i32::MAX (in i128, where c·g cannot overflow),
-/// narrowed to where c·g + 2³¹ fits i64 and to i32. A zero gain gives speed 0 for every c.
-fn speed_range(gain_q32: i64) -> (i32, i32) {
+/// The centred sums c whose speed ⌊(c·g + 2³¹) / 2³²⌋ lies in i32, for a gain g ≥ 0: the
+/// speed grows with c, so it is the interval between the smallest c reaching i32::MIN and
+/// the largest staying at or below i32::MAX (in i128, where c·g cannot overflow), narrowed
+/// to where c·g + 2³¹ fits i64. A zero gain gives speed 0 for every c.
+fn speed_range(gain_q32: i64) -> (i64, i64) {
     if gain_q32 <= 0 {
-        return (i32::MIN, i32::MAX);
+        return (i64::MIN, i64::MAX);
     }
     let g = gain_q32 as i128;
     let half = 1i128 << 31;
@@ -164,8 +185,7 @@ fn speed_range(gain_q32: i64) -> (i32, i32) {
     // c·g + 2³¹ ≥ MIN·2³² = −2⁶³ holds for every c·g that fits i64 (−2⁶³ + 2³¹ floors to
     // MIN too): the lower end is where the product itself would overflow.
     let lo = -((1i128 << 63) / g);
-    let to_i32 = |c: i128| c.clamp(i32::MIN as i128, i32::MAX as i128) as i32;
-    (to_i32(lo), to_i32(hi))
+    (lo as i64, hi as i64)
 }
 
 impl<const N: usize> VelocityEstimator for LsqSlope<N> {
@@ -217,30 +237,28 @@ mod tests {
     fn the_range_test_is_the_exact_saturated_product() {
         fn check<const N: usize>(period_us: u32) {
             let e = LsqSlope::<N>::new(period_us).unwrap();
-            let exact = |c: i32| {
+            let exact = |c: i64| {
                 let v = ((c as i128 * e.gain_q32 as i128) + (1 << 31)) >> 32;
                 v.clamp(i32::MIN as i128, i32::MAX as i128) as i32
             };
-            for c in [e.centred_min, e.centred_max, 0, i32::MIN, i32::MAX] {
-                for d in -2..=2i32 {
+            for c in [e.centred_min, e.centred_max, 0, i64::MIN, i64::MAX] {
+                for d in -2..=2i64 {
                     let c = c.saturating_add(d);
                     assert_eq!(e.speed(c), exact(c), "N {N} T {period_us} c {c}");
                 }
             }
-            // The ends are tight: one further out needs the clamp or overflows i64, unless
-            // the end is i32's own.
+            // The ends are tight: one further out needs the clamp or overflows i64.
             let wide = |c: i64| {
                 c.checked_mul(e.gain_q32)
                     .and_then(|p| p.checked_add(1 << 31))
                     .is_none_or(|p| i32::try_from(p >> 32).is_err())
             };
-            let (lo, hi) = (e.centred_min as i64, e.centred_max as i64);
             assert!(
-                !wide(hi) && (hi == i32::MAX as i64 || wide(hi + 1)),
+                !wide(e.centred_max) && wide(e.centred_max + 1),
                 "N {N} T {period_us}"
             );
             assert!(
-                !wide(lo) && (lo == i32::MIN as i64 || wide(lo - 1)),
+                !wide(e.centred_min) && wide(e.centred_min - 1),
                 "N {N} T {period_us}"
             );
         }
@@ -248,15 +266,16 @@ mod tests {
         check::<32>(100);
         check::<64>(100);
         check::<16>(100_000);
-        check::<64>(100_000);
+        check::<1024>(100_000);
     }
 
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig { cases: 512, ..Default::default() })]
-        /// The wrapping i32 sums give the exact slope: every output equals the least-squares
-        /// centred sum of the last N positions worked in i128 (times the gain, rounded and
-        /// saturated), over positions anywhere on a 1 m substrate, jumps from one end to the
-        /// other included, at the longest window and a short one.
+        /// The sums give the exact slope: every output equals the least-squares centred sum
+        /// of the last N positions worked in i128 (times the gain, rounded and saturated),
+        /// over positions anywhere on a 1 m substrate, jumps from one end to the other
+        /// included, at the longest narrow window (wrapping i32 sums), a short one and a wide
+        /// one (i64 sums).
         #[test]
         fn the_wrapping_sums_are_the_exact_slope(
             xs in proptest::collection::vec(
@@ -283,25 +302,9 @@ mod tests {
             }
             run::<64>(&xs)?;
             run::<7>(&xs)?;
+            // A wide window: its sums in i64.
+            run::<80>(&xs)?;
         }
-    }
-
-    /// A window longer than the sums keep exact is refused, with a sentence naming both.
-    #[test]
-    fn a_window_past_the_exact_sums_is_refused() {
-        assert!(LsqSlope::<LSQ_MAX_WINDOW>::new(100).is_ok());
-        let e = LsqSlope::<65>::new(100).unwrap_err();
-        assert_eq!(
-            e,
-            EstimatorError::WindowTooLong {
-                window: 65,
-                max: 64
-            }
-        );
-        assert_eq!(
-            std::format!("{e}"),
-            "a velocity window of 65 samples is longer than the 64 the estimator keeps exact"
-        );
     }
 
     #[test]

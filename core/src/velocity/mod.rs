@@ -56,13 +56,6 @@ pub enum EstimatorError {
         /// The shortest this estimator takes, samples.
         min: usize,
     },
-    /// Window longer than the estimator's integer sums keep exact.
-    WindowTooLong {
-        /// The window asked for, samples.
-        window: usize,
-        /// The longest this estimator takes, samples.
-        max: usize,
-    },
     /// Sample period outside 10 µs ..= 100 ms.
     BadSamplePeriod {
         /// The period asked for, µs.
@@ -77,11 +70,6 @@ impl core::fmt::Display for EstimatorError {
                 f,
                 "a velocity window of {window} samples is shorter than the {min} the estimator \
                  needs"
-            ),
-            EstimatorError::WindowTooLong { window, max } => write!(
-                f,
-                "a velocity window of {window} samples is longer than the {max} the estimator \
-                 keeps exact"
             ),
             EstimatorError::BadSamplePeriod { sample_period_us } => write!(
                 f,

@@ -48,7 +48,7 @@ const BUDGET: u64 = 400;
 /// measured, so a regression still fails. Remove a line once its kind is under the budget.
 /// The hybrid pays its 64-sample line fit on every sample (the position-phase grating is
 /// under the budget since stop 27, the material since stop 28: both checked against it).
-const OVER_BUDGET: [(&str, f64); 1] = [("grating-hybrid/", 566.0)];
+const OVER_BUDGET: [(&str, f64); 1] = [("grating-hybrid/", 569.0)];
 
 struct VecSink(Vec<u8>);
 impl Sink for VecSink {
