@@ -428,16 +428,8 @@ impl DutyLedger {
         d_ppm: u64,
     ) -> Option<u64> {
         let until = self.offset(self.recorded_until_us);
-        let mut room_e6 = u64::MAX;
-        // Room left at x beyond on-time `on_us` after it, if the reserve fits there too.
-        let mut fits = |on_us: u64, x: i64| {
-            if on_us == 0 {
-                return true;
-            }
-            let left = (slack_e6 + d_ppm * (reference - x).max(0) as u64).checked_sub(on_us * PPM);
-            room_e6 = room_e6.min(left.unwrap_or(0));
-            left.is_some_and(|l| reserve_e6 <= l)
-        };
+        let mut room = Room::new(reference, reserve_e6, slack_e6, d_ppm);
+        let mut fits = |on_us: u64, x: i64| room.fits(on_us, x);
         let mut newer = 0;
         // `newer` when an empty slot was last checked. An empty slot's worst x is its newest
         // (on_since is flat across it while the right side grows as x moves back), so an older
@@ -496,7 +488,7 @@ impl DutyLedger {
         // `from` before the ring, `last` is the ring's oldest slot and `newer` its total).
         let oldest_lo = -(RING_SLOTS as i64 - 1) * slot_us;
         let b = oldest_lo.min(to);
-        (from >= b || fits(newer, b - 1)).then_some(room_e6)
+        (from >= b || fits(newer, b - 1)).then_some(room.least_e6)
     }
 
     /// [`Self::burst_fits`] without its skips: every slot in range checked at its worst x (the
@@ -512,16 +504,8 @@ impl DutyLedger {
         d_ppm: u64,
     ) -> Option<u64> {
         let until = self.offset(self.recorded_until_us);
-        let mut room_e6 = u64::MAX;
-        // Room left at x beyond on-time `on_us` after it, if the reserve fits there too.
-        let mut fits = |on_us: u64, x: i64| {
-            if on_us == 0 {
-                return true;
-            }
-            let left = (slack_e6 + d_ppm * (reference - x).max(0) as u64).checked_sub(on_us * PPM);
-            room_e6 = room_e6.min(left.unwrap_or(0));
-            left.is_some_and(|l| reserve_e6 <= l)
-        };
+        let mut room = Room::new(reference, reserve_e6, slack_e6, d_ppm);
+        let mut fits = |on_us: u64, x: i64| room.fits(on_us, x);
         let mut newer = 0;
         let mut oldest_lo = 0;
         for back in 0..RING_SLOTS {
@@ -539,7 +523,41 @@ impl DutyLedger {
             oldest_lo = lo;
         }
         let b = oldest_lo.min(to);
-        (from >= b || fits(newer, b - 1)).then_some(room_e6)
+        (from >= b || fits(newer, b - 1)).then_some(room.least_e6)
+    }
+}
+
+/// The fit test of [`DutyLedger::burst_fits`] at one x, and the least room it has seen.
+struct Room {
+    reference: i64,
+    reserve_e6: u64,
+    slack_e6: u64,
+    d_ppm: u64,
+    /// The least `slack + d·(reference − x) − on_since(x)` over the x tested, ppm·µs.
+    least_e6: u64,
+}
+
+impl Room {
+    fn new(reference: i64, reserve_e6: u64, slack_e6: u64, d_ppm: u64) -> Self {
+        Self {
+            reference,
+            reserve_e6,
+            slack_e6,
+            d_ppm,
+            least_e6: u64::MAX,
+        }
+    }
+
+    /// True when the reserve fits at x with `on_us` recorded after it (at once with none).
+    #[inline(always)]
+    fn fits(&mut self, on_us: u64, x: i64) -> bool {
+        if on_us == 0 {
+            return true;
+        }
+        let right = self.slack_e6 + self.d_ppm * (self.reference - x).max(0) as u64;
+        let left = right.checked_sub(on_us * PPM);
+        self.least_e6 = self.least_e6.min(left.unwrap_or(0));
+        left.is_some_and(|l| self.reserve_e6 <= l)
     }
 }
 
