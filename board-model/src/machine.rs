@@ -1359,6 +1359,13 @@ impl Machine {
         uc.mem_read((table + 4 * e as u32) as u64, &mut v)
             .map_err(uc_err)?;
         let vector = u32::from_le_bytes(v);
+        // ExceptionTaken (ARMv7-M ARM B1.5.6): IPSR = the exception, EPSR.T = 1 and
+        // EPSR.IT = 0. Unicorn keeps its If-Then state in the XPSR it exposes: an interrupt
+        // taken inside an IT block (its stacked xPSR holds the IT bits, restored on return)
+        // otherwise starts the handler under the interrupted code's conditions, and its
+        // first instructions (a push of the return state) run or skip by stale flags.
+        uc.reg_write(RegisterARM::XPSR, entry_xpsr(xpsr, e) as u64)
+            .map_err(uc_err)?;
         uc.reg_write(RegisterARM::IPSR, e as u64).map_err(uc_err)?;
         uc.reg_write(RegisterARM::LR, exc_return as u64)
             .map_err(uc_err)?;
@@ -1504,6 +1511,20 @@ impl Machine {
 }
 
 /// Bytes in the RTT up-buffer not yet read (write − read offsets, modulo its size).
+/// xPSR's APSR part kept across exception entry: N, Z, C, V, Q (bits 31–27) and GE (19–16).
+const XPSR_APSR_BITS: u32 = 0xF80F_0000;
+/// xPSR's EPSR.T bit (Thumb state, always 1 on an M-profile core).
+const XPSR_T: u32 = 1 << 24;
+/// xPSR's EPSR.IT bits (If-Then state: 26–25 and 15–10).
+#[cfg(test)]
+const XPSR_IT_BITS: u32 = 0x0600_FC00;
+
+/// The xPSR a handler for exception `e` starts with, from the interrupted code's: its APSR
+/// flags, Thumb state, no If-Then state, IPSR = `e` (ExceptionTaken, ARMv7-M ARM B1.5.6).
+fn entry_xpsr(xpsr: u32, e: u16) -> u32 {
+    (xpsr & XPSR_APSR_BITS) | XPSR_T | (e as u32 & 0x1FF)
+}
+
 fn rtt_pending(uc: &Unicorn<'_, Sim>) -> usize {
     let Some(cb) = uc.get_data().rtt else {
         return 0;
@@ -1641,4 +1662,61 @@ fn exception_return(uc: &mut Unicorn<'_, Sim>) -> Result<(), String> {
         uc.get_data_mut().replan = true;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A handler entered inside an If-Then block runs unconditionally: Unicorn keeps the IT
+    /// state in the XPSR it exposes, and writing the entry xPSR clears it. Runs `cmp r0, r0;
+    /// ite eq` (Z set: the block's first instruction runs, its second not), stops inside the
+    /// block, "enters" as `Machine::enter` does and runs the block's two moves: both write.
+    /// Left as it was (IPSR written alone, as the model did before), the second is skipped.
+    /// That is how the stream-cost run crashed on a G474 image (stop 28): a DMA interrupt
+    /// taken between `it lo` and `blo.w` in `__aeabi_memcpy8` started its handler under the
+    /// stale condition, and the handler returned to a data address.
+    #[test]
+    fn a_handler_entered_in_an_it_block_runs_unconditionally() {
+        // cmp r0, r0; ite eq; moveq r1, #1; movne r2, #2 (llvm-mc, thumbv7em).
+        const CODE: [u8; 8] = [0x80, 0x42, 0x0c, 0xbf, 0x01, 0x21, 0x02, 0x22];
+        const BASE: u64 = 0x0800_0000;
+        let run = |clear_it: bool| -> (u32, u32, u32) {
+            let mut uc = Unicorn::new(Arch::ARM, Mode::THUMB | Mode::MCLASS).unwrap();
+            uc.ctl_set_cpu_model(unicorn_engine::ArmCpuModel::CORTEX_M4 as i32)
+                .unwrap();
+            uc.mem_map(BASE, 0x1000, Prot::ALL).unwrap();
+            uc.mem_write(BASE, &CODE).unwrap();
+            // The compare and the IT, stopped inside the block before its first move (as the
+            // model stops at a block's start for an interrupt).
+            uc.emu_start(BASE | 1, BASE + 4, 0, 0).unwrap();
+            let xpsr = uc.reg_read(RegisterARM::XPSR).unwrap() as u32;
+            if clear_it {
+                uc.reg_write(RegisterARM::XPSR, entry_xpsr(xpsr, 27) as u64)
+                    .unwrap();
+            }
+            uc.reg_write(RegisterARM::IPSR, 27).unwrap();
+            let pc = uc.reg_read(RegisterARM::PC).unwrap();
+            uc.emu_start(pc | 1, BASE + 8, 0, 2).unwrap();
+            let r = |reg| uc.reg_read(reg).unwrap() as u32;
+            (xpsr, r(RegisterARM::R1), r(RegisterARM::R2))
+        };
+        let (xpsr, r1, r2) = run(true);
+        assert_ne!(
+            xpsr & XPSR_IT_BITS,
+            0,
+            "stopped inside the IT block: {xpsr:08X}"
+        );
+        assert_eq!((r1, r2), (1, 2), "both moves run in the handler");
+        // The defect the entry xPSR fixes: the IT state carried into the handler.
+        let (_, r1, r2) = run(false);
+        assert_eq!((r1, r2), (1, 0), "with the IT state kept, movne is skipped");
+    }
+
+    #[test]
+    fn the_entry_xpsr_keeps_the_flags_and_nothing_of_the_it_state() {
+        // N Z C V Q set, GE 0b1010, IT bits all set, an old IPSR 0x1B.
+        let x = 0xF80A_0000 | XPSR_IT_BITS | XPSR_T | 0x1B;
+        assert_eq!(entry_xpsr(x, 52 + 16), 0xF80A_0000 | XPSR_T | 68);
+    }
 }
