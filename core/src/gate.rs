@@ -1495,6 +1495,27 @@ mod tests {
     /// The ring holds 64 slots of 5 ms: a call late by less than the ring (a timer tick behind
     /// a sample) keeps the record, a silence longer than the ring forgets it, and so does one
     /// past 2^31 µs, which the wrapping clock shows as far in the past.
+    /// A call a little late (a timer tick handled after a sample, stamped before the head
+    /// slot's start) forgets nothing: 10 ms recorded at [1, 11) ms, the head rolled to 20 ms,
+    /// then a call at 17 ms. Only a silence longer than the ring forgets (CI's mutant sample
+    /// found this untested: a tolerance of 64 / slot instead of 64 · slot forgot it all).
+    #[test]
+    fn a_late_call_forgets_nothing() {
+        let w = DUTY_WINDOW_US;
+        let mut l = DutyLedger::default();
+        assert!(!l.advance(0, w));
+        // As the gate does: rolled to the end of what it records, then recorded.
+        assert!(!l.advance(11_000, w));
+        l.add_on(1_000, 11_000);
+        assert!(!l.advance(20_000, w));
+        assert!(!l.advance(17_000, w), "a late call is not a silence");
+        assert_eq!(l.total(), 10_000);
+        assert_eq!(l.on_since(l.offset(0)), 10_000);
+        // 64 slots of 5 ms before the head: older than the ring, forgotten.
+        assert!(l.advance(20_000u32.wrapping_sub(64 * 5_000), w));
+        assert_eq!(l.total(), 0);
+    }
+
     #[test]
     fn the_ring_forgets_only_what_no_window_holds() {
         let l = SafetyLimits::default();
