@@ -192,6 +192,19 @@ impl DutyLedger {
         t_us.wrapping_sub(self.head_start_us) as i32 as i64
     }
 
+    /// The slot holding offset `x`: 0 (the head) for x ≥ 0, else ⌈−x / slot⌉ (slot k ≥ 1
+    /// holds offsets [−k·slot, −(k−1)·slot)), unclamped: the callers clip it to the ring.
+    fn slot_of(&self, x: i64) -> usize {
+        // A NonZero divisor: no divide-by-zero check on the per-sample path (board-model
+        // panic-check found one here with a plain `max(1)`).
+        let slot = NonZeroU64::new(self.slot_us as u64).unwrap_or(NonZeroU64::MIN);
+        if x >= 0 {
+            0
+        } else {
+            ((x.unsigned_abs() + slot.get() - 1) / slot) as usize
+        }
+    }
+
     /// On-time of slot `back` (0 = head).
     fn slot(&self, back: usize) -> u64 {
         let i = self.head.wrapping_sub(back) & RING_MASK;
@@ -307,21 +320,11 @@ impl DutyLedger {
             return;
         }
         let last = (b - 1).max(a);
-        // Only the slots from `last`'s to `a`'s can overlap (slot k ≥ 1 holds offsets
-        // [−k·slot, −(k−1)·slot), so offset x < 0 is in slot ⌈−x / slot⌉): a pulse touches one
-        // or two, not the ring's 64 (the M4F cost of a ridge pulse, docs/target-cost.md).
-        // A NonZero divisor: no divide-by-zero check on the per-sample path (board-model
-        // panic-check found one here with a plain `max(1)`).
-        let slot = NonZeroU64::new(self.slot_us as u64).unwrap_or(NonZeroU64::MIN);
-        let back_of = |x: i64| {
-            if x >= 0 {
-                0
-            } else {
-                ((x.unsigned_abs() + slot.get() - 1) / slot) as usize
-            }
-        };
-        let newest = back_of(last).min(RING_SLOTS);
-        let oldest = back_of(a).min(RING_SLOTS - 1);
+        // Only the slots from `last`'s to `a`'s can overlap: a pulse touches one or two, not
+        // the ring's 64 (the M4F cost of a ridge pulse, docs/target-cost.md). On-time before
+        // the oldest slot is older than any window.
+        let newest = self.slot_of(last).min(RING_SLOTS);
+        let oldest = self.slot_of(a).min(RING_SLOTS - 1);
         for back in newest..=oldest {
             let (lo, hi) = self.span(back);
             let overlap = b.min(hi) - a.max(lo);
@@ -429,7 +432,6 @@ impl DutyLedger {
     ) -> Option<u64> {
         let until = self.offset(self.recorded_until_us);
         let mut room = Room::new(reference, reserve_e6, slack_e6, d_ppm);
-        let mut fits = |on_us: u64, x: i64| room.fits(on_us, x);
         let mut newer = 0;
         // `newer` when an empty slot was last checked. An empty slot's worst x is its newest
         // (on_since is flat across it while the right side grows as x moves back), so an older
@@ -450,15 +452,9 @@ impl DutyLedger {
         // ring, and then every slot is walked). A growing run's window reaches back a few
         // slots past its start, so most of the ring is newer than it: ~55 instructions a
         // slot saved on the M4F (`scripts/emu-profile.sh material/reversal`).
-        let slot_us = self.slot_us.max(1) as i64;
-        let first = match to.min(until) {
-            m if m > 0 => 0,
-            m => ((-m) / slot_us + 1).min(RING_SLOTS as i64) as usize,
-        };
-        let last = match from {
-            f if f >= 0 => 0,
-            f => ((-f + slot_us - 1) / slot_us).min(RING_SLOTS as i64 - 1) as usize,
-        };
+        // The first: the slot of the newest offset in range, min(to, until) − 1.
+        let first = self.slot_of(to.min(until) - 1).min(RING_SLOTS);
+        let last = self.slot_of(from).min(RING_SLOTS - 1);
         for back in 0..first {
             newer += self.slot(back);
         }
@@ -470,14 +466,14 @@ impl DutyLedger {
             if a < b {
                 if on == 0 {
                     if newer != 0 && empty_checked_at != Some(newer) {
-                        if !fits(newer, b - 1) {
+                        if !room.fits(newer, b - 1) {
                             return None;
                         }
                         empty_checked_at = Some(newer);
                     }
                 } else {
                     let x = (end - on as i64).clamp(a, b - 1);
-                    if !fits(newer + on.min((end - x) as u64), x) {
+                    if !room.fits(newer + on.min((end - x) as u64), x) {
                         return None;
                     }
                 }
@@ -486,9 +482,9 @@ impl DutyLedger {
         }
         // Before the ring: everything recorded counts; the latest x there is the worst (with
         // `from` before the ring, `last` is the ring's oldest slot and `newer` its total).
-        let oldest_lo = -(RING_SLOTS as i64 - 1) * slot_us;
+        let oldest_lo = -(RING_SLOTS as i64 - 1) * self.slot_us.max(1) as i64;
         let b = oldest_lo.min(to);
-        (from >= b || fits(newer, b - 1)).then_some(room.least_e6)
+        (from >= b || room.fits(newer, b - 1)).then_some(room.least_e6)
     }
 
     /// [`Self::burst_fits`] without its skips: every slot in range checked at its worst x (the
@@ -1492,9 +1488,84 @@ mod tests {
         assert!(g.pulse(P10, t0.wrapping_add(290_014), &T, &l).is_some());
     }
 
+    /// Slot k ≥ 1 holds offsets [−k·slot, −(k−1)·slot): hand-worked at and beside the edges
+    /// (a slot of 1 ms), unclamped past the ring.
+    #[test]
+    fn an_offset_lies_in_the_slot_that_holds_it() {
+        let l = DutyLedger::of_slots([0; RING_SLOTS], 0, 0, 1_000, 0);
+        for (x, back) in [
+            (0, 0),
+            (999, 0),
+            (-1, 1),
+            (-999, 1),
+            (-1_000, 1),
+            (-1_001, 2),
+            (-2_000, 2),
+            (-63_000, 63),
+            (-63_001, 64),
+            (-640_000, 640),
+        ] {
+            assert_eq!(l.slot_of(x), back, "offset {x} µs");
+        }
+    }
+
+    /// On-time recorded over slot edges lands in the slots that hold it, and what lies before
+    /// the ring's oldest slot is dropped (older than any window), never wrapped into a newer
+    /// slot. Hand-worked with 1 ms slots, the head starting at 100 ms.
+    #[test]
+    fn on_time_is_recorded_in_its_own_slots() {
+        let blank = || DutyLedger::of_slots([0; RING_SLOTS], 5, 100_000, 1_000, 100_000);
+        // [98 ms, 99 ms): exactly slot 2's span, nothing in slot 1.
+        let mut l = blank();
+        l.add_on(98_000, 99_000);
+        assert_eq!((l.slot(1), l.slot(2), l.slot(3)), (0, 1_000, 0));
+        // [98.5 ms, 100.2 ms): half of slot 2, all of slot 1, 200 µs of the head.
+        let mut l = blank();
+        l.add_on(98_500, 100_200);
+        assert_eq!((l.slot(0), l.slot(1), l.slot(2)), (200, 1_000, 500));
+        assert_eq!(l.total(), 1_700);
+        // A burst of duty 50 % over [98 ms, 99 ms) with a partial period of 300 µs at its
+        // end: the end's slot is the one holding its last µs, slot 2, not slot 1 after it.
+        let mut l = blank();
+        l.add(98_000, 99_000, PPM / 2, 300);
+        assert_eq!((l.slot(1), l.slot(2)), (0, 800));
+        // From 70 ms before the head to 62.5 ms before it: only slot 63's [−63, −62) ms is in
+        // the ring, 500 µs of it; the rest is older than the ring, and no slot but 63 gains.
+        let mut l = blank();
+        l.add_on(30_000, 37_500);
+        assert_eq!(l.slot(63), 500);
+        assert_eq!(l.total(), 500);
+        assert_eq!(l.ring_sum(), 500);
+    }
+
+    /// A range of window starts that ends inside a slot, `to` = −500 µs in slot 1 (1 ms
+    /// slots), with 100 µs recorded at that slot's end ([−100, 0)): every start in the slot
+    /// sees those 100 µs, and the latest start, −501, has the least room (d·(reference − x)
+    /// is smallest there). Hand-worked at duty d = 25 %: it fits with a slack of exactly
+    /// 100 µs + reserve − d·1 µs, the room left being the reserve's, and not with 1 ppm·µs less.
+    /// Checked at a later start, outside the range, the edge would refuse.
+    #[test]
+    fn a_range_ending_inside_a_slot_is_checked_at_its_last_start() {
+        let mut on_us = [0u32; RING_SLOTS];
+        // Slot 1 (one before the head at ring index 5).
+        on_us[4] = 100;
+        let l = DutyLedger::of_slots(on_us, 5, 1_000_000, 1_000, 1_000_000);
+        let d_ppm = 250_000;
+        let reserve_e6 = 40 * PPM;
+        let edge = 100 * PPM + reserve_e6 - d_ppm;
+        for (slack_e6, want) in [(edge, Some(reserve_e6)), (edge - 1, None)] {
+            let args = (-2_000, -500, -500, reserve_e6, slack_e6, d_ppm);
+            let got = l.burst_fits(args.0, args.1, args.2, args.3, args.4, args.5);
+            assert_eq!(got, want, "slack {slack_e6}");
+            let reference = l.burst_fits_every_slot(args.0, args.1, args.2, args.3, args.4, args.5);
+            assert_eq!(reference, want, "every slot, slack {slack_e6}");
+        }
+    }
+
     /// The ring holds 64 slots of 5 ms: a call late by less than the ring (a timer tick behind
     /// a sample) keeps the record, a silence longer than the ring forgets it, and so does one
     /// past 2^31 µs, which the wrapping clock shows as far in the past.
+    ///
     /// A call a little late (a timer tick handled after a sample, stamped before the head
     /// slot's start) forgets nothing: 10 ms recorded at [1, 11) ms, the head rolled to 20 ms,
     /// then a call at 17 ms. Only a silence longer than the ring forgets (CI's mutant sample
