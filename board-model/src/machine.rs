@@ -1364,9 +1364,9 @@ impl Machine {
         // taken inside an IT block (its stacked xPSR holds the IT bits, restored on return)
         // otherwise starts the handler under the interrupted code's conditions, and its
         // first instructions (a push of the return state) run or skip by stale flags.
+        // The whole xPSR, IPSR included (`writing_the_xpsr_sets_the_ipsr`).
         uc.reg_write(RegisterARM::XPSR, entry_xpsr(xpsr, e) as u64)
             .map_err(uc_err)?;
-        uc.reg_write(RegisterARM::IPSR, e as u64).map_err(uc_err)?;
         uc.reg_write(RegisterARM::LR, exc_return as u64)
             .map_err(uc_err)?;
         uc.reg_write(RegisterARM::PC, (vector | 1) as u64)
@@ -1625,10 +1625,9 @@ fn exception_return(uc: &mut Unicorn<'_, Sim>) -> Result<(), String> {
         uc.reg_write(RegisterARM::FPSCR, w(24) as u64)
             .map_err(uc_err)?;
     }
-    // Back to the interrupted mode first (IPSR from the frame), then its stack selection.
+    // Back to the interrupted mode first (IPSR from the frame: the xPSR write sets it,
+    // `writing_the_xpsr_sets_the_ipsr`), then its stack selection.
     uc.reg_write(RegisterARM::XPSR, (xpsr & !(1 << 9)) as u64)
-        .map_err(uc_err)?;
-    uc.reg_write(RegisterARM::IPSR, (xpsr & 0x1FF) as u64)
         .map_err(uc_err)?;
     if !to_thread && xpsr & 0x1FF == 0 {
         return Err(format!(
@@ -1694,8 +1693,9 @@ mod tests {
             if clear_it {
                 uc.reg_write(RegisterARM::XPSR, entry_xpsr(xpsr, 27) as u64)
                     .unwrap();
+            } else {
+                uc.reg_write(RegisterARM::IPSR, 27).unwrap();
             }
-            uc.reg_write(RegisterARM::IPSR, 27).unwrap();
             let pc = uc.reg_read(RegisterARM::PC).unwrap();
             uc.emu_start(pc | 1, BASE + 8, 0, 2).unwrap();
             let r = |reg| uc.reg_read(reg).unwrap() as u32;
@@ -1711,6 +1711,26 @@ mod tests {
         // The defect the entry xPSR fixes: the IT state carried into the handler.
         let (_, r1, r2) = run(false);
         assert_eq!((r1, r2), (1, 0), "with the IT state kept, movne is skipped");
+    }
+
+    /// Unicorn's xPSR write carries the exception number too (its `xpsr_write` under the full
+    /// mask), so exception entry and return set IPSR with the one write. Both directions, and
+    /// a value the old IPSR did not hold.
+    #[test]
+    fn writing_the_xpsr_sets_the_ipsr() {
+        let mut uc = Unicorn::new(Arch::ARM, Mode::THUMB | Mode::MCLASS).unwrap();
+        uc.ctl_set_cpu_model(unicorn_engine::ArmCpuModel::CORTEX_M4 as i32)
+            .unwrap();
+        let ipsr = |uc: &Unicorn<'_, ()>| uc.reg_read(RegisterARM::IPSR).unwrap() as u32 & 0x1FF;
+        assert_eq!(ipsr(&uc), 0);
+        for e in [27u16, 68, 15] {
+            uc.reg_write(RegisterARM::XPSR, entry_xpsr(XPSR_T, e) as u64)
+                .unwrap();
+            assert_eq!(ipsr(&uc), e as u32, "entry to exception {e}");
+        }
+        // A return to thread mode: a frame's xPSR with IPSR 0.
+        uc.reg_write(RegisterARM::XPSR, XPSR_T as u64).unwrap();
+        assert_eq!(ipsr(&uc), 0, "return to thread mode");
     }
 
     #[test]
