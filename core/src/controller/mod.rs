@@ -688,6 +688,31 @@ mod tests {
         assert_eq!(c.telemetry().burst_millihz, 0);
     }
 
+    /// The telemetry's gate-action counter counts every action the controller hands the port:
+    /// starts and changes through every region, the fault's off, and the recovery's start
+    /// (counted here from the outputs themselves).
+    #[test]
+    fn telemetry_counts_every_gate_action() {
+        let mut c = loaded();
+        let mut t = 0;
+        let mut seen = 0;
+        for um in [5_000.0, 30_000.0, 55_000.0, 30_000.0] {
+            seen += feed(&mut c, um, &mut t, 3_000).1;
+        }
+        // A rail fault turns the line off; the sensor comes back and the burst starts again.
+        for _ in 0..3 {
+            let out = c.on_sample(Sample { code: 0, t_us: t });
+            seen += out.action.is_some() as usize;
+            t += 100;
+        }
+        seen += feed(&mut c, 5_000.0, &mut t, 3_000).1;
+        assert!(
+            seen >= 6,
+            "{seen} actions: a start per region, the off and the restart"
+        );
+        assert_eq!(c.telemetry().gate_actions as usize, seen);
+    }
+
     #[test]
     fn region_drives_the_gate() {
         let mut c = loaded();

@@ -876,6 +876,9 @@ mod tests {
         let expected = TIMER.delayed_pulse(6_300, 360_000).unwrap();
         assert_eq!((expected.arr, expected.ccr), (366_299, 360_000));
         assert_eq!(got, vec![(69, expected), (169, expected)]);
+        // The last pulse is booked at its delayed start, 169.7 periods: 16 970 µs (the
+        // spacing rule and the end-by-position check read it).
+        assert_eq!(r.last_pulse_us, Some(16_970));
         // Going down: x = 2 697 − 10·k crosses 2 mm at k = 69.7 and 1 mm at k = 169.7.
         let mut r = hybrid(1_000);
         let got = pulses(&mut r, (0..220).map(|k| Some(2_697 - 10 * k)), -100_000);
