@@ -1073,7 +1073,8 @@ mod tests {
         .unwrap();
         let lowest = 180e6f32 / 4_294_967_296.0;
         let (s, _) = slow.plan_hz(lowest).unwrap();
-        assert_eq!((s.psc, s.arr), (65_535, 65_535));
+        // The u64 path's duty: 40 % of 65 536 ticks, ⌊26 214.4⌋ (under the cap's 32 768).
+        assert_eq!((s.psc, s.arr, s.ccr), (65_535, 65_535, 26_214));
         assert_eq!(slow.plan_hz(lowest * 0.999), None);
         // 180e6 / 65 536 Hz: exactly 65 536 clocks, the whole counter at prescaler 0.
         let fast16 = FastPlanner::new(&T16, &l, 400).unwrap();

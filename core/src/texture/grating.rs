@@ -891,6 +891,32 @@ mod tests {
         assert_eq!(got, vec![(70, one), (170, one)]);
     }
 
+    /// On the line's first trusted sample its window starts one period back, at end − slope.
+    /// Hand-worked: x = 365 + 10·k µm is full at k = 63 (x = 995) and crosses 1 mm at
+    /// k = 63.5, so that sample fires it delayed by half a period, 50 µs = 4 500 clocks (not
+    /// the next sample, undelayed); 2 mm at k = 163.5 the same.
+    #[test]
+    fn the_first_trusted_sample_predicts_within_its_period() {
+        let mut r = hybrid(1_000);
+        let got = pulses(&mut r, (0..200).map(|k| Some(365 + 10 * k)), 100_000);
+        let expected = TIMER.delayed_pulse(4_500, 360_000).unwrap();
+        assert_eq!(got, vec![(63, expected), (163, expected)]);
+    }
+
+    /// A ridge the prediction fired is not fired again by position phase when the line drops
+    /// on the next sample. Hand-worked on the ramp x = 303 + 10·k: 1 mm is predicted at k = 69;
+    /// at k = 70 the sample comes 80 µm off the line (over the 72 µm gate: the line empties)
+    /// and past the ridge, so the tracker reports the crossing, which is the one already fired.
+    /// The ramp goes on; the line refills and 2 mm is predicted at k = 169 as on a clean ramp.
+    #[test]
+    fn a_ridge_the_prediction_fired_is_not_fired_again() {
+        let mut r = hybrid(1_000);
+        let path = (0..220).map(|k| Some(303 + 10 * k + if k == 70 { 80 } else { 0 }));
+        let got = pulses(&mut r, path, 100_000);
+        let expected = TIMER.delayed_pulse(6_300, 360_000).unwrap();
+        assert_eq!(got, vec![(69, expected), (169, expected)]);
+    }
+
     /// The line is trusted from 10 mm/s (1 µm per sample at 10 kHz): at 9 mm/s the ridge is
     /// fired by position phase on the first sample past it, at 11 mm/s predicted.
     #[test]
