@@ -41,8 +41,9 @@ use saw_core::{Config, Controller};
 const SAMPLES: u64 = 5_000;
 /// First timestamp: the u32 µs clock wraps 0.2 s into every vector.
 const T0_US: u32 = u32::MAX - 199_999;
-/// Per-sample instruction budget (mean over a vector) of every scene and texture kind.
-const BUDGET: u64 = 400;
+/// Per-sample instruction budget (mean over a vector) of every scene and texture kind (the
+/// conversion budget's CPU model counts the core at it too).
+const BUDGET: u64 = host_sim::budget::SAMPLE_BUDGET_INSTR;
 /// Issue #17 not met for these: their rows are over [`BUDGET`] (measured on this commit, see
 /// docs/target-cost.md) and fail only above their ceiling here, about 3 % over the worst row
 /// measured, so a regression still fails. Remove a line once its kind is under the budget.
