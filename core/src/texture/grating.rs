@@ -917,6 +917,26 @@ mod tests {
         assert_eq!(got, vec![(69, expected), (169, expected)]);
     }
 
+    /// A ridge the raw samples cross on the line's first trusted sample, but which lies behind
+    /// the line's window, fires at once as position phase (nothing fired it: the line was not
+    /// full when the finger reached it). Hand-worked: the ramp x = 385 + 10·k with the sample at
+    /// k = 62 20 µm low (985, not 1 005). The window fills at k = 63 (x = 1 015): the raw
+    /// samples cross 1 mm there (985 → 1 015). The line's end weights sample i by
+    /// (6i − 124)/4 160 and its slope by (12i − 378)/262 080, so the low sample puts the end
+    /// at 1 015 − 20 · 0.0596 = 1 013.8 and the slope at 10 − 20 · 0.0014 = 9.97: the window
+    /// starts at 1 003.8, past the ridge. So the ridge fires undelayed at k = 63; prediction
+    /// alone would look only ahead, to 2 mm, and never fire it. 2 mm: k = 161.5, predicted
+    /// at k = 161 half a period late (the window is a clean ramp by then).
+    #[test]
+    fn a_ridge_behind_the_first_trusted_window_fires_at_once() {
+        let mut r = hybrid(1_000);
+        let path = (0..200).map(|k| Some(385 + 10 * k - if k == 62 { 20 } else { 0 }));
+        let got = pulses(&mut r, path, 100_000);
+        let now = TIMER.delayed_pulse(0, 360_000).unwrap();
+        let half = TIMER.delayed_pulse(4_500, 360_000).unwrap();
+        assert_eq!(got, vec![(63, now), (161, half)]);
+    }
+
     /// The line is trusted from 10 mm/s (1 µm per sample at 10 kHz): at 9 mm/s the ridge is
     /// fired by position phase on the first sample past it, at 11 mm/s predicted.
     #[test]
