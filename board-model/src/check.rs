@@ -490,8 +490,9 @@ pub fn rail_fault(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     // The first trigger whose conversions are all faulted, and the sample period. The ADC holds
     // its input at the end of each sampling time, so a trigger up to one sampling time before
     // the onset still converts only faulted input; 0.5 µs is under the shortest sampling time
-    // either board uses or has tried (the G474's 92.5 cycles at 37.5 MHz = 2.47 µs, 24.5 cycles
-    // = 653 ns in the conversion budget's pick; the F446's 56 cycles = 2.5 µs). The 1 µs this
+    // either board uses or has tried (the G474's 47.5 cycles at 37.5 MHz = 1.27 µs, 92.5 = 2.47
+    // µs before, 24.5 = 653 ns in the conversion budget's 64× point; the F446's 56 cycles = 2.5
+    // µs). The 1 µs this
     // was before let a 24.5-cycle G474 trigger 0.7 µs ahead of the onset count, whose first
     // conversion is held 47 ns before it.
     let first = o

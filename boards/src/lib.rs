@@ -21,7 +21,8 @@ pub use nucleo_g474re::NUCLEO_G474RE;
 pub const CARRIER_HZ: u32 = 15_000_000;
 /// Position sample rate delivered to the control core (Hz).
 pub const SAMPLE_RATE_HZ: u32 = 10_000;
-/// ADC conversions summed into one 16-bit position sample (16 × 12-bit = 0..=65 520).
+/// The position sample's scale: the sum of 16 12-bit conversions (0..=65 520). A board may
+/// convert more per sample and scale the sum back to this ([`Oversampling::Hardware`]'s shift).
 pub const ADC_OVERSAMPLE: u32 = 16;
 /// Highest burst frequency the textures use (Hz).
 pub const MAX_BURST_HZ: u32 = 2_000;
@@ -247,22 +248,39 @@ pub struct PwmTimer {
     pub pin: Pin,
 }
 
-/// How the 16 conversions per sample are obtained.
+/// How the conversions of one sample are obtained, and scaled to the 16-conversion code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Oversampling {
     /// 16 conversions summed in software (F446: no hardware oversampler; the 16 come from a
     /// 16-rank regular sequence or from 16 back-to-back single conversions).
     Software { conversions: u32 },
-    /// ADC hardware oversampler (G474): `ratio` conversions accumulated, right shift `shift`
-    /// (shift 0 keeps the full 16-bit sum).
+    /// ADC hardware oversampler (G474): `ratio` conversions accumulated, then shifted right by
+    /// `shift` with rounding (RM0440 §21.4.30), so ratio / 2^shift conversions' worth of code.
     Hardware { ratio: u32, shift: u32 },
 }
 
 impl Oversampling {
+    /// Conversions made per sample.
     pub const fn conversions(&self) -> u32 {
         match *self {
             Oversampling::Software { conversions } => conversions,
             Oversampling::Hardware { ratio, .. } => ratio,
+        }
+    }
+
+    /// How many conversions' sum the delivered code is: the core's scale is
+    /// [`ADC_OVERSAMPLE`]. None for a shift that is not a whole power of two of the ratio
+    /// (the code would not be a sum of whole conversions).
+    pub const fn code_conversions(&self) -> Option<u32> {
+        match *self {
+            Oversampling::Software { conversions } => Some(conversions),
+            Oversampling::Hardware { ratio, shift } => {
+                if shift >= 32 || ratio % (1 << shift) != 0 {
+                    None
+                } else {
+                    Some(ratio >> shift)
+                }
+            }
         }
     }
 }
@@ -276,6 +294,10 @@ pub struct AdcDef {
     pub channel: u8,
     pub pin: Pin,
     pub oversampling: Oversampling,
+    /// Sampling time of each conversion, in half ADC-clock cycles (the G474's settings end in
+    /// .5: 95 = 47.5 cycles); the binding maps it to the SMPR code and refuses one the ADC
+    /// does not have. The conversion budget's "default" row is this with `oversampling`.
+    pub sample_half_cycles: u32,
     /// Timer whose TRGO triggers the conversions (hardware trigger plan).
     pub trigger_timer: &'static str,
     pub trigger_bus: Bus,
@@ -284,7 +306,7 @@ pub struct AdcDef {
     pub trigger_extsel: u8,
     /// Trigger events per output sample. 1 on both boards: on the F446 one trigger runs a
     /// 16-rank regular sequence (the same channel in every rank, summed in software), on the
-    /// G474 one trigger runs the 16× hardware oversampler.
+    /// G474 one trigger runs the 32× hardware oversampler.
     pub triggers_per_sample: u32,
 }
 
@@ -478,10 +500,18 @@ impl BoardDef {
             && self.burst_timer_bits == 32
             && self.burst_ticks_at_min_hz() <= self.burst_counter_max()
             && self.max_burst_hz == MAX_BURST_HZ
-            // ADC: 10 kHz, 16 conversions, trigger rate exactly reachable.
+            // ADC: 10 kHz, a 16-conversion code (the G474 converts 32 and halves the sum; the
+            // hardware oversampler's ratio is a power of two, 2..=256, RM0440 §21.4.30),
+            // trigger rate exactly reachable.
             && self.sample_rate_hz == SAMPLE_RATE_HZ
             && self.adc_oversample == ADC_OVERSAMPLE
-            && self.adc.oversampling.conversions() == ADC_OVERSAMPLE
+            && matches!(self.adc.oversampling.code_conversions(), Some(ADC_OVERSAMPLE))
+            && match self.adc.oversampling {
+                Oversampling::Software { conversions } => conversions == ADC_OVERSAMPLE,
+                Oversampling::Hardware { ratio, .. } => {
+                    ratio.is_power_of_two() && ratio >= 2 && ratio <= 256
+                }
+            }
             && self.adc.trigger_timer_clk_hz == c.timer_clk_hz(self.adc.trigger_bus)
             && self.adc_trigger_hz() == self.sample_rate_hz * self.adc.triggers_per_sample
             && self.adc.trigger_timer_clk_hz

@@ -104,6 +104,8 @@ pub const NUCLEO_F446RE: BoardDef = BoardDef {
         oversampling: Oversampling::Software {
             conversions: ADC_OVERSAMPLE,
         },
+        // 56 cycles (firmware/src/board/f446.rs: the rheostat's source impedance).
+        sample_half_cycles: 112,
         trigger_timer: "TIM3",
         trigger_bus: Bus::Apb1,
         trigger_timer_clk_hz: CLOCKS.apb1_timer_hz(),

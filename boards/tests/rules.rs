@@ -849,7 +849,8 @@ fn sample_rate_is_fixed() {
     }
 }
 
-/// A board summing 8 conversions per sample is refused (flattened count or the ADC's own).
+/// A board whose code is not the sum of 16 conversions is refused (flattened count or the
+/// ADC's own).
 #[test]
 fn oversampling_is_sixteen() {
     for b in [F446, G474] {
@@ -878,7 +879,33 @@ fn oversampling_is_sixteen() {
     assert_eq!(f.adc.oversampling.conversions(), 8);
     assert_eq!(g.adc.oversampling.conversions(), 8);
     assert_eq!(F446.adc.oversampling.conversions(), 16);
-    assert_eq!(G474.adc.oversampling.conversions(), 16);
+    // The G474 converts 32 and halves the sum: the code is still 16 conversions' worth.
+    assert_eq!(G474.adc.oversampling.conversions(), 32);
+    assert_eq!(G474.adc.oversampling.code_conversions(), Some(16));
+    let g474 = |ratio, shift| BoardDef {
+        adc: AdcDef {
+            oversampling: Oversampling::Hardware { ratio, shift },
+            ..G474.adc
+        },
+        ..G474
+    };
+    // Any power-of-two ratio shifted back to 16 is a 16-conversion code; a sum of 32 unshifted,
+    // a ratio the oversampler does not have (24, 512) or a shift past the ratio is not.
+    for (ratio, shift, ok) in [
+        (16, 0, true),
+        (32, 1, true),
+        (64, 2, true),
+        (256, 4, true),
+        (32, 0, false),
+        (64, 1, false),
+        (24, 0, false),
+        (512, 5, false),
+        (16, 5, false),
+        (16, 40, false),
+    ] {
+        assert_eq!(g474(ratio, shift).is_consistent(), ok, "{ratio} >> {shift}");
+    }
+    assert_eq!(g474(16, 5).adc.oversampling.code_conversions(), None);
 }
 
 /// An ADC trigger timer clock that is not its bus's timer clock is refused.

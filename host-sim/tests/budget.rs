@@ -215,23 +215,74 @@ fn measured(mode_name: &str, rate_hz: u32, conversions: u32, estimator: &str) ->
 
 /// The G474's best single-ADC point at today's lag (one ADC, 24.5-cycle sampling, 64
 /// conversions per 10 kHz sample shifted by 2, the default `Median3<LsqSlope<32>>`): the same
-/// lag as today — design (32 − 1)/2 + 1 periods + half the 63.1 µs window = 1.682 ms — with half
-/// the noise. Published (`docs/conversion-budget.md`, seeds 2026–2028): lag 1.688 ms pooled
-/// (1.724 worst seed), noise 0.81 mm/s pooled (0.84 worst); asserted per seed: lag 1.60–1.76
-/// ms, noise ≤ 0.88 mm/s (today's default: 1.59 mm/s pooled, 1.66 worst). Not the board's
-/// default: its 63 µs window breaks the board model's 100 µs sensor-to-gate limit.
+/// lag with half the noise. Published (`docs/conversion-budget.md`,
+/// seeds 2026–2028): lag 1.688 ms pooled (1.724 worst seed), noise 0.81 mm/s pooled (0.84
+/// worst); asserted per seed: lag 1.60–1.76 ms, noise ≤ 0.88 mm/s (the previous default: 1.59
+/// mm/s pooled, 1.66 worst). Not the board's default: its 63 µs window breaks the board model's
+/// 100 µs sensor-to-gate limit.
 #[test]
 fn the_g474_single_adc_pick_halves_the_noise_at_the_same_lag() {
     let b = &saw_boards::NUCLEO_G474RE;
-    // The board still converts 16 per sample, as the budget's "default" says.
-    assert_eq!(b.adc.oversampling.conversions(), 16);
-    assert_eq!(budget::g474().default, (0, 16));
     assert_eq!(b.sample_rate_hz, 10_000);
+    assert_ne!(
+        b.adc.oversampling.conversions(),
+        64,
+        "not the board's default"
+    );
     let design = budget::design_lag_us(32, true, 10_000, 64.0 * 37.0 / 37.5);
     assert!((design - 1_681.6).abs() < 0.1, "{design}");
     for (lag, noise) in measured("single smp24.5", 10_000, 64, "med3+lsq32") {
         assert!((1.60..=1.76).contains(&lag), "lag {lag} ms");
         assert!(noise <= 0.88, "noise {noise} mm/s");
+    }
+}
+
+/// The budget's "default" row of each board is the acquisition its board plan (and so its
+/// firmware binding) runs: one ADC, the sampling time and the conversions per 10 kHz sample.
+#[test]
+fn the_budget_default_is_the_boards_acquisition() {
+    for si in [budget::f446(), budget::g474()] {
+        let b = si.board;
+        let (mode, conversions) = si.default;
+        let m = &si.modes[mode];
+        assert_eq!(m.adcs, 1, "{}", b.name);
+        assert_eq!(
+            m.smp_cycles * 2.0,
+            b.adc.sample_half_cycles as f64,
+            "{}",
+            b.name
+        );
+        assert_eq!(conversions, b.adc.oversampling.conversions(), "{}", b.name);
+        assert_eq!(b.sample_rate_hz, 10_000);
+    }
+    // The G474's default moved from the previous one (16 at 92.5 cycles); the F446's did not.
+    assert_ne!(budget::g474().default, budget::g474().today);
+    assert_eq!(budget::f446().default, budget::f446().today);
+}
+
+/// The G474's default (32 conversions at 47.5 cycles, halved to the 16-conversion code, the
+/// default `Median3<LsqSlope<32>>`): the previous default's lag with 1/√2 of its noise. Design
+/// lag 15.5 + 1 periods + half the 51.2 µs window = 1 675.6 µs (previous: 1 672.4, window
+/// 44.8 µs). Published (`docs/conversion-budget.md`, seeds 2026–2028): lag 1.659 ms pooled
+/// (1.672 worst seed), noise 1.15 mm/s pooled (1.18 worst seed); asserted per seed against the
+/// previous default on the same seed: lag within 0.06 ms of it, noise at most 0.75 of it.
+#[test]
+fn the_g474_default_cuts_the_noise_by_root_two_at_the_same_lag() {
+    let window = |c: u32, smp: f64| c as f64 * (smp + 12.5) / 37.5;
+    let design = budget::design_lag_us(32, true, 10_000, window(32, 47.5));
+    assert!((design - 1_675.6).abs() < 0.1, "{design}");
+    let before = budget::design_lag_us(32, true, 10_000, window(16, 92.5));
+    assert!((before - 1_672.4).abs() < 0.1, "{before}");
+    let now = measured("single smp47.5", 10_000, 32, "med3+lsq32");
+    let was = measured("single smp92.5", 10_000, 16, "med3+lsq32");
+    for ((lag, noise), (lag0, noise0)) in now.into_iter().zip(was) {
+        assert!((lag - lag0).abs() <= 0.06, "lag {lag} ms against {lag0}");
+        assert!(
+            noise <= 0.75 * noise0,
+            "noise {noise} mm/s against {noise0}"
+        );
+        assert!((1.60..=1.76).contains(&lag), "lag {lag} ms");
+        assert!(noise <= 1.20, "noise {noise} mm/s");
     }
 }
 

@@ -248,7 +248,10 @@ pub fn dac_wait_ready() {
 /// (f_ADC · C_ADC · ln 2^(N+2)) − R_ADC with N = 12, R_ADC = 6 kΩ max, C_ADC = 4 pF typ (7 pF
 /// max taken), f_ADC = 90 MHz / 4 = 22.5 MHz (embassy's ADCPRE for ≤ 36 MHz): 56 cycles allow
 /// < 30 kΩ. 16 × (56 + 12) cycles = 48 µs per trigger.
-const SAMPLE_TIME: SampleTime = SampleTime::CYCLES56;
+const SAMPLE_TIME: SampleTime = match BOARD.adc.sample_half_cycles {
+    112 => SampleTime::CYCLES56,
+    _ => panic!("F446 binding: a sampling time this board plan does not use"),
+};
 
 /// 16 conversions per trigger (one 16-rank sequence).
 const RANKS: usize = saw_boards::ADC_OVERSAMPLE as usize;
