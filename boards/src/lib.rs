@@ -269,8 +269,8 @@ impl Oversampling {
     }
 
     /// How many conversions' sum the delivered code is: the core's scale is
-    /// [`ADC_OVERSAMPLE`]. None for a shift that is not a whole power of two of the ratio
-    /// (the code would not be a sum of whole conversions).
+    /// [`ADC_OVERSAMPLE`]. None when 2^shift does not divide the ratio (the code would not be
+    /// a sum of whole conversions).
     pub const fn code_conversions(&self) -> Option<u32> {
         match *self {
             Oversampling::Software { conversions } => Some(conversions),

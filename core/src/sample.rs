@@ -2,8 +2,9 @@
 //!
 //! The ADC converts far faster than the 10 kHz control rate, so each control sample is the sum of
 //! [`OVERSAMPLE`] 12-bit conversions (F446: DMA burst summed in software; G474: the hardware
-//! oversampler with ratio 16 and no shift). Summing 16 conversions gives a 16-bit code and cuts
-//! white ADC noise by √16 = 4: the cheapest lever on position noise, hence on velocity error.
+//! oversampler converts 32 and halves the sum with rounding, the same scale with a further √2
+//! less noise). Summing 16 conversions gives a 16-bit code and cuts white ADC noise by √16 = 4:
+//! the cheapest lever on position noise, hence on velocity error.
 
 /// 12-bit conversions summed into one control sample.
 pub const OVERSAMPLE: u32 = 16;

@@ -2,7 +2,8 @@
 //!
 //! Tasks, by priority:
 //! - on the interrupt executor (the sample path, preempts everything below):
-//!   - `sampler`: timer-triggered (TIM3 TRGO, 10 kHz), DMA-fed ADC; 16 conversions per sample.
+//!   - `sampler`: timer-triggered (TIM3 TRGO, 10 kHz), DMA-fed ADC; each sample the
+//!     16-conversion code (F446: 16 summed; G474: 32 halved by the oversampler).
 //!   - `control`: feeds every sample to `saw_core::Controller`, applies gate actions to the
 //!     burst timer, runs the stale-sensor watchdog every 1 ms, logs telemetry at 1 Hz, and
 //!     between samples takes what the link hands over (a compiled scene, a counters request)

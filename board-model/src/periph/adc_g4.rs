@@ -1092,6 +1092,8 @@ mod tests {
             (0b000, 2, 0x0800),
             (0b011, 4, 0x0FFF),
             (0b100, 0, 0xFFE0),
+            // The firmware's setting (32×, shift 1): the 16-conversion code's full scale.
+            (0b100, 1, 0xFFF0),
             (0b111, 8, 0x0FFF),
         ];
         for (ovsr, ovss, expected) in cases {
@@ -1100,6 +1102,26 @@ mod tests {
             modify(&mut adc, t, CR, |v| v | CR_ADSTART);
             run(&mut adc, u64::MAX / 2);
             assert_eq!(r(&mut adc, t, DR), expected, "OVSR {ovsr:#05b} OVSS {ovss}");
+        }
+        // Rounding to nearest, a half up (§21.4.30): 32 conversions summing to an odd number
+        // (one reads 1, the rest 0: 1 → 1 after a 1-bit shift, where truncation gives 0; all 1
+        // but one 0: 31 → 16, not 15).
+        for (first, rest, expected) in [(1u16, 0u16, 1u32), (0, 1, 16)] {
+            let k = Rc::new(RefCell::new(0u32));
+            let k2 = k.clone();
+            let mut adc = AdcG4::new(
+                18,
+                Box::new(move |_, _| {
+                    let i = *k2.borrow();
+                    *k2.borrow_mut() += 1;
+                    Some(if i % 32 == 0 { first } else { rest })
+                }),
+            );
+            let t = bring_up(&mut adc, Some((0b100, 1)));
+            modify(&mut adc, t, CR, |v| v | CR_ADSTART);
+            run(&mut adc, u64::MAX / 2);
+            assert_eq!(r(&mut adc, t, DR), expected, "first {first}, rest {rest}");
+            assert!(*k.borrow() >= 32);
         }
     }
 
@@ -1187,9 +1209,10 @@ mod tests {
     fn oversampled_results_reach_memory_through_dmamux_and_dma() {
         let n = Rc::new(RefCell::new(0u16));
         let n2 = n.clone();
-        // Conversion codes 100 + k for the k-th trigger: each result is 16 × (100 + k).
+        // Conversion codes 100 + k for the k-th trigger: the firmware's 32× with shift 1 makes
+        // each result 32 × (100 + k) / 2 = 16 × (100 + k).
         let mut adc = AdcG4::new(18, Box::new(move |_, _| Some(100 + *n2.borrow())));
-        let t0 = bring_up(&mut adc, Some((0b011, 0)));
+        let t0 = bring_up(&mut adc, Some((0b100, 1)));
         configure_ring_buffered(&mut adc, t0, 2);
         let mut mux = DmaMux::new();
         let mut dma = DmaG4::new(1, [11, 12, 13, 14, 15, 16, 17, 96]);
@@ -1211,7 +1234,8 @@ mod tests {
             *n.borrow_mut() = k as u16;
             let t = t0 + 1_000 + k * 360_000; // 100 µs
             adc.on_event(t, Event::Trgo { timer: 3 }, &mut Signals::default());
-            while let Some(next) = adc.next_event().filter(|&x| x <= t + 100_000) {
+            // The 32 conversions end inside 300 000 ticks (83 µs) of the trigger.
+            while let Some(next) = adc.next_event().filter(|&x| x <= t + 300_000) {
                 let mut s = Signals::default();
                 adc.advance(next, &mut s);
                 for (at, ev) in s.events {

@@ -264,13 +264,14 @@ pub fn dac_wait_ready() {
 /// Sampling time against the rheostat's source impedance. No rheostat value is stated in
 /// boards/README.md or saw-boards; assumed: a 10 kΩ linear slide potentiometer wired as a divider
 /// (core/src/position.rs), whose Thevenin resistance peaks at R/4 = 2.5 kΩ mid-travel. Datasheet
-/// bound (STM32G474 DS12288, ADC characteristics): R_AIN < t_S / (f_ADC · C_ADC · ln 2^(N+2)) −
-/// R_ADC, N = 12 (ln 2^14 = 9.70), C_ADC = 5 pF, f_ADC = 150 MHz / 4 = 37.5 MHz (embassy's
-/// PRESC for ≤ 60 MHz). 24.5 cycles (653 ns): < 13.2 kΩ − R_ADC by the formula, but the
-/// datasheet's "maximum ADC R_AIN" table (which includes pad and parasitics; values from memory,
-/// not re-checked here) puts ~650 ns near 2 kΩ — no margin for 2.5 kΩ. 47.5 cycles (1.27 µs):
-/// < 26.1 kΩ − R_ADC by the formula, twice the 631 ns the conversion budget's settling rule
-/// needs at 2.5 kΩ (docs/conversion-budget.md), ~4 kΩ scaled from that table.
+/// bound (STM32G474 DS12288, ADC characteristics): R_AIN < (k − 0.5) / (f_ADC · C_ADC ·
+/// ln 2^(N+2)) − R_ADC for k sampling cycles, N = 12 (ln 2^14 = 9.70), C_ADC = 5 pF, f_ADC =
+/// 150 MHz / 4 = 37.5 MHz (embassy's PRESC for ≤ 60 MHz). 24.5 cycles (653 ns): < 13.2 kΩ −
+/// R_ADC by the formula, but the datasheet's "maximum ADC R_AIN" table (which includes pad and
+/// parasitics; values from memory, not re-checked here) puts ~650 ns near 2 kΩ — no margin for
+/// 2.5 kΩ. 47.5 cycles (1.27 µs): < 25.8 kΩ − R_ADC by the formula, < 14.6 kΩ with the 11.5 kΩ
+/// the conversion budget fits to that table; twice the 631 ns its settling rule needs at 2.5 kΩ
+/// (docs/conversion-budget.md).
 /// 32 × (47.5 + 12.5) cycles = 51.2 µs per trigger, inside the 100 µs period; the budget's pick
 /// for this board (was 16 × 92.5-cycle conversions, 44.8 µs: the same lag, √2 the velocity
 /// noise). The board model times it (`scripts/board-model.sh`: sensor-to-gate latency and the
@@ -282,10 +283,13 @@ const SAMPLE_TIME: SampleTime = match BOARD.adc.sample_half_cycles {
     _ => panic!("G474 binding: a sampling time this board plan does not use"),
 };
 const CONVERSIONS: u32 = BOARD.adc.oversampling.conversions();
-// One trigger's conversions, (sampling + 12.5 SAR cycles) each at SYSCLK / 4, fit the period.
+// One trigger's conversions, (sampling + 12.5 SAR cycles) each at SYSCLK / 4, fit the period
+// (RM0440 §21.4.12: t_CONV = t_SMPL + 12.5 cycles at 12 bits). In u64: 64 × 92.5 cycles
+// would overflow u32 here before the comparison could refuse it.
 const _: () = assert!(
-    CONVERSIONS * (BOARD.adc.sample_half_cycles + 25) / 2 * 1_000_000 / (BOARD.sysclk_hz / 4)
-        < 1_000_000 / BOARD.sample_rate_hz
+    CONVERSIONS as u64 * (BOARD.adc.sample_half_cycles as u64 + 25) / 2 * 1_000_000
+        / (BOARD.sysclk_hz as u64 / 4)
+        < 1_000_000 / BOARD.sample_rate_hz as u64
 );
 
 /// Samples delivered per `read` (each is one trigger = 32 oversampled conversions).
