@@ -307,6 +307,8 @@ pub fn estimators() -> Vec<(usize, Method)> {
         (15, lsq!(15)),
         (16, lsq!(16)),
         (24, lsq!(24)),
+        (26, lsq!(26)),
+        (28, lsq!(28)),
         (30, lsq!(30)),
         (32, lsq!(32)),
         (36, lsq!(36)),
