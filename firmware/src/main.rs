@@ -171,11 +171,17 @@ async fn main(spawner: Spawner) {
 
     // Both enable lines are forced inactive: now the amplifier may be armed.
     rf_arm.set_high();
+    // The conversions made per sample and their sampling time (the G474 makes 32 and halves
+    // the sum to the 16-conversion code the core reads).
+    let half_cycles = BOARD.adc.sample_half_cycles;
     info!(
-        "adc: {} ch{} @ {} Hz x{} (trigger {} TRGO); enables CH{} + CH{}; rf arm high",
+        "adc: {} ch{} @ {} Hz x{} ({}.{}-cycle sampling, code = {} conversions' sum; trigger {} TRGO); enables CH{} + CH{}; rf arm high",
         BOARD.adc.adc,
         BOARD.adc.channel,
         BOARD.sample_rate_hz,
+        BOARD.adc.oversampling.conversions(),
+        half_cycles / 2,
+        (half_cycles % 2) * 5,
         BOARD.adc_oversample,
         BOARD.adc.trigger_timer,
         BOARD.burst.channel,
