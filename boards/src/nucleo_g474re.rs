@@ -100,8 +100,8 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
             header: "A1 (CN8-2), morpho CN7-30",
         },
         // 32 conversions at 47.5-cycle sampling (51.2 µs of the 100 µs period), the sum halved
-        // to the 16-conversion code: the conversion budget's pick for this board
-        // (docs/conversion-budget.md: the velocity noise 1/√2 of 16 conversions' at the same
+        // to the 16-conversion code: the conversion budget's G474 default
+        // (docs/conversion-budget.md: 1/√2 the velocity noise of 16 conversions at the same
         // lag); why 47.5 cycles against the rheostat: firmware/src/board/g474.rs.
         oversampling: Oversampling::Hardware {
             ratio: 2 * ADC_OVERSAMPLE,

@@ -207,8 +207,9 @@ pub fn g474() -> Silicon {
             mode(1, 2.5),
         ],
         today: (0, 16),
-        // 32 conversions at 47.5 cycles (51.2 µs): today's lag with 1/√2 of its noise. The
-        // 24.5-cycle × 64 point (half the noise) makes the window 63 µs, and the board model's
+        // 32 conversions at 47.5 cycles (51.2 µs): the previous default's (`today`) lag with
+        // 1/√2 of its noise. The 24.5-cycle × 64 point (half the previous noise) makes the
+        // window 63 µs, and the board model's
         // sensor-to-gate latency and rail-fault checks (≤ 100 µs) fail with it; 24.5 × 32
         // (31.6 µs) would do as well here but settles with 3.5 % to spare on an assumed R_ADC
         // (docs/conversion-budget.md, "The pick").
@@ -520,7 +521,8 @@ pub fn dma_load(si: &Silicon, mode: &AdcMode, rate_hz: u32, conversions: u32) ->
 }
 
 /// Every configuration of `si` the sweep runs: (mode index, rate, conversions), those whose
-/// conversions fit the sample period and reach at least today's 160 k conversions/s.
+/// conversions fit the sample period and reach at least the previous default's 160 k
+/// conversions/s.
 pub fn configurations(si: &Silicon) -> Vec<(usize, u32, u32)> {
     let mut v = Vec::new();
     for (mi, mode) in si.modes.iter().enumerate() {

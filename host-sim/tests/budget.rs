@@ -213,9 +213,9 @@ fn measured(mode_name: &str, rate_hz: u32, conversions: u32, estimator: &str) ->
         .collect()
 }
 
-/// The G474's best single-ADC point at today's lag (one ADC, 24.5-cycle sampling, 64
-/// conversions per 10 kHz sample shifted by 2, the default `Median3<LsqSlope<32>>`): the same
-/// lag with half the noise. Published (`docs/conversion-budget.md`,
+/// The G474's best single-ADC point at the previous default's lag (one ADC, 24.5-cycle sampling,
+/// 64 conversions per 10 kHz sample shifted by 2, the default `Median3<LsqSlope<32>>`): that lag
+/// with half the previous default's noise (1/√2 of the current default's). Published (`docs/conversion-budget.md`,
 /// seeds 2026–2028): lag 1.688 ms pooled (1.724 worst seed), noise 0.81 mm/s pooled (0.84
 /// worst); asserted per seed: lag 1.60–1.76 ms, noise ≤ 0.88 mm/s (the previous default: 1.59
 /// mm/s pooled, 1.66 worst). Not the board's default: its 63 µs window breaks the board model's
@@ -265,7 +265,8 @@ fn the_budget_default_is_the_boards_acquisition() {
 /// lag 15.5 + 1 periods + half the 51.2 µs window = 1 675.6 µs (previous: 1 672.4, window
 /// 44.8 µs). Published (`docs/conversion-budget.md`, seeds 2026–2028): lag 1.659 ms pooled
 /// (1.672 worst seed), noise 1.15 mm/s pooled (1.18 worst seed); asserted per seed against the
-/// previous default on the same seed: lag within 0.06 ms of it, noise at most 0.75 of it.
+/// previous default on the same seed: lag within 0.06 ms of it, noise at most 0.75 of it; and
+/// absolutely, lag 1.60–1.76 ms and noise ≤ 1.20 mm/s.
 #[test]
 fn the_g474_default_cuts_the_noise_by_root_two_at_the_same_lag() {
     let window = |c: u32, smp: f64| c as f64 * (smp + 12.5) / 37.5;
@@ -331,10 +332,11 @@ fn the_settling_rule_marks_the_short_sampling_times() {
 /// What the G474's lower noise could buy instead (not applied: it needs a per-board estimator
 /// window, `docs/conversion-budget.md` "What is not done"): the same acquisition with
 /// `Median3<LsqSlope<26>>` keeps the noise under the 1.66 mm/s and cuts a fifth of the
-/// lag. Design lag 12.5 + 1 periods + half the 51.2 µs window = 1 375.6 µs. Published: lag
-/// 1.33 ms (1.34 worst seed), noise 1.54 mm/s RMS over the seeds (1.58 worst seed), as
-/// published; per seed: noise ≤ 1.66 mm/s and lag at most 0.82 of the 32-sample window's on the
-/// same seed.
+/// lag. Design lag 12.5 + 1 periods + half the 51.2 µs window = 1 375.6 µs. Published
+/// (`docs/conversion-budget.md`, seeds 2026–2028): lag 1.33 ms (1.34 worst seed), noise 1.54
+/// mm/s (1.58 worst seed); asserted: the mean lag, the RMS noise and both worst seeds within
+/// 0.005 of those, and per seed noise ≤ 1.66 mm/s, lag 1.25–1.40 ms and at most 0.82 of
+/// `Median3<LsqSlope<32>>`'s on the same acquisition and seed.
 #[test]
 fn the_g474_acquisition_could_buy_a_fifth_of_the_lag() {
     let design = budget::design_lag_us(26, true, 10_000, 32.0 * 60.0 / 37.5);

@@ -269,12 +269,13 @@ pub fn dac_wait_ready() {
 /// 150 MHz / 4 = 37.5 MHz (embassy's PRESC for ≤ 60 MHz). 24.5 cycles (653 ns): < 13.2 kΩ −
 /// R_ADC by the formula, but the datasheet's "maximum ADC R_AIN" table (which includes pad and
 /// parasitics; values from memory, not re-checked here) puts ~650 ns near 2 kΩ — no margin for
-/// 2.5 kΩ. 47.5 cycles (1.27 µs): < 25.8 kΩ − R_ADC by the formula, < 14.6 kΩ with the 11.5 kΩ
-/// the conversion budget fits to that table; twice the 631 ns its settling rule needs at 2.5 kΩ
+/// 2.5 kΩ. 47.5 cycles (1.27 µs): < 25.8 kΩ − R_ADC by the formula, < 14.3 kΩ with the 11.5 kΩ
+/// the conversion budget fits to that table (¼ LSB there; the budget's ½-LSB rule leaves 24.5
+/// cycles 3.5 % to spare); twice the 631 ns its settling rule needs at 2.5 kΩ
 /// (docs/conversion-budget.md).
-/// 32 × (47.5 + 12.5) cycles = 51.2 µs per trigger, inside the 100 µs period; the budget's pick
-/// for this board (was 16 × 92.5-cycle conversions, 44.8 µs: the same lag, √2 the velocity
-/// noise). The board model times it (`scripts/board-model.sh`: sensor-to-gate latency and the
+/// 32 × (47.5 + 12.5) cycles = 51.2 µs per trigger, inside the 100 µs period: the conversion
+/// budget's G474 default (it was 16 conversions at 92.5 cycles, 44.8 µs: the same lag at √2
+/// times this noise). The board model times it (`scripts/board-model.sh`: sensor-to-gate latency and the
 /// rail fault's response, both against 100 µs).
 const SAMPLE_TIME: SampleTime = match BOARD.adc.sample_half_cycles {
     95 => SampleTime::CYCLES47_5,
@@ -284,7 +285,7 @@ const SAMPLE_TIME: SampleTime = match BOARD.adc.sample_half_cycles {
 };
 const CONVERSIONS: u32 = BOARD.adc.oversampling.conversions();
 // One trigger's conversions, (sampling + 12.5 SAR cycles) each at SYSCLK / 4, fit the period
-// (RM0440 §21.4.12: t_CONV = t_SMPL + 12.5 cycles at 12 bits). In u64: 64 × 92.5 cycles
+// (RM0440 §21.4.12 sampling time, §21.4.16 t_CONV = t_SMPL + 12.5 cycles at 12 bits). In u64: 64 × 92.5 cycles
 // would overflow u32 here before the comparison could refuse it.
 const _: () = assert!(
     CONVERSIONS as u64 * (BOARD.adc.sample_half_cycles as u64 + 25) / 2 * 1_000_000
