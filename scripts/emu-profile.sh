@@ -48,30 +48,21 @@ out, top, asm = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 prof = open(os.path.join(out, "profile.txt")).read() if os.path.exists(os.path.join(out, "profile.txt")) else ""
 m = re.search(r"n=(\d+)", prof)
 n = int(m.group(1)) if m else 5000
-counts = [int(l.split()[1]) for l in open(os.path.join(out, "pcs.txt"))]
-by_line, by_fn, total = collections.Counter(), collections.Counter(), 0
-for c, l in zip(counts, open(os.path.join(out, "lines.json"))):
+pcs = [(int(a, 16), int(c)) for a, c in (l.split() for l in open(os.path.join(out, "pcs.txt")))]
+by_line, by_fn, stages, total = collections.Counter(), collections.Counter(), collections.Counter(), 0
+for (_, c), l in zip(pcs, open(os.path.join(out, "lines.json"))):
     frames = json.loads(l)["Symbol"]
     total += c
     inner = frames[0]
     f = inner["FileName"].split("/core/src/")[-1] if "/core/src/" in inner["FileName"] else os.path.basename(inner["FileName"])
     by_line[f"{f}:{inner['Line']} ({inner['FunctionName'].split('<')[0][-60:]})"] += c
     # every inlined frame gets the count once (inclusive)
-    for fn in {fr["FunctionName"] for fr in frames}:
-        by_fn[fn[-90:]] += c
-print(f"total instructions traced: {total}")
-print("\n== inclusive per function (inlined frames included)")
-for k, v in by_fn.most_common(top):
-    print(f"{v:>10} {k}")
-print("\n== per source line (innermost frame)")
-for k, v in by_line.most_common(top):
-    print(f"{v:>10} {k}")
-# Per sample, by stage: an instruction inlined into on_sample counts for the frame just inside
-# it (on_sample's own line when it is on_sample's); one outside it, for the function it is in.
-stages = collections.Counter()
-for c, l in zip(counts, open(os.path.join(out, "lines.json"))):
-    frames = json.loads(l)["Symbol"]
     names = [fr["FunctionName"] for fr in frames]
+    for fn in set(names):
+        by_fn[fn[-90:]] += c
+    # Per sample, by stage: an instruction inlined into on_sample counts for the frame just
+    # inside it (on_sample's own line when it is on_sample's); one outside it, for the function
+    # it is in.
     inside = [i for i, nm in enumerate(names) if nm.endswith("::on_sample")]
     if not inside:
         stages["(call) " + names[-1][-70:]] += c
@@ -79,11 +70,18 @@ for c, l in zip(counts, open(os.path.join(out, "lines.json"))):
     i = inside[0]
     where = f"on_sample:{frames[i]['Line']}"
     stages[(names[i - 1].split("::")[-1][:40] + " @ " if i else "") + where] += c
+print(f"total instructions traced: {total}")
+print("\n== inclusive per function (inlined frames included)")
+for k, v in by_fn.most_common(top):
+    print(f"{v:>10} {k}")
+print("\n== per source line (innermost frame)")
+for k, v in by_line.most_common(top):
+    print(f"{v:>10} {k}")
 print(f"\n== per sample ({n} samples), by stage of on_sample; calls it makes by name")
 for k, v in stages.most_common(top):
     print(f"{v / n:>10.2f} {k}")
 if asm:
-    pcs = {int(l.split()[0], 16): int(l.split()[1]) for l in open(os.path.join(out, "pcs.txt"))}
+    per_pc = dict(pcs)
     lines = open(os.path.join(out, "disasm.txt")).read().split("\n")
     heads = [i for i, l in enumerate(lines) if l.endswith(">:") and asm in l]
     if not heads:
@@ -98,7 +96,7 @@ if asm:
                     break
                 if not mm:
                     continue
-                per = pcs.get(int(mm.group(1), 16), 0) / n
+                per = per_pc.get(int(mm.group(1), 16), 0) / n
                 total += per
                 body.append(f"{per:8.2f} {mm.group(1)} {mm.group(2)}")
             name = lines[h].rstrip(":")
