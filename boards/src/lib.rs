@@ -260,6 +260,12 @@ pub enum Oversampling {
 }
 
 impl Oversampling {
+    /// A ratio the G474's regular oversampler has: a power of two, 2..=256 (RM0440 §21.4.30,
+    /// ADC_CFGR2.OVSR).
+    pub const fn is_hardware_ratio(ratio: u32) -> bool {
+        ratio.is_power_of_two() && ratio >= 2 && ratio <= 256
+    }
+
     /// Conversions made per sample.
     pub const fn conversions(&self) -> u32 {
         match *self {
@@ -507,10 +513,8 @@ impl BoardDef {
             && self.adc_oversample == ADC_OVERSAMPLE
             && matches!(self.adc.oversampling.code_conversions(), Some(ADC_OVERSAMPLE))
             && match self.adc.oversampling {
-                Oversampling::Software { conversions } => conversions == ADC_OVERSAMPLE,
-                Oversampling::Hardware { ratio, .. } => {
-                    ratio.is_power_of_two() && ratio >= 2 && ratio <= 256
-                }
+                Oversampling::Software { .. } => true,
+                Oversampling::Hardware { ratio, .. } => Oversampling::is_hardware_ratio(ratio),
             }
             && self.adc.trigger_timer_clk_hz == c.timer_clk_hz(self.adc.trigger_bus)
             && self.adc_trigger_hz() == self.sample_rate_hz * self.adc.triggers_per_sample

@@ -45,7 +45,7 @@ const _: () = assert!(matches!(PLLR, PllRDiv::DIV2));
 // The board's 32 conversions shifted by 1: OVSR = 4, OVSS = 1, DR = (Σ32 + 1) >> 1.
 const OVS: (u8, u8) = match BOARD.adc.oversampling {
     Oversampling::Hardware { ratio, shift }
-        if ratio.is_power_of_two() && ratio >= 2 && ratio <= 256 && shift <= 8 =>
+        if Oversampling::is_hardware_ratio(ratio) && shift <= 8 =>
     {
         ((ratio.trailing_zeros() - 1) as u8, shift as u8)
     }
@@ -275,8 +275,8 @@ pub fn dac_wait_ready() {
 /// (docs/conversion-budget.md).
 /// 32 × (47.5 + 12.5) cycles = 51.2 µs per trigger, inside the 100 µs period: the conversion
 /// budget's G474 default (it was 16 conversions at 92.5 cycles, 44.8 µs: the same lag at √2
-/// times this noise). The board model times it (`scripts/board-model.sh`: sensor-to-gate latency and the
-/// rail fault's response, both against 100 µs).
+/// times this noise). The board model times it (`scripts/board-model.sh`: sensor-to-gate
+/// latency and the rail fault's response, both against 100 µs).
 const SAMPLE_TIME: SampleTime = match BOARD.adc.sample_half_cycles {
     95 => SampleTime::CYCLES47_5,
     185 => SampleTime::CYCLES92_5,
@@ -285,8 +285,8 @@ const SAMPLE_TIME: SampleTime = match BOARD.adc.sample_half_cycles {
 };
 const CONVERSIONS: u32 = BOARD.adc.oversampling.conversions();
 // One trigger's conversions, (sampling + 12.5 SAR cycles) each at SYSCLK / 4, fit the period
-// (RM0440 §21.4.12 sampling time, §21.4.16 t_CONV = t_SMPL + 12.5 cycles at 12 bits). In u64: 64 × 92.5 cycles
-// would overflow u32 here before the comparison could refuse it.
+// (RM0440 §21.4.12 sampling time, §21.4.16 t_CONV = t_SMPL + 12.5 cycles at 12 bits). In u64:
+// 64 × 92.5 cycles would overflow u32 here before the comparison could refuse it.
 const _: () = assert!(
     CONVERSIONS as u64 * (BOARD.adc.sample_half_cycles as u64 + 25) / 2 * 1_000_000
         / (BOARD.sysclk_hz as u64 / 4)
