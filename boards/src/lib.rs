@@ -24,6 +24,13 @@ pub const SAMPLE_RATE_HZ: u32 = 10_000;
 /// The position sample's scale: the sum of 16 12-bit conversions (0..=65 520). A board may
 /// convert more per sample and scale the sum back to this ([`Oversampling::Hardware`]'s shift).
 pub const ADC_OVERSAMPLE: u32 = 16;
+/// The rheostat's total resistance, Ω: a linear slide potentiometer wired as a divider (ends to
+/// 3.3 V and GND, wiper to the ADC pin; `boards/README.md`, "Before the first flash").
+pub const RHEOSTAT_OHM: u32 = 10_000;
+/// The wiper's worst Thevenin source resistance, Ω: R·u·(1 − u) at travel fraction u peaks at
+/// u = ½, R/4 = 2.5 kΩ for the 10 kΩ part. Each board's sampling time must settle it
+/// ([`AdcDef::settles_source`]).
+pub const RHEOSTAT_SOURCE_OHM_MAX: u32 = RHEOSTAT_OHM / 4;
 /// Highest burst frequency the textures use (Hz).
 pub const MAX_BURST_HZ: u32 = 2_000;
 /// Lowest burst frequency the textures use (Hz).
@@ -314,6 +321,58 @@ pub struct AdcDef {
     /// 16-rank regular sequence (the same channel in every rank, summed in software), on the
     /// G474 one trigger runs the 32× hardware oversampler.
     pub triggers_per_sample: u32,
+    /// ADC clock f_ADC, Hz: the clock the sampling time counts in (the binding's prescaler).
+    pub clk_hz: u32,
+    /// Sampling switch resistance R_ADC, Ω (the chip's datasheet, "ADC characteristics").
+    pub switch_ohm: u32,
+    /// Sample-and-hold capacitor C_ADC, fF (femtofarads: 7 pF = 7 000 fF), datasheet as above.
+    pub hold_ff: u32,
+    /// The worst source resistance the pin sees, Ω: the rheostat's Thevenin resistance at
+    /// mid-travel ([`RHEOSTAT_SOURCE_OHM_MAX`]). The sampling time must settle it.
+    pub source_ohm_max: u32,
+}
+
+/// ln(2^(N+2)) for N = 12 bits, ln 2^14 = 14 · ln 2 = 9.704 060 53…, as the fraction
+/// 9 704 061 / 1 000 000, rounded up so the integer rule is never more lenient than the formula.
+pub const LN_2_POW_14: (u128, u128) = (9_704_061, 1_000_000);
+
+impl AdcDef {
+    /// Largest source resistance, Ω, that `sample_half_cycles` settles to the datasheets' error
+    /// bound: the "R_AIN max" equation of DS10693 (F446) and DS12288 (G474), ADC
+    /// characteristics, R_AIN < (k − 0.5) / (f_ADC · C_ADC · ln 2^(N+2)) − R_ADC with k the
+    /// sampling cycles and N = 12 — the error left below ¼ LSB (e^−ln 2^14 = 2^−14 of full
+    /// scale), so below ½ LSB too. k − 0.5 = (half cycles − 1) / 2, C_ADC in fF (10^−15 F):
+    /// R_AIN + R_ADC ≤ (h − 1) · 10^15 / (2 · f_ADC · C_ADC,fF · ln 2^14), floored (exact for
+    /// integer ohms). `None` when the sampling switch alone does not settle (R_ADC past that
+    /// bound) or when the clock, the capacitor or the sampling time is zero (nothing to settle
+    /// with; refused rather than divided by). Integer arithmetic in u128: no product of these
+    /// u32 fields overflows it.
+    pub const fn max_source_ohm(&self) -> Option<u32> {
+        let (ln_num, ln_den) = LN_2_POW_14;
+        if self.clk_hz == 0 || self.hold_ff == 0 || self.sample_half_cycles == 0 {
+            return None;
+        }
+        let num = (self.sample_half_cycles as u128 - 1) * 1_000_000_000_000_000 * ln_den;
+        let den = 2 * self.clk_hz as u128 * self.hold_ff as u128 * ln_num;
+        let total_ohm = num / den;
+        if total_ohm < self.switch_ohm as u128 {
+            return None;
+        }
+        let r = total_ohm - self.switch_ohm as u128;
+        Some(if r > u32::MAX as u128 {
+            u32::MAX
+        } else {
+            r as u32
+        })
+    }
+
+    /// The sampling time settles the stated worst source (`source_ohm_max`) to ¼ LSB.
+    pub const fn settles_source(&self) -> bool {
+        match self.max_source_ohm() {
+            Some(limit_ohm) => self.source_ohm_max <= limit_ohm,
+            None => false,
+        }
+    }
 }
 
 /// The flash the saved scene lives in: whole erase units the image never reaches.
@@ -516,6 +575,9 @@ impl BoardDef {
                 Oversampling::Software { .. } => true,
                 Oversampling::Hardware { ratio, .. } => Oversampling::is_hardware_ratio(ratio),
             }
+            // The sampling time settles the rheostat's worst source impedance (the datasheets'
+            // R_AIN equation, DS10693 / DS12288 ADC characteristics; boards/README.md).
+            && self.adc.settles_source()
             && self.adc.trigger_timer_clk_hz == c.timer_clk_hz(self.adc.trigger_bus)
             && self.adc_trigger_hz() == self.sample_rate_hz * self.adc.triggers_per_sample
             && self.adc.trigger_timer_clk_hz

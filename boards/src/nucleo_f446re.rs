@@ -26,6 +26,15 @@ pub const F446_LIMITS: PllLimits = PllLimits {
     pclk2_max_hz: 90_000_000,
 };
 
+/// ADCCLK, Hz: PCLK2 90 MHz / 4 (ADC_CCR.ADCPRE, RM0390 §13 common registers; /2 would give 45 MHz, past
+/// DS10693's f_ADC maximum of 36 MHz at VDDA ≥ 2.4 V). embassy-stm32 picks this divider; the
+/// binding's comment (firmware/src/board/f446.rs `SAMPLE_TIME`) states the same.
+pub const F446_ADC_CLK_HZ: u32 = 22_500_000;
+/// R_ADC, Ω: DS10693 ADC characteristics, sampling switch resistance, 6 kΩ max.
+pub const F446_ADC_SWITCH_OHM: u32 = 6_000;
+/// C_ADC, fF: DS10693 ADC characteristics, 4 pF typical, 7 pF max: the maximum is taken.
+pub const F446_ADC_HOLD_FF: u32 = 7_000;
+
 pub const CLOCKS: ClockPlan = ClockPlan {
     source: OscSource::HseBypass,
     osc_hz: 8_000_000,
@@ -111,6 +120,10 @@ pub const NUCLEO_F446RE: BoardDef = BoardDef {
         trigger_timer_clk_hz: CLOCKS.apb1_timer_hz(),
         trigger_extsel: 0b1000,
         triggers_per_sample: 1,
+        clk_hz: F446_ADC_CLK_HZ,
+        switch_ohm: F446_ADC_SWITCH_OHM,
+        hold_ff: F446_ADC_HOLD_FF,
+        source_ohm_max: RHEOSTAT_SOURCE_OHM_MAX,
     },
     sample_rate_hz: SAMPLE_RATE_HZ,
     adc_oversample: ADC_OVERSAMPLE,
@@ -159,4 +172,11 @@ const _: () = assert!(NUCLEO_F446RE.carrier_timer_clk_hz == 180_000_000);
 const _: () = assert!(NUCLEO_F446RE.carrier_timer_clk_hz % CARRIER_HZ == 0);
 const _: () = assert!(NUCLEO_F446RE.carrier_hz() == CARRIER_HZ);
 const _: () = assert!(NUCLEO_F446RE.burst_timer_clk_hz == 90_000_000);
+// 56 cycles at 22.5 MHz settle ≤ 30 312 Ω (DS10693's R_AIN equation, `AdcDef::max_source_ohm`):
+// the rheostat's 2.5 kΩ with twelvefold room.
+const _: () = assert!(
+    NUCLEO_F446RE.adc.settles_source(),
+    "nucleo-f446re: adc.sample_half_cycles does not settle adc.source_ohm_max (the rheostat's \
+     2 500 Ω mid-travel source) to 1/4 LSB (DS10693 R_AIN equation, AdcDef::max_source_ohm)"
+);
 const _: () = assert!(NUCLEO_F446RE.is_consistent());

@@ -24,6 +24,18 @@ pub const G474_LIMITS: PllLimits = PllLimits {
     pclk2_max_hz: 170_000_000,
 };
 
+/// ADC12 clock, Hz: SYSCLK 150 MHz / 4 (ADC12_CCR.PRESC, RM0440 §21 common registers; DS12288's f_ADC
+/// maximum is 60 MHz). embassy-stm32 picks this divider; the binding's comment
+/// (firmware/src/board/g474.rs `SAMPLE_TIME`) states the same.
+pub const G474_ADC_CLK_HZ: u32 = 37_500_000;
+/// R_ADC, Ω: an **effective** value, not a datasheet line. DS12288 gives C_ADC and a "maximum
+/// R_AIN" table instead of R_ADC; 11.5 kΩ is fitted to that table as the firmware reads it
+/// (≈ 2 kΩ at 24.5 cycles; docs/conversion-budget.md, host-sim `budget::g474`). Not re-checked
+/// against the datasheet: replace it when the table is read again.
+pub const G474_ADC_SWITCH_OHM: u32 = 11_500;
+/// C_ADC, fF: DS12288 ADC characteristics, 5 pF.
+pub const G474_ADC_HOLD_FF: u32 = 5_000;
+
 pub const CLOCKS: ClockPlan = ClockPlan {
     source: OscSource::HseCrystal,
     osc_hz: 24_000_000,
@@ -113,6 +125,10 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
         trigger_timer_clk_hz: CLOCKS.apb1_timer_hz(),
         trigger_extsel: 4,
         triggers_per_sample: 1,
+        clk_hz: G474_ADC_CLK_HZ,
+        switch_ohm: G474_ADC_SWITCH_OHM,
+        hold_ff: G474_ADC_HOLD_FF,
+        source_ohm_max: RHEOSTAT_SOURCE_OHM_MAX,
     },
     sample_rate_hz: SAMPLE_RATE_HZ,
     adc_oversample: ADC_OVERSAMPLE,
@@ -158,4 +174,12 @@ const _: () = assert!(CLOCKS.sysclk_hz <= 170_000_000);
 const _: () = assert!(NUCLEO_G474RE.carrier_timer_clk_hz % CARRIER_HZ == 0);
 const _: () = assert!(NUCLEO_G474RE.carrier_hz() == CARRIER_HZ);
 const _: () = assert!(NUCLEO_G474RE.burst_timer_clk_hz == 150_000_000);
+// 47.5 cycles at 37.5 MHz settle ≤ 14 331 Ω (25 831 Ω − R_ADC, DS12288's R_AIN equation,
+// `AdcDef::max_source_ohm`): the rheostat's 2.5 kΩ with fivefold room. 24.5 cycles would settle
+// only 1 690 Ω and is refused.
+const _: () = assert!(
+    NUCLEO_G474RE.adc.settles_source(),
+    "nucleo-g474re: adc.sample_half_cycles does not settle adc.source_ohm_max (the rheostat's \
+     2 500 Ω mid-travel source) to 1/4 LSB (DS12288 R_AIN equation, AdcDef::max_source_ohm)"
+);
 const _: () = assert!(NUCLEO_G474RE.is_consistent());

@@ -1449,3 +1449,160 @@ fn rf_level_pin_and_table_rules() {
         assert!(!bad.is_consistent(), "{}: a code past the DAC", b.name);
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// The sampling time against the rheostat's source impedance (`AdcDef::settles_source`).
+//
+// Hand-worked limits, from the datasheets' R_AIN equation (DS10693 / DS12288, ADC
+// characteristics): R_AIN ≤ (k − 0.5) / (f_ADC · C_ADC · ln 2^14) − R_ADC, with
+// ln 2^14 taken as 9.704061 (the code's rational, rounded up from 9.7040605):
+//   F446, 22.5 MHz, 7 pF: f·C·ln = 1.575e-4 × 9.704061 = 1.52838961e-3 S
+//     56 cycles:  55.5 / 1.52838961e-3 = 36 312.73 Ω → 36 312 − 6 000 = 30 312 Ω
+//     15 cycles:  14.5 / 1.52838961e-3 =  9 487.11 Ω →  9 487 − 6 000 =  3 487 Ω
+//      3 cycles:   2.5 / 1.52838961e-3 =  1 635.71 Ω, below R_ADC 6 000 Ω: nothing settles
+//   G474, 37.5 MHz, 5 pF: f·C·ln = 1.875e-4 × 9.704061 = 1.81951144e-3 S
+//     47.5 cycles: 47 / 1.81951144e-3 = 25 831.11 Ω → 25 831 − 11 500 = 14 331 Ω
+//     24.5 cycles: 24 / 1.81951144e-3 = 13 190.35 Ω → 13 190 − 11 500 =  1 690 Ω
+
+/// The rheostat named in the plan: 10 kΩ, its worst source R/4 = 2 500 Ω at mid-travel
+/// (R·u·(1 − u) at u = ½), the figure both boards state.
+#[test]
+fn rheostat_source_is_a_quarter_of_its_resistance() {
+    assert_eq!(RHEOSTAT_OHM, 10_000);
+    assert_eq!(RHEOSTAT_SOURCE_OHM_MAX, 2_500);
+    assert_eq!(F446.adc.source_ohm_max, 2_500);
+    assert_eq!(G474.adc.source_ohm_max, 2_500);
+}
+
+/// The ADC data each board states: F446 22.5 MHz, 6 kΩ, 7 pF (DS10693 maxima); G474 37.5 MHz,
+/// 11.5 kΩ (effective, fitted), 5 pF (DS12288).
+#[test]
+fn adc_input_data_as_stated() {
+    assert_eq!(
+        (F446.adc.clk_hz, F446.adc.switch_ohm, F446.adc.hold_ff),
+        (22_500_000, 6_000, 7_000)
+    );
+    assert_eq!(
+        (G474.adc.clk_hz, G474.adc.switch_ohm, G474.adc.hold_ff),
+        (37_500_000, 11_500, 5_000)
+    );
+}
+
+/// The largest source each sampling time settles, against the hand-worked figures above.
+#[test]
+fn max_source_ohm_hand_worked() {
+    let at = |b: BoardDef, half_cycles| AdcDef {
+        sample_half_cycles: half_cycles,
+        ..b.adc
+    };
+    assert_eq!(F446.adc.max_source_ohm(), Some(30_312));
+    assert_eq!(at(F446, 30).max_source_ohm(), Some(3_487));
+    assert_eq!(at(F446, 6).max_source_ohm(), None);
+    assert_eq!(G474.adc.max_source_ohm(), Some(14_331));
+    assert_eq!(at(G474, 49).max_source_ohm(), Some(1_690));
+}
+
+/// A source one ohm past the sampling time's limit is refused, the source on the limit accepted
+/// (F446 30 312 Ω, G474 14 331 Ω), the shipped 2 500 Ω accepted.
+#[test]
+fn source_past_the_sampling_limit_is_refused() {
+    for (b, limit_ohm) in [(F446, 30_312), (G474, 14_331)] {
+        let with = |source_ohm_max| BoardDef {
+            adc: AdcDef {
+                source_ohm_max,
+                ..b.adc
+            },
+            ..b
+        };
+        assert!(with(2_500).is_consistent(), "{}", b.name);
+        assert!(with(limit_ohm).is_consistent(), "{} on the limit", b.name);
+        assert!(
+            !with(limit_ohm + 1).is_consistent(),
+            "{} one ohm past",
+            b.name
+        );
+    }
+}
+
+/// A sampling time too short for the rheostat's 2 500 Ω is refused: G474 24.5 cycles (settles
+/// 1 690 Ω; a 1 690 Ω source is accepted there, 1 691 refused) and F446 3 cycles (settles
+/// nothing: R_ADC alone is past the bound, so even a 0 Ω source is refused); F446 15 cycles
+/// (3 487 Ω) still settles 2 500 Ω.
+#[test]
+fn sampling_time_too_short_for_the_rheostat_is_refused() {
+    let with = |b: BoardDef, half_cycles, source_ohm_max| BoardDef {
+        adc: AdcDef {
+            sample_half_cycles: half_cycles,
+            source_ohm_max,
+            ..b.adc
+        },
+        ..b
+    };
+    assert!(!with(G474, 49, 2_500).is_consistent());
+    assert!(with(G474, 49, 1_690).is_consistent());
+    assert!(!with(G474, 49, 1_691).is_consistent());
+    assert!(!with(F446, 6, 2_500).is_consistent());
+    assert!(!with(F446, 6, 0).is_consistent());
+    assert!(with(F446, 30, 2_500).is_consistent());
+}
+
+/// A larger hold capacitor or a faster ADC clock shortens what a sampling time settles: the
+/// F446 at 56 cycles with C_ADC 70 pF (ten times) settles 3 631 Ω − 6 000 Ω, nothing; the G474
+/// at 47.5 cycles with f_ADC 75 MHz (twice) settles 12 915 − 11 500 = 1 415 Ω, short of 2 500.
+#[test]
+fn slower_settling_adc_data_is_refused() {
+    let f = BoardDef {
+        adc: AdcDef {
+            hold_ff: 70_000,
+            ..F446.adc
+        },
+        ..F446
+    };
+    // 55.5 / (22.5e6 × 70e-12 × 9.704061) = 55.5 / 1.52838961e-2 = 3 631.27 Ω.
+    assert_eq!(f.adc.max_source_ohm(), None);
+    assert!(!f.is_consistent());
+    let g = BoardDef {
+        adc: AdcDef {
+            clk_hz: 75_000_000,
+            ..G474.adc
+        },
+        ..G474
+    };
+    // 47 / (75e6 × 5e-12 × 9.704061) = 47 / 3.63902288e-3 = 12 915.55 Ω.
+    assert_eq!(g.adc.max_source_ohm(), Some(1_415));
+    assert!(!g.is_consistent());
+}
+
+/// A zero ADC clock, hold capacitor or sampling time is refused without a division by zero or
+/// an underflow; a sampling time of u32::MAX half cycles at 1 Hz and 1 fF saturates to u32::MAX
+/// ohms (4.29e9 × 1e15 / 1.94e1 ≈ 2.2e23 Ω) rather than wrapping.
+#[test]
+fn degenerate_adc_data_is_refused_without_panic() {
+    for adc in [
+        AdcDef {
+            clk_hz: 0,
+            ..F446.adc
+        },
+        AdcDef {
+            hold_ff: 0,
+            ..F446.adc
+        },
+        AdcDef {
+            sample_half_cycles: 0,
+            ..F446.adc
+        },
+    ] {
+        assert_eq!(adc.max_source_ohm(), None, "{adc:?}");
+        assert!(!adc.settles_source(), "{adc:?}");
+    }
+    let huge = AdcDef {
+        sample_half_cycles: u32::MAX,
+        clk_hz: 1,
+        hold_ff: 1,
+        switch_ohm: 0,
+        source_ohm_max: u32::MAX,
+        ..F446.adc
+    };
+    assert_eq!(huge.max_source_ohm(), Some(u32::MAX));
+    assert!(huge.settles_source());
+}
