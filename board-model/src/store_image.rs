@@ -34,7 +34,7 @@ pub fn before_an_erase(
             )
             .map_err(|e| e.to_string())?;
             embassy_futures::block_on(store.save(&saved)).map_err(|e| e.to_string())?;
-            flash = store.into_flash();
+            flash = store.into_flash().ok_or("the store lost its flash")?;
             if start.compare_to(flash.stats_snapshot()).erases > 0 {
                 let last = last.ok_or("the first save already erased")?;
                 return Ok((before, last, i));

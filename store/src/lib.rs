@@ -7,6 +7,10 @@
 //! when it reclaims a page; a queue would need the reader to skip to its last item and the
 //! writer to pop old ones, two steps a cut could separate.
 //!
+//! The board can wrap the flash in [`Hooks`]: work after every erase (the F446 flushes its flash
+//! caches, which an erase leaves stale) and a verdict on every read (the G474 refuses bytes a
+//! double ECC error was reported in), two things sequential-storage cannot see.
+//!
 //! The item is `FORMAT ‖ postcard(scene_id, Config)`. A stored item of another format, or one
 //! that does not decode, is reported, never returned: the caller boots the default scene. A
 //! decoded scene is not checked here; the caller compiles it and falls back to the default if
@@ -16,7 +20,9 @@
 
 use core::ops::Range;
 
-use embedded_storage_async::nor_flash::NorFlash;
+use embedded_storage_async::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
 use saw_core::scene::Config;
 use sequential_storage::cache::key_pointers::ArrayKeyPointers;
 use sequential_storage::cache::{Cache, Uncached};
@@ -60,6 +66,9 @@ pub enum StoreError {
     Undecodable,
     /// The scene does not fit an item.
     TooLarge,
+    /// The board reported bytes read from the store as corrupted (on the G474, a double ECC
+    /// error: a write cut by a power loss); erase the store to recover.
+    Unreadable,
 }
 
 impl core::fmt::Display for StoreError {
@@ -85,6 +94,10 @@ impl core::fmt::Display for StoreError {
                 f,
                 "the scene does not fit the store's {ITEM_BYTES}-byte item"
             ),
+            StoreError::Unreadable => write!(
+                f,
+                "the flash reported bytes read from the store as corrupted (ECC)"
+            ),
         }
     }
 }
@@ -99,14 +112,102 @@ impl From<StoreError> for saw_link::msg::StoreFault {
     }
 }
 
-fn from_ss<E>(e: sequential_storage::Error<E>) -> StoreError {
+fn from_ss<E>(e: sequential_storage::Error<HookedError<E>>) -> StoreError {
     match e {
+        sequential_storage::Error::Storage {
+            value: HookedError::Corrupted,
+            ..
+        } => StoreError::Unreadable,
         sequential_storage::Error::Corrupted { .. }
         | sequential_storage::Error::LogicBug { .. } => StoreError::Corrupted,
         sequential_storage::Error::BufferTooSmall(_)
         | sequential_storage::Error::ItemTooBig
         | sequential_storage::Error::SerializationError(_) => StoreError::TooLarge,
         _ => StoreError::Flash,
+    }
+}
+
+/// What the board does around the store's flash operations.
+#[derive(Clone, Copy, Debug)]
+pub struct Hooks {
+    /// Runs after every erase, whether it succeeded or not (the F446 flushes its ART caches
+    /// here: a line cached before the erase would otherwise still read the old bytes).
+    pub after_erase: fn(),
+    /// Runs after every successful read with the range read (offset in the flash, length in
+    /// bytes): true if those bytes cannot be trusted, and the read then fails with
+    /// [`StoreError::Unreadable`] (the G474: a double ECC error was reported inside them).
+    pub read_corrupted: fn(u32, usize) -> bool,
+}
+
+impl Hooks {
+    /// Nothing after an erase, every read trusted.
+    pub const NONE: Hooks = Hooks {
+        after_erase: || {},
+        read_corrupted: |_, _| false,
+    };
+}
+
+/// The flash with the board's [`Hooks`] around it: what sequential-storage reads, writes and
+/// erases.
+pub struct HookedFlash<F> {
+    flash: F,
+    hooks: Hooks,
+}
+
+/// A flash error, or bytes the board reported as corrupted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HookedError<E> {
+    Flash(E),
+    Corrupted,
+}
+
+impl<E: NorFlashError> NorFlashError for HookedError<E> {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            HookedError::Flash(e) => e.kind(),
+            HookedError::Corrupted => NorFlashErrorKind::Other,
+        }
+    }
+}
+
+impl<F: NorFlash> ErrorType for HookedFlash<F> {
+    type Error = HookedError<F::Error>;
+}
+
+impl<F: NorFlash> ReadNorFlash for HookedFlash<F> {
+    const READ_SIZE: usize = F::READ_SIZE;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.flash
+            .read(offset, bytes)
+            .await
+            .map_err(HookedError::Flash)?;
+        if (self.hooks.read_corrupted)(offset, bytes.len()) {
+            return Err(HookedError::Corrupted);
+        }
+        Ok(())
+    }
+
+    fn capacity(&self) -> usize {
+        self.flash.capacity()
+    }
+}
+
+impl<F: NorFlash> NorFlash for HookedFlash<F> {
+    const WRITE_SIZE: usize = F::WRITE_SIZE;
+    const ERASE_SIZE: usize = F::ERASE_SIZE;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        let r = self.flash.erase(from, to).await;
+        (self.hooks.after_erase)();
+        r.map_err(HookedError::Flash)
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.flash
+            .write(offset, bytes)
+            .await
+            .map_err(HookedError::Flash)
     }
 }
 
@@ -118,31 +219,58 @@ type KeyCache = Cache<Uncached, Uncached, ArrayKeyPointers<u8, 1>, u8>;
 
 /// The scene store over `flash`, in `range` (offsets in `flash`).
 pub struct SceneStore<F: NorFlash> {
-    map: MapStorage<u8, F, KeyCache>,
+    /// Always `Some` between calls: `erase` takes it apart to start the map afresh.
+    map: Option<MapStorage<u8, HookedFlash<F>, KeyCache>>,
+    range: Range<u32>,
     buf: [u8; ITEM_BYTES],
+}
+
+fn map_over<F: NorFlash>(
+    flash: HookedFlash<F>,
+    range: Range<u32>,
+) -> Result<MapStorage<u8, HookedFlash<F>, KeyCache>, StoreError> {
+    let config = MapConfig::try_new(range).map_err(|_| StoreError::BadRange)?;
+    Ok(MapStorage::new(
+        flash,
+        config,
+        Cache::new(Uncached, Uncached, ArrayKeyPointers::new()),
+    ))
 }
 
 impl<F: NorFlash> SceneStore<F> {
     /// A store over `range` of `flash`: whole erase units, at least two.
     pub fn new(flash: F, range: Range<u32>) -> Result<Self, StoreError> {
-        let config = MapConfig::try_new(range).map_err(|_| StoreError::BadRange)?;
+        Self::with_hooks(flash, range, Hooks::NONE)
+    }
+
+    /// The same, with the board's `hooks` around every read and erase.
+    pub fn with_hooks(flash: F, range: Range<u32>, hooks: Hooks) -> Result<Self, StoreError> {
         Ok(Self {
-            map: MapStorage::new(
-                flash,
-                config,
-                Cache::new(Uncached, Uncached, ArrayKeyPointers::new()),
-            ),
+            map: Some(map_over(HookedFlash { flash, hooks }, range.clone())?),
+            range,
             buf: [0; ITEM_BYTES],
+        })
+    }
+
+    /// Erases the whole store (a corrupted one's recovery): nothing is saved afterwards. The map
+    /// starts afresh, as at boot: its cache pointed into what was erased.
+    pub async fn erase(&mut self) -> Result<(), StoreError> {
+        let map = self.map.take().ok_or(StoreError::Corrupted)?;
+        let (mut flash, _stale) = map.destroy();
+        let r = flash.erase(self.range.start, self.range.end).await;
+        self.map = Some(map_over(flash, self.range.clone())?);
+        r.map_err(|e| match e {
+            HookedError::Corrupted => StoreError::Unreadable,
+            HookedError::Flash(_) => StoreError::Flash,
         })
     }
 
     /// The saved scene; `None` when nothing was ever saved (or the flash is erased).
     pub async fn load(&mut self) -> Result<Option<Saved>, StoreError> {
-        let item: Option<&[u8]> = self
-            .map
-            .fetch_item(&mut self.buf, &KEY)
-            .await
-            .map_err(from_ss)?;
+        let Some(map) = self.map.as_mut() else {
+            return Err(StoreError::Corrupted);
+        };
+        let item: Option<&[u8]> = map.fetch_item(&mut self.buf, &KEY).await.map_err(from_ss)?;
         let Some(bytes) = item else { return Ok(None) };
         let (&format, body) = bytes.split_first().ok_or(StoreError::Undecodable)?;
         if format != FORMAT {
@@ -161,14 +289,17 @@ impl<F: NorFlash> SceneStore<F> {
             .map_err(|_| StoreError::TooLarge)?
             .len();
         let value: &[u8] = &item[..1 + n];
-        self.map
-            .store_item(&mut self.buf, &KEY, &value)
+        let Some(map) = self.map.as_mut() else {
+            return Err(StoreError::Corrupted);
+        };
+        map.store_item(&mut self.buf, &KEY, &value)
             .await
             .map_err(from_ss)
     }
 
-    /// The flash back (tests: "reboot" by building a new store over it).
-    pub fn into_flash(self) -> F {
-        self.map.destroy().0
+    /// The flash back (tests: "reboot" by building a new store over it); None only after an
+    /// `erase` that was dropped half way.
+    pub fn into_flash(self) -> Option<F> {
+        self.map.map(|m| m.destroy().0.flash)
     }
 }

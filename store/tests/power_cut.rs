@@ -58,7 +58,7 @@ fn every_scene_file_round_trips() {
         block_on(store.save(&s)).unwrap();
         assert_eq!(block_on(store.load()), Ok(Some(s.clone())));
         // And after a reboot.
-        let mut again = SceneStore::new(store.into_flash(), RANGE).unwrap();
+        let mut again = SceneStore::new(store.into_flash().unwrap(), RANGE).unwrap();
         assert_eq!(block_on(again.load()), Ok(Some(s)));
         store = again;
     }
@@ -89,13 +89,13 @@ fn cut_at(
     flash.bytes_until_shutoff = Some(cut);
     let mut store = SceneStore::new(flash, SMALL).unwrap();
     let result = block_on(store.save(next));
-    let mut flash = store.into_flash();
+    let mut flash = store.into_flash().unwrap();
     let finished = flash.bytes_until_shutoff.is_some();
     assert_eq!(result.is_ok(), finished, "cut {cut}: {result:?}");
     flash.bytes_until_shutoff = None;
     let mut rebooted = SceneStore::new(flash, SMALL).unwrap();
     let loaded = block_on(rebooted.load());
-    (loaded, finished, rebooted.into_flash())
+    (loaded, finished, rebooted.into_flash().unwrap())
 }
 
 /// Saves A, then (`history` more saves to push the store towards a page change), then B with
@@ -111,7 +111,7 @@ fn cut_everywhere(history: usize) -> u32 {
         old = saved(1 + h as u32, scenes[(1 + h) % scenes.len()].clone());
         block_on(store.save(&old)).unwrap();
     }
-    let base = store.into_flash();
+    let base = store.into_flash().unwrap();
     let next = saved(999, scenes[scenes.len() - 1].clone());
     let mut cut = 0;
     loop {
