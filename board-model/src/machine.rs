@@ -512,6 +512,10 @@ impl Sim {
         }
         if i == self.chip.flash_if {
             self.art = (self.chip.flash_timing)(&*self.periphs[i].p);
+            // The F446's data cache follows FLASH_ACR's DCEN and DCRST (`DataCache`).
+            if let Ok(acr) = self.periphs[i].p.read(now, 0, &mut self.sig) {
+                (self.chip.flash_prog)(&mut *self.periphs[i].p).on_acr(acr);
+            }
         }
         if self.chip.pins.iter().any(|p| p.port == i) {
             self.update_pins(now);
@@ -555,6 +559,49 @@ impl Sim {
         }
         let lines = (bytes as u64).div_ceil(16).max(1);
         (insns as u64).max(lines * (ws as u64 + 1))
+    }
+}
+
+/// A CPU data read of `size` bytes of flash at `addr`, before the load happens: the G474's ECC
+/// check (a double error pends the NMI, RM0440 §5.7.7) and the F446's data cache (RM0390
+/// §3.4.2). Lines whose cached bytes differ from the array's are written over the array for
+/// the load; `stale` keeps the array's bytes for the after-read hook to put back.
+fn flash_data_read(
+    uc: &mut Unicorn<'_, Sim>,
+    addr: u32,
+    size: u32,
+    stale: &mut Vec<(u32, [u8; 16])>,
+) {
+    use crate::periph::flash_prog::DataCache;
+    let s = uc.get_data_mut();
+    let fi = s.chip.flash_if;
+    let prog = (s.chip.flash_prog)(&mut *s.periphs[fi].p);
+    if prog.ecc_read(addr, size) {
+        s.scs.set_pending(exc::NMI);
+        s.replan = true;
+    }
+    let prog = (s.chip.flash_prog)(&mut *s.periphs[fi].p);
+    if !prog.data_cache().is_some_and(|c| c.enabled()) {
+        return;
+    }
+    let first = addr & !(DataCache::LINE_BYTES - 1);
+    let last = (addr + size.max(1) - 1) & !(DataCache::LINE_BYTES - 1);
+    let mut line = first;
+    while line <= last {
+        let mut array = [0u8; 16];
+        if uc.mem_read(line as u64, &mut array).is_err() {
+            return;
+        }
+        let s = uc.get_data_mut();
+        let prog = (s.chip.flash_prog)(&mut *s.periphs[fi].p);
+        let Some(cache) = prog.data_cache() else {
+            return;
+        };
+        let served = cache.read(line, array);
+        if served != array && uc.mem_write(line as u64, &served).is_ok() {
+            stale.push((line, array));
+        }
+        line += DataCache::LINE_BYTES;
     }
 }
 
@@ -721,6 +768,42 @@ impl Machine {
                         false
                     }
                 }
+            },
+        )
+        .map_err(uc_err)?;
+        // A CPU data read of flash (`flash_prog`): on the G474 a double word with a bad ECC
+        // raises ECCD and the NMI; on the F446 the read is served through the ART data cache,
+        // whose line may hold bytes an erase has since changed — those are put in place for
+        // this one load (the hook runs before it) and the array's put back right after it.
+        let stale: std::rc::Rc<std::cell::RefCell<Vec<(u32, [u8; 16])>>> = Default::default();
+        let put_back = stale.clone();
+        uc.add_mem_hook(
+            unicorn_engine::unicorn_const::HookType::MEM_READ,
+            flash_base as u64,
+            (flash_base + flash_size - 1) as u64,
+            move |uc: &mut Unicorn<'_, Sim>,
+                  _kind: unicorn_engine::unicorn_const::MemType,
+                  addr: u64,
+                  size: usize,
+                  _value: i64| {
+                flash_data_read(uc, addr as u32, size as u32, &mut stale.borrow_mut());
+                true
+            },
+        )
+        .map_err(uc_err)?;
+        uc.add_mem_hook(
+            unicorn_engine::unicorn_const::HookType::MEM_READ_AFTER,
+            flash_base as u64,
+            (flash_base + flash_size - 1) as u64,
+            move |uc: &mut Unicorn<'_, Sim>,
+                  _kind: unicorn_engine::unicorn_const::MemType,
+                  _addr: u64,
+                  _size: usize,
+                  _value: i64| {
+                for (line, bytes) in put_back.borrow_mut().drain(..) {
+                    let _ = uc.mem_write(line as u64, &bytes);
+                }
+                true
             },
         )
         .map_err(uc_err)?;

@@ -37,6 +37,30 @@
 //! - SR: EOP, OPERR, PROGERR, WRPERR, PGAERR, SIZERR, PGSERR, MISERR, FASTERR (w1c), BSY.
 //! - Read-while-write: an operation on one bank stalls fetches from that bank only (§5.3).
 //!
+//! F446 ART data cache (RM0390 §3.4.2 "Data management", §3.8.1 FLASH_ACR), in `DataCache`:
+//! CPU data reads of flash (literal pools, constants, the store's bytes) go through 8 lines of
+//! 128 bits, filled on a miss, least recently used replaced ("works like the instruction cache
+//! memory", whose replacement the section names LRU). The cache has no coherency logic with
+//! the flash array: an erase leaves a cached line holding the old bytes, which the CPU reads
+//! until DCRST empties the cache (DCRST acts only while DCEN = 0; ST's HAL flushes after every
+//! erase for this reason, `FLASH_FlushCaches`). While DCEN = 0 reads bypass it (nothing hit,
+//! nothing filled); turning DCEN on again without DCRST finds the old lines. A program updates
+//! a cached copy of its row (an assumption: the manual says nothing; ST's HAL flushes only after
+//! erases, and ST's F4 EEPROM emulation reads back words it just programmed with the cache on).
+//! A system reset empties it (an assumption; the firmware resets it at boot anyway). DMA reads
+//! of flash do not pass through it. The G474's data cache (RM0440 §5.3.4) is not modelled.
+//!
+//! G474 ECC (RM0440 §5.3.2 "Error code correction (ECC)", §5.7.7 FLASH_ECCR): every double word
+//! carries 8 ECC bits. A double word whose program or erase was cut by a power loss is marked
+//! bad (`mark_ecc_bad`; the model's runs never cut power themselves, the checks build such a
+//! flash); a CPU data read of it sets ECCR.ECCD with ADDR_ECC (the double word's byte offset in
+//! its bank) and BK_ECC, and the NMI is pended (`Prog::ecc_read`). ECCD is write 1 to clear;
+//! "set only if ECCC and ECCD were previously cleared": a second error while ECCD stands is not
+//! recorded and raises no second NMI (the manual ties the NMI to the flag being set). The marks
+//! belong to the array: kept across a system reset, cleared by an erase of their page and by
+//! programming the double word to all zeros (a valid code word). Single errors (ECCC) are never
+//! made. The F446 has no flash ECC.
+//!
 //! Durations are the datasheets' typical figures, named here as the model's assumptions (a
 //! review against DS10693 / DS12288 is owed): F446 word program 16 µs, 128 KiB sector erase
 //! 1 s, 64 KiB 550 ms, 16 KiB 250 ms (×32 parallelism); G474 double-word program 82 µs, 2 KiB
@@ -109,7 +133,89 @@ pub struct Operation {
     pub end: Time,
     pub erase: bool,
     pub addr: u32,
+    /// Bytes the operation covers: the erased range, or the programmed unit (F446: the word
+    /// PSIZE selects, G474: 8).
+    pub bytes: u32,
+    /// A program's value as stored (little-endian, `bytes` of it); 0 for an erase. On the F446
+    /// the cells become old AND value; on the G474 the value (into erased cells).
+    pub value: u64,
 }
+
+/// FLASH_ACR bits of the caches, the same on both chips (RM0390 §3.8.1, RM0440 §5.7.1).
+pub const ACR_DCEN: u32 = 1 << 10;
+pub const ACR_DCRST: u32 = 1 << 12;
+
+/// The F446 ART accelerator's data cache (see the module doc): 8 lines of 128 bits.
+#[derive(Clone, Debug, Default)]
+pub struct DataCache {
+    /// Cached lines (line address, bytes), least recently used first.
+    lines: Vec<(u32, [u8; 16])>,
+    /// FLASH_ACR.DCEN.
+    enabled: bool,
+}
+
+impl DataCache {
+    /// RM0390 §3.4.2: "limited to 8 rows of 128 bits".
+    pub const LINES: usize = 8;
+    pub const LINE_BYTES: u32 = 16;
+
+    /// A FLASH_ACR value just written: DCEN, and DCRST with DCEN = 0 empties the cache
+    /// (RM0390 §3.8.1: DCRST "can be written only when the D cache is disabled"; the flash
+    /// interface model refuses it otherwise).
+    pub fn on_acr(&mut self, acr: u32) {
+        self.enabled = acr & ACR_DCEN != 0;
+        if acr & ACR_DCRST != 0 && !self.enabled {
+            self.lines.clear();
+        }
+    }
+
+    pub fn enabled(&self) -> bool {
+        self.enabled
+    }
+
+    /// A CPU data read touching the line at `line_addr`, whose cells hold `array`: the bytes the
+    /// read sees. A hit returns the cached copy (and makes it the most recently used); a miss
+    /// fills a line (replacing the least recently used) with the array's bytes. With DCEN = 0
+    /// the array's bytes, the cache untouched.
+    pub fn read(&mut self, line_addr: u32, array: [u8; 16]) -> [u8; 16] {
+        if !self.enabled {
+            return array;
+        }
+        if let Some(i) = self.lines.iter().position(|l| l.0 == line_addr) {
+            let line = self.lines.remove(i);
+            self.lines.push(line);
+            return line.1;
+        }
+        if self.lines.len() == Self::LINES {
+            self.lines.remove(0);
+        }
+        self.lines.push((line_addr, array));
+        array
+    }
+
+    /// A program wrote `new` (the cells' content afterwards) at `addr`: a cached copy of its
+    /// row follows (see the module doc for why this is assumed).
+    pub fn on_program(&mut self, addr: u32, new: &[u8]) {
+        for (i, b) in new.iter().enumerate() {
+            let a = addr + i as u32;
+            let line = a & !(Self::LINE_BYTES - 1);
+            if let Some(l) = self.lines.iter_mut().find(|l| l.0 == line) {
+                l.1[(a - line) as usize] = *b;
+            }
+        }
+    }
+}
+
+/// G474 FLASH_ECCR (RM0440 §5.7.7): offset and fields.
+pub const G4_ECCR: u32 = 0x18;
+pub const ECCR_ADDR_ECC: u32 = 0x7_FFFF;
+pub const ECCR_BK_ECC: u32 = 1 << 21;
+pub const ECCR_SYSF_ECC: u32 = 1 << 22;
+pub const ECCR_ECCCIE: u32 = 1 << 24;
+pub const ECCR_ECCC2: u32 = 1 << 28;
+pub const ECCR_ECCD2: u32 = 1 << 29;
+pub const ECCR_ECCC: u32 = 1 << 30;
+pub const ECCR_ECCD: u32 = 1 << 31;
 
 /// The programming registers and operation state of one chip's flash interface.
 #[derive(Clone, Debug)]
@@ -125,6 +231,14 @@ pub struct Prog {
     half: Option<(u32, u32, u32)>,
     erases: Vec<(u32, u32)>,
     ops: Vec<Operation>,
+    /// F446: the ART data cache (None on the G474: not modelled).
+    dcache: Option<DataCache>,
+    /// G474: double words (8-aligned addresses) whose ECC does not match their data.
+    ecc_bad: std::collections::BTreeSet<u32>,
+    /// G474: FLASH_ECCR.
+    eccr: u32,
+    /// G474: double ECC errors detected (ECCD set), since construction.
+    ecc_detections: u32,
 }
 
 fn ticks_us(us: u64) -> Time {
@@ -145,15 +259,80 @@ impl Prog {
             half: None,
             erases: Vec::new(),
             ops: Vec::new(),
+            dcache: (kind == Kind::F446).then(DataCache::default),
+            ecc_bad: Default::default(),
+            ecc_detections: 0,
+            eccr: 0,
         }
     }
 
     pub fn reset(&mut self) {
         let ops = std::mem::take(&mut self.ops);
+        let ecc_bad = std::mem::take(&mut self.ecc_bad);
+        let detections = self.ecc_detections;
         *self = Prog::new(self.kind);
         // An operation cut by the reset is not modelled (the flash's content would be
-        // undefined); the history is kept for the checks.
+        // undefined); the history is kept for the checks. ECC marks are the array's: they stay.
         self.ops = ops;
+        self.ecc_bad = ecc_bad;
+        self.ecc_detections = detections;
+    }
+
+    /// A FLASH_ACR value the firmware just wrote (the data cache follows DCEN and DCRST).
+    pub fn on_acr(&mut self, acr: u32) {
+        if let Some(c) = &mut self.dcache {
+            c.on_acr(acr);
+        }
+    }
+
+    /// The F446's data cache, if this chip's is modelled.
+    pub fn data_cache(&mut self) -> Option<&mut DataCache> {
+        self.dcache.as_mut()
+    }
+
+    /// G474: marks the double word at `addr` (rounded down to 8) as carrying a bad ECC, as a
+    /// program or erase cut by a power loss leaves it. Ignored on the F446 (no flash ECC).
+    pub fn mark_ecc_bad(&mut self, addr: u32) {
+        if self.kind == Kind::G474 {
+            self.ecc_bad.insert(addr & !7);
+        }
+    }
+
+    /// Whether any double word of `addr..addr + bytes` carries a bad ECC.
+    pub fn ecc_bad_in(&self, addr: u32, bytes: u32) -> bool {
+        self.ecc_bad
+            .range(addr & !7..addr.saturating_add(bytes))
+            .next()
+            .is_some()
+    }
+
+    /// A CPU data read of `bytes` at `addr`: true if it hit a double word with a bad ECC and
+    /// raised a double ECC error, which pends the NMI (RM0440 §5.7.7 ECCD: "When this bit is
+    /// set, a NMI is generated"). ECCR records the first error until ECCD is cleared.
+    pub fn ecc_read(&mut self, addr: u32, bytes: u32) -> bool {
+        let Some(&dw) = self
+            .ecc_bad
+            .range(addr & !7..addr.saturating_add(bytes))
+            .next()
+        else {
+            return false;
+        };
+        if self.eccr & (ECCR_ECCD | ECCR_ECCC) != 0 {
+            return false;
+        }
+        let (base, bk) = if self.bank_of(dw) == 2 {
+            (0x0804_0000, ECCR_BK_ECC)
+        } else {
+            (0x0800_0000, 0)
+        };
+        self.eccr = (self.eccr & ECCR_ECCCIE) | ECCR_ECCD | bk | ((dw - base) & ECCR_ADDR_ECC);
+        self.ecc_detections += 1;
+        true
+    }
+
+    /// Double ECC errors detected so far (each pended an NMI).
+    pub fn ecc_detections(&self) -> u32 {
+        self.ecc_detections
     }
 
     fn bank_of(&self, addr: u32) -> u8 {
@@ -217,6 +396,7 @@ impl Prog {
             F4_OPTCR if self.kind == Kind::F446 => Some(0x0FFF_AAED),
             // G474 FLASH_OPTR (RM0440 §5.7.8), the factory value 0xFFEF_F8AA: DBANK (bit 22) = 1.
             G4_OPTR if self.kind == Kind::G474 => Some(0xFFEF_F8AA),
+            G4_ECCR if self.kind == Kind::G474 => Some(self.eccr),
             _ => None,
         }
     }
@@ -245,6 +425,16 @@ impl Prog {
                         "FLASH_KEYR: 0x{v:08X} out of the unlock sequence (a bus error that locks FLASH_CR until reset)"
                     ))
                 }
+            }
+            return Ok(true);
+        }
+        if self.kind == Kind::G474 && offset == G4_ECCR {
+            // ECCD, ECCC (and the ECCD2/ECCC2 the model never sets) are write 1 to clear;
+            // ECCCIE is read/write; the address fields are read-only (RM0440 §5.7.7).
+            let w1c = ECCR_ECCD | ECCR_ECCC | ECCR_ECCD2 | ECCR_ECCC2;
+            self.eccr &= !(v & w1c);
+            if mask & ECCR_ECCCIE != 0 {
+                self.eccr = (self.eccr & !ECCR_ECCCIE) | (v & ECCR_ECCCIE);
             }
             return Ok(true);
         }
@@ -320,11 +510,18 @@ impl Prog {
             bank: self.bank_of(addr),
         });
         self.erases.push((addr, bytes));
+        // An erase gives every double word of its range a valid code word again.
+        let marked: Vec<u32> = self.ecc_bad.range(addr..addr + bytes).copied().collect();
+        for a in marked {
+            self.ecc_bad.remove(&a);
+        }
         self.ops.push(Operation {
             start: now,
             end,
             erase: true,
             addr,
+            bytes,
+            value: 0,
         });
         Ok(())
     }
@@ -379,8 +576,14 @@ impl Prog {
                     end,
                     erase: false,
                     addr,
+                    bytes: u32::from(size),
+                    value: u64::from(value),
                 });
-                Ok(vec![(addr, old & value)])
+                let new = old & value;
+                if let Some(c) = &mut self.dcache {
+                    c.on_program(addr, &new.to_le_bytes()[..usize::from(size)]);
+                }
+                Ok(vec![(addr, new)])
             }
             Kind::G474 => {
                 // An error flag left from an earlier program blocks the next: PGSERR (RM0440
@@ -402,10 +605,16 @@ impl Prog {
                     Some((first, first_value, first_old)) if addr == first + 4 => {
                         // ECC: a double word is programmed only into erased cells, except all
                         // zeros, which may be written over anything (RM0440 §5.7.5, PROGERR).
-                        let erased = first_old == 0xFFFF_FFFF && old == 0xFFFF_FFFF;
+                        // A double word with a bad ECC is not erased, whatever its data bits read.
+                        let erased = first_old == 0xFFFF_FFFF
+                            && old == 0xFFFF_FFFF
+                            && !self.ecc_bad.contains(&first);
                         if !erased && (first_value, value) != (0, 0) {
                             return self.program_error(G4_PROGERR);
                         }
+                        // Programmed: into erased cells (never marked), or all zeros, a valid
+                        // code word over anything: the double word's ECC is good either way.
+                        self.ecc_bad.remove(&first);
                         let end = now + ticks_us(82);
                         self.busy = Some(Busy {
                             until: end,
@@ -416,6 +625,8 @@ impl Prog {
                             end,
                             erase: false,
                             addr: first,
+                            bytes: 8,
+                            value: u64::from(first_value) | u64::from(value) << 32,
                         });
                         Ok(vec![(first, first_value), (addr, value)])
                     }
@@ -568,5 +779,131 @@ mod tests {
             .unwrap();
         assert_eq!(p.take_erases(), vec![(0x0807_C000, 0x800)]);
         assert_eq!(p.next_event(), Some(ticks_us(22_000)));
+    }
+
+    /// RM0390 §3.4.2: lines filled on read and kept by an erase, so the CPU reads the erased
+    /// row's old bytes; DCRST with DCEN = 0 empties the cache (§3.8.1), after which the row
+    /// reads 0xFF. Turning DCEN off and on without DCRST keeps the stale line.
+    #[test]
+    fn f446_data_cache_is_stale_after_an_erase_until_dcrst() {
+        let line = 0x0804_0000;
+        let mut c = DataCache::default();
+        c.on_acr(ACR_DCEN);
+        assert_eq!(
+            c.read(line, [0x11; 16]),
+            [0x11; 16],
+            "a miss reads the array"
+        );
+        // The sector erased: the array now holds 0xFF, the cache its copy.
+        assert_eq!(
+            c.read(line, [0xFF; 16]),
+            [0x11; 16],
+            "stale after the erase"
+        );
+        c.on_acr(0);
+        assert_eq!(c.read(line, [0xFF; 16]), [0xFF; 16], "DCEN = 0 bypasses");
+        c.on_acr(ACR_DCEN);
+        assert_eq!(
+            c.read(line, [0xFF; 16]),
+            [0x11; 16],
+            "re-enabled without DCRST"
+        );
+        // The flush as RM0390 §3.8.1 allows it: DCEN off, DCRST set and cleared, DCEN on.
+        c.on_acr(0);
+        c.on_acr(ACR_DCRST);
+        c.on_acr(0);
+        c.on_acr(ACR_DCEN);
+        assert_eq!(c.read(line, [0xFF; 16]), [0xFF; 16], "fresh after DCRST");
+    }
+
+    /// Eight lines, least recently used replaced: a ninth line read evicts the oldest, which then
+    /// reads the array again; one read just before stays.
+    #[test]
+    fn f446_data_cache_holds_eight_lines_and_replaces_the_least_recently_used() {
+        let mut c = DataCache::default();
+        c.on_acr(ACR_DCEN);
+        for i in 0..8u32 {
+            c.read(0x0800_0000 + 16 * i, [i as u8; 16]);
+        }
+        // Line 0 used again: line 1 is now the least recently used.
+        assert_eq!(c.read(0x0800_0000, [0xEE; 16]), [0; 16]);
+        c.read(0x0800_1000, [0x99; 16]);
+        assert_eq!(
+            c.read(0x0800_0010, [0xEE; 16]),
+            [0xEE; 16],
+            "line 1 evicted"
+        );
+        assert_eq!(c.read(0x0800_0000, [0xEE; 16]), [0; 16], "line 0 kept");
+        // DCEN = 0: nothing is filled.
+        c.on_acr(0);
+        c.read(0x0800_2000, [0x55; 16]);
+        c.on_acr(ACR_DCEN);
+        assert_eq!(c.read(0x0800_2000, [0x66; 16]), [0x66; 16]);
+    }
+
+    /// A program through the interface updates a cached copy of its row (the model's
+    /// assumption, see the module doc): the word reads back as programmed.
+    #[test]
+    fn f446_program_updates_the_cached_row() {
+        let mut p = unlocked(Kind::F446);
+        p.on_acr(ACR_DCEN | 5);
+        let line = 0x0804_0010;
+        p.data_cache().unwrap().read(line, [0xFF; 16]);
+        p.write(0, F4_CR, CR_PG | (2 << 8), !0).unwrap();
+        p.store(0, 0x0804_0014, 4, 0x1234_5678, !0).unwrap();
+        let mut want = [0xFF; 16];
+        want[4..8].copy_from_slice(&[0x78, 0x56, 0x34, 0x12]);
+        assert_eq!(p.data_cache().unwrap().read(line, [0xAA; 16]), want);
+        assert!(Prog::new(Kind::G474).data_cache().is_none());
+    }
+
+    /// RM0440 §5.7.7: a read of a double word with a bad ECC sets ECCD, BK_ECC and ADDR_ECC (its
+    /// offset in bank 2: 0x0807_C008 − 0x0804_0000 = 0x3_C008) and raises the NMI once; a second
+    /// error while ECCD stands records nothing; ECCD is write 1 to clear; the mark survives a
+    /// reset and goes with an erase of its page or a program of zeros.
+    #[test]
+    fn g474_a_read_of_a_bad_ecc_double_word_sets_eccd_once_until_cleared() {
+        let mut p = unlocked(Kind::G474);
+        p.mark_ecc_bad(0x0807_C00C);
+        assert!(
+            !p.ecc_read(0x0807_C004, 4),
+            "the double word before is good"
+        );
+        assert!(p.ecc_read(0x0807_C00C, 4));
+        assert_eq!(p.read(G4_ECCR), Some(0x8023_C008));
+        assert!(!p.ecc_read(0x0807_C008, 1), "ECCD still set: no second NMI");
+        assert_eq!(p.ecc_detections(), 1);
+        // Writing 0 changes nothing; writing 1 to ECCD clears it.
+        p.write(0, G4_ECCR, 0, !0).unwrap();
+        assert_eq!(p.read(G4_ECCR).unwrap() & ECCR_ECCD, ECCR_ECCD);
+        p.write(0, G4_ECCR, ECCR_ECCD, !0).unwrap();
+        assert_eq!(p.read(G4_ECCR).unwrap() & ECCR_ECCD, 0);
+        // The mark is the array's: still there after a reset (ECCR back to 0).
+        p.reset();
+        assert_eq!(p.read(G4_ECCR), Some(0));
+        assert!(p.ecc_read(0x0807_C008, 8));
+        p.write(0, G4_ECCR, ECCR_ECCD, !0).unwrap();
+        // Not erased: a program of data is refused (PROGERR); zeros are a valid code word.
+        let mut p2 = unlocked(Kind::G474);
+        p2.mark_ecc_bad(0x0807_C008);
+        p2.write(0, G4_CR, CR_PG, !0).unwrap();
+        p2.store(0, 0x0807_C008, 4, 5, !0).unwrap();
+        p2.store(0, 0x0807_C00C, 4, 6, !0).unwrap();
+        assert_ne!(p2.read(G4_SR).unwrap() & G4_PROGERR, 0);
+        p2.write(0, G4_SR, G4_PROGERR, !0).unwrap();
+        p2.store(0, 0x0807_C008, 4, 0, !0).unwrap();
+        p2.store(0, 0x0807_C00C, 4, 0, !0).unwrap();
+        assert!(!p2.ecc_bad_in(0x0807_C008, 8), "zeros programmed: good ECC");
+        // An erase of the page (bank 2, page 120 = 0x0807_C000) clears its marks (CR locked
+        // again by the reset: unlocked first).
+        p.write(0, G4_KEYR, KEY1, !0).unwrap();
+        p.write(0, G4_KEYR, KEY2, !0).unwrap();
+        p.write(0, G4_CR, CR_SER_PER | (120 << 3) | G4_CR_BKER | CR_STRT, !0)
+            .unwrap();
+        assert!(!p.ecc_read(0x0807_C008, 8));
+        // The F446 has no flash ECC.
+        let mut f = Prog::new(Kind::F446);
+        f.mark_ecc_bad(0x0804_0000);
+        assert!(!f.ecc_read(0x0804_0000, 4));
     }
 }
