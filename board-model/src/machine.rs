@@ -151,6 +151,11 @@ pub struct Sim {
     pub sleeping_ticks: Time,
     /// RTT bytes written by the firmware but not yet drained, as of the last peripheral write.
     rtt_pending: usize,
+    /// The RTT host as `probe-rs run` is: it sets the up channel to block-when-full
+    /// (SEGGER_RTT_MODE_BLOCK_IF_FIFO_FULL = 2 in the descriptor's flags) each time it reads.
+    pub rtt_host_blocking: bool,
+    /// The RTT host stopped reading (a stalled or killed `probe-rs`): nothing is drained.
+    pub rtt_host_stalled: bool,
     /// IRQ lines held high by a fault injection (an interrupt storm).
     pub stuck_irqs: Vec<u16>,
     /// Times of DMA reads from peripheral registers (ADC results reaching memory).
@@ -689,6 +694,8 @@ impl Machine {
             exceptions_taken: 0,
             sleeping_ticks: 0,
             rtt_pending: 0,
+            rtt_host_blocking: false,
+            rtt_host_stalled: false,
             stuck_irqs: Vec::new(),
             dma_reads: Vec::new(),
             ram_copies: Vec::new(),
@@ -1545,11 +1552,19 @@ impl Machine {
         let Some(cb) = self.uc.get_data().rtt else {
             return;
         };
+        if self.uc.get_data().rtt_host_stalled {
+            return;
+        }
         let mut d = [0u8; 24];
         if self.uc.mem_read(cb as u64 + 24, &mut d).is_err() {
             return;
         }
         let w = |i: usize| u32::from_le_bytes(d[i..i + 4].try_into().unwrap());
+        if self.uc.get_data().rtt_host_blocking && w(4) != 0 {
+            // probe-rs's RTT attach: flags' mode bits (1:0) = 2, block if full.
+            let flags = (w(20) & !3) | 2;
+            let _ = self.uc.mem_write(cb as u64 + 24 + 20, &flags.to_le_bytes());
+        }
         let (buf, size, write, read) = (w(4), w(8), w(12), w(16));
         if buf == 0 || size == 0 || write >= size || read >= size || write == read {
             return;

@@ -35,6 +35,19 @@ pub struct Options {
     /// call site of the image (`movw/movt r0, &Location; bl panic_const_div_by_zero`): the
     /// firmware's own panic machinery runs from there, as after a division by zero.
     pub force_panic_s: Option<f64>,
+    /// At this virtual time (s), the NMI is made pending (NMIPENDSET), as a flash double-ECC
+    /// error or any other NMI source would.
+    pub nmi_s: Option<f64>,
+    /// At this virtual time (s), this IRQ — one the firmware binds no handler to — is enabled
+    /// and made pending: the image's DefaultHandler runs.
+    pub unhandled_irq: Option<(f64, u16)>,
+    /// The RTT host is `probe-rs run`: it switches the up channel to block-when-full.
+    pub rtt_host_blocking: bool,
+    /// From this virtual time (s) on, the RTT host reads nothing more (stalled or killed).
+    pub rtt_host_stalls_s: Option<f64>,
+    /// Nothing on the HSE pins (the F446's ST-LINK MCO absent, a dead crystal): HSERDY never
+    /// sets.
+    pub hse_absent: bool,
     /// Bytes the host sends on the link UART, each batch from its virtual time (s) on.
     pub link_input: Vec<(f64, Vec<u8>)>,
     /// Flash contents written before the run (address, bytes): a store left by earlier saves.
@@ -66,6 +79,11 @@ impl Options {
             debugger: false,
             carrier_window_s: None,
             force_panic_s: None,
+            nmi_s: None,
+            unhandled_irq: None,
+            rtt_host_blocking: false,
+            rtt_host_stalls_s: None,
+            hse_absent: false,
             link_input: Vec::new(),
             flash_preload: Vec::new(),
             count_at_s: Vec::new(),
@@ -160,6 +178,18 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
         m.preload_flash(*addr, bytes)?;
     }
     m.sim_mut().scs.debugger_attached = opts.debugger;
+    if opts.hse_absent {
+        use crate::periph::rcc_f4::{HseInput, RccF4};
+        use crate::periph::rcc_g4::RccG4;
+        for p in m.sim_mut().periphs.iter_mut() {
+            let any = p.p.as_any_mut();
+            if let Some(r) = any.downcast_mut::<RccF4>() {
+                r.set_hse_input(HseInput::None);
+            } else if let Some(r) = any.downcast_mut::<RccG4>() {
+                r.set_hse_input(HseInput::None);
+            }
+        }
+    }
     if let Some(ex) = opts.count_per_trigger {
         m.sim_mut().snapshot_on = Some((Event::Trgo { timer: 3 }, ex));
     }
@@ -183,6 +213,16 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
     for s in &opts.count_at_s {
         plan.push((at(*s), 6));
     }
+    if let Some(s) = opts.nmi_s {
+        plan.push((at(s), 7));
+    }
+    if let Some((s, _)) = opts.unhandled_irq {
+        plan.push((at(s), 8));
+    }
+    if let Some(s) = opts.rtt_host_stalls_s {
+        plan.push((at(s), 9));
+    }
+    m.sim_mut().rtt_host_blocking = opts.rtt_host_blocking;
     let mut instruction_counts = Vec::new();
     for (i, (s, _)) in opts.link_input.iter().enumerate() {
         plan.push((at(*s), 10 + i as u8));
@@ -207,6 +247,9 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
             }
             4 => m.sim_mut().stuck_irqs.clear(),
             6 => instruction_counts.push(m.sim().instructions_in.clone()),
+            7 => m.sim_mut().scs.set_pending(crate::scs::exc::NMI),
+            8 => m.sim_mut().scs.force_irq(opts.unhandled_irq.unwrap().1),
+            9 => m.sim_mut().rtt_host_stalled = true,
             n if n >= 10 => {
                 let bytes = &opts.link_input[(n - 10) as usize].1;
                 let now = m.now();

@@ -199,6 +199,14 @@ impl Scs {
         false
     }
 
+    /// Fault injection: an interrupt the firmware never enabled is enabled and made pending, as
+    /// a stray NVIC_ISER write or a driver enabling a line it bound no handler to would leave it.
+    pub fn force_irq(&mut self, irq: u16) {
+        let e = (exc::IRQ0 + irq) as usize;
+        self.enabled[e] = true;
+        self.pending[e] = true;
+    }
+
     /// Sets an exception pending (faults, PendSV, SysTick).
     pub fn set_pending(&mut self, e: u16) {
         self.pending[e as usize] = true;

@@ -14,6 +14,8 @@
 #![no_main]
 
 mod board;
+mod fault;
+mod flash_ecc;
 mod level;
 mod link;
 mod rf;
@@ -39,26 +41,36 @@ use saw_core::gate::BurstOutput;
 use saw_core::sample::Sample;
 use saw_core::Controller;
 
-/// Panic: RF off first (the burst timer keeps running without the CPU), then log, then trap so
-/// probe-rs stops and prints the backtrace. With RF off, a debugger's halt may freeze the IWDG
-/// (only then: see IWDG_TIMEOUT_US), so the backtrace is not cut by a watchdog reset.
+/// Panic: RF off first (the burst timer keeps running without the CPU), then the stop of the
+/// fault path (`fault.rs`): with a debugger the message is logged and the core halts at a
+/// breakpoint for probe-rs's backtrace; without one the chip resets at once.
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
-    rf::emergency_off();
-    board::freeze_watchdog_if_debugged();
-    defmt::error!("panic: {}", defmt::Display2Format(info));
-    cortex_m::asm::udf()
+    fault::stop(fault::Cause::Panic, 0, || defmt::error!("panic: {}", defmt::Display2Format(info)))
 }
 
 /// Same for hard faults.
 #[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
-    rf::emergency_off();
-    board::freeze_watchdog_if_debugged();
-    defmt::error!("hard fault: RF off");
-    loop {
-        cortex_m::asm::bkpt();
+unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    let pc = frame.pc();
+    fault::stop(fault::Cause::HardFault, -13, || defmt::error!("hard fault at pc {=u32:#010x}: RF off", pc))
+}
+
+/// NMI: on the G474 a flash double-ECC error raises it (RM0440 §5.3.10); one in the store is
+/// noted and handled at boot (`flash_ecc.rs`), anything else is a fault. cortex-m-rt's default
+/// would spin here with RF armed.
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
+    if flash_ecc::on_nmi() {
+        return;
     }
+    fault::stop(fault::Cause::Nmi, -14, || defmt::error!("NMI: RF off"))
+}
+
+/// Any exception or interrupt we bound no handler to (cortex-m-rt's default is `loop {}`).
+#[cortex_m_rt::exception]
+unsafe fn DefaultHandler(irqn: i16) {
+    fault::stop(fault::Cause::Unhandled, irqn, || defmt::error!("unhandled interrupt {}: RF off", irqn))
 }
 
 use board::BOARD;
@@ -110,9 +122,14 @@ static CONTROL_READY: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
-    let p = board::init();
+    let Some(p) = board::init() else {
+        fault::halt_without_clock(board::HSE_SOURCE, board::HSE_TIMEOUT_MS)
+    };
     let c = &BOARD.clocks;
     info!("saw-firmware v{} on {} ({})", VERSION, BOARD.name, BOARD.probe_rs_chip);
+    if let Some((cause, irqn)) = fault::take_last() {
+        warn!("boot: the previous run ended in the fault path ({}, exception {}): RF was turned off, then the chip reset", cause, irqn);
+    }
     info!(
         "clocks: osc {} Hz /M{} xN{} /{}{} -> SYSCLK {} Hz, HCLK {} Hz, PCLK1 {} Hz, PCLK2 {} Hz",
         c.osc_hz,

@@ -245,6 +245,13 @@ impl RccG4 {
         Self::nucleo_g474re()
     }
 
+    /// What the board puts on OSC_IN/OSC_OUT from now on (fault injection: `HseInput::None`
+    /// for an F446 whose ST-LINK MCO is absent — solder bridges open, ST-LINK unpowered — or a
+    /// dead crystal: HSERDY never sets).
+    pub fn set_hse_input(&mut self, hse: HseInput) {
+        self.hse_input = hse;
+    }
+
     /// Power-on state with `hse` on the oscillator pins.
     pub fn with_hse(hse: HseInput) -> Self {
         let mut r = RccG4 {

@@ -58,7 +58,15 @@ fn rcc_config() -> Config {
 /// which leaves prefetch and both ART caches off (their reset state too): at 180 MHz and 5 wait
 /// states every flash fetch would stall. Caches are reset while disabled, then ICEN, DCEN and
 /// PRFTEN set (RM0390 §3.4.2 ART accelerator, §3.8.1 FLASH_ACR).
-pub fn init() -> Peripherals {
+///
+/// None if HSE is not ready in time (`super::start_hse`): the board has no exact clock. HSI is
+/// no substitute: its factory trim is ±1 % at 25 °C and −8/+4.5 % over temperature (DS10693,
+/// HSI oscillator characteristics), so the carrier would be 15 MHz ± 150 kHz or worse, off the
+/// transducer's frequency; the caller refuses to run (RF off, a log line).
+pub fn init() -> Option<Peripherals> {
+    if !super::start_hse(true) {
+        return None;
+    }
     let p = embassy_stm32::init(rcc_config());
     let acr = pac::FLASH.acr();
     acr.modify(|w| {
@@ -78,7 +86,19 @@ pub fn init() -> Peripherals {
         w.set_dcen(true);
         w.set_prften(true);
     });
-    p
+    Some(p)
+}
+
+/// What HSE is on this board, for the log line of a board that never got it.
+pub const HSE_SOURCE: &str = "the ST-LINK's 8 MHz MCO on OSC_IN (SB50, and the ST-LINK powered: UM1724 §6.7.1)";
+
+/// Clocks for the GPIO ports of the RF lines (PA0, PB10, PB5) when embassy never ran:
+/// RCC_AHB1ENR.GPIOAEN/GPIOBEN (RM0390 §6.3.10); writes to an unclocked port are ignored.
+pub fn enable_rf_gpio_clocks() {
+    pac::RCC.ahb1enr().modify(|w| {
+        w.set_gpioaen(true);
+        w.set_gpioben(true);
+    });
 }
 
 /// Fault path only, after RF is off: with a debugger attached (DHCSR.C_DEBUGEN, ARMv7-M ARM

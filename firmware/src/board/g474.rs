@@ -72,8 +72,26 @@ fn rcc_config() -> Config {
 /// embassy init with [`rcc_config`]. Nothing to add for the flash: FLASH_ACR resets with ICEN
 /// and DCEN set and embassy's G4 RCC code only modifies LATENCY (RM0440 FLASH_ACR; embassy-stm32
 /// 0.6 rcc/g4.rs). Prefetch stays off, as in ST's G4 defaults.
-pub fn init() -> Peripherals {
-    embassy_stm32::init(rcc_config())
+///
+/// None if the crystal does not start in time (`super::start_hse`): HSI16 is ±1 % at 25 °C
+/// (DS12288), not an exact 15 MHz carrier; the caller refuses to run (RF off, a log line).
+pub fn init() -> Option<Peripherals> {
+    if !super::start_hse(false) {
+        return None;
+    }
+    Some(embassy_stm32::init(rcc_config()))
+}
+
+/// What HSE is on this board, for the log line of a board that never got it.
+pub const HSE_SOURCE: &str = "the 24 MHz crystal X3 (UM2505 §7.7.1)";
+
+/// Clocks for the GPIO ports of the RF lines (PA0, PB10, PB5) when embassy never ran:
+/// RCC_AHB2ENR.GPIOAEN/GPIOBEN (RM0440 §7.4.16); writes to an unclocked port are ignored.
+pub fn enable_rf_gpio_clocks() {
+    pac::RCC.ahb2enr().modify(|w| {
+        w.set_gpioaen(true);
+        w.set_gpioben(true);
+    });
 }
 
 /// Fault path only, after RF is off: with a debugger attached (DHCSR.C_DEBUGEN, ARMv7-M ARM

@@ -16,6 +16,33 @@ pub use g474::*;
 
 use embassy_stm32::rcc::{AHBPrescaler, APBPrescaler};
 
+/// How long HSE may take to become ready: ST's HAL's HSE_STARTUP_TIMEOUT (100 ms). A crystal
+/// starts in ~2 ms (t_SU(HSE), DS12288), an external clock at once.
+pub const HSE_TIMEOUT_MS: u32 = 100;
+/// The clock the core runs on from reset until the PLL: HSI, 16 MHz on both chips.
+const HSI_HZ: u32 = 16_000_000;
+
+/// Starts HSE (bypass: an external clock on OSC_IN) and waits at most [`HSE_TIMEOUT_MS`] for
+/// HSERDY; true if it became ready. Called before `embassy_stm32::init`, whose RCC code waits
+/// for HSERDY without a limit (embassy-stm32 0.6 rcc/f247.rs, rcc/g4.rs): a Nucleo-F446RE whose
+/// ST-LINK MCO does not reach OSC_IN (early revisions, SB50 open, the ST-LINK side unpowered,
+/// UM1724 §6.7.1) would never start and never say why. HSEBYP is writable only while HSEON = 0
+/// (RM0390 §6.3.1 RCC_CR; RM0440 §7.4.1). embassy then finds HSE on and ready and goes on.
+pub fn start_hse(bypass: bool) -> bool {
+    use embassy_stm32::pac::RCC;
+    RCC.cr().modify(|w| w.set_hseon(false));
+    RCC.cr().modify(|w| w.set_hsebyp(bypass));
+    RCC.cr().modify(|w| w.set_hseon(true));
+    for _ in 0..HSE_TIMEOUT_MS {
+        if RCC.cr().read().hserdy() {
+            return true;
+        }
+        // On HSI at reset, zero wait states: one ms of cycles.
+        cortex_m::asm::delay(HSI_HZ / 1000);
+    }
+    RCC.cr().read().hserdy()
+}
+
 /// AHB prescaler from the saw-boards divider.
 pub const fn ahb_pre(div: u32) -> AHBPrescaler {
     match div {
