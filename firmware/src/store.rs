@@ -1,16 +1,89 @@
 //! The saved scene in the board's flash: `saw-store` over the board's store region
 //! (`saw_boards::StoreLayout`), read once at boot, written by the link's `save` — with RF off and
-//! the watchdog lengthened for as long as the flash may stall the CPU.
+//! the watchdog lengthened for as long as the flash may stall the CPU. Around the flash, what
+//! sequential-storage cannot see: the F446's flash caches flushed after every erase, and the
+//! G474's double ECC errors (a save cut by a power loss) refused on read and erased at boot.
 
 use defmt::{info, warn};
-use saw_store::SceneStore;
+use saw_store::{Hooks, Saved, SceneStore, StoreError};
 
 use crate::board::{StoreFlash, BOARD};
+
+/// The board's hooks around the store's flash (`saw_store::Hooks`).
+const HOOKS: Hooks = Hooks { after_erase: flush_flash_caches, read_corrupted: ecc_error_in };
+
+/// F446: the ART accelerator's caches are flushed after every erase, as ST's HAL does
+/// (`FLASH_FlushCaches`, called after each erase by `HAL_FLASHEx_Erase`). The data cache keeps 8
+/// lines of 128 bits read through the D-code bus and has no coherency with the array (RM0390
+/// §3.4.2 "Data management"): a line read before an erase — sequential-storage reads a page's
+/// markers, erases it, reads them again — still returns the old bytes afterwards, and the store
+/// takes an erased page for a full one (a refused save, a corrupt store, the wrong scene at
+/// boot). embassy-stm32 0.6 resets the cache after an erase only on dual-bank F42x/F43x
+/// (`flash/f4.rs`, errata 2.2.12). RM0390 §3.8.1 FLASH_ACR: ICRST (bit 11) and DCRST (bit 12)
+/// reset a cache only while it is disabled (ICEN bit 9, DCEN bit 10 = 0), so: both caches off,
+/// reset set, reset cleared, each back as it was. The instruction cache too, as the HAL does
+/// (the store's sectors hold no code, so it is only for symmetry with it).
+#[cfg(feature = "nucleo-f446re")]
+fn flush_flash_caches() {
+    use embassy_stm32::pac::FLASH;
+    let acr = FLASH.acr();
+    let was = acr.read();
+    acr.modify(|w| {
+        w.set_icen(false);
+        w.set_dcen(false);
+    });
+    acr.modify(|w| {
+        w.set_icrst(true);
+        w.set_dcrst(true);
+    });
+    acr.modify(|w| {
+        w.set_icrst(false);
+        w.set_dcrst(false);
+    });
+    acr.modify(|w| {
+        w.set_icen(was.icen());
+        w.set_dcen(was.dcen());
+    });
+}
+
+/// G474: embassy-stm32 0.6's flash driver already turns the data cache off for every program
+/// and erase and resets it (DCRST) before turning it on again (`flash/g.rs`,
+/// `restore_data_cache_state`), RM0440 §5.3.4.
+#[cfg(not(feature = "nucleo-f446re"))]
+fn flush_flash_caches() {}
+
+/// Whether a double ECC error was reported inside `len` bytes read at `offset` of the store's
+/// region (`flash_ecc.rs`; never on the F446): those bytes are refused.
+fn ecc_error_in(offset: u32, len: usize) -> bool {
+    crate::flash_ecc::reported_in(BOARD.store.region_base + offset, len as u32)
+}
+
+/// The boot's load: the saved scene, unless a double ECC error was reported inside the store
+/// while it was read (on the G474, a save cut by a power loss: `flash_ecc.rs`). Then the store
+/// is erased and nothing is loaded — a scene read with an ECC error is never used, and the
+/// word that raised it would refuse every later save — and the caller boots the embedded or
+/// default scene.
+pub async fn load_at_boot(store: &mut SceneStore<StoreFlash>) -> Result<Option<Saved>, StoreError> {
+    let loaded = store.load().await;
+    let Some(at) = crate::flash_ecc::take() else {
+        return loaded;
+    };
+    match store.erase().await {
+        Ok(()) => {
+            warn!("store: double ECC error at {=u32:#010x} (a save cut by a power loss); store erased", at);
+            Ok(None)
+        }
+        Err(e) => {
+            warn!("store: double ECC error at {=u32:#010x} (a save cut by a power loss); the erase failed ({})", at, e);
+            Err(e)
+        }
+    }
+}
 
 /// The store, or why there is none (logged once at boot).
 pub fn open(flash: Option<StoreFlash>) -> Option<SceneStore<StoreFlash>> {
     let s = BOARD.store;
-    match SceneStore::new(flash?, s.region_range()) {
+    match SceneStore::with_hooks(flash?, s.region_range(), HOOKS) {
         Ok(store) => {
             info!(
                 "store: {} KiB at {=u32:#010x} ({} erase units of {} KiB){}",

@@ -152,6 +152,10 @@ pub struct DataCache {
     lines: Vec<(u32, [u8; 16])>,
     /// FLASH_ACR.DCEN.
     enabled: bool,
+    /// Reads served (DCEN = 1), and of those the ones that returned bytes other than the
+    /// array's (a line an erase had changed).
+    pub reads: u64,
+    pub stale_reads: u64,
 }
 
 impl DataCache {
@@ -181,9 +185,13 @@ impl DataCache {
         if !self.enabled {
             return array;
         }
+        self.reads += 1;
         if let Some(i) = self.lines.iter().position(|l| l.0 == line_addr) {
             let line = self.lines.remove(i);
             self.lines.push(line);
+            if line.1 != array {
+                self.stale_reads += 1;
+            }
             return line.1;
         }
         if self.lines.len() == Self::LINES {
