@@ -136,6 +136,15 @@ fn save_that_erases(board: BoardKind, duration_s: f64) -> (run::Outcome, Machine
     (o, m, image, last.scene_id)
 }
 
+/// The F446 data cache's reads so far, and how many of them returned bytes the array no longer
+/// held.
+fn cache_reads(m: &mut Machine) -> (u64, u64) {
+    let (fi, prog) = (m.sim().chip.flash_if, m.sim().chip.flash_prog);
+    prog(&mut *m.sim_mut().periphs[fi].p)
+        .data_cache()
+        .map_or((0, 0), |c| (c.reads, c.stale_reads))
+}
+
 fn operations(m: &mut Machine) -> Vec<Operation> {
     let (fi, prog) = (m.sim().chip.flash_if, m.sim().chip.flash_prog);
     prog(&mut *m.sim_mut().periphs[fi].p).operations().to_vec()
@@ -172,6 +181,41 @@ fn f446_a_save_across_a_sector_erase_boots_the_saved_scene() {
         ops.len(),
         show(&o.log)
     );
+    // The caches flushed after the erase: FLASH_ACR written with DCRST = 1 and DCEN = 0 after
+    // the erase ends (RM0390 §3.8.1: the only way to empty the data cache), then DCEN = 1 again,
+    // before the store's next flash operation.
+    let acr: Vec<(Time, u32)> = {
+        let fi = m.sim().chip.flash_if;
+        m.sim().periphs[fi]
+            .p
+            .as_any()
+            .downcast_ref::<saw_board_model::periph::misc::FlashF4>()
+            .expect("the F446's flash interface")
+            .acr_history()
+            .to_vec()
+    };
+    const DCEN: u32 = 1 << 10;
+    const DCRST: u32 = 1 << 12;
+    for (i, e) in ops.iter().enumerate().filter(|(_, op)| op.erase) {
+        let next_op = ops.get(i + 1).map_or(Time::MAX, |n| n.start);
+        let window: Vec<u32> = acr
+            .iter()
+            .filter(|(t, _)| *t >= e.end && *t < next_op)
+            .map(|w| w.1)
+            .collect();
+        let reset = window.iter().position(|v| v & DCRST != 0 && v & DCEN == 0);
+        let back_on =
+            reset.is_some_and(|r| window[r..].iter().any(|v| v & DCEN != 0 && v & DCRST == 0));
+        assert!(
+            back_on,
+            "the data cache is not reset after the erase of 0x{:08X} (ends {:.4} s) before the next flash operation: FLASH_ACR writes in between {:08X?}; cache: {} reads, {} of them stale",
+            e.addr,
+            e.end as f64 / TICKS_PER_S as f64,
+            window,
+            cache_reads(&mut m).0,
+            cache_reads(&mut m).1
+        );
+    }
     // Reboot: a fresh board on the flash the save left.
     let flash = store_bytes(&m, board);
     let mut opts = Options::new(board, &elf(board), 0.3);
@@ -233,11 +277,10 @@ struct Boot {
     store_after: Vec<u8>,
 }
 
-/// Boots a fresh G474 on `store` (the store region's bytes) with `bad` double words, for
-/// `duration_s` of board time, the wiper at mid-travel.
-fn boot(store: &[u8], bad: &[u32], duration_s: f64) -> Boot {
+/// Boots a fresh `board` on `store` (the store region's bytes) with `bad` double words (G474),
+/// for `duration_s` of board time, the wiper at mid-travel.
+fn boot(board: BoardKind, store: &[u8], bad: &[u32], duration_s: f64) -> Boot {
     let started = std::time::Instant::now();
-    let board = BoardKind::G474;
     let image = elf(board);
     let mut m = board::build(board, &image, Box::new(|_t: Time| 2048)).expect("the board builds");
     m.preload_flash(board.def().store.origin, store)
@@ -267,8 +310,8 @@ const MAX_ECC_ERRORS: u32 = 16;
 /// erased with the line naming a double word inside it and the built-in scene booted; the boot
 /// reached the control loop (the `adc:` line comes after the scene, before the tasks start), no
 /// reset, and at most `MAX_ECC_ERRORS` ECC errors (each an NMI: not a loop). Returns which.
-fn judge(step: &str, b: &Boot, old_id: u32, new_id: u32) -> &'static str {
-    let s = BoardKind::G474.def().store;
+fn judge(board: BoardKind, step: &str, b: &Boot, old_id: u32, new_id: u32) -> &'static str {
+    let s = board.def().store;
     let erased_line = b.log.iter().find_map(|l| {
         let rest = l.text.strip_prefix("store: double ECC error at 0x")?;
         let (hex, tail) = rest.split_at(8.min(rest.len()));
@@ -335,11 +378,12 @@ fn judge(step: &str, b: &Boot, old_id: u32, new_id: u32) -> &'static str {
 /// ~40 ms on the G474 model), with room for an erase of the whole store (8 pages × 22 ms).
 const BOOT_S: f64 = 0.35;
 
-/// The recorded save of the G474 power-cut checks: operations, the store before, old and new ids.
-fn g474_save() -> (Vec<Operation>, Vec<u8>, u32, u32) {
-    let board = BoardKind::G474;
+/// The recorded save of the power-cut checks: operations, the store before, old and new ids.
+fn recorded_save(board: BoardKind) -> (Vec<Operation>, Vec<u8>, u32, u32) {
     let (_, new_id) = moved();
-    let (o, mut m, before, old_id) = save_that_erases(board, 0.45);
+    // The F446's sector erase takes 1 s of it.
+    let duration_s = if board == BoardKind::F446 { 1.8 } else { 0.45 };
+    let (o, mut m, before, old_id) = save_that_erases(board, duration_s);
     let answer = replies(&o.link_output)
         .into_iter()
         .find(|r| r.1 == 2)
@@ -362,14 +406,17 @@ fn g474_save() -> (Vec<Operation>, Vec<u8>, u32, u32) {
 
 /// Boots on the flash a cut at each step `steps` picks from the save's operations (`k` =
 /// their count: the save complete), judging each; returns the outcome per step.
-fn cut_and_boot(steps: impl Fn(&[Operation]) -> Vec<usize>) -> Vec<(usize, &'static str, f64)> {
-    let (ops, before, old_id, new_id) = g474_save();
-    let origin = BoardKind::G474.def().store.origin;
+fn cut_and_boot(
+    board: BoardKind,
+    steps: impl Fn(&[Operation]) -> Vec<usize>,
+) -> Vec<(usize, &'static str, f64)> {
+    let (ops, before, old_id, new_id) = recorded_save(board);
+    let origin = board.def().store.origin;
     let steps = steps(&ops);
     let mut out = Vec::new();
     for &k in steps.iter().filter(|&&k| k <= ops.len()) {
         let (flash, bad) = cut_at(&before, origin, &ops, k);
-        let b = boot(&flash, &bad, BOOT_S);
+        let b = boot(board, &flash, &bad, BOOT_S);
         let what = match ops.get(k) {
             Some(op) if op.erase => format!(
                 "cut in operation {k} of {} (erase of 0x{:08X})",
@@ -383,7 +430,7 @@ fn cut_and_boot(steps: impl Fn(&[Operation]) -> Vec<usize>) -> Vec<(usize, &'sta
             ),
             None => format!("the save complete ({} operations)", ops.len()),
         };
-        let verdict = judge(&what, &b, old_id, new_id);
+        let verdict = judge(board, &what, &b, old_id, new_id);
         eprintln!(
             "{what}: {verdict} ({} ECC errors, {:.2} s wall)",
             b.ecc_errors, b.wall_s
@@ -406,7 +453,7 @@ fn cut_and_boot(steps: impl Fn(&[Operation]) -> Vec<usize>) -> Vec<(usize, &'sta
 /// operations; each boot is a fresh board for 0.35 s of board time).
 #[test]
 fn g474_a_power_cut_at_every_step_of_a_save_then_boot() {
-    let out = cut_and_boot(|ops| (0..=ops.len()).collect());
+    let out = cut_and_boot(BoardKind::G474, |ops| (0..=ops.len()).collect());
     let count = |v: &str| out.iter().filter(|o| o.1 == v).count();
     eprintln!(
         "{} boots: {} old scene, {} new scene, {} store erased; {:.1} s wall in all",
