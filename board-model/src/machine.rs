@@ -1586,6 +1586,30 @@ impl Machine {
         s.log.extend_from_slice(&out);
     }
 
+    /// The RTT host stops reading for good, leaving the up buffer full: its read offset one past
+    /// the write offset, as if it had read nothing of the last buffer's worth. That is where a
+    /// stalled host ends up once the firmware has logged a buffer's worth (1 KiB: ~10 s of this
+    /// firmware's log at the default scene's rate), fast-forwarded: the next log write finds no
+    /// room at once.
+    pub fn stall_rtt_host_full(&mut self) {
+        self.drain_rtt();
+        self.uc.get_data_mut().rtt_host_stalled = true;
+        let Some(cb) = self.uc.get_data().rtt else {
+            return;
+        };
+        let mut d = [0u8; 12];
+        if self.uc.mem_read(cb as u64 + 24 + 8, &mut d).is_err() {
+            return;
+        }
+        let w = |i: usize| u32::from_le_bytes(d[i..i + 4].try_into().unwrap());
+        let (size, write) = (w(0), w(4));
+        if size == 0 {
+            return;
+        }
+        let read = (write + 1) % size;
+        let _ = self.uc.mem_write(cb as u64 + 24 + 16, &read.to_le_bytes());
+    }
+
     /// Runs in short steps until the core is in thread mode (IPSR = 0), then sets PC to `addr`.
     pub fn divert_in_thread_mode(&mut self, addr: u32) -> Option<Stop> {
         for _ in 0..10_000 {

@@ -43,7 +43,8 @@ pub struct Options {
     pub unhandled_irq: Option<(f64, u16)>,
     /// The RTT host is `probe-rs run`: it switches the up channel to block-when-full.
     pub rtt_host_blocking: bool,
-    /// From this virtual time (s) on, the RTT host reads nothing more (stalled or killed).
+    /// From this virtual time (s) on, the RTT host reads nothing more (stalled or killed), its
+    /// up buffer left full (`Machine::stall_rtt_host_full`).
     pub rtt_host_stalls_s: Option<f64>,
     /// Nothing on the HSE pins (the F446's ST-LINK MCO absent, a dead crystal): HSERDY never
     /// sets.
@@ -249,7 +250,7 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
             6 => instruction_counts.push(m.sim().instructions_in.clone()),
             7 => m.sim_mut().scs.set_pending(crate::scs::exc::NMI),
             8 => m.sim_mut().scs.force_irq(opts.unhandled_irq.unwrap().1),
-            9 => m.sim_mut().rtt_host_stalled = true,
+            9 => m.stall_rtt_host_full(),
             n if n >= 10 => {
                 let bytes = &opts.link_input[(n - 10) as usize].1;
                 let now = m.now();

@@ -176,7 +176,8 @@ fn an_nmi_or_an_unhandled_interrupt_turns_rf_off_within_10_us_and_resets() {
 /// Issue #32: `probe-rs run` switches the RTT up channel to block-when-full; a host that then
 /// stops reading (stalled, killed) must not freeze the control loop. With blocking defmt-rtt
 /// spins in its critical section (interrupts off) once its 1 KiB fills, TIM2 bursting as last
-/// set, until the IWDG resets the chip. Here the host stops reading at 0.3 s; the control loop
+/// set, until the IWDG resets the chip. Here the host stops reading at 0.3 s with the buffer
+/// full (the next region line, at ~0.7 s, finds no room); the control loop
 /// must go on: no reset, and bursts still follow the finger through the last second (region
 /// changes keep changing the burst frequency: TIM2's ARR is rewritten).
 #[test]
@@ -202,6 +203,45 @@ fn a_stalled_rtt_host_never_freezes_the_control_loop() {
         assert!(
             arr_writes >= 1,
             "{board:?}: no burst-frequency change in the last second: the control loop stopped"
+        );
+    }
+}
+
+/// Issue #32: a board whose HSE never becomes ready (an early NUCLEO-F446RE without the
+/// ST-LINK's MCO on OSC_IN, SB50 open, the ST-LINK side unpowered; a dead crystal on the G474).
+/// embassy's RCC init waits for HSERDY forever: the board never started and never said why.
+/// Now: one log line naming the wait and the clock source, RF lines low throughout (never
+/// armed), no boot loop, and the core asleep (WFE).
+#[test]
+fn without_hse_the_board_says_so_and_keeps_rf_off() {
+    for board in BOARDS {
+        let mut opts = Options::new(board, &elf(board), 1.0);
+        opts.hse_absent = true;
+        let (o, _m) = run::run(&opts).unwrap();
+        assert!(o.stop.is_none(), "{board:?}: {:?}", o.stop);
+        assert!(o.resets.is_empty(), "{board:?}: reset {:?}", o.resets);
+        let line = o
+            .log
+            .iter()
+            .find(|l| l.text.contains("HSE not ready after 100 ms"))
+            .unwrap_or_else(|| panic!("{board:?}: no HSE line in {:?}", o.log));
+        assert!(
+            line.text.contains("RF off, halted") && line.level == "ERROR",
+            "{board:?}: {line:?}"
+        );
+        for pin in [PIN_BURST_A, PIN_BURST_B, PIN_RF_ARM] {
+            assert!(
+                !o.pins[pin].iter().any(|e| e.high),
+                "{board:?}: pin {pin} went high without a clock"
+            );
+        }
+        // Halted in WFE: the core sleeps most of the 1 s (the wait of at least 100 ms is spent
+        // polling: `asm::delay` counts at least its cycles, ~200 ms on the model).
+        assert!(
+            o.sleeping > o.end * 7 / 10,
+            "{board:?}: the core slept {} of {} ticks",
+            o.sleeping,
+            o.end
         );
     }
 }

@@ -101,7 +101,9 @@ pub fn halt_without_clock(hse: &str, waited_ms: u32) -> ! {
         waited_ms,
         hse
     );
+    // WFE, not WFI: the same sleep here (no interrupt is enabled, no event comes), and the one
+    // the board model can show (Unicorn runs WFI as a no-op; docs/board-model.md).
     loop {
-        cortex_m::asm::wfi();
+        cortex_m::asm::wfe();
     }
 }

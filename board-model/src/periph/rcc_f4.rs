@@ -798,13 +798,9 @@ impl RccF4 {
         if hse_on && !self.hse.on() {
             match (self.hse_input, self.hsebyp) {
                 (HseInput::ExternalClock(_), true) | (HseInput::Crystal(_), false) => {}
-                (HseInput::None, _) => {
-                    return Err(Unmodelled::write(
-                        OFF_CR,
-                        value,
-                        "RCC_CR.HSEON: the board has no HSE source",
-                    ));
-                }
+                // Nothing on OSC_IN/OSC_OUT (fault injection): HSEON is taken, HSERDY never
+                // sets (RM0390 §6.2.1 / RM0440 §7.2.1: HSERDY follows the oscillator's start).
+                (HseInput::None, _) => {}
                 (HseInput::ExternalClock(_), false) => {
                     return Err(Unmodelled::write(
                         OFF_CR,
@@ -823,6 +819,10 @@ impl RccF4 {
         }
         self.hsi.set(now, hsi_on, self.delays.hsi);
         self.hse.set(now, hse_on, self.delays.hse);
+        if hse_on && self.hse_input == HseInput::None {
+            // On, never ready: a time no run reaches (Time::MAX would overflow the PLL's sums).
+            self.hse.ready_at = Some(Time::MAX / 2);
+        }
         self.pll.set(now, pll_on);
         self.plli2s.set(now, req & CR_PLLI2SON != 0);
         self.pllsai.set(now, req & CR_PLLSAION != 0);
