@@ -101,6 +101,16 @@ impl<P: Read + Write> Client<P> {
 
     /// Sends `request` and waits for its reply.
     pub fn request(&mut self, request: &Request) -> Result<Reply, ClientError> {
+        self.request_within(request, self.timeout)
+    }
+
+    /// Sends `request` and waits up to `timeout` for its reply: for a request whose answer
+    /// takes longer than the client's usual wait (a save that erases a 128 KiB sector).
+    pub fn request_within(
+        &mut self,
+        request: &Request,
+        timeout: Duration,
+    ) -> Result<Reply, ClientError> {
         self.seq = self.seq.wrapping_add(1).max(1);
         let header = Header {
             version: PROTOCOL_VERSION,
@@ -115,7 +125,7 @@ impl<P: Read + Write> Client<P> {
         self.port.flush()?;
         let start = Instant::now();
         loop {
-            match self.read_frame(start + self.timeout)? {
+            match self.read_frame(start + timeout)? {
                 Some((h, Reply::Stream(s))) => self.streams.push_back((h, s)),
                 Some((h, Reply::Error(e))) if h.seq == self.seq => {
                     return Err(ClientError::Link(e))
@@ -129,7 +139,7 @@ impl<P: Read + Write> Client<P> {
                 Some(_) => {}
                 None => {
                     return Err(ClientError::NoAnswer {
-                        waited_ms: self.timeout.as_millis() as u64,
+                        waited_ms: timeout.as_millis() as u64,
                     })
                 }
             }

@@ -31,7 +31,8 @@ pub struct Cli {
     /// Print one JSON object instead of text (for scripts).
     #[arg(long, global = true)]
     pub json: bool,
-    /// How long to wait for each answer, ms (10 to 60000).
+    /// How long to wait for each answer, ms (10 to 60000). A save waits at least 4000 ms
+    /// (`SAVE_TIMEOUT`): erasing a flash sector stalls the F446 for up to 2 s.
     #[arg(long, value_name = "MS", default_value_t = 1000, value_parser = clap::value_parser!(u64).range(10..=60_000))]
     pub timeout: u64,
     /// What to do.
@@ -248,7 +249,7 @@ pub fn run(cli: &Cli) -> Result<Done, Failure> {
             every,
         } => stream(&mut client, csv, *seconds, *every),
         Command::Bench { moves, seconds } => bench(&mut client, *moves, *seconds),
-        Command::Save => save(&mut client),
+        Command::Save => save(&mut client, Duration::from_millis(cli.timeout)),
         Command::Ui { .. } => unreachable!("handled before the port is opened"),
     }
 }
@@ -294,14 +295,31 @@ pub(crate) fn boundary<P: std::io::Read + std::io::Write>(
     applied(reply, format!("boundary {index} at {mm} mm"))
 }
 
+/// The least a save waits for its answer. A save may erase one unit of the store: on the F446 a
+/// 128 KiB sector, 1 s typical and 2 s at most at ×32 parallelism (DS10693 §6.3.11, t_ERASE128KB),
+/// during which the CPU is stalled and the link silent; the board model measures 1.11 s from
+/// request to answer with a typical erase (docs/board-model.md). 4 s covers the worst erase with
+/// the save's programming and item migration twice over. The G474's 2 KiB page (22 ms typical,
+/// 40 ms at most: DS12288 §5.3.10) fits the usual timeout.
+pub const SAVE_TIMEOUT: Duration = Duration::from_millis(4_000);
+
+/// Saves the active scene, waiting up to the larger of `timeout` and `SAVE_TIMEOUT`; says how
+/// long the board took.
 pub(crate) fn save<P: std::io::Read + std::io::Write>(
     client: &mut Client<P>,
+    timeout: Duration,
 ) -> Result<Done, Failure> {
-    match client.request(&Request::Save)? {
-        Reply::Saved { scene_id } => Ok(Done {
-            text: format!("saved scene {scene_id:#010x}: the board boots into it"),
-            json: json!({ "saved": scene_id }),
-        }),
+    let asked = Instant::now();
+    match client.request_within(&Request::Save, timeout.max(SAVE_TIMEOUT))? {
+        Reply::Saved { scene_id } => {
+            let seconds = asked.elapsed().as_secs_f64();
+            Ok(Done {
+                text: format!(
+                    "saved scene {scene_id:#010x} in {seconds:.2} s: the board boots into it"
+                ),
+                json: json!({ "saved": scene_id, "seconds": seconds }),
+            })
+        }
         Reply::SaveFailed(e) => Err(Failure::refused(format!("save failed: {e}"))),
         other => Err(unexpected(other)),
     }

@@ -1,8 +1,10 @@
 //! The virtual board's flash: a file of NOR flash pages (erased = 0xFF, a write only clears
 //! bits), written through after every operation so a killed `host-sim serve` leaves exactly what
-//! a power cut leaves; under it the same `saw_store::SceneStore` the firmware uses.
+//! a power cut leaves; under it the same `saw_store::SceneStore` the firmware uses. An erase
+//! takes as long as the board's (`erase_time`), so a save answers as late as on the board.
 
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
@@ -23,6 +25,22 @@ pub struct Geometry {
     pub units: u32,
     /// Programming unit, bytes (F446 x32 word: 4; G474 double word: 8).
     pub write_bytes: u32,
+    /// How long one erase unit takes to erase, the datasheet's typical figure (`erase_time`).
+    pub erase_time: Duration,
+}
+
+/// The typical erase time of one erase unit of `erase_bytes`, as the board model times its
+/// flash (docs/board-model.md, FLASH programming): a 128 KiB sector of the F446 at ×32
+/// parallelism 1 s (DS10693 §6.3.11 t_ERASE128KB: 1 s typical, 2 s max), a 2 KiB page of the
+/// G474 22 ms (DS12288 §5.3.10 t_ERASE: 22 ms typical, 40 ms max); other sizes scale with the
+/// page's per-byte time. A save that reclaims a unit answers that much later; `saw save` waits
+/// for it (`saw::SAVE_TIMEOUT`).
+pub fn erase_time(erase_bytes: u32) -> Duration {
+    match erase_bytes {
+        0x2_0000 => Duration::from_secs(1),
+        0x800 => Duration::from_millis(22),
+        b => Duration::from_secs_f64(0.022 * b as f64 / 2048.0),
+    }
 }
 
 /// The store's geometry for `board`.
@@ -32,6 +50,7 @@ pub fn geometry(board: &saw_boards::BoardDef) -> Geometry {
         erase_bytes: s.erase_bytes,
         units: s.bytes / s.erase_bytes,
         write_bytes: s.write_bytes,
+        erase_time: erase_time(s.erase_bytes),
     }
 }
 
@@ -57,6 +76,9 @@ impl NorFlashError for FileFlashError {
 pub struct FileFlash<const WRITE: usize, const ERASE: usize> {
     path: PathBuf,
     data: Vec<u8>,
+    /// Time one erase unit takes; the caller (the link, the sample loop) waits it out as the
+    /// board's link task does.
+    erase_time: Duration,
 }
 
 impl<const WRITE: usize, const ERASE: usize> FileFlash<WRITE, ERASE> {
@@ -78,10 +100,17 @@ impl<const WRITE: usize, const ERASE: usize> FileFlash<WRITE, ERASE> {
         let f = Self {
             path: path.to_path_buf(),
             data,
+            erase_time: Duration::ZERO,
         };
         f.persist()
             .map_err(|_| format!("--flash {}: cannot write", path.display()))?;
         Ok(f)
+    }
+
+    /// Each erase unit takes `t` to erase from now on.
+    pub fn with_erase_time(mut self, t: Duration) -> Self {
+        self.erase_time = t;
+        self
     }
 
     fn persist(&self) -> Result<(), FileFlashError> {
@@ -127,6 +156,9 @@ impl<const WRITE: usize, const ERASE: usize> NorFlash for FileFlash<WRITE, ERASE
 
     async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
         let r = self.range(from, to.saturating_sub(from) as usize, ERASE)?;
+        // The board answers nothing until the erase ends (the F446's CPU is stalled, the
+        // G474's link task awaits it): neither does the virtual board.
+        std::thread::sleep(self.erase_time * (r.len() / ERASE) as u32);
         self.data[r].fill(0xFF);
         self.persist()
     }
@@ -173,14 +205,15 @@ pub fn open(path: &Path, board: &saw_boards::BoardDef) -> Result<Box<dyn Persist
     fn make<const W: usize, const E: usize>(
         path: &Path,
         units: u32,
+        erase_time: Duration,
     ) -> Result<Box<dyn Persist + Send>, String> {
-        let flash = FileFlash::<W, E>::open(path, units as usize)?;
+        let flash = FileFlash::<W, E>::open(path, units as usize)?.with_erase_time(erase_time);
         let store = SceneStore::new(flash, 0..units * E as u32).map_err(|e| e.to_string())?;
         Ok(Box::new(FileStore { store }))
     }
     match (g.write_bytes, g.erase_bytes) {
-        (8, 2048) => make::<8, 2048>(path, g.units),
-        (4, 0x2_0000) => make::<4, 0x2_0000>(path, g.units),
+        (8, 2048) => make::<8, 2048>(path, g.units, g.erase_time),
+        (4, 0x2_0000) => make::<4, 0x2_0000>(path, g.units, g.erase_time),
         (w, e) => Err(format!(
             "{}: no virtual flash for {w}-byte writes and {e}-byte erase units",
             board.name

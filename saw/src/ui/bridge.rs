@@ -251,7 +251,7 @@ fn linked<P: Read + Write>(
             return "the panel stopped".into();
         }
         while let Ok((id, cmd)) = commands.try_recv() {
-            let result = execute(client, &cmd);
+            let result = execute(client, &cmd, opts.timeout);
             let link_failed = matches!(&result, Err(f) if f.code == 3);
             match result {
                 Ok(done) => {
@@ -305,12 +305,18 @@ fn linked<P: Read + Write>(
     }
 }
 
-fn execute<P: Read + Write>(client: &mut Client<P>, cmd: &Command) -> Result<Done, Failure> {
+/// Runs one command from the page; `timeout` is the panel's wait per answer (a save waits at
+/// least `SAVE_TIMEOUT`).
+fn execute<P: Read + Write>(
+    client: &mut Client<P>,
+    cmd: &Command,
+    timeout: Duration,
+) -> Result<Done, Failure> {
     match cmd {
         Command::Boundary { index, mm } => crate::boundary(client, *index, *mm),
         Command::Set { index, keys } => crate::set(client, *index, keys),
         Command::Push { name, text } => crate::push_text(client, name, text),
-        Command::Save => crate::save(client),
+        Command::Save => crate::save(client, timeout),
         Command::Drive(mode) => {
             let reply = client.request(&Request::SetDrive(*mode))?;
             crate::applied(reply, format!("drive {mode:?}"))
