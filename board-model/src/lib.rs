@@ -11,5 +11,6 @@ pub mod panic_check;
 pub mod periph;
 pub mod run;
 pub mod scs;
+pub mod serve;
 pub mod stack;
 pub mod store_image;

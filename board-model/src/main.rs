@@ -2,10 +2,12 @@
 //! would show (boot, clocks, carrier, ADC rate, closed loop against host-sim, caps, latency,
 //! rail fault, watchdog).
 use clap::{Parser, Subcommand};
+use host_sim::door::{Range, Whole};
 use saw_board_model::board::BoardKind;
 use saw_board_model::{check, run};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 #[derive(Parser)]
 #[command(
@@ -64,6 +66,40 @@ enum Cmd {
         #[arg(long)]
         elf: PathBuf,
     },
+    /// Serve the image's host link behind a pseudo-terminal for `saw --port PATH` (and the
+    /// panel): the firmware runs on the model paced to the wall clock (never ahead of it; as
+    /// fast as it can when slower, with its speed printed), its link UART bridged to the pty, its
+    /// defmt log decoded on stderr. Ctrl-C or SIGTERM stops it and removes the link.
+    Serve {
+        /// Board: nucleo-f446re or nucleo-g474re.
+        #[arg(long)]
+        board: String,
+        /// The firmware ELF (scripts/build-firmware.sh leaves firmware/target/<board>.elf).
+        #[arg(long)]
+        elf: PathBuf,
+        /// Where to put the link to the pty's slave (`saw --port` takes this path); a symlink
+        /// already there is replaced, any other file refused.
+        #[arg(long, value_name = "PATH")]
+        pty: PathBuf,
+        /// A file holding the store's flash region (F446: 256 KiB, sectors 6-7; G474: 16 KiB,
+        /// the end of bank 2): loaded before boot when it exists, written back when serve stops,
+        /// so a saved scene survives a restart. Same format as `host-sim serve --flash`.
+        #[arg(long, value_name = "FILE")]
+        flash: Option<PathBuf>,
+        /// Write the decoded defmt log here instead of stderr.
+        #[arg(long, value_name = "FILE")]
+        log: Option<PathBuf>,
+        #[arg(long, value_name = "MM_S", default_value_t = 60.0, help = SERVE_SPEED.help("Finger speed, back and forth between 1.5 and 61.5 mm"), value_parser = SERVE_SPEED.parser())]
+        speed: f64,
+        #[arg(long, value_name = "MM", conflicts_with = "speed", help = SERVE_AT.help("Finger at rest here instead"), value_parser = SERVE_AT.parser())]
+        rest_at: Option<f64>,
+        #[arg(long, value_name = "LSB", default_value_t = 2.0, help = SERVE_NOISE.help("ADC noise per conversion"), value_parser = SERVE_NOISE.parser())]
+        noise: f64,
+        #[arg(long, default_value_t = 1, help = SERVE_SEED.help("Noise seed"), value_parser = SERVE_SEED.parser())]
+        seed: u64,
+        #[arg(long, value_name = "S", help = SERVE_SECONDS.help("Stop after this much board time (default: run until stopped)"), value_parser = SERVE_SECONDS.parser())]
+        seconds: Option<f64>,
+    },
     /// Every path from the per-sample roots into a panic function, from the image's Thumb code
     /// (direct calls and tail calls; indirect branches counted, not followed); exits 1 if there
     /// is one, 2 on a usage error (a root that names no function).
@@ -82,6 +118,15 @@ enum Cmd {
         allow_file: Option<PathBuf>,
     },
 }
+
+// `serve`'s flags, checked at the door as host-sim's are (`host_sim::door`): one line naming the
+// flag, the value and the rule; NaN and inf refused.
+const SERVE_SPEED: Range = Range::new(0.1, 1000.0, "mm/s");
+/// The default scene's travel (63 mm): the model's wiper reads the default calibration.
+const SERVE_AT: Range = Range::new(0.0, 63.0, "mm");
+const SERVE_NOISE: Range = Range::new(0.0, 100.0, "LSB RMS");
+const SERVE_SEED: Whole = Whole::new(0, u64::MAX);
+const SERVE_SECONDS: Range = Range::new(0.01, 1e6, "s");
 
 /// clap prints "invalid value '<v>' for '--duration <DURATION>': " before these, so they state
 /// only the rule.
@@ -197,6 +242,63 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
                 ExitCode::FAILURE
             })
         }
+        Cmd::Serve {
+            board,
+            elf,
+            pty,
+            flash,
+            log,
+            speed,
+            rest_at,
+            noise,
+            seed,
+            seconds,
+        } => {
+            let kind = BoardKind::parse(&board)?;
+            let trajectory = match rest_at {
+                Some(at) => host_sim::trajectory::Trajectory::Rest { at_um: at * 1000.0 },
+                None => host_sim::trajectory::Trajectory::Triangle {
+                    a_um: 1_500.0,
+                    b_um: 61_500.0,
+                    speed_um_s: speed * 1000.0,
+                },
+            };
+            let opts = saw_board_model::serve::ServeOptions {
+                board: kind,
+                elf,
+                pty,
+                flash,
+                log,
+                trajectory,
+                adc: host_sim::adc::AdcParams {
+                    noise_lsb_rms: noise,
+                    seed,
+                    ..Default::default()
+                },
+                board_seconds: seconds,
+            };
+            on_stop_signals();
+            let stats = saw_board_model::serve::serve(&opts, &STOP, |p| {
+                eprintln!(
+                    "board-model serve: {} running {} on {} ({})",
+                    kind.name(),
+                    opts.elf.display(),
+                    opts.pty.display(),
+                    p.slave_path().display()
+                )
+            })?;
+            eprintln!(
+                "board-model serve: stopped at {:.3} s of board time; served {:.3} s of it in {:.3} s ({:.2}× real time); {} bytes in, {} out, {} resets",
+                stats.board_s,
+                stats.served_s,
+                stats.wall_s,
+                stats.speed(),
+                stats.bytes_in,
+                stats.bytes_out,
+                stats.resets
+            );
+            Ok(ExitCode::SUCCESS)
+        }
         Cmd::PanicCheck {
             elf,
             root,
@@ -303,6 +405,31 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
                 ExitCode::SUCCESS
             })
         }
+    }
+}
+
+/// Set by SIGINT or SIGTERM: `serve` stops at its next step, writes the flash back and removes
+/// its link (the default action would kill it and leave both behind).
+static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn stop_requested(_signal: i32) {
+    // Only an atomic store: async-signal-safe.
+    STOP.store(true, Ordering::Relaxed);
+}
+
+// libc's `signal` (glibc gives it BSD semantics: the handler stays installed, reads restart);
+// declared here rather than adding a crate for two calls.
+extern "C" {
+    fn signal(signum: i32, handler: extern "C" fn(i32)) -> usize;
+}
+
+fn on_stop_signals() {
+    const SIGINT: i32 = 2;
+    const SIGTERM: i32 = 15;
+    // SAFETY: the handler only stores to an atomic.
+    unsafe {
+        signal(SIGINT, stop_requested);
+        signal(SIGTERM, stop_requested);
     }
 }
 
