@@ -409,45 +409,13 @@ fn the_line_carries_every_third_sample_and_not_every_second() {
     );
 }
 
-/// The F446's store (sectors 6–7: two 128 KiB units written a word at a time) after as many
-/// saves as fit before the next must erase a sector, built with the firmware's own `saw-store`
-/// over sequential-storage's mock NOR flash: its bytes (a `--flash` file) and the last scene
-/// saved.
-fn f446_store_before_an_erase() -> (Vec<u8>, u32) {
-    use sequential_storage::mock_flash::MockFlashBase;
-    type Flash = MockFlashBase<2, 4, 0x8000>;
-    let layout = saw_boards::NUCLEO_F446RE.store;
-    assert_eq!((layout.bytes, layout.erase_bytes), (2 * 0x2_0000, 0x2_0000));
-    let mut flash = Flash::default();
-    let start = flash.stats_snapshot();
-    let mut last = None;
-    for i in 0..100_000u32 {
-        let before = flash.as_bytes().to_vec();
-        let config = saw_core::default_config()
-            .with_boundary(0, 25_000 + (i % 50) * 100)
-            .unwrap();
-        let saved = saw_store::Saved {
-            scene_id: saw_link::scene_id(&config),
-            config,
-        };
-        let mut store = saw_store::SceneStore::new(flash, Flash::FULL_FLASH_RANGE).unwrap();
-        embassy_futures::block_on(store.save(&saved)).unwrap();
-        flash = store.into_flash().unwrap();
-        if start.compare_to(flash.stats_snapshot()).erases > 0 {
-            return (before, last.expect("the first save erased"));
-        }
-        last = Some(saved.scene_id);
-    }
-    panic!("no erase after 100 000 saves");
-}
-
 /// A save that must reclaim a 128 KiB sector answers only after the erase (1 s on the F446, up
 /// to 2 s: `host-sim serve` takes the typical 1 s): `saw save` waits for it (`SAVE_TIMEOUT`)
 /// instead of reporting no answer after its usual 1 s, says how long it took, and the board
 /// boots into the scene after a power cycle.
 #[test]
 fn a_save_that_erases_a_sector_succeeds_and_survives_a_power_cycle() {
-    let (image, last) = f446_store_before_an_erase();
+    let (image, last) = common::f446_store_before_an_erase();
     let dir = tempfile::tempdir().unwrap();
     let flash = dir.path().join("flash.bin");
     std::fs::write(&flash, &image).unwrap();

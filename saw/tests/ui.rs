@@ -292,3 +292,33 @@ fn a_sensor_fault_reaches_the_page_while_it_lasts() {
     assert!((250..=310).contains(&faulted), "{faulted} faulted records");
     assert!(after > 100, "records after the fault: {after}");
 }
+
+/// The panel's save from a store at its first erase: the virtual F446 erases a 128 KiB sector
+/// for 1 s before it answers (as the board does), longer than the panel's 1 s wait per answer;
+/// the save still succeeds (`saw::SAVE_TIMEOUT`) and says how long it took.
+#[test]
+fn the_panels_save_waits_for_a_sector_erase() {
+    let (image, _) = common::f446_store_before_an_erase();
+    let dir = tempfile::tempdir().unwrap();
+    let flash = dir.path().join("flash.bin");
+    std::fs::write(&flash, &image).unwrap();
+    let flash_arg = flash.to_str().unwrap().to_string();
+    let vb = VirtualBoard::start_in(dir, &["--board", "nucleo-f446re", "--flash", &flash_arg]);
+    let ui = panel(&vb);
+    let mut ws = socket(&ui);
+    assert_eq!(next(&mut ws, "link", 5.0).unwrap()["ok"], true);
+    let a = command(&mut ws, json!({"id": 7, "cmd": "save"}));
+    assert_eq!(a["ok"], true, "{a}");
+    let text = a["text"].as_str().unwrap();
+    assert!(
+        text.starts_with("saved scene 0x") && text.contains(" s: the board boots into it"),
+        "{a}"
+    );
+    // The save erased a sector (a byte back at 0xFF), and the link stayed up through it.
+    let after = std::fs::read(&flash).unwrap();
+    assert!(image
+        .iter()
+        .zip(&after)
+        .any(|(b, a)| *b != 0xFF && *a == 0xFF));
+    assert!(next(&mut ws, "records", 5.0).is_some());
+}

@@ -81,3 +81,37 @@ pub fn panel(vb: &VirtualBoard) -> saw::ui::UiHandle {
     })
     .unwrap()
 }
+
+/// The F446's store (sectors 6–7: two 128 KiB units written a word at a time) after as many
+/// saves as fit before the next must erase a sector, built with the firmware's own `saw-store`
+/// over sequential-storage's mock NOR flash: its bytes (a `--flash` file) and the last scene
+/// saved.
+// The e2e and panel tests use it; the browser test does not.
+#[allow(dead_code)]
+pub fn f446_store_before_an_erase() -> (Vec<u8>, u32) {
+    use sequential_storage::mock_flash::MockFlashBase;
+    type Flash = MockFlashBase<2, 4, 0x8000>;
+    let layout = saw_boards::NUCLEO_F446RE.store;
+    assert_eq!((layout.bytes, layout.erase_bytes), (2 * 0x2_0000, 0x2_0000));
+    let mut flash = Flash::default();
+    let start = flash.stats_snapshot();
+    let mut last = None;
+    for i in 0..100_000u32 {
+        let before = flash.as_bytes().to_vec();
+        let config = saw_core::default_config()
+            .with_boundary(0, 25_000 + (i % 50) * 100)
+            .unwrap();
+        let saved = saw_store::Saved {
+            scene_id: saw_link::scene_id(&config),
+            config,
+        };
+        let mut store = saw_store::SceneStore::new(flash, Flash::FULL_FLASH_RANGE).unwrap();
+        embassy_futures::block_on(store.save(&saved)).unwrap();
+        flash = store.into_flash().unwrap();
+        if start.compare_to(flash.stats_snapshot()).erases > 0 {
+            return (before, last.expect("the first save erased"));
+        }
+        last = Some(saved.scene_id);
+    }
+    panic!("no erase after 100 000 saves");
+}
