@@ -246,6 +246,40 @@ fn without_hse_the_board_says_so_and_keeps_rf_off() {
     }
 }
 
+/// Issue #32, ES0430 (G474 errata): a conversion more than 1 ms after the calibration or the
+/// previous conversion may be wrong. The sampler's first trigger after `start` — at boot, after
+/// the calibration and the boot log — is that late; the firmware converts one sequence and
+/// discards it first, so no late result reaches the DMA buffer, at boot or after the overrun
+/// restart of `acquisition_recovers_from_an_overrun`'s storm.
+#[test]
+fn g474_no_late_conversion_reaches_the_samples() {
+    use saw_board_model::periph::adc_g4::AdcG4;
+    let mut opts = Options::new(BoardKind::G474, &elf(BoardKind::G474), 1.3);
+    opts.stuck_irq = Some((1.2, 11));
+    opts.stuck_for_s = Some(0.002);
+    let (o, m) = run::run(&opts).unwrap();
+    assert!(o.stop.is_none(), "{:?}", o.stop);
+    assert_eq!(
+        o.log.iter().filter(|l| l.text.contains("acquisition restarted")).count(),
+        1,
+        "the storm must restart the acquisition once"
+    );
+    let adc = m
+        .sim()
+        .periphs
+        .iter()
+        .find_map(|p| p.p.as_any().downcast_ref::<AdcG4>())
+        .expect("the G474 model has an ADC1");
+    assert!(
+        adc.late_results_delivered.is_empty(),
+        "late conversions in the samples at {:?} µs",
+        adc.late_results_delivered
+            .iter()
+            .map(|t| t / (TICKS_PER_S / 1_000_000))
+            .collect::<Vec<_>>()
+    );
+}
+
 /// The same panic with a debugger attached (DHCSR.C_DEBUGEN = 1): the core halts at the HardFault
 /// handler's breakpoint, and the fault path has frozen the IWDG for the halt (DBGMCU
 /// DBG_IWDG_STOP) so probe-rs can print the backtrace: no reset in the next 200 ms, RF off.

@@ -200,6 +200,10 @@ struct Conversion {
     end_at: Time,
 }
 
+/// ES0430 (STM32G47x/48x errata), "Wrong ADC result if conversion done late after calibration
+/// or previous conversion": more than 1 ms.
+pub const LATE_CONVERSION_TICKS: Time = TICKS_PER_S / 1_000;
+
 /// The STM32G474 ADC1/ADC2 block (ADC1 + ADC12 common registers).
 pub struct AdcG4 {
     irq: u16,
@@ -220,6 +224,13 @@ pub struct AdcG4 {
     calibration_end_at: Option<Time>,
     /// ADRDY rises at this time.
     ready_at: Option<Time>,
+    /// When the ADC last finished a conversion or its calibration (None: neither since reset),
+    /// for ES0430's late-conversion erratum (`LATE_CONVERSION_TICKS`).
+    last_activity_at: Option<Time>,
+    /// Results with a late first conversion (ES0430) that raised a DMA request, i.e. reached the
+    /// firmware's buffer: their end-of-conversion times. A firmware that works around the
+    /// erratum leaves this empty.
+    pub late_results_delivered: Vec<Time>,
     conversion: Option<Conversion>,
     fault: Option<String>,
 }
@@ -245,6 +256,8 @@ impl AdcG4 {
             ccr: 0,
             calibration_end_at: None,
             ready_at: None,
+            last_activity_at: None,
+            late_results_delivered: Vec::new(),
             conversion: None,
             fault: None,
         };
@@ -361,7 +374,8 @@ impl AdcG4 {
 
     /// Flags that become true on their own (calibration done, ready) up to `now`.
     fn settle(&mut self, now: Time) {
-        if self.calibration_end_at.is_some_and(|t| t <= now) {
+        if let Some(t) = self.calibration_end_at.filter(|&t| t <= now) {
+            self.last_activity_at = Some(t);
             self.calibration_end_at = None;
             self.cr &= !CR_ADCAL;
         }
@@ -381,6 +395,13 @@ impl AdcG4 {
         let t = c.end_at;
         self.conversion = None;
         let mut sum: u32 = 0;
+        // ES0430: the first conversion more than 1 ms after the calibration or the previous
+        // conversion may be wrong; the erratum gives no figure, the model reads it as 0 (a
+        // discharged sampling capacitor: the largest error on a mid-scale input).
+        let late = self
+            .last_activity_at
+            .is_none_or(|t| c.start_at.saturating_sub(t) > LATE_CONVERSION_TICKS);
+        self.last_activity_at = Some(t);
         for i in 0..c.count as u64 {
             let held_at = c.start_at + i * c.conversion_ticks + c.sample_ticks;
             let code = match (self.input)(held_at, c.channel) {
@@ -400,7 +421,7 @@ impl AdcG4 {
                     0
                 }
             };
-            sum += code;
+            sum += if i == 0 && late { 0 } else { code };
         }
         self.isr |= EOSMP;
         let value = if self.cfgr2 & CFGR2_ROVSE != 0 {
@@ -449,6 +470,9 @@ impl AdcG4 {
             }
             out.events.push((t, Event::DmaRequest(Request::Adc1)));
             *request_outstanding = true;
+            if late {
+                self.late_results_delivered.push(t);
+            }
         }
 
         let next = if c.rank < c.last_rank {
@@ -862,6 +886,7 @@ impl Peripheral for AdcG4 {
         self.dr = 0;
         self.difsel = 0;
         self.ccr = 0;
+        self.last_activity_at = None;
         self.calibration_end_at = None;
         self.ready_at = None;
         self.conversion = None;
@@ -1083,6 +1108,34 @@ mod tests {
             CR_ADSTART,
             "hardware trigger: ADSTART stays 1"
         );
+    }
+
+    /// ES0430's late conversion: a trigger more than 1 ms after the calibration finds the first
+    /// of its 16 conversions read as 0; the next trigger, 100 µs later, converts all 16. At
+    /// exactly 1 ms after the previous conversion nothing is lost.
+    #[test]
+    fn a_conversion_more_than_1_ms_late_reads_wrong() {
+        let log = Rc::new(RefCell::new(Vec::new()));
+        let mut adc = AdcG4::new(18, counting_input(4000, log.clone()));
+        let t0 = bring_up(&mut adc, Some((0b011, 0)));
+        configure_ring_buffered(&mut adc, t0, 2);
+        modify(&mut adc, t0, CR, |v| v | CR_ADSTART);
+        // 2 ms after ADRDY: more than 1 ms after the calibration.
+        let t = t0 + 2 * TICKS_PER_S / 1_000;
+        adc.on_event(t, Event::Trgo { timer: 3 }, &mut Signals::default());
+        run(&mut adc, t + 56_832);
+        // Codes 4000..=4015 with the first lost: 64 120 − 4 000.
+        assert_eq!(r(&mut adc, t, DR), 60_120);
+        let t = t + 360_000; // 100 µs later
+        adc.on_event(t, Event::Trgo { timer: 3 }, &mut Signals::default());
+        run(&mut adc, t + 56_832);
+        // Codes 4016..=4031: 16 × 4016 + 120.
+        assert_eq!(r(&mut adc, t, DR), 64_376);
+        // Exactly 1 ms after the previous sequence's end: not late.
+        let t = t + 56_832 + TICKS_PER_S / 1_000;
+        adc.on_event(t, Event::Trgo { timer: 3 }, &mut Signals::default());
+        run(&mut adc, t + 56_832);
+        assert_eq!(r(&mut adc, t, DR), 16 * 4032 + 120);
     }
 
     #[test]

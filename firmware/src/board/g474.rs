@@ -356,9 +356,11 @@ impl Sampler {
         Sampler { adc, trigger }
     }
 
-    /// Arm DMA + ADC, then start the trigger timer: the first conversions land in a running
-    /// ring buffer. Call from the task that reads, right before the first `read`.
+    /// A dummy conversion, then arm DMA + ADC, then start the trigger timer: the first
+    /// conversions land in a running ring buffer. Call from the task that reads, right before
+    /// the first `read`.
     pub fn start(&mut self) {
+        dummy_conversion();
         self.adc.start();
         self.trigger.start();
     }
@@ -415,6 +417,38 @@ impl Sampler {
         self.adc.clear();
         self.start();
     }
+}
+
+/// ES0430 (STM32G47x/48x errata), "Wrong ADC result if conversion done late after calibration
+/// or previous conversion": a conversion more than 1 ms after the calibration or the previous
+/// conversion may be wrong; the workaround is a conversion whose result is thrown away. The
+/// sampler converts every 100 µs, so only the first trigger after `start` — at boot after the
+/// calibration, and after every restart — is late: one software-triggered sequence is converted
+/// here and discarded, and the first TIM3 trigger comes one period later. With DMAEN = 0 the
+/// result raises no DMA request (it would land in the ring buffer once the channel runs), and
+/// with EXTEN = 0 ADSTART starts it at once and clears itself at its end of sequence (RM0440
+/// §21.4.15 "Starting conversions", §21.4.18 single mode); CFGR (writable only while ADSTART =
+/// 0, §21.7.4) is then put back as embassy set it. 32 conversions of 60 cycles at 37.5 MHz:
+/// ~51 µs of busy wait, at boot and after a restart only.
+fn dummy_conversion() {
+    let adc = pac::ADC1;
+    let cfgr = adc.cfgr().read();
+    adc.cfgr().modify(|w| {
+        w.set_dmaen(vals::Dmaen::DISABLE);
+        w.set_exten(Exten::DISABLED);
+        w.set_cont(false);
+    });
+    adc.cr().modify(|w| w.set_adstart(true));
+    while adc.cr().read().adstart() {}
+    let _ = adc.dr().read();
+    // ISR flags are rc_w1.
+    adc.isr().write(|w| {
+        w.set_ovr(true);
+        w.set_eoc(true);
+        w.set_eos(true);
+        w.set_eosmp(true);
+    });
+    adc.cfgr().write_value(cfgr);
 }
 
 /// TIM3: `sample_rate_hz` period, TRGO = update event; started by `Sampler::start`. Its UG
