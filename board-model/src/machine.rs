@@ -37,6 +37,8 @@ pub struct ChipSpec {
     /// External interrupts implemented.
     pub irqs: u16,
     pub flash: (u32, u32),
+    /// Address of the 16-bit flash size data register (FLASHSIZE, KiB) in system memory.
+    pub flash_size_reg: u32,
     /// RAM regions (base, size).
     pub ram: Vec<(u32, u32)>,
     /// Index of the RCC in `periphs`, and how to read its clock tree and clock gates.
@@ -642,6 +644,7 @@ impl Machine {
     ) -> Result<Self, String> {
         let irqs = chip.irqs;
         let (flash_base, flash_size) = chip.flash;
+        let chip_flash_size_reg = chip.flash_size_reg;
         let mut flash_image = vec![0xFFu8; flash_size as usize];
         for s in &image.segments {
             if s.addr < flash_base
@@ -721,6 +724,17 @@ impl Machine {
         .map_err(uc_err)?;
         uc.mem_write(flash_base as u64, &flash_image)
             .map_err(uc_err)?;
+        // The flash size data register, in the system memory's engineering bytes (RM0390
+        // §39.2 FLASHSIZE at 0x1FFF_7A22; RM0440 §48.2 at 0x1FFF_75E0): read-only, the part's
+        // flash in KiB. Its 4 KiB page is mapped read-only and holds nothing else the model
+        // knows (reads of the rest return 0).
+        let fs_page = chip_flash_size_reg & !0xFFF;
+        uc.mem_map(fs_page as u64, 0x1000, Prot::READ).map_err(uc_err)?;
+        uc.mem_write(
+            chip_flash_size_reg as u64,
+            &((flash_size / 1024) as u16).to_le_bytes(),
+        )
+        .map_err(uc_err)?;
         // A store to flash is a program operation of the flash interface (`flash_prog`): the
         // model decides what the cells hold afterwards (old AND new on the F446, a double word
         // into erased cells on the G474, nothing on an error) and the slice ends so a busy
@@ -1117,6 +1131,29 @@ impl Machine {
         s.update_pins(now);
         // The RTT control block is rebuilt by the new boot; read from its start again.
         self.reset_core()
+    }
+
+    /// Makes this a part with less flash (a G474RB/RC, an F446RC): FLASHSIZE reads `kib` and
+    /// the flash above it is not there (an access faults). Before a run.
+    pub fn set_flash_kib(&mut self, kib: u16) -> Result<(), String> {
+        let (base, size) = self.uc.get_data().chip.flash;
+        let have = kib as u32 * 1024;
+        if have == 0 || have > size || !have.is_multiple_of(4096) {
+            return Err(format!(
+                "flash size {kib} KiB: the model's chip has {} KiB; give a multiple of 4 up to it",
+                size / 1024
+            ));
+        }
+        let reg = self.uc.get_data().chip.flash_size_reg;
+        self.uc
+            .mem_write(reg as u64, &kib.to_le_bytes())
+            .map_err(|e| format!("{e:?}"))?;
+        if have < size {
+            self.uc
+                .mem_unmap((base + have) as u64, (size - have) as u64)
+                .map_err(|e| format!("{e:?}"))?;
+        }
+        Ok(())
     }
 
     /// Writes `bytes` into flash at `addr` before a run, as a probe would have programmed them.

@@ -49,6 +49,9 @@ pub struct Options {
     /// Nothing on the HSE pins (the F446's ST-LINK MCO absent, a dead crystal): HSERDY never
     /// sets.
     pub hse_absent: bool,
+    /// A part with this much flash, KiB (None: the board's 512): FLASHSIZE reads it and the
+    /// flash above is absent.
+    pub flash_kib: Option<u16>,
     /// Bytes the host sends on the link UART, each batch from its virtual time (s) on.
     pub link_input: Vec<(f64, Vec<u8>)>,
     /// Flash contents written before the run (address, bytes): a store left by earlier saves.
@@ -85,6 +88,7 @@ impl Options {
             rtt_host_blocking: false,
             rtt_host_stalls_s: None,
             hse_absent: false,
+            flash_kib: None,
             link_input: Vec::new(),
             flash_preload: Vec::new(),
             count_at_s: Vec::new(),
@@ -179,6 +183,9 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
         m.preload_flash(*addr, bytes)?;
     }
     m.sim_mut().scs.debugger_attached = opts.debugger;
+    if let Some(kib) = opts.flash_kib {
+        m.set_flash_kib(kib)?;
+    }
     if opts.hse_absent {
         use crate::periph::rcc_f4::{HseInput, RccF4};
         use crate::periph::rcc_g4::RccG4;

@@ -280,6 +280,38 @@ fn g474_no_late_conversion_reaches_the_samples() {
     );
 }
 
+/// Issue #32: the same image on a part with less flash (an F446RC or G474RC, 256 KiB) has no
+/// store region (F446 sectors 6–7 from 0x0804_0000; G474 bank 2's last pages near 0x0808_0000):
+/// touching it faults. The firmware reads FLASHSIZE, says the store is off, boots the built-in
+/// scene and runs (bursts, no reset, no fault); a save is then refused as on a board without a
+/// store.
+#[test]
+fn a_part_with_less_flash_runs_without_a_store() {
+    for board in BOARDS {
+        let mut opts = Options::new(board, &elf(board), 0.5);
+        opts.flash_kib = Some(256);
+        let (o, _m) = run::run(&opts).unwrap();
+        assert!(o.stop.is_none(), "{board:?}: {:?}", o.stop);
+        assert!(o.resets.is_empty(), "{board:?}: reset {:?}", o.resets);
+        assert!(
+            o.log
+                .iter()
+                .any(|l| l.text.contains("this part has 256 KiB of flash (FLASHSIZE)")),
+            "{board:?}: no flash-size line in {:?}",
+            o.log
+        );
+        assert!(
+            o.log.iter().any(|l| l.text == "boot: no scene store on this board"),
+            "{board:?}: {:?}",
+            o.log
+        );
+        assert!(
+            o.pins[PIN_BURST_A].iter().any(|e| e.high),
+            "{board:?}: no burst"
+        );
+    }
+}
+
 /// The same panic with a debugger attached (DHCSR.C_DEBUGEN = 1): the core halts at the HardFault
 /// handler's breakpoint, and the fault path has frozen the IWDG for the halt (DBGMCU
 /// DBG_IWDG_STOP) so probe-rs can print the backtrace: no reset in the next 200 ms, RF off.

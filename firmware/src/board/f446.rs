@@ -22,6 +22,9 @@ use static_cell::StaticCell;
 
 use super::{AdcFault, Batch};
 
+/// FLASHSIZE, the flash size data register (RM0390 §39.2).
+pub const FLASH_SIZE_REG: u32 = 0x1FFF_7A22;
+
 pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE;
 
 // The numbers below are what the embassy RCC config is built from; make sure the plan is the one
@@ -125,6 +128,9 @@ pub type StoreFlash = flash::Bank1Region3<'static, flash::Async>;
 
 fn store_flash(p: Peri<'static, peripherals::FLASH>) -> Option<StoreFlash> {
     const _: () = assert!(BOARD.store.region_base == 0x0802_0000);
+    if !super::store_fits() {
+        return None;
+    }
     Some(flash::Flash::new(p, Irqs).into_regions().bank1_region3)
 }
 

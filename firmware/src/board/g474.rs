@@ -23,6 +23,9 @@ use static_cell::StaticCell;
 
 use super::{AdcFault, Batch};
 
+/// FLASHSIZE, the flash size data register (RM0440 §48.2).
+pub const FLASH_SIZE_REG: u32 = 0x1FFF_75E0;
+
 pub const BOARD: &BoardDef = &saw_boards::NUCLEO_G474RE;
 
 const C: saw_boards::ClockPlan = BOARD.clocks;
@@ -126,6 +129,9 @@ pub type StoreFlash = flash::Bank2Region<'static, flash::Async>;
 /// panic: the board then runs without a store and says so.
 fn store_flash(p: Peri<'static, peripherals::FLASH>) -> Option<StoreFlash> {
     const _: () = assert!(BOARD.store.region_base == 0x0804_0000);
+    if !super::store_fits() {
+        return None;
+    }
     if !pac::FLASH.optr().read().dbank() {
         defmt::warn!("store: the flash is in single-bank mode (FLASH_OPTR.DBANK = 0); no store");
         return None;

@@ -90,3 +90,30 @@ pub struct Batch {
 /// How long `Sampler::read` waits for a batch: the batch's own sample periods plus four.
 pub const READ_TIMEOUT: embassy_time::Duration =
     embassy_time::Duration::from_micros((SAMPLES_PER_READ as u64 + 4) * 1_000_000 / BOARD.sample_rate_hz as u64);
+
+/// The part's flash in KiB, from its flash size data register (FLASHSIZE, in system memory:
+/// RM0390 §39.2 at 0x1FFF_7A22, RM0440 §48.2 at 0x1FFF_75E0). The same image runs on an
+/// F446RC or a G474RB/RC, whose smaller flash has no store region.
+fn flash_kib() -> u32 {
+    // SAFETY: a read-only, always-mapped 16-bit register.
+    unsafe { core::ptr::read_volatile(FLASH_SIZE_REG as *const u16) as u32 }
+}
+
+/// True if the part has the flash the store lives in; else says so once and the board runs
+/// without a store (`saw save` is refused).
+fn store_fits() -> bool {
+    let s = BOARD.store;
+    let have = flash_kib();
+    let end = s.origin + s.bytes;
+    let need_kib = (end - BOARD.flash_origin).div_ceil(1024);
+    if have < need_kib {
+        defmt::warn!(
+            "store: this part has {} KiB of flash (FLASHSIZE); the store at {=u32:#010x} needs {} KiB: no store, save is refused",
+            have,
+            s.origin,
+            need_kib
+        );
+        return false;
+    }
+    true
+}
