@@ -17,7 +17,10 @@
 #    delayed one-pulse fired at boot by the self-test image: rise arr + 1 − ccr ticks after CEN,
 #    high ccr ticks, docs/board-model.md); skipped, saying so, when that image is missing
 #    (`SELFTEST=1 scripts/build-firmware.sh` builds it; scripts/test.sh does);
-# 4. a summary per board: flash, static RAM, stack reserved, deepest, headroom.
+# 4. `saw` against the images through `board-model serve` (board-model/tests/serve.rs, both boards:
+#    hello, every scene pushed and read back, refusals, a save that must erase — the F446's
+#    128 KiB sector — with a power cycle into it, a 1 kHz stream); builds the `saw` binary;
+# 5. a summary per board: flash, static RAM, stack reserved, deepest, headroom.
 # Needs firmware/target/<board>.elf (scripts/build-firmware.sh) and defmt-print (scripts/setup.sh).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -48,6 +51,20 @@ for b in "${BOARDS[@]}"; do
         echo "board model: $b: delayed-pulse check SKIPPED: no $st (SELFTEST=1 scripts/build-firmware.sh)"
     fi
 done
+
+# saw against the images, served by the model behind a pty: the tests the plain `cargo test`
+# above ignores (they need the saw binary), for the boards named. The debug saw: scripts/test.sh
+# has built it already (`cargo test --workspace`), and it only moves bytes.
+echo "== board model: saw against the images (board-model serve)"
+cargo build -p saw --manifest-path "$ROOT/Cargo.toml"
+filters=()
+for b in "${BOARDS[@]}"; do
+    case "$b" in
+        nucleo-f446re) filters+=(f446_) ;;
+        nucleo-g474re) filters+=(g474_) ;;
+    esac
+done
+SAW_BIN="$CARGO_TARGET_DIR/debug/saw" cargo test --release --test serve -- --ignored "${filters[@]}" || fail=1
 
 if command -v size >/dev/null 2>&1; then SIZE=size; else SIZE=llvm-size-22; fi
 echo

@@ -4,7 +4,7 @@
 //! a unit (the F446's 128 KiB sector) followed by a power cycle, and a stream.
 //!
 //! Ignored by a plain `cargo test`: they need the `saw` binary of the host workspace
-//! (`cargo build --release -p saw`; `SAW_BIN` names another) and the images
+//! (`cargo build -p saw`, either profile; `SAW_BIN` names another) and the images
 //! (`$SAW_FIRMWARE_DIR/<board>.elf`, default `../firmware/target`). `scripts/board-model.sh` runs
 //! them after `check`: `cargo test --release --test serve -- --ignored`.
 //!
@@ -42,7 +42,13 @@ fn saw_bin() -> PathBuf {
             let target = std::env::var("CARGO_TARGET_DIR")
                 .map(PathBuf::from)
                 .unwrap_or_else(|_| Path::new(env!("CARGO_MANIFEST_DIR")).join("../target"));
-            target.join("release/saw")
+            // Either profile: saw only moves bytes.
+            let release = target.join("release/saw");
+            if release.exists() {
+                release
+            } else {
+                target.join("debug/saw")
+            }
         }
     };
     assert!(
