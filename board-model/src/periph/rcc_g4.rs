@@ -27,7 +27,7 @@
 use super::misc::{g474_min_wait_states, FlashG4, PwrG4};
 use super::rcc_f4::{ahb_div, apb_div, divides_master, rising_resets, Gate, Osc, Pll};
 pub use super::rcc_f4::{HseInput, ReadyDelays, HSI_HZ, LSI_HZ};
-use super::{merge, Clocks, Peripheral, ResetCause, Signals, Time, Unmodelled};
+use super::{merge, Clocks, Peripheral, ResetCause, Signals, Time, Unmodelled, TICKS_PER_S};
 use std::any::Any;
 
 /// HSI48 RC oscillator (RM0440 §7.2.4).
@@ -231,6 +231,10 @@ pub struct RccG4 {
     last_clocks: Clocks,
     clocks_changed: bool,
     bdcr_writes_ignored: u32,
+    /// When SYSCLK last changed (for the 1 µs of the HCLK step rule).
+    sysclk_since: Time,
+    /// HCLK steps across 80 MHz that break RM0440 §7.2.7's intermediate /2 step: (time, what).
+    pub hclk_step_violations: Vec<(Time, String)>,
 }
 
 impl Default for RccG4 {
@@ -281,6 +285,8 @@ impl RccG4 {
             last_clocks: Clocks::default(),
             clocks_changed: false,
             bdcr_writes_ignored: 0,
+            sysclk_since: 0,
+            hclk_step_violations: Vec::new(),
         };
         r.reset_registers(0);
         r.last_clocks = r.clocks();
@@ -444,13 +450,46 @@ impl RccG4 {
         }
     }
 
-    fn note_clocks(&mut self, out: &mut Signals) {
+    fn note_clocks(&mut self, now: Time, out: &mut Signals) {
         let c = self.clocks();
         if c != self.last_clocks {
+            self.check_hclk_step(now, &c);
             self.last_clocks = c;
             self.clocks_changed = true;
             out.replan = true;
         }
+    }
+
+    /// RM0440 §7.2.7 (and ST's HAL_RCC_ClockConfig, "intermediate step with HCLK prescaler 2
+    /// necessary before to go over 80 MHz"): HCLK may not go from ≤ 80 MHz to above it in one
+    /// step; the switch is made with AHB /2, and /1 is set at least 1 µs later. A step that
+    /// breaks the rule is recorded (`hclk_step_violations`), as a board would show it, if at
+    /// all, by a brown-out or a corrupted fetch.
+    fn check_hclk_step(&mut self, now: Time, c: &Clocks) {
+        const LIMIT_HZ: u64 = 80_000_000;
+        let before = self.last_clocks;
+        if c.sysclk_hz != before.sysclk_hz {
+            self.sysclk_since = now;
+        }
+        let (from, to) = (before.hclk_hz as u64, c.hclk_hz as u64);
+        if from == 0 || from > LIMIT_HZ || to <= LIMIT_HZ {
+            return;
+        }
+        // The allowed step: the same SYSCLK, AHB /2 → /1, at least 1 µs after SYSCLK settled.
+        let halving_undone = c.sysclk_hz == before.sysclk_hz && to == 2 * from;
+        if halving_undone && now - self.sysclk_since >= TICKS_PER_S / 1_000_000 {
+            return;
+        }
+        self.hclk_step_violations.push((
+            now,
+            format!(
+                "HCLK {} -> {} Hz in one step (SYSCLK {} Hz{}): RM0440 §7.2.7 asks for AHB /2 for at least 1 µs first",
+                from,
+                to,
+                c.sysclk_hz,
+                if halving_undone { ", /2 held under 1 µs" } else { "" }
+            ),
+        ));
     }
 
     fn hsi_in_use(&self) -> bool {
@@ -724,7 +763,7 @@ impl Peripheral for RccG4 {
 
     fn read(&mut self, now: Time, offset: u32, out: &mut Signals) -> Result<u32, Unmodelled> {
         self.settle(now);
-        self.note_clocks(out);
+        self.note_clocks(now, out);
         match offset {
             OFF_CR => Ok(self.cr_read(now)),
             // HSICAL (23:16): factory calibration, not modelled (reads 0).
@@ -870,13 +909,13 @@ impl Peripheral for RccG4 {
                 None => return Err(Unmodelled::write(offset, value, unmodelled_reg(offset))),
             },
         }
-        self.note_clocks(out);
+        self.note_clocks(now, out);
         Ok(())
     }
 
     fn advance(&mut self, now: Time, out: &mut Signals) {
         self.settle(now);
-        self.note_clocks(out);
+        self.note_clocks(now, out);
     }
 
     fn next_event(&self) -> Option<Time> {
@@ -1040,6 +1079,39 @@ mod tests {
             self.modify(B::Rcc, OFF_CCIPR2, 3, 0);
             // time driver TIM4; later TIM1..3 and ADC12.
             self.enable_and_reset(OFF_APB1RSTR1, OFF_APB1ENR1, 2);
+        }
+    }
+
+    /// RM0440 §7.2.7's step rule as the model checks it: embassy-stm32 0.6's G4 sequence (SW =
+    /// PLL with AHB /1 in one write, from HSI16) is recorded; ST's HAL sequence (AHB /2, switch,
+    /// 1 µs, AHB /1) is not; the same with /2 held for less than 1 µs is.
+    #[test]
+    fn hclk_may_not_step_past_80_mhz_in_one_go() {
+        let mut chip = Chip::new();
+        chip.embassy_init();
+        assert_eq!(chip.rcc.hclk_step_violations.len(), 1, "{:?}", chip.rcc.hclk_step_violations);
+        assert!(chip.rcc.hclk_step_violations[0].1.contains("HCLK 16000000 -> 150000000 Hz"));
+
+        for (wait_ticks, violations) in [(3_600, 0), (3_599, 1)] {
+            let mut chip = Chip::new();
+            chip.embassy_init();
+            // Back to HSI16, then up again as ST's HAL does.
+            chip.modify(B::Rcc, OFF_CFGR, 3, SW_HSI);
+            chip.wait(B::Rcc, OFF_CFGR, 3 << 2, SW_HSI << 2);
+            chip.rcc.hclk_step_violations.clear();
+            chip.modify(B::Rcc, OFF_CFGR, 0xF << 4, 0b1000 << 4);
+            chip.modify(B::Rcc, OFF_CFGR, 3, SW_PLL);
+            chip.wait(B::Rcc, OFF_CFGR, 3 << 2, SW_PLL << 2);
+            assert_eq!(chip.rcc.clocks().hclk_hz, 75_000_000);
+            chip.now += wait_ticks;
+            chip.modify(B::Rcc, OFF_CFGR, 0xF << 4, 0);
+            assert_eq!(chip.rcc.clocks().hclk_hz, 150_000_000);
+            assert_eq!(
+                chip.rcc.hclk_step_violations.len(),
+                violations,
+                "AHB /2 held {wait_ticks} ticks: {:?}",
+                chip.rcc.hclk_step_violations
+            );
         }
     }
 
