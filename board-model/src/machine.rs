@@ -569,6 +569,47 @@ impl Sim {
     }
 }
 
+/// Hooks every CPU data read of flash (`flash_prog`): on the G474 a double word with a bad ECC
+/// raises ECCD and the NMI; on the F446 the read is served through the ART data cache, whose
+/// line may hold bytes an erase has since changed — those are put in place for this one load
+/// (the hook runs before it) and the array's put back right after it.
+fn install_flash_read_hooks(uc: &mut Unicorn<'static, Sim>) -> Result<(), String> {
+    let (flash_base, flash_size) = uc.get_data().chip.flash;
+    let stale: std::rc::Rc<std::cell::RefCell<Vec<(u32, [u8; 16])>>> = Default::default();
+    let put_back = stale.clone();
+    uc.add_mem_hook(
+        unicorn_engine::unicorn_const::HookType::MEM_READ,
+        flash_base as u64,
+        (flash_base + flash_size - 1) as u64,
+        move |uc: &mut Unicorn<'_, Sim>,
+              _kind: unicorn_engine::unicorn_const::MemType,
+              addr: u64,
+              size: usize,
+              _value: i64| {
+            flash_data_read(uc, addr as u32, size as u32, &mut stale.borrow_mut());
+            true
+        },
+    )
+    .map_err(uc_err)?;
+    uc.add_mem_hook(
+        unicorn_engine::unicorn_const::HookType::MEM_READ_AFTER,
+        flash_base as u64,
+        (flash_base + flash_size - 1) as u64,
+        move |uc: &mut Unicorn<'_, Sim>,
+              _kind: unicorn_engine::unicorn_const::MemType,
+              _addr: u64,
+              _size: usize,
+              _value: i64| {
+            for (line, bytes) in put_back.borrow_mut().drain(..) {
+                let _ = uc.mem_write(line as u64, &bytes);
+            }
+            true
+        },
+    )
+    .map_err(uc_err)?;
+    Ok(())
+}
+
 /// A CPU data read of `size` bytes of flash at `addr`, before the load happens: the G474's ECC
 /// check (a double error pends the NMI, RM0440 §5.7.7) and the F446's data cache (RM0390
 /// §3.4.2). Lines whose cached bytes differ from the array's are written over the array for
@@ -792,42 +833,17 @@ impl Machine {
             },
         )
         .map_err(uc_err)?;
-        // A CPU data read of flash (`flash_prog`): on the G474 a double word with a bad ECC
-        // raises ECCD and the NMI; on the F446 the read is served through the ART data cache,
-        // whose line may hold bytes an erase has since changed — those are put in place for
-        // this one load (the hook runs before it) and the array's put back right after it.
-        let stale: std::rc::Rc<std::cell::RefCell<Vec<(u32, [u8; 16])>>> = Default::default();
-        let put_back = stale.clone();
-        uc.add_mem_hook(
-            unicorn_engine::unicorn_const::HookType::MEM_READ,
-            flash_base as u64,
-            (flash_base + flash_size - 1) as u64,
-            move |uc: &mut Unicorn<'_, Sim>,
-                  _kind: unicorn_engine::unicorn_const::MemType,
-                  addr: u64,
-                  size: usize,
-                  _value: i64| {
-                flash_data_read(uc, addr as u32, size as u32, &mut stale.borrow_mut());
-                true
-            },
-        )
-        .map_err(uc_err)?;
-        uc.add_mem_hook(
-            unicorn_engine::unicorn_const::HookType::MEM_READ_AFTER,
-            flash_base as u64,
-            (flash_base + flash_size - 1) as u64,
-            move |uc: &mut Unicorn<'_, Sim>,
-                  _kind: unicorn_engine::unicorn_const::MemType,
-                  _addr: u64,
-                  _size: usize,
-                  _value: i64| {
-                for (line, bytes) in put_back.borrow_mut().drain(..) {
-                    let _ = uc.mem_write(line as u64, &bytes);
-                }
-                true
-            },
-        )
-        .map_err(uc_err)?;
+        // The F446's data cache sees every CPU data read of flash (`install_flash_read_hooks`).
+        let f446_data_cache = {
+            let s = uc.get_data_mut();
+            let fi = s.chip.flash_if;
+            (s.chip.flash_prog)(&mut *s.periphs[fi].p)
+                .data_cache()
+                .is_some()
+        };
+        if f446_data_cache {
+            install_flash_read_hooks(&mut uc)?;
+        }
         let ram = uc.get_data().chip.ram.clone();
         for &(b, s) in &ram {
             uc.mem_map(b as u64, s as u64, Prot::ALL).map_err(uc_err)?;
@@ -1152,6 +1168,25 @@ impl Machine {
             self.uc
                 .mem_unmap((base + have) as u64, (size - have) as u64)
                 .map_err(|e| format!("{e:?}"))?;
+        }
+        Ok(())
+    }
+
+    /// Marks the flash double word at `addr` as carrying a bad ECC (G474, `flash_prog`), as a
+    /// program or erase cut by a power loss leaves it; before the first run only. The first
+    /// mark installs the data-read hook that checks it: a machine with a read hook sends every
+    /// load down Unicorn's slow path (~40 % of a run), so only runs that need it pay.
+    pub fn mark_flash_ecc_bad(&mut self, addr: u32) -> Result<(), String> {
+        if self.sim().instructions > 0 {
+            return Err("flash ECC marks are set before the first run (translated code would miss the read hook)".into());
+        }
+        let s = self.uc.get_data_mut();
+        let fi = s.chip.flash_if;
+        let prog = (s.chip.flash_prog)(&mut *s.periphs[fi].p);
+        let hooked = prog.data_cache().is_some() || prog.ecc_bad_in(0, u32::MAX);
+        prog.mark_ecc_bad(addr);
+        if !hooked && prog.ecc_bad_in(0, u32::MAX) {
+            install_flash_read_hooks(&mut self.uc)?;
         }
         Ok(())
     }

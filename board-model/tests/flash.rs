@@ -287,7 +287,7 @@ fn boot(board: BoardKind, store: &[u8], bad: &[u32], duration_s: f64) -> Boot {
         .expect("the store is in flash");
     let (fi, prog) = (m.sim().chip.flash_if, m.sim().chip.flash_prog);
     for &a in bad {
-        prog(&mut *m.sim_mut().periphs[fi].p).mark_ecc_bad(a);
+        m.mark_flash_ecc_bad(a).expect("marked before the run");
     }
     let stop = m.run_until((duration_s * TICKS_PER_S as f64) as Time);
     assert!(stop.is_none(), "the boot run stopped: {stop:?}");
