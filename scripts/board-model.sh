@@ -19,7 +19,8 @@
 #    (`SELFTEST=1 scripts/build-firmware.sh` builds it; scripts/test.sh does);
 # 4. `saw` against the images through `board-model serve` (board-model/tests/serve.rs, both boards:
 #    hello, every scene pushed and read back, refusals, a save that must erase — the F446's
-#    128 KiB sector — with a power cycle into it, a 1 kHz stream); builds the `saw` binary;
+#    128 KiB sector — with a power cycle into it, a 1 kHz stream) and the panel's save on the
+#    F446 image (saw/tests/ui.rs); builds the debug `saw`;
 # 5. a summary per board: flash, static RAM, stack reserved, deepest, headroom.
 # Needs firmware/target/<board>.elf (scripts/build-firmware.sh) and defmt-print (scripts/setup.sh).
 set -euo pipefail
@@ -53,10 +54,17 @@ for b in "${BOARDS[@]}"; do
 done
 
 # saw against the images, served by the model behind a pty: the tests the plain `cargo test`
-# above ignores (they need the saw binary), for the boards named. The debug saw: scripts/test.sh
-# has built it already (`cargo test --workspace`), and it only moves bytes.
+# above ignores (they need the saw binary), for the boards named. The debug saw, built with its
+# tests (scripts/test.sh's `cargo test --workspace` has built most of it), only moves bytes.
 echo "== board model: saw against the images (board-model serve)"
-cargo build -p saw --manifest-path "$ROOT/Cargo.toml"
+cargo test -p saw --manifest-path "$ROOT/Cargo.toml" --test ui --no-run
+if [[ " ${BOARDS[*]} " == *" nucleo-f446re "* ]]; then
+    # The panel's save on the F446 image, erasing a sector (saw/tests/ui.rs).
+    SAW_BOARD_MODEL_BIN="$CARGO_TARGET_DIR/release/board-model" \
+        SAW_F446_ELF="$SAW_FIRMWARE_DIR/nucleo-f446re.elf" \
+        cargo test -p saw --manifest-path "$ROOT/Cargo.toml" --test ui -- --ignored \
+        the_panels_save_on_the_f446_image || fail=1
+fi
 filters=()
 for b in "${BOARDS[@]}"; do
     case "$b" in

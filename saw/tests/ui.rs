@@ -322,3 +322,65 @@ fn the_panels_save_waits_for_a_sector_erase() {
         .any(|(b, a)| *b != 0xFF && *a == 0xFF));
     assert!(next(&mut ws, "records", 5.0).is_some());
 }
+
+/// The panel's save on the real F446 image: `board-model serve` (`SAW_BOARD_MODEL_BIN`) runs
+/// `SAW_F446_ELF` with its store filled to the first erase, so the save erases a 128 KiB sector
+/// (1.11 s of board time; the model never runs ahead of the wall clock). The panel waits its
+/// usual 1 s per answer and `SAVE_TIMEOUT` for the save. Ignored without those variables;
+/// `scripts/board-model.sh` runs it.
+#[test]
+#[ignore = "needs SAW_BOARD_MODEL_BIN and SAW_F446_ELF; scripts/board-model.sh runs it"]
+fn the_panels_save_on_the_f446_image_waits_for_its_sector_erase() {
+    let (Ok(bin), Ok(elf)) = (
+        std::env::var("SAW_BOARD_MODEL_BIN"),
+        std::env::var("SAW_F446_ELF"),
+    ) else {
+        panic!("set SAW_BOARD_MODEL_BIN and SAW_F446_ELF");
+    };
+    let (image, _) = common::f446_store_before_an_erase();
+    let dir = tempfile::tempdir().unwrap();
+    let flash = dir.path().join("flash.bin");
+    std::fs::write(&flash, &image).unwrap();
+    let port = dir.path().join("tty");
+    let mut served = std::process::Command::new(bin)
+        .args(["serve", "--board", "nucleo-f446re", "--elf", &elf, "--pty"])
+        .arg(&port)
+        .arg("--flash")
+        .arg(&flash)
+        .arg("--log")
+        .arg(dir.path().join("defmt.log"))
+        .spawn()
+        .unwrap();
+    let give_up = Instant::now() + Duration::from_secs(60);
+    while !port.exists() && Instant::now() < give_up {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let result = std::panic::catch_unwind(|| {
+        let ui = saw::ui::start(saw::ui::UiOptions {
+            port: port.clone(),
+            listen: "127.0.0.1:0".parse().unwrap(),
+            allow_remote: false,
+            timeout: Duration::from_millis(1000),
+            every: 10,
+        })
+        .unwrap();
+        let mut ws = socket(&ui);
+        let link = next(&mut ws, "link", 10.0).expect("no link message");
+        assert_eq!(link["ok"], true, "{link}");
+        assert_eq!(link["hello"]["board"], "nucleo-f446re", "{link}");
+        ws.send(Message::Text(
+            json!({"id": 9, "cmd": "save"}).to_string().into(),
+        ))
+        .unwrap();
+        let a = next(&mut ws, "answer", 10.0).expect("no answer");
+        assert_eq!(a["ok"], true, "{a}");
+        let text = a["text"].as_str().unwrap();
+        assert!(text.starts_with("saved scene 0x"), "{a}");
+        eprintln!("panel on the F446 image: {text}");
+    });
+    let _ = served.kill();
+    let _ = served.wait();
+    if let Err(p) = result {
+        std::panic::resume_unwind(p);
+    }
+}
