@@ -1,10 +1,14 @@
 //! The saved scene's flash on the firmware images (issue #32): what silicon does to a store that
 //! the board model once could not show.
 //!
-//! - F446, the ART data cache across an erase (RM0390 §3.4.2): a save that must erase a sector
-//!   is made over the link, then the board reboots on the flash it left: the scene just saved
-//!   must boot. Without a cache flush after the erase, the store reads its erased sector's old
-//!   markers through the cache.
+//! - F446, the ART data cache across an erase (RM0390 §3.4.2, §3.8.1): a save that must erase a
+//!   sector is made over the link; the caches must be reset (DCRST with DCEN = 0) after the
+//!   erase, before the store's next flash operation, and the board must boot the saved scene on
+//!   the flash it left. In this save the model's cache serves no stale line even without the
+//!   reset (its 8 lines are refilled by the page scan and the code's literal pools long before
+//!   sequential-storage reads the erased sector again: 0 of ~317 000 cached reads were stale),
+//!   so the check holds the firmware to the manual's rule rather than to a symptom this flow
+//!   cannot show.
 //! - G474, a power cut in a save (RM0440 §5.3.2, §5.7.7): the save's flash operations are
 //!   recorded, and for every one a flash is built as a cut there leaves it (the operations
 //!   before done, that one half done with a bad ECC); a fresh board boots on each and must run
@@ -152,7 +156,8 @@ fn operations(m: &mut Machine) -> Vec<Operation> {
 
 /// F446 (issue #32 A): a save whose store must erase a sector, then a reboot on the flash it
 /// left. The store's 128 KiB sectors hold ~1 900 saves; the image is the one just before the
-/// save that reclaims the first sector. The board must answer Saved and boot the new scene.
+/// save that reclaims the first sector. The board must answer Saved, reset its flash caches
+/// after the erase (see the module doc) and boot the new scene.
 #[test]
 fn f446_a_save_across_a_sector_erase_boots_the_saved_scene() {
     let board = BoardKind::F446;
