@@ -66,7 +66,7 @@ pub fn stop(cause: Cause, irqn: i16, log: impl FnOnce()) -> ! {
         // run a second fault path to completion in between; a volatile write of plain words.
         unsafe { core::ptr::write_volatile(core::ptr::addr_of_mut!(LAST_FAULT).cast::<[u32; 2]>(), [MAGIC, word]) };
     }
-    if cortex_m::peripheral::DCB::is_debugger_attached() {
+    if debugger_reading() {
         crate::board::freeze_watchdog_if_debugged();
         if first {
             log();
@@ -76,6 +76,17 @@ pub fn stop(cause: Cause, irqn: i16, log: impl FnOnce()) -> ! {
         }
     }
     cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// A debugger that will print the backtrace: DHCSR.C_DEBUGEN set *and* an RTT host that put the
+/// log channel in block-when-full mode, as `probe-rs run` does at attach. C_DEBUGEN alone is not
+/// enough: only a power-on reset clears it (ARMv7-M ARM C1.6.3; the DBGMCU freeze bits too), so
+/// a tool that detached without clearing it — or a killed probe-rs — would leave a board that
+/// halts at the next fault with the IWDG frozen, for good (stlink-org PR #1503 describes that
+/// failure). The RTT control block is rebuilt at every boot, so its mode flag is only set by a
+/// host attached since.
+fn debugger_reading() -> bool {
+    cortex_m::peripheral::DCB::is_debugger_attached() && defmt_rtt::in_blocking_mode()
 }
 
 /// The previous run's fault-path cause, if it ended there (read once at boot, then cleared).
@@ -95,9 +106,11 @@ pub fn take_last() -> Option<(Cause, i16)> {
 /// would only repeat the wait; no IWDG runs yet, so none comes.
 pub fn halt_without_clock(hse: &str, waited_ms: u32) -> ! {
     crate::board::enable_rf_gpio_clocks();
-    crate::rf::emergency_off();
+    // Only the pins: TIM2, TIM8 and the DAC are not clocked yet (embassy never ran), and an
+    // access to an unclocked block is not something to rely on.
+    crate::rf::rf_pins_low();
     defmt::error!(
-        "clocks: HSE not ready after {} ms ({}): HSI is not an exact 15 MHz carrier; RF off, halted",
+        "clocks: HSE not ready after at least {} ms ({}): HSI is not an exact 15 MHz carrier; RF off, halted",
         waited_ms,
         hse
     );

@@ -384,18 +384,25 @@ impl BurstOutput for BurstGate {
 /// (Writes to a peripheral whose clock is still off, before `board::split`, are ignored.)
 pub fn emergency_off() {
     use embassy_stm32::pac;
-    use embassy_stm32::pac::gpio::vals::Moder;
     use embassy_stm32::pac::timer::vals::Ocm;
     // CCMR1 channel 0 = CH1 (IDT A), CCMR2 channel 0 = CH3 (IDT B).
     pac::TIM2.ccmr_output(0).modify(|w| w.set_ocm(0, Ocm::FORCE_INACTIVE));
     pac::TIM2.ccmr_output(1).modify(|w| w.set_ocm(0, Ocm::FORCE_INACTIVE));
     pac::TIM2.cr1().modify(|w| w.set_cen(false));
+    rf_pins_low();
+    crate::level::emergency_off();
+}
+
+/// The pin half of `emergency_off`: the enables (PA0, PB10) as GPIO outputs driving low, then
+/// the RF arm (PB5) low. Needs only the GPIO ports' clocks.
+pub fn rf_pins_low() {
+    use embassy_stm32::pac;
+    use embassy_stm32::pac::gpio::vals::Moder;
     pac::GPIOA.bsrr().write(|w| w.set_br(0, true));
     pac::GPIOB.bsrr().write(|w| w.set_br(10, true));
     pac::GPIOA.moder().modify(|w| w.set_moder(0, Moder::OUTPUT));
     pac::GPIOB.moder().modify(|w| w.set_moder(10, Moder::OUTPUT));
     pac::GPIOB.bsrr().write(|w| w.set_br(5, true));
-    crate::level::emergency_off();
 }
 const _: () = {
     let b = crate::board::BOARD;

@@ -37,7 +37,9 @@ pub fn start_hse(bypass: bool) -> bool {
         if RCC.cr().read().hserdy() {
             return true;
         }
-        // On HSI at reset, zero wait states: one ms of cycles.
+        // On HSI16 from reset: at least a millisecond (`delay` takes at least its count of
+        // core cycles; ~2 ms per step on an M4, whose loop takes two cycles an iteration). The
+        // log says "at least".
         cortex_m::asm::delay(HSI_HZ / 1000);
     }
     RCC.cr().read().hserdy()
