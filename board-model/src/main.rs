@@ -89,15 +89,15 @@ enum Cmd {
         /// Write the decoded defmt log here instead of stderr.
         #[arg(long, value_name = "FILE")]
         log: Option<PathBuf>,
-        #[arg(long, value_name = "MM_S", default_value_t = 60.0, help = SERVE_SPEED.help("Finger speed, back and forth between 1.5 and 61.5 mm"), value_parser = SERVE_SPEED.parser())]
+        #[arg(long, value_name = "MM_S", default_value_t = 60.0, help = SERVE_SPEED.help("Finger speed, back and forth between 1.5 and 61.5 mm"), value_parser = SERVE_SPEED.parser(), allow_negative_numbers = true)]
         speed: f64,
-        #[arg(long, value_name = "MM", conflicts_with = "speed", help = SERVE_AT.help("Finger at rest here instead"), value_parser = SERVE_AT.parser())]
+        #[arg(long, value_name = "MM", conflicts_with = "speed", help = SERVE_AT.help("Finger at rest here instead"), value_parser = SERVE_AT.parser(), allow_negative_numbers = true)]
         rest_at: Option<f64>,
-        #[arg(long, value_name = "LSB", default_value_t = 2.0, help = SERVE_NOISE.help("ADC noise per conversion"), value_parser = SERVE_NOISE.parser())]
+        #[arg(long, value_name = "LSB", default_value_t = 2.0, help = SERVE_NOISE.help("ADC noise per conversion"), value_parser = SERVE_NOISE.parser(), allow_negative_numbers = true)]
         noise: f64,
-        #[arg(long, default_value_t = 1, help = SERVE_SEED.help("Noise seed"), value_parser = SERVE_SEED.parser())]
+        #[arg(long, default_value_t = 1, help = SERVE_SEED.help("Noise seed"), value_parser = SERVE_SEED.parser(), allow_negative_numbers = true)]
         seed: u64,
-        #[arg(long, value_name = "S", help = SERVE_SECONDS.help("Stop after this much board time (default: run until stopped)"), value_parser = SERVE_SECONDS.parser())]
+        #[arg(long, value_name = "S", help = SERVE_SECONDS.help("Stop after this much board time (default: run until stopped)"), value_parser = SERVE_SECONDS.parser(), allow_negative_numbers = true)]
         seconds: Option<f64>,
     },
     /// Every path from the per-sample roots into a panic function, from the image's Thumb code

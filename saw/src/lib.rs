@@ -21,11 +21,11 @@ use serde_json::{json, Value};
 #[command(
     name = "saw",
     version,
-    about = "Drive a SAW tactile display over its serial link (the Nucleo's ST-LINK virtual COM port, or `host-sim serve --pty PATH`).",
+    about = "Drive a SAW tactile display over its serial link (the Nucleo's ST-LINK virtual COM port, or `host-sim serve --pty PATH` / `board-model serve --pty PATH`).",
     after_help = "Exit codes: 0 done; 1 the board refused (the reason is printed); 2 a bad command line or scene file; 3 the link failed (no port, port busy, no answer, protocol mismatch)."
 )]
 pub struct Cli {
-    /// The serial port: /dev/ttyACM0 for a Nucleo, or the path given to `host-sim serve --pty`.
+    /// The serial port: /dev/ttyACM0 for a Nucleo, or the path given to `host-sim serve --pty` or `board-model serve --pty`.
     #[arg(long, short, value_name = "PORT")]
     pub port: PathBuf,
     /// Print one JSON object instead of text (for scripts).
@@ -93,7 +93,9 @@ pub enum Command {
         #[arg(long, value_name = "N", default_value_t = 10, value_parser = clap::value_parser!(u16).range(1..=10_000))]
         every: u16,
     },
-    /// Save the active scene to flash: the board boots into it from now on.
+    /// Save the active scene to flash: the board boots into it from now on. A save that erases
+    /// (an F446 sector: ~1 s, up to 2 s) holds the answer: this waits the longer of --timeout and
+    /// 4 s, and prints how long the answer took (host time).
     Save,
     /// The fig. 11 panel: a local web page that shows the finger, the regions and the trace live
     /// and edits the scene (docs/ui.md). Open the address it prints in a browser.

@@ -23,7 +23,7 @@ pub fn open(path: &Path) -> Result<Port, String> {
     if let Err(e) = std::fs::metadata(path) {
         return Err(match e.kind() {
             io::ErrorKind::NotFound => format!(
-                "port {name} does not exist: is the board plugged in (or `host-sim serve --pty {name}` running)?"
+                "port {name} does not exist: is the board plugged in (or `host-sim serve --pty {name}` / `board-model serve … --pty {name}` running; board-model's link appears once the image has booted)?"
             ),
             _ => format!("port {name}: {e}"),
         });

@@ -93,7 +93,7 @@ pub fn init() -> Option<Peripherals> {
 }
 
 /// What HSE is on this board, for the log line of a board that never got it.
-pub const HSE_SOURCE: &str = "the ST-LINK's 8 MHz MCO on OSC_IN (SB50, and the ST-LINK powered: UM1724 §6.7.1)";
+pub const HSE_SOURCE: &str = "the ST-LINK's 8 MHz MCO on OSC_IN: SB50/SB16 closed, the ST-LINK powered (UM1724 §6.7)";
 
 /// Clocks for the GPIO ports of the RF lines (PA0, PB10, PB5) when embassy never ran:
 /// RCC_AHB1ENR.GPIOAEN/GPIOBEN (RM0390 §6.3.10); writes to an unclocked port are ignored.
