@@ -346,7 +346,7 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
 }
 
 /// The defmt decoder the project installs (scripts/setup.sh).
-fn defmt_print() -> PathBuf {
+pub(crate) fn defmt_print() -> PathBuf {
     if let Ok(p) = std::env::var("DEFMT_PRINT") {
         return PathBuf::from(p);
     }

@@ -288,7 +288,7 @@ impl LogSink {
             ),
             None => our_stderr(),
         };
-        let child = Command::new(defmt_print())
+        let child = Command::new(crate::run::defmt_print())
             .arg("-e")
             .arg(elf)
             .args(["--log-format", "{t} {L} {s}"])
@@ -339,16 +339,3 @@ fn our_stderr() -> Stdio {
     }
 }
 
-/// The defmt decoder the project installs (scripts/setup.sh), found as `run::decode` finds it.
-fn defmt_print() -> PathBuf {
-    if let Ok(p) = std::env::var("DEFMT_PRINT") {
-        return PathBuf::from(p);
-    }
-    let home = std::env::var("HOME").unwrap_or_default();
-    let local = Path::new(&home).join(".cargo/bin/defmt-print");
-    if local.exists() {
-        local
-    } else {
-        PathBuf::from("defmt-print")
-    }
-}
