@@ -11,6 +11,17 @@
 //! caches, which an erase leaves stale) and a verdict on every read (the G474 refuses bytes a
 //! double ECC error was reported in), two things sequential-storage cannot see.
 //!
+//! A write unit the board refuses to read (on the G474, a double word whose program or erase a
+//! power loss cut: its ECC is bad) is repaired by [`SceneStore::zero_unreadable`], which
+//! programs it to all zeros — a valid ECC code word, which the G474 programs over any content
+//! (RM0440 §5.7.5 PROGERR: "except if the data to write is 0x0000 0000"); ST's EEPROM emulation
+//! neutralises a word a power loss corrupted the same way. sequential-storage then sees a torn
+//! write of its own kind: a zeroed item header fails its length CRC and is stepped over a word at
+//! a time, a zeroed word inside an item's data fails the item's CRC and the item is skipped (the
+//! load finds the item saved before it), a zeroed page marker is a written marker (markers are
+//! written as zeros), and a page whose erase was cut, zeroed throughout, is a closed page
+//! without live items, which the next save's repair erases (`tests/ecc_repair.rs`).
+//!
 //! The item is `FORMAT ‖ postcard(scene_id, Config)`. A stored item of another format, or one
 //! that does not decode, is reported, never returned: the caller boots the default scene. A
 //! decoded scene is not checked here; the caller compiles it and falls back to the default if
@@ -67,7 +78,7 @@ pub enum StoreError {
     /// The scene does not fit an item.
     TooLarge,
     /// The board reported bytes read from the store as corrupted (on the G474, a double ECC
-    /// error: a write cut by a power loss); erase the store to recover.
+    /// error: a write cut by a power loss); `zero_unreadable` repairs the store, or erase it.
     Unreadable,
 }
 
@@ -137,6 +148,10 @@ pub struct Hooks {
     /// bytes): true if those bytes cannot be trusted, and the read then fails with
     /// [`StoreError::Unreadable`] (the G474: a double ECC error was reported inside them).
     pub read_corrupted: fn(u32, usize) -> bool,
+    /// Runs after [`SceneStore::zero_unreadable`] programmed the write unit at the offset (its
+    /// length the second argument) to zeros: the board forgets the corruption it reported there
+    /// (the G474 clears its record of the double ECC error, so the next one is recorded).
+    pub zeroed: fn(u32, usize),
 }
 
 impl Hooks {
@@ -144,8 +159,21 @@ impl Hooks {
     pub const NONE: Hooks = Hooks {
         after_erase: || {},
         read_corrupted: |_, _| false,
+        zeroed: |_, _| {},
     };
 }
+
+/// What [`SceneStore::zero_unreadable`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Zeroed {
+    /// The first write unit zeroed (offset in the flash).
+    pub first: u32,
+    /// Write units zeroed.
+    pub count: u32,
+}
+
+/// The largest write unit `zero_unreadable` handles (the G474's double word is 8 bytes).
+const MAX_ZERO_UNIT: usize = 32;
 
 /// The flash with the board's [`Hooks`] around it: what sequential-storage reads, writes and
 /// erases.
@@ -211,6 +239,38 @@ impl<F: NorFlash> NorFlash for HookedFlash<F> {
     }
 }
 
+/// `SceneStore::zero_unreadable`'s walk over `range` in units of `unit` bytes.
+async fn zero_unreadable_in<F: NorFlash>(
+    flash: &mut HookedFlash<F>,
+    range: Range<u32>,
+    unit: usize,
+) -> Result<Option<Zeroed>, StoreError> {
+    // Word-aligned, as some flash drivers want a write's buffer (sequential-storage's too).
+    #[repr(align(8))]
+    struct Unit([u8; MAX_ZERO_UNIT]);
+    let zeros = Unit([0; MAX_ZERO_UNIT]);
+    let mut buf = Unit([0; MAX_ZERO_UNIT]);
+    let mut done: Option<Zeroed> = None;
+    for offset in range.step_by(unit) {
+        match flash.read(offset, &mut buf.0[..unit]).await {
+            Ok(()) => continue,
+            Err(HookedError::Flash(_)) => return Err(StoreError::Flash),
+            Err(HookedError::Corrupted) => {}
+        }
+        flash
+            .write(offset, &zeros.0[..unit])
+            .await
+            .map_err(|_| StoreError::Flash)?;
+        (flash.hooks.zeroed)(offset, unit);
+        let z = done.get_or_insert(Zeroed {
+            first: offset,
+            count: 0,
+        });
+        z.count += 1;
+    }
+    Ok(done)
+}
+
 /// The map's cache: where the one key's newest item is. Without it, reclaiming a unit looks up
 /// every item it holds across the whole store to see whether a newer copy exists — quadratic in
 /// the saves a unit holds: a 128 KiB F446 sector holds ~1 900 saves of the default scene, and the
@@ -263,6 +323,24 @@ impl<F: NorFlash> SceneStore<F> {
             HookedError::Corrupted => StoreError::Unreadable,
             HookedError::Flash(_) => StoreError::Flash,
         })
+    }
+
+    /// Reads every write unit of the store once and programs each one the board refuses to read
+    /// ([`Hooks::read_corrupted`]) to all zeros, then runs [`Hooks::zeroed`] for it; `None` if
+    /// none was refused. The map starts afresh afterwards, as at boot (its cache may point at a
+    /// zeroed item). Only for a flash that accepts zeros over programmed cells (the G474's ECC
+    /// flash: see the crate doc); a read or write the flash itself fails is `Flash`, and the
+    /// units zeroed before it stay zeroed (a cut here leaves at worst a unit to zero again).
+    pub async fn zero_unreadable(&mut self) -> Result<Option<Zeroed>, StoreError> {
+        let unit = F::WRITE_SIZE;
+        if unit == 0 || unit > MAX_ZERO_UNIT || !unit.is_multiple_of(F::READ_SIZE) {
+            return Err(StoreError::BadRange);
+        }
+        let map = self.map.take().ok_or(StoreError::Corrupted)?;
+        let (mut flash, _stale) = map.destroy();
+        let r = zero_unreadable_in(&mut flash, self.range.clone(), unit).await;
+        self.map = Some(map_over(flash, self.range.clone())?);
+        r
     }
 
     /// The saved scene; `None` when nothing was ever saved (or the flash is erased).

@@ -45,6 +45,7 @@ fn bad_read(offset: u32, len: usize) -> bool {
 const HOOKS: Hooks = Hooks {
     after_erase: count_erase,
     read_corrupted: bad_read,
+    zeroed: |_, _| {},
 };
 
 #[test]
