@@ -112,7 +112,13 @@ fn cut_everywhere(history: usize) -> u32 {
         block_on(store.save(&old)).unwrap();
     }
     let base = store.into_flash().unwrap();
-    let next = saved(999, scenes[scenes.len() - 1].clone());
+    // The largest scene file, whatever the directory holds (a small one, as `rf-off.toml`, would
+    // leave the page changes to chance).
+    let largest = scenes
+        .iter()
+        .max_by_key(|c| postcard::to_allocvec(c).map_or(0, |v| v.len()))
+        .expect("the scenes directory holds scenes");
+    let next = saved(999, largest.clone());
     let mut cut = 0;
     loop {
         let (loaded, finished, flash) = cut_at(&base, &next, cut);
@@ -142,9 +148,11 @@ fn a_cut_at_any_byte_of_a_save_leaves_the_old_or_the_new_scene() {
     // A save into a page with room.
     let cuts = cut_everywhere(0);
     // At least every byte of the item itself.
-    let item = 1 + postcard::to_allocvec(&(999u32, scenes().last().unwrap()))
-        .unwrap()
-        .len() as u32;
+    let item = scenes()
+        .iter()
+        .map(|c| 1 + postcard::to_allocvec(&(999u32, c)).unwrap().len() as u32)
+        .max()
+        .unwrap();
     assert!(
         cuts >= item,
         "only {cuts} cut points for a {item}-byte item"
