@@ -40,13 +40,35 @@ pub fn on_nmi() -> bool {
     }
     // The first one is kept: it names where the cut save was.
     let _ = IN_STORE.compare_exchange(NONE, at, Ordering::Relaxed, Ordering::Relaxed);
-    // ECCD is write 1 to clear; ECCC written 0 is left as it is; the interrupt enable kept.
+    // ECCD and ECCC are write 1 to clear (a standing ECCC would keep the next double error from
+    // being reported: `clear_corrected`); the interrupt enable kept.
     FLASH.eccr().write(|w| {
         w.set_eccd(true);
+        w.set_eccc(eccr.eccc());
         w.set_eccie(eccr.eccie());
     });
     true
 }
+
+/// Clears a standing single-error (corrected) report. ECCD is set, and its NMI raised, "only if
+/// ECCC/ECCD are previously cleared" (RM0440 FLASH_ECCR), so an ECCC left by any corrected read
+/// — of the image itself, anywhere — would hide a torn double word in the store: the load would
+/// get wrong data with no report. Called before the boot's load.
+#[cfg(feature = "nucleo-g474re")]
+pub fn clear_corrected() {
+    use embassy_stm32::pac::FLASH;
+    let eccr = FLASH.eccr().read();
+    if eccr.eccc() {
+        FLASH.eccr().write(|w| {
+            w.set_eccc(true);
+            w.set_eccie(eccr.eccie());
+        });
+    }
+}
+
+/// The F446's flash has no ECC.
+#[cfg(not(feature = "nucleo-g474re"))]
+pub fn clear_corrected() {}
 
 /// The F446's flash has no ECC: an NMI is never an ECC report.
 #[cfg(not(feature = "nucleo-g474re"))]
@@ -59,6 +81,19 @@ pub fn on_nmi() -> bool {
 pub fn reported_in(addr: u32, len: u32) -> bool {
     let at = IN_STORE.load(Ordering::Relaxed);
     at != NONE && at < addr.saturating_add(len) && at.saturating_add(8) > addr
+}
+
+/// Whether this board's flash has ECC (the G474; the F446's has none): the boot's scan of the
+/// store for double words to zero runs only there (`store::load_at_boot`).
+pub const HAS_ECC: bool = cfg!(feature = "nucleo-g474re");
+
+/// Forgets the recorded error if it lies in the `len` bytes from `addr`: that double word was
+/// programmed to zeros, a valid code word (RM0440 §5.7.5 PROGERR: zeros are accepted over any
+/// content), and reads back without error; the next double error is recorded again.
+pub fn forget_in(addr: u32, len: u32) {
+    if reported_in(addr, len) {
+        IN_STORE.store(NONE, Ordering::Relaxed);
+    }
 }
 
 /// The recorded error's address, cleared: the store has been dealt with.

@@ -2,7 +2,9 @@
 //! (`saw_boards::StoreLayout`), read once at boot, written by the link's `save` — with RF off and
 //! the watchdog lengthened for as long as the flash may stall the CPU. Around the flash, what
 //! sequential-storage cannot see: the F446's flash caches flushed after every erase, and the
-//! G474's double ECC errors (a save cut by a power loss) refused on read and erased at boot.
+//! G474's double ECC errors (a save cut by a power loss) refused on read and, at boot, the double
+//! words that raise them programmed to zeros, which sequential-storage then takes for the torn
+//! write they are (`saw_store::SceneStore::zero_unreadable`).
 
 use defmt::{info, warn};
 use saw_store::{Hooks, Saved, SceneStore, StoreError};
@@ -10,7 +12,7 @@ use saw_store::{Hooks, Saved, SceneStore, StoreError};
 use crate::board::{StoreFlash, BOARD};
 
 /// The board's hooks around the store's flash (`saw_store::Hooks`).
-const HOOKS: Hooks = Hooks { after_erase: flush_flash_caches, read_corrupted: ecc_error_in };
+const HOOKS: Hooks = Hooks { after_erase: flush_flash_caches, read_corrupted: ecc_error_in, zeroed: ecc_zeroed };
 
 /// F446: the ART accelerator's caches are flushed after every erase, as ST's HAL does
 /// (`FLASH_FlushCaches`, called after each erase by `HAL_FLASHEx_Erase`). The data cache keeps 8
@@ -58,15 +60,58 @@ fn ecc_error_in(offset: u32, len: usize) -> bool {
     crate::flash_ecc::reported_in(BOARD.store.region_base + offset, len as u32)
 }
 
-/// The boot's load: the saved scene, unless a double ECC error was reported inside the store
-/// while it was read (on the G474, a save cut by a power loss: `flash_ecc.rs`). Then the store
-/// is erased and nothing is loaded — a scene read with an ECC error is never used, and the
-/// word that raised it would refuse every later save — and the caller boots the embedded or
-/// default scene.
+/// The double word at `offset` of the store's region was programmed to zeros: its error is
+/// forgotten, so the next one is recorded (`flash_ecc.rs` keeps only the first).
+fn ecc_zeroed(offset: u32, len: usize) {
+    crate::flash_ecc::forget_in(BOARD.store.region_base + offset, len as u32);
+}
+
+/// The boot's load: the saved scene, with the store repaired first if a save was cut by a
+/// power loss. On the G474 such a cut leaves a double word — or, for a page erase, every double
+/// word of the page — whose ECC is bad (RM0440 §5.3.2): reading it is a double error, its NMI
+/// recorded by `flash_ecc.rs`. Every double word of the store is read once, and each one that
+/// raises an error is programmed to all zeros: a valid code word, accepted over any content
+/// (RM0440 §5.7.5 PROGERR "except if the data to write is 0x0000 0000"), the way ST's EEPROM
+/// emulation (X-CUBE-EEPROM) neutralises a word a power loss corrupted. sequential-storage then
+/// finds a torn write of its own kind — an item whose CRC fails, skipped for the one saved
+/// before it; a written page marker; a closed page without live items, erased by the next save
+/// — and the load returns the old scene or the new one (`saw_store::SceneStore::zero_unreadable`).
+/// Only if the store still cannot be read is it erased (nothing loaded: the caller boots the
+/// embedded or default scene); a scene read with an ECC error is never used.
 pub async fn load_at_boot(store: &mut SceneStore<StoreFlash>) -> Result<Option<Saved>, StoreError> {
-    let loaded = store.load().await;
-    let Some(at) = crate::flash_ecc::take() else {
-        return loaded;
+    let base = BOARD.store.region_base;
+    crate::flash_ecc::clear_corrected();
+    let zeroed = if crate::flash_ecc::HAS_ECC { store.zero_unreadable().await } else { Ok(None) };
+    let at = match zeroed {
+        Ok(Some(z)) => {
+            let loaded = store.load().await;
+            let unreadable = matches!(
+                loaded,
+                Err(StoreError::Unreadable | StoreError::Corrupted | StoreError::Flash)
+            );
+            // An error the scan left (none should: every double word was read) refuses the load.
+            if crate::flash_ecc::take().is_none() && !unreadable {
+                warn!(
+                    "store: double ECC error at {=u32:#010x} (a save cut by a power loss); {=u32} double word(s) zeroed, the store repaired",
+                    base + z.first,
+                    z.count
+                );
+                return loaded;
+            }
+            base + z.first
+        }
+        Ok(None) => {
+            let loaded = store.load().await;
+            let Some(at) = crate::flash_ecc::take() else {
+                return loaded;
+            };
+            at
+        }
+        // A zeroing refused by the flash (its error still recorded), or a read that failed.
+        Err(e) => match crate::flash_ecc::take() {
+            Some(at) => at,
+            None => return Err(e),
+        },
     };
     match store.erase().await {
         Ok(()) => {
