@@ -247,7 +247,7 @@ async fn boot_scene(
 ) -> (saw_core::scene::Config, Prepared, saw_link::msg::SceneSource) {
     use saw_link::msg::SceneSource;
     match store {
-        Some(store) => match store.load().await {
+        Some(store) => match store::load_at_boot(store).await {
             Ok(Some(saved)) => {
                 match Prepared::compile(timer, SAMPLE_PERIOD_US, &saved.config) {
                     Ok(p) => {
