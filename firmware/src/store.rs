@@ -21,31 +21,13 @@ const HOOKS: Hooks = Hooks { after_erase: flush_flash_caches, read_corrupted: ec
 /// markers, erases it, reads them again — still returns the old bytes afterwards, and the store
 /// takes an erased page for a full one (a refused save, a corrupt store, the wrong scene at
 /// boot). embassy-stm32 0.6 resets the cache after an erase only on dual-bank F42x/F43x
-/// (`flash/f4.rs`, errata 2.2.12). RM0390 §3.8.1 FLASH_ACR: ICRST (bit 11) and DCRST (bit 12)
-/// reset a cache only while it is disabled (ICEN bit 9, DCEN bit 10 = 0), so: both caches off,
-/// reset set, reset cleared, each back as it was. The instruction cache too, as the HAL does
-/// (the store's sectors hold no code, so it is only for symmetry with it).
+/// (`flash/f4.rs`, errata 2.2.12). Both caches reset, each back as it was
+/// (`board::reset_flash_caches`); the instruction cache too, as the HAL does (the store's
+/// sectors hold no code, so it is only for symmetry with it).
 #[cfg(feature = "nucleo-f446re")]
 fn flush_flash_caches() {
-    use embassy_stm32::pac::FLASH;
-    let acr = FLASH.acr();
-    let was = acr.read();
-    acr.modify(|w| {
-        w.set_icen(false);
-        w.set_dcen(false);
-    });
-    acr.modify(|w| {
-        w.set_icrst(true);
-        w.set_dcrst(true);
-    });
-    acr.modify(|w| {
-        w.set_icrst(false);
-        w.set_dcrst(false);
-    });
-    acr.modify(|w| {
-        w.set_icen(was.icen());
-        w.set_dcen(was.dcen());
-    });
+    let was = embassy_stm32::pac::FLASH.acr().read();
+    crate::board::reset_flash_caches(was.icen(), was.dcen());
 }
 
 /// G474: embassy-stm32 0.6's flash driver already turns the data cache off for every program

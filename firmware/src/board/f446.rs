@@ -71,6 +71,17 @@ pub fn init() -> Option<Peripherals> {
         return None;
     }
     let p = embassy_stm32::init(rcc_config());
+    reset_flash_caches(true, true);
+    pac::FLASH.acr().modify(|w| w.set_prften(true));
+    Some(p)
+}
+
+/// Resets both ART caches, then turns each on or off as asked: RM0390 §3.8.1 FLASH_ACR — ICRST
+/// (bit 11) and DCRST (bit 12) reset a cache only while it is disabled (ICEN bit 9, DCEN bit
+/// 10 = 0), so both off, reset set, reset cleared, then the enables (ST's FLASH_FlushCaches).
+/// At boot, and after every store erase (`store.rs`: a stale data-cache line would return the
+/// erased sector's old bytes).
+pub fn reset_flash_caches(icen: bool, dcen: bool) {
     let acr = pac::FLASH.acr();
     acr.modify(|w| {
         w.set_icen(false);
@@ -85,11 +96,9 @@ pub fn init() -> Option<Peripherals> {
         w.set_dcrst(false);
     });
     acr.modify(|w| {
-        w.set_icen(true);
-        w.set_dcen(true);
-        w.set_prften(true);
+        w.set_icen(icen);
+        w.set_dcen(dcen);
     });
-    Some(p)
 }
 
 /// What HSE is on this board, for the log line of a board that never got it.
