@@ -658,7 +658,7 @@ fn board_replies(
 
 /// `req` as the host sends it: a zero first (any partial frame before it is dropped), then the
 /// frame with sequence number `seq`.
-fn request_frame(seq: u32, req: &saw_link::msg::Request) -> Vec<u8> {
+pub fn request_frame(seq: u32, req: &saw_link::msg::Request) -> Vec<u8> {
     use saw_link::frame::{self, MAX_ENCODED};
     use saw_link::msg::{Header, PROTOCOL_VERSION};
     let mut out = vec![0u8; MAX_ENCODED + 1];

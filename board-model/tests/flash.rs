@@ -23,7 +23,7 @@ use saw_board_model::machine::Machine;
 use saw_board_model::periph::flash_prog::Operation;
 use saw_board_model::periph::{Time, TICKS_PER_S};
 use saw_board_model::run::{self, LogLine, Options};
-use saw_link::msg::{Header, Reply, Request, PROTOCOL_VERSION};
+use saw_link::msg::{Reply, Request};
 use std::path::PathBuf;
 
 fn elf(board: BoardKind) -> PathBuf {
@@ -38,22 +38,6 @@ fn elf(board: BoardKind) -> PathBuf {
     p
 }
 
-/// `req` as the host sends it: a zero (ends any partial frame), then the frame.
-fn request(seq: u32, req: &Request) -> Vec<u8> {
-    use saw_link::frame::{encode, MAX_ENCODED};
-    let mut out = vec![0u8; MAX_ENCODED + 1];
-    let n = encode(
-        &Header {
-            version: PROTOCOL_VERSION,
-            seq,
-        },
-        req,
-        &mut out[1..],
-    )
-    .expect("a request frames");
-    out.truncate(n + 1);
-    out
-}
 
 /// The board's replies: (time its last byte left, sequence number, reply).
 fn replies(bytes: &[(Time, u8)]) -> Vec<(Time, u32, Reply)> {
@@ -122,7 +106,7 @@ fn save_that_erases(board: BoardKind, duration_s: f64) -> (run::Outcome, Machine
     opts.link_input = vec![
         (
             0.25,
-            request(
+            saw_board_model::check::request_frame(
                 1,
                 &Request::MoveBoundary {
                     index: 0,
@@ -130,7 +114,7 @@ fn save_that_erases(board: BoardKind, duration_s: f64) -> (run::Outcome, Machine
                 },
             ),
         ),
-        (0.30, request(2, &Request::Save)),
+        (0.30, saw_board_model::check::request_frame(2, &Request::Save)),
     ];
     let (o, m) = run::run(&opts).expect("the run starts");
     assert!(
