@@ -359,11 +359,8 @@ impl AdcDef {
             return None;
         }
         let r = total_ohm - self.switch_ohm as u128;
-        Some(if r > u32::MAX as u128 {
-            u32::MAX
-        } else {
-            r as u32
-        })
+        // Saturated to u32 (only absurd data gets there: a clock or capacitor near zero).
+        Some(if r >> 32 != 0 { u32::MAX } else { r as u32 })
     }
 
     /// The sampling time settles the stated worst source (`source_ohm_max`) to ¼ LSB.

@@ -1606,3 +1606,35 @@ fn degenerate_adc_data_is_refused_without_panic() {
     assert_eq!(huge.max_source_ohm(), Some(u32::MAX));
     assert!(huge.settles_source());
 }
+
+/// `max_source_ohm` at its edges, worked by hand: f_ADC 1 MHz, C_ADC 1 pF (1000 fF), 1.5
+/// sampling cycles (3 half cycles: k − 0.5 = 1) give R_AIN + R_ADC ≤ 1 / (10^6 · 10^−12 ·
+/// 9.704061) = 103 049.6 Ω, floored 103 049. A sampling switch of exactly that leaves 0 Ω for
+/// the source (a 0 Ω source still settles); one ohm more and nothing settles. Data that would
+/// allow more than u32::MAX ohms (f_ADC 1 Hz, C_ADC 1 fF: ~1.03 · 10^14 Ω) saturates there.
+#[test]
+fn the_source_limit_at_its_edges() {
+    let edge = AdcDef {
+        clk_hz: 1_000_000,
+        hold_ff: 1_000,
+        sample_half_cycles: 3,
+        switch_ohm: 103_049,
+        source_ohm_max: 0,
+        ..F446.adc
+    };
+    assert_eq!(edge.max_source_ohm(), Some(0));
+    assert!(edge.settles_source());
+    let past = AdcDef {
+        switch_ohm: 103_050,
+        ..edge
+    };
+    assert_eq!(past.max_source_ohm(), None);
+    assert!(!past.settles_source());
+    let huge = AdcDef {
+        clk_hz: 1,
+        hold_ff: 1,
+        switch_ohm: 0,
+        ..edge
+    };
+    assert_eq!(huge.max_source_ohm(), Some(u32::MAX));
+}
