@@ -1375,16 +1375,20 @@ mod tests {
                 &mut Signals::default()
             )
             .is_err());
+        // Nothing on OSC_IN (issue #32's absent ST-LINK MCO): HSEON is taken and HSERDY never
+        // sets, a second of board time later as at once.
         let mut g = RccF4::with_hse(HseInput::None);
-        assert!(g
-            .write(
-                0,
-                OFF_CR,
-                0x83 | CR_HSEBYP | CR_HSEON,
-                0xFFFF_FFFF,
-                &mut Signals::default()
-            )
-            .is_err());
+        g.write(
+            0,
+            OFF_CR,
+            0x83 | CR_HSEBYP | CR_HSEON,
+            0xFFFF_FFFF,
+            &mut Signals::default(),
+        )
+        .expect("HSEON is taken without an input");
+        let cr = g.read(TICKS_PER_S, OFF_CR, &mut Signals::default()).unwrap();
+        assert_eq!(cr & CR_HSEON, CR_HSEON);
+        assert_eq!(cr & CR_HSERDY, 0, "HSERDY set with nothing on OSC_IN");
     }
 
     #[test]
