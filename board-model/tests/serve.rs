@@ -244,7 +244,8 @@ fn hello_push_and_refuse(kind: BoardKind) {
     let r = saw(&s.port, &["push", &name]);
     assert_eq!(r.code, 1, "{}", r.stdout);
     assert_eq!(r.stderr.trim(), format!("error: {host}"));
-    let r = saw(&s.port, &["set", "1", "kind=constant", "f_b_hz=9000"]);
+    // Region 0: the last scene file pushed may have only one region (scenes/rf-off.toml).
+    let r = saw(&s.port, &["set", "0", "kind=constant", "f_b_hz=9000"]);
     assert_eq!(r.code, 1, "{}", r.stdout);
     assert!(r.stderr.contains("f_b 9000 Hz is above"), "{}", r.stderr);
     let after = saw_json(&s.port, &["hello"]);
