@@ -23,9 +23,12 @@
 //! without live items, which the next save's repair erases (`tests/ecc_repair.rs`).
 //!
 //! The item is `FORMAT ‖ postcard(scene_id, Config)`. A stored item of another format, or one
-//! that does not decode, is reported, never returned: the caller boots the default scene. A
-//! decoded scene is not checked here; the caller compiles it and falls back to the default if
-//! the controller refuses it.
+//! that does not decode (or leaves bytes after the scene), is reported, never returned: the
+//! caller boots the embedded or default scene, and the next save replaces the item. A decoded
+//! scene is not checked here; the caller compiles it and falls back to the default if the
+//! controller refuses it. `FORMAT` must change with `Config`'s encoding (`tests/foreign.rs` pins
+//! format 1's bytes); it did not when `limits.max_level_percent` was added, so a scene saved by
+//! firmware from before that is format 1 of an older layout, which is reported as not decoding.
 
 #![no_std]
 
@@ -80,6 +83,9 @@ pub enum StoreError {
     /// The board reported bytes read from the store as corrupted (on the G474, a double ECC
     /// error: a write cut by a power loss); `zero_unreadable` repairs the store, or erase it.
     Unreadable,
+    /// The save wrote its item but reads back another scene or none (the store's free space
+    /// held bytes that were not erased); erase the store.
+    NotStored,
 }
 
 impl core::fmt::Display for StoreError {
@@ -108,6 +114,10 @@ impl core::fmt::Display for StoreError {
             StoreError::Unreadable => write!(
                 f,
                 "the flash reported bytes read from the store as corrupted (ECC)"
+            ),
+            StoreError::NotStored => write!(
+                f,
+                "the scene read back after the save is not the one written (the store's free flash was not erased); erase the store"
             ),
         }
     }
@@ -354,8 +364,13 @@ impl<F: NorFlash> SceneStore<F> {
         if format != FORMAT {
             return Err(StoreError::OtherFormat { found: format });
         }
-        let (scene_id, config): (u32, Config) =
-            postcard::from_bytes(body).map_err(|_| StoreError::Undecodable)?;
+        let ((scene_id, config), rest): ((u32, Config), &[u8]) =
+            postcard::take_from_bytes(body).map_err(|_| StoreError::Undecodable)?;
+        // `save` writes the scene and nothing after it: bytes left over mean another layout
+        // whose start happened to decode, not this scene (`tests/foreign.rs`).
+        if !rest.is_empty() {
+            return Err(StoreError::Undecodable);
+        }
         Ok(Some(Saved { scene_id, config }))
     }
 
@@ -372,7 +387,27 @@ impl<F: NorFlash> SceneStore<F> {
         };
         map.store_item(&mut self.buf, &KEY, &value)
             .await
-            .map_err(from_ss)
+            .map_err(from_ss)?;
+        self.verify(value).await
+    }
+
+    /// Reads the scene item back as a boot would (the map started afresh: its cache only knows
+    /// where the item was written) and checks it is `value`. sequential-storage writes into
+    /// space it takes to be erased; a store region holding stray bytes there (another image's
+    /// data, not erased) leaves the item ANDed with them on a flash that programs 1 → 0 without
+    /// complaint (the F446, the virtual board's file), its CRC then fails and the load finds an
+    /// older item or none. The save said Ok before this check (`tests/power_cut.rs`,
+    /// a_save_over_sprinkled_flash_that_says_ok_loads_back).
+    async fn verify(&mut self, value: &[u8]) -> Result<(), StoreError> {
+        let map = self.map.take().ok_or(StoreError::Corrupted)?;
+        let (flash, _cache) = map.destroy();
+        let map = self.map.insert(map_over(flash, self.range.clone())?);
+        let item: Option<&[u8]> = map.fetch_item(&mut self.buf, &KEY).await.map_err(from_ss)?;
+        if item == Some(value) {
+            Ok(())
+        } else {
+            Err(StoreError::NotStored)
+        }
     }
 
     /// The flash back (tests: "reboot" by building a new store over it); None only after an
