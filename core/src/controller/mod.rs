@@ -176,6 +176,11 @@ pub struct Controller<E: VelocityEstimator = DefaultEstimator> {
     /// the u64 division (~170 instructions on the M4, `__aeabi_uldivmod`) is paid once per
     /// period, not per record (the board model's stream-cost check: +10 % → +2 % per sample).
     burst_memo: Cell<Option<(u16, u32, u32)>>,
+    /// When the last two one-pulses (ridges, lines) fired, µs, older first: the only work the
+    /// sample path does for the pulse rate [`Controller::telemetry`] reports (two stores per
+    /// pulse, none per sample). The last is forgotten (a `Cell`, from `telemetry`) once the
+    /// pulses have stopped, so a stale pair never comes back when the µs clock wraps.
+    pulse_us: [Cell<Option<u32>>; 2],
 }
 
 impl Controller<DefaultEstimator> {
@@ -214,6 +219,7 @@ impl<E: VelocityEstimator> Controller<E> {
                 ..Telemetry::default()
             },
             burst_memo: Cell::new(None),
+            pulse_us: [Cell::new(None), Cell::new(None)],
         }
     }
 
@@ -253,6 +259,8 @@ impl<E: VelocityEstimator> Controller<E> {
         // pulse keeps its window: the gate may be in its rest).
         self.region = None;
         self.lines.reset();
+        // Pulses of the old scene say nothing about the new one's rate.
+        self.pulse_us = [Cell::new(None), Cell::new(None)];
         self.drive_pending = true;
         self.caps_pending = true;
     }
@@ -269,7 +277,7 @@ impl<E: VelocityEstimator> Controller<E> {
         // state change of the gate goes through `count_action`, which used to fill it from
         // `gate.running()` the same way, so the figure is the same.
         let burst_millihz = match self.gate.running() {
-            None => 0,
+            None => self.pulse_rate_millihz(),
             Some(s) => match self.burst_memo.get() {
                 Some((psc, arr, millihz)) if (psc, arr) == (s.psc, s.arr) => millihz,
                 _ => {
@@ -283,6 +291,38 @@ impl<E: VelocityEstimator> Controller<E> {
             burst_millihz,
             ..self.telemetry
         }
+    }
+
+    /// The rate of one-pulses (a ridge crossed by the position or hybrid grating, a line),
+    /// mHz: 1 / the interval between the last two, while they keep coming — 0 once the finger
+    /// is still (the velocity estimate 0) or no pulse has come for 1.5 intervals since the last
+    /// (a crossing at constant speed lands a sample early or late, so one interval may be a
+    /// sample period longer than the one before). A crossing the duty cap skipped fired no
+    /// pulse: the rate is what was produced, not what was crossed.
+    fn pulse_rate_millihz(&self) -> u32 {
+        let [prev, last] = [self.pulse_us[0].get(), self.pulse_us[1].get()];
+        let (Some(prev), Some(last), Some(now)) = (prev, last, self.last_sample_us) else {
+            return 0;
+        };
+        let interval_us = last.wrapping_sub(prev);
+        let since_us = now.wrapping_sub(last);
+        if since_us > interval_us.saturating_add(interval_us / 2) {
+            // Stopped: forget the pair, so a µs clock that wraps never revives it.
+            self.pulse_us[1].set(None);
+            return 0;
+        }
+        if self.telemetry.velocity_um_s == 0 || interval_us == 0 {
+            return 0;
+        }
+        // 10^9 µs·mHz / interval: 1 mHz at 10^9 µs, 10^9 mHz at 1 µs; fits u32.
+        1_000_000_000 / interval_us
+    }
+
+    /// A one-pulse fired at `t_us`: kept for [`Self::pulse_rate_millihz`].
+    #[inline(always)]
+    fn note_pulse(&mut self, t_us: u32) {
+        self.pulse_us[0].set(self.pulse_us[1].get());
+        self.pulse_us[1].set(Some(t_us));
     }
 
     /// The position mapper of the active configuration.
@@ -390,6 +430,7 @@ impl<E: VelocityEstimator> Controller<E> {
                     return false;
                 }
                 self.lines.started(t_us);
+                self.note_pulse(t_us);
                 self.telemetry.line_pulses = self.telemetry.line_pulses.wrapping_add(1);
                 debug!("line {} crossed at {} um: pulse", line, position_um);
                 out.action = action;
@@ -443,6 +484,7 @@ impl<E: VelocityEstimator> Controller<E> {
                 let action = self.gate.pulse(p, t_us, &self.timer, &limits);
                 if matches!(action, Some(GateAction::Pulse(_))) {
                     self.telemetry.ridge_pulses = self.telemetry.ridge_pulses.wrapping_add(1);
+                    self.note_pulse(t_us);
                     out.envelope = Some(Envelope::Rectangular);
                 } else {
                     // Inside the duty cap's rest after the previous pulse.
@@ -524,6 +566,8 @@ impl<E: VelocityEstimator> Controller<E> {
         }
         self.telemetry.position_um = -1;
         self.telemetry.region = u8::MAX;
+        // No pulse while the sensor is faulty: the rate starts again from two new pulses.
+        self.pulse_us[1].set(None);
         let limits = self.limits();
         let action = self.gate.force_off(t_us, &self.timer, &limits);
         self.count_action(action);

@@ -57,6 +57,10 @@ pub struct Telemetry {
     pub velocity_um_s: i32,
     /// Region under the finger (255 when none).
     pub region: u8,
-    /// Burst frequency on the line, mHz (0 when off).
+    /// The burst frequency f_b the line is producing, mHz: while periodic bursts run, the
+    /// running timer period's frequency; else, while one-pulses keep firing (a position or
+    /// hybrid grating's ridges, lines), their rate, 1 / the interval between the last two
+    /// (at a constant speed V over a grating of period λ, V/λ); 0 when the line is off, the
+    /// finger still (velocity 0), or no pulse has come for 1.5 × the last interval.
     pub burst_millihz: u32,
 }
