@@ -1,10 +1,14 @@
 //! The panel's end of the link: one thread owns the serial port (as `saw` does, with its lock),
 //! keeps the telemetry stream running, carries out the page's edits one at a time, and
-//! publishes what the board answers. When the link fails it says so and reopens the port every
-//! `RETRY` until the board answers again.
+//! publishes what the board answers. When the link fails it says so (to the pages and on the
+//! terminal) and reopens the port every `RETRY` until the board answers again.
+//!
+//! The port is held only while a page is open: a panel whose tab was closed (a forgotten `saw ui`)
+//! lets go of the port after `ALONE`, and does not take it again until a page connects, so `saw`
+//! or another tool can have it meanwhile.
 
 use std::io::{Read, Write};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc::Receiver;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -19,7 +23,7 @@ use super::{Snapshot, UiOptions};
 use crate::{Done, Failure};
 
 /// How often a lost link is tried again.
-const RETRY: Duration = Duration::from_millis(300);
+pub(super) const RETRY: Duration = Duration::from_millis(300);
 /// How often records go to the pages: about a screen's frame rate.
 const FRAME: Duration = Duration::from_millis(33);
 /// How often the counters are read.
@@ -27,6 +31,11 @@ const COUNTERS_EVERY: Duration = Duration::from_secs(1);
 /// No stream frame for this long while streaming: the board is asked who it is; no answer is a
 /// lost link.
 const SILENCE: Duration = Duration::from_secs(1);
+/// No page open for this long: the port is let go. Long enough for a page's reload (its socket
+/// closes and a new one opens) not to drop the link.
+pub(super) const ALONE: Duration = Duration::from_secs(2);
+/// Why a session ends when no page is open (not a lost link: nothing is shown for it).
+const LET_GO: &str = "no page open";
 /// The largest scene file the page may send, bytes.
 const MAX_SCENE_BYTES: usize = 64 * 1024;
 
@@ -110,6 +119,17 @@ pub fn parse_command(text: &str) -> Result<(u64, Command), (u64, String)> {
                 .get("text")
                 .and_then(Value::as_str)
                 .ok_or_else(|| fail("`text` missing".into()))?;
+            // TOML 1.0 allows no control character but tab, CR and LF anywhere in a file: other
+            // input is refused by name and rule, and none of it is echoed back.
+            if text
+                .chars()
+                .any(|c| c.is_control() && !matches!(c, '\t' | '\n' | '\r'))
+            {
+                return Err(fail(format!(
+                    "{}: not a scene file (a scene file is TOML text: UTF-8 without control characters); nothing sent",
+                    printable(name)
+                )));
+            }
             if text.len() > MAX_SCENE_BYTES {
                 return Err(fail(format!(
                     "{name}: {} bytes; a scene file may have at most {MAX_SCENE_BYTES}",
@@ -117,7 +137,7 @@ pub fn parse_command(text: &str) -> Result<(u64, Command), (u64, String)> {
                 )));
             }
             Command::Push {
-                name: name.chars().take(200).collect(),
+                name: printable(name),
                 text: text.into(),
             }
         }
@@ -142,6 +162,11 @@ pub fn parse_command(text: &str) -> Result<(u64, Command), (u64, String)> {
     Ok((id, c))
 }
 
+/// A file name as messages show it: at most 200 characters, control characters dropped.
+fn printable(name: &str) -> String {
+    name.chars().filter(|c| !c.is_control()).take(200).collect()
+}
+
 struct Out {
     tx: broadcast::Sender<String>,
     snapshot: Arc<Mutex<Snapshot>>,
@@ -164,31 +189,58 @@ impl Out {
     }
 }
 
-/// Starts the bridge thread.
+/// Starts the bridge thread. `pages` counts the open pages; `said` is what the terminal was
+/// already told about the port (not said again).
 pub(super) fn spawn(
     opts: UiOptions,
     tx: broadcast::Sender<String>,
     snapshot: Arc<Mutex<Snapshot>>,
     commands: Receiver<(u64, Command)>,
     stop: Arc<AtomicBool>,
+    pages: Arc<AtomicUsize>,
+    said: Option<String>,
 ) -> Option<std::thread::JoinHandle<()>> {
     let out = Out { tx, snapshot };
     std::thread::Builder::new()
         .name("saw-ui-link".into())
         .spawn(move || {
-            let mut last_why = String::new();
+            let mut last_why = said.unwrap_or_default();
+            let mut published = String::new();
             while !stop.load(Ordering::Relaxed) {
+                if pages.load(Ordering::Relaxed) == 0 {
+                    // Nobody to show the board to: the port is left to other programs.
+                    std::thread::sleep(RETRY);
+                    continue;
+                }
                 let why = match crate::port::open(&opts.port) {
                     Ok(port) => {
                         let mut client = Client::new(port, opts.timeout);
-                        linked(&mut client, &opts, &out, &commands, &stop)
+                        linked(&mut client, &opts, &out, &commands, &stop, &pages)
                     }
                     Err(e) => e,
                 };
-                if why != last_why {
-                    out.lost(&why);
-                    last_why = why;
+                if why == LET_GO {
+                    eprintln!(
+                        "saw ui: no page open for {} s: port {} let go (taken again when a page connects)",
+                        ALONE.as_secs(),
+                        opts.port.display()
+                    );
+                    // A page that connects next is told the link's state afresh.
+                    out.snapshot.lock().unwrap_or_else(|e| e.into_inner()).link = None;
+                    (last_why, published) = (String::new(), String::new());
+                    continue;
                 }
+                if why != published {
+                    out.lost(&why);
+                    published = why.clone();
+                }
+                if why != last_why && why != "the panel stopped" {
+                    eprintln!(
+                        "saw ui: {why}; trying again every {} s while a page is open",
+                        RETRY.as_secs_f64()
+                    );
+                }
+                last_why = why;
                 // Edits made while the link is down are refused, not queued for later.
                 while let Ok((id, _)) = commands.try_recv() {
                     out.send(json!({"t": "answer", "id": id, "ok": false, "text": format!("not sent: the link is lost ({last_why})")}));
@@ -207,7 +259,9 @@ fn record_json(r: &Record) -> Value {
         r.region,
         r.burst_millihz as f64 / 1000.0,
         r.bursting,
-        r.fault.map(|f| format!("{f:?}"))
+        r.fault.map(|f| format!("{f:?}")),
+        crate::scene_hex(r.scene_id),
+        r.change
     ])
 }
 
@@ -218,11 +272,18 @@ fn linked<P: Read + Write>(
     out: &Out,
     commands: &Receiver<(u64, Command)>,
     stop: &AtomicBool,
+    pages: &AtomicUsize,
 ) -> String {
     let hello = match client.hello() {
         Ok(h) => h,
         Err(e) => return e.to_string(),
     };
+    eprintln!(
+        "saw ui: linked to {} ({}) on {}",
+        hello.board,
+        hello.firmware,
+        opts.port.display()
+    );
     out.keep(
         |s| &mut s.link,
         json!({"t": "link", "ok": true, "hello": hello}),
@@ -230,12 +291,9 @@ fn linked<P: Read + Write>(
     if let Err(e) = publish_scene(client, out) {
         return e;
     }
-    let streaming = client.request(&Request::Stream {
-        every_samples: opts.every,
-    });
-    let sample_rate_hz = match streaming {
-        Ok(Reply::Streaming { sample_rate_hz, .. }) => sample_rate_hz,
-        Ok(other) => return format!("the board answered the stream request with {other:?}"),
+    // Only records sampled from here on: none left in transit from an earlier stream.
+    let sample_rate_hz = match client.start_stream(opts.every) {
+        Ok(s) => s.sample_rate_hz,
         Err(e) => return e.to_string(),
     };
     out.keep(
@@ -245,10 +303,17 @@ fn linked<P: Read + Write>(
     let mut records: Vec<Value> = Vec::new();
     let mut dropped = 0u32;
     let (mut flushed, mut counted, mut heard) = (Instant::now(), Instant::now(), Instant::now());
+    let mut alone: Option<Instant> = None;
     loop {
         if stop.load(Ordering::Relaxed) {
             let _ = client.request(&Request::Stream { every_samples: 0 });
             return "the panel stopped".into();
+        }
+        if pages.load(Ordering::Relaxed) > 0 {
+            alone = None;
+        } else if alone.get_or_insert_with(Instant::now).elapsed() >= ALONE {
+            let _ = client.request(&Request::Stream { every_samples: 0 });
+            return LET_GO.into();
         }
         while let Ok((id, cmd)) = commands.try_recv() {
             let result = execute(client, &cmd, opts.timeout);
@@ -421,5 +486,23 @@ mod tests {
             "a".repeat(MAX_SCENE_BYTES + 1)
         );
         assert!(parse_command(&big).unwrap_err().1.contains("at most 65536"));
+    }
+
+    #[test]
+    fn a_file_that_is_not_text_is_refused_without_its_bytes() {
+        // Bytes a binary file decodes to (NUL, ESC, DEL, a replacement character): refused by
+        // name and rule, none of them in the sentence.
+        let cmd = json!({"id": 5, "cmd": "push", "name": "photo\u{7}.png", "text": "PNG\u{0}\u{1b}[2J\u{7f}\u{fffd}kind = \"grating\""});
+        let (id, why) = parse_command(&cmd.to_string()).unwrap_err();
+        assert_eq!(id, 5);
+        assert!(
+            why.starts_with("photo.png: not a scene file") && why.contains("TOML text"),
+            "{why}"
+        );
+        assert!(!why.contains("PNG") && !why.contains('\u{fffd}'), "{why}");
+        assert!(!why.chars().any(char::is_control), "{why:?}");
+        // Tabs and both line ends are TOML's own.
+        let ok = json!({"id": 6, "cmd": "push", "name": "a.toml", "text": "[scene]\r\n\tdrive = \"standing\"\n"});
+        assert!(parse_command(&ok.to_string()).is_ok());
     }
 }

@@ -7,11 +7,15 @@
 //! It binds to loopback unless `--allow-remote` says otherwise (with a warning), and refuses any
 //! request whose Host is not the server's own address (DNS rebinding) or whose Origin is not the
 //! server's own page (cross-site requests and WebSockets).
+//!
+//! The port: a missing or busy port is said on the terminal at start (the page says it too once
+//! one is open), and the port is held only while a page is connected (`bridge`).
 
 mod bridge;
 
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -61,6 +65,24 @@ struct App {
     commands: std::sync::mpsc::Sender<(u64, BridgeCommand)>,
     /// Host header values that name this server.
     hosts: Arc<Vec<String>>,
+    /// Pages connected now: the bridge holds the port only while there is one.
+    pages: Arc<AtomicUsize>,
+}
+
+/// Counts a page while its socket is open (also when the session ends by an error).
+struct PageOpen(Arc<AtomicUsize>);
+
+impl PageOpen {
+    fn new(pages: &Arc<AtomicUsize>) -> Self {
+        pages.fetch_add(1, Ordering::Relaxed);
+        Self(pages.clone())
+    }
+}
+
+impl Drop for PageOpen {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::Relaxed);
+    }
 }
 
 /// A running panel: its address; dropping the handle leaves it running until `stop`.
@@ -193,6 +215,7 @@ async fn ws(State(app): State<App>, upgrade: WebSocketUpgrade) -> Response {
 
 /// One page's WebSocket: the snapshot, then everything the bridge publishes; commands in.
 async fn session(app: App, mut socket: WebSocket) {
+    let _open = PageOpen::new(&app.pages);
     let mut rx = app.out.subscribe();
     let first: Vec<String> = {
         let s = app.snapshot.lock().unwrap_or_else(|e| e.into_inner());
@@ -257,18 +280,31 @@ pub fn start(opts: UiOptions) -> Result<UiHandle, String> {
     let snapshot = Arc::new(Mutex::new(Snapshot::default()));
     let (commands, commands_rx) = std::sync::mpsc::channel();
     let bridge_stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    // The port is tried once now, so that a missing or busy one is said on the terminal at
+    // start; then it is let go until a page connects.
+    let said = crate::port::open(&opts.port).err();
+    if let Some(why) = &said {
+        eprintln!(
+            "saw ui: {why}; the panel opens it when a page connects, and tries again every {} s while one is open",
+            bridge::RETRY.as_secs_f64()
+        );
+    }
+    let pages = Arc::new(AtomicUsize::new(0));
     let bridge = bridge::spawn(
         opts.clone(),
         out.clone(),
         snapshot.clone(),
         commands_rx,
         bridge_stop.clone(),
+        pages.clone(),
+        said,
     );
     let app = App {
         out,
         snapshot,
         commands,
         hosts: Arc::new(host_names(addr)),
+        pages,
     };
     let router = Router::new()
         .route("/", get(page))
