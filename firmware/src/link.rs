@@ -16,12 +16,15 @@ use saw_core::burst::BurstTimer;
 use saw_core::controller::{ConfigError, Prepared, Telemetry};
 use saw_core::scene::Config;
 use saw_link::msg::{Record, StoreFault};
-use saw_link::session::Board;
+use saw_link::session::{Board, Stamp};
 use saw_link::stream::{Decimator, QUEUE_RECORDS};
 
 
 /// A compiled scene on its way to the control loop.
 pub static INSTALL: Signal<CriticalSectionRawMutex, Prepared> = Signal::new();
+/// The stamp its records carry (scene id, change count), set before `INSTALL`.
+static STAMP_SCENE: AtomicU32 = AtomicU32::new(0);
+static STAMP_CHANGE: AtomicU32 = AtomicU32::new(0);
 /// The control loop has installed it.
 pub static INSTALLED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// The link asks for the counters; the control loop answers in `TELEMETRY`.
@@ -45,11 +48,14 @@ pub static QUIETED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 pub struct StreamTap {
     decimator: Decimator,
     every: u16,
+    /// The scene in force, as its records carry it.
+    pub stamp: Stamp,
 }
 
 impl StreamTap {
-    pub const fn new() -> Self {
-        Self { decimator: Decimator::new(), every: 0 }
+    /// Stopped; records stamped with `stamp` (the scene the board booted into).
+    pub const fn new(stamp: Stamp) -> Self {
+        Self { decimator: Decimator::new(), every: 0, stamp }
     }
 
     /// Whether this sample becomes a record (follows `EVERY`).
@@ -75,9 +81,15 @@ impl StreamTap {
 
 /// The control loop's end of the hand-over, called once per iteration between samples.
 /// Returns a `QUIET` request for the control loop to carry out (then it calls `quieted`).
-pub fn service(ctrl: &mut saw_core::Controller) -> Option<bool> {
+pub fn service(ctrl: &mut saw_core::Controller, tap: &mut StreamTap) -> Option<bool> {
     if let Some(p) = INSTALL.try_take() {
         ctrl.install(p);
+        // The new scene's first sample is a record, stamped with it.
+        tap.stamp = Stamp {
+            scene_id: STAMP_SCENE.load(Ordering::Relaxed),
+            change: STAMP_CHANGE.load(Ordering::Relaxed),
+        };
+        tap.decimator.force_next();
         INSTALLED.signal(());
     }
     if TELEMETRY_WANTED.swap(false, Ordering::Relaxed) {
@@ -108,9 +120,12 @@ pub struct FirmwareBoard {
 }
 
 impl Board for FirmwareBoard {
-    async fn apply(&mut self, config: &Config) -> Result<(), ConfigError> {
+    async fn apply(&mut self, config: &Config, stamp: Stamp) -> Result<(), ConfigError> {
         // Compiled here, at thread priority; the control loop only swaps it in.
         let p = Prepared::compile(&self.timer, self.sample_period_us, config)?;
+        // Stored before the signal: the control loop reads them once it takes the scene.
+        STAMP_SCENE.store(stamp.scene_id, Ordering::Relaxed);
+        STAMP_CHANGE.store(stamp.change, Ordering::Relaxed);
         INSTALLED.reset();
         INSTALL.signal(p);
         INSTALLED.wait().await;
@@ -121,6 +136,10 @@ impl Board for FirmwareBoard {
         TELEMETRY.reset();
         TELEMETRY_WANTED.store(true, Ordering::Relaxed);
         TELEMETRY.wait().await
+    }
+
+    fn now_us(&mut self) -> u64 {
+        embassy_time::Instant::now().as_micros()
     }
 
     fn stream(&mut self, every_samples: u16) {

@@ -233,7 +233,7 @@ async fn main(spawner: Spawner) {
     interrupt::UART4.set_priority(SAMPLE_PATH_PRIORITY);
     let high = EXECUTOR_HIGH.start(interrupt::UART4);
     high.spawn(unwrap!(sampler(parts.sampler)));
-    high.spawn(unwrap!(control(ctrl, burst, rf_arm, wdg)));
+    high.spawn(unwrap!(control(ctrl, burst, rf_arm, wdg, session.stamp())));
     let board = link::FirmwareBoard { timer, sample_period_us: SAMPLE_PERIOD_US, sent: 0, store };
     spawner.spawn(unwrap!(link::link(parts.link_tx, parts.link_rx, session, board)));
 }
@@ -365,8 +365,14 @@ fn sample_step(ctrl: &mut Controller, burst: &mut BurstGate, tap: &mut link::Str
     // Drive mode, then amplitude, then the line (saw-core's order).
     saw_core::controller::apply(&out, burst);
     if tap.take() {
+        // The sample's 32-bit µs time widened against the 64-bit clock: exact while the sample
+        // is less than 71.6 min old (it is a few µs old). Read only for a streamed sample.
+        let now_us = Instant::now().as_micros();
+        let age_us = (now_us as u32).wrapping_sub(sample.t_us);
         tap.push(saw_link::msg::Record {
-            time_us: sample.t_us,
+            time_us: now_us.wrapping_sub(u64::from(age_us)),
+            scene_id: tap.stamp.scene_id,
+            change: tap.stamp.change,
             position_um: out.position_um,
             velocity_um_s: out.velocity_um_s,
             region: out.region,
@@ -392,6 +398,7 @@ async fn control(
     mut burst: BurstGate,
     mut rf_arm: Output<'static>,
     mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+    stamp: saw_link::session::Stamp,
 ) {
     // `rf_arm` is owned here for the life of the loop (a reset drops it low; an external
     // pull-down keeps the amplifier disarmed while the pin is unconfigured); it goes low only
@@ -399,7 +406,7 @@ async fn control(
     let mut held: Option<store::Timeout> = None;
     let mut watchdog = Ticker::every(WATCHDOG_PERIOD);
     let mut next_log = Instant::now().as_micros() + TELEMETRY_PERIOD_US;
-    let mut tap = link::StreamTap::new();
+    let mut tap = link::StreamTap::new(stamp);
     CONTROL_READY.signal(());
     loop {
         match select(SAMPLES.receive(), watchdog.next()).await {
@@ -407,7 +414,7 @@ async fn control(
             Either::Second(()) => tick_step(&mut ctrl, &mut burst, Instant::now().as_micros() as u32),
         }
         // Between samples: a scene compiled by the link, a counters request, a save's hold.
-        if let Some(quiet) = link::service(&mut ctrl) {
+        if let Some(quiet) = link::service(&mut ctrl, &mut tap) {
             if quiet {
                 // RF off at the amplifier before the flash can stall us, then a watchdog long
                 // enough for an erase; the gate keeps following the controller, so bursts

@@ -5,10 +5,23 @@
 
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+use crate::clock::Ping;
 use crate::frame::{self, Receiver, Refusal, MAX_ENCODED};
 use crate::msg::{Header, Hello, LinkError, Reply, Request, Stream, PROTOCOL_VERSION};
+
+/// A stream the board started: what [`Client::start_stream`] returns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StreamStart {
+    /// Records every this many samples.
+    pub every_samples: u16,
+    /// Samples per second of the board's control loop.
+    pub sample_rate_hz: u32,
+    /// The board's clock when it started the stream, µs since boot: no record before it is
+    /// handed on.
+    pub from_us: u64,
+}
 
 /// Why a request got no usable answer. Each reads as one sentence.
 #[derive(Debug)]
@@ -72,6 +85,12 @@ pub struct Client<P: Read + Write> {
     /// Bytes read from the port and not yet framed.
     inbox: Vec<u8>,
     inbox_pos: usize,
+    /// The stream started by this client: records of an earlier board time are stale.
+    from_us: Option<u64>,
+    /// Stale records dropped.
+    stale_records: u64,
+    /// The host clock's origin: an instant and the Unix time it stands for.
+    anchor: (Instant, u64),
 }
 
 impl<P: Read + Write> Client<P> {
@@ -86,7 +105,76 @@ impl<P: Read + Write> Client<P> {
             bad_frames: 0,
             inbox: Vec::with_capacity(4096),
             inbox_pos: 0,
+            from_us: None,
+            stale_records: 0,
+            anchor: (
+                Instant::now(),
+                SystemTime::now()
+                    .duration_since(UNIX_EPOCH)
+                    .map_or(0, |d| d.as_micros() as u64),
+            ),
         }
+    }
+
+    /// The host's clock: µs since the Unix epoch, read once when the client was made and
+    /// carried on by the monotonic clock (a wall-clock step does not jump it).
+    pub fn host_us(&self, at: Instant) -> u64 {
+        self.anchor.1 + at.saturating_duration_since(self.anchor.0).as_micros() as u64
+    }
+
+    /// One round trip of [`Request::Ping`], timed on [`Self::host_us`]'s clock.
+    pub fn ping(&mut self) -> Result<Ping, ClientError> {
+        let sent = Instant::now();
+        match self.request(&Request::Ping)? {
+            Reply::Pong { board_time_us } => Ok(Ping {
+                host_sent_us: self.host_us(sent),
+                host_received_us: self.host_us(Instant::now()),
+                board_us: board_time_us,
+            }),
+            other => Err(ClientError::Unexpected(Box::new(other))),
+        }
+    }
+
+    /// Starts (or restarts) the stream at one record every `every_samples` samples. Frames
+    /// still in transit from an earlier stream (this client's or another's) are dropped, and so
+    /// is every record older than the board's answer: what [`Self::next_stream`] hands on was
+    /// sampled after this call reached the board.
+    pub fn start_stream(&mut self, every_samples: u16) -> Result<StreamStart, ClientError> {
+        match self.request(&Request::Stream { every_samples })? {
+            Reply::Streaming {
+                every_samples,
+                sample_rate_hz,
+                from_us,
+            } => {
+                self.from_us = Some(from_us);
+                let stale: usize = self.streams.iter().map(|(_, s)| s.records.len()).sum();
+                self.stale_records += stale as u64;
+                self.streams.clear();
+                Ok(StreamStart {
+                    every_samples,
+                    sample_rate_hz,
+                    from_us,
+                })
+            }
+            other => Err(ClientError::Unexpected(Box::new(other))),
+        }
+    }
+
+    /// Stops the stream; frames that arrive after are dropped until the next start.
+    pub fn stop_stream(&mut self) -> Result<(), ClientError> {
+        self.from_us = Some(u64::MAX);
+        match self.request(&Request::Stream { every_samples: 0 })? {
+            Reply::Streaming { .. } => {
+                self.streams.clear();
+                Ok(())
+            }
+            other => Err(ClientError::Unexpected(Box::new(other))),
+        }
+    }
+
+    /// Records dropped as stale: sampled before the stream this client started.
+    pub fn stale_records(&self) -> u64 {
+        self.stale_records
     }
 
     /// Frames from the board that were refused (noise on the line).
@@ -158,20 +246,36 @@ impl<P: Read + Write> Client<P> {
         }
     }
 
-    /// The next stream frame, waiting until `deadline`; `None` when none came.
+    /// The next stream frame, waiting until `deadline`; `None` when none came. After
+    /// [`Self::start_stream`], records sampled before the stream started are taken out (a frame
+    /// left with none is skipped).
     pub fn next_stream(
         &mut self,
         deadline: Instant,
     ) -> Result<Option<(Header, Stream)>, ClientError> {
-        if let Some(s) = self.streams.pop_front() {
-            return Ok(Some(s));
-        }
         loop {
-            match self.read_frame(deadline)? {
-                Some((h, Reply::Stream(s))) => return Ok(Some((h, s))),
-                Some(_) => {}
-                None => return Ok(None),
+            let next = match self.streams.pop_front() {
+                Some(s) => Some(s),
+                None => loop {
+                    match self.read_frame(deadline)? {
+                        Some((h, Reply::Stream(s))) => break Some((h, s)),
+                        Some(_) => {}
+                        None => break None,
+                    }
+                },
+            };
+            let Some((h, mut s)) = next else {
+                return Ok(None);
+            };
+            if let Some(from_us) = self.from_us {
+                let before = s.records.len();
+                s.records.retain(|r| r.time_us >= from_us);
+                self.stale_records += (before - s.records.len()) as u64;
+                if s.records.is_empty() {
+                    continue;
+                }
             }
+            return Ok(Some((h, s)));
         }
     }
 

@@ -13,6 +13,8 @@
 
 #[cfg(feature = "std")]
 pub mod client;
+#[cfg(feature = "std")]
+pub mod clock;
 pub mod frame;
 pub mod msg;
 pub mod session;

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 /// The protocol this crate speaks. Every frame's header carries it; a board answers a frame of
 /// another version with [`LinkError::WrongVersion`] and nothing else.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// Telemetry records per stream frame: 8 records (≈ 130 bytes on the wire) amortise the
 /// frame's 9 bytes of header, CRC and COBS overhead, and at the default 1 kHz stream a frame
@@ -76,6 +76,8 @@ pub enum Request {
     },
     /// Save the active scene to flash; the board boots into it from then on.
     Save,
+    /// The board's clock now, for aligning board time with the host's ([`Reply::Pong`]).
+    Ping,
 }
 
 /// Where the active scene came from.
@@ -141,8 +143,14 @@ pub struct LinkCounters {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Record {
-    /// The sample's time on the board's µs clock (wraps every 71.6 min).
-    pub time_us: u32,
+    /// The sample's time, µs since the board booted (64 bits: never wraps).
+    pub time_us: u64,
+    /// The id of the scene in force at this sample ([`crate::scene_id`]).
+    pub scene_id: u32,
+    /// Scene changes since boot (loads and edits over the link) at this sample: the first
+    /// record of every change is always sent, whatever the decimation, so a continuous log
+    /// splits into trials at the records where this count steps.
+    pub change: u32,
     /// Position, µm, while the sensor is healthy.
     pub position_um: Option<i32>,
     /// Velocity, µm/s, once the estimator has a full window.
@@ -205,6 +213,10 @@ pub enum Reply {
         every_samples: u16,
         /// Samples per second of the control loop.
         sample_rate_hz: u32,
+        /// The board's clock when the request was handled, µs since boot: records of an
+        /// earlier time are stale (still in transit from a stream asked for before) and the
+        /// host drops them.
+        from_us: u64,
     },
     /// The active scene is in flash.
     Saved {
@@ -217,6 +229,11 @@ pub enum Reply {
     Stream(Stream),
     /// The request's frame was refused.
     Error(LinkError),
+    /// To [`Request::Ping`].
+    Pong {
+        /// The board's clock when it handled the ping, µs since boot.
+        board_time_us: u64,
+    },
 }
 
 /// Why a save failed.
@@ -314,5 +331,5 @@ impl core::fmt::Display for StoreFault {
 
 impl Request {
     /// How many request variants this protocol version defines (postcard numbers them 0..N).
-    pub const VARIANTS: u32 = 9;
+    pub const VARIANTS: u32 = 10;
 }

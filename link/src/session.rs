@@ -17,8 +17,16 @@ use crate::scene_id;
 #[allow(async_fn_in_trait)] // used with concrete types only; no `Send` bound is wanted on target
 pub trait Board {
     /// Compiles `config` and makes it active from the next sample, or refuses it with nothing
-    /// changed (the controller's compile step: `Controller::load`).
-    async fn apply(&mut self, config: &Config) -> Result<(), saw_core::controller::ConfigError>;
+    /// changed (the controller's compile step: `Controller::load`). Records of the samples it
+    /// runs carry `stamp`, and the first of them is sent whatever the decimation
+    /// ([`crate::stream::Decimator::force_next`]).
+    async fn apply(
+        &mut self,
+        config: &Config,
+        stamp: Stamp,
+    ) -> Result<(), saw_core::controller::ConfigError>;
+    /// The board's clock, µs since boot.
+    fn now_us(&mut self) -> u64;
     /// The control core's counters now (on the firmware the control loop hands them over
     /// between two samples).
     async fn telemetry(&mut self) -> Telemetry;
@@ -29,6 +37,15 @@ pub trait Board {
     /// Stores `config` as the scene to boot into. The board keeps the carrier off and the
     /// watchdog fed while the flash is busy.
     async fn save(&mut self, scene_id: u32, config: &Config) -> Result<(), StoreFault>;
+}
+
+/// Which scene a sample ran under: what every stream record carries.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Stamp {
+    /// The scene's id ([`crate::scene_id`]).
+    pub scene_id: u32,
+    /// Scene changes since boot (0: the scene the board booted into).
+    pub change: u32,
 }
 
 /// Who the board is, for [`Request::Hello`].
@@ -49,6 +66,11 @@ pub struct Session {
     active: Config,
     scene_id: u32,
     source: SceneSource,
+    /// Scene changes applied since boot.
+    change: u32,
+    /// The scene the board booted into (or saved last) and where it came from: a change back
+    /// to it (a bench restoring a boundary) reports that source again, not "over the link".
+    origin: (u32, SceneSource),
     every_samples: u16,
     link: LinkCounters,
     /// Counter values at the last reset.
@@ -58,11 +80,14 @@ pub struct Session {
 impl Session {
     /// A session over the scene the board booted into (already applied).
     pub fn new(identity: Identity, active: Config, source: SceneSource) -> Self {
+        let id = scene_id(&active);
         Self {
             identity,
-            scene_id: scene_id(&active),
+            scene_id: id,
             active,
             source,
+            change: 0,
+            origin: (id, source),
             every_samples: 0,
             link: LinkCounters::default(),
             base: Counters::default(),
@@ -77,6 +102,15 @@ impl Session {
     /// The active scene's id.
     pub fn scene_id(&self) -> u32 {
         self.scene_id
+    }
+
+    /// The active scene's stamp: what the board's records carry (the glue stamps the scene
+    /// it booted into with this before the first sample).
+    pub fn stamp(&self) -> Stamp {
+        Stamp {
+            scene_id: self.scene_id,
+            change: self.change,
+        }
     }
 
     /// Where the active scene came from.
@@ -148,16 +182,24 @@ impl Session {
                 Reply::Counters(since)
             }
             Request::Stream { every_samples } => {
+                // Read before the decimation changes: every record of this stream is of this
+                // time or later.
+                let from_us = board.now_us();
                 self.every_samples = every_samples;
                 board.stream(every_samples);
                 Reply::Streaming {
                     every_samples,
                     sample_rate_hz: self.identity.sample_rate_hz,
+                    from_us,
                 }
             }
+            Request::Ping => Reply::Pong {
+                board_time_us: board.now_us(),
+            },
             Request::Save => match board.save(self.scene_id, &self.active).await {
                 Ok(()) => {
                     self.source = SceneSource::Saved;
+                    self.origin = (self.scene_id, SceneSource::Saved);
                     Reply::Saved {
                         scene_id: self.scene_id,
                     }
@@ -168,11 +210,20 @@ impl Session {
     }
 
     async fn apply<B: Board>(&mut self, board: &mut B, next: Config) -> Reply {
-        match board.apply(&next).await {
+        let stamp = Stamp {
+            scene_id: scene_id(&next),
+            change: self.change.wrapping_add(1),
+        };
+        match board.apply(&next, stamp).await {
             Ok(()) => {
-                self.scene_id = scene_id(&next);
+                self.scene_id = stamp.scene_id;
+                self.change = stamp.change;
                 self.active = next;
-                self.source = SceneSource::Link;
+                self.source = if stamp.scene_id == self.origin.0 {
+                    self.origin.1
+                } else {
+                    SceneSource::Link
+                };
                 Reply::Applied {
                     scene_id: self.scene_id,
                 }

@@ -31,6 +31,12 @@ impl Decimator {
         self.left = 0;
     }
 
+    /// The next sample becomes a record (a new scene's first sample), and the count restarts
+    /// there; nothing while stopped.
+    pub fn force_next(&mut self) {
+        self.left = 0;
+    }
+
     /// Whether this sample becomes a record.
     #[inline]
     pub fn take(&mut self) -> bool {

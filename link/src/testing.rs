@@ -17,7 +17,7 @@ use saw_core::gate::DriveMode;
 use saw_core::texture::Texture;
 
 use crate::msg::{Header, Reply, Request, SceneSource, StoreFault};
-use crate::session::{Board, Identity, Session};
+use crate::session::{Board, Identity, Session, Stamp};
 
 /// The F446's burst timer (90 MHz, 32-bit, 2 kHz f_b limit).
 pub const TIMER: BurstTimer = BurstTimer {
@@ -40,6 +40,10 @@ pub struct CoreBoard {
     pub every: u16,
     pub saved: Option<(u32, Config)>,
     pub flash_ok: bool,
+    /// The stamp of the last scene applied.
+    pub stamp: Stamp,
+    /// The board's clock, µs since boot: tests set it.
+    pub now_us: u64,
 }
 
 impl CoreBoard {
@@ -53,6 +57,8 @@ impl CoreBoard {
             every: 0,
             saved: None,
             flash_ok: true,
+            stamp: Stamp::default(),
+            now_us: 0,
         }
     }
 }
@@ -64,8 +70,13 @@ impl Default for CoreBoard {
 }
 
 impl Board for CoreBoard {
-    async fn apply(&mut self, config: &Config) -> Result<(), ConfigError> {
-        self.ctrl.load(config)
+    async fn apply(&mut self, config: &Config, stamp: Stamp) -> Result<(), ConfigError> {
+        self.ctrl.load(config)?;
+        self.stamp = stamp;
+        Ok(())
+    }
+    fn now_us(&mut self) -> u64 {
+        self.now_us
     }
     async fn telemetry(&mut self) -> Telemetry {
         self.ctrl.telemetry()
@@ -189,5 +200,6 @@ pub fn every_request() -> std::vec::Vec<Request> {
         Request::Counters { reset: true },
         Request::Stream { every_samples: 10 },
         Request::Save,
+        Request::Ping,
     ]
 }

@@ -11,7 +11,7 @@ use saw_core::texture::Texture;
 use saw_link::frame::{self, Receiver, MAX_ENCODED};
 use saw_link::msg::{Header, LinkError, Reply, Request, SceneSource, StoreFault, PROTOCOL_VERSION};
 use saw_link::scene_id;
-use saw_link::session::Session;
+use saw_link::session::{Session, Stamp};
 
 use saw_link::testing::{session, CoreBoard, TIMER};
 
@@ -237,12 +237,14 @@ fn counters_count_and_reset() {
 #[test]
 fn stream_and_save() {
     let (mut s, mut b) = (session(), CoreBoard::new());
+    b.now_us = 5_000_000_123;
     let (_, r) = ask(&mut s, &mut b, 1, &Request::Stream { every_samples: 10 });
     assert_eq!(
         r,
         Reply::Streaming {
             every_samples: 10,
-            sample_rate_hz: 10_000
+            sample_rate_hz: 10_000,
+            from_us: 5_000_000_123,
         }
     );
     assert_eq!((b.every, s.every_samples()), (10, 10));
@@ -292,4 +294,66 @@ fn a_bad_frame_gets_a_typed_error_and_the_next_request_is_answered() {
         panic!("{r:?}")
     };
     assert_eq!((c.link.frames_ok, c.link.frames_bad), (2, 1));
+}
+
+#[test]
+fn a_ping_reads_the_board_clock_past_32_bits() {
+    let (mut s, mut b) = (session(), CoreBoard::new());
+    // 2^32 µs is 71.6 min: the clock goes on past it.
+    b.now_us = (1 << 32) + 17;
+    let (h, r) = ask(&mut s, &mut b, 9, &Request::Ping);
+    assert_eq!(h.seq, 9);
+    assert_eq!(r, Reply::Pong { board_time_us: (1 << 32) + 17 });
+}
+
+#[test]
+fn every_accepted_change_steps_the_stamp_and_a_refused_one_does_not() {
+    let (mut s, mut b) = (session(), CoreBoard::new());
+    let boot = scene_id(&default_config());
+    assert_eq!(s.stamp(), Stamp { scene_id: boot, change: 0 });
+    let set = Request::SetTexture {
+        region: 0,
+        texture: Texture::constant_hz(250),
+    };
+    let (_, r) = ask(&mut s, &mut b, 1, &set);
+    let Reply::Applied { scene_id: first } = r else {
+        panic!("{r:?}")
+    };
+    assert_ne!(first, boot);
+    assert_eq!(b.stamp, Stamp { scene_id: first, change: 1 });
+    assert_eq!(s.stamp(), b.stamp);
+    // Refused: neither the board's stamp nor the session's moves.
+    let (_, r) = ask(
+        &mut s,
+        &mut b,
+        2,
+        &Request::MoveBoundary {
+            index: 0,
+            at_um: 999_000_000,
+        },
+    );
+    assert!(matches!(r, Reply::Refused(_)), "{r:?}");
+    assert_eq!(b.stamp, Stamp { scene_id: first, change: 1 });
+    // The same scene again is still a change: a trial that repeats a condition is its own trial.
+    let (_, r) = ask(&mut s, &mut b, 3, &set);
+    assert_eq!(r, Reply::Applied { scene_id: first });
+    assert_eq!(b.stamp, Stamp { scene_id: first, change: 2 });
+}
+
+#[test]
+fn a_change_back_to_the_boot_scene_reports_its_source_again() {
+    let (mut s, mut b) = (session(), CoreBoard::new());
+    let (_, r) = ask(&mut s, &mut b, 1, &Request::SetDrive(DriveMode::Progressive));
+    assert!(matches!(r, Reply::Applied { .. }), "{r:?}");
+    assert_eq!(s.source(), SceneSource::Link);
+    let (_, r) = ask(&mut s, &mut b, 2, &Request::SetDrive(DriveMode::Standing));
+    assert_eq!(r, Reply::Applied { scene_id: scene_id(&default_config()) });
+    assert_eq!(s.source(), SceneSource::Default);
+    // After a save, the saved scene is the one to come back to.
+    ask(&mut s, &mut b, 3, &Request::SetDrive(DriveMode::Progressive));
+    ask(&mut s, &mut b, 4, &Request::Save);
+    ask(&mut s, &mut b, 5, &Request::SetDrive(DriveMode::Standing));
+    assert_eq!(s.source(), SceneSource::Link);
+    ask(&mut s, &mut b, 6, &Request::SetDrive(DriveMode::Progressive));
+    assert_eq!(s.source(), SceneSource::Saved);
 }

@@ -3,6 +3,8 @@
 //! prints one JSON object per command for scripts. The link itself is `saw_link`.
 
 pub mod port;
+pub mod record;
+pub mod session;
 pub mod ui;
 
 use std::path::PathBuf;
@@ -13,8 +15,72 @@ use saw_core::gate::DriveMode;
 use saw_core::scene::Config;
 use saw_core::texture::Texture;
 use saw_link::client::{Client, ClientError};
-use saw_link::msg::{Counters, Hello, Record, Reply, Request, SceneSource};
+use saw_link::msg::{Counters, Hello, Reply, Request, SceneSource};
 use serde_json::{json, Value};
+
+/// What the command line asked for.
+#[derive(Debug)]
+pub enum Parsed {
+    /// A command to run.
+    Run(Cli),
+    /// `--help` or `--version`: print this, exit 0.
+    Print(String),
+    /// Not a valid command line: one line saying why (`json`: `--json` was given, so the
+    /// answer goes to stdout as JSON like every other answer).
+    Refused {
+        /// `--json` was on the command line.
+        json: bool,
+        /// The flag or argument, the value and the rule, on one line.
+        message: String,
+    },
+}
+
+/// Parses a command line without exiting: errors come back as one line (clap's first line,
+/// and its tip if it has one), so `--json` can answer in JSON even when the command line is
+/// wrong.
+pub fn parse_args<I, T>(args: I) -> Parsed
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let args: Vec<std::ffi::OsString> = args.into_iter().map(Into::into).collect();
+    let json = args
+        .iter()
+        .skip(1)
+        .take_while(|a| *a != "--")
+        .any(|a| a == "--json");
+    match Cli::try_parse_from(&args) {
+        Ok(cli) => Parsed::Run(cli),
+        Err(e) => {
+            use clap::error::ErrorKind;
+            match e.kind() {
+                ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
+                    Parsed::Print(e.render().to_string())
+                }
+                _ => Parsed::Refused {
+                    json,
+                    message: one_line(&e.render().to_string()),
+                },
+            }
+        }
+    }
+}
+
+/// Clap's error as one line: its first line without `error: `, and its tip.
+pub(crate) fn one_line(rendered: &str) -> String {
+    let mut lines = rendered.lines().map(str::trim).filter(|l| !l.is_empty());
+    let first = lines
+        .next()
+        .unwrap_or("the command line was not understood")
+        .trim_start_matches("error: ")
+        .to_string();
+    let tip = lines.find_map(|l| l.strip_prefix("tip: "));
+    let help = "`saw --help` lists the commands, `saw COMMAND --help` their values";
+    match tip {
+        Some(t) => format!("{first} ({t}); {help}"),
+        None => format!("{first}; {help}"),
+    }
+}
 
 /// `saw --port PORT <command>`.
 #[derive(Parser, Debug)]
@@ -33,7 +99,7 @@ pub struct Cli {
     pub json: bool,
     /// How long to wait for each answer, ms (10 to 60000). A save waits at least 4000 ms
     /// (`SAVE_TIMEOUT`): erasing a flash sector stalls the F446 for up to 2 s.
-    #[arg(long, value_name = "MS", default_value_t = 1000, value_parser = clap::value_parser!(u64).range(10..=60_000))]
+    #[arg(long, value_name = "MS", default_value_t = 1000, allow_negative_numbers = true, value_parser = clap::value_parser!(u64).range(10..=60_000))]
     pub timeout: u64,
     /// What to do.
     #[command(subcommand)]
@@ -55,16 +121,20 @@ pub enum Command {
     Get,
     /// Move boundary INDEX (where region INDEX ends) to MM, live.
     Boundary {
-        /// Boundary index, 0 = the end of the first region.
+        /// Boundary index, 0 = the end of the first region (0 to 254).
+        #[arg(allow_negative_numbers = true)]
         index: u8,
         /// New position, mm from the start end (0 to 1000; the scene's layout rules apply).
         #[arg(value_parser = mm, allow_hyphen_values = true)]
         mm: f64,
     },
-    /// Give region INDEX a new texture, written as scene-file keys: `saw set 1 kind=grating
-    /// wavelength_mm=1.5` (same keys, ranges and sentences as a `[[region]]` table).
+    /// Change region INDEX's texture, written as scene-file keys: `saw set 1 f_b_hz=80` keeps
+    /// the region's kind and every value not named; `saw set 1 kind=grating wavelength_mm=1.5`
+    /// gives it a new kind (its keys not named take their defaults). Same keys, ranges and
+    /// sentences as a `[[region]]` table (docs/scenes.md).
     Set {
-        /// Region index, left to right from 0.
+        /// Region index, left to right from 0 (0 to 255).
+        #[arg(allow_negative_numbers = true)]
         index: u8,
         /// `key=value` pairs of a `[[region]]` table (docs/scenes.md).
         #[arg(required = true, value_name = "KEY=VALUE")]
@@ -81,17 +151,44 @@ pub enum Command {
         #[arg(long)]
         reset: bool,
     },
-    /// Record the telemetry stream to a CSV file.
+    /// Record the telemetry stream to a CSV file (columns: docs/link.md). Only records
+    /// sampled after the stream started are written: none left in transit from before.
     Stream {
-        /// Where to write the records (time_us, position_um, velocity_um_s, region, f_b_hz, bursting, fault).
+        /// Where to write the records.
         #[arg(long, value_name = "FILE")]
         csv: PathBuf,
         /// How long, s (0.1 to 86400).
-        #[arg(long, value_name = "S", value_parser = seconds)]
+        #[arg(long, value_name = "S", allow_negative_numbers = true, value_parser = seconds)]
         seconds: f64,
         /// One record every N samples (1 to 10000; 10 = 1 kHz on a 10 kHz board).
-        #[arg(long, value_name = "N", default_value_t = 10, value_parser = clap::value_parser!(u16).range(1..=10_000))]
+        #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true, value_parser = clap::value_parser!(u16).range(1..=10_000))]
         every: u16,
+    },
+    /// One stream, many changes: streams to a CSV file while reading commands from stdin, one
+    /// per line (`set 0 f_b_hz=80`, `push scenes/grating.toml`, `boundary 0 20`, `drive
+    /// standing`, `wait 1.5`, `hello`, `get`, `counters`), until stdin ends or --seconds pass.
+    /// Each command's answer is one line on stdout; every record carries the scene in force and
+    /// the change count, so the log splits into trials at the changes.
+    Session {
+        /// Where to write the records.
+        #[arg(long, value_name = "FILE")]
+        csv: PathBuf,
+        /// Stop after this long, s (0.1 to 86400; default: when stdin ends).
+        #[arg(long, value_name = "S", allow_negative_numbers = true, value_parser = seconds)]
+        seconds: Option<f64>,
+        /// One record every N samples (1 to 10000; 10 = 1 kHz on a 10 kHz board).
+        #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true, value_parser = clap::value_parser!(u16).range(1..=10_000))]
+        every: u16,
+    },
+    /// Align the board's clock with this host's: round trips of a ping, the board's boot on the
+    /// host's clock, the drift between the two clocks and how good the fit is.
+    Ping {
+        /// Round trips (2 to 1000), taken over --over seconds.
+        #[arg(long, default_value_t = 20, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(2..=1000))]
+        count: u32,
+        /// Seconds the round trips span (0 to 3600; a longer span measures the drift better).
+        #[arg(long, value_name = "S", default_value_t = 1.0, allow_negative_numbers = true, value_parser = over_seconds)]
+        over: f64,
     },
     /// Save the active scene to flash: the board boots into it from now on. A save that erases
     /// (an F446 sector: ~1 s, up to 2 s) holds the answer: this waits the longer of --timeout and
@@ -108,19 +205,23 @@ pub enum Command {
         allow_remote: bool,
         /// One record every N samples in the page's trace (1 to 10000; 10 = 1 kHz on a 10 kHz
         /// board).
-        #[arg(long, value_name = "N", default_value_t = 10, value_parser = clap::value_parser!(u16).range(1..=10_000))]
+        #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true, value_parser = clap::value_parser!(u16).range(1..=10_000))]
         every: u16,
     },
     /// Measure the link: the round trip of boundary moves (the scene is restored after), and
     /// the fastest stream that arrives without a drop.
     Bench {
         /// Boundary moves to time (10 to 100000).
-        #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(10..=100_000))]
+        #[arg(long, default_value_t = 200, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(10..=100_000))]
         moves: u32,
         /// Seconds each stream rate is tried (0.5 to 60).
-        #[arg(long, value_name = "S", default_value_t = 2.0, value_parser = bench_seconds)]
+        #[arg(long, value_name = "S", default_value_t = 2.0, allow_negative_numbers = true, value_parser = bench_seconds)]
         seconds: f64,
     },
+}
+
+fn over_seconds(s: &str) -> Result<f64, String> {
+    finite_in(s, 0.0, 3600.0, "s")
 }
 
 fn bench_seconds(s: &str) -> Result<f64, String> {
@@ -173,14 +274,14 @@ impl Failure {
             message,
         }
     }
-    fn input(message: String) -> Self {
+    pub(crate) fn input(message: String) -> Self {
         Self {
             code: 2,
             kind: "input",
             message,
         }
     }
-    fn link(message: String) -> Self {
+    pub(crate) fn link(message: String) -> Self {
         Self {
             code: 3,
             kind: "link",
@@ -215,26 +316,51 @@ pub fn run(cli: &Cli) -> Result<Done, Failure> {
         return ui_command(cli, *listen, *allow_remote, *every);
     }
     let port = port::open(&cli.port).map_err(Failure::link)?;
-    let mut client = Client::new(port, Duration::from_millis(cli.timeout));
+    let timeout = Duration::from_millis(cli.timeout);
+    let mut client = Client::new(port, timeout);
     // Every command starts with hello: a board speaking another protocol is named before
     // anything is sent that it would misread.
     let hello = client.hello()?;
-    match &cli.command {
-        Command::Hello => Ok(Done {
-            text: hello_text(&hello),
-            json: json!({ "hello": hello }),
-        }),
-        Command::Push { file } => push(&mut client, file),
-        Command::Get => get(&mut client),
-        Command::Boundary { index, mm } => boundary(&mut client, *index, *mm),
-        Command::Set { index, keys } => set(&mut client, *index, keys),
+    if let Command::Session {
+        csv,
+        seconds,
+        every,
+    } = &cli.command
+    {
+        return session::run(&mut client, csv, *seconds, *every, cli.json, timeout);
+    }
+    execute(&mut client, &cli.command, timeout, Some(hello))
+}
+
+/// Runs one command on an open link (`hello`: the board's answer to the hello already said).
+pub(crate) fn execute<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+    command: &Command,
+    timeout: Duration,
+    hello: Option<Hello>,
+) -> Result<Done, Failure> {
+    match command {
+        Command::Hello => {
+            let hello = match hello {
+                Some(h) => h,
+                None => client.hello()?,
+            };
+            Ok(Done {
+                text: hello_text(&hello),
+                json: json!({ "hello": hello_json(&hello) }),
+            })
+        }
+        Command::Push { file } => push(client, file),
+        Command::Get => get(client),
+        Command::Boundary { index, mm } => boundary(client, *index, *mm),
+        Command::Set { index, keys } => set(client, *index, keys),
         Command::Drive { mode } => {
             let drive = match mode {
                 Drive::Standing => DriveMode::Standing,
                 Drive::Progressive => DriveMode::Progressive,
             };
             let reply = client.request(&Request::SetDrive(drive))?;
-            applied(reply, format!("drive {drive:?}"))
+            applied(reply, format!("{} drive", drive_name(drive)))
         }
         Command::Counters { reset } => {
             match client.request(&Request::Counters { reset: *reset })? {
@@ -249,10 +375,13 @@ pub fn run(cli: &Cli) -> Result<Done, Failure> {
             csv,
             seconds,
             every,
-        } => stream(&mut client, csv, *seconds, *every),
-        Command::Bench { moves, seconds } => bench(&mut client, *moves, *seconds),
-        Command::Save => save(&mut client, Duration::from_millis(cli.timeout)),
-        Command::Ui { .. } => unreachable!("handled before the port is opened"),
+        } => stream(client, csv, *seconds, *every),
+        Command::Ping { count, over } => ping(client, *count, *over),
+        Command::Bench { moves, seconds } => bench(client, *moves, *seconds),
+        Command::Save => save(client, timeout),
+        Command::Session { .. } | Command::Ui { .. } => Err(Failure::input(
+            "session and ui hold the port themselves: run them from the command line".into(),
+        )),
     }
 }
 
@@ -319,7 +448,7 @@ pub(crate) fn save<P: std::io::Read + std::io::Write>(
                 text: format!(
                     "saved scene {scene_id:#010x} in {seconds:.2} s: the board boots into it"
                 ),
-                json: json!({ "saved": scene_id, "seconds": seconds }),
+                json: json!({ "saved": scene_hex(scene_id), "seconds": seconds }),
             })
         }
         Reply::SaveFailed(e) => Err(Failure::refused(format!("save failed: {e}"))),
@@ -343,6 +472,41 @@ pub(crate) fn source_name(s: SceneSource) -> &'static str {
     }
 }
 
+/// A scene id as text and JSON show it: `0x5ad0c3e1` (the id is a CRC-32).
+pub fn scene_hex(id: u32) -> String {
+    format!("{id:#010x}")
+}
+
+/// Where a scene came from, as JSON names it.
+pub fn source_key(s: SceneSource) -> &'static str {
+    match s {
+        SceneSource::Default => "default",
+        SceneSource::BuildTime => "build-time",
+        SceneSource::Saved => "saved",
+        SceneSource::Link => "link",
+        _ => "unknown",
+    }
+}
+
+/// A drive mode as the scene file writes it.
+pub fn drive_name(d: DriveMode) -> &'static str {
+    match d {
+        DriveMode::Standing => "standing",
+        DriveMode::Progressive => "progressive",
+    }
+}
+
+fn hello_json(h: &Hello) -> Value {
+    json!({
+        "protocol": h.protocol,
+        "firmware": h.firmware.as_str(),
+        "board": h.board.as_str(),
+        "sample_rate_hz": h.sample_rate_hz,
+        "scene_id": scene_hex(h.scene_id),
+        "scene_source": source_key(h.scene_source),
+    })
+}
+
 fn hello_text(h: &Hello) -> String {
     format!(
         "{} running {} (protocol {}, {} samples/s); scene {:#010x}, {}",
@@ -359,7 +523,7 @@ pub(crate) fn applied(reply: Reply, what: String) -> Result<Done, Failure> {
     match reply {
         Reply::Applied { scene_id } => Ok(Done {
             text: format!("{what}: running, scene {scene_id:#010x}"),
-            json: json!({ "applied": scene_id }),
+            json: json!({ "applied": scene_hex(scene_id) }),
         }),
         Reply::Refused(e) => Err(Failure::refused(format!("refused, nothing changed: {e}"))),
         other => Err(unexpected(other)),
@@ -387,7 +551,7 @@ pub(crate) fn push_text<P: std::io::Read + std::io::Write>(
     match client.request(&Request::LoadScene(doc.config.clone()))? {
         Reply::Applied { scene_id } => Ok(Done {
             text: format!("{name}: running, scene {scene_id:#010x}"),
-            json: json!({ "applied": scene_id, "file": name }),
+            json: json!({ "applied": scene_hex(scene_id), "file": name }),
         }),
         // The board's refusal, located in the file: the sentence host-sim gives this file.
         Reply::Refused(e) => Err(Failure::refused(doc.locate(&e).to_string())),
@@ -403,9 +567,23 @@ fn get<P: std::io::Read + std::io::Write>(client: &mut Client<P>) -> Result<Done
             config,
         } => Ok(Done {
             text: scene_text(scene_id, source, &config),
-            json: json!({ "scene_id": scene_id, "source": source, "config": config }),
+            json: json!({
+                "scene_id": scene_hex(scene_id),
+                "source": source_key(source),
+                "scene": scene_json(&config),
+            }),
         }),
         other => Err(unexpected(other)),
+    }
+}
+
+/// A scene as JSON with the scene file's keys and units (docs/scenes.md): what `saw get
+/// --json` prints, and what a scene file written from it as TOML reads back as.
+pub fn scene_json(c: &Config) -> Value {
+    let text = saw_core::scene_file::to_scene_file(c, "");
+    match toml::from_str::<toml::Table>(&text) {
+        Ok(t) => serde_json::to_value(t).unwrap_or(Value::Null),
+        Err(_) => Value::Null,
     }
 }
 
@@ -425,12 +603,13 @@ pub(crate) fn regions_mm(c: &Config) -> impl Iterator<Item = (f64, f64, &Texture
 }
 
 fn scene_text(scene_id: u32, source: SceneSource, c: &Config) -> String {
+    let n = c.scene.textures.len();
     let mut s = format!(
-        "scene {scene_id:#010x}, {}; {} regions over {} mm, {:?} drive",
+        "scene {scene_id:#010x}, {}; {n} region{} over {} mm, {} drive",
         source_name(source),
-        c.scene.textures.len(),
+        if n == 1 { "" } else { "s" },
         c.calibration.length_um as f64 / 1000.0,
-        c.scene.drive
+        drive_name(c.scene.drive)
     );
     for (i, (from_mm, to_mm, t)) in regions_mm(c).enumerate() {
         s += &format!(
@@ -460,9 +639,23 @@ pub(crate) fn texture_text(t: &Texture) -> String {
             c.duty_permille as f64 / 10.0
         ),
         Texture::Grating(g) => format!("grating λ {} mm", g.wavelength_um as f64 / 1000.0),
-        Texture::Material(m) => format!("material Δμ {}", m.delta_mu),
+        Texture::Material(m) => format!("material Δμ {}", significant(m.delta_mu.into(), 3)),
         Texture::Random(r) => format!("random about {} Hz", r.center_millihz as f64 / 1000.0),
         other => other.kind().into(),
+    }
+}
+
+/// `v` to `digits` significant digits, without trailing zeros: 0.05732819 → "0.0573".
+pub fn significant(v: f64, digits: i32) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let decimals = (digits - 1 - v.abs().log10().floor() as i32).max(0) as usize;
+    let s = format!("{v:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
     }
 }
 
@@ -495,34 +688,72 @@ pub(crate) fn set<P: std::io::Read + std::io::Write>(
     index: u8,
     keys: &[String],
 ) -> Result<Done, Failure> {
-    let region = region_toml(keys).map_err(Failure::input)?;
-    // The region is read against the board's substrate, so lengths are checked as in its scene.
+    let given = region_toml(keys).map_err(Failure::input)?;
+    // The region is read in the board's scene: lengths are checked against its substrate, and
+    // the values not named are the region's own.
     let Reply::Scene { config, .. } = client.request(&Request::GetScene)? else {
         return Err(Failure::link("the board did not send its scene".into()));
     };
-    let cal = config.calibration;
-    let text = format!(
-        "[substrate]\nlength_mm = {}\ncode_at_start = {}\ncode_at_end = {}\nrail_margin_code = {}\n\n{region}",
-        cal.length_um as f64 / 1000.0,
-        cal.code_at_start,
-        cal.code_at_end,
-        cal.rail_margin_code
-    );
-    let doc = saw_core::scene_file::parse("set", &text).map_err(|e| {
-        Failure::input(format!(
-            "region {index}: `{}`: {}",
-            e.field.trim_start_matches("region[0]."),
-            e.message
-        ))
-    })?;
-    let Some(texture) = doc.config.scene.textures.first().copied() else {
-        return Err(Failure::input("no texture given (kind=…)".into()));
-    };
+    let texture = merged_texture(&config, index, &given).map_err(Failure::input)?;
     let reply = client.request(&Request::SetTexture {
         region: index,
         texture,
     })?;
     applied(reply, format!("region {index}: {}", texture_text(&texture)))
+}
+
+/// Region `index` of `config` with the keys of `given` (a `[[region]]` table from
+/// [`region_toml`]) over its own: the same kind keeps every value not named; a new `kind` starts
+/// from that kind's defaults. Checked as a scene file is; errors name the region and the key.
+pub fn merged_texture(config: &Config, index: u8, given: &str) -> Result<Texture, String> {
+    let n = config.scene.textures.len();
+    let at = usize::from(index);
+    if at >= n {
+        return Err(format!(
+            "region {index}: the board's scene has {n} region{} (0 to {})",
+            if n == 1 { "" } else { "s" },
+            n - 1
+        ));
+    }
+    let given: toml::Table = toml::from_str(given).map_err(|e| e.to_string())?;
+    let given = given
+        .get("region")
+        .and_then(|r| r.as_array())
+        .and_then(|r| r.first())
+        .and_then(|r| r.as_table())
+        .cloned()
+        .unwrap_or_default();
+    let mut file: toml::Table =
+        toml::from_str(&saw_core::scene_file::to_scene_file(config, "")).map_err(|e| e.to_string())?;
+    let region = file
+        .get_mut("region")
+        .and_then(|r| r.as_array_mut())
+        .and_then(|r| r.get_mut(at))
+        .and_then(|r| r.as_table_mut())
+        .ok_or_else(|| format!("region {index}: not in the board's scene"))?;
+    let new_kind = given.get("kind").is_some_and(|k| Some(k) != region.get("kind"));
+    if new_kind {
+        // A new kind: only the region's extent carries over.
+        region.retain(|k, _| k == "until_mm");
+    }
+    for (k, v) in given {
+        region.insert(k, v);
+    }
+    let text = toml::to_string(&file).map_err(|e| e.to_string())?;
+    let doc = saw_core::scene_file::parse("set", &text).map_err(|e| {
+        let field = e.field.to_string();
+        let prefix = format!("region[{at}].");
+        match field.strip_prefix(&prefix) {
+            Some(key) => format!("region {index}: `{key}`: {}", e.message),
+            None => format!("region {index}: {}: {}", field, e.message),
+        }
+    })?;
+    doc.config
+        .scene
+        .textures
+        .get(at)
+        .copied()
+        .ok_or_else(|| format!("region {index}: not in the scene read back"))
 }
 
 fn counters_text(c: &Counters) -> String {
@@ -548,76 +779,148 @@ fn counters_text(c: &Counters) -> String {
     )
 }
 
-/// A CSV line of a record.
-pub fn csv_line(r: &Record) -> String {
-    let opt = |v: Option<i32>| v.map_or(String::new(), |v| v.to_string());
-    format!(
-        "{},{},{},{},{},{},{}",
-        r.time_us,
-        opt(r.position_um),
-        opt(r.velocity_um_s),
-        r.region.map_or(String::new(), |v| v.to_string()),
-        r.burst_millihz as f64 / 1000.0,
-        u8::from(r.bursting),
-        r.fault.map_or(String::new(), |f| format!("{f:?}"))
-    )
+pub use record::{csv_line, CSV_HEADER};
+
+/// The counts of a run that streamed: before and after, from the board.
+fn stream_counts<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+) -> Result<(u32, u32), Failure> {
+    let c = counters(client)?;
+    Ok((c.link.records_dropped, c.link.frames_bad))
 }
 
-/// The CSV header.
-pub const CSV_HEADER: &str = "time_us,position_um,velocity_um_s,region,f_b_hz,bursting,fault";
-
+/// Streams to `csv` for `seconds`: pings before and after for the clock alignment, and only
+/// records sampled after the board started this stream.
 fn stream<P: std::io::Read + std::io::Write>(
     client: &mut Client<P>,
-    csv: &PathBuf,
+    csv: &std::path::Path,
     seconds: f64,
     every: u16,
 ) -> Result<Done, Failure> {
-    use std::io::Write;
-    let file = std::fs::File::create(csv)
-        .map_err(|e| Failure::input(format!("--csv {}: {e}", csv.display())))?;
-    let mut w = std::io::BufWriter::new(file);
-    let io = |e: std::io::Error| Failure::input(format!("--csv {}: {e}", csv.display()));
-    writeln!(w, "{CSV_HEADER}").map_err(io)?;
-    let dropped_before = match client.request(&Request::Counters { reset: false })? {
-        Reply::Counters(c) => c.link.records_dropped,
-        other => return Err(unexpected(other)),
-    };
-    let rate = match client.request(&Request::Stream {
-        every_samples: every,
-    })? {
-        Reply::Streaming { sample_rate_hz, .. } => sample_rate_hz as f64 / every as f64,
-        other => return Err(unexpected(other)),
-    };
+    let mut run = StreamRun::start(client, csv, every)?;
     let end = Instant::now() + Duration::from_secs_f64(seconds);
-    let (mut records, mut frames, mut frames_lost) = (0u64, 0u64, 0u64);
-    let mut last_seq: Option<u32> = None;
-    while let Some((h, s)) = client.next_stream(end)? {
-        if let Some(prev) = last_seq {
-            frames_lost += h.seq.wrapping_sub(prev).saturating_sub(1) as u64;
-        }
-        last_seq = Some(h.seq);
-        frames += 1;
-        for r in &s.records {
-            writeln!(w, "{}", csv_line(r)).map_err(io)?;
-            records += 1;
-        }
+    run.rec.drain_until(client, end)?;
+    run.finish(client, format!("in {seconds} s"))
+}
+
+/// A stream being recorded, from its start to its summary.
+pub(crate) struct StreamRun {
+    pub(crate) rec: record::Recorder,
+    before: (u32, u32),
+    start_pings: Vec<saw_link::clock::Ping>,
+    rate_hz: f64,
+    csv: String,
+}
+
+impl StreamRun {
+    /// Aligns the clocks, opens the file and starts the stream.
+    pub(crate) fn start<P: std::io::Read + std::io::Write>(
+        client: &mut Client<P>,
+        csv: &std::path::Path,
+        every: u16,
+    ) -> Result<Self, Failure> {
+        let start_pings = record::pings(client, record::PINGS, Duration::ZERO)?;
+        let align = saw_link::clock::Alignment::fit(&start_pings)
+            .ok_or_else(|| Failure::link("no ping answered".into()))?;
+        let rec = record::Recorder::create(csv, align)?;
+        let before = stream_counts(client)?;
+        let started = client.start_stream(every)?;
+        Ok(Self {
+            rec,
+            before,
+            start_pings,
+            rate_hz: started.sample_rate_hz as f64 / every as f64,
+            csv: csv.display().to_string(),
+        })
     }
-    let _ = client.request(&Request::Stream { every_samples: 0 })?;
-    w.flush().map_err(io)?;
-    let dropped = match client.request(&Request::Counters { reset: false })? {
-        Reply::Counters(c) => c.link.records_dropped.wrapping_sub(dropped_before) as u64,
-        other => return Err(unexpected(other)),
+
+    /// Stops the stream, measures the drift over it and sums it up.
+    pub(crate) fn finish<P: std::io::Read + std::io::Write>(
+        mut self,
+        client: &mut Client<P>,
+        how_long: String,
+    ) -> Result<Done, Failure> {
+        client.stop_stream()?;
+        self.rec.finish()?;
+        let end_pings = record::pings(client, record::PINGS, Duration::ZERO)?;
+        let all: Vec<_> = self.start_pings.iter().chain(&end_pings).copied().collect();
+        let drift = saw_link::clock::Alignment::fit(&all).unwrap_or(self.rec.align);
+        let after = stream_counts(client)?;
+        let dropped = after.0.wrapping_sub(self.before.0);
+        let refused_by_board = after.1.wrapping_sub(self.before.1);
+        let r = &self.rec;
+        let (first_us, last_us) = r.span_us.unwrap_or((0, 0));
+        // The host times in the file are from the offset before the stream; the drift measured
+        // over it adds this much at the last record.
+        let drift_error_us = drift.drift_ppm().abs() * 1e-6 * (last_us.saturating_sub(first_us)) as f64;
+        let text = format!(
+            "{} records {how_long} to {} ({:.0} records/s asked), {:.3} s of board time ({first_us} to {last_us} µs since boot), {} scene change{}\n\
+             dropped by the board {dropped}; frames lost on the line {}; frames from the board that failed their check {}; requests the board refused {refused_by_board}; stale records left out {}\n\
+             clocks: board boot at host Unix time {:.6} s, host times within ±{:.2} ms (half the quickest round trip {:.2} ms, drift {:+.1} ppm over the stream {:.2} ms)",
+            r.records,
+            self.csv,
+            self.rate_hz,
+            r.span_s(),
+            r.changes,
+            if r.changes == 1 { "" } else { "s" },
+            r.frames_lost,
+            client.bad_frames(),
+            client.stale_records(),
+            r.align.host_us(0) * 1e-6,
+            (r.align.error_us + drift_error_us) * 1e-3,
+            r.align.error_us * 1e-3,
+            drift.drift_ppm(),
+            drift_error_us * 1e-3,
+        );
+        Ok(Done {
+            text,
+            json: json!({
+                "records": r.records, "frames": r.frames, "dropped": dropped,
+                "frames_lost": r.frames_lost, "bad_frames": client.bad_frames(),
+                "refused_by_board": refused_by_board, "stale_records": client.stale_records(),
+                "first_us": first_us, "last_us": last_us, "board_seconds": r.span_s(),
+                "scene_changes": r.changes, "rate_hz": self.rate_hz, "csv": self.csv,
+                "clock": record::alignment_json(&r.align),
+                "drift": record::alignment_json(&drift),
+            }),
+        })
+    }
+}
+
+/// `saw ping`: round trips spread over `over` seconds and the alignment they give.
+fn ping<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+    count: u32,
+    over: f64,
+) -> Result<Done, Failure> {
+    let gap = Duration::from_secs_f64(over / (count - 1).max(1) as f64);
+    let pings = record::pings(client, count as usize, gap)?;
+    let a = saw_link::clock::Alignment::fit(&pings)
+        .ok_or_else(|| Failure::link("no ping answered".into()))?;
+    let mut rtt: Vec<u64> = pings.iter().map(|p| p.round_trip_us()).collect();
+    rtt.sort_unstable();
+    let (min, median, max) = (rtt[0], rtt[rtt.len() / 2], rtt[rtt.len() - 1]);
+    let last = pings[pings.len() - 1].board_us;
+    let drift = if a.span_us == 0 {
+        "no drift measured (one ping)".to_string()
+    } else {
+        format!(
+            "drift {:+.1} ppm over {:.3} s",
+            a.drift_ppm(),
+            a.span_us as f64 * 1e-6
+        )
     };
     Ok(Done {
         text: format!(
-            "{records} records in {seconds} s to {} ({rate:.0} records/s asked); {dropped} dropped by the board, {frames_lost} frames lost on the line, {} refused",
-            csv.display(),
-            client.bad_frames()
+            "{count} round trips: {min} µs quickest, {median} µs median, {max} µs slowest\n\
+             board clock {last} µs since boot; boot at host Unix time {:.6} s; {drift}; mapped times within ±{:.0} µs",
+            a.host_us(0) * 1e-6,
+            a.error_us
         ),
         json: json!({
-            "records": records, "frames": frames, "dropped": dropped,
-            "frames_lost": frames_lost, "bad_frames": client.bad_frames(),
-            "rate_hz": rate, "csv": csv.display().to_string(),
+            "round_trip_us": { "min": min, "median": median, "max": max },
+            "board_us": last,
+            "clock": record::alignment_json(&a),
         }),
     })
 }
@@ -654,7 +957,8 @@ fn bench<P: std::io::Read + std::io::Write>(
         }
         rtt_us.push(t.elapsed().as_secs_f64() * 1e6);
     }
-    match client.request(&Request::LoadScene(config))? {
+    // Back where it was: the same scene, so the board reports its source as before.
+    match client.request(&Request::MoveBoundary { index: 0, at_um })? {
         Reply::Applied { .. } => {}
         other => return Err(unexpected(other)),
     }
@@ -667,20 +971,14 @@ fn bench<P: std::io::Read + std::io::Write>(
     let mut lossless: Option<f64> = None;
     for every in [1u16, 2, 3, 4, 5, 10] {
         let before = counters(client)?.link.records_dropped;
-        client.request(&Request::Stream {
-            every_samples: every,
-        })?;
+        client.start_stream(every)?;
         let end = Instant::now() + Duration::from_secs_f64(seconds);
         let mut records = 0u64;
         while let Some((_, s)) = client.next_stream(end)? {
             records += s.records.len() as u64;
         }
-        client.request(&Request::Stream { every_samples: 0 })?;
-        // Frames still in flight after the stop are read and dropped here.
-        while client
-            .next_stream(Instant::now() + Duration::from_millis(50))?
-            .is_some()
-        {}
+        // Frames still in flight after the stop are dropped by the client.
+        client.stop_stream()?;
         let dropped = counters(client)?.link.records_dropped.wrapping_sub(before);
         let rate = hello.sample_rate_hz as f64 / every as f64;
         if dropped == 0 && lossless.is_none() {

@@ -2,11 +2,29 @@
 
 use std::process::ExitCode;
 
-use clap::Parser;
-use saw::{run, Cli};
+use saw::{parse_args, run, Parsed};
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match parse_args(std::env::args_os()) {
+        Parsed::Run(cli) => cli,
+        // --help, --version: clap's own text, exit 0.
+        Parsed::Print(text) => {
+            print!("{text}");
+            return ExitCode::SUCCESS;
+        }
+        // A bad command line: one line, on stdout as JSON when --json was asked for.
+        Parsed::Refused { json, message } => {
+            if json {
+                println!(
+                    "{}",
+                    serde_json::json!({ "ok": false, "kind": "input", "error": message })
+                );
+            } else {
+                eprintln!("error: {message}");
+            }
+            return ExitCode::from(2);
+        }
+    };
     match run(&cli) {
         Ok(done) => {
             if cli.json {

@@ -9,7 +9,7 @@ use saw_core::scene::Config;
 use saw_core::velocity::VelocityEstimator;
 use saw_core::Controller;
 use saw_link::msg::{Record, SceneSource, StoreFault};
-use saw_link::session::Board;
+use saw_link::session::{Board, Stamp};
 use saw_link::stream::{Decimator, QUEUE_RECORDS};
 
 use crate::sim::{sample_period_us, ClosedLoop, SimError, SimParams};
@@ -37,6 +37,10 @@ pub struct VirtualBoard<E: VelocityEstimator> {
     dropped: u32,
     sent: u32,
     store: Option<Box<dyn Persist + Send>>,
+    /// The scene in force, as its records carry it.
+    stamp: Stamp,
+    /// The board's clock, µs since boot: where `run_until` last brought it.
+    now_us: u64,
 }
 
 /// What the board booted into.
@@ -84,21 +88,32 @@ impl<E: VelocityEstimator> VirtualBoard<E> {
                 dropped: 0,
                 sent: 0,
                 store,
+                stamp: Stamp::default(),
+                now_us: 0,
             },
             config,
             source,
         })
     }
 
+    /// Stamps the records from now on (the scene the board booted into, before the first
+    /// sample: `Session::stamp`).
+    pub fn set_stamp(&mut self, stamp: Stamp) {
+        self.stamp = stamp;
+    }
+
     /// Runs every sample due before `t_us` (board time since boot).
     pub fn run_until(&mut self, t_us: u64) {
+        self.now_us = self.now_us.max(t_us);
         while self.next_k * (self.period_us as u64) < t_us {
             let k = self.next_k;
             let t_s = (k * self.period_us as u64) as f64 * 1e-6;
             let p = self.lp.step(k, self.trajectory.state(t_s));
             if self.decimator.take() {
                 let record = Record {
-                    time_us: p.t_us as u32,
+                    time_us: p.t_us,
+                    scene_id: self.stamp.scene_id,
+                    change: self.stamp.change,
                     position_um: p.meas_um,
                     velocity_um_s: p.est_vel_um_s,
                     region: p.region,
@@ -138,8 +153,15 @@ impl<E: VelocityEstimator> VirtualBoard<E> {
 }
 
 impl<E: VelocityEstimator> Board for VirtualBoard<E> {
-    async fn apply(&mut self, config: &Config) -> Result<(), ConfigError> {
-        self.lp.ctrl.load(config)
+    async fn apply(&mut self, config: &Config, stamp: Stamp) -> Result<(), ConfigError> {
+        self.lp.ctrl.load(config)?;
+        self.stamp = stamp;
+        self.decimator.force_next();
+        Ok(())
+    }
+
+    fn now_us(&mut self) -> u64 {
+        self.now_us
     }
 
     async fn telemetry(&mut self) -> Telemetry {

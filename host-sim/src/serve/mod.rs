@@ -40,6 +40,7 @@ const SECONDS: Range = Range::new(0.01, 1e6, "s");
 const BAUD: Whole = Whole::new(9_600, 16_000_000);
 const FAULT_AT: Range = Range::new(0.0, 1e6, "s");
 const FAULT_FOR: Range = Range::new(0.001, 1e6, "s");
+const CLOCK_PPM: Range = Range::new(-1000.0, 1000.0, "ppm");
 
 /// A sensor fault the virtual board's ADC sees (`--fault`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -95,6 +96,25 @@ pub struct ServeArgs {
     pub fault_at: Option<f64>,
     #[arg(long, value_name = "S", requires = "fault", help = FAULT_FOR.help("How long the fault lasts"), value_parser = FAULT_FOR.parser())]
     pub fault_for: Option<f64>,
+    #[arg(long, value_name = "PPM", default_value_t = 0.0, allow_negative_numbers = true, help = CLOCK_PPM.help("The board clock's rate error against the host's (a crystal's tolerance; positive: fast), for checking clock alignment"), value_parser = CLOCK_PPM.parser())]
+    pub clock_ppm: f64,
+}
+
+/// The virtual board's clock: µs since `start` on the host's monotonic clock, scaled by the
+/// crystal's rate error.
+#[derive(Clone, Copy, Debug)]
+pub struct BoardClock {
+    /// The board's boot, on the host's clock.
+    pub start: Instant,
+    /// Board µs per host µs.
+    pub rate: f64,
+}
+
+impl BoardClock {
+    /// The board's time at host instant `at`, µs since boot.
+    pub fn board_us(&self, at: Instant) -> u64 {
+        (at.saturating_duration_since(self.start).as_secs_f64() * 1e6 * self.rate) as u64
+    }
 }
 
 /// What a serve run did.
@@ -151,6 +171,16 @@ pub fn serve(
     stop: &AtomicBool,
     ready: impl FnOnce(&Pty),
 ) -> Result<ServeStats, String> {
+    serve_with_clock(a, stop, |p, _| ready(p))
+}
+
+/// [`serve`], and `ready` is also told the board's clock (so a test can check the host's
+/// clock alignment against the board's own time).
+pub fn serve_with_clock(
+    a: &ServeArgs,
+    stop: &AtomicBool,
+    ready: impl FnOnce(&Pty, BoardClock),
+) -> Result<ServeStats, String> {
     let board = a.board;
     let (params, source) = params(a, board)?;
     let store = match &a.flash {
@@ -166,9 +196,15 @@ pub fn serve(
         sample_rate_hz: board.sample_rate_hz,
     };
     let session = Session::new(identity, boot.config, boot.source);
+    let mut board = boot.board;
+    board.set_stamp(session.stamp());
     let pty = Pty::open(&a.pty)?;
-    ready(&pty);
-    run(&pty, boot.board, session, a.baud as u32, a.seconds, stop)
+    let clock = BoardClock {
+        start: Instant::now(),
+        rate: 1.0 + a.clock_ppm * 1e-6,
+    };
+    ready(&pty, clock);
+    run(&pty, board, session, clock, a.baud as u32, a.seconds, stop)
 }
 
 fn params(a: &ServeArgs, board: &'static BoardDef) -> Result<(SimParams, SceneSource), String> {
@@ -224,11 +260,12 @@ fn run<E: VelocityEstimator>(
     pty: &Pty,
     mut board: VirtualBoard<E>,
     mut session: Session,
+    clock: BoardClock,
     baud: u32,
     seconds: Option<f64>,
     stop: &AtomicBool,
 ) -> Result<ServeStats, String> {
-    let start = Instant::now();
+    let start = clock.start;
     let bytes_per_s = baud as f64 / 10.0;
     let mut line = Line {
         budget: 0.0,
@@ -244,6 +281,10 @@ fn run<E: VelocityEstimator>(
     let end = seconds.map(|s| start + Duration::from_secs_f64(s));
     while !stop.load(Ordering::Relaxed) && end.is_none_or(|e| Instant::now() < e) {
         let n = pty.read(&mut inbuf).map_err(|e| format!("pty: {e}"))?;
+        if n > 0 {
+            // The samples due so far run first: a request acts at the board time it arrives.
+            board.run_until(clock.board_us(Instant::now()));
+        }
         for &byte in &inbuf[..n] {
             let reply = match rx.push(byte) {
                 None => continue,
@@ -259,7 +300,7 @@ fn run<E: VelocityEstimator>(
             send(pty, &bytes);
             stats.replies += 1;
         }
-        board.run_until(start.elapsed().as_micros() as u64);
+        board.run_until(clock.board_us(Instant::now()));
         // The stream: frames go when the line has room; until then records wait in the queue,
         // and the queue drops when full.
         line.refill();
