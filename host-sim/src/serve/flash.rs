@@ -2,10 +2,18 @@
 //! bits), written through after every operation so a killed `host-sim serve` leaves exactly what
 //! a power cut leaves; under it the same `saw_store::SceneStore` the firmware uses. An erase
 //! takes as long as the board's (`erase_time`), so a save answers as late as on the board.
+//!
+//! One board owns a flash file: it holds an exclusive lock on it (flock) while it runs, and a
+//! second `serve --flash` on the same file is refused instead of writing over the first's
+//! saves (the two would each rewrite the whole file from their own copy).
 
-use std::path::{Path, PathBuf};
+use std::fs::File;
+use std::os::unix::fs::FileExt;
+use std::path::Path;
 use std::time::Duration;
 
+use nix::errno::Errno;
+use nix::fcntl::{Flock, FlockArg};
 use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
@@ -74,7 +82,8 @@ impl NorFlashError for FileFlashError {
 
 /// NOR flash in a file.
 pub struct FileFlash<const WRITE: usize, const ERASE: usize> {
-    path: PathBuf,
+    /// The file, locked for this board while it lives; every operation is written through it.
+    file: Flock<File>,
     data: Vec<u8>,
     /// Time one erase unit takes; the caller (the link, the sample loop) waits it out as the
     /// board's link task does.
@@ -82,23 +91,50 @@ pub struct FileFlash<const WRITE: usize, const ERASE: usize> {
 }
 
 impl<const WRITE: usize, const ERASE: usize> FileFlash<WRITE, ERASE> {
-    /// Opens (or creates, erased) `units` erase units in `path`.
+    /// Opens (or creates, erased) `units` erase units in `path`, locked for this board: a file
+    /// another board holds is refused.
     pub fn open(path: &Path, units: usize) -> Result<Self, String> {
         let size = units * ERASE;
-        let data = match std::fs::read(path) {
-            Ok(d) if d.len() == size => d,
-            Ok(d) => {
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(path)
+            .map_err(|e| format!("--flash {}: {e}", path.display()))?;
+        let file = match Flock::lock(file, FlockArg::LockExclusiveNonblock) {
+            Ok(f) => f,
+            Err((_, Errno::EWOULDBLOCK)) => {
                 return Err(format!(
-                    "--flash {}: {} bytes, not this board's {size}-byte store",
-                    path.display(),
-                    d.len()
+                    "--flash {}: another host-sim serve is using this flash file; stop it or \
+                     choose another file",
+                    path.display()
                 ))
             }
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => vec![0xFF; size],
-            Err(e) => return Err(format!("--flash {}: {e}", path.display())),
+            Err((_, e)) => return Err(format!("--flash {}: cannot lock it: {e}", path.display())),
+        };
+        let len = file
+            .metadata()
+            .map_err(|e| format!("--flash {}: {e}", path.display()))?
+            .len() as usize;
+        let data = match len {
+            // Created just now (or left empty): an erased flash.
+            0 => vec![0xFF; size],
+            n if n == size => {
+                let mut d = vec![0; size];
+                file.read_exact_at(&mut d, 0)
+                    .map_err(|e| format!("--flash {}: {e}", path.display()))?;
+                d
+            }
+            n => {
+                return Err(format!(
+                    "--flash {}: {n} bytes, not this board's {size}-byte store",
+                    path.display()
+                ))
+            }
         };
         let f = Self {
-            path: path.to_path_buf(),
+            file,
             data,
             erase_time: Duration::ZERO,
         };
@@ -114,7 +150,10 @@ impl<const WRITE: usize, const ERASE: usize> FileFlash<WRITE, ERASE> {
     }
 
     fn persist(&self) -> Result<(), FileFlashError> {
-        std::fs::write(&self.path, &self.data).map_err(|_| FileFlashError::Io)
+        // In place through the locked file: its size never changes, so nothing truncates it.
+        self.file
+            .write_all_at(&self.data, 0)
+            .map_err(|_| FileFlashError::Io)
     }
 
     fn range(
@@ -218,5 +257,45 @@ pub fn open(path: &Path, board: &saw_boards::BoardDef) -> Result<Box<dyn Persist
             "{}: no virtual flash for {w}-byte writes and {e}-byte erase units",
             board.name
         )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A G474-sized flash file in a fresh folder of this test.
+    fn scratch(name: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("host-sim-flash-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d.join("flash.bin")
+    }
+
+    /// Two boards on one flash file: the second is refused with one line naming the file,
+    /// while the first lives; once it is dropped the file opens again, with what it wrote.
+    #[test]
+    fn a_flash_file_serves_one_board_at_a_time() {
+        let path = scratch("one");
+        let mut first = FileFlash::<8, 2048>::open(&path, 2).unwrap();
+        embassy_futures::block_on(first.write(0, &[0x12; 8])).unwrap();
+        let e = FileFlash::<8, 2048>::open(&path, 2).err().unwrap();
+        assert_eq!(
+            e,
+            format!(
+                "--flash {}: another host-sim serve is using this flash file; stop it or choose \
+                 another file",
+                path.display()
+            )
+        );
+        // The store's opener says the same (the lock comes before the size check).
+        let e = open(&path, &saw_boards::NUCLEO_G474RE).err().unwrap();
+        assert!(e.contains("another host-sim serve is using this flash file"), "{e}");
+        drop(first);
+        let mut again = FileFlash::<8, 2048>::open(&path, 2).unwrap();
+        let mut got = [0u8; 9];
+        embassy_futures::block_on(again.read(0, &mut got)).unwrap();
+        assert_eq!(got, [0x12, 0x12, 0x12, 0x12, 0x12, 0x12, 0x12, 0x12, 0xFF]);
+        assert_eq!(std::fs::metadata(&path).unwrap().len(), 2 * 2048);
     }
 }
