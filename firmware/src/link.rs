@@ -144,9 +144,9 @@ impl Board for FirmwareBoard {
 
     fn stream(&mut self, every_samples: u16) {
         EVERY.store(every_samples, Ordering::Relaxed);
-        if every_samples == 0 {
-            RECORDS.clear();
-        }
+        // Records of the stream before are stale to whoever asked (the host drops those older
+        // than the answer's `from_us`): the line is not spent on them.
+        RECORDS.clear();
     }
 
     fn stream_counts(&mut self) -> (u32, u32) {

@@ -291,9 +291,11 @@ fn run<E: VelocityEstimator>(
                 Some(Ok(len)) => block_on(session.on_frame(&mut board, rx.payload(len))),
                 Some(Err(e)) => session.on_bad_frame(None, e),
             };
-            if session.every_samples() == 0 {
-                // A stopped stream: what was gathered goes, nothing more.
+            if matches!(reply.1, Reply::Streaming { .. }) {
+                // A stream stopped or started anew: what was gathered for the one before is
+                // stale (the client drops it) and is not sent.
                 pending = None;
+                batcher = Batcher::default();
             }
             let bytes = encode(&reply.0, &reply.1)?;
             line.spend(bytes.len());

@@ -7,13 +7,16 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use clap::Parser;
-use host_sim::serve::{serve, ServeArgs, ServeStats};
+use host_sim::serve::{serve_with_clock, BoardClock, ServeArgs, ServeStats};
 
 /// A virtual board running in a thread, stopped on drop.
 pub struct VirtualBoard {
     stop: Arc<AtomicBool>,
     handle: Option<JoinHandle<Result<ServeStats, String>>>,
     pub port: PathBuf,
+    /// The board's own clock (boot instant, rate).
+    #[allow(dead_code)]
+    pub clock: BoardClock,
     _dir: tempfile::TempDir,
 }
 
@@ -36,16 +39,18 @@ impl VirtualBoard {
         let (tx, rx) = std::sync::mpsc::channel();
         let s = stop.clone();
         let handle = std::thread::spawn(move || {
-            serve(&args, &s, |_| {
-                let _ = tx.send(());
+            serve_with_clock(&args, &s, |_, clock| {
+                let _ = tx.send(clock);
             })
         });
-        rx.recv_timeout(Duration::from_secs(10))
+        let clock = rx
+            .recv_timeout(Duration::from_secs(10))
             .expect("the virtual board did not start");
         Self {
             stop,
             handle: Some(handle),
             port,
+            clock,
             _dir: dir,
         }
     }
