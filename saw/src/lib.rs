@@ -408,6 +408,21 @@ fn ui_command(
         handle.addr,
         cli.port.display()
     );
+    if cli.json {
+        // A script starting the panel reads where it is from stdout, as JSON like every answer
+        // (the terminal lines above stay on stderr); the last line comes when it stops.
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
+        let _ = writeln!(
+            out,
+            "{}",
+            json!({ "ok": true, "result": {
+                "listening": format!("http://{}", handle.addr),
+                "port": cli.port.display().to_string(),
+            } })
+        );
+        let _ = out.flush();
+    }
     handle.wait();
     Ok(Done {
         text: "the panel stopped".into(),

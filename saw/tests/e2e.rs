@@ -759,3 +759,29 @@ fn set_keeps_the_values_it_does_not_name() {
     let r = saw(&vb.port, &["drive", "progressive"]);
     assert!(r.stdout.starts_with("progressive drive: running"), "{}", r.stdout);
 }
+
+/// `saw --json ui`: its stdout is JSON like every other command's (where it listens), the
+/// terminal lines stay on stderr.
+#[test]
+fn the_panel_under_json_says_where_it_listens_in_json() {
+    use std::io::BufRead;
+    let vb = VirtualBoard::start(&[]);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_saw"))
+        .arg("--port")
+        .arg(&vb.port)
+        .args(["--json", "ui", "--listen", "127.0.0.1:0"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    let _ = child.kill();
+    let _ = child.wait();
+    let v: Value = serde_json::from_str(first.trim()).unwrap_or_else(|e| panic!("{e}: {first:?}"));
+    assert_eq!(v["ok"], true, "{v}");
+    let at = v["result"]["listening"].as_str().unwrap();
+    assert!(at.starts_with("http://127.0.0.1:") && !at.ends_with(":0"), "{v}");
+}
