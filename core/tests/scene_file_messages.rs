@@ -40,7 +40,7 @@ fn substrate_calibration_refusal_reads_as_a_sentence() {
                 [[region]]\nkind = \"off\"\n";
     assert_eq!(
         refusal("cal.toml", text, 100),
-        "cal.toml:1:1: `substrate`: code_at_end 100 must be above code_at_start 3000"
+        "cal.toml:4:15: `substrate.code_at_end`: code_at_end 100 must be above code_at_start 3000"
     );
 }
 
@@ -51,8 +51,8 @@ fn limits_refusal_reads_as_a_sentence() {
     let text = "[limits]\nstale_after_ms = 1\n\n[[region]]\nkind = \"off\"\n";
     assert_eq!(
         refusal("limits.toml", text, 1_000),
-        "limits.toml:1:1: `limits`: stale limit 1 ms must be at least two sample periods (2 ms) \
-         and at most 1000 ms"
+        "limits.toml:2:18: `limits.stale_after_ms`: stale limit 1 ms must be at least two sample \
+         periods (2 ms) and at most 1000 ms"
     );
 }
 
@@ -63,13 +63,13 @@ fn region_layout_refusals_read_as_sentences() {
                     [[region]]\nkind = \"off\"\n";
     assert_eq!(
         refusal("regions.toml", unsorted, 100),
-        "regions.toml:5:1: `region[1].until_mm`: region 1 ends at 20 mm, not after region 0 \
+        "regions.toml:7:12: `region[1].until_mm`: region 1 ends at 20 mm, not after region 0 \
          (30 mm)"
     );
     let at_end = "[[region]]\nkind = \"off\"\nuntil_mm = 63\n\n[[region]]\nkind = \"off\"\n";
     assert_eq!(
         refusal("end.toml", at_end, 100),
-        "end.toml:1:1: `region[0].until_mm`: region 0 ends at 63 mm, not strictly between 0 mm \
+        "end.toml:3:12: `region[0].until_mm`: region 0 ends at 63 mm, not strictly between 0 mm \
          and the substrate's end at 63 mm"
     );
     let narrow = "hysteresis_mm = 0.5\n\n\
@@ -78,7 +78,7 @@ fn region_layout_refusals_read_as_sentences() {
                   [[region]]\nkind = \"off\"\n";
     assert_eq!(
         refusal("narrow.toml", narrow, 100),
-        "narrow.toml:7:1: `region[1]`: region 1 is 0.6 mm wide, narrower than twice the \
+        "narrow.toml:9:12: `region[1].until_mm`: region 1 is 0.6 mm wide, narrower than twice the \
          hysteresis (1 mm)"
     );
 }
@@ -89,19 +89,19 @@ fn texture_refusals_read_as_sentences() {
                  [[region]]\nkind = \"constant\"\nf_b_hz = 9000\n";
     assert_eq!(
         refusal("f_b.toml", above, 100),
-        "f_b.toml:6:1: `region[1]`: f_b 9000 Hz is above this board's limit of 5000 Hz"
+        "f_b.toml:8:10: `region[1].f_b_hz`: f_b 9000 Hz is above this board's limit of 5000 Hz"
     );
     let below = "[[region]]\nkind = \"constant\"\nf_b_hz = 0.041\n";
     assert_eq!(
         refusal_on(T16, "low.toml", below, 100),
-        "low.toml:1:1: `region[0]`: f_b 0.041 Hz is below the lowest the burst timer reaches, \
-         0.042 Hz"
+        "low.toml:3:10: `region[0].f_b_hz`: f_b 0.041 Hz is below the lowest the burst timer \
+         reaches, 0.042 Hz"
     );
     let wide = "[[region]]\nkind = \"grating\"\nridge_mm = 40\ngroove_mm = 40\n";
     assert_eq!(
         refusal("grating.toml", wide, 100),
-        "grating.toml:1:1: `region[0]`: wavelength 80 mm must be above 0 mm and at most the \
-         substrate's length, 63 mm"
+        "grating.toml:3:12: `region[0].ridge_mm`: wavelength 80 mm must be above 0 mm and at most \
+         the substrate's length, 63 mm"
     );
 }
 
@@ -110,19 +110,19 @@ fn lines_refusals_read_as_sentences() {
     let unsorted = "[[region]]\nkind = \"off\"\n\n[lines]\npositions_mm = [30, 20]\n";
     assert_eq!(
         refusal("lines.toml", unsorted, 100),
-        "lines.toml:4:1: `lines`: line 1 at 20 mm must be after line 0 (30 mm)"
+        "lines.toml:5:21: `lines.positions_mm[1]`: line 1 at 20 mm must be after line 0 (30 mm)"
     );
     let outside = "[[region]]\nkind = \"off\"\n\n[lines]\npositions_mm = [30, 70]\n";
     assert_eq!(
         refusal("lines.toml", outside, 100),
-        "lines.toml:4:1: `lines`: line 1 at 70 mm must be strictly between 0 mm and the \
-         substrate's end at 63 mm"
+        "lines.toml:5:21: `lines.positions_mm[1]`: line 1 at 70 mm must be strictly between 0 mm \
+         and the substrate's end at 63 mm"
     );
     let long = "[[region]]\nkind = \"off\"\n\n[lines]\npositions_mm = [30]\npulse_ms = 60\n";
     assert_eq!(
         refusal("pulse.toml", long, 100),
-        "pulse.toml:4:1: `lines`: line pulse 60 ms must be above 0 ms and at most the on-time cap \
-         of 50 ms"
+        "pulse.toml:6:12: `lines.pulse_ms`: line pulse 60 ms must be above 0 ms and at most the \
+         on-time cap of 50 ms"
     );
 }
 
@@ -160,6 +160,91 @@ fn range_refusals_name_the_unit() {
         (
             "[[region]]\nkind = \"material\"\ndelta_mu = inf\n",
             "mu.toml:3:12: `region[0].delta_mu`: inf is not a number; it must be from 0 to 100",
+        ),
+    ];
+    for (text, expected) in cases {
+        let file = expected.split(':').next().unwrap();
+        assert_eq!(refusal(file, text, 100), expected);
+    }
+}
+
+/// The board's checks (the controller's dry run) point at the value they refuse, as the
+/// reader's do: line and column of the value, the field with its region (issue #33).
+#[test]
+fn board_refusals_point_at_the_value() {
+    let cases = [
+        (
+            "[limits]\nmax_duty_percent = 30\n\n[[region]]\nkind = \"constant\"\nf_b_hz = 80\n\
+             duty_percent = 40\n",
+            "duty.toml:7:16: `region[0].duty_percent`: duty 40 % is above the carrier's cap of 30 %",
+        ),
+        (
+            "[limits]\nmax_level_percent = 50\n\n[[region]]\nkind = \"random\"\nf_b_hz = 80\n\
+             amplitude_percent = 80\n",
+            "level.toml:7:21: `region[0].amplitude_percent`: amplitude 80 % is above the level cap \
+             of 50 % (limits.max_level_percent)",
+        ),
+        // The last region, too narrow, starts at the `until_mm` before it.
+        (
+            "hysteresis_mm = 0.5\n[[region]]\nkind = \"off\"\nuntil_mm = 62.5\n[[region]]\n\
+             kind = \"off\"\n",
+            "narrow.toml:4:12: `region[0].until_mm`: region 1 is 0.5 mm wide, narrower than twice \
+             the hysteresis (1 mm)",
+        ),
+        (
+            "[substrate]\nlength_mm = 63\ncode_at_start = 100\ncode_at_end = 60000\n\n\
+             [[region]]\nkind = \"off\"\n",
+            "rail.toml:3:17: `substrate.code_at_start`: code_at_start 100 is inside the low rail \
+             band (at or below 655)",
+        ),
+    ];
+    for (text, expected) in cases {
+        let file = expected.split(':').next().unwrap();
+        assert_eq!(refusal(file, text, 100), expected);
+    }
+}
+
+/// A key no table takes: the nearest key when it is a slip (edit distance, or the unit left
+/// off), else a short list — the table's keys, or the region's kind's — never all 25 region keys.
+/// A value none of a choice's: the same.
+#[test]
+fn unknown_keys_and_values_name_the_nearest_or_a_short_list() {
+    let cases = [
+        (
+            "[[region]]\nkind = \"constant\"\nf_b_hx = 80\n",
+            "typo.toml:3:1: `f_b_hx`: unknown key `f_b_hx`: did you mean `f_b_hz`?",
+        ),
+        (
+            "hysteresis = 0.1\n\n[[region]]\nkind = \"off\"\n",
+            "unit.toml:1:1: `hysteresis`: unknown key `hysteresis`: did you mean `hysteresis_mm`?",
+        ),
+        (
+            "[limits]\nmax_duty = 30\n\n[[region]]\nkind = \"off\"\n",
+            "cap.toml:2:1: `max_duty`: unknown key `max_duty`: did you mean `max_duty_percent`?",
+        ),
+        (
+            "[[region]]\nkind = \"constant\"\nf_b_hz = 80\ncolour = \"red\"\n",
+            "colour.toml:4:1: `colour`: unknown key `colour`: a `constant` region takes `kind`, \
+             `until_mm`, `f_b_hz` and `duty_percent` (docs/scenes.md lists every kind's keys)",
+        ),
+        (
+            "[[region]]\nkind = \"off\"\ncolour = \"red\"\n",
+            "off.toml:3:1: `colour`: unknown key `colour`: an `off` region takes `kind` and \
+             `until_mm` (docs/scenes.md lists every kind's keys)",
+        ),
+        (
+            "[limits]\nzzz = 30\n\n[[region]]\nkind = \"off\"\n",
+            "limits.toml:2:1: `zzz`: unknown key `zzz`: [limits] takes `max_duty_percent`, \
+             `max_level_percent`, `max_on_time_ms` and `stale_after_ms`",
+        ),
+        (
+            "[[region]]\nkind = \"grating\"\nwavelength_mm = 1\nrender = \"hybird\"\n",
+            "render.toml:4:10: `render`: unknown value `hybird`: did you mean `hybrid`?",
+        ),
+        (
+            "[[region]]\nkind = \"grating\"\nwavelength_mm = 1\nrender = \"phase\"\n",
+            "phase.toml:4:10: `render`: unknown value `phase`: it must be `position`, `hybrid` or \
+             `velocity`",
         ),
     ];
     for (text, expected) in cases {

@@ -1,10 +1,10 @@
 //! docs/scenes.md cannot drift from the parser: the keys each of its tables lists are the keys
-//! the parser accepts there, read from the parser itself (its "unknown field … expected one of"
-//! list, and which keys each region kind refuses), never from a copy in this test.
+//! the parser accepts there, read from the parser itself (`scene_file::keys`, its serde structs'
+//! field lists, and which keys each region kind refuses), never from a copy in this test.
 
 use std::collections::BTreeSet;
 
-use saw_core::scene_file::parse;
+use saw_core::scene_file::{keys, parse, TABLES};
 
 const DOC: &str = include_str!("../../docs/scenes.md");
 
@@ -27,15 +27,13 @@ fn doc_keys(name: &str) -> BTreeSet<String> {
         .collect()
 }
 
-/// The keys the parser lists when it refuses an unknown one in `text`.
-fn parser_keys(text: &str) -> BTreeSet<String> {
-    let e = parse("probe.toml", text).unwrap_err();
-    let (_, list) = e
-        .message
-        .split_once("expected one of ")
-        .unwrap_or_else(|| panic!("no key list in: {e}"));
-    list.split(", ")
-        .map(|k| k.trim().trim_matches('`').to_string())
+/// The keys the parser takes in table `name`: `scene_file::keys`, the field list of the
+/// parser's own serde struct (what `deny_unknown_fields` checks a key against).
+fn parser_keys(name: &str) -> BTreeSet<String> {
+    keys(name)
+        .unwrap_or_else(|| panic!("the parser has no table `{name}`"))
+        .iter()
+        .map(|k| k.to_string())
         .collect()
 }
 
@@ -43,21 +41,9 @@ const REGION: &str = "[[region]]\nkind = \"off\"\n";
 
 #[test]
 fn every_table_lists_exactly_the_keys_the_parser_accepts() {
-    let cases = [
-        ("top", format!("zzz_unknown = 1\n{REGION}")),
-        (
-            "substrate",
-            format!("[substrate]\nzzz_unknown = 1\n{REGION}"),
-        ),
-        ("limits", format!("[limits]\nzzz_unknown = 1\n{REGION}")),
-        ("lines", format!("{REGION}[lines]\nzzz_unknown = 1\n")),
-        (
-            "region",
-            "[[region]]\nkind = \"off\"\nzzz_unknown = 1\n".to_string(),
-        ),
-    ];
-    for (name, probe) in cases {
-        let parser = parser_keys(&probe);
+    assert_eq!(TABLES, ["top", "substrate", "limits", "region", "lines"]);
+    for name in TABLES {
+        let parser = parser_keys(name);
         let mut doc = doc_keys(name);
         if name == "region" {
             // The region table lists the keys every kind has; each kind's table the rest.
@@ -68,6 +54,18 @@ fn every_table_lists_exactly_the_keys_the_parser_accepts() {
         assert_eq!(
             doc, parser,
             "docs/scenes.md `{name}` keys (left) differ from the parser's (right)"
+        );
+        // And the parser refuses a key outside that list in that table.
+        let probe = match name {
+            "top" => format!("zzz_unknown = 1\n{REGION}"),
+            "region" => format!("{REGION}zzz_unknown = 1\n"),
+            "lines" => format!("{REGION}[lines]\nzzz_unknown = 1\n"),
+            _ => format!("[{name}]\nzzz_unknown = 1\n{REGION}"),
+        };
+        let e = parse("probe.toml", &probe).unwrap_err();
+        assert!(
+            e.message.starts_with("unknown key `zzz_unknown`"),
+            "{name}: {e}"
         );
     }
 }
@@ -92,7 +90,7 @@ fn kind_takes(kind: &str, key: &str) -> bool {
 
 #[test]
 fn each_kind_takes_exactly_the_keys_its_table_lists() {
-    let region = parser_keys("[[region]]\nkind = \"off\"\nzzz_unknown = 1\n");
+    let region = parser_keys("region");
     let common = doc_keys("region");
     // Every kind's documented keys come from the parser's region keys.
     let mut kinds_seen = BTreeSet::new();

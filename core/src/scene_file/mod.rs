@@ -10,22 +10,31 @@
 //! - `spec.rs`: the file's shape (tables, keys, which fields each region kind takes);
 //! - `sections.rs`: `[substrate]`, `[limits]`, `hysteresis_mm`, `drive` and `[lines]` converted;
 //! - `regions.rs`: the `[[region]]` tables, one function per texture kind;
-//! - `ctx.rs`: errors located in the file, and the range checks that raise them.
+//! - `ctx.rs`: errors located in the file, and the range checks that raise them;
+//! - `keys.rs`: the keys each table takes, and the sentence for one it does not ("did you
+//!   mean").
+//!
+//! Every refusal points at `file:line:col` of the value at fault (an unknown key: the key), the
+//! board's checks included (an f_b above the board's limit at its `f_b_hz`, a boundary before
+//! the one before it at its `until_mm`); only what no single key holds (a missing key, a
+//! calibration as a whole) points at its table.
 
 extern crate std;
 
 mod ctx;
+mod keys;
 mod regions;
 mod sections;
 mod spec;
 mod write;
 
+pub use keys::{keys, TABLES};
 pub use write::to_scene_file;
 
 use core::fmt;
 use core::ops::Range;
+use std::collections::BTreeMap;
 use std::string::{String, ToString};
-use std::vec::Vec as StdVec;
 
 use crate::burst::BurstTimer;
 use crate::controller::{ConfigError, Controller};
@@ -61,23 +70,83 @@ impl fmt::Display for SceneFileError {
 
 impl std::error::Error for SceneFileError {}
 
-/// Where each part of a parsed file sits, to locate errors the controller finds later.
+/// Where each table and value of a parsed file sits, by the name a refusal gives it
+/// (`region[1]`, `region[1].f_b_hz`, `lines.positions_mm[2]`), to locate the errors the
+/// controller finds later at the value they are about.
 #[derive(Clone, Debug, Default)]
-struct Spans {
-    substrate: Option<Range<usize>>,
-    limits: Option<Range<usize>>,
-    lines: Option<Range<usize>>,
-    regions: StdVec<Range<usize>>,
-}
+struct Spans(BTreeMap<String, Range<usize>>);
 
 impl Spans {
     fn of(doc: &File) -> Self {
-        Spans {
-            substrate: doc.substrate.as_ref().map(|s| s.span()),
-            limits: doc.limits.as_ref().map(|l| l.span()),
-            lines: doc.lines.as_ref().map(|l| l.span()),
-            regions: doc.region.iter().map(|r| r.span()).collect(),
+        let mut m = BTreeMap::new();
+        let mut put = |name: String, span: Range<usize>| {
+            m.insert(name, span);
+        };
+        if let Some(h) = &doc.hysteresis_mm {
+            put("hysteresis_mm".into(), h.span());
         }
+        if let Some(t) = &doc.substrate {
+            put("substrate".into(), t.span());
+            let s = t.get_ref();
+            put("substrate.length_mm".into(), s.length_mm.span());
+            put("substrate.code_at_start".into(), s.code_at_start.span());
+            put("substrate.code_at_end".into(), s.code_at_end.span());
+            if let Some(m) = &s.rail_margin_code {
+                put("substrate.rail_margin_code".into(), m.span());
+            }
+        }
+        if let Some(t) = &doc.limits {
+            put("limits".into(), t.span());
+            let l = t.get_ref();
+            for (name, v) in [
+                ("max_duty_percent", &l.max_duty_percent),
+                ("max_level_percent", &l.max_level_percent),
+                ("max_on_time_ms", &l.max_on_time_ms),
+                ("stale_after_ms", &l.stale_after_ms),
+            ] {
+                if let Some(v) = v {
+                    put(std::format!("limits.{name}"), v.span());
+                }
+            }
+        }
+        for (i, r) in doc.region.iter().enumerate() {
+            put(std::format!("region[{i}]"), r.span());
+            let spec = r.get_ref();
+            if let Some(u) = &spec.until_mm {
+                put(std::format!("region[{i}].until_mm"), u.span());
+            }
+            for (name, span) in spec.present() {
+                put(std::format!("region[{i}].{name}"), span);
+            }
+        }
+        if let Some(t) = &doc.lines {
+            put("lines".into(), t.span());
+            let l = t.get_ref();
+            put("lines.positions_mm".into(), l.positions_mm.span());
+            for (j, p) in l.positions_mm.get_ref().iter().enumerate() {
+                put(std::format!("lines.positions_mm[{j}]"), p.span());
+            }
+            for (name, v) in [
+                ("pulse_ms", &l.pulse_ms),
+                ("amplitude_percent", &l.amplitude_percent),
+                ("rearm_mm", &l.rearm_mm),
+            ] {
+                if let Some(v) = v {
+                    put(std::format!("lines.{name}"), v.span());
+                }
+            }
+        }
+        Spans(m)
+    }
+
+    /// The first of `names` the file writes, with its span; else `table` (the key was left to
+    /// its default, or no single key holds the fault); else the whole file.
+    fn find(&self, names: &[String], table: &str) -> (Range<usize>, String) {
+        names
+            .iter()
+            .chain(core::iter::once(&table.to_string()))
+            .find_map(|n| self.0.get(n).map(|s| (s.clone(), n.clone())))
+            .unwrap_or((0..0, "(file)".to_string()))
     }
 }
 
@@ -135,42 +204,16 @@ pub fn parse(file: &str, text: &str) -> Result<SceneDoc, SceneFileError> {
 }
 
 impl SceneDoc {
-    /// Locates an error the controller found in this file's configuration.
+    /// Locates an error the controller found in this file's configuration: at the value of the
+    /// key it is about ([`fault_keys`]), or at its table when the file leaves that key to its
+    /// default.
     pub fn locate(&self, e: &ConfigError) -> SceneFileError {
         let cx = Ctx {
             file: &self.file,
             text: &self.text,
         };
-        let region = |i: u8| self.spans.regions.get(i as usize).cloned().unwrap_or(0..0);
-        let (span, field) = match e {
-            ConfigError::Calibration(_) => (
-                self.spans.substrate.clone().unwrap_or(0..0),
-                "substrate".to_string(),
-            ),
-            ConfigError::Limits(_) | ConfigError::StaleLimit { .. } => (
-                self.spans.limits.clone().unwrap_or(0..0),
-                "limits".to_string(),
-            ),
-            ConfigError::Region(re) => {
-                use crate::region::RegionError as R;
-                match re {
-                    R::Unsorted { index, .. } | R::OutOfRange { index, .. } => {
-                        (region(*index), std::format!("region[{index}].until_mm"))
-                    }
-                    R::TooNarrow { index, .. } => (region(*index), std::format!("region[{index}]")),
-                    _ => (0..0, "hysteresis_mm".to_string()),
-                }
-            }
-            ConfigError::Texture { region: i, .. }
-            | ConfigError::TextureParams { region: i, .. } => {
-                (region(*i), std::format!("region[{i}]"))
-            }
-            ConfigError::Lines(_) | ConfigError::LinePulse(_) => (
-                self.spans.lines.clone().unwrap_or(0..0),
-                "lines".to_string(),
-            ),
-            _ => (0..0, "(file)".to_string()),
-        };
+        let (names, table) = fault_keys(e, |i| self.spans.0.contains_key(&until(i)));
+        let (span, field) = self.spans.find(&names, &table);
         // The located field already names the region (or the lines), so the sentence is the
         // inner error's; every other refusal reads whole.
         match e {
@@ -180,6 +223,119 @@ impl SceneDoc {
             ConfigError::TextureParams { error, .. } => cx.err(span, &field, error),
             _ => cx.err(span, &field, e),
         }
+    }
+}
+
+/// `region[i].until_mm`.
+fn until(i: usize) -> String {
+    std::format!("region[{i}].until_mm")
+}
+
+/// The keys a controller refusal is about, most telling first, and the table to fall back on.
+/// `has_until(i)`: whether region `i` writes `until_mm` (the last region does not).
+fn fault_keys(
+    e: &ConfigError,
+    has_until: impl Fn(usize) -> bool,
+) -> (std::vec::Vec<String>, String) {
+    use crate::burst::BurstError as B;
+    use crate::position::CalibrationError as C;
+    use crate::region::RegionError as R;
+    use crate::texture::{LineFault as L, MaterialParam as M, SpreadParam as S, TextureError as T};
+    let one = |k: &str| std::vec![k.to_string()];
+    let region = |i: u8, keys: &[&str]| {
+        (
+            keys.iter()
+                .map(|k| std::format!("region[{i}].{k}"))
+                .collect(),
+            std::format!("region[{i}]"),
+        )
+    };
+    match *e {
+        ConfigError::Calibration(c) => {
+            let key = match c {
+                C::EndInRail { at_start: true, .. } => "substrate.code_at_start",
+                C::EndsSwapped { .. } | C::EndsTooClose { .. } | C::EndInRail { .. } => {
+                    "substrate.code_at_end"
+                }
+                C::BadLength { .. } => "substrate.length_mm",
+                C::BadRailMargin { .. } => "substrate.rail_margin_code",
+            };
+            (one(key), "substrate".into())
+        }
+        ConfigError::Limits(b) => {
+            let key = match b {
+                B::NoOnTime { .. } => "limits.max_on_time_ms",
+                _ => "limits.max_duty_percent",
+            };
+            (one(key), "limits".into())
+        }
+        ConfigError::StaleLimit { .. } => (one("limits.stale_after_ms"), "limits".into()),
+        ConfigError::Region(r) => match r {
+            R::Unsorted { index, .. } | R::OutOfRange { index, .. } => (
+                std::vec![until(index as usize)],
+                std::format!("region[{index}]"),
+            ),
+            // A region too narrow ends at its `until_mm`, or, the last, starts at the one before.
+            R::TooNarrow { index, .. } => {
+                let i = index as usize;
+                let key = if has_until(i) || i == 0 {
+                    until(i)
+                } else {
+                    until(i - 1)
+                };
+                (std::vec![key], std::format!("region[{index}]"))
+            }
+            R::HysteresisTooLarge { .. } => (one("hysteresis_mm"), "hysteresis_mm".into()),
+            _ => (std::vec![], "region[0]".into()),
+        },
+        ConfigError::Texture { region: i, error } => match error {
+            B::ZeroFrequency | B::AboveBoardLimit { .. } | B::BelowTimerRange { .. } => {
+                region(i, &["f_b_hz"])
+            }
+            B::BadDuty { .. } | B::DutyAboveCap { .. } => region(i, &["duty_percent"]),
+            B::NoOnTime { .. } => region(i, &["duty_percent", "f_b_hz"]),
+            _ => region(i, &[]),
+        },
+        ConfigError::TextureParams { region: i, error } => match error {
+            T::BadWavelength { .. } => region(i, &["wavelength_mm", "ridge_mm"]),
+            T::BadSpeedThreshold { .. } => region(i, &["min_speed_mm_s"]),
+            T::BadMaterial { param, .. } => region(
+                i,
+                &[match param {
+                    M::DeltaMu => "delta_mu",
+                    M::NormalForce => "normal_force_n",
+                    M::Mass => "mass_g",
+                    M::Stiffness => "stiffness_n_per_m",
+                }],
+            ),
+            T::BadSpread { param, .. } => region(
+                i,
+                &[match param {
+                    S::Spread => "spread_percent",
+                    S::Amplitude => "amplitude_percent",
+                    S::AmplitudeSpread => "amplitude_spread_percent",
+                }],
+            ),
+            T::LevelAboveCap { .. } => region(i, &["amplitude_percent"]),
+            T::BadRearm { .. } => region(i, &["rearm_mm"]),
+            _ => region(i, &[]),
+        },
+        ConfigError::Lines(t) => {
+            let keys = match t {
+                T::BadLines(L::OutOfRange { index, .. } | L::Unsorted { index, .. }) => {
+                    std::vec![std::format!("lines.positions_mm[{index}]")]
+                }
+                T::BadLines(L::Rearm { .. }) => one("lines.rearm_mm"),
+                T::BadLines(_) | T::LevelAboveCap { .. } | T::BadSpread { .. } => {
+                    one("lines.amplitude_percent")
+                }
+                T::BadPulse { .. } => one("lines.pulse_ms"),
+                _ => std::vec![],
+            };
+            (keys, "lines".into())
+        }
+        ConfigError::LinePulse(_) => (one("lines.pulse_ms"), "lines".into()),
+        _ => (std::vec![], "(file)".into()),
     }
 }
 
@@ -229,10 +385,14 @@ mod tests {
     }
 
     #[test]
-    fn board_limit_is_located_at_the_region() {
+    fn board_limit_is_located_at_the_value() {
         let text = "[[region]]\nkind = \"constant\"\nuntil_mm = 20\nf_b_hz = 80\n\n[[region]]\nkind = \"constant\"\nf_b_hz = 9000\n";
         let e = err(text);
-        assert_eq!((e.line, e.field.as_str()), (6, "region[1]"), "{e}");
+        assert_eq!(
+            (e.line, e.column, e.field.as_str()),
+            (8, 10, "region[1].f_b_hz"),
+            "{e}"
+        );
         assert!(e.message.contains("above this board's limit"), "{e}");
     }
 
@@ -240,7 +400,11 @@ mod tests {
     fn unsorted_boundaries_are_located() {
         let text = "[[region]]\nkind = \"off\"\nuntil_mm = 30\n[[region]]\nkind = \"off\"\nuntil_mm = 20\n[[region]]\nkind = \"off\"\n";
         let e = err(text);
-        assert_eq!((e.line, e.field.as_str()), (4, "region[1].until_mm"), "{e}");
+        assert_eq!(
+            (e.line, e.column, e.field.as_str()),
+            (6, 12, "region[1].until_mm"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -25,10 +25,13 @@ pub(super) fn calibration(
     let s = s.get_ref();
     let length_mm = cx.range(&s.length_mm, "substrate.length_mm", 1.0, 1000.0)?;
     Ok(Calibration {
-        code_at_start: s.code_at_start,
-        code_at_end: s.code_at_end,
+        code_at_start: *s.code_at_start.get_ref(),
+        code_at_end: *s.code_at_end.get_ref(),
         length_um: milli(length_mm),
-        rail_margin_code: s.rail_margin_code.unwrap_or(DEFAULT_RAIL_MARGIN_CODE),
+        rail_margin_code: s
+            .rail_margin_code
+            .as_ref()
+            .map_or(DEFAULT_RAIL_MARGIN_CODE, |m| *m.get_ref()),
     })
 }
 
@@ -106,22 +109,31 @@ pub(super) fn lines(
         return Ok(out);
     };
     let l = l.get_ref();
-    // The array has one span, so a bad position is located at the array.
-    let at = l.positions_mm.span();
-    for &p in l.positions_mm.get_ref() {
+    // A 17th line is refused where it is written.
+    let span_of_17th = l
+        .positions_mm
+        .get_ref()
+        .get(16)
+        .map_or(l.positions_mm.span(), |p| p.span());
+    for p in l.positions_mm.get_ref() {
+        let (p, span) = (*p.get_ref(), p.span());
         let um = (p * 1000.0).round();
         if !(p.is_finite() && um >= 0.0 && um <= u32::MAX as f64) {
             return Err(cx.err(
-                at.clone(),
+                span,
                 "lines.positions_mm",
                 format_args!(
                     "{p} mm is not a position: it must be a finite number of mm, at least 0"
                 ),
             ));
         }
-        out.positions_um
-            .push(um as u32)
-            .map_err(|_| cx.err(at.clone(), "lines.positions_mm", "more than 16 lines"))?;
+        out.positions_um.push(um as u32).map_err(|_| {
+            cx.err(
+                span_of_17th.clone(),
+                "lines.positions_mm",
+                "more than 16 lines",
+            )
+        })?;
     }
     #[cfg(feature = "fuzz-plant-lines")]
     plant::lines(&out.positions_um);

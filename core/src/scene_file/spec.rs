@@ -28,7 +28,8 @@ pub(super) struct File {
 }
 
 /// Reads the TOML into a [`File`]. A syntax error, an unknown key or a value of the wrong type is
-/// located where the `toml` crate points.
+/// located where the `toml` crate points; an unknown key or value is named with the nearest
+/// one the table takes, or a short list of them ([`super::keys::unknown`]).
 pub(super) fn read(cx: &Ctx<'_>) -> Result<File, SceneFileError> {
     let text = cx.text;
     toml::from_str(text).map_err(|e| {
@@ -39,8 +40,38 @@ pub(super) fn read(cx: &Ctx<'_>) -> Result<File, SceneFileError> {
         let line_text = text[line_start..].split('\n').next().unwrap_or("");
         let field = line_text.split('=').next().unwrap_or("").trim();
         let field = if field.is_empty() { "(file)" } else { field };
-        cx.err(span, field, e.message())
+        match super::keys::unknown(e.message(), region_kind_at(text, start).as_deref()) {
+            Some(sentence) => cx.err(span, field, sentence),
+            None => cx.err(span, field, e.message()),
+        }
     })
+}
+
+/// The `kind` of the `[[region]]` table that holds byte `at`, if the file reads that far: the
+/// last region starting at or before it (a key in a later table is not a region's, and the
+/// caller only asks about a region's key).
+fn region_kind_at(text: &str, at: usize) -> Option<String> {
+    /// Every region's kind, and nothing else checked: the file failed the strict read.
+    #[derive(Deserialize)]
+    struct Loose {
+        #[serde(default)]
+        region: StdVec<Spanned<LooseRegion>>,
+    }
+    #[derive(Deserialize)]
+    struct LooseRegion {
+        kind: Option<String>,
+    }
+    let loose: Loose = toml::from_str(text).ok()?;
+    loose
+        .region
+        .iter()
+        .rfind(|r| r.span().start <= at)
+        .and_then(|r| r.get_ref().kind.clone())
+}
+
+/// The fields kind `kind` takes besides `kind` and `until_mm`; None for no kind.
+pub(super) fn kind_fields(kind: &str) -> Option<&'static [&'static str]> {
+    KINDS.iter().find(|(k, _)| *k == kind).map(|(_, f)| *f)
 }
 
 /// `[substrate]`: the rheostat calibration.
@@ -48,9 +79,9 @@ pub(super) fn read(cx: &Ctx<'_>) -> Result<File, SceneFileError> {
 #[serde(deny_unknown_fields)]
 pub(super) struct Substrate {
     pub(super) length_mm: Spanned<f64>,
-    pub(super) code_at_start: u16,
-    pub(super) code_at_end: u16,
-    pub(super) rail_margin_code: Option<u16>,
+    pub(super) code_at_start: Spanned<u16>,
+    pub(super) code_at_end: Spanned<u16>,
+    pub(super) rail_margin_code: Option<Spanned<u16>>,
 }
 
 /// `[limits]`: the carrier caps and the stale-sensor limit.
@@ -172,7 +203,7 @@ const KINDS: &[(&str, &[&str])] = &[
 
 impl RegionSpec {
     /// Every optional field that is present, with its span.
-    fn present(&self) -> StdVec<(&'static str, Range<usize>)> {
+    pub(super) fn present(&self) -> StdVec<(&'static str, Range<usize>)> {
         let f = |name: &'static str, v: &Option<Spanned<f64>>| v.as_ref().map(|v| (name, v.span()));
         [
             f("f_b_hz", &self.f_b_hz),
@@ -239,7 +270,8 @@ impl RegionSpec {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct LinesSpec {
-    pub(super) positions_mm: Spanned<StdVec<f64>>,
+    /// Each position with its own span, so a bad one is located at itself.
+    pub(super) positions_mm: Spanned<StdVec<Spanned<f64>>>,
     pub(super) pulse_ms: Option<Spanned<f64>>,
     pub(super) envelope: Option<EnvelopeSpec>,
     pub(super) amplitude_percent: Option<Spanned<f64>>,
