@@ -134,6 +134,9 @@ fn lines_report_their_crossing_rate_and_0_once_past() {
             .filter(|(mm, _)| *mm > 43.1)
             .all(|&(_, f)| f == 0),
         "past the last line: {:?}",
-        past.iter().filter(|(mm, _)| *mm > 43.1).take(5).collect::<Vec<_>>()
+        past.iter()
+            .filter(|(mm, _)| *mm > 43.1)
+            .take(5)
+            .collect::<Vec<_>>()
     );
 }

@@ -270,11 +270,24 @@ impl Motion {
 pub enum Refusal {
     /// A value or a combination refused at the door (exit code 2); the sentence after `error: `.
     Door(String),
-    /// A file the flags name could not be used (exit code 1).
+    /// The `--scene` file refused, by the reader's rules or the board's (exit code 2, as `saw
+    /// push` and `host-sim serve` refuse a scene file, docs/scenes.md): `file:line:col: `field`:
+    /// sentence`, at the value at fault.
+    Scene(saw_core::scene_file::SceneFileError),
+    /// A file the flags name could not be used: unreadable, or a scenario that cannot run (exit
+    /// code 1).
     Run(Box<dyn std::error::Error>),
 }
 
 impl Refusal {
+    /// The exit code: 2 for a flag or a scene file refused, 1 for a file that cannot be used.
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            Refusal::Door(_) | Refusal::Scene(_) => 2,
+            Refusal::Run(_) => 1,
+        }
+    }
+
     fn value(flag: &str, m: &ArgMatches, id: &str, rule: String) -> Self {
         Refusal::Door(format!(
             "invalid value '{}' for '{flag}': {rule}",
@@ -432,7 +445,7 @@ pub fn plan(args: &Args, m: &ArgMatches) -> Result<Plan, Refusal> {
                 sim::burst_timer(board),
                 sim::sample_period_us(board),
             )
-            .map_err(|e| Refusal::Run(e.into()))?;
+            .map_err(Refusal::Scene)?;
             (config, path.display().to_string())
         }
     };

@@ -54,13 +54,13 @@ fn main() -> ExitCode {
     log::set_max_level(args.log);
     let plan = match cli::plan(&args, &matches) {
         Ok(p) => p,
-        Err(Refusal::Door(e)) => {
-            eprintln!("error: {e}\n\nFor more information, try '--help'.");
-            return ExitCode::from(2);
-        }
-        Err(Refusal::Run(e)) => {
-            eprintln!("error: {e}");
-            return ExitCode::FAILURE;
+        Err(r) => {
+            match &r {
+                Refusal::Door(e) => eprintln!("error: {e}\n\nFor more information, try '--help'."),
+                Refusal::Scene(e) => eprintln!("error: {e}"),
+                Refusal::Run(e) => eprintln!("error: {e}"),
+            }
+            return ExitCode::from(r.exit_code());
         }
     };
     match run(&args, plan) {
