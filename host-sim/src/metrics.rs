@@ -1,5 +1,7 @@
 //! Figures of merit of a run: commanded vs produced f_b per region (from the gate edges), region
-//! switches against the scene's boundaries, velocity error and delay, faults, pulse integrity.
+//! switches against the scene's boundaries, velocity error and delay, faults, pulse integrity;
+//! tangible lines' pulses on their own; and the same figures per minute of the run ([`Minute`]),
+//! which a long run's chart draws.
 
 use std::collections::{HashSet, VecDeque};
 
@@ -95,6 +97,54 @@ pub struct VelocityStats {
     pub samples: usize,
 }
 
+/// The figures of one minute of a run (the last one may be shorter): what a long run's chart
+/// draws over the whole run. A pulse counts in the minute its rise falls in, a sample in the
+/// minute of its time.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Minute {
+    /// Start of the minute, s.
+    pub start_s: f64,
+    /// Time of the run inside it (sample periods), s.
+    pub span_s: f64,
+    /// Per region: f_b produced, its model's f_b and pulses in this minute.
+    pub regions: Vec<MinuteRegion>,
+    /// Line pulses whose rise is in this minute (every line together).
+    pub line_pulses: usize,
+    /// Region switches.
+    pub switches: usize,
+    /// The least and the most a switch came past its boundary, µm (None without switches).
+    pub switch_past_um: Option<(f64, f64)>,
+    /// RMS velocity error at zero lag, µm/s (None without an estimate).
+    pub velocity_rms_um_s: Option<f64>,
+    /// RMS velocity error against the true velocity delayed by the whole run's best-fit delay
+    /// ([`VelocityStats::delay_us`]), µm/s.
+    pub velocity_rms_at_delay_um_s: Option<f64>,
+    /// Fault onsets.
+    pub fault_onsets: usize,
+    /// Samples with a fault in force.
+    pub fault_samples: usize,
+    /// Samples.
+    pub samples: usize,
+}
+
+/// One region's figures in one [`Minute`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MinuteRegion {
+    /// f_b measured on the gate line over the whole periods that rose in this minute, Hz.
+    pub produced_hz: Option<f64>,
+    /// The model's f_b over the same periods (motion- or chance-driven textures), Hz.
+    pub expected_hz: Option<f64>,
+    /// Pulses (region bursts, not line pulses) that rose in this minute.
+    pub pulses: usize,
+    /// Whole periods measured.
+    pub intervals: usize,
+    /// Time the finger spent in the region in this minute, s.
+    pub time_s: f64,
+}
+
+/// The length of a [`Minute`], µs.
+pub const MINUTE_US: u64 = 60_000_000;
+
 /// Where the finger left the calibrated travel (0 … the scene's length).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct OffTravel {
@@ -134,6 +184,10 @@ pub struct Metrics {
     pub stall: Stall,
     /// Samples with the finger off the travel.
     pub off_travel: OffTravel,
+    /// Pulses per tangible line (scene order), counted apart from every region's bursts.
+    pub line_pulses: Vec<usize>,
+    /// The run minute by minute.
+    pub minutes: Vec<Minute>,
 }
 
 /// A gate that stopped making the bursts the core asked for (without preload, a 32-bit counter
@@ -182,6 +236,8 @@ struct Placed {
     run_before: Option<u64>,
     /// The f_b the texture's model gives at the finger's speed at the rise, Hz.
     expected_hz: Option<f64>,
+    /// The tangible line this pulse was fired for (then it is no burst of `region`).
+    line: Option<u8>,
 }
 
 /// Per-region running sums.
@@ -194,6 +250,44 @@ struct RegionSums {
     expected_period_s: f64,
     expected_n: usize,
     samples: usize,
+}
+
+/// One minute's running sums.
+#[derive(Clone, Debug)]
+struct MinuteSums {
+    regions: Vec<RegionSums>,
+    line_pulses: usize,
+    switches: usize,
+    switch_past_um: Option<(f64, f64)>,
+    fault_onsets: usize,
+    fault_samples: usize,
+    samples: usize,
+    vel_n: usize,
+    lag_sums: [f64; VELOCITY_LAGS],
+}
+
+impl MinuteSums {
+    fn new(regions: usize) -> Self {
+        Self {
+            regions: vec![RegionSums::default(); regions],
+            line_pulses: 0,
+            switches: 0,
+            switch_past_um: None,
+            fault_onsets: 0,
+            fault_samples: 0,
+            samples: 0,
+            vel_n: 0,
+            lag_sums: [0.0; VELOCITY_LAGS],
+        }
+    }
+}
+
+/// Widens `range` to hold `x`.
+fn widen(range: Option<(f64, f64)>, x: f64) -> Option<(f64, f64)> {
+    Some(match range {
+        None => (x, x),
+        Some((lo, hi)) => (lo.min(x), hi.max(x)),
+    })
 }
 
 /// The metrics of a run computed as it goes, in memory that does not grow with its length:
@@ -240,6 +334,15 @@ pub struct Online {
     lag_block: [f32; VELOCITY_LAGS],
     lag_sums: [f64; VELOCITY_LAGS],
     block_n: u32,
+    /// The minute the current f32 block of lag sums belongs to (flushed when it changes).
+    lag_minute: usize,
+    minutes: Vec<MinuteSums>,
+    /// Gate actions not yet reached by a placed rise: (kernel clock it acts at, the line it
+    /// fires for). The first rise after a line's pulse is that line's.
+    actions: VecDeque<(u64, Option<u8>)>,
+    line_armed: Option<u8>,
+    latency_clk: u64,
+    line_pulses: Vec<usize>,
 }
 
 impl Online {
@@ -294,7 +397,30 @@ impl Online {
             lag_block: [0.0; VELOCITY_LAGS],
             lag_sums: [0.0; VELOCITY_LAGS],
             block_n: 0,
+            lag_minute: 0,
+            minutes: Vec::new(),
+            actions: VecDeque::new(),
+            line_armed: None,
+            latency_clk: params.action_latency_us as u64 * clock_hz as u64 / 1_000_000,
+            line_pulses: vec![0; scene.lines.positions_um.len()],
         }
+    }
+
+    /// The running sums of the minute `t_us` falls in.
+    fn minute(&mut self, t_us: u64) -> &mut MinuteSums {
+        let i = (t_us / MINUTE_US) as usize;
+        while self.minutes.len() <= i {
+            self.minutes.push(MinuteSums::new(self.textures.len()));
+        }
+        &mut self.minutes[i]
+    }
+
+    /// The minute's running sums of the rise at kernel clock `clk` (a rise at the run's very
+    /// end counts in its last minute, which has samples).
+    fn minute_of_clock(&mut self, clk: u64) -> &mut MinuteSums {
+        let last_us = self.points.saturating_sub(1) * self.sample_period_us as u64;
+        let t_us = (clk * 1_000_000 / self.clock_hz as u64).min(last_us);
+        self.minute(t_us)
     }
 
     fn clocks(&self, t_us: u64) -> u64 {
@@ -332,9 +458,22 @@ impl Online {
                 s.samples += 1;
             }
         }
+        let minute = self.minute(p.t_us);
+        minute.samples += 1;
+        if let Some(s) = p.region.and_then(|r| minute.regions.get_mut(r as usize)) {
+            s.samples += 1;
+        }
         if let Some(GateAction::Start(s) | GateAction::Update(s) | GateAction::Pulse(s)) = p.action
         {
             self.planned.insert((s.on_clocks(), s.period_clocks()));
+        }
+        if let Some(a) = p.action {
+            let line = match a {
+                GateAction::Pulse(_) => p.line,
+                _ => None,
+            };
+            let at = self.clocks(p.t_us) + self.latency_clk;
+            self.actions.push_back((at, line));
         }
         // Edges up to this point's time are placed now: the point covering them is known.
         let now = self.clocks(p.t_us);
@@ -346,10 +485,12 @@ impl Online {
         self.stall_point(p, now);
         // Faults, travel, switches, velocity.
         if p.fault.is_some() {
+            let onset = self.prev.is_none_or(|q| q.fault.is_none());
             self.fault_samples += 1;
-            if self.prev.is_none_or(|q| q.fault.is_none()) {
-                self.fault_onsets += 1;
-            }
+            self.fault_onsets += usize::from(onset);
+            let minute = self.minute(p.t_us);
+            minute.fault_samples += 1;
+            minute.fault_onsets += usize::from(onset);
         }
         if !(0.0..=self.length_um).contains(&p.true_um) {
             self.off.samples += 1;
@@ -360,10 +501,10 @@ impl Online {
             .and_then(|q| switch_between(&q, p, &self.boundaries_um))
         {
             self.switch_count += 1;
-            self.switch_past_um = Some(match self.switch_past_um {
-                None => (w.past_um, w.past_um),
-                Some((lo, hi)) => (lo.min(w.past_um), hi.max(w.past_um)),
-            });
+            self.switch_past_um = widen(self.switch_past_um, w.past_um);
+            let minute = self.minute(p.t_us);
+            minute.switches += 1;
+            minute.switch_past_um = widen(minute.switch_past_um, w.past_um);
             if self.switches.len() < SWITCHES_LISTED {
                 self.switches.push(w);
             }
@@ -386,6 +527,13 @@ impl Online {
         let Some(est) = p.est_vel_um_s.filter(|_| p.fault.is_none()) else {
             return;
         };
+        // A block of f32 sums belongs to one minute: a new minute flushes the last one's.
+        let minute = (p.t_us / MINUTE_US) as usize;
+        if minute != self.lag_minute {
+            self.flush_lags();
+            self.lag_minute = minute;
+        }
+        self.minute(p.t_us).vel_n += 1;
         let e = est as f32 * 1e-3;
         let window = &self.true_ring[self.ring_at..self.ring_at + VELOCITY_LAGS];
         for (acc, &t) in self.lag_block.iter_mut().zip(window) {
@@ -399,6 +547,12 @@ impl Online {
     }
 
     fn flush_lags(&mut self) {
+        let minute = self.lag_minute as u64 * MINUTE_US;
+        let block = self.lag_block;
+        let sums = &mut self.minute(minute).lag_sums;
+        for (sum, acc) in sums.iter_mut().zip(&block) {
+            *sum += *acc as f64;
+        }
         for (sum, acc) in self.lag_sums.iter_mut().zip(&mut self.lag_block) {
             *sum += *acc as f64;
             *acc = 0.0;
@@ -410,8 +564,17 @@ impl Online {
     fn edge(&mut self, e: Edge, latest: u64) {
         // A rise after the last point (the run's end) has no sample before it: not placed.
         if e.high {
+            // The actions in force at this rise: the first rise after a line's pulse is it.
+            while self.actions.front().is_some_and(|a| a.0 <= e.t) {
+                if let Some((_, line)) = self.actions.pop_front() {
+                    self.line_armed = line;
+                }
+            }
+            let line = self.line_armed.take();
             if let Some((done, fall)) = self.awaiting.take() {
-                self.complete(done, fall, Some(e.t), latest);
+                // A line's pulse cuts the bursts before it short: their last period is none.
+                let next = if line.is_some() { None } else { Some(e.t) };
+                self.complete(done, fall, next, latest);
             }
             let idx = e.t.saturating_sub(1) / self.period_clk;
             let at = self.slot(idx);
@@ -436,11 +599,20 @@ impl Online {
                 region,
                 run_before,
                 expected_hz,
+                line,
             });
         } else if let Some(p) = self.open.take() {
             self.pulses += 1;
-            if let Some(r) = p.region {
+            if let Some(l) = p.line {
+                if let Some(n) = self.line_pulses.get_mut(l as usize) {
+                    *n += 1;
+                }
+                self.minute_of_clock(p.rise).line_pulses += 1;
+            } else if let Some(r) = p.region {
                 if let Some(s) = self.sums.get_mut(r as usize) {
+                    s.pulses += 1;
+                }
+                if let Some(s) = self.minute_of_clock(p.rise).regions.get_mut(r as usize) {
                     s.pulses += 1;
                 }
             }
@@ -455,12 +627,14 @@ impl Online {
         if !pulse_matches(on, period, &self.planned) {
             self.malformed += 1;
         }
-        let (Some(region), Some(run), Some(next)) = (p.region, p.run_before, next_rise) else {
+        let (Some(region), Some(run), Some(next), None) =
+            (p.region, p.run_before, next_rise, p.line)
+        else {
             return;
         };
         let last = (next / self.period_clk).min(latest);
         if self.slot(last).is_some_and(|s| s.run == run) {
-            if let Some(s) = self.sums.get_mut(region as usize) {
+            let add = |s: &mut RegionSums| {
                 s.intervals += 1;
                 s.interval_clk += next - p.rise;
                 s.on_clk += on;
@@ -468,6 +642,12 @@ impl Online {
                     s.expected_period_s += 1.0 / f;
                     s.expected_n += 1;
                 }
+            };
+            if let Some(s) = self.sums.get_mut(region as usize) {
+                add(s);
+            }
+            if let Some(s) = self.minute_of_clock(p.rise).regions.get_mut(region as usize) {
+                add(s);
             }
         }
     }
@@ -552,6 +732,7 @@ impl Online {
             })
             .collect();
         let velocity = self.velocity();
+        let minutes = self.minutes_done(velocity.as_ref());
         let (total, longest, _) = self.stall_clk;
         Metrics {
             regions,
@@ -569,7 +750,51 @@ impl Online {
                 longest_s: longest as f64 / clock,
             },
             off_travel: self.off,
+            line_pulses: self.line_pulses,
+            minutes,
         }
+    }
+
+    /// The minutes' figures (after [`Self::velocity`], whose flush closes the last block and
+    /// whose delay the minutes' velocity error is taken at).
+    fn minutes_done(&self, velocity: Option<&VelocityStats>) -> Vec<Minute> {
+        let clock = self.clock_hz as f64;
+        let period_s = self.sample_period_us as f64 * 1e-6;
+        let lag = velocity.map_or(0, |v| (v.delay_us / self.sample_period_us as f64) as usize);
+        self.minutes
+            .iter()
+            .enumerate()
+            .map(|(i, m)| {
+                let rms = |k: usize| {
+                    (m.vel_n > 0).then(|| (m.lag_sums[k] / m.vel_n as f64).sqrt() * 1e3)
+                };
+                Minute {
+                    start_s: (i as u64 * MINUTE_US) as f64 * 1e-6,
+                    span_s: m.samples as f64 * period_s,
+                    regions: m
+                        .regions
+                        .iter()
+                        .map(|s| MinuteRegion {
+                            produced_hz: (s.intervals > 0)
+                                .then(|| clock * s.intervals as f64 / s.interval_clk as f64),
+                            expected_hz: (s.expected_n > 0)
+                                .then(|| s.expected_n as f64 / s.expected_period_s),
+                            pulses: s.pulses,
+                            intervals: s.intervals,
+                            time_s: s.samples as f64 * period_s,
+                        })
+                        .collect(),
+                    line_pulses: m.line_pulses,
+                    switches: m.switches,
+                    switch_past_um: m.switch_past_um,
+                    velocity_rms_um_s: rms(0),
+                    velocity_rms_at_delay_um_s: rms(lag),
+                    fault_onsets: m.fault_onsets,
+                    fault_samples: m.fault_samples,
+                    samples: m.samples,
+                }
+            })
+            .collect()
     }
 
     /// Velocity RMS error at zero lag and at the best lag, over every sample with an estimate

@@ -1,4 +1,5 @@
-//! The human summary of a run.
+//! The human summary of a run: the board and motion, f_b per region, the tangible lines' pulses
+//! (apart from every region's bursts), switches, velocity, faults and the gate.
 
 use std::fmt::Write;
 
@@ -96,6 +97,7 @@ pub fn summary(r: &RunHeader, m: &Metrics) -> String {
             g.time_s
         );
     }
+    lines(&mut s, r, m);
     let _ = writeln!(s, "\nregion switches: {}", m.switch_count);
     for w in m.switches.iter().take(SWITCHES_PRINTED) {
         let _ = writeln!(
@@ -139,10 +141,18 @@ pub fn summary(r: &RunHeader, m: &Metrics) -> String {
         "faults: {} onsets, {} samples under fault (controller counted {})",
         m.fault_onsets, m.fault_samples, r.telemetry.faults
     );
+    let line_pulses: usize = m.line_pulses.iter().sum();
     let _ = writeln!(
         s,
-        "gate: {} pulses, {} malformed (runt/doubled/stretched), {} gate actions",
-        m.pulses, m.malformed_pulses, r.telemetry.gate_actions
+        "gate: {} pulses{}, {} malformed (runt/doubled/stretched), {} gate actions",
+        m.pulses,
+        if m.line_pulses.is_empty() {
+            String::new()
+        } else {
+            format!(" ({line_pulses} of them line pulses)")
+        },
+        m.malformed_pulses,
+        r.telemetry.gate_actions
     );
     if m.stall.total_s > 0.0 {
         let _ = writeln!(
@@ -160,4 +170,32 @@ pub fn summary(r: &RunHeader, m: &Metrics) -> String {
     }
     let _ = writeln!(s, "samples: {}", m.samples);
     s
+}
+
+/// The tangible lines, when the scene has any: where they are and the pulses measured on the
+/// gate line for each (none of them counted as a region's bursts), beside the core's own count
+/// and the crossings it skipped to keep the duty cap.
+fn lines(s: &mut String, r: &RunHeader, m: &Metrics) {
+    let scene = &r.params.config.scene;
+    if scene.lines.positions_um.is_empty() {
+        return;
+    }
+    let at: Vec<String> = scene
+        .lines
+        .positions_um
+        .iter()
+        .map(|p| format!("{:.3}", *p as f64 / 1e3))
+        .collect();
+    let per: Vec<String> = m.line_pulses.iter().map(|n| n.to_string()).collect();
+    let _ = writeln!(
+        s,
+        "\ntangible lines: {} at [{}] mm; {} pulses measured on the gate line (per line: {}); \
+         the core fired {}, skipped {} crossings to keep the duty cap",
+        at.len(),
+        at.join(", "),
+        m.line_pulses.iter().sum::<usize>(),
+        per.join(", "),
+        r.telemetry.line_pulses,
+        r.telemetry.lines_skipped
+    );
 }

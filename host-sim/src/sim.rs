@@ -123,6 +123,9 @@ pub struct TracePoint {
     pub fault: Option<SensorFault>,
     /// The action this sample (or its tick) produced.
     pub action: Option<GateAction>,
+    /// The tangible line whose pulse this sample fired (the core's `Output::line`): the
+    /// metrics count it for its line, not as a burst of the region under it.
+    pub line: Option<u8>,
 }
 
 /// What a run produced.
@@ -311,6 +314,7 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
             gate: false,
             fault: self.fault,
             action: None,
+            line: None,
         };
         if let Some(s) = sample {
             let out = self.ctrl.on_sample(s);
@@ -328,6 +332,7 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
             point.meas_um = out.position_um;
             point.est_vel_um_s = out.velocity_um_s;
             point.region = out.region;
+            point.line = out.line;
             self.fault = out.fault;
             self.region = out.region;
         } else {
