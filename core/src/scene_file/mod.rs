@@ -559,6 +559,336 @@ mod tests {
         assert_eq!(cfg.scene.lines.positions_um.len(), 6);
     }
 
+    /// A file writing every key a refusal can be about, one per line (line numbers below).
+    const EVERY_KEY: &str = "hysteresis_mm = 0.1\n\
+        [substrate]\nlength_mm = 63\ncode_at_start = 1310\ncode_at_end = 64225\n\
+        rail_margin_code = 655\n\
+        [limits]\nmax_duty_percent = 50\nmax_level_percent = 100\nmax_on_time_ms = 50\n\
+        stale_after_ms = 5\n\
+        [[region]]\nkind = \"constant\"\nuntil_mm = 10\nf_b_hz = 80\nduty_percent = 40\n\
+        [[region]]\nkind = \"grating\"\nuntil_mm = 20\nwavelength_mm = 1\nmin_speed_mm_s = 15\n\
+        amplitude_percent = 100\nrearm_mm = 0.1\n\
+        [[region]]\nkind = \"material\"\nuntil_mm = 30\ndelta_mu = 0.5\nnormal_force_n = 1\n\
+        mass_g = 1\nstiffness_n_per_m = 500\n\
+        [[region]]\nkind = \"random\"\nf_b_hz = 60\nspread_percent = 25\n\
+        amplitude_percent = 100\namplitude_spread_percent = 10\n\
+        [lines]\npositions_mm = [5, 15]\npulse_ms = 10\namplitude_percent = 100\nrearm_mm = 0.2\n";
+
+    /// Every controller refusal is located at the value it is about (field and line by hand from
+    /// [`EVERY_KEY`]), or at its table when the file leaves that key to its default. Errors are
+    /// built by hand: the reader's own ranges keep most of them from a file.
+    #[test]
+    fn every_controller_refusal_is_located_at_its_key() {
+        use crate::burst::BurstError as B;
+        use crate::position::CalibrationError as C;
+        use crate::region::RegionError as R;
+        use crate::texture::{
+            LineFault as L, MaterialParam as M, ParamValue, SpreadParam as S, TextureError as T,
+        };
+        let doc = parse("every.toml", EVERY_KEY).unwrap();
+        let tex = |region, error| ConfigError::Texture { region, error };
+        let par = |region, error| ConfigError::TextureParams { region, error };
+        let f_b = B::AboveBoardLimit {
+            burst_millihz: 1,
+            max_millihz: 1,
+        };
+        let no_on = B::NoOnTime {
+            burst_millihz: 1,
+            max_duty_permille: 1,
+            max_on_time_us: 1,
+        };
+        let mat = |param| T::BadMaterial {
+            param,
+            value: ParamValue(-1.0),
+        };
+        let spread = |param| T::BadSpread { param, permille: 1 };
+        let narrow = |index| {
+            ConfigError::Region(R::TooNarrow {
+                index,
+                width_um: 1,
+                min_width_um: 2,
+            })
+        };
+        let pulse = T::BadPulse {
+            pulse_us: 1,
+            max_on_time_us: 1,
+        };
+        let cases: &[(ConfigError, &str, usize)] = &[
+            (
+                ConfigError::Calibration(C::EndsSwapped {
+                    code_at_start: 1,
+                    code_at_end: 1,
+                }),
+                "substrate.code_at_end",
+                5,
+            ),
+            (
+                ConfigError::Calibration(C::EndsTooClose {
+                    span_code: 1,
+                    min_span_code: 2,
+                }),
+                "substrate.code_at_end",
+                5,
+            ),
+            (
+                ConfigError::Calibration(C::EndInRail {
+                    at_start: true,
+                    code: 1,
+                    rail_code: 2,
+                }),
+                "substrate.code_at_start",
+                4,
+            ),
+            (
+                ConfigError::Calibration(C::EndInRail {
+                    at_start: false,
+                    code: 1,
+                    rail_code: 2,
+                }),
+                "substrate.code_at_end",
+                5,
+            ),
+            (
+                ConfigError::Calibration(C::BadLength { length_um: 0 }),
+                "substrate.length_mm",
+                3,
+            ),
+            (
+                ConfigError::Calibration(C::BadRailMargin {
+                    margin_code: 0,
+                    limit_code: 1,
+                }),
+                "substrate.rail_margin_code",
+                6,
+            ),
+            (
+                ConfigError::Limits(B::BadDuty { duty_permille: 0 }),
+                "limits.max_duty_percent",
+                8,
+            ),
+            (ConfigError::Limits(no_on), "limits.max_on_time_ms", 10),
+            (
+                ConfigError::StaleLimit {
+                    stale_after_us: 1,
+                    min_us: 2,
+                },
+                "limits.stale_after_ms",
+                11,
+            ),
+            (
+                ConfigError::Region(R::Unsorted {
+                    index: 1,
+                    at_um: 1,
+                    previous_um: 2,
+                }),
+                "region[1].until_mm",
+                19,
+            ),
+            (
+                ConfigError::Region(R::OutOfRange {
+                    index: 2,
+                    at_um: 1,
+                    length_um: 1,
+                }),
+                "region[2].until_mm",
+                26,
+            ),
+            (narrow(0), "region[0].until_mm", 14),
+            (narrow(1), "region[1].until_mm", 19),
+            // The last region has no `until_mm`: it starts at the one before.
+            (narrow(3), "region[2].until_mm", 26),
+            (
+                ConfigError::Region(R::HysteresisTooLarge { hysteresis_um: 1 }),
+                "hysteresis_mm",
+                1,
+            ),
+            (
+                ConfigError::Region(R::BadCount { regions: 9 }),
+                "region[0]",
+                12,
+            ),
+            (tex(0, f_b), "region[0].f_b_hz", 15),
+            (tex(0, B::ZeroFrequency), "region[0].f_b_hz", 15),
+            (
+                tex(
+                    3,
+                    B::BelowTimerRange {
+                        burst_millihz: 1,
+                        min_millihz: 2,
+                    },
+                ),
+                "region[3].f_b_hz",
+                33,
+            ),
+            (
+                tex(0, B::BadDuty { duty_permille: 0 }),
+                "region[0].duty_percent",
+                16,
+            ),
+            (
+                tex(
+                    0,
+                    B::DutyAboveCap {
+                        duty_permille: 2,
+                        cap_permille: 1,
+                    },
+                ),
+                "region[0].duty_percent",
+                16,
+            ),
+            (tex(0, no_on), "region[0].duty_percent", 16),
+            // A grating writes neither key: its table.
+            (tex(1, no_on), "region[1]", 17),
+            (
+                tex(
+                    0,
+                    B::PulseTooLong {
+                        pulse_us: 2,
+                        max_us: 1,
+                    },
+                ),
+                "region[0]",
+                12,
+            ),
+            (
+                par(
+                    1,
+                    T::BadWavelength {
+                        wavelength_um: 0,
+                        length_um: 1,
+                    },
+                ),
+                "region[1].wavelength_mm",
+                20,
+            ),
+            (
+                par(1, T::BadSpeedThreshold { min_speed_um_s: 1 }),
+                "region[1].min_speed_mm_s",
+                21,
+            ),
+            (par(2, mat(M::DeltaMu)), "region[2].delta_mu", 27),
+            (par(2, mat(M::NormalForce)), "region[2].normal_force_n", 28),
+            (par(2, mat(M::Mass)), "region[2].mass_g", 29),
+            (par(2, mat(M::Stiffness)), "region[2].stiffness_n_per_m", 30),
+            (par(3, spread(S::Spread)), "region[3].spread_percent", 34),
+            (
+                par(3, spread(S::Amplitude)),
+                "region[3].amplitude_percent",
+                35,
+            ),
+            (
+                par(3, spread(S::AmplitudeSpread)),
+                "region[3].amplitude_spread_percent",
+                36,
+            ),
+            (
+                par(
+                    1,
+                    T::LevelAboveCap {
+                        permille: 2,
+                        max_level_permille: 1,
+                    },
+                ),
+                "region[1].amplitude_percent",
+                22,
+            ),
+            (
+                par(
+                    1,
+                    T::BadRearm {
+                        rearm_um: 1,
+                        wavelength_um: 1,
+                    },
+                ),
+                "region[1].rearm_mm",
+                23,
+            ),
+            (par(0, pulse), "region[0]", 12),
+            (
+                ConfigError::Lines(T::BadLines(L::OutOfRange {
+                    index: 1,
+                    at_um: 1,
+                    length_um: 1,
+                })),
+                "lines.positions_mm[1]",
+                38,
+            ),
+            (
+                ConfigError::Lines(T::BadLines(L::Unsorted {
+                    index: 0,
+                    at_um: 1,
+                    previous_um: 1,
+                })),
+                "lines.positions_mm[0]",
+                38,
+            ),
+            (
+                ConfigError::Lines(T::BadLines(L::Rearm { rearm_um: 1 })),
+                "lines.rearm_mm",
+                41,
+            ),
+            (
+                ConfigError::Lines(T::BadLines(L::Amplitude { permille: 0 })),
+                "lines.amplitude_percent",
+                40,
+            ),
+            (
+                ConfigError::Lines(T::LevelAboveCap {
+                    permille: 2,
+                    max_level_permille: 1,
+                }),
+                "lines.amplitude_percent",
+                40,
+            ),
+            (
+                ConfigError::Lines(spread(S::Amplitude)),
+                "lines.amplitude_percent",
+                40,
+            ),
+            (ConfigError::Lines(pulse), "lines.pulse_ms", 39),
+            (
+                ConfigError::Lines(T::BadSpeedThreshold { min_speed_um_s: 1 }),
+                "lines",
+                37,
+            ),
+            (
+                ConfigError::LinePulse(B::PulseTooLong {
+                    pulse_us: 2,
+                    max_us: 1,
+                }),
+                "lines.pulse_ms",
+                39,
+            ),
+            (
+                ConfigError::TextureCount {
+                    textures: 1,
+                    boundaries: 1,
+                },
+                "(file)",
+                1,
+            ),
+        ];
+        for (e, field, line) in cases {
+            let got = doc.locate(e);
+            assert_eq!(
+                (got.field.as_str(), got.line),
+                (*field, *line),
+                "{e:?}: {got}"
+            );
+        }
+        // Columns: at the value (`positions_mm = [5, 15]`: 5 at column 17, 15 at column 20).
+        let at = |index| {
+            let e = doc.locate(&ConfigError::Lines(T::BadLines(L::OutOfRange {
+                index,
+                at_um: 1,
+                length_um: 1,
+            })));
+            e.column
+        };
+        assert_eq!((at(0), at(1)), (17, 20));
+        assert_eq!(doc.locate(&tex(0, f_b)).column, 10);
+    }
+
     #[test]
     fn shipped_scenes_load() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
