@@ -405,8 +405,10 @@ pub struct Board {
 struct Tally {
     last_seq: Option<u32>,
     frames_lost: u64,
-    /// The board's drop count in the last frame (since the stream started).
-    dropped: u64,
+    /// The board's drop count in the first and the last frame. It is a running count (the
+    /// virtual board's since boot), so a stream's own drops are its growth.
+    first_dropped: Option<u32>,
+    last_dropped: u32,
 }
 
 impl Tally {
@@ -415,7 +417,14 @@ impl Tally {
             self.frames_lost += h.seq.wrapping_sub(prev).saturating_sub(1) as u64;
         }
         self.last_seq = Some(h.seq);
-        self.dropped = dropped as u64;
+        self.first_dropped.get_or_insert(dropped);
+        self.last_dropped = dropped;
+    }
+
+    /// Drops seen in the frames so far (those before the first frame not among them).
+    fn dropped_seen(&self) -> u64 {
+        self.first_dropped
+            .map_or(0, |first| self.last_dropped.wrapping_sub(first) as u64)
     }
 }
 
@@ -504,6 +513,14 @@ impl Board {
         let client = self.client()?;
         py.allow_threads(|| client.start_stream(every))
             .map_err(link_err)
+    }
+
+    /// The board's count of records dropped (since boot or the last counters reset).
+    fn records_dropped(&mut self, py: Python<'_>, wait: Duration) -> PyResult<u32> {
+        match self.ask(py, Request::Counters { reset: false }, wait)? {
+            Reply::Counters(c) => Ok(c.link.records_dropped),
+            other => Err(unexpected(other)),
+        }
     }
 
     /// Stops the stream; frames still in flight are dropped by the client.
@@ -774,6 +791,7 @@ impl Board {
         let seconds = finite_in("seconds", seconds, SECONDS, "s")?;
         let every = whole_in("every", every, EVERY)? as u16;
         let wait = self.wait(timeout_s)?;
+        let dropped_before = self.records_dropped(py, wait)?;
         let start = self.start_stream(py, every)?;
         let rate_hz = start.sample_rate_hz as f64 / every as f64;
         let end = Instant::now() + Duration::from_secs_f64(seconds);
@@ -800,10 +818,13 @@ impl Board {
         let stopped = self.stop_stream(py);
         outcome?;
         stopped?;
+        // The board's own count over the recording, as `saw stream` reports it: it also holds
+        // drops before the first frame, which no frame's count can show.
+        let dropped = self.records_dropped(py, wait)?.wrapping_sub(dropped_before) as u64;
         let client = self.client()?;
         Ok(Recording {
             records,
-            dropped: tally.dropped,
+            dropped,
             frames_lost: tally.frames_lost,
             bad_frames: client.bad_frames(),
             stale: client.stale_records() - stale_before,
@@ -831,6 +852,7 @@ impl Board {
             .transpose()?;
         let mut b = slf.borrow_mut();
         let wait = b.wait(timeout_s)?;
+        let dropped_before = b.records_dropped(py, wait)?;
         let start = b.start_stream(py, every)?;
         b.streaming = true;
         Ok(Stream {
@@ -842,6 +864,8 @@ impl Board {
             open: true,
             rate_hz: start.sample_rate_hz as f64 / every as f64,
             from_us: start.from_us,
+            dropped_before,
+            dropped_after_close: None,
         })
     }
 
@@ -959,14 +983,20 @@ pub struct Stream {
     /// The board's clock when it started the stream, µs since boot: every record is at or after.
     #[pyo3(get)]
     from_us: u64,
+    /// The board's dropped-records counter before the stream started.
+    dropped_before: u32,
+    /// The stream's drops by that counter, once closed.
+    dropped_after_close: Option<u64>,
 }
 
 #[pymethods]
 impl Stream {
-    /// Records the board dropped since the stream started (its count in the last frame).
+    /// Records the board dropped in this stream: while it runs, the growth of the frames' count
+    /// since the first frame; once closed, the board's counter over the whole stream.
     #[getter]
     fn dropped(&self) -> u64 {
-        self.tally.dropped
+        self.dropped_after_close
+            .unwrap_or_else(|| self.tally.dropped_seen())
     }
 
     /// Stream frames lost on the line (gaps in their running number).
@@ -1016,7 +1046,10 @@ impl Stream {
         if b.client.is_none() {
             return Ok(());
         }
-        b.stop_stream(py)
+        b.stop_stream(py)?;
+        let after = b.records_dropped(py, self.wait)?;
+        self.dropped_after_close = Some(after.wrapping_sub(self.dropped_before) as u64);
+        Ok(())
     }
 
     fn __enter__(slf: Py<Self>) -> Py<Self> {

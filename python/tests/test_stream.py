@@ -27,6 +27,19 @@ def test_ten_seconds_at_one_kilohertz_arrive_without_a_drop(board):
     assert rec[0].time_us == t[0] and rec[-1].time_us == t[-1]
 
 
+def test_a_stream_the_line_cannot_carry_shows_its_drops(board):
+    # Every sample (10 000 records/s) is more than the 921 600-baud line carries (docs/link.md,
+    # "The line and the stream"), so the drop count and the time steps the 1 kHz check reads do
+    # see drops when there are some.
+    rec = board.record(seconds=1, every=1)
+    t = rec.columns()["time_us"]
+    missing = sum((b - a) // 100 - 1 for a, b in zip(t, t[1:]))
+    print(rec, f"{missing} samples missing between records")
+    assert missing > 0
+    # The board's count also holds drops before the first record and after the last.
+    assert rec.dropped >= missing
+
+
 def test_to_pandas_when_pandas_is_there(board):
     rec = board.record(seconds=0.2, every=EVERY)
     try:
@@ -51,6 +64,7 @@ def test_the_stream_iterator_yields_records_and_stops_on_exit(board):
             if len(records) == 300:
                 break
         assert s.dropped == 0 and s.frames_lost == 0
+    assert s.dropped == 0
     steps = {b.time_us - a.time_us for a, b in zip(records, records[1:])}
     assert steps == {STEP_US}
     # Stopped: the board answers requests again, and no stream frame is pending.
