@@ -3,6 +3,7 @@
 # maturin and pytest, builds the abi3 wheel (`maturin build --release`, one wheel for CPython
 # 3.8 and later, written to target/wheels/) and installs it into the venv. With --test, then
 # builds host-sim (release) and runs python/tests/ with pytest against its virtual board.
+# CARGO_TARGET_DIR moves target/ (the venv and the wheels with it).
 # Idempotent: an existing venv and its tools are kept, and an unchanged crate is a cargo no-op.
 #
 #   ./scripts/python.sh            # build and install
@@ -18,7 +19,8 @@ case "${1:-}" in
     *) echo "python.sh: unknown argument \`$1\`: the only one is --test" >&2; exit 2 ;;
 esac
 
-VENV=${SAWLINK_VENV:-target/venv}
+TARGET=${CARGO_TARGET_DIR:-target}
+VENV=${SAWLINK_VENV:-$TARGET/venv}
 PYTHON=${PYTHON:-python3}
 start=$(date +%s)
 
@@ -32,15 +34,16 @@ if ! "$VENV/bin/maturin" --version >/dev/null 2>&1 || ! "$VENV/bin/python" -c 'i
 fi
 
 # The wheel: release, stripped (pyproject.toml), into target/wheels.
-rm -f target/wheels/sawlink-*.whl
-"$VENV/bin/maturin" build --release --quiet -m python/Cargo.toml -o target/wheels \
+rm -f "$TARGET"/wheels/sawlink-*.whl
+"$VENV/bin/maturin" build --release --quiet -m python/Cargo.toml -o "$TARGET/wheels" \
     --interpreter "$VENV/bin/python"
-wheel=$(ls target/wheels/sawlink-*.whl)
+wheel=$(ls "$TARGET"/wheels/sawlink-*.whl)
 "$VENV/bin/python" -m pip install --quiet --force-reinstall --no-deps "$wheel"
 echo "python.sh: installed $(basename "$wheel") into $VENV ($(( $(date +%s) - start )) s so far)"
 
 if [ "$TEST" = 1 ]; then
     cargo build --release -p host-sim
-    SAWLINK_HOST_SIM="$PWD/target/release/host-sim" "$VENV/bin/python" -m pytest -q python/tests
+    host_sim=$(cd "$TARGET" && pwd)/release/host-sim
+    SAWLINK_HOST_SIM="$host_sim" "$VENV/bin/python" -m pytest -q python/tests
     echo "python.sh: built and tested in $(( $(date +%s) - start )) s"
 fi

@@ -81,3 +81,8 @@ for tool in /usr/bin/rustc /usr/bin/cargo /usr/bin/ld.lld-22 /usr/bin/qemu-syste
         echo "setup: warning: $tool not found" >&2
     fi
 done
+
+# The Python module `sawlink` (python/, docs/link.md "From Python"): a venv in target/venv with
+# maturin and pytest, the abi3 wheel built and installed into it. Idempotent: the venv and its
+# tools are kept, and an unchanged crate is a cargo no-op (a few seconds to repackage).
+"$(dirname "$0")/python.sh"

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Runs every test: installs what is missing (no-op when present), the host workspace's tests
-# (core, boards, host simulation, scenario tests), the fuzz targets for a short budget each and a
+# (core, boards, host simulation, scenario tests), the Python module's pytest against the
+# virtual board (scripts/python.sh --test), the fuzz targets for a short budget each and a
 # planted parser panic the fuzzer must find (scripts/fuzz.sh), both boards' firmware release
 # builds with their flash/RAM sizes checked against the budget, the panic check of the
 # per-sample path with its planted defect (scripts/panic-check.sh), the core on an emulated
@@ -14,6 +15,8 @@ cd "$(dirname "$0")/.."
 ./scripts/setup.sh
 echo "== host tests"
 cargo test --workspace
+echo "== python"
+./scripts/python.sh --test
 echo "== fuzz: every target 10 s, then a planted panic that must be found (docs/fuzzing.md)"
 # New inputs go to a scratch directory: CI reads the kept corpus and leaves it as it is. 15 s
 # each: the fuzz workspace's build from scratch takes most of the step's ~2.5 min share of CI
