@@ -37,13 +37,19 @@ impl Run {
 
     /// One sample with the finger at `um`; the f_b then reported, mHz.
     fn sample(&mut self, um: f64) -> u32 {
+        self.sample_line(um).1
+    }
+
+    /// One sample with the finger at `um`: the line it fired, if any, and the f_b then
+    /// reported, mHz.
+    fn sample_line(&mut self, um: f64) -> (Option<u8>, u32) {
         let code = self.ctrl.mapper().unwrap().code_at_um(um as f32) as u16;
-        self.ctrl.on_sample(Sample {
+        let out = self.ctrl.on_sample(Sample {
             code,
             t_us: self.t_us,
         });
         self.t_us += PERIOD_US;
-        self.ctrl.telemetry().burst_millihz
+        (out.line, self.ctrl.telemetry().burst_millihz)
     }
 
     /// Slides from `from_mm` to `to_mm` at `speed_mm_s`; the f_b reported at each sample.
@@ -139,4 +145,40 @@ fn lines_report_their_crossing_rate_and_0_once_past() {
             .take(5)
             .collect::<Vec<_>>()
     );
+}
+
+/// The edge of "the pulses have stopped": two lines 2 mm apart crossed at 40 mm/s, then the
+/// finger slides on past them. The rate 1 / interval is still reported 1.5 intervals after the
+/// last pulse, and is 0 one sample later. The pulses' times are read from the outputs (the
+/// sample that fired each line); the rest is worked by hand from them.
+#[test]
+fn the_rate_holds_for_one_and_a_half_intervals_after_the_last_pulse() {
+    let mut run = Run::new("[[region]]\nkind = \"off\"\n\n[lines]\npositions_mm = [10, 12]\n");
+    let _ = run.rest(9.0, 10);
+    let step_mm = 40.0 * PERIOD_US as f64 * 1e-6;
+    let mut fired = Vec::new();
+    let mut reported = Vec::new();
+    for k in 0..=2_500 {
+        let t_us = run.t_us;
+        let (line, f_b) = run.sample_line((9.0 + k as f64 * step_mm) * 1000.0);
+        if line.is_some() {
+            fired.push(t_us);
+        }
+        reported.push((t_us, f_b));
+    }
+    let [first, last] = fired[..] else {
+        panic!("lines fired at {fired:?} µs");
+    };
+    let interval = last - first;
+    // 2 mm at 40 mm/s: 50 ms, give or take the sample the crossing lands on.
+    assert!((interval as i64 - 50_000).abs() <= 200, "{interval} µs");
+    let expected = 1_000_000_000 / interval;
+    let at = |t: u32| reported.iter().find(|(tr, _)| *tr == t).unwrap().1;
+    assert_eq!(at(last), expected, "at the last pulse");
+    assert_eq!(
+        at(last + interval * 3 / 2),
+        expected,
+        "1.5 intervals after it"
+    );
+    assert_eq!(at(last + interval * 3 / 2 + PERIOD_US), 0, "a sample later");
 }

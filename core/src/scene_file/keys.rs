@@ -198,6 +198,8 @@ mod tests {
         assert_eq!(nearest("speed", &["seed"]), Some("seed"));
         assert_eq!(nearest("spees", &["seed"]), None);
         assert_eq!(nearest("pulse_us", &["pulse_ms"]), Some("pulse_ms"));
+        // Two edits in ten characters (two letters dropped): near (⌊10 / 3⌋ = 3 allowed).
+        assert_eq!(nearest("duty_prcnt", region), Some("duty_percent"));
     }
 
     #[test]
@@ -213,6 +215,18 @@ mod tests {
         );
         assert_eq!(keys("region").unwrap().len(), 25);
         assert_eq!(keys("nope"), None);
+    }
+
+    /// An unknown value is matched against the choice's values only, never against the keys of
+    /// the region it is written in (`rearm` would be `rearm_mm`'s unit left off).
+    #[test]
+    fn an_unknown_value_is_no_key() {
+        let serde = "unknown variant `rearm`, expected one of `position`, `hybrid`, `velocity`";
+        assert_eq!(
+            unknown(serde, Some("grating")).unwrap(),
+            "unknown value `rearm`: it must be `position`, `hybrid` or `velocity`"
+        );
+        assert_eq!(unknown("invalid type: string", Some("grating")), None);
     }
 
     #[test]
