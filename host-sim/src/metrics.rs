@@ -759,7 +759,8 @@ impl Online {
     /// whose delay the minutes' velocity error is taken at).
     fn minutes_done(&self, velocity: Option<&VelocityStats>) -> Vec<Minute> {
         let clock = self.clock_hz as f64;
-        let period_s = self.sample_period_us as f64 * 1e-6;
+        // Whole µs first, one rounding after: a full minute is 60 s exactly.
+        let secs = |samples: usize| (samples as u64 * self.sample_period_us as u64) as f64 / 1e6;
         let lag = velocity.map_or(0, |v| (v.delay_us / self.sample_period_us as f64) as usize);
         self.minutes
             .iter()
@@ -770,7 +771,7 @@ impl Online {
                 };
                 Minute {
                     start_s: (i as u64 * MINUTE_US) as f64 * 1e-6,
-                    span_s: m.samples as f64 * period_s,
+                    span_s: secs(m.samples),
                     regions: m
                         .regions
                         .iter()
@@ -781,7 +782,7 @@ impl Online {
                                 .then(|| s.expected_n as f64 / s.expected_period_s),
                             pulses: s.pulses,
                             intervals: s.intervals,
-                            time_s: s.samples as f64 * period_s,
+                            time_s: secs(s.samples),
                         })
                         .collect(),
                     line_pulses: m.line_pulses,
