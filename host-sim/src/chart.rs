@@ -1,12 +1,20 @@
 //! PNG chart of a run: stacked panels over time — position, velocity, region, gate line and the
 //! RF drive the finger gets (enable × level); with lines, a last panel of every line pulse's
 //! drive against the finger's distance from its line (the triangle and where it peaks).
+//!
+//! A run longer than [`LONG_RUN_S`] would crowd hundreds of strokes into each pixel column (the
+//! traces alias into moiré), so its chart draws those panels over its last [`DETAIL_S`] only,
+//! and under them the run minute by minute ([`crate::metrics::Minute`], computed by the
+//! metrics): f_b produced per region and the lines' pulse rate, how far past their boundary the
+//! switches came, the velocity error, the time under fault. Every trace is clipped to its plot
+//! and wide lines are drawn without miter joins, so nothing lands outside its panel.
 
 use std::path::Path;
 
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
+use crate::metrics::{Metrics, Minute};
 use crate::sim::{SimResult, TracePoint};
 use crate::timer::{Edge, LevelEdge};
 
@@ -226,9 +234,10 @@ impl GappyDecimator {
     }
 }
 
-/// Accumulates [`dense_duty`]'s figures from a step curve fed point by point.
+/// Accumulates [`dense_duty`]'s figures from a step curve fed point by point, over `t0..t_end`.
 #[derive(Clone, Debug, PartialEq)]
 struct DutyBins {
+    t0: f64,
     t_end: f64,
     width: f64,
     on: Vec<f64>,
@@ -237,10 +246,11 @@ struct DutyBins {
 }
 
 impl DutyBins {
-    fn new(t_end: f64, bins: usize) -> Self {
+    fn new(t0: f64, t_end: f64, bins: usize) -> Self {
         Self {
+            t0,
             t_end,
-            width: t_end / bins as f64,
+            width: (t_end - t0) / bins as f64,
             on: vec![0.0; bins],
             rises: vec![0; bins],
             last: None,
@@ -248,7 +258,7 @@ impl DutyBins {
     }
 
     fn slice(&self, t: f64) -> usize {
-        ((t.max(0.0) / self.width) as usize).min(self.on.len() - 1)
+        (((t - self.t0).max(0.0) / self.width) as usize).min(self.on.len() - 1)
     }
 
     fn push(&mut self, p: (f64, f64)) {
@@ -264,9 +274,10 @@ impl DutyBins {
             return;
         }
         // Spread [t0, t1) over the slices it overlaps.
-        let (a, b) = (t0.max(0.0), t1.min(self.t_end));
+        let (a, b) = (t0.max(self.t0), t1.min(self.t_end));
         for k in self.slice(a)..=self.slice(b) {
-            let (lo, hi) = (k as f64 * self.width, (k + 1) as f64 * self.width);
+            let lo = self.t0 + k as f64 * self.width;
+            let hi = lo + self.width;
             self.on[k] += (b.min(hi) - a.max(lo)).max(0.0);
         }
     }
@@ -281,7 +292,10 @@ impl DutyBins {
                     open = true;
                 }
                 if let Some(run) = runs.last_mut() {
-                    run.push(((k as f64 + 0.5) * self.width, self.on[k] / self.width));
+                    run.push((
+                        self.t0 + (k as f64 + 0.5) * self.width,
+                        self.on[k] / self.width,
+                    ));
                 }
             } else {
                 open = false;
@@ -294,11 +308,23 @@ impl DutyBins {
 /// Line pulses drawn on the line panel (the first ones; the legend gives the total).
 pub const LINE_PULSES_DRAWN: usize = 100;
 
+/// Runs longer than this, s, get the long chart: the last [`DETAIL_S`] in detail and the run
+/// minute by minute. A minute of 60 mm/s strokes is 60 of them over the time axis, still
+/// readable; five minutes alias.
+pub const LONG_RUN_S: f64 = 60.0;
+
+/// The long chart's detail: its last seconds, as many as the default run's whole chart shows.
+pub const DETAIL_S: f64 = 3.0;
+
 /// Everything the chart draws, in memory bounded by the chart's width, not the run's length:
 /// fed point by point and edge by edge by [`Recorder`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct ChartData {
+    /// Where the time panels start: 0, or the detail's start for a long run.
+    t0: f64,
     t_end: f64,
+    /// A long run's chart (detail and per-minute panels).
+    long: bool,
     length_mm: f64,
     boundaries_mm: Vec<f64>,
     lines_mm: Vec<f64>,
@@ -330,22 +356,24 @@ pub struct Recorder {
     /// The line pulse being drawn: (finger position at each step µm, drive) while the gate is
     /// high, with the rise's time.
     pulse: Option<(u64, Vec<(f64, f64)>)>,
+    /// Whether the gate, duty and drive curves have their point at the time panels' start.
+    opened: bool,
+    /// Whether the region curve has its first point.
+    region_opened: bool,
 }
 
 impl Recorder {
     /// A recorder for a run of `params` on a burst timer clocked at `clock_hz`.
     pub fn new(params: &crate::sim::SimParams, clock_hz: u32) -> Self {
         let t_end = params.duration_s;
+        let long = t_end > LONG_RUN_S;
+        let t0 = if long { t_end - DETAIL_S } else { 0.0 };
         let scene = &params.config.scene;
-        let mut gate = Decimator::new(0.0, t_end, 3 * BUCKETS);
-        gate.push((0.0, 0.0));
-        let mut duty = DutyBins::new(t_end, BUCKETS);
-        duty.push((0.0, 0.0));
-        let mut drive = Decimator::new(0.0, t_end, 3 * BUCKETS);
-        drive.push((0.0, 0.0));
         Self {
             data: ChartData {
+                t0,
                 t_end,
+                long,
                 length_mm: params.config.calibration.length_um as f64 / 1e3,
                 boundaries_mm: scene
                     .boundaries_um
@@ -359,15 +387,15 @@ impl Recorder {
                     .map(|&l| l as f64 / 1e3)
                     .collect(),
                 region_labels: scene.textures.iter().map(region_label).collect(),
-                pos_truth: Decimator::new(0.0, t_end, BUCKETS),
-                pos_core: GappyDecimator::new(0.0, t_end, BUCKETS),
-                vel_truth: Decimator::new(0.0, t_end, BUCKETS),
-                vel_core: GappyDecimator::new(0.0, t_end, BUCKETS),
+                pos_truth: Decimator::new(t0, t_end, BUCKETS),
+                pos_core: GappyDecimator::new(t0, t_end, BUCKETS),
+                vel_truth: Decimator::new(t0, t_end, BUCKETS),
+                vel_core: GappyDecimator::new(t0, t_end, BUCKETS),
                 vel_max_mm_s: 10.0,
-                region: Decimator::new(0.0, t_end, BUCKETS),
-                gate,
-                duty,
-                drive,
+                region: Decimator::new(t0, t_end, BUCKETS),
+                gate: Decimator::new(t0, t_end, 3 * BUCKETS),
+                duty: DutyBins::new(t0, t_end, BUCKETS),
+                drive: Decimator::new(t0, t_end, 3 * BUCKETS),
                 line_curves: Vec::new(),
                 line_pulses: 0,
             },
@@ -378,13 +406,43 @@ impl Recorder {
             code: 0,
             drive_last: 0.0,
             pulse: None,
+            opened: false,
+            region_opened: false,
         }
+    }
+
+    /// The gate, duty and drive curves' first point, at the time panels' start: the line as it
+    /// stood then (`gate_high`).
+    fn open(&mut self, gate_high: bool) {
+        if self.opened {
+            return;
+        }
+        self.opened = true;
+        let d = &mut self.data;
+        let g = f64::from(u8::from(gate_high));
+        d.gate.push((d.t0, g));
+        d.duty.push((d.t0, g));
+        d.drive.push((d.t0, self.drive_last));
     }
 
     /// The next trace point.
     pub fn point(&mut self, p: &TracePoint) {
         let d = &mut self.data;
         let t = p.t_us as f64 * 1e-6;
+        // Region (−1 = none: fault or no scene) as a step curve.
+        let y = p.region.map(|x| x as f64).unwrap_or(-1.0);
+        if t < d.t0 {
+            // Before a long run's detail only the region the curve starts from is kept.
+            self.last_region = Some(y);
+            return;
+        }
+        if !self.region_opened {
+            // A long run's detail starts with the region it was in.
+            self.region_opened = true;
+            if let Some(l) = self.last_region {
+                d.region.push((d.t0, l));
+            }
+        }
         // The four series share the sample's time, so its bucket is worked out once.
         let b = d.pos_truth.bucket_of(t);
         d.pos_truth.push_in(b, (t, p.true_um / 1e3));
@@ -394,8 +452,6 @@ impl Recorder {
         let est = p.est_vel_um_s.map(|v| v as f64 / 1e3);
         d.vel_core.push_in(b, t, est);
         d.vel_max_mm_s = d.vel_max_mm_s.max(v.abs()).max(est.unwrap_or(0.0).abs());
-        // Region (−1 = none: fault or no scene) as a step curve.
-        let y = p.region.map(|x| x as f64).unwrap_or(-1.0);
         if self.last_region != Some(y) {
             if let Some(l) = self.last_region {
                 d.region.push((t, l));
@@ -434,22 +490,26 @@ impl Recorder {
     /// The curves' points at kernel-clock time `t`, after every change at `t`.
     fn at(&mut self, t: u64, was_high: bool, code_changed: bool) {
         let x = t as f64 / self.clock_hz;
-        let d = &mut self.data;
-        let (before, after) = (
-            f64::from(u8::from(was_high)),
-            f64::from(u8::from(self.gate_high)),
-        );
-        if before != after {
-            d.gate.push((x, before));
-            d.gate.push((x, after));
-            d.duty.push((x, before));
-            d.duty.push((x, after));
-        }
         let level = crate::rf::permille_at_code(self.code) / 1000.0;
         let y = if self.gate_high { level } else { 0.0 };
-        d.drive.push((x, self.drive_last));
-        d.drive.push((x, y));
+        if x >= self.data.t0 {
+            self.open(was_high);
+            let d = &mut self.data;
+            let (before, after) = (
+                f64::from(u8::from(was_high)),
+                f64::from(u8::from(self.gate_high)),
+            );
+            if before != after {
+                d.gate.push((x, before));
+                d.gate.push((x, after));
+                d.duty.push((x, before));
+                d.duty.push((x, after));
+            }
+            d.drive.push((x, self.drive_last));
+            d.drive.push((x, y));
+        }
         self.drive_last = y;
+        let d = &mut self.data;
         if d.lines_mm.is_empty() {
             return;
         }
@@ -492,6 +552,7 @@ impl Recorder {
 
     /// The chart's data, the curves closed at the run's end.
     pub fn finish(mut self) -> ChartData {
+        self.open(self.gate_high);
         let d = &mut self.data;
         let t_end = d.t_end;
         if let Some(l) = self.last_region {
@@ -547,11 +608,152 @@ impl ChartData {
     }
 }
 
+/// The pale blue the truth is drawn in: blue at 35 % over the white background, opaque, so the
+/// strokes of a wide line overlapping themselves do not darken.
+const TRUTH: RGBColor = RGBColor(166, 166, 255);
+
+/// A time panel's plot: f64 on both axes.
+type Plot<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// Segment `p`–`q` cut to the rectangle `x` × `y` (Liang–Barsky): its ends inside, and whether
+/// each is the segment's own (not a cut); None when it misses the rectangle or is not finite.
+fn clip_segment(
+    p: (f64, f64),
+    q: (f64, f64),
+    x: (f64, f64),
+    y: (f64, f64),
+) -> Option<((f64, f64), (f64, f64), bool, bool)> {
+    if ![p.0, p.1, q.0, q.1].iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let (dx, dy) = (q.0 - p.0, q.1 - p.1);
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for (pk, qk) in [
+        (-dx, p.0 - x.0),
+        (dx, x.1 - p.0),
+        (-dy, p.1 - y.0),
+        (dy, y.1 - p.1),
+    ] {
+        if pk == 0.0 {
+            if qk < 0.0 {
+                return None;
+            }
+        } else if pk < 0.0 {
+            t0 = t0.max(qk / pk);
+        } else {
+            t1 = t1.min(qk / pk);
+        }
+    }
+    if t0 > t1 {
+        return None;
+    }
+    let at = |t: f64| (p.0 + t * dx, p.1 + t * dy);
+    let a = if t0 == 0.0 { p } else { at(t0) };
+    let b = if t1 == 1.0 { q } else { at(t1) };
+    Some((a, b, t0 == 0.0, t1 == 1.0))
+}
+
+/// The runs of polyline `pts` inside the rectangle `x` × `y` (data coordinates): every segment
+/// cut where it crosses the border, a new run wherever the line comes back in. What a plot draws
+/// goes through this, so no trace lands outside its plot (plotters does not clip).
+pub fn clip_polyline(pts: &[(f64, f64)], x: (f64, f64), y: (f64, f64)) -> Vec<Series> {
+    let mut runs: Vec<Series> = Vec::new();
+    if let [p] = pts {
+        if clip_segment(*p, *p, x, y).is_some() {
+            runs.push(vec![*p]);
+        }
+        return runs;
+    }
+    let mut open = false;
+    for w in pts.windows(2) {
+        match clip_segment(w[0], w[1], x, y) {
+            None => open = false,
+            Some((a, b, whole_start, whole_end)) => {
+                match runs.last_mut() {
+                    Some(run) if open && whole_start => run.push(b),
+                    _ => runs.push(vec![a, b]),
+                }
+                open = whole_end;
+            }
+        }
+    }
+    runs
+}
+
+/// Draws `pts` as a 1-px line, clipped to the plot.
+fn thin<DB: DrawingBackend>(
+    c: &mut Plot<'_, DB>,
+    pts: &[(f64, f64)],
+    style: ShapeStyle,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let (x, y) = (c.x_range(), c.y_range());
+    for run in clip_polyline(pts, (x.start, x.end), (y.start, y.end)) {
+        c.draw_series(LineSeries::new(run, style))?;
+    }
+    Ok(())
+}
+
+/// Pixel offsets a line `width` px wide is stamped at: a disc of that diameter.
+fn stamp(width: u32) -> Vec<(i32, i32)> {
+    let w = width.max(1) as i32;
+    let (lo, hi) = (-(w - 1) / 2, w / 2);
+    let c = (lo + hi) as f64 / 2.0;
+    let r2 = (w as f64 / 2.0).powi(2);
+    let mut out = Vec::new();
+    for dx in lo..=hi {
+        for dy in lo..=hi {
+            if (dx as f64 - c).powi(2) + (dy as f64 - c).powi(2) <= r2 {
+                out.push((dx, dy));
+            }
+        }
+    }
+    out
+}
+
+/// Draws `pts` as a line `width` px wide in an opaque `color`, clipped to the plot: the 1-px
+/// polyline stamped at every offset of a disc. (plotters' own wide lines join segments with
+/// unbounded miters: a decimated zigzag's joins spiked across the whole picture.)
+fn wide<DB: DrawingBackend>(
+    c: &mut Plot<'_, DB>,
+    pts: &[(f64, f64)],
+    color: RGBColor,
+    width: u32,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let (x, y) = (c.x_range(), c.y_range());
+    let area = c.plotting_area().strip_coord_spec();
+    let base = c.plotting_area().get_base_pixel();
+    let offsets = stamp(width);
+    for run in clip_polyline(pts, (x.start, x.end), (y.start, y.end)) {
+        let mut px: Vec<(i32, i32)> = Vec::with_capacity(run.len());
+        for p in &run {
+            let b = c.backend_coord(p);
+            let q = (b.0 - base.0, b.1 - base.1);
+            if px.last() != Some(&q) {
+                px.push(q);
+            }
+        }
+        if px.len() == 1 {
+            px.push(px[0]);
+        }
+        for &(dx, dy) in &offsets {
+            let shifted: Vec<(i32, i32)> = px.iter().map(|&(a, b)| (a + dx, b + dy)).collect();
+            area.draw(&PathElement::new(shifted, color.stroke_width(1)))?;
+        }
+    }
+    Ok(())
+}
+
 /// Draws what the core saw (red, thin, in runs broken by faults) over the truth (pale blue,
 /// wide), both already decimated to the panel's width by the [`Recorder`], and the legend
 /// beside the plot: `(runs, label, line width)` and `(truth, line width)`.
-fn core_against_truth<'a, DB: DrawingBackend + 'a>(
-    c: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+fn core_against_truth<DB: DrawingBackend>(
+    c: &mut Plot<'_, DB>,
     (core, label, core_width): (&[Vec<(f64, f64)>], &str, u32),
     (truth, truth_width): (&[(f64, f64)], u32),
 ) -> Result<Vec<Entry>, Box<dyn std::error::Error>>
@@ -559,18 +761,12 @@ where
     DB::ErrorType: 'static,
 {
     // The truth first, wide and pale, so the core's thin line stays visible on top of it.
-    c.draw_series(LineSeries::new(
-        truth.iter().copied(),
-        BLUE.mix(0.35).stroke_width(truth_width),
-    ))?;
+    wide(c, truth, TRUTH, truth_width)?;
     for run in core {
-        c.draw_series(LineSeries::new(
-            run.iter().copied(),
-            RED.stroke_width(core_width),
-        ))?;
+        thin(c, run, RED.stroke_width(core_width))?;
     }
     Ok(vec![
-        ("true".into(), BLUE.mix(0.35), truth_width),
+        ("true".into(), TRUTH.to_rgba(), truth_width),
         (label.into(), RED.to_rgba(), core_width.max(2)),
     ])
 }
@@ -607,28 +803,156 @@ where
     Ok(())
 }
 
-/// Writes the chart of a run (its [`ChartData`]) to `path` (PNG).
+/// The chart's width, px.
+pub const WIDTH_PX: u32 = 1600;
+/// The title band's height, px.
+pub const TITLE_PX: u32 = 40;
+/// The time panels' height (position, velocity, region, gate), px.
+const TIME_PANELS_PX: u32 = 1160;
+/// The line panel's height, px.
+const LINE_PANEL_PX: u32 = 320;
+/// A long chart's section headings' height, px.
+const HEADING_PX: u32 = 30;
+/// A long chart's per-minute panels' height, px.
+const MINUTE_PANELS_PX: u32 = 4 * 240;
+
+/// The chart's size in pixels: the short chart's, or the long one's with its headings and
+/// per-minute panels.
+pub fn size(d: &ChartData) -> (u32, u32) {
+    let lines = if d.lines_mm.is_empty() {
+        0
+    } else {
+        LINE_PANEL_PX
+    };
+    let long = if d.long {
+        2 * HEADING_PX + MINUTE_PANELS_PX
+    } else {
+        0
+    };
+    (WIDTH_PX, TITLE_PX + TIME_PANELS_PX + lines + long)
+}
+
+/// The pixel rectangles `(x0, y0, x1, y1)` of the chart's panels, top to bottom: the time
+/// panels, then a long run's per-minute panels, then the line panel. Each draws only inside
+/// its own rectangle; the title band and the headings are the rest.
+pub fn panel_rects(d: &ChartData) -> Vec<(i32, i32, i32, i32)> {
+    let w = WIDTH_PX as i32;
+    let mut y = TITLE_PX as i32;
+    if d.long {
+        y += HEADING_PX as i32;
+    }
+    let mut out = Vec::new();
+    for h in [330, 330, 200, 300] {
+        out.push((0, y, w, y + h));
+        y += h;
+    }
+    if d.long {
+        y += HEADING_PX as i32;
+        for _ in 0..4 {
+            let h = (MINUTE_PANELS_PX / 4) as i32;
+            out.push((0, y, w, y + h));
+            y += h;
+        }
+    }
+    if !d.lines_mm.is_empty() {
+        out.push((0, y, w, y + LINE_PANEL_PX as i32));
+    }
+    out
+}
+
+/// Writes the chart of a run (its [`ChartData`], and for a long run its per-minute figures from
+/// `m`) to `path` (PNG).
 pub fn write_png(
     d: &ChartData,
+    m: &Metrics,
     path: &Path,
     title: &str,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let with_lines = !d.lines_mm.is_empty();
-    let height = if with_lines { 1520 } else { 1200 };
-    let root = BitMapBackend::new(path, (1600, height)).into_drawing_area();
+    let root = BitMapBackend::new(path, size(d)).into_drawing_area();
+    draw(d, m, &root, title)?;
+    root.present()?;
+    Ok(())
+}
+
+/// Draws the chart on `root` (of [`size`]): the title, the time panels and, for a long run,
+/// the per-minute panels under headings; the line panel last.
+pub fn draw<DB: DrawingBackend>(
+    d: &ChartData,
+    m: &Metrics,
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
     root.fill(&WHITE)?;
-    let (header, body) = root.split_vertically(40);
-    header.draw(&Text::new(
+    root.draw(&Text::new(
         title.to_string(),
         (20, 10),
         ("sans-serif", 22).into_font(),
     ))?;
-    let panels = if with_lines {
-        body.split_by_breakpoints::<i32, i32, _, _>([], [330, 660, 860, 1160])
-    } else {
-        body.split_by_breakpoints::<i32, i32, _, _>([], [330, 660, 860])
+    let heading = |y: i32, text: String| {
+        root.draw(&Text::new(
+            text,
+            (20, y + 6),
+            ("sans-serif", 19).into_font().style(FontStyle::Bold),
+        ))
     };
-    let t_end = d.t_end;
+    let rects = panel_rects(d);
+    let area = |r: (i32, i32, i32, i32)| {
+        root.clone()
+            .shrink((r.0, r.1), ((r.2 - r.0) as u32, (r.3 - r.1) as u32))
+    };
+    if d.long {
+        heading(
+            TITLE_PX as i32,
+            format!(
+                "the last {} s in detail (t = {:.1} to {:.1} s)",
+                fmt_s(d.t_end - d.t0),
+                d.t0,
+                d.t_end
+            ),
+        )?;
+    }
+    let time: Vec<_> = rects[..4].iter().map(|&r| area(r)).collect();
+    time_panels(d, &time)?;
+    if d.long {
+        heading(
+            rects[3].3,
+            format!(
+                "minute by minute over the whole {} s ({} minutes; the last one {} s)",
+                fmt_s(d.t_end),
+                m.minutes.len(),
+                fmt_s(m.minutes.last().map_or(0.0, |x| x.span_s))
+            ),
+        )?;
+        let minutes: Vec<_> = rects[4..8].iter().map(|&r| area(r)).collect();
+        minute_panels(d, m, &minutes)?;
+    }
+    if let Some(&r) = rects.last().filter(|_| !d.lines_mm.is_empty()) {
+        line_envelopes(d, &area(r))?;
+    }
+    Ok(())
+}
+
+/// Seconds as the headings write them: whole seconds without decimals.
+fn fmt_s(s: f64) -> String {
+    if (s - s.round()).abs() < 1e-9 {
+        format!("{s:.0}")
+    } else {
+        format!("{s:.2}")
+    }
+}
+
+/// The position, velocity, region and gate panels over `d.t0 .. d.t_end`.
+fn time_panels<DB: DrawingBackend>(
+    d: &ChartData,
+    panels: &[DrawingArea<DB, plotters::coord::Shift>],
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let (t0, t_end) = (d.t0, d.t_end);
     let label_font = ("sans-serif", 18);
 
     // Position.
@@ -640,7 +964,7 @@ pub fn write_png(
             .margin_right(LEGEND_PX)
             .x_label_area_size(30)
             .y_label_area_size(80)
-            .build_cartesian_2d(0.0..t_end, -1.0..len_mm + 1.0)?;
+            .build_cartesian_2d(t0..t_end, -1.0..len_mm + 1.0)?;
         c.configure_mesh()
             .y_desc("position (mm)")
             .axis_desc_style(label_font)
@@ -650,7 +974,7 @@ pub fn write_png(
         let mut legend: Vec<Entry> = Vec::new();
         for &b in &d.boundaries_mm {
             c.draw_series(DashedLineSeries::new(
-                vec![(0.0, b), (t_end, b)],
+                vec![(t0, b), (t_end, b)],
                 6,
                 4,
                 BLACK.mix(0.5).stroke_width(1),
@@ -659,7 +983,7 @@ pub fn write_png(
         }
         for (i, &l) in d.lines_mm.iter().enumerate() {
             c.draw_series(DashedLineSeries::new(
-                vec![(0.0, l), (t_end, l)],
+                vec![(t0, l), (t_end, l)],
                 2,
                 3,
                 MAGENTA.mix(0.7).stroke_width(1),
@@ -673,6 +997,15 @@ pub fn write_png(
             (&meas, "measured", 1),
             (&tp, 5),
         )?);
+        // The boundaries and lines again over the opaque truth, so they stay visible.
+        for &b in &d.boundaries_mm {
+            c.draw_series(DashedLineSeries::new(
+                vec![(t0, b), (t_end, b)],
+                6,
+                4,
+                BLACK.mix(0.5).stroke_width(1),
+            ))?;
+        }
         side_legend(&panels[0], &legend)?;
     }
 
@@ -685,7 +1018,7 @@ pub fn write_png(
             .margin_right(LEGEND_PX)
             .x_label_area_size(30)
             .y_label_area_size(80)
-            .build_cartesian_2d(0.0..t_end, -vmax..vmax)?;
+            .build_cartesian_2d(t0..t_end, -vmax..vmax)?;
         c.configure_mesh()
             .y_desc("velocity (mm/s)")
             .axis_desc_style(label_font)
@@ -705,7 +1038,7 @@ pub fn write_png(
             .margin_right(LEGEND_PX)
             .x_label_area_size(30)
             .y_label_area_size(80)
-            .build_cartesian_2d(0.0..t_end, -1.5..n - 0.5)?;
+            .build_cartesian_2d(t0..t_end, -1.5..n - 0.5)?;
         let labels = &d.region_labels;
         c.configure_mesh()
             .y_desc("region")
@@ -727,7 +1060,8 @@ pub fn write_png(
             })
             .light_line_style(WHITE.mix(0.0))
             .draw()?;
-        c.draw_series(LineSeries::new(pts, GREEN.mix(0.9).stroke_width(2)))?;
+        // GREEN at 90 % over white, opaque.
+        wide(&mut c, &pts, RGBColor(25, 255, 25), 2)?;
     }
 
     // Gate line, from the timer model's edges: min/max per pixel column, so a kHz burst shows as
@@ -739,7 +1073,7 @@ pub fn write_png(
             .margin_right(LEGEND_PX)
             .x_label_area_size(45)
             .y_label_area_size(80)
-            .build_cartesian_2d(0.0..t_end, -0.2..1.2)?;
+            .build_cartesian_2d(t0..t_end, -0.2..1.2)?;
         c.configure_mesh()
             .y_desc("RF gate, drive")
             .x_desc("time (s)")
@@ -757,20 +1091,18 @@ pub fn write_png(
             })
             .light_line_style(WHITE.mix(0.0))
             .draw()?;
-        c.draw_series(LineSeries::new(pts, BLACK.stroke_width(1)))?;
-        // Where bursts are denser than pixels the line is a solid band: there the share of
-        // each pixel column's time it was on is drawn over it (the duty, and where it drops).
-        let orange = RGBColor(230, 120, 0);
-        for run in d.duty.runs() {
-            c.draw_series(LineSeries::new(run, orange.stroke_width(2)))?;
-        }
+        thin(&mut c, &pts, BLACK.stroke_width(1))?;
         // The drive the finger gets: enable × the RF level (the reference circuit's amplitude
         // for the DAC code), as a share of full drive.
         let blue = RGBColor(30, 90, 220);
-        c.draw_series(LineSeries::new(
-            d.drive.points(),
-            blue.mix(0.8).stroke_width(1),
-        ))?;
+        thin(&mut c, &d.drive.points(), blue.mix(0.8).stroke_width(1))?;
+        // Where bursts are denser than pixels the line is a solid band: there the share of
+        // each pixel column's time it was on is drawn over it (the duty, and where it drops),
+        // last, so the drive's own band does not hide it.
+        let orange = RGBColor(230, 120, 0);
+        for run in d.duty.runs() {
+            wide(&mut c, &run, orange, 2)?;
+        }
         side_legend(
             &panels[3],
             &[
@@ -782,11 +1114,251 @@ pub fn write_png(
             ],
         )?;
     }
+    Ok(())
+}
 
-    if with_lines {
-        line_envelopes(d, &panels[4])?;
+/// Colours of the regions on the per-minute panels, in order (repeating).
+const REGION_COLOURS: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(127, 127, 127),
+    RGBColor(23, 190, 207),
+];
+
+/// A per-minute plot: minutes on x, f64 on y.
+fn minute_plot<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, plotters::coord::Shift>,
+    minutes: f64,
+    y: std::ops::Range<f64>,
+    y_desc: &str,
+    last: bool,
+    y_labels: Option<&dyn Fn(&f64) -> String>,
+) -> Result<Plot<'a, DB>, Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let mut c = ChartBuilder::on(area)
+        .margin(10)
+        .margin_right(LEGEND_PX)
+        .x_label_area_size(if last { 45 } else { 30 })
+        .y_label_area_size(80)
+        .build_cartesian_2d(0.0..minutes, y)?;
+    let mut mesh = c.configure_mesh();
+    mesh.y_desc(y_desc)
+        .axis_desc_style(("sans-serif", 18))
+        .label_style(("sans-serif", 15))
+        .light_line_style(WHITE.mix(0.0));
+    if last {
+        mesh.x_desc("time (minutes)");
     }
-    root.present()?;
+    if let Some(f) = y_labels {
+        mesh.y_labels(12).y_label_formatter(f);
+    }
+    mesh.draw()?;
+    Ok(c)
+}
+
+/// The run minute by minute ([`Metrics::minutes`]), one point per minute at its middle: f_b
+/// produced per region (log scale, the commanded or model f_b dashed) and the lines' pulse
+/// rate; how far past their boundary the minute's switches came (least to most); the velocity
+/// error at zero lag and at the run's delay; the share of the minute under fault.
+fn minute_panels<DB: DrawingBackend>(
+    d: &ChartData,
+    m: &Metrics,
+    panels: &[DrawingArea<DB, plotters::coord::Shift>],
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let mins = &m.minutes;
+    let span = mins
+        .last()
+        .map_or(1.0, |x| (x.start_s + x.span_s) / 60.0)
+        .max(1e-3);
+    let mid = |x: &Minute| (x.start_s + x.span_s / 2.0) / 60.0;
+
+    // f_b per region, and the lines' pulses per second.
+    {
+        let colour = |i: usize| REGION_COLOURS[i % REGION_COLOURS.len()];
+        let line_rate = |x: &Minute| {
+            (x.line_pulses > 0 && x.span_s > 0.0).then(|| x.line_pulses as f64 / x.span_s)
+        };
+        let mut all: Vec<f64> = Vec::new();
+        for x in mins {
+            for r in &x.regions {
+                all.extend(r.produced_hz.iter().chain(&r.expected_hz));
+            }
+            all.extend(line_rate(x));
+        }
+        all.extend(m.regions.iter().filter_map(|r| r.commanded_hz));
+        let all: Vec<f64> = all.into_iter().filter(|v| *v > 0.0 && v.is_finite()).collect();
+        let lo = all.iter().copied().fold(f64::MAX, f64::min).min(1.0);
+        let hi = all.iter().copied().fold(1.0, f64::max);
+        let (lo, hi) = (lo.log10().floor() - 0.1, hi.log10().ceil() + 0.1);
+        // A log axis drawn as log10 values: decades labelled.
+        let decades = |v: &f64| {
+            if (v - v.round()).abs() < 1e-6 {
+                format!("{}", 10f64.powi(v.round() as i32))
+            } else {
+                String::new()
+            }
+        };
+        let mut c = minute_plot(
+            &panels[0],
+            span,
+            lo..hi,
+            "f_b produced (Hz, log)",
+            false,
+            Some(&decades),
+        )?;
+        let mut legend: Vec<Entry> = Vec::new();
+        for (i, label) in d.region_labels.iter().enumerate() {
+            let produced: Vec<(f64, f64)> = mins
+                .iter()
+                .filter_map(|x| {
+                    let f = x.regions.get(i)?.produced_hz?;
+                    Some((mid(x), f.log10()))
+                })
+                .collect();
+            let asked: Vec<(f64, f64)> = match m.regions.get(i).and_then(|r| r.commanded_hz) {
+                Some(f) => vec![(0.0, f.log10()), (span, f.log10())],
+                None => mins
+                    .iter()
+                    .filter_map(|x| Some((mid(x), x.regions.get(i)?.expected_hz?.log10())))
+                    .collect(),
+            };
+            if produced.is_empty() && asked.is_empty() {
+                continue;
+            }
+            let col = colour(i);
+            for run in clip_polyline(&asked, (0.0, span), (lo, hi)) {
+                c.draw_series(DashedLineSeries::new(run, 5, 4, col.stroke_width(1)))?;
+            }
+            thin(&mut c, &produced, col.stroke_width(1))?;
+            c.draw_series(
+                produced
+                    .iter()
+                    .map(|&p| Circle::new(p, 3, col.filled())),
+            )?;
+            legend.push((format!("{i}: {label}"), col.to_rgba(), 2));
+        }
+        let lines: Vec<(f64, f64)> = mins
+            .iter()
+            .filter_map(|x| Some((mid(x), line_rate(x)?.log10())))
+            .collect();
+        if !lines.is_empty() {
+            thin(&mut c, &lines, MAGENTA.stroke_width(1))?;
+            c.draw_series(lines.iter().map(|&p| Circle::new(p, 3, MAGENTA.filled())))?;
+            legend.push(("line pulses per second".into(), MAGENTA.to_rgba(), 2));
+        }
+        legend.push(("dashed: commanded, or".into(), BLACK.mix(0.6), 1));
+        legend.push(("  the texture's model".into(), WHITE.to_rgba(), 0));
+        side_legend(&panels[0], &legend)?;
+    }
+
+    // Switches: how far past its boundary each minute's switches came.
+    {
+        let ranges: Vec<(f64, (f64, f64))> = mins
+            .iter()
+            .filter_map(|x| Some((mid(x), x.switch_past_um?)))
+            .map(|(t, (a, b))| (t, (a / 1e3, b / 1e3)))
+            .collect();
+        let lo = ranges.iter().map(|r| r.1 .0).fold(0.0, f64::min);
+        let hi = ranges.iter().map(|r| r.1 .1).fold(0.1, f64::max);
+        let pad = 0.1 * (hi - lo);
+        let mut c = minute_plot(
+            &panels[1],
+            span,
+            lo - pad..hi + pad,
+            "switch past boundary (mm)",
+            false,
+            None,
+        )?;
+        let col = RGBColor(30, 90, 220);
+        for &(t, (a, b)) in &ranges {
+            thin(&mut c, &[(t, a), (t, b)], col.stroke_width(1))?;
+            c.draw_series([a, b].map(|v| Circle::new((t, v), 3, col.filled())))?;
+        }
+        thin(&mut c, &[(0.0, 0.0), (span, 0.0)], BLACK.mix(0.5).stroke_width(1))?;
+        side_legend(
+            &panels[1],
+            &[
+                (format!("{} switches; per minute", m.switch_count), col.to_rgba(), 2),
+                ("  the least and the most".into(), WHITE.to_rgba(), 0),
+                ("  past the boundary".into(), WHITE.to_rgba(), 0),
+                ("the boundary".into(), BLACK.mix(0.5), 1),
+            ],
+        )?;
+    }
+
+    // Velocity error.
+    {
+        let zero: Vec<(f64, f64)> = mins
+            .iter()
+            .filter_map(|x| Some((mid(x), x.velocity_rms_um_s? / 1e3)))
+            .collect();
+        let delayed: Vec<(f64, f64)> = mins
+            .iter()
+            .filter_map(|x| Some((mid(x), x.velocity_rms_at_delay_um_s? / 1e3)))
+            .collect();
+        let hi = zero.iter().chain(&delayed).map(|p| p.1).fold(0.1, f64::max) * 1.15;
+        let mut c = minute_plot(
+            &panels[2],
+            span,
+            0.0..hi,
+            "velocity RMS error (mm/s)",
+            false,
+            None,
+        )?;
+        let blue = RGBColor(30, 90, 220);
+        thin(&mut c, &zero, RED.stroke_width(1))?;
+        c.draw_series(zero.iter().map(|&p| Circle::new(p, 3, RED.filled())))?;
+        thin(&mut c, &delayed, blue.stroke_width(1))?;
+        c.draw_series(delayed.iter().map(|&p| Circle::new(p, 3, blue.filled())))?;
+        let delay = m
+            .velocity
+            .map_or("—".into(), |v| format!("{:.1} ms", v.delay_us / 1e3));
+        side_legend(
+            &panels[2],
+            &[
+                ("at zero lag".into(), RED.to_rgba(), 2),
+                (format!("at the run's delay, {delay}"), blue.to_rgba(), 2),
+            ],
+        )?;
+    }
+
+    // Faults: the share of each minute with a fault in force.
+    {
+        let pct: Vec<(f64, f64, f64)> = mins
+            .iter()
+            .map(|x| {
+                (
+                    x.start_s / 60.0,
+                    (x.start_s + x.span_s) / 60.0,
+                    100.0 * x.fault_samples as f64 / x.samples.max(1) as f64,
+                )
+            })
+            .collect();
+        let hi = pct.iter().map(|p| p.2).fold(1.0, f64::max) * 1.15;
+        let mut c = minute_plot(&panels[3], span, 0.0..hi, "time under fault (%)", true, None)?;
+        let col = RGBColor(214, 39, 40);
+        c.draw_series(
+            pct.iter()
+                .filter(|p| p.2 > 0.0)
+                .map(|&(a, b, v)| Rectangle::new([(a, 0.0), (b, v)], col.mix(0.6).filled())),
+        )?;
+        side_legend(
+            &panels[3],
+            &[
+                ("time under fault".into(), col.mix(0.6), 8),
+                (format!("{} fault onsets in all", m.fault_onsets), WHITE.to_rgba(), 0),
+            ],
+        )?;
+    }
     Ok(())
 }
 
@@ -826,10 +1398,7 @@ where
     ))?;
     let blue = RGBColor(30, 90, 220);
     for curve in curves {
-        c.draw_series(LineSeries::new(
-            curve.clone(),
-            blue.mix(0.5).stroke_width(1),
-        ))?;
+        thin(&mut c, curve, blue.mix(0.5).stroke_width(1))?;
     }
     side_legend(
         area,
@@ -868,7 +1437,7 @@ fn region_label(t: &saw_core::texture::Texture) -> String {
 /// with at least two rising edges (where the line is denser than the slices).
 #[cfg(test)]
 fn dense_duty(pts: &[(f64, f64)], t_end: f64, bins: usize) -> Vec<Vec<(f64, f64)>> {
-    let mut d = DutyBins::new(t_end, bins);
+    let mut d = DutyBins::new(0.0, t_end, bins);
     for &p in pts {
         d.push(p);
     }

@@ -107,14 +107,49 @@ fn parse_level(s: &str) -> Result<log::LevelFilter, String> {
     s.parse().map_err(|_| format!("unknown log level {s:?}"))
 }
 
+/// The binary's other commands, each dispatched before the simulator's flags are parsed
+/// (`main.rs`), with what each does: `--help` lists them, `host-sim help COMMAND` shows one's
+/// help.
+pub const COMMANDS: [(&str, &str); 6] = [
+    (
+        "serve",
+        "a virtual board behind a pseudo-terminal, for saw and its panel (docs/link.md)",
+    ),
+    (
+        "soak",
+        "the safety rules over random scenes, fingers and faults (docs/soak.md)",
+    ),
+    ("model", "physical models of the display (docs/models.md)"),
+    (
+        "tile-to-scene",
+        "a grooved tile as a scene file's grating region",
+    ),
+    (
+        "bench",
+        "the velocity estimators measured and charted (docs/bench-results.md)",
+    ),
+    (
+        "budget",
+        "lag against noise per ADC configuration (docs/conversion-budget.md)",
+    ),
+];
+
+/// The commands' list `--help` ends with: one line each.
+pub fn commands_help() -> String {
+    let mut s = String::from(
+        "Commands (each one's flags, units and ranges: host-sim help COMMAND, or host-sim \
+         COMMAND --help):\n",
+    );
+    for (name, what) in COMMANDS {
+        s.push_str(&format!("  {name:<14} {what}\n"));
+    }
+    s.push_str("  help           this help, or a command's: host-sim help serve");
+    s
+}
+
 /// Host simulation of the SAW tactile display: trajectory → rheostat/ADC → saw-core → burst timer.
 #[derive(Parser, Debug, Clone)]
-#[command(
-    name = "host-sim",
-    version,
-    after_help = "Other commands of this binary: host-sim model --help, host-sim tile-to-scene \
-                  --help, host-sim bench --help, host-sim budget --help."
-)]
+#[command(name = "host-sim", version, after_help = commands_help())]
 pub struct Args {
     /// Trajectory kind.
     #[arg(long, value_enum, default_value_t = Kind::BackAndForth)]

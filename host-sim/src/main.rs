@@ -21,6 +21,12 @@ impl log::Log for StderrLog {
 }
 
 fn main() -> ExitCode {
+    // `host-sim help [COMMAND]`: the other commands are dispatched by hand before clap, so
+    // clap knows no `help` subcommand; this gives the same text as `--help`.
+    let argv: Vec<String> = std::env::args().skip(1).collect();
+    if argv.first().map(String::as_str) == Some("help") {
+        return help(&argv[1..]);
+    }
     // `host-sim bench …`: the velocity estimators measured (docs/bench-results.md).
     if let Some(code) = host_sim::bench::run_from_env() {
         return code;
@@ -68,6 +74,48 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::FAILURE
+        }
+    }
+}
+
+/// `host-sim help` (the simulator's `--help`) or `host-sim help COMMAND` (that command's
+/// `--help`, from the command itself, so the two never differ).
+fn help(topic: &[String]) -> ExitCode {
+    use clap::CommandFactory;
+    let names: Vec<&str> = cli::COMMANDS.iter().map(|c| c.0).collect();
+    match topic {
+        [] => {
+            print!("{}", cli::Args::command().render_long_help());
+            ExitCode::SUCCESS
+        }
+        [cmd] if cmd == "help" => help(&[]),
+        [cmd] if names.contains(&cmd.as_str()) => {
+            let status = std::env::current_exe()
+                .and_then(|exe| std::process::Command::new(exe).args([cmd, "--help"]).status());
+            match status {
+                Ok(s) if s.success() => ExitCode::SUCCESS,
+                Ok(_) => ExitCode::FAILURE,
+                Err(e) => {
+                    eprintln!("error: cannot run host-sim {cmd} --help: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        [cmd] => {
+            eprintln!(
+                "error: unknown command '{cmd}': host-sim's commands are {}\n\nFor more \
+                 information, try 'host-sim --help'.",
+                names.join(", ")
+            );
+            ExitCode::from(2)
+        }
+        more => {
+            eprintln!(
+                "error: host-sim help takes one command name, not '{}'\n\nFor more \
+                 information, try 'host-sim --help'.",
+                more.join(" ")
+            );
+            ExitCode::from(2)
         }
     }
 }
@@ -130,7 +178,7 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
             100.0 * m.off_travel.samples as f64 / m.samples.max(1) as f64
         ));
     }
-    chart::write_png(&data, &output, &title)?;
+    chart::write_png(&data, &m, &output, &title)?;
     println!("chart: {}", output.display());
     let bare = sim::bare_core_s_per_sample(&params, BARE_CORE_SAMPLES)?;
     let per_sample = sim_s / m.samples.max(1) as f64;

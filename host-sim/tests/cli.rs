@@ -703,3 +703,94 @@ fn serve_fault_needs_its_window() {
         assert!(err.contains("--fault"), "{err}");
     }
 }
+
+// ---------------------------------------------------------------- help for every command
+
+/// `--help` ends with the binary's other commands, one line each, and how to get their help:
+/// serve and soak among them (they are dispatched before the simulator's flags are parsed, so
+/// clap alone never listed them).
+#[test]
+fn help_lists_every_command() {
+    let out = run(&["--help"]);
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8(out.stdout).unwrap();
+    let lines: Vec<&str> = text.lines().map(str::trim_end).collect();
+    for want in [
+        "Commands (each one's flags, units and ranges: host-sim help COMMAND, or host-sim COMMAND --help):",
+        "  serve          a virtual board behind a pseudo-terminal, for saw and its panel (docs/link.md)",
+        "  soak           the safety rules over random scenes, fingers and faults (docs/soak.md)",
+        "  model          physical models of the display (docs/models.md)",
+        "  tile-to-scene  a grooved tile as a scene file's grating region",
+        "  bench          the velocity estimators measured and charted (docs/bench-results.md)",
+        "  budget         lag against noise per ADC configuration (docs/conversion-budget.md)",
+        "  help           this help, or a command's: host-sim help serve",
+    ] {
+        assert!(lines.contains(&want), "missing {want:?} in\n{text}");
+    }
+}
+
+/// `host-sim help` is `--help`; `host-sim help COMMAND` is `host-sim COMMAND --help`, for
+/// every command; an unknown name is refused with one line listing the commands.
+#[test]
+fn help_command_gives_each_commands_help() {
+    let main = run(&["--help"]);
+    let help = run(&["help"]);
+    assert_eq!(help.status.code(), Some(0), "{help:?}");
+    assert_eq!(help.stdout, main.stdout);
+    for cmd in ["serve", "soak", "model", "tile-to-scene", "bench", "budget"] {
+        let own = run(&[cmd, "--help"]);
+        let via = run(&["help", cmd]);
+        assert_eq!(via.status.code(), Some(0), "help {cmd}: {via:?}");
+        assert!(!own.stdout.is_empty(), "{cmd} --help printed nothing");
+        assert_eq!(
+            String::from_utf8_lossy(&via.stdout),
+            String::from_utf8_lossy(&own.stdout),
+            "help {cmd}"
+        );
+    }
+    let serve = String::from_utf8(run(&["help", "serve"]).stdout).unwrap();
+    assert!(serve.lines().any(|l| l.starts_with("Usage: host-sim serve")), "{serve}");
+    let soak = String::from_utf8(run(&["help", "soak"]).stdout).unwrap();
+    assert!(soak.lines().any(|l| l.starts_with("Usage: host-sim soak")), "{soak}");
+    let out = run(&["help", "nope"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(out.stdout.is_empty());
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(
+        err.lines().next(),
+        Some(
+            "error: unknown command 'nope': host-sim's commands are serve, soak, model, \
+             tile-to-scene, bench, budget"
+        )
+    );
+}
+
+// ---------------------------------------------------------------- the summary's lines
+
+/// scenes/lines.toml: five lines over one `off` region. 3 s at 60 mm/s from 1.5 to 61.5 mm and
+/// back and forth is three strokes, each crossing every line once: 3 pulses per line, 15 in
+/// all, and none of them a burst of the off region (whose row stays empty).
+#[test]
+fn the_summary_reports_lines_apart_from_regions() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/lines.toml");
+    let out = run(&["--scene", scene.to_str().unwrap(), "-o", "lines.png"]);
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    let text = String::from_utf8(out.stdout).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(
+        lines.contains(&"       0             —              —           —       —       0        0  3.00 s"),
+        "the off region's row:\n{text}"
+    );
+    assert!(
+        lines.contains(
+            &"tangible lines: 5 at [10.000, 20.000, 31.500, 43.000, 53.000] mm; 15 pulses \
+              measured on the gate line (per line: 3, 3, 3, 3, 3); the core fired 15, skipped 0 \
+              crossings to keep the duty cap"
+        ),
+        "{text}"
+    );
+    assert!(
+        lines.contains(&"gate: 15 pulses (15 of them line pulses), 0 malformed (runt/doubled/stretched), 15 gate actions"),
+        "{text}"
+    );
+}
