@@ -254,7 +254,10 @@ async fn the_panel_in_a_real_browser() {
         .parse()
         .unwrap_or_else(|e| panic!("{shown}: {e}"));
     // A CSS pixel is 0.055 mm on this strip; the pointer lands on a whole pixel.
-    assert!((shown_mm - 30.0).abs() < 0.1, "shown while dragging: {shown}");
+    assert!(
+        (shown_mm - 30.0).abs() < 0.1,
+        "shown while dragging: {shown}"
+    );
     assert!(
         (shown[1].as_f64().unwrap() - x1).abs() < 10.0,
         "the label at x = {shown}, the pointer at {x1}"
@@ -306,10 +309,7 @@ async fn the_panel_in_a_real_browser() {
     let b0 = got["result"]["scene"]["region"][0]["until_mm"]
         .as_f64()
         .unwrap_or_else(|| panic!("no boundary 0 in {got}"));
-    assert!(
-        (b0 - 30.0).abs() < 0.1,
-        "the board's boundary 0 at {b0} mm"
-    );
+    assert!((b0 - 30.0).abs() < 0.1, "the board's boundary 0 at {b0} mm");
 
     // A new panel on the same board; the page reloaded.
     let ui = panel(&vb);
@@ -349,7 +349,10 @@ async fn the_panel_in_a_real_browser() {
     .await;
     let text = js(&c, "return document.getElementById('answer').textContent").await;
     assert!(text.as_str().unwrap().contains("wavelength_mm"), "{text}");
-    assert!(in_view(&c, "answer").await, "the refusal below the window after Apply");
+    assert!(
+        in_view(&c, "answer").await,
+        "the refusal below the window after Apply"
+    );
     for scroll in ["0", "document.body.scrollHeight"] {
         js(&c, &format!("window.scrollTo(0, {scroll}); return true")).await;
         assert!(
@@ -367,7 +370,11 @@ async fn the_panel_in_a_real_browser() {
     let noise = dir.path().join("noise.bin");
     std::fs::write(&noise, random_bytes(4096)).unwrap();
     let scene_before = js(&c, "return document.body.dataset.sceneId").await;
-    js(&c, "document.getElementById('answer').textContent = ''; return true").await;
+    js(
+        &c,
+        "document.getElementById('answer').textContent = ''; return true",
+    )
+    .await;
     c.find(fantoccini::Locator::Id("file"))
         .await
         .unwrap()
@@ -381,7 +388,11 @@ async fn the_panel_in_a_real_browser() {
         5,
     )
     .await;
-    let said = js(&c, "const a = document.getElementById('answer'); return [a.className, a.textContent]").await;
+    let said = js(
+        &c,
+        "const a = document.getElementById('answer'); return [a.className, a.textContent]",
+    )
+    .await;
     let text = said[1].as_str().unwrap();
     assert_eq!(said[0], "refused", "{said}");
     assert!(text.contains("TOML text"), "the rule not named: {text}");
@@ -447,7 +458,11 @@ async fn the_panel_in_a_real_browser() {
             .collect()
     };
     let (starts, lines) = (pen("moveTo"), pen("lineTo"));
-    assert_eq!(starts.len(), 2, "one gap, two runs: pen down at x = {starts:?}");
+    assert_eq!(
+        starts.len(),
+        2,
+        "one gap, two runs: pen down at x = {starts:?}"
+    );
     assert!(
         (starts[0] - x_of(10.0)).abs() < 0.5 && (starts[1] - x_of(11.5)).abs() < 0.5,
         "the runs start at x = {starts:?}, the records at 10 s and 11.5 s at {} and {}",
@@ -545,13 +560,22 @@ async fn the_panel_in_a_real_browser() {
     .await;
     // Looked at from 1 s of the board's time (the finger well under way) for 1.2 s of it.
     let record_us = "return Number(document.getElementById('strip').dataset.recordUs || 0)";
-    until(&c, "1 s of the board's time", &format!("{record_us} >= 1e6"), 20).await;
+    until(
+        &c,
+        "1 s of the board's time",
+        &format!("{record_us} >= 1e6"),
+        20,
+    )
+    .await;
     // The marker as drawn, with the board time of the record it shows: (mm, s).
     let mut seen: Vec<f64> = Vec::new();
     let mut at: Vec<f64> = Vec::new();
     let give_up = Instant::now() + Duration::from_secs(20);
     while at.len() < 2 || at[at.len() - 1] - at[0] < 1.2 {
-        assert!(Instant::now() < give_up, "1.2 s of board time not seen in 20 s: {at:?}");
+        assert!(
+            Instant::now() < give_up,
+            "1.2 s of board time not seen in 20 s: {at:?}"
+        );
         let v = js(
             &c,
             "const d = document.getElementById('strip').dataset; return [Number(d.fingerMm), Number(d.fingerUs)]",

@@ -421,10 +421,16 @@ fn the_port_is_held_only_while_a_page_is_open() {
     let mut ws = socket(&ui);
     let link = next(&mut ws, "link", 5.0).expect("no link message");
     assert_eq!(link["ok"], true, "{link}");
-    assert!(saw::port::open(&vb.port).is_err(), "a page is open: the panel holds the port");
+    assert!(
+        saw::port::open(&vb.port).is_err(),
+        "a page is open: the panel holds the port"
+    );
     // The tab closed: the panel lets go of the port.
     drop(ws);
-    until_free(&vb.port, "the panel held the port 10 s after its page closed");
+    until_free(
+        &vb.port,
+        "the panel held the port 10 s after its page closed",
+    );
     // A page again: the link comes back, with its telemetry.
     let mut ws = socket(&ui);
     let link = next(&mut ws, "link", 5.0).expect("no link message");
