@@ -606,6 +606,16 @@ impl ChartData {
     pub fn line_pulses(&self) -> usize {
         self.line_pulses
     }
+
+    /// The time the time panels cover, s: the whole run, or a long run's last [`DETAIL_S`].
+    pub fn span_s(&self) -> (f64, f64) {
+        (self.t0, self.t_end)
+    }
+
+    /// Whether this is a long run's chart (detail and per-minute panels).
+    pub fn is_long(&self) -> bool {
+        self.long
+    }
 }
 
 /// The pale blue the truth is drawn in: blue at 35 % over the white background, opaque, so the
