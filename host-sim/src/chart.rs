@@ -625,14 +625,12 @@ const TRUTH: RGBColor = RGBColor(166, 166, 255);
 /// A time panel's plot: f64 on both axes.
 type Plot<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
+/// A clipped segment: its ends, and whether each is the segment's own (not a cut).
+type Clipped = ((f64, f64), (f64, f64), bool, bool);
+
 /// Segment `p`–`q` cut to the rectangle `x` × `y` (Liang–Barsky): its ends inside, and whether
 /// each is the segment's own (not a cut); None when it misses the rectangle or is not finite.
-fn clip_segment(
-    p: (f64, f64),
-    q: (f64, f64),
-    x: (f64, f64),
-    y: (f64, f64),
-) -> Option<((f64, f64), (f64, f64), bool, bool)> {
+fn clip_segment(p: (f64, f64), q: (f64, f64), x: (f64, f64), y: (f64, f64)) -> Option<Clipped> {
     if ![p.0, p.1, q.0, q.1].iter().all(|v| v.is_finite()) {
         return None;
     }
@@ -1205,7 +1203,10 @@ where
             all.extend(line_rate(x));
         }
         all.extend(m.regions.iter().filter_map(|r| r.commanded_hz));
-        let all: Vec<f64> = all.into_iter().filter(|v| *v > 0.0 && v.is_finite()).collect();
+        let all: Vec<f64> = all
+            .into_iter()
+            .filter(|v| *v > 0.0 && v.is_finite())
+            .collect();
         let lo = all.iter().copied().fold(f64::MAX, f64::min).min(1.0);
         let hi = all.iter().copied().fold(1.0, f64::max);
         let (lo, hi) = (lo.log10().floor() - 0.1, hi.log10().ceil() + 0.1);
@@ -1249,11 +1250,7 @@ where
                 c.draw_series(DashedLineSeries::new(run, 5, 4, col.stroke_width(1)))?;
             }
             thin(&mut c, &produced, col.stroke_width(1))?;
-            c.draw_series(
-                produced
-                    .iter()
-                    .map(|&p| Circle::new(p, 3, col.filled())),
-            )?;
+            c.draw_series(produced.iter().map(|&p| Circle::new(p, 3, col.filled())))?;
             legend.push((format!("{i}: {label}"), col.to_rgba(), 2));
         }
         let lines: Vec<(f64, f64)> = mins
@@ -1293,11 +1290,19 @@ where
             thin(&mut c, &[(t, a), (t, b)], col.stroke_width(1))?;
             c.draw_series([a, b].map(|v| Circle::new((t, v), 3, col.filled())))?;
         }
-        thin(&mut c, &[(0.0, 0.0), (span, 0.0)], BLACK.mix(0.5).stroke_width(1))?;
+        thin(
+            &mut c,
+            &[(0.0, 0.0), (span, 0.0)],
+            BLACK.mix(0.5).stroke_width(1),
+        )?;
         side_legend(
             &panels[1],
             &[
-                (format!("{} switches; per minute", m.switch_count), col.to_rgba(), 2),
+                (
+                    format!("{} switches; per minute", m.switch_count),
+                    col.to_rgba(),
+                    2,
+                ),
                 ("  the least and the most".into(), WHITE.to_rgba(), 0),
                 ("  past the boundary".into(), WHITE.to_rgba(), 0),
                 ("the boundary".into(), BLACK.mix(0.5), 1),
@@ -1354,7 +1359,14 @@ where
             })
             .collect();
         let hi = pct.iter().map(|p| p.2).fold(1.0, f64::max) * 1.15;
-        let mut c = minute_plot(&panels[3], span, 0.0..hi, "time under fault (%)", true, None)?;
+        let mut c = minute_plot(
+            &panels[3],
+            span,
+            0.0..hi,
+            "time under fault (%)",
+            true,
+            None,
+        )?;
         let col = RGBColor(214, 39, 40);
         c.draw_series(
             pct.iter()
@@ -1365,7 +1377,11 @@ where
             &panels[3],
             &[
                 ("time under fault".into(), col.mix(0.6), 8),
-                (format!("{} fault onsets in all", m.fault_onsets), WHITE.to_rgba(), 0),
+                (
+                    format!("{} fault onsets in all", m.fault_onsets),
+                    WHITE.to_rgba(),
+                    0,
+                ),
             ],
         )?;
     }

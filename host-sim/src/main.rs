@@ -90,8 +90,11 @@ fn help(topic: &[String]) -> ExitCode {
         }
         [cmd] if cmd == "help" => help(&[]),
         [cmd] if names.contains(&cmd.as_str()) => {
-            let status = std::env::current_exe()
-                .and_then(|exe| std::process::Command::new(exe).args([cmd, "--help"]).status());
+            let status = std::env::current_exe().and_then(|exe| {
+                std::process::Command::new(exe)
+                    .args([cmd, "--help"])
+                    .status()
+            });
             match status {
                 Ok(s) if s.success() => ExitCode::SUCCESS,
                 Ok(_) => ExitCode::FAILURE,

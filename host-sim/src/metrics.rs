@@ -646,7 +646,11 @@ impl Online {
             if let Some(s) = self.sums.get_mut(region as usize) {
                 add(s);
             }
-            if let Some(s) = self.minute_of_clock(p.rise).regions.get_mut(region as usize) {
+            if let Some(s) = self
+                .minute_of_clock(p.rise)
+                .regions
+                .get_mut(region as usize)
+            {
                 add(s);
             }
         }
@@ -766,9 +770,8 @@ impl Online {
             .iter()
             .enumerate()
             .map(|(i, m)| {
-                let rms = |k: usize| {
-                    (m.vel_n > 0).then(|| (m.lag_sums[k] / m.vel_n as f64).sqrt() * 1e3)
-                };
+                let rms =
+                    |k: usize| (m.vel_n > 0).then(|| (m.lag_sums[k] / m.vel_n as f64).sqrt() * 1e3);
                 Minute {
                     start_s: (i as u64 * MINUTE_US) as f64 * 1e-6,
                     span_s: secs(m.samples),

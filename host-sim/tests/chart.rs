@@ -114,7 +114,12 @@ fn assert_nothing_outside_panels(d: &ChartData, img: &(Vec<u8>, u32, u32)) {
     let w = w as i32;
     let title = chart::TITLE_PX as i32;
     let ink = inked(img, 60..w, 0..title);
-    assert!(ink.is_empty(), "{} pixels drawn over the title band, e.g. {:?}", ink.len(), &ink[..ink.len().min(5)]);
+    assert!(
+        ink.is_empty(),
+        "{} pixels drawn over the title band, e.g. {:?}",
+        ink.len(),
+        &ink[..ink.len().min(5)]
+    );
     let rects = chart::panel_rects(d);
     // The headings: between the title and the first panel, and between the time panels and the
     // per-minute ones (a long chart only).
@@ -124,13 +129,26 @@ fn assert_nothing_outside_panels(d: &ChartData, img: &(Vec<u8>, u32, u32)) {
     }
     for (top, bottom) in bands.into_iter().filter(|b| b.1 > b.0) {
         let ink = inked(img, 1_000..w, top..bottom);
-        assert!(ink.is_empty(), "{} pixels in the heading band {top}–{bottom}", ink.len());
+        assert!(
+            ink.is_empty(),
+            "{} pixels in the heading band {top}–{bottom}",
+            ink.len()
+        );
     }
     for (i, &(_, y0, _, y1)) in rects.iter().enumerate() {
         let ink = inked(img, 100..1_360, y0..y0 + 9);
-        assert!(ink.is_empty(), "panel {i}: {} pixels in its top margin, e.g. {:?}", ink.len(), &ink[..ink.len().min(5)]);
+        assert!(
+            ink.is_empty(),
+            "panel {i}: {} pixels in its top margin, e.g. {:?}",
+            ink.len(),
+            &ink[..ink.len().min(5)]
+        );
         let ink = inked(img, w - 226..w - 222, y0..y1 - 50);
-        assert!(ink.is_empty(), "panel {i}: {} pixels between its plot and its legend", ink.len());
+        assert!(
+            ink.is_empty(),
+            "panel {i}: {} pixels between its plot and its legend",
+            ink.len()
+        );
     }
 }
 
@@ -147,7 +165,13 @@ fn an_hour_long_run_draws_detail_and_minutes_inside_their_panels() {
             61_500.0 - 60_000.0 * (s - 1.0)
         }
     };
-    let v = |t_us: u64| if t_us % 2_000_000 < 1_000_000 { 60_000.0 } else { -60_000.0 };
+    let v = |t_us: u64| {
+        if t_us % 2_000_000 < 1_000_000 {
+            60_000.0
+        } else {
+            -60_000.0
+        }
+    };
     let (d, m) = written(3_600.0, 10_000, tri, v);
     assert!(d.is_long());
     assert_eq!(d.span_s(), (3_597.0, 3_600.0));
@@ -170,7 +194,7 @@ fn an_hour_long_run_draws_detail_and_minutes_inside_their_panels() {
 /// stay inside their plots (plotters' wide lines spiked down through every panel below, shown).
 #[test]
 fn the_sharpest_turns_stay_inside_their_panels() {
-    let spike = |t_us: u64| t_us > 0 && t_us % 10_000 == 0;
+    let spike = |t_us: u64| t_us > 0 && t_us.is_multiple_of(10_000);
     let jump = |t_us: u64| if spike(t_us) { 61_500.0 } else { 30_000.0 };
     let v = |t_us: u64| if spike(t_us) { 600_000.0 } else { 0.0 };
     let (d, m) = written(0.3, 100, jump, v);
@@ -187,15 +211,33 @@ fn the_sharpest_turns_stay_inside_their_panels() {
 fn clipping_by_hand() {
     let r = (0.0, 10.0);
     let clip = |pts: &[(f64, f64)]| chart::clip_polyline(pts, r, r);
-    assert_eq!(clip(&[(1.0, 1.0), (2.0, 5.0), (3.0, 2.0)]), vec![vec![(1.0, 1.0), (2.0, 5.0), (3.0, 2.0)]]);
-    assert_eq!(clip(&[(2.0, 6.0), (4.0, 14.0)]), vec![vec![(2.0, 6.0), (3.0, 10.0)]]);
+    assert_eq!(
+        clip(&[(1.0, 1.0), (2.0, 5.0), (3.0, 2.0)]),
+        vec![vec![(1.0, 1.0), (2.0, 5.0), (3.0, 2.0)]]
+    );
+    assert_eq!(
+        clip(&[(2.0, 6.0), (4.0, 14.0)]),
+        vec![vec![(2.0, 6.0), (3.0, 10.0)]]
+    );
     assert_eq!(
         clip(&[(1.0, 5.0), (3.0, 15.0), (5.0, 5.0), (6.0, 5.0)]),
-        vec![vec![(1.0, 5.0), (2.0, 10.0)], vec![(4.0, 10.0), (5.0, 5.0), (6.0, 5.0)]]
+        vec![
+            vec![(1.0, 5.0), (2.0, 10.0)],
+            vec![(4.0, 10.0), (5.0, 5.0), (6.0, 5.0)]
+        ]
     );
-    assert_eq!(clip(&[(-5.0, 20.0), (20.0, 20.0)]), Vec::<Vec<(f64, f64)>>::new());
-    assert_eq!(clip(&[(1.0, f64::NAN), (2.0, 2.0)]), Vec::<Vec<(f64, f64)>>::new());
-    assert_eq!(clip(&[(-10.0, 5.0), (20.0, 5.0)]), vec![vec![(0.0, 5.0), (10.0, 5.0)]]);
+    assert_eq!(
+        clip(&[(-5.0, 20.0), (20.0, 20.0)]),
+        Vec::<Vec<(f64, f64)>>::new()
+    );
+    assert_eq!(
+        clip(&[(1.0, f64::NAN), (2.0, 2.0)]),
+        Vec::<Vec<(f64, f64)>>::new()
+    );
+    assert_eq!(
+        clip(&[(-10.0, 5.0), (20.0, 5.0)]),
+        vec![vec![(0.0, 5.0), (10.0, 5.0)]]
+    );
     assert_eq!(clip(&[(4.0, 4.0)]), vec![vec![(4.0, 4.0)]]);
     assert_eq!(clip(&[(40.0, 4.0)]), Vec::<Vec<(f64, f64)>>::new());
 }

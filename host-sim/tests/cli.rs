@@ -749,9 +749,17 @@ fn help_command_gives_each_commands_help() {
         );
     }
     let serve = String::from_utf8(run(&["help", "serve"]).stdout).unwrap();
-    assert!(serve.lines().any(|l| l.starts_with("Usage: host-sim serve")), "{serve}");
+    assert!(
+        serve
+            .lines()
+            .any(|l| l.starts_with("Usage: host-sim serve")),
+        "{serve}"
+    );
     let soak = String::from_utf8(run(&["help", "soak"]).stdout).unwrap();
-    assert!(soak.lines().any(|l| l.starts_with("Usage: host-sim soak")), "{soak}");
+    assert!(
+        soak.lines().any(|l| l.starts_with("Usage: host-sim soak")),
+        "{soak}"
+    );
     let out = run(&["help", "nope"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(out.stdout.is_empty());
@@ -778,7 +786,9 @@ fn the_summary_reports_lines_apart_from_regions() {
     let text = String::from_utf8(out.stdout).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     assert!(
-        lines.contains(&"       0             —              —           —       —       0        0  3.00 s"),
+        lines.contains(
+            &"       0             —              —           —       —       0        0  3.00 s"
+        ),
         "the off region's row:\n{text}"
     );
     assert!(

@@ -70,8 +70,8 @@ fn run() -> Metrics {
         sim::sample_period_us(board),
     )
     .unwrap();
-    let params = SimParams::new(board, Trajectory::Rest { at_um: 10_000.0 }, 120.0)
-        .with_config(config);
+    let params =
+        SimParams::new(board, Trajectory::Rest { at_um: 10_000.0 }, 120.0).with_config(config);
     let mut m = Online::new(&params, 1_000_000, PERIOD_US as u32, &[]);
 
     // The gate's edges, as the timer would have made them.
@@ -148,29 +148,69 @@ fn minute_figures_by_hand() {
     assert_eq!(a.samples, 600_000);
     assert_eq!(a.regions[0].pulses, 6_000);
     assert_eq!(a.regions[0].intervals, 6_000);
-    close(a.regions[0].produced_hz, 100.0, 1e-9, "minute 0, region 0 f_b");
-    close(Some(a.regions[0].time_s), 60.0, 1e-9, "minute 0, region 0 time");
+    close(
+        a.regions[0].produced_hz,
+        100.0,
+        1e-9,
+        "minute 0, region 0 f_b",
+    );
+    close(
+        Some(a.regions[0].time_s),
+        60.0,
+        1e-9,
+        "minute 0, region 0 time",
+    );
     assert_eq!(a.regions[1].pulses, 0);
     assert_eq!(a.regions[1].produced_hz, None);
     assert_eq!((a.switches, a.switch_past_um), (0, None));
     assert_eq!((a.fault_onsets, a.fault_samples), (0, 0));
     assert_eq!(a.line_pulses, 0);
-    close(a.velocity_rms_um_s, 1_000.0, 0.1, "minute 0, velocity error");
+    close(
+        a.velocity_rms_um_s,
+        1_000.0,
+        0.1,
+        "minute 0, velocity error",
+    );
 
     // Minute 1: region 0 from 60 to 61 s (100 rises) and from 61.5 to 90 s (2850); region 1
     // from 90 to 120 s at 50 Hz, 1500 rises less the one that was the line's pulse.
     assert_eq!((b.start_s, b.span_s), (60.0, 60.0));
     assert_eq!(b.regions[0].pulses, 100 + 2_850);
-    close(b.regions[0].produced_hz, 100.0, 1e-9, "minute 1, region 0 f_b");
-    close(Some(b.regions[0].time_s), 29.5, 1e-9, "minute 1, region 0 time");
+    close(
+        b.regions[0].produced_hz,
+        100.0,
+        1e-9,
+        "minute 1, region 0 f_b",
+    );
+    close(
+        Some(b.regions[0].time_s),
+        29.5,
+        1e-9,
+        "minute 1, region 0 time",
+    );
     assert_eq!(b.regions[1].pulses, 1_499);
-    close(b.regions[1].produced_hz, 50.0, 1e-9, "minute 1, region 1 f_b");
-    close(Some(b.regions[1].time_s), 30.0, 1e-9, "minute 1, region 1 time");
+    close(
+        b.regions[1].produced_hz,
+        50.0,
+        1e-9,
+        "minute 1, region 1 f_b",
+    );
+    close(
+        Some(b.regions[1].time_s),
+        30.0,
+        1e-9,
+        "minute 1, region 1 time",
+    );
     assert_eq!(b.line_pulses, 1);
     assert_eq!(b.switches, 1);
     assert_eq!(b.switch_past_um, Some((20_000.0, 20_000.0)));
     assert_eq!((b.fault_onsets, b.fault_samples), (1, 5_000));
-    close(b.velocity_rms_um_s, 2_000.0, 0.2, "minute 1, velocity error");
+    close(
+        b.velocity_rms_um_s,
+        2_000.0,
+        0.2,
+        "minute 1, velocity error",
+    );
     // The true velocity is zero throughout: every lag fits as well, the first is the delay.
     close(
         b.velocity_rms_at_delay_um_s,
@@ -183,5 +223,8 @@ fn minute_figures_by_hand() {
     assert_eq!(m.regions[0].pulses, 6_000 + 2_950);
     assert_eq!(m.regions[1].pulses, 1_499);
     assert_eq!(m.line_pulses, vec![1]);
-    assert_eq!((m.switch_count, m.fault_onsets, m.fault_samples), (1, 1, 5_000));
+    assert_eq!(
+        (m.switch_count, m.fault_onsets, m.fault_samples),
+        (1, 1, 5_000)
+    );
 }

@@ -13,7 +13,10 @@ use nix::unistd::Pid;
 const EXE: &str = env!("CARGO_BIN_EXE_host-sim");
 
 fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("host-sim-serve-files-{}-{name}", std::process::id()));
+    let d = std::env::temp_dir().join(format!(
+        "host-sim-serve-files-{}-{name}",
+        std::process::id()
+    ));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d

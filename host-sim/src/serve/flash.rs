@@ -12,11 +12,11 @@ use std::os::unix::fs::FileExt;
 use std::path::Path;
 use std::time::Duration;
 
-use nix::errno::Errno;
-use nix::fcntl::{Flock, FlockArg};
 use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
+use nix::errno::Errno;
+use nix::fcntl::{Flock, FlockArg};
 use saw_core::scene::Config;
 use saw_link::msg::StoreFault;
 use saw_store::{Saved, SceneStore};
@@ -290,7 +290,10 @@ mod tests {
         );
         // The store's opener says the same (the lock comes before the size check).
         let e = open(&path, &saw_boards::NUCLEO_G474RE).err().unwrap();
-        assert!(e.contains("another host-sim serve is using this flash file"), "{e}");
+        assert!(
+            e.contains("another host-sim serve is using this flash file"),
+            "{e}"
+        );
         drop(first);
         let mut again = FileFlash::<8, 2048>::open(&path, 2).unwrap();
         let mut got = [0u8; 9];

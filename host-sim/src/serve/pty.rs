@@ -60,7 +60,13 @@ fn take_lock(link: &Path) -> Result<(Flock<std::fs::File>, PathBuf), String> {
             .create(true)
             .truncate(false)
             .open(&path)
-            .map_err(|e| format!("--pty {}: cannot open {}: {e}", link.display(), path.display()))?;
+            .map_err(|e| {
+                format!(
+                    "--pty {}: cannot open {}: {e}",
+                    link.display(),
+                    path.display()
+                )
+            })?;
         let mut lock = match Flock::lock(file, FlockArg::LockExclusiveNonblock) {
             Ok(l) => l,
             Err((mut file, Errno::EWOULDBLOCK)) => {
@@ -79,7 +85,11 @@ fn take_lock(link: &Path) -> Result<(Flock<std::fs::File>, PathBuf), String> {
                 ));
             }
             Err((_, e)) => {
-                return Err(format!("--pty {}: cannot lock {}: {e}", link.display(), path.display()))
+                return Err(format!(
+                    "--pty {}: cannot lock {}: {e}",
+                    link.display(),
+                    path.display()
+                ))
             }
         };
         let same = match (lock.metadata(), std::fs::metadata(&path)) {
@@ -93,7 +103,13 @@ fn take_lock(link: &Path) -> Result<(Flock<std::fs::File>, PathBuf), String> {
         lock.set_len(0)
             .and_then(|_| lock.rewind())
             .and_then(|_| writeln!(lock, "{}", std::process::id()))
-            .map_err(|e| format!("--pty {}: cannot write {}: {e}", link.display(), path.display()))?;
+            .map_err(|e| {
+                format!(
+                    "--pty {}: cannot write {}: {e}",
+                    link.display(),
+                    path.display()
+                )
+            })?;
         return Ok((lock, path));
     }
     Err(format!(
@@ -213,7 +229,12 @@ fn remember(path: &Path) -> usize {
     let raw = c.into_raw();
     for (i, slot) in CLEANUP.iter().enumerate() {
         if slot
-            .compare_exchange(std::ptr::null_mut(), raw, Ordering::SeqCst, Ordering::SeqCst)
+            .compare_exchange(
+                std::ptr::null_mut(),
+                raw,
+                Ordering::SeqCst,
+                Ordering::SeqCst,
+            )
             .is_ok()
         {
             return i;
@@ -271,7 +292,10 @@ fn install_handler() {
 /// From now on SIGINT, SIGTERM and SIGHUP set `stop` (after removing the links) instead of
 /// ending the process: the serve loop returns and every board is dropped as at `--seconds`.
 pub fn on_signals(stop: &'static AtomicBool) {
-    STOP.store(stop as *const AtomicBool as *mut AtomicBool, Ordering::SeqCst);
+    STOP.store(
+        stop as *const AtomicBool as *mut AtomicBool,
+        Ordering::SeqCst,
+    );
     install_handler();
 }
 
@@ -306,8 +330,14 @@ mod tests {
         );
         assert_eq!(std::fs::read_link(&link).unwrap(), first.slave_path());
         drop(first);
-        assert!(std::fs::symlink_metadata(&link).is_err(), "the link outlived its board");
-        assert!(!lock_path(&link).exists(), "the lock file outlived its board");
+        assert!(
+            std::fs::symlink_metadata(&link).is_err(),
+            "the link outlived its board"
+        );
+        assert!(
+            !lock_path(&link).exists(),
+            "the lock file outlived its board"
+        );
         let again = Pty::open(&link).unwrap();
         assert_eq!(std::fs::read_link(&link).unwrap(), again.slave_path());
     }
