@@ -482,6 +482,14 @@ impl Online {
                 self.edge(e, k);
             }
         }
+        // Actions up to now that no rise has reached: every rise up to now is placed, so only
+        // the last one's line matters for the next rise (and the queue stays as short as the
+        // action latency, however long a run goes without a rise).
+        while self.actions.front().is_some_and(|a| a.0 <= now) {
+            if let Some((_, line)) = self.actions.pop_front() {
+                self.line_armed = line;
+            }
+        }
         self.stall_point(p, now);
         // Faults, travel, switches, velocity.
         if p.fault.is_some() {
