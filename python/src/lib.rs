@@ -1063,6 +1063,19 @@ impl Stream {
     }
 }
 
+impl Drop for Stream {
+    /// A stream dropped while open (a `for` loop left by `break` without `with`) is stopped,
+    /// so the board takes requests again.
+    fn drop(&mut self) {
+        if self.open {
+            Python::with_gil(|py| {
+                // Nobody is left to tell of a failed stop; the next call finds the port's state.
+                let _ = self.close(py);
+            });
+        }
+    }
+}
+
 /// The scene id a configuration has on every host and board (the CRC-32 of its encoding).
 #[pyfunction]
 fn scene_id_of_file(path: PathBuf) -> PyResult<u32> {
