@@ -701,6 +701,7 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
         (0.30, flipped),
         (0.35, frame_of(4, &Request::Counters { reset: false })),
         (0.40, frame_of(5, &Request::Stream { every_samples: 10 })),
+        (0.45, frame_of(7, &Request::Ping)),
         (0.50, frame_of(6, &Request::Stream { every_samples: 0 })),
     ];
     let (o, m) = run::run(&opts)?;
@@ -800,6 +801,47 @@ pub fn link(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
             worst_um = worst_um.max((p as f64 - truth).abs());
         }
     }
+    // Protocol 2: every record carries the scene in force (the moved one, the first change since
+    // boot), none is older than the stream's start, and a ping reads the board's µs clock at the
+    // time its request arrived (the records' clock: the model's time since reset).
+    let from_us = match answer(5) {
+        Some((_, _, Reply::Streaming { from_us, .. })) => Some(from_us),
+        _ => None,
+    };
+    let stamped = records
+        .iter()
+        .all(|r| r.scene_id == want && r.change == 1 && from_us.is_some_and(|f| r.time_us >= f));
+    out.push(check(
+        "link: records carry the scene in force and start after the request",
+        !records.is_empty() && stamped,
+        format!(
+            "from_us {from_us:?}; first record {:?}",
+            records.first().map(|r| (r.time_us, r.scene_id, r.change))
+        ),
+    ));
+    // The board's µs clock starts with its time driver, after reset: compared by differences.
+    // Between the stream request and the ping the board's clock moved as far as the model's
+    // time between their last bytes in, give or take the link task's latency (< 0.5 ms).
+    let in_us = |i: usize| {
+        o.link_input_done
+            .get(i)
+            .map(|t| *t as f64 * 1e6 / TICKS_PER_S as f64)
+    };
+    let pong = match answer(7) {
+        Some((_, _, Reply::Pong { board_time_us })) => Some(board_time_us),
+        _ => None,
+    };
+    let board_dt = pong.zip(from_us).map(|(p, f)| p as f64 - f as f64);
+    let model_dt = in_us(5).zip(in_us(4)).map(|(p, s)| p - s);
+    out.push(check(
+        "link: a ping reads the board clock",
+        board_dt
+            .zip(model_dt)
+            .is_some_and(|(b, m)| (b - m).abs() < 500.0),
+        format!(
+            "stream request to ping: {board_dt:?} µs on the board's clock, {model_dt:?} µs of model time"
+        ),
+    ));
     out.push(check(
         "link: stream follows the finger",
         (90..=110).contains(&records.len()) && worst_um < 300.0 && bad == 0,

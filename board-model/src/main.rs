@@ -7,7 +7,7 @@ use saw_board_model::board::BoardKind;
 use saw_board_model::{check, run};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 #[derive(Parser)]
 #[command(
@@ -277,7 +277,10 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
                 },
                 board_seconds: seconds,
             };
-            on_stop_signals();
+            // host-sim's pty handler: on SIGINT, SIGTERM or SIGHUP it removes the link at once
+            // and sets STOP (its `Pty::open` installs the handler; one of our own would be
+            // replaced by it and the process killed by the re-raised signal).
+            host_sim::serve::pty::on_signals(&STOP);
             let stats = saw_board_model::serve::serve(&opts, &STOP, |p| {
                 eprintln!(
                     "board-model serve: {} running {} on {} ({})",
@@ -411,27 +414,6 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
 /// Set by SIGINT or SIGTERM: `serve` stops at its next step, writes the flash back and removes
 /// its link (the default action would kill it and leave both behind).
 static STOP: AtomicBool = AtomicBool::new(false);
-
-extern "C" fn stop_requested(_signal: i32) {
-    // Only an atomic store: async-signal-safe.
-    STOP.store(true, Ordering::Relaxed);
-}
-
-// libc's `signal` (glibc gives it BSD semantics: the handler stays installed, reads restart);
-// declared here rather than adding a crate for two calls.
-extern "C" {
-    fn signal(signum: i32, handler: extern "C" fn(i32)) -> usize;
-}
-
-fn on_stop_signals() {
-    const SIGINT: i32 = 2;
-    const SIGTERM: i32 = 15;
-    // SAFETY: the handler only stores to an atomic.
-    unsafe {
-        signal(SIGINT, stop_requested);
-        signal(SIGTERM, stop_requested);
-    }
-}
 
 /// Reads the allow file: `pattern | reason` per line.
 fn allow_list(path: &std::path::Path) -> Result<Vec<(String, String)>, String> {

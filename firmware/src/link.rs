@@ -50,12 +50,31 @@ pub struct StreamTap {
     every: u16,
     /// The scene in force, as its records carry it.
     pub stamp: Stamp,
+    /// The last record's time, 32-bit and widened to 64: the next is widened from it.
+    last_us: Option<(u32, u64)>,
 }
 
 impl StreamTap {
     /// Stopped; records stamped with `stamp` (the scene the board booted into).
     pub const fn new(stamp: Stamp) -> Self {
-        Self { decimator: Decimator::new(), every: 0, stamp }
+        Self { decimator: Decimator::new(), every: 0, stamp, last_us: None }
+    }
+
+    /// A streamed sample's 32-bit µs time as µs since boot (64 bits). From the record before:
+    /// one subtraction, exact while records are less than 71.6 min apart (at most 1 s: every
+    /// 10 000th sample); the first of a stream is widened against the 64-bit clock, once, so
+    /// the sample path does not read the clock per record (issue #33's tap cost check).
+    #[inline]
+    pub fn widen(&mut self, t_us: u32) -> u64 {
+        let wide = match self.last_us {
+            Some((last32, last64)) => last64.wrapping_add(u64::from(t_us.wrapping_sub(last32))),
+            None => {
+                let now = embassy_time::Instant::now().as_micros();
+                now.wrapping_sub(u64::from((now as u32).wrapping_sub(t_us)))
+            }
+        };
+        self.last_us = Some((t_us, wide));
+        wide
     }
 
     /// Whether this sample becomes a record (follows `EVERY`).
@@ -65,6 +84,8 @@ impl StreamTap {
         if every != self.every {
             self.every = every;
             self.decimator.set(every);
+            // A new stream's first record is widened against the clock again.
+            self.last_us = None;
         }
         self.decimator.take()
     }

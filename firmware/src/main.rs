@@ -365,12 +365,8 @@ fn sample_step(ctrl: &mut Controller, burst: &mut BurstGate, tap: &mut link::Str
     // Drive mode, then amplitude, then the line (saw-core's order).
     saw_core::controller::apply(&out, burst);
     if tap.take() {
-        // The sample's 32-bit µs time widened against the 64-bit clock: exact while the sample
-        // is less than 71.6 min old (it is a few µs old). Read only for a streamed sample.
-        let now_us = Instant::now().as_micros();
-        let age_us = (now_us as u32).wrapping_sub(sample.t_us);
         tap.push(saw_link::msg::Record {
-            time_us: now_us.wrapping_sub(u64::from(age_us)),
+            time_us: tap.widen(sample.t_us),
             scene_id: tap.stamp.scene_id,
             change: tap.stamp.change,
             position_um: out.position_um,

@@ -140,9 +140,13 @@ pub fn run_from_env() -> Option<ExitCode> {
         Ok(a) => a,
         Err(e) => e.exit(),
     };
-    let stop = AtomicBool::new(false);
+    // SIGINT, SIGTERM, SIGHUP: the link is removed at once and the loop ends as at --seconds
+    // (the flash written, the summary printed) instead of the process dying by the signal.
+    static STOP: AtomicBool = AtomicBool::new(false);
+    pty::on_signals(&STOP);
+    let stop = &STOP;
     Some(
-        match serve(&a, &stop, |p| {
+        match serve(&a, stop, |p| {
             eprintln!(
                 "virtual board on {} ({})",
                 a.pty.display(),
@@ -182,6 +186,9 @@ pub fn serve_with_clock(
     ready: impl FnOnce(&Pty, BoardClock),
 ) -> Result<ServeStats, String> {
     let board = a.board;
+    // The link first: a second board on a live link (or a locked flash file) is refused before
+    // anything boots or logs.
+    let pty = Pty::open(&a.pty)?;
     let (params, source) = params(a, board)?;
     let store = match &a.flash {
         Some(path) => Some(flash::open(path, board)?),
@@ -198,7 +205,6 @@ pub fn serve_with_clock(
     let session = Session::new(identity, boot.config, boot.source);
     let mut board = boot.board;
     board.set_stamp(session.stamp());
-    let pty = Pty::open(&a.pty)?;
     let clock = BoardClock {
         start: Instant::now(),
         rate: 1.0 + a.clock_ppm * 1e-6,
