@@ -30,14 +30,26 @@ const SETTLE_S: f64 = 0.0067;
 /// Seeds of the ADC noise per case.
 const SEEDS: std::ops::Range<u64> = 0..6;
 
-/// Worst |placement error| on a steady stroke, stated in docs/estimators.md: 6.7 µm, the worst
-/// of these 42 runs (6.61 µm, λ = 0.2 mm at 100 mm/s, seed 0), asserted as stated against the
-/// issue's 10 µm. The line's end has σ = 0.25 of one sample's position noise (8.1 µm at 2 LSB
-/// with 16 conversions, so 2.0 µm), and the worst of ~1 100 bursts is ≈ 3.3 σ of that. With the
-/// 32-sample line it was 10.2 µm.
-const STATED_STEADY_WORST_UM: f64 = 6.7;
+/// The specification, issue #17's figure (docs/estimators.md, "the issue's 10 µm"): every burst
+/// on a steady stroke within 10 µm of its ridge, on every run.
+const SPEC_STEADY_WORST_UM: f64 = 10.0;
+
+/// 95 % of the steady bursts of all runs within 5 µm of their ridge: 2.5 σ of the line's end
+/// (σ ≈ 2.0 µm, docs/estimators.md: 0.25 of one sample's position noise, 8.1 µm at 2 LSB with
+/// 16 conversions), where a Gaussian puts 98.8 %. Measured over 30 seeds a case (22 320 bursts):
+/// 95th percentile 4.0 µm, RMS 2.1 µm, and worst 8.7 µm (λ = 0.2 mm, 100 mm/s, seed 17), so a
+/// bound at the worst of a few seeds is the noise realisation's, not the renderer's.
+const STEADY_P95_UM: f64 = 5.0;
+
+/// Snapshot: the worst |placement error| on a steady stroke over [`SEEDS`] on today's noise
+/// stream, 6.61 µm (λ = 0.2 mm at 100 mm/s, seed 0), the figure docs/estimators.md quotes. Not a
+/// specification: a change of the noise model or the loop moves it; re-measure and update the
+/// docs' figure with it. With the 32-sample line it was 10.2 µm.
+const SNAPSHOT_STEADY_WORST_UM: f64 = 6.61;
+const SNAPSHOT_STEADY_WORST_CASE: &str = "λ 200 µm, 100 mm/s, seed 0";
 
 struct Score {
+    steady_abs_um: Vec<f64>,
     steady_worst_um: f64,
     steady_rms_um: f64,
     settling_worst_um: f64,
@@ -60,6 +72,7 @@ fn score(r: &SimResult, wavelength_um: u32, speed_um_s: f64) -> Score {
     }
     let delayed = pulses(r).iter().filter(|(_, d)| *d).count();
     Score {
+        steady_abs_um: steady.iter().map(|e| e.abs()).collect(),
         steady_worst_um: steady.iter().map(|e| e.abs()).fold(0.0, f64::max),
         steady_rms_um: (steady.iter().map(|e| e * e).sum::<f64>() / steady.len().max(1) as f64)
             .sqrt(),
@@ -85,46 +98,101 @@ fn run(p: SimParams) -> SimResult {
     sim::run(&p).unwrap()
 }
 
-#[test]
-fn hybrid_bursts_land_within_ten_microns_on_a_steady_stroke() {
-    let mut worst = (0.0f64, String::new());
-    for wavelength_um in [200u32, 1_000] {
-        for mm_s in [20.0, 50.0, 100.0, 200.0] {
-            // λ = 0.2 mm at 200 mm/s is 1 kHz: the board's top f_b; the ridge spacing check
-            // can drop one in a run there, as position phase does (docs/estimators.md).
-            if wavelength_um == 200 && mm_s == 200.0 {
-                continue;
-            }
-            for seed in SEEDS {
-                let v = mm_s * 1_000.0;
-                let (traj, d) = stroke(wavelength_um, v);
-                let r = run(SimParams::new(&NUCLEO_F446RE, traj, d)
-                    .with_config(grating_config_at(GratingRender::Hybrid, wavelength_um))
-                    .with_noise(2.0, seed));
-                let s = score(&r, wavelength_um, v);
-                let case = format!("λ {wavelength_um} µm, {mm_s} mm/s, seed {seed}");
-                eprintln!(
-                    "{case}: {} bursts / {} ridges, {} delayed; steady RMS {:.1} worst {:.1} µm; within {SETTLE_S} s of a turn worst {:.1} µm",
-                    s.bursts, s.ridges, s.delayed, s.steady_rms_um, s.steady_worst_um, s.settling_worst_um
-                );
-                assert_eq!(s.bursts as u64, s.ridges, "{case}: one burst per ridge");
-                assert!(
-                    s.steady_worst_um <= STATED_STEADY_WORST_UM,
-                    "{case}: worst {} µm",
-                    s.steady_worst_um
-                );
-                // Most bursts are delayed into the period by the prediction (the others are
-                // fired at once where the line had just passed the ridge, or by position
-                // phase within a window of a turn).
-                assert!(s.delayed * 2 >= s.bursts, "{case}: {} delayed", s.delayed);
-                assert_eq!(r.telemetry.ridges_skipped, 0, "{case}");
-                if s.steady_worst_um >= worst.0 {
-                    worst = (s.steady_worst_um, case);
+/// One steady-stroke run: its case, its score and the ridges the renderer skipped.
+struct SteadyRun {
+    case: String,
+    score: Score,
+    ridges_skipped: u32,
+}
+
+/// The steady strokes: λ = 0.2 and 1 mm, 20/50/100/200 mm/s there and back, [`SEEDS`] each. Run
+/// once per test binary and shared by the specification test and the snapshot.
+fn steady_runs() -> &'static [SteadyRun] {
+    static RUNS: std::sync::OnceLock<Vec<SteadyRun>> = std::sync::OnceLock::new();
+    RUNS.get_or_init(|| {
+        let mut runs = Vec::new();
+        for wavelength_um in [200u32, 1_000] {
+            for mm_s in [20.0, 50.0, 100.0, 200.0] {
+                // λ = 0.2 mm at 200 mm/s is 1 kHz: the board's top f_b; the ridge spacing check
+                // can drop one in a run there, as position phase does (docs/estimators.md).
+                if wavelength_um == 200 && mm_s == 200.0 {
+                    continue;
+                }
+                for seed in SEEDS {
+                    let v = mm_s * 1_000.0;
+                    let (traj, d) = stroke(wavelength_um, v);
+                    let r = run(SimParams::new(&NUCLEO_F446RE, traj, d)
+                        .with_config(grating_config_at(GratingRender::Hybrid, wavelength_um))
+                        .with_noise(2.0, seed));
+                    runs.push(SteadyRun {
+                        case: format!("λ {wavelength_um} µm, {mm_s} mm/s, seed {seed}"),
+                        score: score(&r, wavelength_um, v),
+                        ridges_skipped: r.telemetry.ridges_skipped,
+                    });
                 }
             }
         }
+        runs
+    })
+}
+
+#[test]
+fn hybrid_bursts_land_within_ten_microns_on_a_steady_stroke() {
+    let mut all_um = Vec::new();
+    for run in steady_runs() {
+        let (case, s) = (&run.case, &run.score);
+        eprintln!(
+            "{case}: {} bursts / {} ridges, {} delayed; steady RMS {:.1} worst {:.1} µm; within {SETTLE_S} s of a turn worst {:.1} µm",
+            s.bursts, s.ridges, s.delayed, s.steady_rms_um, s.steady_worst_um, s.settling_worst_um
+        );
+        assert_eq!(s.bursts as u64, s.ridges, "{case}: one burst per ridge");
+        assert!(
+            s.steady_worst_um <= SPEC_STEADY_WORST_UM,
+            "{case}: worst {} µm, the specification is {SPEC_STEADY_WORST_UM} µm",
+            s.steady_worst_um
+        );
+        // Most bursts are delayed into the period by the prediction (the others are fired at
+        // once where the line had just passed the ridge, or by position phase within a window
+        // of a turn).
+        assert!(s.delayed * 2 >= s.bursts, "{case}: {} delayed", s.delayed);
+        assert_eq!(run.ridges_skipped, 0, "{case}");
+        all_um.extend_from_slice(&s.steady_abs_um);
     }
-    eprintln!("hybrid steady worst {:.2} µm ({})", worst.0, worst.1);
+    all_um.sort_by(f64::total_cmp);
+    assert!(all_um.len() > 1_000, "{} steady bursts", all_um.len());
+    let p95 = all_um[all_um.len() * 95 / 100];
+    eprintln!(
+        "steady bursts: {}, 95th percentile {p95:.2} µm, worst {:.2} µm",
+        all_um.len(),
+        all_um[all_um.len() - 1]
+    );
+    assert!(
+        p95 <= STEADY_P95_UM,
+        "95th percentile of the steady bursts {p95:.2} µm, above {STEADY_P95_UM} µm"
+    );
+}
+
+/// Snapshot, not a specification: the worst steady placement over [`SEEDS`] on today's noise
+/// stream is the figure docs/estimators.md quotes. A failure here means the figure moved (a
+/// change of the noise model, the estimator or the renderer): re-measure, update the docs and
+/// this snapshot, and judge the change by the specification test above.
+#[test]
+fn snapshot_hybrid_steady_worst_over_seeds_0_to_5() {
+    let worst = steady_runs()
+        .iter()
+        .max_by(|a, b| a.score.steady_worst_um.total_cmp(&b.score.steady_worst_um))
+        .unwrap();
+    eprintln!(
+        "hybrid steady worst {:.3} µm ({})",
+        worst.score.steady_worst_um, worst.case
+    );
+    assert!(
+        (worst.score.steady_worst_um - SNAPSHOT_STEADY_WORST_UM).abs() < 0.005
+            && worst.case == SNAPSHOT_STEADY_WORST_CASE,
+        "snapshot moved: worst {:.3} µm ({}), was {SNAPSHOT_STEADY_WORST_UM} µm ({SNAPSHOT_STEADY_WORST_CASE})",
+        worst.score.steady_worst_um,
+        worst.case
+    );
 }
 
 /// Below the trust speed (10 mm/s) the line is not trusted: every burst comes from position

@@ -17,15 +17,39 @@ const LINE_UM: u32 = 50_000;
 const PULSE_US: u32 = 10_000;
 /// ADC noise seeds each crossing runs with.
 const SEEDS: std::ops::Range<u64> = 0..12;
-/// Worst distance of a triangle's peak from its line at 20 and 60 mm/s, µm, worst of [`SEEDS`]
-/// on either board at 2 LSB of ADC noise, as docs/rf-level.md states it (no margin). Below
-/// ~200 mm/s a sample's travel (2 µm at 20 mm/s) is finer than the position the core measures
-/// (one 12-bit LSB of the 100 mm rheostat is 24 µm; 16 conversions at 2 LSB RMS leave ~12 µm
-/// RMS) and the 5 ms of velocity noise the lead multiplies, so the firing sample is chosen by
-/// noise: per speed, 24 µm at +20 and +60 mm/s, 32 at −20, 36 at −60. At 200 mm/s the peak is
-/// within one sample of travel (20 µm) on every seed. Without the lead it lands half the pulse
-/// late: 100 µm at 20 mm/s, 1 mm at 200 mm/s.
-const STATED_FLOOR_UM: f64 = 36.02;
+
+/// One 12-bit LSB of the 100 mm rheostat, µm: below ~200 mm/s a sample's travel (2 µm at
+/// 20 mm/s) is finer than the position the core measures (16 conversions at 2 LSB RMS leave
+/// 0.5 LSB, ~12 µm RMS) and the 5 ms of velocity noise the lead multiplies, so the firing sample
+/// is chosen by noise.
+const LSB_UM: f64 = 100_000.0 / 4096.0;
+
+/// The specification (docs/rf-level.md, the test's doc below): the peak within one sample of
+/// travel of the line, or within the position's noise floor where that is coarser — taken as
+/// 2 LSB (48.8 µm, 4 σ of the position's noise), on every crossing. Measured over 48 seeds on
+/// both noise streams and both boards: worst 40.0 µm (the tabulated stream, −20 mm/s, seed 7),
+/// 36.0 µm on the reference one. Without the lead the peak lands half the pulse late: 100 µm at
+/// 20 mm/s, 1 mm at 200 mm/s.
+const SPEC_FLOOR_UM: f64 = 2.0 * LSB_UM;
+
+/// The spread of the peak at 20–60 mm/s, where the position's noise sets it: RMS at most
+/// 16 µm (the position's ~12 µm RMS, with room for the lead's velocity noise and the spread of
+/// 96 crossings), and 95 % of the crossings within 1.5 LSB (36.6 µm, 3 σ of the position's
+/// noise). Measured over 48 seeds a case on both boards: RMS 12.4 µm (reference stream) and
+/// 11.6 µm (tabulated), 95th percentile 24.0 and 22.0 µm; over [`SEEDS`] RMS 13.8 µm and 95th
+/// percentile 30.0 µm (the percentile of 96 crossings moves by steps of the position's
+/// quantisation from one seed set to another; the RMS is steadier). A lead 20 µm off at
+/// 20 mm/s (a fifth of it) takes the RMS to ~19 µm.
+const SLOW_RMS_UM: f64 = 16.0;
+const SLOW_P95_UM: f64 = 1.5 * LSB_UM;
+
+/// Snapshot: the worst distance of a triangle's peak from its line over [`SEEDS`] on the
+/// reference noise stream, 36.02 µm (G474, −60 mm/s, seed 4), as docs/rf-level.md and the
+/// README state it (per speed 24 µm at +20 and +60 mm/s, 32 at −20, 36 at −60; at 200 mm/s
+/// within one sample of travel, 20 µm). Not a specification: another noise realisation moves
+/// it (on the tabulated stream seed 7 at −20 mm/s peaks 40 µm from the line).
+const SNAPSHOT_WORST_UM: f64 = 36.02;
+const SNAPSHOT_WORST_CASE: &str = "nucleo-g474re -60000 µm/s seed 4";
 
 fn lines_config(envelope: Envelope, amplitude_permille: u16) -> saw_core::Config {
     let mut cfg = default_config();
@@ -58,8 +82,8 @@ fn crossing(
     )
     .with_config(cfg)
     .with_noise(2.0, seed)
-    // The figure (36 µm over these 12 seeds) was measured on this noise stream; on the
-    // tabulated one seed 7 at −20 mm/s peaks 40 µm from the line (docs/streaming.md).
+    // The snapshot figure (36 µm over these 12 seeds) was measured on this noise stream; on
+    // the tabulated one seed 7 at −20 mm/s peaks 40 µm from the line (docs/streaming.md).
     .with_reference_noise();
     sim::run(&p).unwrap()
 }
@@ -88,72 +112,157 @@ fn drive_steps(r: &SimResult, rise: u64, fall: u64) -> Vec<(u64, f64)> {
         .collect()
 }
 
-/// A triangle at 20, 60 and 200 mm/s, both ways, on both boards, over several noise seeds:
-/// its peak within one sample of travel of the line (or the position's noise floor where that
-/// is coarser), its length the scene's, rising to the middle and falling after it, no step
-/// larger than one table entry's, 0 at the end.
-#[test]
-fn a_triangle_peaks_on_the_line_at_every_speed() {
-    let mut worst = (0.0f64, String::new());
-    for board in [&NUCLEO_F446RE, &NUCLEO_G474RE] {
-        let clk = board.burst_timer_clk_hz as f64;
-        let plan = triangle_plan(
-            PULSE_US as u64 * board.rf_level.envelope_timer_clk_hz as u64 / 1_000_000,
-            board.rf_level.envelope_timer_clk_hz,
+/// One triangle crossing's outcome.
+struct Crossing {
+    case: String,
+    speed_um_s: f64,
+    /// Signed distance of the peak from the line (the true finger position then), µm.
+    err_um: f64,
+    /// What is wrong with the pulse's shape, if anything.
+    shape: Result<(), String>,
+}
+
+macro_rules! ensure {
+    ($c:expr, $($fmt:tt)+) => {
+        if !$c {
+            return Err(format!($($fmt)+));
+        }
+    };
+}
+
+/// The pulse's shape: its length the scene's, rising to the middle and falling after it, no step
+/// larger than one table entry's, 0 at the end, one level per table entry. Returns the peak's
+/// time.
+fn triangle_shape(r: &SimResult, board: &BoardDef) -> Result<u64, String> {
+    let clk = board.burst_timer_clk_hz as f64;
+    let plan = triangle_plan(
+        PULSE_US as u64 * board.rf_level.envelope_timer_clk_hz as u64 / 1_000_000,
+        board.rf_level.envelope_timer_clk_hz,
+    );
+    // One entry of the table at full level: 1000 ‰ / (entries / 2), plus the table's 1 %.
+    let max_step = 1000.0 / (plan.entries as f64 / 2.0) + 10.0;
+    let (rise, fall) = the_pulse(r);
+    let length_us = (fall - rise) as f64 / clk * 1e6;
+    ensure!((length_us - PULSE_US as f64).abs() < 1.0, "{length_us} µs");
+    let steps = drive_steps(r, rise, fall);
+    let (peak_t, peak) = steps
+        .iter()
+        .copied()
+        .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+    ensure!((peak - 1000.0).abs() < 10.0, "peak {peak} ‰");
+    // Symmetric: the peak halfway (within one step), rising before, falling after.
+    let half = (rise + fall) as f64 / 2.0;
+    let step_clocks = (fall - rise) as f64 / plan.entries as f64;
+    ensure!(
+        ((peak_t as f64) - half).abs() <= step_clocks,
+        "peak at {peak_t}, middle {half}"
+    );
+    for w in steps.windows(2) {
+        let d = w[1].1 - w[0].1;
+        ensure!(d.abs() <= max_step, "a step of {d:.1} ‰ at {}", w[1].0);
+        ensure!(
+            if w[1].0 <= peak_t { d > 0.0 } else { d < 0.0 },
+            "not a triangle at {}",
+            w[1].0
         );
-        // One entry of the table at full level: 1000 ‰ / (entries / 2), plus the table's 1 %.
-        let max_step = 1000.0 / (plan.entries as f64 / 2.0) + 10.0;
-        for speed in [
-            20_000.0, 60_000.0, 200_000.0, -20_000.0, -60_000.0, -200_000.0,
-        ] {
-            for seed in SEEDS {
-                let r = crossing(board, lines_config(Envelope::Triangular, 1000), speed, seed);
-                let (rise, fall) = the_pulse(&r);
-                let length_us = (fall - rise) as f64 / clk * 1e6;
-                assert!((length_us - PULSE_US as f64).abs() < 1.0, "{length_us} µs");
-                let steps = drive_steps(&r, rise, fall);
-                let (peak_t, peak) =
-                    steps
-                        .iter()
-                        .copied()
-                        .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
-                assert!((peak - 1000.0).abs() < 10.0, "peak {peak} ‰");
-                // Symmetric: the peak halfway (within one step), rising before, falling after.
-                let half = (rise + fall) as f64 / 2.0;
-                let step_clocks = (fall - rise) as f64 / plan.entries as f64;
-                assert!(
-                    ((peak_t as f64) - half).abs() <= step_clocks,
-                    "peak at {peak_t}, middle {half}"
-                );
-                for w in steps.windows(2) {
-                    let d = w[1].1 - w[0].1;
-                    assert!(d.abs() <= max_step, "a step of {d:.1} ‰ at {}", w[1].0);
-                    assert!(
-                        if w[1].0 <= peak_t { d > 0.0 } else { d < 0.0 },
-                        "not a triangle at {}",
-                        w[1].0
-                    );
+    }
+    ensure!(r.waveform.code_at(fall) == 0, "the envelope ends at 0");
+    // The entries come one per step: the sample loop (100 µs) plays none of them.
+    ensure!(steps.len() >= plan.entries - 1, "{} steps", steps.len());
+    Ok(peak_t)
+}
+
+/// A triangle at 20, 60 and 200 mm/s, both ways, on both boards, over [`SEEDS`]: run once per
+/// test binary, shared by the specification test and the snapshot.
+fn triangle_crossings() -> &'static [Crossing] {
+    static RUNS: std::sync::OnceLock<Vec<Crossing>> = std::sync::OnceLock::new();
+    RUNS.get_or_init(|| {
+        let mut runs = Vec::new();
+        for board in [&NUCLEO_F446RE, &NUCLEO_G474RE] {
+            for speed in [
+                20_000.0, 60_000.0, 200_000.0, -20_000.0, -60_000.0, -200_000.0,
+            ] {
+                for seed in SEEDS {
+                    let r = crossing(board, lines_config(Envelope::Triangular, 1000), speed, seed);
+                    let shape = triangle_shape(&r, board);
+                    let err_um = shape
+                        .as_ref()
+                        .map_or(f64::NAN, |&t| true_um_at(&r, t) - LINE_UM as f64);
+                    runs.push(Crossing {
+                        case: format!("{} {speed} µm/s seed {seed}", board.name),
+                        speed_um_s: speed,
+                        err_um,
+                        shape: shape.map(|_| ()),
+                    });
                 }
-                assert_eq!(r.waveform.code_at(fall), 0, "the envelope ends at 0");
-                // The entries come one per step: the sample loop (100 µs) plays none of them.
-                assert!(steps.len() >= plan.entries - 1, "{} steps", steps.len());
-                // The peak on the line.
-                let err_um = true_um_at(&r, peak_t) - LINE_UM as f64;
-                let one_sample_um = speed.abs() * 1e-4;
-                let tag = format!(
-                    "{} {speed} µm/s seed {seed}: peak {err_um:+.1} µm from the line",
-                    board.name
-                );
-                if err_um.abs() > worst.0 {
-                    worst = (err_um.abs(), tag.clone());
-                }
-                // (+ 0.01 µm: the float sum of a whole number of samples' travel.)
-                let bound = one_sample_um.max(STATED_FLOOR_UM) + 0.01;
-                assert!(err_um.abs() <= bound, "{tag}, more than {bound} µm");
             }
         }
+        runs
+    })
+}
+
+/// A triangle at 20, 60 and 200 mm/s, both ways, on both boards, over several noise seeds: its
+/// shape ([`triangle_shape`]), and its peak on the line — within one sample of travel, or the
+/// position's noise floor where that is coarser ([`SPEC_FLOOR_UM`]) on every crossing, and
+/// within [`SLOW_P95_UM`] on 95 % of those at 20–60 mm/s.
+#[test]
+fn a_triangle_peaks_on_the_line_at_every_speed() {
+    let mut slow_um = Vec::new();
+    for c in triangle_crossings() {
+        if let Err(e) = &c.shape {
+            panic!("{}: {e}", c.case);
+        }
+        let one_sample_um = c.speed_um_s.abs() * 1e-4;
+        let bound = one_sample_um.max(SPEC_FLOOR_UM);
+        assert!(
+            c.err_um.abs() <= bound,
+            "{}: peak {:+.1} µm from the line, more than {bound:.1} µm",
+            c.case,
+            c.err_um
+        );
+        if c.speed_um_s.abs() < 100_000.0 {
+            slow_um.push(c.err_um.abs());
+        }
     }
-    eprintln!("worst peak error: {:.3} µm ({})", worst.0, worst.1);
+    slow_um.sort_by(f64::total_cmp);
+    let p95 = slow_um[slow_um.len() * 95 / 100];
+    let rms = (slow_um.iter().map(|e| e * e).sum::<f64>() / slow_um.len() as f64).sqrt();
+    eprintln!(
+        "20–60 mm/s: {} crossings, RMS {rms:.2} µm, 95th percentile {p95:.2} µm, worst {:.2} µm",
+        slow_um.len(),
+        slow_um[slow_um.len() - 1]
+    );
+    assert!(
+        rms <= SLOW_RMS_UM,
+        "RMS at 20–60 mm/s {rms:.2} µm, above {SLOW_RMS_UM} µm"
+    );
+    assert!(
+        p95 <= SLOW_P95_UM,
+        "95th percentile at 20–60 mm/s {p95:.2} µm, above {SLOW_P95_UM:.1} µm"
+    );
+}
+
+/// Snapshot, not a specification: the worst peak distance over [`SEEDS`] on the reference
+/// stream is the figure docs/rf-level.md and the README quote. A failure here means the figure
+/// moved (the noise model, the lead, the timer model): re-measure, update those docs and this
+/// snapshot, and judge the change by the specification test above.
+#[test]
+fn snapshot_triangle_peak_worst_over_seeds_0_to_11() {
+    let worst = triangle_crossings()
+        .iter()
+        .max_by(|a, b| a.err_um.abs().total_cmp(&b.err_um.abs()))
+        .unwrap();
+    eprintln!(
+        "worst peak error: {:.3} µm ({})",
+        worst.err_um.abs(),
+        worst.case
+    );
+    assert!(
+        (worst.err_um.abs() - SNAPSHOT_WORST_UM).abs() < 0.005 && worst.case == SNAPSHOT_WORST_CASE,
+        "snapshot moved: worst {:.3} µm ({}), was {SNAPSHOT_WORST_UM} µm ({SNAPSHOT_WORST_CASE})",
+        worst.err_um.abs(),
+        worst.case
+    );
 }
 
 /// A rectangle is flat at its level for the whole pulse, as before, and fires on the line.
@@ -173,7 +282,7 @@ fn a_rectangle_is_flat_and_starts_on_the_line() {
         let at_rise = true_um_at(&r, rise) - LINE_UM as f64;
         // Fired on the first sample past the line: within a sample and the position noise.
         assert!(
-            at_rise * speed.signum() > -STATED_FLOOR_UM && at_rise.abs() < 60.0,
+            at_rise * speed.signum() > -SPEC_FLOOR_UM && at_rise.abs() < 60.0,
             "{at_rise} µm"
         );
     }
