@@ -204,11 +204,10 @@ fn flash_of(bytes: &[u8]) -> Flash {
 fn sprinkled(seed: &[u8], permille: u16) -> Vec<u8> {
     let mut bytes = vec![0xFF; 8192];
     for (w, chunk) in bytes.chunks_mut(4).enumerate() {
-        let r = seed[w % seed.len()] as u16 * 4 + (w as u16 / seed.len() as u16);
-        if r % 1000 < permille {
-            chunk.copy_from_slice(
-                &(seed[(w * 7) % seed.len()] as u32 * 0x0101_0101 ^ w as u32).to_le_bytes(),
-            );
+        // A hash of the word's index and the seed picks the words and their values.
+        let h = (seed[w % seed.len()] as u32 ^ (w as u32) << 8).wrapping_mul(0x9E37_79B1);
+        if (h >> 16) % 1000 < permille as u32 {
+            chunk.copy_from_slice(&h.to_le_bytes());
         }
     }
     bytes
