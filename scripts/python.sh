@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The Python module `sawlink` (python/, PyO3): makes a venv (target/venv, or $SAWLINK_VENV) with
-# maturin and pytest, builds the abi3 wheel (`maturin build --release`, one wheel for CPython
+# maturin and pytest, builds the abi3 wheel (`maturin build --profile wheel`, one wheel for CPython
 # 3.8 and later, written to target/wheels/) and installs it into the venv. With --test, then
 # builds host-sim (release) and runs python/tests/ with pytest against its virtual board.
 # CARGO_TARGET_DIR moves target/ (the venv and the wheels with it).
@@ -33,9 +33,10 @@ if ! "$VENV/bin/maturin" --version >/dev/null 2>&1 || ! "$VENV/bin/python" -c 'i
     "$VENV/bin/python" -m pip install --quiet "maturin>=1.5,<2" "pytest>=7"
 fi
 
-# The wheel: release, stripped (pyproject.toml), into target/wheels.
+# The wheel: optimised (the `wheel` profile: release without debug info), stripped
+# (pyproject.toml), into target/wheels.
 rm -f "$TARGET"/wheels/sawlink-*.whl
-"$VENV/bin/maturin" build --release --quiet -m python/Cargo.toml -o "$TARGET/wheels" \
+"$VENV/bin/maturin" build --profile wheel --quiet -m python/Cargo.toml -o "$TARGET/wheels" \
     --interpreter "$VENV/bin/python"
 wheel=$(ls "$TARGET"/wheels/sawlink-*.whl)
 "$VENV/bin/python" -m pip install --quiet --force-reinstall --no-deps "$wheel"

@@ -365,8 +365,9 @@ fn sample_step(ctrl: &mut Controller, burst: &mut BurstGate, tap: &mut link::Str
     // Drive mode, then amplitude, then the line (saw-core's order).
     saw_core::controller::apply(&out, burst);
     if tap.take() {
+        let time_us = tap.widen(sample.t_us);
         tap.push(saw_link::msg::Record {
-            time_us: tap.widen(sample.t_us),
+            time_us,
             scene_id: tap.stamp.scene_id,
             change: tap.stamp.change,
             position_um: out.position_um,

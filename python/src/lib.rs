@@ -20,7 +20,6 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 use saw::port::{self, Port};
 use saw_core::gate::DriveMode;
-use saw_core::scene::Config;
 use saw_link::client::{Client, ClientError, StreamStart};
 use saw_link::msg::{Header, Hello, Record, Reply, Request, PROTOCOL_VERSION};
 
@@ -610,7 +609,12 @@ impl Board {
         let wait = self.wait(timeout_s)?;
         let h = self.hello_reply(py, wait)?;
         self.hello = h.clone();
-        to_python(py, &h)
+        // The names `saw --json hello` uses (a source as a word: "default", "saved", "link"),
+        // with the scene id as a Python int.
+        let mut v = serde_json::to_value(&h)
+            .map_err(|e| SawError::new_err(format!("cannot convert a reply: {e}")))?;
+        v["scene_source"] = saw::source_key(h.scene_source).into();
+        to_python(py, &v)
     }
 
     /// Loads a scene: a scene file's path, or a dict shaped like one (`{"substrate": {...},
@@ -646,8 +650,8 @@ impl Board {
         self.push_text(py, &name, &text, wait)
     }
 
-    /// The active scene: `{"scene_id": int, "source": str, "config": dict}` (the configuration
-    /// as `saw --json get` prints it).
+    /// The active scene: `{"scene_id": int, "source": str, "scene": dict}`, the scene with the
+    /// scene file's keys and units as `saw --json get` prints it.
     #[pyo3(signature = (timeout_s = None))]
     fn get(&mut self, py: Python<'_>, timeout_s: Option<f64>) -> PyResult<PyObject> {
         let wait = self.wait(timeout_s)?;
@@ -662,14 +666,18 @@ impl Board {
         };
         let d = PyDict::new(py);
         d.set_item("scene_id", scene_id)?;
-        d.set_item("source", to_python(py, &source)?)?;
-        d.set_item("config", to_python(py, &config)?)?;
+        d.set_item("source", saw::source_key(source))?;
+        // The scene file's keys and units (`saw --json get`): pushed back as a dict it is the
+        // same scene.
+        d.set_item("scene", to_python(py, &saw::scene_json(&config))?)?;
         Ok(d.into_any().unbind())
     }
 
-    /// Gives region `region` a new texture written as the keys of a `[[region]]` table:
-    /// `board.set(1, kind="grating", wavelength_mm=1.5)` (or `board.set(1, "kind=grating",
-    /// "wavelength_mm=1.5")`, as `saw set` takes them). Returns the scene id now running.
+    /// Changes region `region`'s texture, written as the keys of a `[[region]]` table:
+    /// `board.set(1, f_b_hz=80)` keeps the region's other values; `board.set(1, kind="grating",
+    /// wavelength_mm=1.5)` gives it a new kind from that kind's defaults (or `board.set(1,
+    /// "kind=grating", "wavelength_mm=1.5")`, as `saw set` takes them). Returns the scene id
+    /// now running.
     #[pyo3(signature = (region, *pairs, timeout_s = None, **keys))]
     fn set(
         &mut self,
@@ -694,13 +702,13 @@ impl Board {
             ));
         }
         let table = saw::region_toml(&all).map_err(input)?;
-        // Read against the board's substrate, so lengths are checked as in its scene (what
-        // `saw set` does; saw's own `set` is crate-private).
+        // Over the region's own values in the board's scene, as `saw set` does: the keys named
+        // change, the rest stay (a new kind starts from its defaults).
         let (_, reply) = self.scene(py, wait)?;
         let Reply::Scene { config, .. } = reply else {
             unreachable!("scene() returns only a Scene")
         };
-        let texture = region_texture(&config, region, &table)?;
+        let texture = saw::merged_texture(&config, region, &table).map_err(input)?;
         self.applied(py, Request::SetTexture { region, texture }, wait)
     }
 
@@ -935,36 +943,6 @@ impl Board {
             other => Err(unexpected(other)),
         }
     }
-}
-
-/// The texture a `[[region]]` table gives, read against `config`'s substrate (what `saw set`
-/// does before it sends one).
-fn region_texture(
-    config: &Config,
-    region: u8,
-    table: &str,
-) -> PyResult<saw_core::texture::Texture> {
-    let cal = config.calibration;
-    let text = format!(
-        "[substrate]\nlength_mm = {}\ncode_at_start = {}\ncode_at_end = {}\nrail_margin_code = {}\n\n{table}",
-        cal.length_um as f64 / 1000.0,
-        cal.code_at_start,
-        cal.code_at_end,
-        cal.rail_margin_code
-    );
-    let doc = saw_core::scene_file::parse("set", &text).map_err(|e| {
-        input(format!(
-            "region {region}: `{}`: {}",
-            e.field.trim_start_matches("region[0]."),
-            e.message
-        ))
-    })?;
-    doc.config
-        .scene
-        .textures
-        .first()
-        .copied()
-        .ok_or_else(|| input("set: no texture given (kind=…)".into()))
 }
 
 /// A running stream (from `Board.stream`): an iterator of records and a context manager that

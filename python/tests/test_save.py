@@ -13,7 +13,7 @@ def test_a_saved_scene_survives_a_restart(tmp_path, start_board):
     vb = start_board("--flash", str(flash))
     grating = next(p for p in SCENES if p.stem == "grating")
     with sawlink.Board(vb.port) as b:
-        assert b.hello()["scene_source"] == "Default"
+        assert b.hello()["scene_source"] == "default"
         scene_id = b.push(grating)
         saved = b.save()
         assert saved["scene_id"] == scene_id
@@ -22,7 +22,7 @@ def test_a_saved_scene_survives_a_restart(tmp_path, start_board):
     vb = start_board("--flash", str(flash))
     with sawlink.Board(vb.port) as b:
         hello = b.hello()
-        assert (hello["scene_id"], hello["scene_source"]) == (scene_id, "Saved")
+        assert (hello["scene_id"], hello["scene_source"]) == (scene_id, "saved")
 
 
 def test_a_board_without_a_store_raises_save_failed(board):

@@ -10,12 +10,6 @@ import sawlink
 from conftest import SCENES
 
 
-def texture_kind(texture):
-    """The scene-file kind of a texture as `get` returns it (serde: "Off" or {"Grating": …})."""
-    name = texture if isinstance(texture, str) else next(iter(texture))
-    return name.lower()
-
-
 @pytest.mark.parametrize("path", SCENES, ids=[p.stem for p in SCENES])
 def test_every_scene_round_trips_by_id_and_content(board, path):
     with open(path, "rb") as f:
@@ -25,19 +19,19 @@ def test_every_scene_round_trips_by_id_and_content(board, path):
     got = board.get()
     assert got["scene_id"] == scene_id
     # A pushed scene is the link's, unless it is the very scene the board booted with.
-    assert got["source"] == (boot["scene_source"] if scene_id == boot["scene_id"] else "Link")
+    assert got["source"] == (boot["scene_source"] if scene_id == boot["scene_id"] else "link")
     assert board.hello()["scene_id"] == scene_id
-    # The content, against the file as Python's own TOML reader reads it.
-    scene = got["config"]["scene"]
+    # The content in the scene file's keys, against the file as Python's own TOML reader reads it.
+    scene = got["scene"]
     regions = file["region"]
-    assert [texture_kind(t) for t in scene["textures"]] == [r["kind"] for r in regions]
-    assert scene["boundaries_um"] == [round(r["until_mm"] * 1000) for r in regions if "until_mm" in r]
+    assert [r["kind"] for r in scene["region"]] == [r["kind"] for r in regions]
+    assert [r.get("until_mm") for r in scene["region"]] == [r.get("until_mm") for r in regions]
     if "substrate" in file:
-        assert got["config"]["calibration"]["length_um"] == round(file["substrate"]["length_mm"] * 1000)
+        assert scene["substrate"]["length_mm"] == file["substrate"]["length_mm"]
     if "drive" in file:
-        assert scene["drive"] == file["drive"].capitalize()
+        assert scene["drive"] == file["drive"]
     if "hysteresis_mm" in file:
-        assert scene["hysteresis_um"] == round(file["hysteresis_mm"] * 1000)
+        assert scene["hysteresis_mm"] == file["hysteresis_mm"]
     # The id is the file's on every host: the module reads the file as the board compiled it.
     assert sawlink.scene_id_of_file(path) == scene_id
 
@@ -53,15 +47,21 @@ def test_boundary_drive_and_set_read_back(board):
     moved = board.boundary(0, 30.0)
     got = board.get()
     assert got["scene_id"] == moved
-    assert got["config"]["scene"]["boundaries_um"][0] == 30_000
+    assert got["scene"]["region"][0]["until_mm"] == 30
 
     assert board.drive("progressive") == board.get()["scene_id"]
-    assert board.get()["config"]["scene"]["drive"] == "Progressive"
+    assert board.get()["scene"]["drive"] == "progressive"
 
     changed = board.set(1, kind="constant", f_b_hz=150, duty_percent=30)
-    texture = board.get()["config"]["scene"]["textures"][1]
+    region = board.get()["scene"]["region"][1]
     assert board.get()["scene_id"] == changed
-    assert texture == {"Constant": {"burst_millihz": 150_000, "duty_permille": 300}}
+    assert (region["kind"], region["f_b_hz"], region["duty_percent"]) == ("constant", 150, 30)
+    # A key alone keeps the region's other values (the duty set above).
+    board.set(1, f_b_hz=90)
+    region = board.get()["scene"]["region"][1]
+    assert (region["f_b_hz"], region["duty_percent"]) == (90, 30)
+    # What get gives pushes back as the same scene.
+    assert board.push(board.get()["scene"]) == board.get()["scene_id"]
     # The command line's spelling gives the same scene.
     board.set(1, "kind=grating", "wavelength_mm=2")
     assert board.set(1, "kind=constant", "f_b_hz=150", "duty_percent=30") == changed

@@ -5,6 +5,7 @@
 pub mod port;
 pub mod record;
 pub mod session;
+#[cfg(feature = "ui")]
 pub mod ui;
 
 use std::path::PathBuf;
@@ -385,7 +386,21 @@ pub(crate) fn execute<P: std::io::Read + std::io::Write>(
     }
 }
 
+/// `saw ui` in a build without the panel (the `ui` feature off).
+#[cfg(not(feature = "ui"))]
+fn ui_command(
+    _cli: &Cli,
+    _listen: std::net::SocketAddr,
+    _allow_remote: bool,
+    _every: u16,
+) -> Result<Done, Failure> {
+    Err(Failure::input(
+        "this saw was built without the panel (cargo feature `ui`)".into(),
+    ))
+}
+
 /// `saw ui`: serves the panel until interrupted.
+#[cfg(feature = "ui")]
 fn ui_command(
     cli: &Cli,
     listen: std::net::SocketAddr,
