@@ -171,8 +171,8 @@ pub struct Record {
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Stream {
-    /// Records dropped since the stream started (never reset while it runs): a host sees a
-    /// gap as a jump of this count.
+    /// Records the board dropped since boot (a full queue; never reset): a host sees a gap
+    /// as a jump of this count between two frames.
     pub dropped: u32,
     /// The records, oldest first.
     pub records: Vec<Record, RECORDS_PER_FRAME>,
