@@ -237,6 +237,13 @@ fn unknown_keys_and_values_name_the_nearest_or_a_short_list() {
             "limits.toml:2:1: `zzz`: unknown key `zzz`: [limits] takes `max_duty_percent`, \
              `max_level_percent`, `max_on_time_ms` and `stale_after_ms`",
         ),
+        // A key in [lines] after a region is judged by the lines' keys, not the region's.
+        (
+            "[[region]]\nkind = \"constant\"\nf_b_hz = 80\n\n[lines]\npositions_mm = [10]\n\
+             duty = 1\n",
+            "lines.toml:7:1: `duty`: unknown key `duty`: [lines] takes `positions_mm`, `pulse_ms`, \
+             `envelope`, `amplitude_percent` and `rearm_mm`",
+        ),
         (
             "[[region]]\nkind = \"grating\"\nwavelength_mm = 1\nrender = \"hybird\"\n",
             "render.toml:4:10: `render`: unknown value `hybird`: did you mean `hybrid`?",
