@@ -373,7 +373,7 @@ fn sample_step(ctrl: &mut Controller, burst: &mut BurstGate, tap: &mut link::Str
             position_um: out.position_um,
             velocity_um_s: out.velocity_um_s,
             region: out.region,
-            burst_millihz: ctrl.telemetry().burst_millihz,
+            burst_millihz: ctrl.burst_millihz(),
             bursting: burst.line() != rf::Line::Off,
             fault: out.fault,
         });

@@ -272,11 +272,21 @@ impl<E: VelocityEstimator> Controller<E> {
 
     /// Counters and last values, for telemetry.
     pub fn telemetry(&self) -> Telemetry {
+        Telemetry {
+            burst_millihz: self.burst_millihz(),
+            ..self.telemetry
+        }
+    }
+
+    /// The burst frequency in force, mHz: [`Telemetry::burst_millihz`] alone, for a stream
+    /// record (the firmware reads it per streamed sample; the whole telemetry's copy costs
+    /// instructions the sample path's tap budget has not got).
+    pub fn burst_millihz(&self) -> u32 {
         // The running burst's frequency is worked out here, when asked, not on every gate
         // action (a u64 division per changed sample for a velocity-driven texture). Every
         // state change of the gate goes through `count_action`, which used to fill it from
         // `gate.running()` the same way, so the figure is the same.
-        let burst_millihz = match self.gate.running() {
+        match self.gate.running() {
             None => self.pulse_rate_millihz(),
             Some(s) => match self.burst_memo.get() {
                 Some((psc, arr, millihz)) if (psc, arr) == (s.psc, s.arr) => millihz,
@@ -286,10 +296,6 @@ impl<E: VelocityEstimator> Controller<E> {
                     millihz
                 }
             },
-        };
-        Telemetry {
-            burst_millihz,
-            ..self.telemetry
         }
     }
 

@@ -117,7 +117,7 @@ impl<E: VelocityEstimator> VirtualBoard<E> {
                     position_um: p.meas_um,
                     velocity_um_s: p.est_vel_um_s,
                     region: p.region,
-                    burst_millihz: self.lp.ctrl.telemetry().burst_millihz,
+                    burst_millihz: self.lp.ctrl.burst_millihz(),
                     bursting: self.lp.tm.is_running(),
                     fault: p.fault,
                 };
