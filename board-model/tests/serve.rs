@@ -230,7 +230,8 @@ fn hello_push_and_refuse(kind: BoardKind) {
                 assert_eq!(back, doc.config, "{name}");
             }
             Err(e) => {
-                assert_eq!(r.code, 1, "{name}: {}", r.stdout);
+                // A scene file the board refuses exits 2, as the reader's refusals do.
+                assert_eq!(r.code, 2, "{name}: {}", r.stdout);
                 assert_eq!(r.stderr.trim(), format!("error: {e}"), "{name}");
             }
         }
@@ -244,7 +245,7 @@ fn hello_push_and_refuse(kind: BoardKind) {
     let host = saw_core::scene_file::load_for_board(&name, text, timer, period_us).unwrap_err();
     let before = saw_json(&s.port, &["hello"]);
     let r = saw(&s.port, &["push", &name]);
-    assert_eq!(r.code, 1, "{}", r.stdout);
+    assert_eq!(r.code, 2, "{}", r.stdout);
     assert_eq!(r.stderr.trim(), format!("error: {host}"));
     // Region 0: the last scene file pushed may have only one region (scenes/rf-off.toml).
     let r = saw(&s.port, &["set", "0", "kind=constant", "f_b_hz=9000"]);

@@ -89,7 +89,7 @@ pub(crate) fn one_line(rendered: &str) -> String {
     name = "saw",
     version,
     about = "Drive a SAW tactile display over its serial link (the Nucleo's ST-LINK virtual COM port, or `host-sim serve --pty PATH` / `board-model serve --pty PATH`).",
-    after_help = "Exit codes: 0 done; 1 the board refused (the reason is printed); 2 a bad command line or scene file; 3 the link failed (no port, port busy, no answer, protocol mismatch)."
+    after_help = "Exit codes: 0 done; 1 the board refused a live edit (set, boundary, drive; the reason is printed); 2 a bad command line or scene file (a file the reader or the board refuses, located in the file); 3 the link failed (no port, port busy, no answer, protocol mismatch)."
 )]
 pub struct Cli {
     /// The serial port: /dev/ttyACM0 for a Nucleo, or the path given to `host-sim serve --pty` or `board-model serve --pty`.
@@ -584,7 +584,13 @@ pub(crate) fn push_text<P: std::io::Read + std::io::Write>(
             json: json!({ "applied": scene_hex(scene_id), "file": name }),
         }),
         // The board's refusal, located in the file: the sentence host-sim gives this file.
-        Reply::Refused(e) => Err(Failure::refused(doc.locate(&e).to_string())),
+        // A scene file the board refuses is a bad scene file, as one the reader refuses: exit 2
+        // either way (docs/scenes.md, "When a file is refused"), kind "refused".
+        Reply::Refused(e) => Err(Failure {
+            code: 2,
+            kind: "refused",
+            message: doc.locate(&e).to_string(),
+        }),
         other => Err(unexpected(other)),
     }
 }

@@ -246,7 +246,8 @@ fn a_refused_scene_reads_as_host_sim_reads_it_and_changes_nothing() {
     .unwrap_err();
     let before = saw_json(&vb.port, &["hello"]);
     let r = saw(&vb.port, &["push", file.to_str().unwrap()]);
-    assert_eq!(r.code, 1);
+    // A scene file refused, by the board here: exit 2 as for the reader's refusals.
+    assert_eq!(r.code, 2);
     assert_eq!(r.stderr.trim(), format!("error: {host}"));
     let after = saw_json(&vb.port, &["hello"]);
     assert_eq!(
@@ -588,7 +589,7 @@ fn a_session_is_one_log_that_splits_at_each_change() {
     let vb = VirtualBoard::start(&[]);
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("session.csv");
-    let script = "set 0 f_b_hz=30\nwait 0.3\nset 0 f_b_hz=60\nwait 0.3\n# a comment\nset 0 f_b_hz=90\nwait 0.3\nset 0 f_b_hz=-5\n";
+    let script = "set 0 f_b_hz=30\nwait 0.2\nset 0 f_b_hz=45\nwait 0.2\n# a comment\nset 0 f_b_hz=60\nwait 0.2\nset 0 f_b_hz=75\nwait 0.2\nset 0 f_b_hz=90\nwait 0.2\nset 0 f_b_hz=-5\n";
     let mut child = Command::new(env!("CARGO_BIN_EXE_saw"))
         .arg("--port")
         .arg(&vb.port)
@@ -606,14 +607,14 @@ fn a_session_is_one_log_that_splits_at_each_change() {
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
     // One answer per command (the comment is none), then the summary.
-    assert_eq!(lines.len(), 8, "{lines:?}");
-    let ids: Vec<String> = [0, 2, 4]
+    assert_eq!(lines.len(), 12, "{lines:?}");
+    let ids: Vec<String> = [0, 2, 4, 6, 8]
         .iter()
         .map(|&i| lines[i]["result"]["applied"].as_str().unwrap().to_string())
         .collect();
-    assert_eq!(lines[6]["ok"], false, "{}", lines[6]);
-    assert!(lines[6]["error"].as_str().unwrap().contains("f_b_hz"), "{}", lines[6]);
-    assert_eq!(lines[7]["result"]["commands"], 7, "{}", lines[7]);
+    assert_eq!(lines[10]["ok"], false, "{}", lines[10]);
+    assert!(lines[10]["error"].as_str().unwrap().contains("f_b_hz"), "{}", lines[10]);
+    assert_eq!(lines[11]["result"]["commands"], 11, "{}", lines[11]);
     let csv = Csv::read(&csv);
     let (scene, change) = (csv.values("scene_id"), csv.numbers("change"));
     // Split at the change count: the boot scene's part, then one part per accepted set.
@@ -627,24 +628,32 @@ fn a_session_is_one_log_that_splits_at_each_change() {
             _ => parts.push((*c, id.clone(), 1)),
         }
     }
-    let applied: Vec<&String> = parts.iter().map(|p| &p.1).skip(parts.len() - 3).collect();
+    let applied: Vec<&String> = parts.iter().map(|p| &p.1).skip(parts.len() - 5).collect();
     assert_eq!(applied, ids.iter().collect::<Vec<_>>(), "{parts:?}");
-    // The three changes are consecutive counts, each lasting about its wait (0.3 s = 300
+    // The five changes are consecutive counts, each lasting about its wait (0.2 s = 200
     // records at 1 kHz; the last part runs until stdin's end and the stop).
-    let last3 = &parts[parts.len() - 3..];
-    assert!(last3.windows(2).all(|w| w[1].0 == w[0].0 + 1), "{parts:?}");
-    for p in &last3[..2] {
-        assert!((250..=400).contains(&p.2), "{parts:?}");
+    let last5 = &parts[parts.len() - 5..];
+    assert!(last5.windows(2).all(|w| w[1].0 == w[0].0 + 1), "{parts:?}");
+    for p in &last5[..4] {
+        assert!((150..=300).contains(&p.2), "{parts:?}");
     }
     // Time goes forward through the changes, and a change's first record is its first sample
-    // (sent whatever the decimation): less than 1 ms after the record before it.
+    // (sent whatever the decimation), so the count restarts there: it comes at most 1 ms after
+    // the record before it, the record after it exactly 1 ms later, and over the changes at
+    // least one comes off the 1 ms schedule (each of the five lands on it by chance 1 time in
+    // 10: all five, 1 run in 100 000).
     let t = csv.numbers("time_us");
     assert!(t.windows(2).all(|w| w[1] > w[0]), "time goes forward");
-    for i in 1..change.len() {
+    let mut off_schedule = 0;
+    for i in 1..change.len() - 1 {
         if change[i] != change[i - 1] {
-            assert!(t[i] - t[i - 1] < 1_000, "change at record {i}: {} µs", t[i] - t[i - 1]);
+            let before = t[i] - t[i - 1];
+            assert!(before <= 1_000, "change at record {i}: {before} µs after the one before");
+            assert_eq!(t[i + 1] - t[i], 1_000, "the count restarts at the change");
+            off_schedule += usize::from(before < 1_000);
         }
     }
+    assert!(off_schedule > 0, "no change's first sample was forced into the stream");
 }
 
 /// The clock alignment against the virtual board's own clock (which runs 200 ppm fast here):
