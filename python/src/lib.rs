@@ -650,7 +650,7 @@ impl Board {
         self.push_text(py, &name, &text, wait)
     }
 
-    /// The active scene: `{"scene_id": int, "source": str, "scene": dict}`, the scene with the
+    /// The active scene: `{"scene_id": int, "scene_source": str, "scene": dict}`, the scene with the
     /// scene file's keys and units as `saw --json get` prints it.
     #[pyo3(signature = (timeout_s = None))]
     fn get(&mut self, py: Python<'_>, timeout_s: Option<f64>) -> PyResult<PyObject> {
@@ -666,7 +666,7 @@ impl Board {
         };
         let d = PyDict::new(py);
         d.set_item("scene_id", scene_id)?;
-        d.set_item("source", saw::source_key(source))?;
+        d.set_item("scene_source", saw::source_key(source))?;
         // The scene file's keys and units (`saw --json get`): pushed back as a dict it is the
         // same scene.
         d.set_item("scene", to_python(py, &saw::scene_json(&config))?)?;

@@ -19,7 +19,7 @@ def test_every_scene_round_trips_by_id_and_content(board, path):
     got = board.get()
     assert got["scene_id"] == scene_id
     # A pushed scene is the link's, unless it is the very scene the board booted with.
-    assert got["source"] == (boot["scene_source"] if scene_id == boot["scene_id"] else "link")
+    assert got["scene_source"] == (boot["scene_source"] if scene_id == boot["scene_id"] else "link")
     assert board.hello()["scene_id"] == scene_id
     # The content in the scene file's keys, against the file as Python's own TOML reader reads it.
     scene = got["scene"]

@@ -69,18 +69,58 @@ where
 
 /// Clap's error as one line: its first line without `error: `, and its tip.
 pub(crate) fn one_line(rendered: &str) -> String {
-    let mut lines = rendered.lines().map(str::trim).filter(|l| !l.is_empty());
-    let first = lines
-        .next()
-        .unwrap_or("the command line was not understood")
-        .trim_start_matches("error: ")
-        .to_string();
-    let tip = lines.find_map(|l| l.strip_prefix("tip: "));
+    let all: Vec<&str> = rendered.lines().collect();
+    let first = all
+        .first()
+        .map_or("the command line was not understood", |l| l.trim())
+        .trim_start_matches("error: ");
+    // A first line ending in ':' introduces an indented list (the missing arguments): kept.
+    let list: Vec<&str> = if first.ends_with(':') {
+        all.iter()
+            .skip(1)
+            .take_while(|l| l.starts_with("  "))
+            .map(|l| l.trim())
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let first = if list.is_empty() {
+        first.to_string()
+    } else {
+        format!("{} {}", first, list.join(", "))
+    };
+    let tip = all.iter().find_map(|l| l.trim().strip_prefix("tip: "));
     let help = "`saw --help` lists the commands, `saw COMMAND --help` their values";
     match tip {
         Some(t) => format!("{first} ({t}); {help}"),
         None => format!("{first}; {help}"),
     }
+}
+
+/// A whole number from `lo` to `hi` (`unit` in the sentence), negatives included in the check.
+fn whole_in<T: TryFrom<i128>>(s: &str, lo: i128, hi: i128, unit: &str) -> Result<T, String> {
+    let sentence = || format!("must be a whole number from {lo} to {hi}{unit}");
+    let v: i128 = s.trim().parse().map_err(|_| format!("not a whole number; {}", sentence()))?;
+    if v < lo || v > hi {
+        return Err(sentence());
+    }
+    T::try_from(v).map_err(|_| sentence())
+}
+
+fn timeout_ms(s: &str) -> Result<u64, String> {
+    whole_in(s, 10, 60_000, " ms")
+}
+fn every_n(s: &str) -> Result<u16, String> {
+    whole_in(s, 1, 10_000, " samples")
+}
+fn index_u8(s: &str) -> Result<u8, String> {
+    whole_in(s, 0, 255, "")
+}
+fn moves_n(s: &str) -> Result<u32, String> {
+    whole_in(s, 10, 100_000, " moves")
+}
+fn count_n(s: &str) -> Result<u32, String> {
+    whole_in(s, 2, 1_000, " round trips")
 }
 
 /// `saw --port PORT <command>`.
@@ -100,7 +140,7 @@ pub struct Cli {
     pub json: bool,
     /// How long to wait for each answer, ms (10 to 60000). A save waits at least 4000 ms
     /// (`SAVE_TIMEOUT`): erasing a flash sector stalls the F446 for up to 2 s.
-    #[arg(long, value_name = "MS", default_value_t = 1000, allow_negative_numbers = true, value_parser = clap::value_parser!(u64).range(10..=60_000))]
+    #[arg(long, value_name = "MS", default_value_t = 1000, allow_negative_numbers = true, value_parser = timeout_ms)]
     pub timeout: u64,
     /// What to do.
     #[command(subcommand)]
@@ -122,8 +162,8 @@ pub enum Command {
     Get,
     /// Move boundary INDEX (where region INDEX ends) to MM, live.
     Boundary {
-        /// Boundary index, 0 = the end of the first region (0 to 254).
-        #[arg(allow_negative_numbers = true)]
+        /// Boundary index, 0 = the end of the first region (0 to 255).
+        #[arg(allow_negative_numbers = true, value_parser = index_u8)]
         index: u8,
         /// New position, mm from the start end (0 to 1000; the scene's layout rules apply).
         #[arg(value_parser = mm, allow_hyphen_values = true)]
@@ -135,7 +175,7 @@ pub enum Command {
     /// sentences as a `[[region]]` table (docs/scenes.md).
     Set {
         /// Region index, left to right from 0 (0 to 255).
-        #[arg(allow_negative_numbers = true)]
+        #[arg(allow_negative_numbers = true, value_parser = index_u8)]
         index: u8,
         /// `key=value` pairs of a `[[region]]` table (docs/scenes.md).
         #[arg(required = true, value_name = "KEY=VALUE")]
@@ -162,7 +202,7 @@ pub enum Command {
         #[arg(long, value_name = "S", allow_negative_numbers = true, value_parser = seconds)]
         seconds: f64,
         /// One record every N samples (1 to 10000; 10 = 1 kHz on a 10 kHz board).
-        #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true, value_parser = clap::value_parser!(u16).range(1..=10_000))]
+        #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true, value_parser = every_n)]
         every: u16,
     },
     /// One stream, many changes: streams to a CSV file while reading commands from stdin, one
@@ -174,18 +214,19 @@ pub enum Command {
         /// Where to write the records.
         #[arg(long, value_name = "FILE")]
         csv: PathBuf,
-        /// Stop after this long, s (0.1 to 86400; default: when stdin ends).
+        /// Record exactly this long, s (0.1 to 86400), whatever stdin does; without it the session
+    /// ends when stdin ends and its last `wait` is over.
         #[arg(long, value_name = "S", allow_negative_numbers = true, value_parser = seconds)]
         seconds: Option<f64>,
         /// One record every N samples (1 to 10000; 10 = 1 kHz on a 10 kHz board).
-        #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true, value_parser = clap::value_parser!(u16).range(1..=10_000))]
+        #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true, value_parser = every_n)]
         every: u16,
     },
     /// Align the board's clock with this host's: round trips of a ping, the board's boot on the
     /// host's clock, the drift between the two clocks and how good the fit is.
     Ping {
         /// Round trips (2 to 1000), taken over --over seconds.
-        #[arg(long, default_value_t = 20, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(2..=1000))]
+        #[arg(long, default_value_t = 20, allow_negative_numbers = true, value_parser = count_n)]
         count: u32,
         /// Seconds the round trips span (0 to 3600; a longer span measures the drift better).
         #[arg(long, value_name = "S", default_value_t = 1.0, allow_negative_numbers = true, value_parser = over_seconds)]
@@ -206,14 +247,14 @@ pub enum Command {
         allow_remote: bool,
         /// One record every N samples in the page's trace (1 to 10000; 10 = 1 kHz on a 10 kHz
         /// board).
-        #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true, value_parser = clap::value_parser!(u16).range(1..=10_000))]
+        #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true, value_parser = every_n)]
         every: u16,
     },
     /// Measure the link: the round trip of boundary moves (the scene is restored after), and
     /// the fastest stream that arrives without a drop.
     Bench {
         /// Boundary moves to time (10 to 100000).
-        #[arg(long, default_value_t = 200, allow_negative_numbers = true, value_parser = clap::value_parser!(u32).range(10..=100_000))]
+        #[arg(long, default_value_t = 200, allow_negative_numbers = true, value_parser = moves_n)]
         moves: u32,
         /// Seconds each stream rate is tried (0.5 to 60).
         #[arg(long, value_name = "S", default_value_t = 2.0, allow_negative_numbers = true, value_parser = bench_seconds)]
@@ -605,7 +646,7 @@ fn get<P: std::io::Read + std::io::Write>(client: &mut Client<P>) -> Result<Done
             text: scene_text(scene_id, source, &config),
             json: json!({
                 "scene_id": scene_hex(scene_id),
-                "source": source_key(source),
+                "scene_source": source_key(source),
                 "scene": scene_json(&config),
             }),
         }),
@@ -856,7 +897,8 @@ impl StreamRun {
         every: u16,
     ) -> Result<Self, Failure> {
         let start_pings = record::pings(client, record::PINGS, Duration::ZERO)?;
-        let align = saw_link::clock::Alignment::fit(&start_pings)
+        // Back to back: the offset only (a rate fitted over a millisecond would be noise).
+        let align = saw_link::clock::Alignment::offset(&start_pings)
             .ok_or_else(|| Failure::link("no ping answered".into()))?;
         let rec = record::Recorder::create(csv, align)?;
         let before = stream_counts(client)?;
@@ -891,8 +933,8 @@ impl StreamRun {
         let drift_error_us = drift.drift_ppm().abs() * 1e-6 * (last_us.saturating_sub(first_us)) as f64;
         let text = format!(
             "{} records {how_long} to {} ({:.0} records/s asked), {:.3} s of board time ({first_us} to {last_us} µs since boot), {} scene change{}\n\
-             dropped by the board {dropped}; frames lost on the line {}; frames from the board that failed their check {}; requests the board refused {refused_by_board}; stale records left out {}\n\
-             clocks: board boot at host Unix time {:.6} s, host times within ±{:.2} ms (half the quickest round trip {:.2} ms, drift {:+.1} ppm over the stream {:.2} ms)",
+             dropped by the board {dropped}; frames lost on the line {}; frames from the board that failed their check {}; frames the board refused {refused_by_board}; stale records left out {}\n\
+             clocks: board boot at host Unix time {:.6} s, host times within ±{:.2} ms (half the quickest round trip before the stream {:.2} ms, and the board clock's drift of {:+.1} ± {:.1} ppm over the stream, {:.2} ms at its end)",
             r.records,
             self.csv,
             self.rate_hz,
@@ -906,6 +948,7 @@ impl StreamRun {
             (r.align.error_us + drift_error_us) * 1e-3,
             r.align.error_us * 1e-3,
             drift.drift_ppm(),
+            drift.drift_error_ppm(),
             drift_error_us * 1e-3,
         );
         Ok(Done {
@@ -938,11 +981,12 @@ fn ping<P: std::io::Read + std::io::Write>(
     let (min, median, max) = (rtt[0], rtt[rtt.len() / 2], rtt[rtt.len() - 1]);
     let last = pings[pings.len() - 1].board_us;
     let drift = if a.span_us == 0 {
-        "no drift measured (one ping)".to_string()
+        "no drift measured (no time between the pings fitted)".to_string()
     } else {
         format!(
-            "drift {:+.1} ppm over {:.3} s",
+            "the board clock {:+.1} ± {:.1} ppm against this host's (positive: fast), measured over {:.3} s",
             a.drift_ppm(),
+            a.drift_error_ppm(),
             a.span_us as f64 * 1e-6
         )
     };

@@ -58,6 +58,7 @@ pub fn alignment_json(a: &Alignment) -> Value {
     json!({
         "board_boot_host_us": a.host_us(0).round(),
         "drift_ppm": a.drift_ppm(),
+        "drift_error_ppm": a.drift_error_ppm(),
         "error_us": a.error_us,
         "span_us": a.span_us,
     })

@@ -100,7 +100,9 @@ pub fn run<P: std::io::Read + std::io::Write>(
         if end.is_some_and(|e| now >= e) {
             break;
         }
-        if !stdin_open && queued.is_empty() && now >= held_until {
+        // Without --seconds the session lasts as long as its commands (stdin's end, then its
+        // last wait); with it, exactly that long, whatever stdin does.
+        if end.is_none() && !stdin_open && queued.is_empty() && now >= held_until {
             break;
         }
         // A few ms of stream between looks at stdin.
@@ -157,7 +159,11 @@ pub fn run<P: std::io::Read + std::io::Write>(
     }
     let seconds = started.elapsed().as_secs_f64();
     let mut done = stream.finish(client, format!("in {seconds:.1} s"))?;
-    done.text = format!("{commands} commands ({failed} failed); {}", done.text);
+    done.text = format!(
+        "{commands} command{} ({failed} failed); {}",
+        if commands == 1 { "" } else { "s" },
+        done.text
+    );
     done.json["commands"] = json!(commands);
     done.json["commands_failed"] = json!(failed);
     Ok(done)

@@ -193,6 +193,14 @@ fn ten_seconds_stream_without_a_drop_at_1_khz() {
         "{} records",
         csv.rows.len()
     );
+    // The host times are the board times moved by the offset found before the stream (its
+    // pings are back to back: no drift is fitted over a millisecond of them).
+    let host = csv.numbers("host_time_us");
+    let board = csv.numbers("time_us");
+    assert!(
+        host.iter().zip(&board).all(|(h, b)| (h - b).abs_diff(host[0] - board[0]) <= 1),
+        "host_time_us drifts from time_us"
+    );
     // Consecutive records are 10 samples (1 ms) apart: nothing lost in between.
     let t = csv.numbers("time_us");
     assert!(
@@ -680,10 +688,13 @@ fn ping_aligns_the_board_clock_within_the_error_it_states() {
         "boot at {boot} µs, truly {boot_unix_us} µs: off by {} µs, stated ±{error_us} µs",
         boot - boot_unix_us
     );
-    // Board µs are 1/1.0002 host µs: −199.96 ppm; the two end pings' error over the span.
-    let want_ppm = (1.0 / 1.0002 - 1.0) * 1e6;
+    // The board runs 200 ppm fast (1.0002 board µs a host µs): +200 ppm, within the error
+    // it states (both ends' error over the span).
+    let want_ppm = 200.0;
     let drift = clock["drift_ppm"].as_f64().unwrap();
-    let allowed_ppm = 2.0 * error_us / span_us * 1e6 + 1.0;
+    let allowed_ppm = clock["drift_error_ppm"].as_f64().unwrap();
+    assert_eq!(allowed_ppm, 2.0 * error_us / span_us * 1e6, "{clock}");
+    assert!(span_us >= 0.5e6, "the fitted pings a third of the 2 s apart at least: {clock}");
     assert!(
         (drift - want_ppm).abs() <= allowed_ppm,
         "drift {drift} ppm, truly {want_ppm} ppm (±{allowed_ppm})"
@@ -721,9 +732,20 @@ fn command_line_errors_are_one_line_and_json_when_asked() {
         assert_eq!(v["kind"], "input");
         assert!(v["error"].as_str().unwrap().contains(says), "{v}");
     }
-    // The range sentence itself for a negative --seconds.
-    let r = saw(port, &["stream", "--csv", "x.csv", "--seconds", "-1"]);
-    assert!(r.stderr.contains("from 0.1 to 86400 s"), "{}", r.stderr);
+    // The range sentences themselves, for negative numbers.
+    for (args, says) in [
+        (vec!["stream", "--csv", "x.csv", "--seconds", "-1"], "from 0.1 to 86400 s"),
+        (vec!["--timeout", "-5", "hello"], "must be a whole number from 10 to 60000 ms"),
+        (vec!["boundary", "-1", "5"], "must be a whole number from 0 to 255"),
+        (vec!["ping", "--count", "1"], "must be a whole number from 2 to 1000 round trips"),
+    ] {
+        let r = saw(port, &args);
+        assert!(r.stderr.contains(says), "{args:?}: {}", r.stderr);
+    }
+    // A missing argument is named on the one line.
+    let r = saw(port, &["stream", "--seconds", "1"]);
+    assert!(r.stderr.contains("not provided: --csv <FILE>"), "{}", r.stderr);
+    assert_eq!(r.stderr.trim().lines().count(), 1, "{}", r.stderr);
     // --help is not an error.
     let r = saw(port, &["--help"]);
     assert_eq!(r.code, 0);
@@ -793,4 +815,24 @@ fn the_panel_under_json_says_where_it_listens_in_json() {
     assert_eq!(v["ok"], true, "{v}");
     let at = v["result"]["listening"].as_str().unwrap();
     assert!(at.starts_with("http://127.0.0.1:") && !at.ends_with(":0"), "{v}");
+}
+
+/// `saw session --seconds S` records S seconds whatever stdin does (here: nothing, at once).
+#[test]
+fn a_session_with_seconds_lasts_them_with_no_commands() {
+    let vb = VirtualBoard::start(&[]);
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("quiet.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_saw"))
+        .arg("--port")
+        .arg(&vb.port)
+        .args(["--json", "session", "--csv", csv.to_str().unwrap(), "--seconds", "0.5"])
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let t = Csv::read(&csv).numbers("time_us");
+    let span_us = t.last().unwrap() - t.first().unwrap();
+    // Half a second of 1 kHz records, give or take the stream's start and stop.
+    assert!((400_000..=600_000).contains(&span_us), "{span_us} µs");
 }
