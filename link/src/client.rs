@@ -11,6 +11,24 @@ use crate::clock::Ping;
 use crate::frame::{self, Receiver, Refusal, MAX_ENCODED};
 use crate::msg::{Header, Hello, LinkError, Reply, Request, Stream, PROTOCOL_VERSION};
 
+/// The host clock's origin: the Unix time read between two monotonic readings, the tightest
+/// of a few tries (a thread preempted between the readings would put the origin off by the
+/// time it was away).
+fn anchor() -> (Instant, u64) {
+    (0..5)
+        .map(|_| {
+            let before = Instant::now();
+            let unix_us = SystemTime::now()
+                .duration_since(UNIX_EPOCH)
+                .map_or(0, |d| d.as_micros() as u64);
+            let after = Instant::now();
+            (after - before, before + (after - before) / 2, unix_us)
+        })
+        .min_by_key(|(gap, _, _)| *gap)
+        .map(|(_, at, unix_us)| (at, unix_us))
+        .unwrap_or_else(|| (Instant::now(), 0))
+}
+
 /// A stream the board started: what [`Client::start_stream`] returns.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct StreamStart {
@@ -107,12 +125,7 @@ impl<P: Read + Write> Client<P> {
             inbox_pos: 0,
             from_us: None,
             stale_records: 0,
-            anchor: (
-                Instant::now(),
-                SystemTime::now()
-                    .duration_since(UNIX_EPOCH)
-                    .map_or(0, |d| d.as_micros() as u64),
-            ),
+            anchor: anchor(),
         }
     }
 

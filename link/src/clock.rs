@@ -133,7 +133,10 @@ mod tests {
             ping(70_200_000, 10, 400),
         ];
         let a = Alignment::fit(&pings).unwrap();
-        assert_eq!(a.error_us, 150.0, "half the slower of the two quick round trips");
+        assert_eq!(
+            a.error_us, 150.0,
+            "half the slower of the two quick round trips"
+        );
         // The quickest of each third: the second ping and the fifth.
         assert_eq!(a.board_ref_us, pings[1].board_us);
         assert_eq!(a.span_us, pings[4].board_us - pings[1].board_us);
@@ -141,7 +144,11 @@ mod tests {
         // over 60 s allows (5 ppm), which is what it says.
         assert_eq!(a.drift_error_ppm(), 2.0 * 150.0 / a.span_us as f64 * 1e6);
         let want = (1.0 / 1.0002 - 1.0) * 1e6;
-        assert!((a.drift_ppm() - want).abs() < a.drift_error_ppm(), "{}", a.drift_ppm());
+        assert!(
+            (a.drift_ppm() - want).abs() < a.drift_error_ppm(),
+            "{}",
+            a.drift_ppm()
+        );
         // Any board time between the pings maps to its true host time within the bound.
         for host in [10_100_100u64, 30_000_000, 50_000_000, 70_100_150] {
             let board = ((host as f64 - 5e6) / 1.0002).round() as u64;
@@ -154,14 +161,19 @@ mod tests {
     fn the_quickest_pings_are_a_third_of_the_span_apart() {
         // The two quickest round trips sit side by side in the middle: a fit of the halves'
         // quickest would measure the drift over 1 s of a 9 s span.
-        let mut pings: Vec<Ping> = (0..9).map(|i| ping(10_000_000 + i * 1_000_000, 500, 1_000)).collect();
+        let mut pings: Vec<Ping> = (0..9)
+            .map(|i| ping(10_000_000 + i * 1_000_000, 500, 1_000))
+            .collect();
         pings[4] = ping(14_000_000, 50, 100);
         pings[5] = ping(15_000_000, 50, 100);
         let a = Alignment::fit(&pings).unwrap();
         assert!(a.span_us > 5_000_000, "{}", a.span_us);
         // A burst taken back to back: the offset only.
         let o = Alignment::offset(&pings[3..6]).unwrap();
-        assert_eq!((o.rate, o.span_us, o.board_ref_us), (1.0, 0, pings[4].board_us));
+        assert_eq!(
+            (o.rate, o.span_us, o.board_ref_us),
+            (1.0, 0, pings[4].board_us)
+        );
         assert_eq!(o.drift_error_ppm(), f64::INFINITY);
     }
 

@@ -303,14 +303,25 @@ fn a_ping_reads_the_board_clock_past_32_bits() {
     b.now_us = (1 << 32) + 17;
     let (h, r) = ask(&mut s, &mut b, 9, &Request::Ping);
     assert_eq!(h.seq, 9);
-    assert_eq!(r, Reply::Pong { board_time_us: (1 << 32) + 17 });
+    assert_eq!(
+        r,
+        Reply::Pong {
+            board_time_us: (1 << 32) + 17
+        }
+    );
 }
 
 #[test]
 fn every_accepted_change_steps_the_stamp_and_a_refused_one_does_not() {
     let (mut s, mut b) = (session(), CoreBoard::new());
     let boot = scene_id(&default_config());
-    assert_eq!(s.stamp(), Stamp { scene_id: boot, change: 0 });
+    assert_eq!(
+        s.stamp(),
+        Stamp {
+            scene_id: boot,
+            change: 0
+        }
+    );
     let set = Request::SetTexture {
         region: 0,
         texture: Texture::constant_hz(250),
@@ -320,7 +331,13 @@ fn every_accepted_change_steps_the_stamp_and_a_refused_one_does_not() {
         panic!("{r:?}")
     };
     assert_ne!(first, boot);
-    assert_eq!(b.stamp, Stamp { scene_id: first, change: 1 });
+    assert_eq!(
+        b.stamp,
+        Stamp {
+            scene_id: first,
+            change: 1
+        }
+    );
     assert_eq!(s.stamp(), b.stamp);
     // Refused: neither the board's stamp nor the session's moves.
     let (_, r) = ask(
@@ -333,27 +350,59 @@ fn every_accepted_change_steps_the_stamp_and_a_refused_one_does_not() {
         },
     );
     assert!(matches!(r, Reply::Refused(_)), "{r:?}");
-    assert_eq!(b.stamp, Stamp { scene_id: first, change: 1 });
+    assert_eq!(
+        b.stamp,
+        Stamp {
+            scene_id: first,
+            change: 1
+        }
+    );
     // The same scene again is still a change: a trial that repeats a condition is its own trial.
     let (_, r) = ask(&mut s, &mut b, 3, &set);
     assert_eq!(r, Reply::Applied { scene_id: first });
-    assert_eq!(b.stamp, Stamp { scene_id: first, change: 2 });
+    assert_eq!(
+        b.stamp,
+        Stamp {
+            scene_id: first,
+            change: 2
+        }
+    );
 }
 
 #[test]
 fn a_change_back_to_the_boot_scene_reports_its_source_again() {
     let (mut s, mut b) = (session(), CoreBoard::new());
-    let (_, r) = ask(&mut s, &mut b, 1, &Request::SetDrive(DriveMode::Progressive));
+    let (_, r) = ask(
+        &mut s,
+        &mut b,
+        1,
+        &Request::SetDrive(DriveMode::Progressive),
+    );
     assert!(matches!(r, Reply::Applied { .. }), "{r:?}");
     assert_eq!(s.source(), SceneSource::Link);
     let (_, r) = ask(&mut s, &mut b, 2, &Request::SetDrive(DriveMode::Standing));
-    assert_eq!(r, Reply::Applied { scene_id: scene_id(&default_config()) });
+    assert_eq!(
+        r,
+        Reply::Applied {
+            scene_id: scene_id(&default_config())
+        }
+    );
     assert_eq!(s.source(), SceneSource::Default);
     // After a save, the saved scene is the one to come back to.
-    ask(&mut s, &mut b, 3, &Request::SetDrive(DriveMode::Progressive));
+    ask(
+        &mut s,
+        &mut b,
+        3,
+        &Request::SetDrive(DriveMode::Progressive),
+    );
     ask(&mut s, &mut b, 4, &Request::Save);
     ask(&mut s, &mut b, 5, &Request::SetDrive(DriveMode::Standing));
     assert_eq!(s.source(), SceneSource::Link);
-    ask(&mut s, &mut b, 6, &Request::SetDrive(DriveMode::Progressive));
+    ask(
+        &mut s,
+        &mut b,
+        6,
+        &Request::SetDrive(DriveMode::Progressive),
+    );
     assert_eq!(s.source(), SceneSource::Saved);
 }

@@ -100,7 +100,10 @@ pub(crate) fn one_line(rendered: &str) -> String {
 /// A whole number from `lo` to `hi` (`unit` in the sentence), negatives included in the check.
 fn whole_in<T: TryFrom<i128>>(s: &str, lo: i128, hi: i128, unit: &str) -> Result<T, String> {
     let sentence = || format!("must be a whole number from {lo} to {hi}{unit}");
-    let v: i128 = s.trim().parse().map_err(|_| format!("not a whole number; {}", sentence()))?;
+    let v: i128 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("not a whole number; {}", sentence()))?;
     if v < lo || v > hi {
         return Err(sentence());
     }
@@ -215,7 +218,7 @@ pub enum Command {
         #[arg(long, value_name = "FILE")]
         csv: PathBuf,
         /// Record exactly this long, s (0.1 to 86400), whatever stdin does; without it the session
-    /// ends when stdin ends and its last `wait` is over.
+        /// ends when stdin ends and its last `wait` is over.
         #[arg(long, value_name = "S", allow_negative_numbers = true, value_parser = seconds)]
         seconds: Option<f64>,
         /// One record every N samples (1 to 10000; 10 = 1 kHz on a 10 kHz board).
@@ -800,15 +803,17 @@ pub fn merged_texture(config: &Config, index: u8, given: &str) -> Result<Texture
         .and_then(|r| r.as_table())
         .cloned()
         .unwrap_or_default();
-    let mut file: toml::Table =
-        toml::from_str(&saw_core::scene_file::to_scene_file(config, "")).map_err(|e| e.to_string())?;
+    let mut file: toml::Table = toml::from_str(&saw_core::scene_file::to_scene_file(config, ""))
+        .map_err(|e| e.to_string())?;
     let region = file
         .get_mut("region")
         .and_then(|r| r.as_array_mut())
         .and_then(|r| r.get_mut(at))
         .and_then(|r| r.as_table_mut())
         .ok_or_else(|| format!("region {index}: not in the board's scene"))?;
-    let new_kind = given.get("kind").is_some_and(|k| Some(k) != region.get("kind"));
+    let new_kind = given
+        .get("kind")
+        .is_some_and(|k| Some(k) != region.get("kind"));
     if new_kind {
         // A new kind: only the region's extent carries over.
         region.retain(|k, _| k == "until_mm");
@@ -930,7 +935,8 @@ impl StreamRun {
         let (first_us, last_us) = r.span_us.unwrap_or((0, 0));
         // The host times in the file are from the offset before the stream; the drift measured
         // over it adds this much at the last record.
-        let drift_error_us = drift.drift_ppm().abs() * 1e-6 * (last_us.saturating_sub(first_us)) as f64;
+        let drift_error_us =
+            drift.drift_ppm().abs() * 1e-6 * (last_us.saturating_sub(first_us)) as f64;
         let text = format!(
             "{} records {how_long} to {} ({:.0} records/s asked), {:.3} s of board time ({first_us} to {last_us} µs since boot), {} scene change{}\n\
              dropped by the board {dropped}; frames lost on the line {}; frames from the board that failed their check {}; frames the board refused {refused_by_board}; stale records left out {}\n\

@@ -14,7 +14,8 @@ use serde_json::{json, Value};
 use crate::{scene_hex, Failure};
 
 /// The columns, in order (docs/link.md, "Records").
-pub const CSV_HEADER: &str = "time_us,host_time_us,scene_id,change,position_um,velocity_um_s,region,f_b_hz,bursting,fault";
+pub const CSV_HEADER: &str =
+    "time_us,host_time_us,scene_id,change,position_um,velocity_um_s,region,f_b_hz,bursting,fault";
 
 /// A record's CSV row; `host_us`: the host time its board time maps to.
 pub fn csv_line(r: &Record, host_us: u64) -> String {

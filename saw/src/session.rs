@@ -49,12 +49,14 @@ fn parse(line: &str) -> Result<Step, String> {
             .parse()
             .map_err(|_| format!("wait {s}: not a number; must be from 0 to {WAIT_MAX_S} s"))?;
         if !v.is_finite() || !(0.0..=WAIT_MAX_S).contains(&v) {
-            return Err(format!("wait {s}: must be a finite number from 0 to {WAIT_MAX_S} s"));
+            return Err(format!(
+                "wait {s}: must be a finite number from 0 to {WAIT_MAX_S} s"
+            ));
         }
         return Ok(Step::Wait(v));
     }
-    let parsed = Line::try_parse_from(&words)
-        .map_err(|e| crate::one_line(&e.render().to_string()))?;
+    let parsed =
+        Line::try_parse_from(&words).map_err(|e| crate::one_line(&e.render().to_string()))?;
     match parsed.command {
         Command::Stream { .. }
         | Command::Session { .. }
@@ -106,7 +108,8 @@ pub fn run<P: std::io::Read + std::io::Write>(
             break;
         }
         // A few ms of stream between looks at stdin.
-        let look = (now + Duration::from_millis(5)).min(end.unwrap_or(now + Duration::from_millis(5)));
+        let look =
+            (now + Duration::from_millis(5)).min(end.unwrap_or(now + Duration::from_millis(5)));
         stream.rec.drain_until(client, look)?;
         loop {
             match rx.try_recv() {
@@ -119,7 +122,9 @@ pub fn run<P: std::io::Read + std::io::Write>(
             }
         }
         while Instant::now() >= held_until {
-            let Some(line) = queued.pop_front() else { break };
+            let Some(line) = queued.pop_front() else {
+                break;
+            };
             let answer = match parse(&line) {
                 Ok(Step::Nothing) => continue,
                 Ok(Step::Wait(s)) => {
@@ -187,10 +192,16 @@ mod tests {
             Ok(Step::Run(Command::Push { file })) if file.to_str() == Some("scenes/a b.toml")
         ));
         for (line, says) in [
-            ("wait -1", "wait -1: must be a finite number from 0 to 86400 s"),
+            (
+                "wait -1",
+                "wait -1: must be a finite number from 0 to 86400 s",
+            ),
             ("wait nan", "wait nan: must be a finite number"),
             ("wait", "wait takes one value"),
-            ("stream --csv x --seconds 1", "`stream` does not run inside a session"),
+            (
+                "stream --csv x --seconds 1",
+                "`stream` does not run inside a session",
+            ),
             ("boundary 0 -3", "must be a finite number from 0 to 1000 mm"),
             ("fly", "unrecognized subcommand 'fly'"),
         ] {

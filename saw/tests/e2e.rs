@@ -64,7 +64,10 @@ fn every_scene_file_is_pushed_and_read_back() {
         let h = saw_json(&vb.port, &["hello"]);
         assert_eq!(h["result"]["hello"]["scene_id"], want);
         // The scene file that pushed it is the source only while it is not the boot scene.
-        let src = h["result"]["hello"]["scene_source"].as_str().unwrap().to_string();
+        let src = h["result"]["hello"]["scene_source"]
+            .as_str()
+            .unwrap()
+            .to_string();
         assert!(src == "link" || src == "default", "{h}");
         let g = saw_json(&vb.port, &["get"]);
         assert_eq!(g["result"]["scene_id"], want);
@@ -87,7 +90,12 @@ impl Csv {
     fn read(path: &Path) -> Self {
         let text = std::fs::read_to_string(path).unwrap();
         let mut lines = text.lines();
-        let header = lines.next().unwrap().split(',').map(str::to_string).collect();
+        let header = lines
+            .next()
+            .unwrap()
+            .split(',')
+            .map(str::to_string)
+            .collect();
         let rows = lines
             .map(|l| l.split(',').map(str::to_string).collect())
             .collect();
@@ -105,7 +113,10 @@ impl Csv {
         self.rows.iter().map(|r| r[c].clone()).collect()
     }
     fn numbers(&self, name: &str) -> Vec<u64> {
-        self.values(name).iter().map(|v| v.parse().unwrap()).collect()
+        self.values(name)
+            .iter()
+            .map(|v| v.parse().unwrap())
+            .collect()
     }
 }
 
@@ -113,12 +124,18 @@ impl Csv {
 /// only between two records `max_gap_us` apart or less: across records the line dropped (the
 /// stream's drop counter), the switch could be anywhere in the gap.
 fn switches(csv: &Csv, a: &str, b: &str, max_gap_us: u64) -> Vec<f64> {
-    let (t, region, pos) = (csv.col("time_us"), csv.col("region"), csv.col("position_um"));
+    let (t, region, pos) = (
+        csv.col("time_us"),
+        csv.col("region"),
+        csv.col("position_um"),
+    );
     let time = |r: &Vec<String>| r[t].parse::<u64>().unwrap_or(0);
     csv.rows
         .windows(2)
         .filter(|w| time(&w[1]).wrapping_sub(time(&w[0])) <= max_gap_us)
-        .filter(|w| (w[0][region] == a && w[1][region] == b) || (w[0][region] == b && w[1][region] == a))
+        .filter(|w| {
+            (w[0][region] == a && w[1][region] == b) || (w[0][region] == b && w[1][region] == a)
+        })
         .filter_map(|w| w[1][pos].parse::<f64>().ok())
         .map(|um| um / 1000.0)
         .collect()
@@ -198,7 +215,9 @@ fn ten_seconds_stream_without_a_drop_at_1_khz() {
     let host = csv.numbers("host_time_us");
     let board = csv.numbers("time_us");
     assert!(
-        host.iter().zip(&board).all(|(h, b)| (h - b).abs_diff(host[0] - board[0]) <= 1),
+        host.iter()
+            .zip(&board)
+            .all(|(h, b)| (h - b).abs_diff(host[0] - board[0]) <= 1),
         "host_time_us drifts from time_us"
     );
     // Consecutive records are 10 samples (1 ms) apart: nothing lost in between.
@@ -473,7 +492,11 @@ fn a_save_that_erases_a_sector_succeeds_and_survives_a_power_cycle() {
     let args = ["--board", "nucleo-f446re", "--flash", &flash_arg];
     let vb = VirtualBoard::start_in(dir, &args);
     let h = saw_json(&vb.port, &["hello"]);
-    assert_eq!(h["result"]["hello"]["scene_id"], format!("{last:#010x}"), "{h}");
+    assert_eq!(
+        h["result"]["hello"]["scene_id"],
+        format!("{last:#010x}"),
+        "{h}"
+    );
     assert_eq!(h["result"]["hello"]["scene_source"], "saved", "{h}");
     let moved = saw_json(&vb.port, &["boundary", "0", "30"]);
     let id = moved["result"]["applied"].clone();
@@ -527,7 +550,15 @@ fn a_stream_frame_of_eight_records_is_about_212_bytes() {
         records: core::iter::repeat_n(r, 8).collect(),
     });
     let mut out = [0u8; saw_link::frame::MAX_ENCODED];
-    let n = saw_link::frame::encode(&Header { version: 2, seq: 300 }, &frame, &mut out).unwrap();
+    let n = saw_link::frame::encode(
+        &Header {
+            version: 2,
+            seq: 300,
+        },
+        &frame,
+        &mut out,
+    )
+    .unwrap();
     assert!((200..=220).contains(&n), "{n} bytes");
 }
 
@@ -547,7 +578,8 @@ fn twenty_trials_of_set_then_stream_record_only_their_own_scene() {
                 .open_native()
                 .unwrap();
             let stream = saw_link::msg::Request::Stream { every_samples: 1 };
-            p.write_all(&encoded(saw_link::msg::PROTOCOL_VERSION, 7, &stream)).unwrap();
+            p.write_all(&encoded(saw_link::msg::PROTOCOL_VERSION, 7, &stream))
+                .unwrap();
             p.flush().unwrap();
         }
         let set = saw_json(
@@ -573,20 +605,35 @@ fn twenty_trials_of_set_then_stream_record_only_their_own_scene() {
         );
         assert_eq!(r["ok"], true, "{r}");
         let csv = Csv::read(&csv);
-        assert!(csv.rows.len() > 200, "trial {trial}: {} records", csv.rows.len());
+        assert!(
+            csv.rows.len() > 200,
+            "trial {trial}: {} records",
+            csv.rows.len()
+        );
         let t = csv.numbers("time_us");
         let stale = t.iter().filter(|&&t| t < asked_us).count();
-        assert_eq!(stale, 0, "trial {trial}: {stale} records from before the stream was asked for");
+        assert_eq!(
+            stale, 0,
+            "trial {trial}: {stale} records from before the stream was asked for"
+        );
         let ids = csv.values("scene_id");
         let wrong = ids.iter().filter(|v| **v != id).count();
-        assert_eq!(wrong, 0, "trial {trial}: {wrong} records of another scene than {id}");
-        let changes: std::collections::BTreeSet<u64> =
-            csv.numbers("change").into_iter().collect();
+        assert_eq!(
+            wrong, 0,
+            "trial {trial}: {wrong} records of another scene than {id}"
+        );
+        let changes: std::collections::BTreeSet<u64> = csv.numbers("change").into_iter().collect();
         assert_eq!(changes.len(), 1, "trial {trial}: {changes:?}");
         // Each trial's change is new: no record is from an earlier trial's scene.
-        assert!(seen_changes.insert(*changes.first().unwrap()), "trial {trial}");
+        assert!(
+            seen_changes.insert(*changes.first().unwrap()),
+            "trial {trial}"
+        );
         // The records follow each other at the decimation: no seam of old records.
-        assert!(t.windows(2).all(|w| w[1] - w[0] == 1_000), "trial {trial}: a gap");
+        assert!(
+            t.windows(2).all(|w| w[1] - w[0] == 1_000),
+            "trial {trial}: a gap"
+        );
     }
 }
 
@@ -607,9 +654,19 @@ fn a_session_is_one_log_that_splits_at_each_change() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    child.stdin.take().unwrap().write_all(script.as_bytes()).unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(script.as_bytes())
+        .unwrap();
     let out = child.wait_with_output().unwrap();
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let lines: Vec<Value> = String::from_utf8_lossy(&out.stdout)
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
@@ -621,7 +678,11 @@ fn a_session_is_one_log_that_splits_at_each_change() {
         .map(|&i| lines[i]["result"]["applied"].as_str().unwrap().to_string())
         .collect();
     assert_eq!(lines[10]["ok"], false, "{}", lines[10]);
-    assert!(lines[10]["error"].as_str().unwrap().contains("f_b_hz"), "{}", lines[10]);
+    assert!(
+        lines[10]["error"].as_str().unwrap().contains("f_b_hz"),
+        "{}",
+        lines[10]
+    );
     assert_eq!(lines[11]["result"]["commands"], 11, "{}", lines[11]);
     let csv = Csv::read(&csv);
     let (scene, change) = (csv.values("scene_id"), csv.numbers("change"));
@@ -656,12 +717,18 @@ fn a_session_is_one_log_that_splits_at_each_change() {
     for i in 1..change.len() - 1 {
         if change[i] != change[i - 1] {
             let before = t[i] - t[i - 1];
-            assert!(before <= 1_000, "change at record {i}: {before} µs after the one before");
+            assert!(
+                before <= 1_000,
+                "change at record {i}: {before} µs after the one before"
+            );
             assert_eq!(t[i + 1] - t[i], 1_000, "the count restarts at the change");
             off_schedule += usize::from(before < 1_000);
         }
     }
-    assert!(off_schedule > 0, "no change's first sample was forced into the stream");
+    assert!(
+        off_schedule > 0,
+        "no change's first sample was forced into the stream"
+    );
 }
 
 /// The clock alignment against the virtual board's own clock (which runs 200 ppm fast here):
@@ -675,12 +742,26 @@ fn ping_aligns_the_board_clock_within_the_error_it_states() {
     let clock = &r["result"]["clock"];
     let error_us = clock["error_us"].as_f64().unwrap();
     let span_us = clock["span_us"].as_f64().unwrap();
-    // The truth: the board booted at `vb.clock.start`, on this machine's Unix clock.
-    let now_unix_us = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
+    // The truth: the board booted at `vb.clock.start`, on this machine's Unix clock, read
+    // between two monotonic readings (the tightest of a few, so a preempted thread does not
+    // move it).
+    let boot_unix_us = (0..5)
+        .map(|_| {
+            let before = std::time::Instant::now();
+            let unix_us = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_micros() as f64;
+            let after = std::time::Instant::now();
+            let mid = before + (after - before) / 2;
+            (
+                after - before,
+                unix_us - (mid - vb.clock.start).as_micros() as f64,
+            )
+        })
+        .min_by_key(|(gap, _)| *gap)
         .unwrap()
-        .as_micros() as f64;
-    let boot_unix_us = now_unix_us - vb.clock.start.elapsed().as_micros() as f64;
+        .1;
     let boot = clock["board_boot_host_us"].as_f64().unwrap();
     // Reading the two clocks here and in `saw` adds a few µs each; 50 µs of slack for it.
     assert!(
@@ -694,12 +775,17 @@ fn ping_aligns_the_board_clock_within_the_error_it_states() {
     let drift = clock["drift_ppm"].as_f64().unwrap();
     let allowed_ppm = clock["drift_error_ppm"].as_f64().unwrap();
     assert_eq!(allowed_ppm, 2.0 * error_us / span_us * 1e6, "{clock}");
-    assert!(span_us >= 0.5e6, "the fitted pings a third of the 2 s apart at least: {clock}");
+    assert!(
+        span_us >= 0.5e6,
+        "the fitted pings a third of the 2 s apart at least: {clock}"
+    );
     assert!(
         (drift - want_ppm).abs() <= allowed_ppm,
         "drift {drift} ppm, truly {want_ppm} ppm (±{allowed_ppm})"
     );
-    println!("ping: error ±{error_us} µs, drift {drift:.1} ppm (true {want_ppm:.1}) over {span_us} µs");
+    println!(
+        "ping: error ±{error_us} µs, drift {drift:.1} ppm (true {want_ppm:.1}) over {span_us} µs"
+    );
 }
 
 /// A command line's mistakes: with --json the answer is JSON on stdout like every other; a
@@ -708,8 +794,22 @@ fn ping_aligns_the_board_clock_within_the_error_it_states() {
 fn command_line_errors_are_one_line_and_json_when_asked() {
     let port = Path::new("/nonexistent/tty");
     for (args, says) in [
-        (vec!["stream", "--csv", "x.csv", "--seconds", "-1"], "--seconds"),
-        (vec!["stream", "--csv", "x.csv", "--seconds", "1", "--every", "-1"], "--every"),
+        (
+            vec!["stream", "--csv", "x.csv", "--seconds", "-1"],
+            "--seconds",
+        ),
+        (
+            vec![
+                "stream",
+                "--csv",
+                "x.csv",
+                "--seconds",
+                "1",
+                "--every",
+                "-1",
+            ],
+            "--every",
+        ),
         (vec!["--timeout", "-5", "hello"], "--timeout"),
         (vec!["bench", "--moves", "-1"], "--moves"),
         (vec!["ping", "--over", "-1"], "--over"),
@@ -720,7 +820,11 @@ fn command_line_errors_are_one_line_and_json_when_asked() {
         let r = saw(port, &args);
         assert_eq!(r.code, 2, "{args:?}: {}", r.stderr);
         assert_eq!(r.stderr.trim().lines().count(), 1, "{args:?}: {}", r.stderr);
-        assert!(!r.stderr.contains("unexpected argument '-"), "{args:?}: {}", r.stderr);
+        assert!(
+            !r.stderr.contains("unexpected argument '-"),
+            "{args:?}: {}",
+            r.stderr
+        );
         assert!(r.stderr.contains(says), "{args:?}: {}", r.stderr);
         let mut with_json = vec!["--json"];
         with_json.extend(&args);
@@ -734,17 +838,33 @@ fn command_line_errors_are_one_line_and_json_when_asked() {
     }
     // The range sentences themselves, for negative numbers.
     for (args, says) in [
-        (vec!["stream", "--csv", "x.csv", "--seconds", "-1"], "from 0.1 to 86400 s"),
-        (vec!["--timeout", "-5", "hello"], "must be a whole number from 10 to 60000 ms"),
-        (vec!["boundary", "-1", "5"], "must be a whole number from 0 to 255"),
-        (vec!["ping", "--count", "1"], "must be a whole number from 2 to 1000 round trips"),
+        (
+            vec!["stream", "--csv", "x.csv", "--seconds", "-1"],
+            "from 0.1 to 86400 s",
+        ),
+        (
+            vec!["--timeout", "-5", "hello"],
+            "must be a whole number from 10 to 60000 ms",
+        ),
+        (
+            vec!["boundary", "-1", "5"],
+            "must be a whole number from 0 to 255",
+        ),
+        (
+            vec!["ping", "--count", "1"],
+            "must be a whole number from 2 to 1000 round trips",
+        ),
     ] {
         let r = saw(port, &args);
         assert!(r.stderr.contains(says), "{args:?}: {}", r.stderr);
     }
     // A missing argument is named on the one line.
     let r = saw(port, &["stream", "--seconds", "1"]);
-    assert!(r.stderr.contains("not provided: --csv <FILE>"), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("not provided: --csv <FILE>"),
+        "{}",
+        r.stderr
+    );
     assert_eq!(r.stderr.trim().lines().count(), 1, "{}", r.stderr);
     // --help is not an error.
     let r = saw(port, &["--help"]);
@@ -788,7 +908,11 @@ fn set_keeps_the_values_it_does_not_name() {
     assert!(r.stdout.contains("3 regions over"), "{}", r.stdout);
     assert!(r.stdout.contains("standing drive"), "{}", r.stdout);
     let r = saw(&vb.port, &["drive", "progressive"]);
-    assert!(r.stdout.starts_with("progressive drive: running"), "{}", r.stdout);
+    assert!(
+        r.stdout.starts_with("progressive drive: running"),
+        "{}",
+        r.stdout
+    );
 }
 
 /// `saw --json ui`: its stdout is JSON like every other command's (where it listens), the
@@ -814,7 +938,10 @@ fn the_panel_under_json_says_where_it_listens_in_json() {
     let v: Value = serde_json::from_str(first.trim()).unwrap_or_else(|e| panic!("{e}: {first:?}"));
     assert_eq!(v["ok"], true, "{v}");
     let at = v["result"]["listening"].as_str().unwrap();
-    assert!(at.starts_with("http://127.0.0.1:") && !at.ends_with(":0"), "{v}");
+    assert!(
+        at.starts_with("http://127.0.0.1:") && !at.ends_with(":0"),
+        "{v}"
+    );
 }
 
 /// `saw session --seconds S` records S seconds whatever stdin does (here: nothing, at once).
@@ -826,11 +953,23 @@ fn a_session_with_seconds_lasts_them_with_no_commands() {
     let out = Command::new(env!("CARGO_BIN_EXE_saw"))
         .arg("--port")
         .arg(&vb.port)
-        .args(["--json", "session", "--csv", csv.to_str().unwrap(), "--seconds", "0.5"])
+        .args([
+            "--json",
+            "session",
+            "--csv",
+            csv.to_str().unwrap(),
+            "--seconds",
+            "0.5",
+        ])
         .stdin(std::process::Stdio::null())
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let t = Csv::read(&csv).numbers("time_us");
     let span_us = t.last().unwrap() - t.first().unwrap();
     // Half a second of 1 kHz records, give or take the stream's start and stop.
