@@ -1,0 +1,19 @@
+//! Experiments with people on the SAW display: what a lab runs and how it is analysed.
+//!
+//! - [`protocol`]: protocol files (TOML), checked at the door like scene files.
+//! - [`design`]: the trial list a protocol and a subject imply (orders from a seed,
+//!   counterbalanced across subjects).
+//! - [`staircase`]: transformed up-down staircases (a state machine per track).
+//! - [`runner`]: the state machine that owns order and progress: hands out the next
+//!   presentation, takes the response, resumes from a log.
+//! - [`exploration`]: what the finger did while a stimulus was explored, from the telemetry.
+//! - [`observer`]: a simulated participant (Thurstonian, on the f_b the board produced).
+//! - [`analysis`]: scale values, ANOVA, yardsticks, thresholds and fits — no I/O, results
+//!   as data; [`dist`] the distributions it needs.
+//!
+//! The front ends (`saw experiment`, the panel, the Python module) only drive these.
+
+pub mod analysis;
+pub mod dist;
+pub mod observer;
+pub mod staircase;
