@@ -8,6 +8,7 @@
 //!   presentation, takes the response, resumes from a log.
 //! - [`exploration`]: what the finger did while a stimulus was explored, from the telemetry.
 //! - [`observer`]: a simulated participant (Thurstonian, on the f_b the board produced).
+//! - [`session`]: the append-only log and the CSV and sidecar rewritten from it.
 //! - [`analysis`]: scale values, ANOVA, yardsticks, thresholds and fits — no I/O, results
 //!   as data; [`dist`] the distributions it needs.
 //!
@@ -15,5 +16,9 @@
 
 pub mod analysis;
 pub mod dist;
+pub mod exploration;
 pub mod observer;
+pub mod protocol;
+pub mod runner;
+pub mod session;
 pub mod staircase;

@@ -1,0 +1,238 @@
+//! The analysis' input: rows read from CSV text — a session CSV of `saw experiment run`, or a
+//! lab's own paired-comparison data with columns `subject,first,second,score` — as data. The
+//! caller reads the files; this reads text.
+
+use std::fmt;
+
+use serde::Serialize;
+
+/// A paired judgment: `score` in grades, positive = the first presented judged more.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PairedRow {
+    /// The block (a lab's CSV: its file name).
+    pub block: String,
+    /// The subject.
+    pub subject: String,
+    /// The stimulus presented first.
+    pub first: String,
+    /// The stimulus presented second.
+    pub second: String,
+    /// The grade.
+    pub score: f64,
+}
+
+/// A two-interval trial (constant stimuli or a staircase).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct IntervalRow {
+    /// The block.
+    pub block: String,
+    /// The subject.
+    pub subject: String,
+    /// The staircase track (None: constant stimuli).
+    pub track: Option<String>,
+    /// The trial's number in the session.
+    pub trial: u32,
+    /// The level.
+    pub level: f64,
+    /// The comparison's interval chosen.
+    pub correct: bool,
+    /// A staircase reversal at this trial.
+    pub reversal: bool,
+}
+
+/// Everything read.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Dataset {
+    /// Paired judgments.
+    pub paired: Vec<PairedRow>,
+    /// Two-interval trials.
+    pub intervals: Vec<IntervalRow>,
+}
+
+/// A file the analysis cannot read: which, where, why.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct InputError {
+    /// The file.
+    pub file: String,
+    /// 1-based line (0: the file).
+    pub line: usize,
+    /// The column at fault.
+    pub column: String,
+    /// The sentence.
+    pub message: String,
+}
+
+impl fmt::Display for InputError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.line == 0 {
+            write!(f, "{}: {}", self.file, self.message)
+        } else {
+            write!(
+                f,
+                "{}:{}: {}: {}",
+                self.file, self.line, self.column, self.message
+            )
+        }
+    }
+}
+
+impl std::error::Error for InputError {}
+
+/// The columns of a lab's own paired-comparison CSV.
+pub const LAB_COLUMNS: [&str; 4] = ["subject", "first", "second", "score"];
+
+/// Reads one CSV's text (named `file` in errors) into `into`.
+pub fn read_csv(file: &str, text: &str, into: &mut Dataset) -> Result<(), InputError> {
+    let err = |line: usize, column: &str, message: String| InputError {
+        file: file.to_string(),
+        line,
+        column: column.to_string(),
+        message,
+    };
+    let mut r = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .from_reader(text.as_bytes());
+    let headers = r
+        .headers()
+        .map_err(|e| err(1, "(header)", format!("not CSV: {e}")))?
+        .clone();
+    let col = |name: &str| headers.iter().position(|h| h.trim() == name);
+    let session = col("design").is_some();
+    let need: &[&str] = if session {
+        &[
+            "subject", "trial", "block", "design", "first", "second", "score", "level", "correct",
+            "reversal", "track",
+        ]
+    } else {
+        &LAB_COLUMNS
+    };
+    for n in need {
+        if col(n).is_none() {
+            return Err(err(
+                1,
+                n,
+                format!(
+                    "the header has no column {n}; a lab's CSV has the columns {} (docs/experiment.md), a session CSV is what `saw experiment run` wrote",
+                    LAB_COLUMNS.join(",")
+                ),
+            ));
+        }
+    }
+    let idx = |n: &str| col(n).unwrap_or(0);
+    for (k, rec) in r.records().enumerate() {
+        let line = k + 2;
+        let rec = rec.map_err(|e| err(line, "(row)", format!("not a CSV row: {e}")))?;
+        let get = |n: &str| rec.get(idx(n)).unwrap_or("").trim().to_string();
+        let number = |n: &str| -> Result<f64, InputError> {
+            let s = get(n);
+            match s.parse::<f64>() {
+                Ok(v) if v.is_finite() => Ok(v),
+                _ => Err(err(line, n, format!("{s:?} is not a finite number"))),
+            }
+        };
+        let flag = |n: &str| -> Result<bool, InputError> {
+            match get(n).as_str() {
+                "1" => Ok(true),
+                "0" | "" => Ok(false),
+                s => Err(err(line, n, format!("{s:?} is not 0 or 1"))),
+            }
+        };
+        let block = if session {
+            get("block")
+        } else {
+            file.to_string()
+        };
+        let subject = get("subject");
+        if subject.is_empty() {
+            return Err(err(
+                line,
+                "subject",
+                "is empty; every row names its subject".into(),
+            ));
+        }
+        let design = if session {
+            get("design")
+        } else {
+            "paired".to_string()
+        };
+        match design.as_str() {
+            "paired" => {
+                let (first, second) = (get("first"), get("second"));
+                if first.is_empty() || second.is_empty() {
+                    return Err(err(
+                        line,
+                        if first.is_empty() { "first" } else { "second" },
+                        "is empty; a paired row names both stimuli".into(),
+                    ));
+                }
+                if first == second {
+                    return Err(err(
+                        line,
+                        "second",
+                        format!("\"{second}\" is compared with itself"),
+                    ));
+                }
+                into.paired.push(PairedRow {
+                    block,
+                    subject,
+                    first,
+                    second,
+                    score: number("score")?,
+                });
+            }
+            "constant" | "staircase" => {
+                let track = get("track");
+                into.intervals.push(IntervalRow {
+                    block,
+                    subject,
+                    track: (design == "staircase").then_some(track),
+                    trial: number("trial")? as u32,
+                    level: number("level")?,
+                    correct: flag("correct")?,
+                    reversal: flag("reversal")?,
+                });
+            }
+            other => {
+                return Err(err(
+                    line,
+                    "design",
+                    format!("\"{other}\" is not a design (paired, constant, staircase)"),
+                ))
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_labs_csv_is_read_and_its_mistakes_located() {
+        let mut d = Dataset::default();
+        read_csv(
+            "lab.csv",
+            "subject,first,second,score\ns1,a,b,2\ns1,b,a,-1.5\n",
+            &mut d,
+        )
+        .unwrap();
+        assert_eq!(d.paired.len(), 2);
+        assert_eq!(d.paired[1].score, -1.5);
+        assert_eq!(d.paired[0].block, "lab.csv");
+
+        let e = read_csv("lab.csv", "subject,first,second,score\ns1,a,b,x\n", &mut d).unwrap_err();
+        assert_eq!((e.line, e.column.as_str()), (2, "score"), "{e}");
+        let e = read_csv(
+            "lab.csv",
+            "subject,first,second,score\ns1,a,b,NaN\n",
+            &mut d,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("not a finite number"), "{e}");
+        let e = read_csv("lab.csv", "subject,first,score\n", &mut d).unwrap_err();
+        assert_eq!(e.column, "second", "{e}");
+        let e = read_csv("lab.csv", "subject,first,second,score\ns1,a,a,1\n", &mut d).unwrap_err();
+        assert!(e.to_string().contains("compared with itself"), "{e}");
+    }
+}
