@@ -44,6 +44,8 @@ pub fn summarize(records: &[Record]) -> Exploration {
         ..Exploration::default()
     };
     let mut moving_us = 0u64;
+    // Distance summed in whole µm (the records' unit), so the sum has no rounding noise.
+    let mut distance_um = 0u64;
     let mut speed_time = 0.0f64;
     let mut fb_sum = 0.0f64;
     let mut fb_n = 0u32;
@@ -71,7 +73,7 @@ pub fn summarize(records: &[Record]) -> Exploration {
             let _ = p;
             let dt_us = r.time_us.saturating_sub(prev.time_us);
             if let (Some(a), Some(b)) = (prev.position_um, r.position_um) {
-                e.distance_mm += (b as f64 - a as f64).abs() / 1000.0;
+                distance_um += (i64::from(b) - i64::from(a)).unsigned_abs();
             }
             if let Some(s) = speed {
                 if s > MOVING_MM_S {
@@ -99,8 +101,10 @@ pub fn summarize(records: &[Record]) -> Exploration {
         prev = Some(r);
     }
     e.explored_s = moving_us as f64 / 1e6;
+    e.distance_mm = distance_um as f64 / 1000.0;
     if moving_us > 0 {
-        e.mean_speed_mm_s = speed_time / moving_us as f64;
+        // To the µm/s the records carry.
+        e.mean_speed_mm_s = (speed_time / moving_us as f64 * 1000.0).round() / 1000.0;
     }
     if fb_n > 0 {
         e.f_b_hz = fb_sum / fb_n as f64;

@@ -15,10 +15,13 @@
 //! The front ends (`saw experiment`, the panel, the Python module) only drive these.
 
 pub mod analysis;
+#[cfg(feature = "chart")]
+pub mod chart;
 pub mod dist;
 pub mod exploration;
 pub mod observer;
 pub mod protocol;
 pub mod runner;
 pub mod session;
+pub mod simulate;
 pub mod staircase;

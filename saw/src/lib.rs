@@ -2,6 +2,8 @@
 //! link. One subcommand per request; every value checked before anything is sent; `--json`
 //! prints one JSON object per command for scripts. The link itself is `saw_link`.
 
+pub mod experiment;
+mod experiment_analyze;
 pub mod port;
 pub mod record;
 pub mod session;
@@ -136,8 +138,9 @@ fn count_n(s: &str) -> Result<u32, String> {
 )]
 pub struct Cli {
     /// The serial port: /dev/ttyACM0 for a Nucleo, or the path given to `host-sim serve --pty` or `board-model serve --pty`.
-    #[arg(long, short, value_name = "PORT")]
-    pub port: PathBuf,
+    /// Every command but `experiment analyze` and `experiment check` needs it.
+    #[arg(long, short, value_name = "PORT", global = true)]
+    pub port: Option<PathBuf>,
     /// Print one JSON object instead of text (for scripts).
     #[arg(long, global = true)]
     pub json: bool,
@@ -239,6 +242,13 @@ pub enum Command {
     /// (an F446 sector: ~1 s, up to 2 s) holds the answer: this waits the longer of --timeout and
     /// 4 s, and prints how long the answer took (host time).
     Save,
+    /// Experiments with people: run a protocol (paired comparisons, constant stimuli,
+    /// staircases) with a participant, check a protocol, analyse sessions (docs/experiment.md).
+    Experiment {
+        /// What to do.
+        #[command(subcommand)]
+        command: experiment::ExperimentCommand,
+    },
     /// The fig. 11 panel: a local web page that shows the finger, the regions and the trace live
     /// and edits the scene (docs/ui.md). Open the address it prints in a browser.
     Ui {
@@ -352,6 +362,10 @@ pub struct Done {
 
 /// Runs one command.
 pub fn run(cli: &Cli) -> Result<Done, Failure> {
+    let timeout = Duration::from_millis(cli.timeout);
+    if let Command::Experiment { command } = &cli.command {
+        return experiment::command(command, cli.port.as_deref(), timeout, cli.json);
+    }
     if let Command::Ui {
         listen,
         allow_remote,
@@ -360,8 +374,7 @@ pub fn run(cli: &Cli) -> Result<Done, Failure> {
     {
         return ui_command(cli, *listen, *allow_remote, *every);
     }
-    let port = port::open(&cli.port).map_err(Failure::link)?;
-    let timeout = Duration::from_millis(cli.timeout);
+    let port = port::open(port_path(cli)?).map_err(Failure::link)?;
     let mut client = Client::new(port, timeout);
     // Every command starts with hello: a board speaking another protocol is named before
     // anything is sent that it would misread.
@@ -375,6 +388,15 @@ pub fn run(cli: &Cli) -> Result<Done, Failure> {
         return session::run(&mut client, csv, *seconds, *every, cli.json, timeout);
     }
     execute(&mut client, &cli.command, timeout, Some(hello))
+}
+
+/// The --port a command needs.
+fn port_path(cli: &Cli) -> Result<&std::path::Path, Failure> {
+    cli.port.as_deref().ok_or_else(|| {
+        Failure::input(
+            "--port: missing; this command talks to a board (the serial port: /dev/ttyACM0 for a Nucleo, or the path given to host-sim serve --pty)".into(),
+        )
+    })
 }
 
 /// Runs one command on an open link (`hello`: the board's answer to the hello already said).
@@ -424,8 +446,8 @@ pub(crate) fn execute<P: std::io::Read + std::io::Write>(
         Command::Ping { count, over } => ping(client, *count, *over),
         Command::Bench { moves, seconds } => bench(client, *moves, *seconds),
         Command::Save => save(client, timeout),
-        Command::Session { .. } | Command::Ui { .. } => Err(Failure::input(
-            "session and ui hold the port themselves: run them from the command line".into(),
+        Command::Session { .. } | Command::Ui { .. } | Command::Experiment { .. } => Err(Failure::input(
+            "session, ui and experiment hold the port themselves: run them from the command line".into(),
         )),
     }
 }
@@ -454,8 +476,9 @@ fn ui_command(
     if let Some(warning) = ui::check_listen(listen, allow_remote).map_err(Failure::input)? {
         eprintln!("{warning}");
     }
+    let port = port_path(cli)?.to_path_buf();
     let handle = ui::start(ui::UiOptions {
-        port: cli.port.clone(),
+        port: port.clone(),
         listen,
         allow_remote,
         timeout: Duration::from_millis(cli.timeout),
@@ -465,7 +488,7 @@ fn ui_command(
     eprintln!(
         "saw ui: http://{} (the panel for {}); Ctrl-C to stop",
         handle.addr,
-        cli.port.display()
+        port.display()
     );
     if cli.json {
         // A script starting the panel reads where it is from stdout, as JSON like every answer
@@ -477,7 +500,7 @@ fn ui_command(
             "{}",
             json!({ "ok": true, "result": {
                 "listening": format!("http://{}", handle.addr),
-                "port": cli.port.display().to_string(),
+                "port": port.display().to_string(),
             } })
         );
         let _ = out.flush();

@@ -61,6 +61,7 @@ fn parse(line: &str) -> Result<Step, String> {
         Command::Stream { .. }
         | Command::Session { .. }
         | Command::Ui { .. }
+        | Command::Experiment { .. }
         | Command::Bench { .. }
         | Command::Ping { .. } => Err(format!(
             "`{}` does not run inside a session (it streams or holds the port itself); a session takes hello, push, get, boundary, set, drive, counters, save and wait",
