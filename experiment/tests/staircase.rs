@@ -495,8 +495,8 @@ fn interleaved_tracks_converge_each_on_its_target() {
             detector(0).level_at_p_correct(p).unwrap()
         })
         .collect();
-    let mut thresholds = vec![Vec::new(), Vec::new()];
-    let mut trials = vec![Vec::new(), Vec::new()];
+    let mut thresholds = [Vec::new(), Vec::new()];
+    let mut trials = [Vec::new(), Vec::new()];
     for seed in 0..200u64 {
         let mut observer = Observer::new(detector(5000 + seed));
         let mut runs = Interleaved::new(specs.clone(), seed).unwrap();

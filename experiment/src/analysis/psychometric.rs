@@ -154,14 +154,17 @@ pub struct Fit {
     pub level_at_target: Option<f64>,
     /// Standard error of α from the observed information (the inverse of the negative
     /// Hessian of the log-likelihood, by central differences); `None` if it is not positive
-    /// definite (e.g. a fit at a bound).
+    /// definite (e.g. a [`Fit::degenerate`] one).
     pub se_alpha: Option<f64>,
     /// Standard error of β, likewise.
     pub se_beta: Option<f64>,
-    /// Whether α or β ended at the search's bounds (the likelihood rose towards them: e.g. a
-    /// step-like data set whose best slope is infinite). Such a fit is the best in the box,
-    /// not a maximum.
-    pub at_bound: bool,
+    /// Whether the data have no proper maximum: the fit ended at the search's bounds, or the
+    /// likelihood is as high a step further towards the edge (a slope twice as steep, or the
+    /// threshold moved by half itself (Weibull) or by the levels' span (logistic)). That is
+    /// what data stepping from chance to perfect between two levels, or all correct, do: the
+    /// best slope is infinite or the threshold unbounded. The estimates are then one point of
+    /// a ridge, not a maximum, and no SE is given.
+    pub degenerate: bool,
     /// Whether the simplex met its tolerance (1e-10 in −log-likelihood) within its budget.
     pub converged: bool,
     /// Log-likelihood evaluations spent.
@@ -317,7 +320,7 @@ impl Space {
     }
 
     /// Bounds of (α, β). Wide enough that any fit of data with an interior maximum lies
-    /// inside; a fit that ends on them is flagged `at_bound`.
+    /// inside; a fit that ends on them is flagged `degenerate`.
     fn bounds(&self) -> ([f64; 2], [f64; 2]) {
         match self.model {
             Model::Weibull => ([self.lo * 1e-3, self.hi * 1e3], [1e-2, 1e3]),
@@ -604,13 +607,14 @@ fn fit_from(
     };
     let evaluations = first.evaluations + second.evaluations;
     let [alpha, beta] = space.natural(best);
-    let at_bound = space.at_bound([alpha, beta]);
-    let (se_alpha, se_beta) = if at_bound {
+    let log_likelihood = log_likelihood(data, model, alpha, beta, opts);
+    let degenerate = space.at_bound([alpha, beta])
+        || on_ridge(data, model, alpha, beta, opts, space, log_likelihood);
+    let (se_alpha, se_beta) = if degenerate {
         (None, None)
     } else {
         standard_errors(data, model, alpha, beta, opts, space)
     };
-    let log_likelihood = log_likelihood(data, model, alpha, beta, opts);
     let mut levels: Vec<f64> = data.iter().map(|d| d.level).collect();
     levels.sort_by(f64::total_cmp);
     levels.dedup();
@@ -627,7 +631,7 @@ fn fit_from(
         level_at_target: None,
         se_alpha,
         se_beta,
-        at_bound,
+        degenerate,
         converged,
         evaluations,
     };
@@ -635,6 +639,28 @@ fn fit_from(
         level_at_target: fit.level_at(opts.target),
         ..fit
     }
+}
+
+/// Whether the likelihood is (to 1e-9) as high a large step towards the edge of the
+/// parameter space: a slope twice as steep, or the threshold moved by half itself (Weibull) or
+/// by the levels' span (logistic), either way. At a proper maximum each of these costs far
+/// more than 1e-9 of log-likelihood even with a handful of trials.
+fn on_ridge(
+    data: &[LevelCount],
+    model: Model,
+    alpha: f64,
+    beta: f64,
+    opts: &FitOptions,
+    space: &Space,
+    ll: f64,
+) -> bool {
+    let (a_lo, a_hi) = match model {
+        Model::Weibull => (0.5 * alpha, 1.5 * alpha),
+        Model::Logistic => (alpha - space.span(), alpha + space.span()),
+    };
+    [(alpha, 2.0 * beta), (a_lo, beta), (a_hi, beta)]
+        .iter()
+        .any(|&(a, b)| log_likelihood(data, model, a, b, opts) >= ll - 1e-9)
 }
 
 /// Standard errors from the observed information: the inverse of the negative Hessian of
@@ -737,9 +763,9 @@ pub struct BootstrapCi {
     pub confidence: f64,
     /// Resamples drawn.
     pub n_resamples: u32,
-    /// Resamples whose fit ended at the search's bounds (kept in the intervals: dropping them
+    /// Resamples whose fit was [`Fit::degenerate`] (kept in the intervals: dropping them
     /// would bias the interval towards well-behaved data).
-    pub n_at_bound: u32,
+    pub n_degenerate: u32,
 }
 
 /// A type-7 quantile (linear between order statistics) of sorted values.
@@ -793,7 +819,7 @@ pub fn bootstrap(
     let original = fit_from(&used, model, opts, &space, start);
     let mut rng = ChaCha8Rng::seed_from_u64(boot.seed);
     let (mut alphas, mut betas, mut levels) = (Vec::new(), Vec::new(), Vec::new());
-    let mut n_at_bound = 0u32;
+    let mut n_degenerate = 0u32;
     let mut resample = used.clone();
     for _ in 0..boot.n_resamples {
         for (r, d) in resample.iter_mut().zip(used.iter()) {
@@ -814,8 +840,8 @@ pub fn bootstrap(
             &space,
             [original.alpha, original.beta],
         );
-        if refit.at_bound {
-            n_at_bound += 1;
+        if refit.degenerate {
+            n_degenerate += 1;
         }
         alphas.push(refit.alpha);
         betas.push(refit.beta);
@@ -832,6 +858,6 @@ pub fn bootstrap(
         level_at_target,
         confidence: boot.confidence,
         n_resamples: boot.n_resamples,
-        n_at_bound,
+        n_degenerate,
     })
 }
