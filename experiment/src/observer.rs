@@ -505,3 +505,234 @@ impl Observer {
         GUESS_2IFC + (1.0 - GUESS_2IFC - s.lapse) * f
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Eq. 10–12 with fig. 5's values, by hand: ω0 = √(500 / 0.001) = 707.107 rad/s; at
+    /// μs − μc = 0.1, R = 0.1 · 1 / (0.001 · 707.107 · 0.04) = 3.5355 and
+    /// f_ss = 707.107 / (2 (π − tan⁻¹ 3.5355 + 3.5355)) = 65.692 Hz; at R = 0, ω0/2π = 112.540.
+    #[test]
+    fn stick_slip_by_hand_at_fig5_values() {
+        let p = StickSlipParams::fig5(0.1);
+        assert!((p.omega0_rad_per_s() - 707.1068).abs() < 1e-3);
+        assert!((p.r() - 3.535534).abs() < 1e-6);
+        assert!((stick_slip_hz(&p).unwrap() - 65.69215).abs() < 1e-4);
+        assert!((stick_slip_hz(&StickSlipParams::fig5(0.0)).unwrap() - 112.53954).abs() < 1e-4);
+        assert_eq!(StickSlipParams::default(), p);
+    }
+
+    /// The paper: "As Figure 5 shows, f_ss increases when β … decreases" — through eq. 12
+    /// (μs − μc ∝ β) and eq. 10–11 (f_ss falls as μs − μc rises). Checked both on fig. 5's
+    /// abscissa and from a surface's β, with sandpaper-like projection radii (the paper's
+    /// #60…#320: 180, 80, 48, 34 µm) and otherwise arbitrary s − s′, E, σ.
+    #[test]
+    fn stick_slip_rises_as_beta_falls() {
+        let mut last = f64::INFINITY;
+        for i in 0..=100 {
+            let f = stick_slip_hz(&StickSlipParams::fig5(i as f64 * 0.01)).unwrap();
+            assert!(f < last, "f_ss must fall as μs − μc rises: {f} at step {i}");
+            last = f;
+        }
+        let mut last = 0.0;
+        for beta_um in [180.0, 80.0, 48.0, 34.0] {
+            let mu = friction_difference(2e3, beta_um * 1e-6, 1e5, 10e-6).unwrap();
+            let f = stick_slip_hz(&StickSlipParams::fig5(mu)).unwrap();
+            assert!(
+                f > last,
+                "f_ss must rise as β falls: {f} Hz at β = {beta_um} µm"
+            );
+            last = f;
+        }
+        // Large R: the period tends to 2R/ω0, so f_ss → ω0/(2R).
+        let p = StickSlipParams::fig5(100.0);
+        let f = stick_slip_hz(&p).unwrap();
+        assert!((f * 2.0 * p.r() / p.omega0_rad_per_s() - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn stick_slip_refuses_what_has_no_meaning() {
+        let e = stick_slip_hz(&StickSlipParams {
+            mass_kg: 0.0,
+            ..StickSlipParams::default()
+        })
+        .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "simulated observer: `mass_kg` is 0, but it must be a finite number greater than 0."
+        );
+        assert!(stick_slip_hz(&StickSlipParams::fig5(-0.1)).is_err());
+        assert!(stick_slip_hz(&StickSlipParams::fig5(f64::NAN)).is_err());
+        assert_eq!(friction_difference(1.0, 1.0, 0.0, 1.0), None);
+        assert_eq!(friction_difference(-1.0, 1.0, 1.0, 1.0), None);
+    }
+
+    #[test]
+    fn percepts_order_rougher_as_lower_fb() {
+        let log = Percept::LogFb;
+        assert_eq!(log.roughness(1.0), Some(0.0));
+        assert!((log.roughness(20.0).unwrap() + 20f64.ln()).abs() < 1e-15);
+        assert_eq!(log.roughness(0.0), None);
+        assert_eq!(log.roughness(f64::NAN), None);
+        let ss = Percept::StickSlip {
+            finger: StickSlipParams::default(),
+            friction_difference_hz: 2.0,
+        };
+        // 20 Hz → μs − μc = 0.1 → f_ss = 65.692 Hz (the hand value above).
+        assert!((ss.roughness(20.0).unwrap() + 65.69215f64.ln()).abs() < 1e-5);
+        let fbs = [20.0, 40.0, 80.0, 200.0, 1000.0];
+        for w in fbs.windows(2) {
+            assert!(ss.roughness(w[0]).unwrap() > ss.roughness(w[1]).unwrap());
+        }
+        // Compressed at high f_b: 200 → 1000 Hz is a fifth of LogFb's step.
+        let d_ss = ss.roughness(200.0).unwrap() - ss.roughness(1000.0).unwrap();
+        let d_log = log.roughness(200.0).unwrap() - log.roughness(1000.0).unwrap();
+        assert!(d_ss < 0.2 * d_log, "{d_ss} vs {d_log}");
+    }
+
+    fn spec(noise: f64, lapse: f64, seed: u64) -> ObserverSpec {
+        ObserverSpec {
+            noise,
+            lapse,
+            seed,
+            ..ObserverSpec::default()
+        }
+    }
+
+    #[test]
+    fn equal_stimuli_grade_zero_on_average_and_grades_stay_on_the_scale() {
+        let mut o = Observer::new(spec(0.4, 0.05, 1));
+        let n = 40_000;
+        let mut sum = 0i64;
+        for _ in 0..n {
+            let g = o.compare(40.0, 40.0, 5);
+            assert!((-2..=2).contains(&g));
+            sum += i64::from(g);
+        }
+        // Grade SD ≤ 2: the mean of 40 000 is within 0.05 with room.
+        assert!(
+            (sum as f64 / n as f64).abs() < 0.05,
+            "mean grade {}",
+            sum as f64 / n as f64
+        );
+        // Rougher first (lower f_b) → positive grades.
+        let mean: f64 = (0..2000)
+            .map(|_| f64::from(o.compare(20.0, 200.0, 5)))
+            .sum::<f64>()
+            / 2000.0;
+        assert!(mean > 1.5, "{mean}");
+        assert_eq!(o.compare(20.0, 200.0, 1), 0);
+        assert_eq!(o.compare(20.0, 200.0, 0), 0);
+        assert!((-1..=1).contains(&o.compare(20.0, 200.0, 4)));
+        assert_eq!(o.compare(-1.0, 200.0, 5), 0);
+        // Noise 0: the sign at full scale.
+        let mut exact = Observer::new(spec(0.0, 0.0, 1));
+        assert_eq!(exact.compare(20.0, 40.0, 7), 3);
+        assert_eq!(exact.compare(40.0, 20.0, 7), -3);
+        assert_eq!(exact.compare(40.0, 40.0, 7), 0);
+    }
+
+    /// The Thurstone case V draw: P(first rougher) = Φ(Δr / (noise √2)).
+    #[test]
+    fn forced_choices_follow_case_v() {
+        let noise = 0.5;
+        let mut o = Observer::new(spec(noise, 0.0, 3));
+        for (a, b) in [(40.0, 50.0), (40.0, 80.0), (100.0, 80.0)] {
+            let n = 20_000;
+            let k = (0..n).filter(|_| o.choose_first_rougher(a, b)).count();
+            let dr = (b as f64).ln() - (a as f64).ln();
+            let want = Normal::standard().cdf(dr / (noise * 2f64.sqrt()));
+            let got = k as f64 / n as f64;
+            assert!(
+                (got - want).abs() < 4.0 * (want * (1.0 - want) / n as f64).sqrt() + 1e-3,
+                "{a} vs {b}: {got} vs {want}"
+            );
+        }
+    }
+
+    #[test]
+    fn detection_follows_its_psychometric_function() {
+        let s = ObserverSpec {
+            threshold: 10.0,
+            spread: 4.0,
+            ..spec(0.0, 0.04, 11)
+        };
+        let mut o = Observer::new(s);
+        assert!((o.p_correct(10.0) - (0.75 - 0.02)).abs() < 1e-12);
+        assert!((o.p_correct(1e9) - 0.96).abs() < 1e-12);
+        assert!((o.p_correct(-1e9) - 0.5).abs() < 1e-12);
+        assert_eq!(o.p_correct(f64::NAN), 0.5);
+        for p in [0.6, 0.7071, 0.9] {
+            let x = s.level_at_p_correct(p).unwrap();
+            assert!((o.p_correct(x) - p).abs() < 1e-9);
+        }
+        assert_eq!(s.level_at_p_correct(0.97), None);
+        assert_eq!(s.level_at_p_correct(0.5), None);
+        for level in [4.0, 10.0, 16.0] {
+            let n = 20_000;
+            let k = (0..n).filter(|_| o.detect(level)).count();
+            let (got, want) = (k as f64 / n as f64, o.p_correct(level));
+            assert!(
+                (got - want).abs() < 4.0 * (want * (1.0 - want) / n as f64).sqrt(),
+                "{level}: {got} vs {want}"
+            );
+        }
+    }
+
+    #[test]
+    fn same_seed_same_participant() {
+        let run = |seed| {
+            let mut o = Observer::new(spec(0.3, 0.1, seed));
+            (0..200)
+                .map(|i| o.compare(20.0 + i as f64, 40.0, 5))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(run(5), run(5));
+        assert_ne!(run(5), run(6));
+    }
+
+    #[test]
+    fn specs_deserialize_with_defaults_and_refuse_bad_values() {
+        let s: ObserverSpec = serde_json::from_str(
+            r#"{"noise": 0.2, "lapse": 0.01, "percept": {"kind": "log_fb"}, "seed": 4}"#,
+        )
+        .unwrap();
+        assert_eq!((s.threshold, s.spread, s.category_width), (1.0, 0.5, 1.0));
+        let s: ObserverSpec = serde_json::from_str(
+            r#"{"noise": 0.2, "lapse": 0.0, "seed": 4, "percept": {"kind": "stick_slip", "friction_difference_hz": 2.0,
+                "finger": {"normal_force_n": 1.0, "mass_kg": 0.001, "stiffness_n_per_m": 500.0, "speed_m_per_s": 0.04, "friction_difference": 0.0}}}"#,
+        )
+        .unwrap();
+        assert!(s.check().is_ok());
+        for (bad, field) in [
+            (ObserverSpec { noise: -1.0, ..s }, "`noise` is -1"),
+            (ObserverSpec { lapse: 1.0, ..s }, "`lapse` is 1"),
+            (ObserverSpec { spread: 0.0, ..s }, "`spread` is 0"),
+            (
+                ObserverSpec {
+                    threshold: f64::INFINITY,
+                    ..s
+                },
+                "`threshold` is inf",
+            ),
+            (
+                ObserverSpec {
+                    category_width: f64::NAN,
+                    ..s
+                },
+                "`category_width` is NaN",
+            ),
+        ] {
+            let text = Observer::try_new(bad).unwrap_err().to_string();
+            assert!(text.contains(field) && text.ends_with('.'), "{text}");
+            // `new` takes it anyway, and nothing panics.
+            let mut o = Observer::new(bad);
+            let _ = (
+                o.compare(20.0, 40.0, 5),
+                o.detect(1.0),
+                o.choose_first_rougher(20.0, 40.0),
+            );
+        }
+    }
+}
