@@ -641,7 +641,7 @@ mod tests {
         for (a, b) in [(40.0, 50.0), (40.0, 80.0), (100.0, 80.0)] {
             let n = 20_000;
             let k = (0..n).filter(|_| o.choose_first_rougher(a, b)).count();
-            let dr = (b as f64).ln() - (a as f64).ln();
+            let dr: f64 = b.ln() - a.ln();
             let want = Normal::standard().cdf(dr / (noise * 2f64.sqrt()));
             let got = k as f64 / n as f64;
             assert!(
@@ -663,7 +663,7 @@ mod tests {
         assert!((o.p_correct(1e9) - 0.96).abs() < 1e-12);
         assert!((o.p_correct(-1e9) - 0.5).abs() < 1e-12);
         assert_eq!(o.p_correct(f64::NAN), 0.5);
-        for p in [0.6, 0.7071, 0.9] {
+        for p in [0.6, std::f64::consts::FRAC_1_SQRT_2, 0.9] {
             let x = s.level_at_p_correct(p).unwrap();
             assert!((o.p_correct(x) - p).abs() < 1e-9);
         }
