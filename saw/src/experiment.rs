@@ -378,61 +378,24 @@ pub fn run<P: std::io::Read + std::io::Write>(
     };
     let resumed_at = runner.answered();
     let planned = runner.planned_trials();
-    let timing = runner.protocol().timing;
     let off_scene = runner.protocol().off_scene.clone();
     if resumed_at == 0 {
         participant.instructions(&runner.protocol().instructions)?;
     }
     while let Some(trial) = runner.next_trial().cloned() {
-        if trial.break_before && trial.number > resumed_at {
-            load(client, "the RF-off scene", &off_scene)?;
-            participant.rest(trial.number, planned)?;
-        }
-        let started_utc = session::now_utc();
-        let mut shown = Vec::new();
-        let n = trial.intervals.len();
-        for (k, iv) in trial.intervals.iter().enumerate() {
-            let mut s = Shown {
-                stimulus: iv.stimulus.clone(),
-                ..Shown::default()
-            };
-            match &iv.scene {
-                Some(text) => {
-                    let id = load(client, &iv.stimulus, text)?;
-                    s.scene_id = Some(id);
-                    participant.explore(k, n);
-                    let (records, from_us) = explore(client, timing.explore_s, Some(id))?;
-                    s.board_from_us = from_us;
-                    s.board_to_us = records.last().map(|r| r.time_us);
-                    s.exploration = Some(exploration::summarize(&records));
-                }
-                None => {
-                    // An object handed over: the board's RF off while it is explored.
-                    load(client, "the RF-off scene", &off_scene)?;
-                    participant.hand_over(k, &iv.stimulus, iv.prompt.as_deref().unwrap_or(""))?;
-                    participant.explore(k, n);
-                    std::thread::sleep(Duration::from_secs_f64(timing.explore_s));
-                }
-            }
-            shown.push(s);
-            if timing.rf_off_between {
-                load(client, "the RF-off scene", &off_scene)?;
-            }
-            if k + 1 < n {
-                std::thread::sleep(Duration::from_secs_f64(timing.pause_s));
-            }
-        }
-        let asked = Instant::now();
-        let value = participant.respond(&trial, &shown)?;
-        let response_ms = asked.elapsed().as_secs_f64() * 1e3;
-        let outcome = runner
-            .respond(value)
-            .map_err(|e| Failure::input(e.to_string()))?;
-        log.append(TrialRecord::new(&outcome, shown, started_utc, response_ms))
-            .map_err(Failure::input)?;
-        if runner.next_trial().is_some() {
-            std::thread::sleep(Duration::from_secs_f64(timing.pause_s));
-        }
+        // A failure mid-trial (the board pulled, stdin closed) loses that trial only: the log
+        // holds every one answered, and the message says how to go on.
+        let answered = runner.answered();
+        present_trial(client, &trial, &mut runner, &mut log, &mut *participant, resumed_at, planned, &off_scene)
+            .map_err(|mut f| {
+                f.message = format!(
+                    "{} (at trial {}; the log {} keeps the {answered} trials answered: --resume runs this one again)",
+                    f.message,
+                    trial.number,
+                    paths.log.display()
+                );
+                f
+            })?;
     }
     load(client, "the RF-off scene", &off_scene)?;
     let trials = log.records().len();
@@ -454,6 +417,71 @@ pub fn run<P: std::io::Read + std::io::Write>(
             "sidecar": paths.sidecar.display().to_string(),
         }),
     })
+}
+
+/// Presents one trial, asks, logs it.
+#[allow(clippy::too_many_arguments)]
+fn present_trial<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+    trial: &Trial,
+    runner: &mut Runner,
+    log: &mut Log,
+    participant: &mut dyn Participant,
+    resumed_at: u32,
+    planned: u32,
+    off_scene: &str,
+) -> Result<(), Failure> {
+    let timing = runner.protocol().timing;
+    if trial.break_before && trial.number > resumed_at {
+        load(client, "the RF-off scene", off_scene)?;
+        participant.rest(trial.number, planned)?;
+    }
+    let started_utc = session::now_utc();
+    let mut shown = Vec::new();
+    let n = trial.intervals.len();
+    for (k, iv) in trial.intervals.iter().enumerate() {
+        let mut s = Shown {
+            stimulus: iv.stimulus.clone(),
+            ..Shown::default()
+        };
+        match &iv.scene {
+            Some(text) => {
+                let id = load(client, &iv.stimulus, text)?;
+                s.scene_id = Some(id);
+                participant.explore(k, n);
+                let (records, from_us) = explore(client, timing.explore_s, Some(id))?;
+                s.board_from_us = from_us;
+                s.board_to_us = records.last().map(|r| r.time_us);
+                s.exploration = Some(exploration::summarize(&records));
+            }
+            None => {
+                // An object handed over: the board's RF off while it is explored.
+                load(client, "the RF-off scene", off_scene)?;
+                participant.hand_over(k, &iv.stimulus, iv.prompt.as_deref().unwrap_or(""))?;
+                participant.explore(k, n);
+                std::thread::sleep(Duration::from_secs_f64(timing.explore_s));
+            }
+        }
+        shown.push(s);
+        if timing.rf_off_between {
+            load(client, "the RF-off scene", off_scene)?;
+        }
+        if k + 1 < n {
+            std::thread::sleep(Duration::from_secs_f64(timing.pause_s));
+        }
+    }
+    let asked = Instant::now();
+    let value = participant.respond(trial, &shown)?;
+    let response_ms = asked.elapsed().as_secs_f64() * 1e3;
+    let outcome = runner
+        .respond(value)
+        .map_err(|e| Failure::input(e.to_string()))?;
+    log.append(TrialRecord::new(&outcome, shown, started_utc, response_ms))
+        .map_err(Failure::input)?;
+    if runner.next_trial().is_some() {
+        std::thread::sleep(Duration::from_secs_f64(timing.pause_s));
+    }
+    Ok(())
 }
 
 /// The number of sessions (logs) in `dir`: the next subject's index.
