@@ -1,17 +1,234 @@
-//! `saw experiment analyze` (being written: waits for the paired-comparison analysis).
+//! `saw experiment analyze`: reads the CSV files (and the sessions' sidecars beside them, for
+//! each block's stimuli in the protocol's order), runs the analysis, prints it as text or JSON
+//! and draws the chart. The analysis itself is `saw_experiment::analysis`.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::experiment::Method;
-use crate::{Done, Failure};
+use saw_experiment::analysis::input::{read_csv, Dataset};
+use saw_experiment::analysis::paired::Variant;
+use saw_experiment::analysis::report::{self, Options, Report};
+use serde_json::{json, Value};
 
-/// Not yet.
+use crate::experiment::Method;
+use crate::{significant, Done, Failure};
+
+/// Reads, analyses, prints (and charts).
 pub fn analyze(
-    _files: &[std::path::PathBuf],
-    _method: Option<Method>,
-    _output: Option<&Path>,
+    files: &[std::path::PathBuf],
+    method: Option<Method>,
+    output: Option<&Path>,
 ) -> Result<Done, Failure> {
-    Err(Failure::input(
-        "saw experiment analyze is not built yet".into(),
-    ))
+    let mut data = Dataset::default();
+    let mut opts = Options {
+        method: method.map(|m| match m {
+            Method::Scheffe => Variant::Scheffe,
+            Method::Ura => Variant::Ura,
+            Method::Haga => Variant::Haga,
+            Method::Nakaya => Variant::Nakaya,
+        }),
+        ..Options::default()
+    };
+    for f in files {
+        let name = f.display().to_string();
+        let text =
+            std::fs::read_to_string(f).map_err(|e| Failure::input(format!("{name}: {e}")))?;
+        read_csv(&name, &text, &mut data).map_err(|e| Failure::input(e.to_string()))?;
+        // A session's sidecar (<subject>.json beside <subject>.csv) holds the protocol: each
+        // block's stimuli in its order, for correlating two blocks' scales.
+        let sidecar = f.with_extension("json");
+        if let Ok(s) = std::fs::read_to_string(&sidecar) {
+            if let Ok(v) = serde_json::from_str::<Value>(&s) {
+                block_stimuli(&v, &mut opts.block_stimuli);
+            }
+        }
+    }
+    if data.paired.is_empty() && data.intervals.is_empty() {
+        return Err(Failure::input(format!(
+            "{}: no trials to analyse",
+            files
+                .iter()
+                .map(|f| f.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+    let r = report::analyze(&data, &opts).map_err(|e| Failure::input(e.to_string()))?;
+    let mut text = render(&r);
+    if let Some(png) = output {
+        chart(&r, png)?;
+        text += &format!("\nchart: {}", png.display());
+    }
+    Ok(Done {
+        text,
+        json: serde_json::to_value(&r).unwrap_or(Value::Null),
+    })
+}
+
+/// Draws the report's chart.
+#[cfg(feature = "chart")]
+fn chart(_r: &Report, png: &Path) -> Result<(), Failure> {
+    // CHART: saw_experiment::chart::draw(r, png) once it lands.
+    Err(Failure::input(format!(
+        "-o {}: charts are not built yet",
+        png.display()
+    )))
+}
+
+/// Without the chart feature there is no chart.
+#[cfg(not(feature = "chart"))]
+fn chart(_: &Report, png: &Path) -> Result<(), Failure> {
+    Err(Failure::input(format!(
+        "-o {}: this saw was built without charts (cargo feature `chart`)",
+        png.display()
+    )))
+}
+
+/// Each block's stimuli from a sidecar's protocol text.
+fn block_stimuli(sidecar: &Value, into: &mut BTreeMap<String, Vec<String>>) {
+    let Some(text) = sidecar["session"]["protocol_text"].as_str() else {
+        return;
+    };
+    let Ok(t) = text.parse::<toml::Table>() else {
+        return;
+    };
+    for b in t
+        .get("block")
+        .and_then(|b| b.as_array())
+        .into_iter()
+        .flatten()
+    {
+        let (Some(name), Some(list)) = (
+            b.get("name").and_then(|n| n.as_str()),
+            b.get("stimuli").and_then(|s| s.as_array()),
+        ) else {
+            continue;
+        };
+        into.insert(
+            name.to_string(),
+            list.iter()
+                .filter_map(|s| s.as_str().map(str::to_string))
+                .collect(),
+        );
+    }
+}
+
+fn num(v: f64) -> String {
+    significant(v, 4)
+}
+
+/// The report as text.
+fn render(r: &Report) -> String {
+    let mut out = String::new();
+    for b in &r.paired {
+        let a = &b.scheffe;
+        out += &format!(
+            "block \"{}\": paired comparisons, {} subjects, {} judgments, Scheffé's method ({} variant)\n",
+            b.block,
+            b.subjects,
+            b.judgments,
+            json!(a.variant).as_str().unwrap_or("?")
+        );
+        let mut order: Vec<usize> = (0..a.stimuli.len()).collect();
+        order.sort_by(|&i, &j| a.scale[i].total_cmp(&a.scale[j]));
+        out += "  stimulus            scale    thurstone  bradley-terry\n";
+        for i in order {
+            let s = &a.stimuli[i];
+            let t = b
+                .thurstone
+                .as_ref()
+                .and_then(|m| m.get(s))
+                .map_or("-".into(), |v| num(*v));
+            let bt = b
+                .bradley_terry
+                .as_ref()
+                .and_then(|m| m.get(s))
+                .map_or("-".into(), |v| num(*v));
+            out += &format!("  {:<18} {:>7}  {:>9}  {:>13}\n", s, num(a.scale[i]), t, bt);
+        }
+        out += "  source                    SS      df        MS         F        p\n";
+        for row in &a.anova {
+            out += &format!(
+                "  {:<18} {:>10} {:>7} {:>9} {:>9} {:>8}\n",
+                json!(row.source).as_str().unwrap_or("?"),
+                num(row.ss),
+                num(row.df),
+                row.ms.map_or("".into(), num),
+                row.f.map_or("".into(), num),
+                row.p.map_or("".into(), |p| format!("{p:.4}")),
+            );
+        }
+        for y in &a.yardstick {
+            out += &format!(
+                "  yardstick at {} %: q = {}, Y = {}; pairs it separates: {}\n",
+                y.alpha * 100.0,
+                num(y.q),
+                num(y.y),
+                if y.separated.is_empty() {
+                    "none".to_string()
+                } else {
+                    y.separated
+                        .iter()
+                        .map(|(p, q)| format!("{p}–{q}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                }
+            );
+        }
+    }
+    for c in &r.correlations {
+        out += &format!(
+            "scales of \"{}\" and \"{}\" ({}): Pearson r = {}, Spearman ρ = {}\n",
+            c.blocks.0,
+            c.blocks.1,
+            c.pairs
+                .iter()
+                .map(|(a, b)| format!("{a}~{b}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            c.pearson.map_or("-".into(), |v| format!("{v:.3}")),
+            c.spearman.map_or("-".into(), |v| format!("{v:.3}")),
+        );
+    }
+    for t in &r.tracks {
+        out += &format!(
+            "staircase \"{}\" of {} in block \"{}\": {} trials, {} reversals, threshold {} (mean of the last {} reversals)\n",
+            t.track,
+            t.subject,
+            t.block,
+            t.levels.len(),
+            t.reversal_levels.len(),
+            t.threshold.map_or("- (too few reversals)".into(), num),
+            t.threshold_reversals
+        );
+    }
+    for c in &r.constant {
+        out += &format!(
+            "block \"{}\": constant stimuli, {} levels, {} trials\n",
+            c.block,
+            c.points.len(),
+            c.points.iter().map(|p| p.n_trials).sum::<u32>()
+        );
+        for f in &c.fits {
+            match &f.result {
+                Ok(ci) => {
+                    out += &format!(
+                        "  {:?}: α = {} [{}, {}], β = {} [{}, {}], level at {:.1} % = {} (95 % bootstrap, {} resamples)\n",
+                        f.model,
+                        num(ci.fit.alpha),
+                        num(ci.alpha.lower),
+                        num(ci.alpha.upper),
+                        num(ci.fit.beta),
+                        num(ci.beta.lower),
+                        num(ci.beta.upper),
+                        ci.fit.target * 100.0,
+                        ci.fit.level_at_target.map_or("-".into(), num),
+                        ci.n_resamples
+                    )
+                }
+                Err(e) => out += &format!("  {:?}: no fit: {e}\n", f.model),
+            }
+        }
+    }
+    out.trim_end().to_string()
 }

@@ -4,5 +4,5 @@
 pub mod input;
 pub mod paired;
 pub mod psychometric;
-// pub mod report; (waits for paired.rs)
+pub mod report;
 pub mod scaling;

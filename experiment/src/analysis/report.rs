@@ -11,7 +11,9 @@ use serde::Serialize;
 
 use super::input::Dataset;
 use super::paired::{self, Judgment, PairedAnalysis, Variant};
-use super::psychometric::{self, BootstrapCi, BootstrapKind, BootstrapOptions, FitOptions, LevelCount, Model};
+use super::psychometric::{
+    self, BootstrapCi, BootstrapKind, BootstrapOptions, FitOptions, LevelCount, Model,
+};
 use super::scaling;
 use crate::staircase::{self, StepScale};
 
@@ -207,7 +209,9 @@ pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
     for i in 0..report.paired.len() {
         for j in i + 1..report.paired.len() {
             let (a, b) = (&report.paired[i], &report.paired[j]);
-            let (Some(sa), Some(sb)) = (o.block_stimuli.get(&a.block), o.block_stimuli.get(&b.block)) else {
+            let (Some(sa), Some(sb)) =
+                (o.block_stimuli.get(&a.block), o.block_stimuli.get(&b.block))
+            else {
                 continue;
             };
             if sa.len() != sb.len() {
@@ -240,14 +244,23 @@ pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
         let mut rows: Vec<_> = data
             .intervals
             .iter()
-            .filter(|r| r.subject == subject && r.block == block && r.track.as_deref() == Some(&track))
+            .filter(|r| {
+                r.subject == subject && r.block == block && r.track.as_deref() == Some(&track)
+            })
             .collect();
         rows.sort_by_key(|r| r.trial);
-        let reversal_levels: Vec<f64> = rows.iter().filter(|r| r.reversal).map(|r| r.level).collect();
+        let reversal_levels: Vec<f64> = rows
+            .iter()
+            .filter(|r| r.reversal)
+            .map(|r| r.level)
+            .collect();
         // Linear steps are the protocols' default; a log track's threshold would be the
         // geometric mean, which the session CSV does not say — the arithmetic mean is stated.
-        let threshold =
-            psychometric::reversal_threshold(&reversal_levels, o.threshold_reversals, StepScale::Linear);
+        let threshold = psychometric::reversal_threshold(
+            &reversal_levels,
+            o.threshold_reversals,
+            StepScale::Linear,
+        );
         report.tracks.push(Track {
             subject,
             block,
@@ -268,7 +281,11 @@ pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
     }
     for b in cblocks {
         let mut points: Vec<LevelCount> = Vec::new();
-        for r in data.intervals.iter().filter(|r| r.track.is_none() && r.block == b) {
+        for r in data
+            .intervals
+            .iter()
+            .filter(|r| r.track.is_none() && r.block == b)
+        {
             match points.iter_mut().find(|p| p.level == r.level) {
                 Some(p) => {
                     p.n_trials += 1;
