@@ -700,3 +700,42 @@ fn results_serialise_as_data() {
     assert_eq!(json["anova"][6]["ms"], serde_json::Value::Null);
     assert_eq!(json["yardstick"][0]["alpha"], 0.05);
 }
+
+/// Arbitrary judgments — any names, repeats, missing pairs, self comparisons, NaN and huge
+/// scores — are analysed or refused, never a panic.
+#[test]
+fn arbitrary_judgments_never_panic() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let names = ["a", "b", "c", ""];
+    for _ in 0..300 {
+        let rows = rng.random_range(0..14);
+        let judgments: Vec<Judgment> = (0..rows)
+            .map(|_| {
+                let score = match rng.random_range(0..20) {
+                    0 => f64::NAN,
+                    1 => 1e300,
+                    _ => f64::from(rng.random_range(-3..=3)),
+                };
+                judgment(
+                    ["s1", "s2", "s3", ""][rng.random_range(0..4)],
+                    names[rng.random_range(0..4)],
+                    names[rng.random_range(0..4)],
+                    score,
+                )
+            })
+            .collect();
+        let _ = infer_variant(&judgments);
+        for variant in [
+            None,
+            Some(Variant::Scheffe),
+            Some(Variant::Haga),
+            Some(Variant::Ura),
+            Some(Variant::Nakaya),
+        ] {
+            if let Err(e) = analyze(&judgments, variant) {
+                assert!(!e.to_string().is_empty());
+            }
+        }
+    }
+}
