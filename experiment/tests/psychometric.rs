@@ -502,3 +502,67 @@ fn model_inversions() {
     assert!((Model::Weibull.f(3.0, 3.0, 2.5) - (1.0 - (-1.0f64).exp())).abs() < 1e-15);
     assert_eq!(Model::Logistic.f(3.0, 3.0, 2.5), 0.5);
 }
+
+/// No input panics: seeded random data sets with extreme levels (±1e300, 1e-300, 0), counts
+/// up to u32::MAX and odd options either fit or are refused.
+#[test]
+fn no_input_panics() {
+    use rand::Rng;
+    let mut rng = ChaCha8Rng::seed_from_u64(99);
+    let specials = [
+        0.0,
+        1e-300,
+        -1e-300,
+        1e300,
+        -1e300,
+        1.0,
+        f64::INFINITY,
+        f64::NAN,
+        5.0,
+    ];
+    for round in 0..300 {
+        let n = rng.random_range(0..6);
+        let data: Vec<LevelCount> = (0..n)
+            .map(|_| {
+                let n_trials = if rng.random::<bool>() {
+                    rng.random_range(0..50)
+                } else {
+                    u32::MAX
+                };
+                LevelCount {
+                    level: if rng.random::<bool>() {
+                        specials[rng.random_range(0..specials.len())]
+                    } else {
+                        rng.random_range(-10.0..10.0)
+                    },
+                    n_trials,
+                    n_correct: rng.random_range(0..=n_trials.min(60)),
+                }
+            })
+            .collect();
+        let opts = FitOptions {
+            guess: [0.0, 0.5, 0.99][round % 3],
+            lapse: [0.0, 0.005, 0.3][round % 3 / 2],
+            target: [0.5, 0.75, 0.995, 2.0][round % 4],
+        };
+        for model in [Model::Weibull, Model::Logistic] {
+            if let Ok(f) = fit(&data, model, &opts) {
+                assert!(
+                    f.alpha.is_finite() || f.degenerate || !f.converged,
+                    "{data:?} {f:?}"
+                );
+            }
+            let boot = BootstrapOptions {
+                kind: if round % 2 == 0 {
+                    BootstrapKind::Parametric
+                } else {
+                    BootstrapKind::NonParametric
+                },
+                n_resamples: 3,
+                seed: round as u64,
+                confidence: 0.9,
+            };
+            let _ = bootstrap(&data, model, &opts, &boot);
+        }
+    }
+}

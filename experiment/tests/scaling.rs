@@ -449,4 +449,43 @@ fn refusals_name_field_value_and_rule() {
         n: vec![],
     };
     assert!(sentence(thurstone_case_v(&m).unwrap_err()).contains("`p`"));
+    // A count below one (a hand-made matrix) clips to ½ rather than panicking.
+    let m = ProportionMatrix {
+        items: vec!["a".into(), "b".into()],
+        p: vec![vec![None, Some(1.0)], vec![Some(0.0), None]],
+        n: vec![vec![0.3; 2]; 2],
+    };
+    let t = thurstone_case_v(&m).unwrap();
+    assert_eq!((t.scale[0], t.clipped_pairs), (0.0, 1));
+}
+
+/// No input panics: seeded random choice lists over a few names, with odd values of
+/// `first_chosen`, either scale or are refused.
+#[test]
+fn no_input_panics() {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let names = ["a", "b", "c", "d"];
+    let odd = [0.0, 1.0, 0.5, 0.25, f64::NAN, -1.0, 2.0, f64::INFINITY];
+    for _ in 0..500 {
+        let n = rng.random_range(0..12);
+        let choices: Vec<Choice> = (0..n)
+            .map(|_| Choice {
+                first: names[rng.random_range(0..4)].into(),
+                second: names[rng.random_range(0..4)].into(),
+                first_chosen: if rng.random_range(0..10) == 0 {
+                    odd[rng.random_range(0..odd.len())]
+                } else {
+                    f64::from(u8::from(rng.random::<bool>()))
+                },
+            })
+            .collect();
+        let _ = thurstone_from_choices(&choices);
+        if let Ok(bt) = bradley_terry(&choices) {
+            assert!(bt.log_worth.iter().all(|x| x.is_finite()), "{choices:?}");
+        }
+        let a: Vec<f64> = (0..n)
+            .map(|_| odd[rng.random_range(0..odd.len())])
+            .collect();
+        let _ = (pearson(&a, &a), spearman(&a, &a));
+    }
 }

@@ -574,3 +574,44 @@ fn same_seed_same_track() {
     let s = spec(2, 1);
     assert_eq!(run_track(&s, 42), run_track(&s, 42));
 }
+
+/// No answer sequence panics, and the level never leaves [min, max], on either scale.
+#[test]
+fn no_answer_sequence_panics_or_escapes_the_range() {
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    for round in 0..200u64 {
+        let log = round % 2 == 0;
+        let s = StaircaseSpec {
+            name: "fuzz".into(),
+            start: 4.0,
+            down: rng.random_range(1..5),
+            up: rng.random_range(1..4),
+            steps: if log {
+                vec![2.0, 1.5, 1.1]
+            } else {
+                vec![3.0, 1.0, 0.25]
+            },
+            scale: if log {
+                StepScale::Log
+            } else {
+                StepScale::Linear
+            },
+            min: 0.5,
+            max: 10.0,
+            max_trials: Some(rng.random_range(1..300)),
+            max_reversals: if round % 3 == 0 {
+                None
+            } else {
+                Some(rng.random_range(1..20))
+            },
+            threshold_reversals: 1,
+        };
+        let mut t = Staircase::new(s).unwrap();
+        for _ in 0..400 {
+            let step = t.respond(rng.random());
+            assert!((0.5..=10.0).contains(&step.next_level), "{step:?}");
+        }
+        assert!(t.done());
+        let _ = (t.threshold(), t.target_probability());
+    }
+}

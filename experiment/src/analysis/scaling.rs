@@ -233,8 +233,9 @@ pub fn thurstone_case_v(m: &ProportionMatrix) -> Result<ThurstoneScale, ScalingE
             return Err(refuse(format!("p[{i}][{j}]"), p, "must lie in [0, 1]"));
         }
         let n = m.n[i][j];
+        // At most ½: a count below 1 (a hand-made matrix) would otherwise invert the bounds.
         let bound = if n.is_finite() && n > 0.0 {
-            0.5 / n
+            (0.5 / n).min(0.5)
         } else {
             0.01
         };
