@@ -23,6 +23,29 @@ use serde::{Deserialize, Serialize};
 
 use crate::dist::{f_upper, qtukey};
 
+/// The studentized range's quantile, remembered: a study's yardsticks ask for the same few
+/// (level, t, error df) every time, and each is a nested quadrature inverted by a root finder
+/// (tens of ms) — planning runs hundreds of studies.
+fn quantile(p: f64, k: u32, df: f64) -> f64 {
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    static MEMO: OnceLock<Mutex<HashMap<(u64, u32, u64), f64>>> = OnceLock::new();
+    let key = (p.to_bits(), k, df.to_bits());
+    let memo = MEMO.get_or_init(|| Mutex::new(HashMap::new()));
+    if let Some(q) = memo.lock().ok().and_then(|m| m.get(&key).copied()) {
+        return q;
+    }
+    let q = qtukey(p, k, df);
+    if let Ok(mut m) = memo.lock() {
+        // Bounded: a long-running caller with ever new designs does not grow it without end.
+        if m.len() > 4096 {
+            m.clear();
+        }
+        m.insert(key, q);
+    }
+    q
+}
+
 /// One graded comparison: `subject` was shown `first`, then `second`, and graded the first
 /// against the second by `score` grades (positive: the first judged more).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -749,7 +772,7 @@ pub fn analyze(
         Some(mse) => [0.05, 0.01]
             .iter()
             .map(|&alpha| {
-                let q = qtukey(1.0 - alpha, t as u32, df_error as f64);
+                let q = quantile(1.0 - alpha, t as u32, df_error as f64);
                 let y = q * (mse / divisor).sqrt();
                 let mut separated = Vec::new();
                 for i in 0..t {
