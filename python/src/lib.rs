@@ -23,6 +23,8 @@ use saw_core::gate::DriveMode;
 use saw_link::client::{Client, ClientError, StreamStart};
 use saw_link::msg::{Header, Hello, Record, Reply, Request, PROTOCOL_VERSION};
 
+mod experiment;
+
 create_exception!(
     sawlink,
     SawError,
@@ -1071,6 +1073,7 @@ fn sawlink(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Recording>()?;
     m.add_class::<PyRecord>()?;
     m.add_function(wrap_pyfunction!(scene_id_of_file, m)?)?;
+    experiment::register(m)?;
     m.add("SawError", py.get_type::<SawError>())?;
     m.add("PortError", py.get_type::<PortError>())?;
     m.add("PortMissing", py.get_type::<PortMissing>())?;
