@@ -40,6 +40,7 @@ pub fn analyze(
         if let Ok(s) = std::fs::read_to_string(&sidecar) {
             if let Ok(v) = serde_json::from_str::<Value>(&s) {
                 block_stimuli(&v, &mut opts.block_stimuli);
+                track_rules(&v, &mut opts.track_rules);
             }
         }
     }
@@ -82,6 +83,50 @@ fn chart(_: &Report, png: &Path) -> Result<(), Failure> {
         "-o {}: this saw was built without charts (cargo feature `chart`)",
         png.display()
     )))
+}
+
+/// Each staircase track's threshold rule from a sidecar's protocol text (the defaults as the
+/// protocol reader's: the last 6 reversals, linear steps).
+fn track_rules(
+    sidecar: &Value,
+    into: &mut BTreeMap<(String, String), (usize, saw_experiment::staircase::StepScale)>,
+) {
+    use saw_experiment::staircase::StepScale;
+    let Some(Ok(t)) = sidecar["session"]["protocol_text"]
+        .as_str()
+        .map(|s| s.parse::<toml::Table>())
+    else {
+        return;
+    };
+    for b in t
+        .get("block")
+        .and_then(|b| b.as_array())
+        .into_iter()
+        .flatten()
+    {
+        let Some(block) = b.get("name").and_then(|n| n.as_str()) else {
+            continue;
+        };
+        for tr in b
+            .get("staircase")
+            .and_then(|s| s.as_array())
+            .into_iter()
+            .flatten()
+        {
+            let Some(name) = tr.get("name").and_then(|n| n.as_str()) else {
+                continue;
+            };
+            let last = tr
+                .get("threshold_reversals")
+                .and_then(|v| v.as_integer())
+                .map_or(6, |v| v.max(1) as usize);
+            let scale = match tr.get("scale").and_then(|v| v.as_str()) {
+                Some("log") => StepScale::Log,
+                _ => StepScale::Linear,
+            };
+            into.insert((block.to_string(), name.to_string()), (last, scale));
+        }
+    }
 }
 
 /// Each block's stimuli from a sidecar's protocol text.

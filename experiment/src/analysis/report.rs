@@ -25,8 +25,12 @@ pub struct Options {
     /// Each block's stimuli in the protocol's order (the sidecars give it): two blocks with
     /// as many stimuli are correlated in that order, as table 1 pairs #60 with 20 Hz.
     pub block_stimuli: BTreeMap<String, Vec<String>>,
-    /// The reversals a staircase threshold averages (the last N).
+    /// The reversals a staircase threshold averages (the last N) when the track's own rule is
+    /// not known.
     pub threshold_reversals: usize,
+    /// Each track's own rule, by (block, track): the reversals its threshold averages and its
+    /// step scale (the protocol's, from the sessions' sidecars).
+    pub track_rules: BTreeMap<(String, String), (usize, StepScale)>,
     /// Bootstrap resamples of the psychometric fits (0: none).
     pub bootstrap: u32,
     /// The bootstrap's seed.
@@ -39,6 +43,7 @@ impl Default for Options {
             method: None,
             block_stimuli: BTreeMap::new(),
             threshold_reversals: 6,
+            track_rules: BTreeMap::new(),
             bootstrap: 1000,
             seed: 1,
         }
@@ -254,13 +259,14 @@ pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
             .filter(|r| r.reversal)
             .map(|r| r.level)
             .collect();
-        // Linear steps are the protocols' default; a log track's threshold would be the
-        // geometric mean, which the session CSV does not say — the arithmetic mean is stated.
-        let threshold = psychometric::reversal_threshold(
-            &reversal_levels,
-            o.threshold_reversals,
-            StepScale::Linear,
-        );
+        // The track's own rule when the protocol is known (geometric mean on a log scale),
+        // else the last `threshold_reversals` on a linear one.
+        let (last, scale) = o
+            .track_rules
+            .get(&(block.clone(), track.clone()))
+            .copied()
+            .unwrap_or((o.threshold_reversals, StepScale::Linear));
+        let threshold = psychometric::reversal_threshold(&reversal_levels, last, scale);
         report.tracks.push(Track {
             subject,
             block,
@@ -269,7 +275,7 @@ pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
             correct: rows.iter().map(|r| r.correct).collect(),
             reversal_levels,
             threshold,
-            threshold_reversals: o.threshold_reversals,
+            threshold_reversals: last,
         });
     }
     // Constant stimuli: pooled per block.
