@@ -144,6 +144,8 @@ fn the_5_percent_yardstick_separates_indistinguishable_stimuli_in_at_most_5_perc
         "the 5 % yardstick separated b and c in {separated} of {studies} studies (grade = 3 SD)"
     );
     assert!(separated <= 27, "{separated} of {studies}");
+    // The figure docs/experiment.md publishes (seeded: the same studies every run).
+    assert_eq!(separated, 11, "docs/experiment.md says 11 of 400");
 }
 
 /// Where the method breaks: when most judgments sit at the ends of the grade scale (a grade
@@ -159,4 +161,5 @@ fn saturated_grades_make_the_yardstick_anticonservative() {
         "the 5 % yardstick separated b and c in {separated} of {studies} studies (grade = 1 SD)"
     );
     assert!(separated > 27, "{separated} of {studies}");
+    assert_eq!(separated, 39, "docs/experiment.md says 39 of 400");
 }
