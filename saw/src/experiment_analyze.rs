@@ -68,12 +68,9 @@ pub fn analyze(
 
 /// Draws the report's chart.
 #[cfg(feature = "chart")]
-fn chart(_r: &Report, png: &Path) -> Result<(), Failure> {
-    // CHART: saw_experiment::chart::draw(r, png) once it lands.
-    Err(Failure::input(format!(
-        "-o {}: charts are not built yet",
-        png.display()
-    )))
+fn chart(r: &Report, png: &Path) -> Result<(), Failure> {
+    saw_experiment::chart::draw(r, png)
+        .map_err(|e| Failure::input(format!("-o {}: {e}", png.display())))
 }
 
 /// Without the chart feature there is no chart.

@@ -326,6 +326,23 @@ pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
                         },
                     )
                     .map_err(|e| e.to_string())
+                    .and_then(|ci| {
+                        // A fit on the edge of its parameter space (every level answered
+                        // right, say) has no maximum: its estimates and a zero-width interval
+                        // would read as precise. Refused with the reason.
+                        if ci.fit.degenerate {
+                            Err(format!(
+                                "the data have no maximum-likelihood fit (proportions correct {}): the levels do not span the threshold",
+                                points
+                                    .iter()
+                                    .map(|p| format!("{}/{} at {}", p.n_correct, p.n_trials, p.level))
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            ))
+                        } else {
+                            Ok(ci)
+                        }
+                    })
                 } else {
                     Err("no bootstrap asked for".to_string())
                 };
