@@ -51,6 +51,15 @@ pub enum ExperimentCommand {
         /// The simulated participant's noise seed (0 to 2^63; default: the subject index).
         #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = seed_n)]
         observer_seed: Option<u64>,
+        /// Ask on web pages as well as in the terminal: the participant's view (large response
+        /// buttons, for a tablet) at http://ADDR:PORT/participant and the experimenter's at
+        /// /experimenter, both URLs printed with the run's token, which every request needs.
+        /// A page or the terminal may answer; the first answer counts (docs/experiment-panel.md).
+        #[arg(long, value_name = "ADDR:PORT", conflicts_with = "simulate")]
+        panel: Option<std::net::SocketAddr>,
+        /// Allow a non-loopback --panel address (a tablet on the lab's network).
+        #[arg(long, requires = "panel")]
+        allow_remote: bool,
     },
     /// Read a protocol and print its plan: stimuli, blocks, trials per subject, how long.
     Check {
@@ -116,15 +125,36 @@ pub fn command(
             resume,
             simulate,
             observer_seed,
+            panel,
+            allow_remote,
         } => {
             let p = protocol::load(protocol).map_err(|e| Failure::input(e.to_string()))?;
             session::check_subject(subject).map_err(Failure::input)?;
             let port = port.ok_or_else(|| {
                 Failure::input("--port: missing; `saw experiment run` presents on a board (the path of the serial port)".into())
             })?;
-            let participant: Box<dyn Participant> = match simulate {
-                None => Box::new(Terminal::new(json_out)),
-                Some(spec) => Box::new(Simulated::new(spec, *observer_seed, *subject_index)?),
+            let participant: Box<dyn Participant> = match (simulate, panel) {
+                (Some(spec), _) => Box::new(Simulated::new(spec, *observer_seed, *subject_index)?),
+                (None, None) => Box::new(Terminal::new(json_out)),
+                #[cfg(feature = "ui")]
+                (None, Some(listen)) => Box::new(crate::ui::experiment::Panel::start(
+                    crate::ui::experiment::PanelOptions {
+                        listen: *listen,
+                        allow_remote: *allow_remote,
+                        json: json_out,
+                        protocol: p.clone(),
+                        subject: subject.clone(),
+                        subject_index: *subject_index,
+                        out: out.clone(),
+                    },
+                )?),
+                #[cfg(not(feature = "ui"))]
+                (None, Some(_)) => {
+                    let _ = allow_remote;
+                    return Err(Failure::input(
+                        "--panel: this saw was built without the panel (cargo feature `ui`)".into(),
+                    ));
+                }
             };
             let opened = crate::port::open(port).map_err(Failure::link)?;
             let mut client = Client::new(opened, timeout);

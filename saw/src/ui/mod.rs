@@ -12,6 +12,7 @@
 //! one is open), and the port is held only while a page is connected (`bridge`).
 
 mod bridge;
+pub mod experiment;
 
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
