@@ -163,6 +163,7 @@ fn full(scale_a: &[f64]) -> Report {
             track("s02", "from above", 50.0, 3),
         ],
         constant: vec![constant()],
+        staircase_fits: vec![],
     }
 }
 
@@ -304,6 +305,7 @@ fn an_empty_report_is_an_error_sentence_and_no_file() {
         correlations: vec![],
         tracks: vec![],
         constant: vec![],
+        staircase_fits: vec![],
     };
     let png = out("empty.png");
     let e = chart::draw(&empty, &png).unwrap_err();
@@ -417,6 +419,7 @@ fn hostile_values_draw_without_panicking() {
         }],
         tracks: vec![weird_track, empty_track, flat_track],
         constant: vec![c, no_points],
+        staircase_fits: vec![],
     };
     let (w, h, rgb) = chart::pixels(&report).expect("hostile values are skipped, not refused");
     assert_eq!((w, h), chart::size(&report));
@@ -442,6 +445,7 @@ fn panels_are_capped() {
         correlations: vec![],
         tracks,
         constant: vec![],
+        staircase_fits: vec![],
     };
     assert_eq!(
         chart::size(&report),

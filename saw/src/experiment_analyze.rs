@@ -244,9 +244,14 @@ fn render(r: &Report) -> String {
             t.threshold_reversals
         );
     }
-    for c in &r.constant {
+    let fitted = r.constant.iter().map(|c| (c, "constant stimuli")).chain(
+        r.staircase_fits
+            .iter()
+            .map(|c| (c, "the staircases' trials")),
+    );
+    for (c, what) in fitted {
         out += &format!(
-            "block \"{}\": constant stimuli, {} levels, {} trials\n",
+            "block \"{}\": psychometric fit of {what}, {} levels, {} trials\n",
             c.block,
             c.points.len(),
             c.points.iter().map(|p| p.n_trials).sum::<u32>()

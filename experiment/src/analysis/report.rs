@@ -134,6 +134,9 @@ pub struct Report {
     pub tracks: Vec<Track>,
     /// Constant-stimuli blocks.
     pub constant: Vec<ConstantBlock>,
+    /// Staircase blocks' trials fitted as constant stimuli are (every level a track visited,
+    /// its subjects and tracks pooled).
+    pub staircase_fits: Vec<ConstantBlock>,
 }
 
 /// An analysis refused: which block, why.
@@ -160,6 +163,7 @@ pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
         correlations: Vec::new(),
         tracks: Vec::new(),
         constant: Vec::new(),
+        staircase_fits: Vec::new(),
     };
     // Paired blocks, in order of first appearance.
     let mut blocks: Vec<String> = Vec::new();
@@ -278,19 +282,21 @@ pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
             threshold_reversals: last,
         });
     }
-    // Constant stimuli: pooled per block.
-    let mut cblocks: Vec<String> = Vec::new();
-    for r in data.intervals.iter().filter(|r| r.track.is_none()) {
-        if !cblocks.contains(&r.block) {
-            cblocks.push(r.block.clone());
+    // Constant stimuli, and the staircases' trials: a psychometric fit per block, its
+    // subjects pooled.
+    let mut fit_blocks: Vec<(String, bool)> = Vec::new();
+    for r in &data.intervals {
+        let k = (r.block.clone(), r.track.is_some());
+        if !fit_blocks.contains(&k) {
+            fit_blocks.push(k);
         }
     }
-    for b in cblocks {
+    for (b, staircase) in fit_blocks {
         let mut points: Vec<LevelCount> = Vec::new();
         for r in data
             .intervals
             .iter()
-            .filter(|r| r.track.is_none() && r.block == b)
+            .filter(|r| r.track.is_some() == staircase && r.block == b)
         {
             match points.iter_mut().find(|p| p.level == r.level) {
                 Some(p) => {
@@ -305,57 +311,68 @@ pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
             }
         }
         points.sort_by(|a, b| a.level.total_cmp(&b.level));
-        let opts = FitOptions {
-            guess: 0.5,
-            lapse: 0.0,
-            target: staircase::target_probability(2, 1),
-        };
-        let fits = [Model::Weibull, Model::Logistic]
-            .into_iter()
-            .map(|model| {
-                let result = if o.bootstrap >= 2 {
-                    psychometric::bootstrap(
-                        &points,
-                        model,
-                        &opts,
-                        &BootstrapOptions {
-                            kind: BootstrapKind::Parametric,
-                            n_resamples: o.bootstrap,
-                            seed: o.seed,
-                            confidence: 0.95,
-                        },
-                    )
-                    .map_err(|e| e.to_string())
-                    .and_then(|ci| {
-                        // A fit on the edge of its parameter space (every level answered
-                        // right, say) has no maximum: its estimates and a zero-width interval
-                        // would read as precise. Refused with the reason.
-                        if ci.fit.degenerate {
-                            Err(format!(
-                                "the data have no maximum-likelihood fit (proportions correct {}): the levels do not span the threshold",
-                                points
-                                    .iter()
-                                    .map(|p| format!("{}/{} at {}", p.n_correct, p.n_trials, p.level))
-                                    .collect::<Vec<_>>()
-                                    .join(", ")
-                            ))
-                        } else {
-                            Ok(ci)
-                        }
-                    })
-                } else {
-                    Err("no bootstrap asked for".to_string())
-                };
-                ModelFit { model, result }
-            })
-            .collect();
-        report.constant.push(ConstantBlock {
+        let fits = fit_models(&points, o);
+        let block = ConstantBlock {
             block: b,
             points,
             fits,
-        });
+        };
+        if staircase {
+            report.staircase_fits.push(block);
+        } else {
+            report.constant.push(block);
+        }
     }
     Ok(report)
+}
+
+/// Weibull and logistic fits of `points` (two-interval: guess rate ½; the level at 70.7 %,
+/// a 2-down-1-up track's target) with their bootstrap intervals.
+fn fit_models(points: &[LevelCount], o: &Options) -> Vec<ModelFit> {
+    let opts = FitOptions {
+        guess: 0.5,
+        lapse: 0.0,
+        target: staircase::target_probability(2, 1),
+    };
+    [Model::Weibull, Model::Logistic]
+        .into_iter()
+        .map(|model| {
+            let result = if o.bootstrap >= 2 {
+                psychometric::bootstrap(
+                    points,
+                    model,
+                    &opts,
+                    &BootstrapOptions {
+                        kind: BootstrapKind::Parametric,
+                        n_resamples: o.bootstrap,
+                        seed: o.seed,
+                        confidence: 0.95,
+                    },
+                )
+                .map_err(|e| e.to_string())
+                .and_then(|ci| {
+                    // A fit on the edge of its parameter space (every level answered right,
+                    // say) has no maximum: its estimates and a zero-width interval would read
+                    // as precise. Refused with the reason.
+                    if ci.fit.degenerate {
+                        Err(format!(
+                            "the data have no maximum-likelihood fit (proportions correct {}): the levels do not span the threshold",
+                            points
+                                .iter()
+                                .map(|p| format!("{}/{} at {}", p.n_correct, p.n_trials, p.level))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ))
+                    } else {
+                        Ok(ci)
+                    }
+                })
+            } else {
+                Err("no bootstrap asked for".to_string())
+            };
+            ModelFit { model, result }
+        })
+        .collect()
 }
 
 fn keyed(names: &[String], values: &[f64]) -> BTreeMap<String, f64> {
