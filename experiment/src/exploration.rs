@@ -69,10 +69,12 @@ pub fn summarize(records: &[Record]) -> Exploration {
         if let Some(s) = speed {
             e.peak_speed_mm_s = e.peak_speed_mm_s.max(s);
         }
-        if let (Some(p), Some(prev)) = (prev, prev) {
-            let _ = p;
+        if let Some(prev) = prev {
             let dt_us = r.time_us.saturating_sub(prev.time_us);
-            if let (Some(a), Some(b)) = (prev.position_um, r.position_um) {
+            // Only while the finger moves: at rest, position noise summed at the stream's
+            // rate would add up to metres.
+            let moving = speed.is_some_and(|s| s > MOVING_MM_S);
+            if let (Some(a), Some(b), true) = (prev.position_um, r.position_um, moving) {
                 distance_um += (i64::from(b) - i64::from(a)).unsigned_abs();
             }
             if let Some(s) = speed {
@@ -82,13 +84,19 @@ pub fn summarize(records: &[Record]) -> Exploration {
                 }
             }
         }
+        if r.position_um.is_none() {
+            // No position (a sensor fault): the run is broken; a finger reappearing 2 mm away
+            // is not a stroke.
+            start_um = None;
+            dir = 0;
+        }
         if let Some(p) = r.position_um.map(i64::from) {
             let start = *start_um.get_or_insert(p);
             if dir == 0 {
                 if (p - start).abs() as f64 >= STROKE_MM * 1000.0 {
                     dir = if p > start { 1 } else { -1 };
                     extreme_um = p;
-                    e.strokes = 1;
+                    e.strokes += 1;
                 }
             } else if (dir > 0 && p > extreme_um) || (dir < 0 && p < extreme_um) {
                 extreme_um = p;
@@ -173,8 +181,28 @@ mod tests {
         let e = summarize(&rs);
         assert_eq!(e.strokes, 0, "{e:?}");
         assert_eq!(e.explored_s, 0.0, "{e:?}");
+        assert_eq!(e.distance_mm, 0.0, "noise at rest travels nowhere: {e:?}");
         assert_eq!(e.mean_speed_mm_s, 0.0);
         assert_eq!(e.f_b_hz, 0.0, "no bursts");
+    }
+
+    /// A position lost (a fault) and back 3 mm away, at rest either side: no stroke, no
+    /// distance; a stroke after it still counts.
+    #[test]
+    fn a_gap_in_position_is_not_a_stroke() {
+        let mut rs: Vec<Record> = (0..10u64).map(|k| rec(k * 1000, 10_000, 0, 0)).collect();
+        let mut gap = rec(10_000, 0, 0, 0);
+        gap.position_um = None;
+        gap.velocity_um_s = None;
+        rs.push(gap);
+        rs.extend((11..20u64).map(|k| rec(k * 1000, 13_000, 0, 0)));
+        let e = summarize(&rs);
+        assert_eq!((e.strokes, e.distance_mm), (0, 0.0), "{e:?}");
+        // Then a 5 mm run at 50 mm/s: one stroke, 5 mm.
+        rs.extend((0..=100u64).map(|k| rec(20_000 + k * 1000, 13_000 + 50 * k as i32, 50_000, 0)));
+        let e = summarize(&rs);
+        assert_eq!(e.strokes, 1, "{e:?}");
+        assert!((e.distance_mm - 5.0).abs() < 0.06, "{e:?}");
     }
 
     #[test]

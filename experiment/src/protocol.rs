@@ -571,8 +571,8 @@ pub fn parse(file: &str, text: &str, files: &dyn Files) -> Result<Protocol, Prot
         stimuli.push(Stimulus { name, source });
     }
     if stimuli.is_empty() {
-        return Err(cx.err(
-            0..0,
+        return Err(whole(
+            file,
             "stimulus",
             "the protocol has no [[stimulus]]; a design needs at least two",
         ));
@@ -600,6 +600,20 @@ pub fn parse(file: &str, text: &str, files: &dyn Files) -> Result<Protocol, Prot
         let bp = b.get_ref();
         let field = |k: &str| format!("block[{i}].{k}");
         let design_name = bp.design.get_ref().as_str();
+        let block_name = bp.name.get_ref().trim();
+        if block_name.is_empty() {
+            return Err(cx.err(bp.name.span(), &field("name"), "must not be empty"));
+        }
+        if let Some(j) = spec.block[..i]
+            .iter()
+            .position(|o| o.get_ref().name.get_ref().trim() == block_name)
+        {
+            return Err(cx.err(
+                bp.name.span(),
+                &field("name"),
+                format_args!("\"{block_name}\" is already the name of block[{j}]; the analysis tells blocks apart by name"),
+            ));
+        }
         let repeats = match &bp.repeats {
             Some(r) => cx.count(r, &field("repeats"), 1, 100)?,
             None => 1,
@@ -693,10 +707,22 @@ pub fn parse(file: &str, text: &str, files: &dyn Files) -> Result<Protocol, Prot
                         ),
                     ));
                 }
-                Design::Paired {
-                    variant,
-                    stimuli: idx,
-                    repeats,
+                {
+                    // The variants' analyses have no replication within a subject: a second
+                    // judgment of a pair by one subject is refused by the analysis, so it is
+                    // refused here, before anyone is asked.
+                    if let (Some(r), true) = (&bp.repeats, repeats > 1) {
+                        return Err(cx.err(
+                            r.span(),
+                            &field("repeats"),
+                            format_args!("{repeats} for a paired block: each subject judges each pair once in Scheffé's method and its variants; more judgments come from more subjects"),
+                        ));
+                    }
+                    Design::Paired {
+                        variant,
+                        stimuli: idx,
+                        repeats,
+                    }
                 }
             }
             "constant" | "staircase" => {
@@ -726,6 +752,16 @@ pub fn parse(file: &str, text: &str, files: &dyn Files) -> Result<Protocol, Prot
                         return Err(cx.err(std_name.span(), &field("standard"), format_args!("\"{}\" is not an inline region; a level is added to one of a region's keys", std_name.get_ref())))
                     }
                 };
+                let vary_given = bp.vary.as_ref();
+                if let Some(v) =
+                    vary_given.filter(|v| ["until_mm", "kind"].contains(&v.get_ref().as_str()))
+                {
+                    return Err(cx.err(
+                        v.span(),
+                        &field("vary"),
+                        format_args!("{} cannot be varied: a stimulus' region covers the whole travel and keeps its kind; vary one of its texture's numbers (such as f_b_hz)", v.get_ref()),
+                    ));
+                }
                 let vary = bp.vary.as_ref().ok_or_else(|| {
                     cx.err(
                         b.span(),
@@ -887,8 +923,8 @@ pub fn parse(file: &str, text: &str, files: &dyn Files) -> Result<Protocol, Prot
         });
     }
     if blocks.is_empty() {
-        return Err(cx.err(
-            0..0,
+        return Err(whole(
+            file,
             "block",
             "the protocol has no [[block]]; there is nothing to run",
         ));
@@ -907,6 +943,17 @@ pub fn parse(file: &str, text: &str, files: &dyn Files) -> Result<Protocol, Prot
         off_scene,
         text: text.to_string(),
     })
+}
+
+/// An error about the file as a whole (no line to point at).
+fn whole(file: &str, field: &str, message: &str) -> ProtocolError {
+    ProtocolError {
+        file: file.to_string(),
+        line: 0,
+        column: 0,
+        field: field.to_string(),
+        message: message.to_string(),
+    }
 }
 
 fn words_span(spec: &FileSpec) -> Option<&Spanned<Vec<String>>> {
@@ -950,6 +997,15 @@ fn track(
             }
         },
     };
+    // A track stopped only by reversals may never stop (answered right at its floor, it never
+    // turns): a trial limit is required.
+    if tp.max_trials.is_none() {
+        return Err(cx.err(
+            t.span(),
+            &f("max_trials"),
+            "is missing: every track needs a trial limit (a track stopped only by reversals may never stop); max_reversals may stop it sooner",
+        ));
+    }
     let spec = StaircaseSpec {
         name: tp.name.get_ref().clone(),
         start: finite(&tp.start, "start")?,

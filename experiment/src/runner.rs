@@ -491,6 +491,15 @@ impl Runner {
     /// The fixed trials of block `b` for this subject, in presentation order.
     fn fixed_trials(&self, b: usize, rng: &mut ChaCha8Rng) -> Vec<Trial> {
         let s = self.subject_index as usize;
+        // The one-pair-per-subject variants pick the pair from the subject's index; when the
+        // block order rotates with that index too, the pair is picked from the rotation's
+        // cycle count, so that every pair is judged in every block position (otherwise, with
+        // two blocks, even pairs would always come first and odd ones second).
+        let pair_s = if self.protocol.counterbalance_blocks {
+            s / self.protocol.blocks.len().max(1)
+        } else {
+            s
+        };
         match &self.protocol.blocks[b].design {
             Design::Paired {
                 variant,
@@ -521,12 +530,12 @@ impl Runner {
                         }
                         // One ordered pair per subject: subject n judges the n-th (mod t(t−1)),
                         // so a study of t(t−1)·r subjects covers each ordered pair r times.
-                        PairedVariant::Scheffe => pairs.push(ordered[s % ordered.len()]),
+                        PairedVariant::Scheffe => pairs.push(ordered[pair_s % ordered.len()]),
                         // One pair per subject in one order: the pair cycles with the subject,
                         // the order flips every full cycle.
                         PairedVariant::Haga => {
-                            let (i, j) = unordered[s % unordered.len()];
-                            pairs.push(if (s / unordered.len()) % 2 == 0 {
+                            let (i, j) = unordered[pair_s % unordered.len()];
+                            pairs.push(if (pair_s / unordered.len()) % 2 == 0 {
                                 (i, j)
                             } else {
                                 (j, i)
@@ -546,12 +555,12 @@ impl Runner {
             Design::Constant {
                 levels, repeats, ..
             } => {
-                // Every level `repeats` times, the comparison first in half of them (the odd
-                // one at random), then the whole list shuffled.
+                // Every level `repeats` times, the comparison first in half of them (the last
+                // of an odd number at random), then the whole list shuffled.
                 let mut plan: Vec<(f64, u8)> = Vec::new();
                 for &l in levels {
                     for rep in 0..*repeats {
-                        let target = if rep * 2 + 1 == *repeats {
+                        let target = if repeats % 2 == 1 && rep + 1 == *repeats {
                             if rng.random::<bool>() {
                                 1
                             } else {

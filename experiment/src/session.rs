@@ -9,6 +9,7 @@ use std::fs::{self, File, OpenOptions};
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 
+use nix::fcntl::{Flock, FlockArg};
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
@@ -181,11 +182,59 @@ pub fn check_subject(id: &str) -> Result<(), String> {
     }
 }
 
+/// The subject's index for a session in `dir`: `given`, or on resume the index the session
+/// began with (a different one given is refused: the orders follow it), or for a new session
+/// the number of sessions already in `dir` — except where the protocol has Scheffé's or Haga's
+/// variant, whose pair per subject follows the index: there it must be given (counting files
+/// repeats or skips one when two booths start at once or a pilot is thrown away).
+pub fn subject_index(
+    protocol: &crate::protocol::Protocol,
+    given: Option<u32>,
+    resumed: Option<&Header>,
+    dir: &Path,
+) -> Result<u32, String> {
+    use crate::protocol::{Design, PairedVariant};
+    if let Some(h) = resumed {
+        return match given {
+            Some(i) if i != h.subject_index => Err(format!(
+                "subject index {i} differs from the {} the session began with; a resumed session keeps its index (its orders follow it)",
+                h.subject_index
+            )),
+            _ => Ok(h.subject_index),
+        };
+    }
+    if let Some(i) = given {
+        return Ok(i);
+    }
+    let one_pair = protocol.blocks.iter().any(|b| {
+        matches!(
+            b.design,
+            Design::Paired {
+                variant: PairedVariant::Scheffe | PairedVariant::Haga,
+                ..
+            }
+        )
+    });
+    if one_pair {
+        return Err(
+            "the subject index is required: in Scheffé's and Haga's variants it picks the pair the subject judges (0 for the study's first subject, 1 for the next, …)"
+                .into(),
+        );
+    }
+    Ok(std::fs::read_dir(dir).map_or(0, |d| {
+        d.filter_map(Result::ok)
+            .filter(|e| e.file_name().to_string_lossy().ends_with(".log.jsonl"))
+            .count() as u32
+    }))
+}
+
 /// An open session log.
 #[derive(Debug)]
 pub struct Log {
     paths: Paths,
-    file: File,
+    /// The log, locked (flock) while this session holds it: a second runner for the subject is
+    /// refused rather than interleaving its trials.
+    file: Flock<File>,
     header: Header,
     records: Vec<TrialRecord>,
 }
@@ -259,25 +308,44 @@ impl Log {
     pub fn create(dir: &Path, header: Header) -> Result<Self, String> {
         let paths = Paths::new(dir, &header.subject);
         fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-        let mut file = OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&paths.log)
-            .map_err(|e| {
-                if e.kind() == std::io::ErrorKind::AlreadyExists {
-                    format!(
-                        "{} exists: subject {} has a session here already (--resume continues it)",
-                        paths.log.display(),
-                        header.subject
-                    )
-                } else {
-                    format!("{}: {e}", paths.log.display())
-                }
-            })?;
+        let exists = || {
+            format!(
+                "{} exists: subject {} has a session here already (--resume continues it)",
+                paths.log.display(),
+                header.subject
+            )
+        };
+        if paths.log.exists() {
+            return Err(exists());
+        }
+        // The header is written and synced under a temporary name, then linked to the log's
+        // name (which fails if it exists): a log either has its whole header or is not there,
+        // whatever kill comes between.
+        let tmp = paths.log.with_extension("jsonl.new");
         let line = json!({"kind": "session", "session": header}).to_string();
-        writeln!(file, "{line}")
-            .and_then(|_| file.sync_all())
-            .map_err(|e| format!("{}: {e}", paths.log.display()))?;
+        let io = |e: std::io::Error| format!("{}: {e}", paths.log.display());
+        {
+            let mut f = File::create(&tmp).map_err(io)?;
+            writeln!(f, "{line}")
+                .and_then(|_| f.sync_all())
+                .map_err(io)?;
+        }
+        let linked = fs::hard_link(&tmp, &paths.log);
+        let _ = fs::remove_file(&tmp);
+        linked.map_err(|e| {
+            if e.kind() == std::io::ErrorKind::AlreadyExists {
+                exists()
+            } else {
+                io(e)
+            }
+        })?;
+        let file = lock(
+            OpenOptions::new()
+                .append(true)
+                .open(&paths.log)
+                .map_err(io)?,
+            &paths.log,
+        )?;
         let log = Log {
             paths,
             file,
@@ -288,37 +356,47 @@ impl Log {
         Ok(log)
     }
 
-    /// Reopens `subject`'s log in `dir` to continue it: a torn last line is cut off.
+    /// Reopens `subject`'s log in `dir` to continue it: a torn last line is cut off, and the
+    /// CSV and sidecar are rewritten (a kill between a trial's sync and their rename left them
+    /// one trial behind).
     pub fn resume(dir: &Path, subject: &str) -> Result<Self, String> {
         let paths = Paths::new(dir, subject);
-        let read = read_log(&paths.log).map_err(|e| {
-            if !paths.log.exists() {
-                format!(
-                    "{}: no session of subject {subject} to resume (run without --resume to begin one)",
-                    paths.log.display()
-                )
-            } else {
-                e
-            }
-        })?;
-        let file = OpenOptions::new()
-            .append(true)
-            .open(&paths.log)
-            .map_err(|e| format!("{}: {e}", paths.log.display()))?;
-        if read.torn_bytes > 0 {
-            let len = file
-                .metadata()
-                .map_err(|e| format!("{}: {e}", paths.log.display()))?
-                .len();
-            file.set_len(len - read.torn_bytes as u64)
-                .map_err(|e| format!("{}: {e}", paths.log.display()))?;
+        if !paths.log.exists() {
+            return Err(format!(
+                "{}: no session of subject {subject} to resume (run without --resume to begin one)",
+                paths.log.display()
+            ));
         }
-        Ok(Log {
+        let io = |e: std::io::Error| format!("{}: {e}", paths.log.display());
+        // Locked before it is read: another runner cannot append between the read and ours.
+        let file = lock(
+            OpenOptions::new()
+                .append(true)
+                .open(&paths.log)
+                .map_err(io)?,
+            &paths.log,
+        )?;
+        let read = read_log(&paths.log)?;
+        if read.header.subject != subject {
+            return Err(format!(
+                "{}: the log is subject {}'s, not {subject}'s",
+                paths.log.display(),
+                read.header.subject
+            ));
+        }
+        if read.torn_bytes > 0 {
+            let len = file.metadata().map_err(io)?.len();
+            file.set_len(len.saturating_sub(read.torn_bytes as u64))
+                .map_err(io)?;
+        }
+        let log = Log {
             paths,
             file,
             header: read.header,
             records: read.records,
-        })
+        };
+        log.write_outputs()?;
+        Ok(log)
     }
 
     /// The header.
@@ -353,10 +431,19 @@ impl Log {
     /// Appends a trial: written, flushed and synced before this returns, then the CSV and
     /// sidecar rewritten from the log.
     pub fn append(&mut self, record: TrialRecord) -> Result<(), String> {
-        let line = json!({"kind": "trial", "trial": record}).to_string();
-        writeln!(self.file, "{line}")
+        let line = json!({"kind": "trial", "trial": record}).to_string() + "\n";
+        let io = |e: std::io::Error| format!("{}: {e}", self.paths.log.display());
+        let before = self.file.metadata().map_err(io)?.len();
+        // One write of the whole line, then the sync; on any failure the file is cut back to
+        // where it was, so a retry neither glues onto half a line nor logs the trial twice.
+        if let Err(e) = self
+            .file
+            .write_all(line.as_bytes())
             .and_then(|_| self.file.sync_data())
-            .map_err(|e| format!("{}: {e}", self.paths.log.display()))?;
+        {
+            let _ = self.file.set_len(before);
+            return Err(io(e));
+        }
         self.records.push(record);
         self.write_outputs()
     }
@@ -373,8 +460,21 @@ impl Log {
     }
 }
 
+/// Takes the session's lock on its log, or says who holds it.
+fn lock(file: File, path: &Path) -> Result<Flock<File>, String> {
+    Flock::lock(file, FlockArg::LockExclusiveNonblock).map_err(|(_, e)| {
+        format!(
+            "{}: another runner has this session open ({e}); one session of a subject at a time",
+            path.display()
+        )
+    })
+}
+
 fn write_atomic(path: &Path, text: &str) -> Result<(), String> {
-    let tmp = path.with_extension("tmp");
+    // Each output its own temporary name (the CSV's and the sidecar's differ).
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
     fs::write(&tmp, text)
         .and_then(|_| fs::rename(&tmp, path))
         .map_err(|e| format!("{}: {e}", path.display()))

@@ -164,6 +164,7 @@ fn full(scale_a: &[f64]) -> Report {
         ],
         constant: vec![constant()],
         staircase_fits: vec![],
+        refused: vec![],
     }
 }
 
@@ -306,6 +307,7 @@ fn an_empty_report_is_an_error_sentence_and_no_file() {
         tracks: vec![],
         constant: vec![],
         staircase_fits: vec![],
+        refused: vec![],
     };
     let png = out("empty.png");
     let e = chart::draw(&empty, &png).unwrap_err();
@@ -420,6 +422,7 @@ fn hostile_values_draw_without_panicking() {
         tracks: vec![weird_track, empty_track, flat_track],
         constant: vec![c, no_points],
         staircase_fits: vec![],
+        refused: vec![],
     };
     let (w, h, rgb) = chart::pixels(&report).expect("hostile values are skipped, not refused");
     assert_eq!((w, h), chart::size(&report));
@@ -446,6 +449,7 @@ fn panels_are_capped() {
         tracks,
         constant: vec![],
         staircase_fits: vec![],
+        refused: vec![],
     };
     assert_eq!(
         chart::size(&report),

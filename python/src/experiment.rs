@@ -14,8 +14,7 @@
 //!     exp.respond(ask(trial["question"], trial["words"], trial["values"]))
 //! ```
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use pyo3::create_exception;
@@ -76,15 +75,6 @@ fn sleep(py: Python<'_>, d: Duration) -> PyResult<()> {
         py.allow_threads(|| std::thread::sleep(left.min(Duration::from_millis(50))));
         py.check_signals()?;
     }
-}
-
-/// The number of sessions (logs) in `dir`: the next subject's index, as `saw experiment run`.
-fn sessions_in(dir: &Path) -> u32 {
-    std::fs::read_dir(dir).map_or(0, |d| {
-        d.filter_map(Result::ok)
-            .filter(|e| e.file_name().to_string_lossy().ends_with(".log.jsonl"))
-            .count() as u32
-    })
 }
 
 /// A protocol run with one participant: the runner and its log (`<subject>.log.jsonl`, `.csv`,
@@ -223,12 +213,14 @@ impl Experiment {
                     log.paths().log.display()
                 )));
             }
-            let index = index.unwrap_or(log.header().subject_index);
+            let index = session::subject_index(&protocol, index, Some(log.header()), &out_dir)
+                .map_err(|e| refused(format!("subject_index: {e}")))?;
             let runner =
                 Runner::resume(protocol, subject, index, &log.replay()).map_err(refused)?;
             (runner, log)
         } else {
-            let index = index.unwrap_or_else(|| sessions_in(&out_dir));
+            let index = session::subject_index(&protocol, index, None, &out_dir)
+                .map_err(|e| refused(format!("subject_index: {e}")))?;
             let runner = Runner::new(protocol, subject, index).map_err(refused)?;
             let header = Header::new(&runner, board_json, PROGRAM);
             let log = Log::create(&out_dir, header).map_err(|e| refused(pythonic(e)))?;
@@ -561,43 +553,13 @@ impl Experiment {
     }
 }
 
-/// Each block's stimuli in the protocol's order, from a session's sidecar (its protocol text),
-/// as `saw experiment analyze` reads them: two blocks' scales are correlated in that order.
-fn block_stimuli(sidecar: &Value, into: &mut BTreeMap<String, Vec<String>>) {
-    let Some(text) = sidecar["session"]["protocol_text"].as_str() else {
-        return;
-    };
-    let Ok(t) = text.parse::<toml::Table>() else {
-        return;
-    };
-    for b in t
-        .get("block")
-        .and_then(|b| b.as_array())
-        .into_iter()
-        .flatten()
-    {
-        let (Some(name), Some(list)) = (
-            b.get("name").and_then(|n| n.as_str()),
-            b.get("stimuli").and_then(|s| s.as_array()),
-        ) else {
-            continue;
-        };
-        into.insert(
-            name.to_string(),
-            list.iter()
-                .filter_map(|s| s.as_str().map(str::to_string))
-                .collect(),
-        );
-    }
-}
-
 /// Analyses CSV files — session CSVs an `Experiment` (or `saw experiment run`) wrote, or a
 /// lab's own `subject,first,second,score` — as `saw experiment analyze` does, and returns the
 /// report as `saw --json experiment analyze` prints it: `{"paired": [{"block", "subjects",
 /// "judgments", "scheffe", "scale": {stimulus: value}, "thurstone", "bradley_terry"}],
 /// "correlations", "tracks", "constant"}`. `files`: a path or a list of paths (a session's
 /// sidecar beside its CSV gives the protocol's stimulus order). `method`: "scheffe", "ura",
-/// "haga" or "nakaya" (default: the one the design implies). `bootstrap`: resamples of the
+/// "haga" or "nakaya" (default: each block's own, from the sidecar, else the one its data imply). `bootstrap`: resamples of the
 /// constant-stimuli fits (0 to 100 000; 0 or 1: none).
 #[pyfunction]
 #[pyo3(signature = (files, method = None, bootstrap = 1000))]
@@ -642,10 +604,10 @@ fn analyze(
         let name = f.display().to_string();
         let text = std::fs::read_to_string(f).map_err(|e| refused(format!("{name}: {e}")))?;
         read_csv(&name, &text, &mut data).map_err(refused)?;
+        // The sidecar beside a session CSV: stimulus orders, variants, threshold rules, read
+        // as `saw experiment analyze` reads them.
         if let Ok(s) = std::fs::read_to_string(f.with_extension("json")) {
-            if let Ok(v) = serde_json::from_str::<Value>(&s) {
-                block_stimuli(&v, &mut opts.block_stimuli);
-            }
+            saw_experiment::analysis::input::sidecar_options(&s, &mut opts);
         }
     }
     if data.paired.is_empty() && data.intervals.is_empty() {

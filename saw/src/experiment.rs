@@ -387,15 +387,15 @@ pub fn run<P: std::io::Read + std::io::Write>(
                 paths.log.display()
             )));
         }
-        let index = opts.subject_index.unwrap_or(log.header().subject_index);
+        let index =
+            session::subject_index(&protocol, opts.subject_index, Some(log.header()), &opts.out)
+                .map_err(|e| Failure::input(format!("--subject-index: {e}")))?;
         let runner = Runner::resume(protocol, &opts.subject, index, &log.replay())
             .map_err(|e| Failure::input(e.to_string()))?;
         (runner, log)
     } else {
-        let index = match opts.subject_index {
-            Some(i) => i,
-            None => sessions_in(&opts.out),
-        };
+        let index = session::subject_index(&protocol, opts.subject_index, None, &opts.out)
+            .map_err(|e| Failure::input(format!("--subject-index: {e}")))?;
         let runner = Runner::new(protocol, &opts.subject, index)
             .map_err(|e| Failure::input(e.to_string()))?;
         let header = Header::new(
@@ -512,15 +512,6 @@ fn present_trial<P: std::io::Read + std::io::Write>(
         std::thread::sleep(Duration::from_secs_f64(timing.pause_s));
     }
     Ok(())
-}
-
-/// The number of sessions (logs) in `dir`: the next subject's index.
-fn sessions_in(dir: &Path) -> u32 {
-    std::fs::read_dir(dir).map_or(0, |d| {
-        d.filter_map(Result::ok)
-            .filter(|e| e.file_name().to_string_lossy().ends_with(".log.jsonl"))
-            .count() as u32
-    })
 }
 
 fn board_json(h: &Hello) -> Value {

@@ -2,7 +2,6 @@
 //! each block's stimuli in the protocol's order), runs the analysis, prints it as text or JSON
 //! and draws the chart. The analysis itself is `saw_experiment::analysis`.
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
 use saw_experiment::analysis::input::{read_csv, Dataset};
@@ -35,13 +34,9 @@ pub fn analyze(
             std::fs::read_to_string(f).map_err(|e| Failure::input(format!("{name}: {e}")))?;
         read_csv(&name, &text, &mut data).map_err(|e| Failure::input(e.to_string()))?;
         // A session's sidecar (<subject>.json beside <subject>.csv) holds the protocol: each
-        // block's stimuli in its order, for correlating two blocks' scales.
-        let sidecar = f.with_extension("json");
-        if let Ok(s) = std::fs::read_to_string(&sidecar) {
-            if let Ok(v) = serde_json::from_str::<Value>(&s) {
-                block_stimuli(&v, &mut opts.block_stimuli);
-                track_rules(&v, &mut opts.track_rules);
-            }
+        // block's stimuli in its order, its variant, each track's threshold rule.
+        if let Ok(text) = std::fs::read_to_string(f.with_extension("json")) {
+            saw_experiment::analysis::input::sidecar_options(&text, &mut opts);
         }
     }
     if data.paired.is_empty() && data.intervals.is_empty() {
@@ -55,6 +50,18 @@ pub fn analyze(
         )));
     }
     let r = report::analyze(&data, &opts).map_err(|e| Failure::input(e.to_string()))?;
+    // Every block refused: the refusals are the answer (exit 2); some refused: reported with
+    // the rest.
+    if r.paired.is_empty() && r.tracks.is_empty() && r.constant.is_empty() && !r.refused.is_empty()
+    {
+        return Err(Failure::input(
+            r.refused
+                .iter()
+                .map(|e| e.to_string())
+                .collect::<Vec<_>>()
+                .join("; "),
+        ));
+    }
     let mut text = render(&r);
     if let Some(png) = output {
         chart(&r, png)?;
@@ -80,79 +87,6 @@ fn chart(_: &Report, png: &Path) -> Result<(), Failure> {
         "-o {}: this saw was built without charts (cargo feature `chart`)",
         png.display()
     )))
-}
-
-/// Each staircase track's threshold rule from a sidecar's protocol text (the defaults as the
-/// protocol reader's: the last 6 reversals, linear steps).
-fn track_rules(
-    sidecar: &Value,
-    into: &mut BTreeMap<(String, String), (usize, saw_experiment::staircase::StepScale)>,
-) {
-    use saw_experiment::staircase::StepScale;
-    let Some(Ok(t)) = sidecar["session"]["protocol_text"]
-        .as_str()
-        .map(|s| s.parse::<toml::Table>())
-    else {
-        return;
-    };
-    for b in t
-        .get("block")
-        .and_then(|b| b.as_array())
-        .into_iter()
-        .flatten()
-    {
-        let Some(block) = b.get("name").and_then(|n| n.as_str()) else {
-            continue;
-        };
-        for tr in b
-            .get("staircase")
-            .and_then(|s| s.as_array())
-            .into_iter()
-            .flatten()
-        {
-            let Some(name) = tr.get("name").and_then(|n| n.as_str()) else {
-                continue;
-            };
-            let last = tr
-                .get("threshold_reversals")
-                .and_then(|v| v.as_integer())
-                .map_or(6, |v| v.max(1) as usize);
-            let scale = match tr.get("scale").and_then(|v| v.as_str()) {
-                Some("log") => StepScale::Log,
-                _ => StepScale::Linear,
-            };
-            into.insert((block.to_string(), name.to_string()), (last, scale));
-        }
-    }
-}
-
-/// Each block's stimuli from a sidecar's protocol text.
-fn block_stimuli(sidecar: &Value, into: &mut BTreeMap<String, Vec<String>>) {
-    let Some(text) = sidecar["session"]["protocol_text"].as_str() else {
-        return;
-    };
-    let Ok(t) = text.parse::<toml::Table>() else {
-        return;
-    };
-    for b in t
-        .get("block")
-        .and_then(|b| b.as_array())
-        .into_iter()
-        .flatten()
-    {
-        let (Some(name), Some(list)) = (
-            b.get("name").and_then(|n| n.as_str()),
-            b.get("stimuli").and_then(|s| s.as_array()),
-        ) else {
-            continue;
-        };
-        into.insert(
-            name.to_string(),
-            list.iter()
-                .filter_map(|s| s.as_str().map(str::to_string))
-                .collect(),
-        );
-    }
 }
 
 fn num(v: f64) -> String {
@@ -276,6 +210,9 @@ fn render(r: &Report) -> String {
                 Err(e) => out += &format!("  {:?}: no fit: {e}\n", f.model),
             }
         }
+    }
+    for e in &r.refused {
+        out += &format!("not analysed: {e}\n");
     }
     out.trim_end().to_string()
 }

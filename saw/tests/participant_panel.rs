@@ -231,6 +231,27 @@ async fn js(c: &Client, script: &str) -> Value {
     c.execute(script, vec![]).await.unwrap()
 }
 
+/// Clicks the element `css` finds, as a person would (WebDriver's click: it must be shown and
+/// enabled). The page re-renders on every state it is sent, so the element found can be
+/// replaced before the click lands (a stale reference): found again and retried, for up to 5 s.
+async fn click(c: &Client, css: &str) {
+    let end = std::time::Instant::now() + std::time::Duration::from_secs(5);
+    loop {
+        let tried = match c.find(Locator::Css(css)).await {
+            Ok(e) => e.click().await.map(|_| ()),
+            Err(e) => Err(e),
+        };
+        match tried {
+            Ok(()) => return,
+            Err(e) if std::time::Instant::now() < end => {
+                let _ = e;
+                tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+            }
+            Err(e) => panic!("clicking {css}: {e}"),
+        }
+    }
+}
+
 /// Waits until `script` returns true.
 async fn until(c: &Client, what: &str, script: &str, secs: u64) {
     let end = Instant::now() + Duration::from_secs(secs);
@@ -289,12 +310,7 @@ async fn a_participant_answers_every_trial_with_the_panel_buttons() {
     )
     .await;
     screenshot(&c, "participant-instructions").await;
-    c.find(Locator::Id("p-continue"))
-        .await
-        .unwrap()
-        .click()
-        .await
-        .unwrap();
+    click(&c, "#p-continue").await;
 
     let mut clicked = BTreeMap::new();
     loop {
@@ -315,14 +331,7 @@ async fn a_participant_answers_every_trial_with_the_panel_buttons() {
         if trial == 0 {
             screenshot(&c, "participant-question").await;
         }
-        c.find(Locator::Css(&format!(
-            "#p-buttons button[data-value='{grade}']"
-        )))
-        .await
-        .unwrap()
-        .click()
-        .await
-        .unwrap();
+        click(&c, &format!("#p-buttons button[data-value='{grade}']")).await;
         clicked.insert(trial, grade);
         until(
             &c,

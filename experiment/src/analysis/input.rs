@@ -97,7 +97,11 @@ pub fn read_csv(file: &str, text: &str, into: &mut Dataset) -> Result<(), InputE
         .map_err(|e| err(1, "(header)", format!("not CSV: {e}")))?
         .clone();
     let col = |name: &str| headers.iter().position(|h| h.trim() == name);
-    let session = col("design").is_some();
+    // A session CSV is told by the columns only `saw experiment run` writes together; a lab's
+    // own file may have a `design` or `block` column of its own.
+    let session = ["design", "trial", "target_interval", "response_word"]
+        .iter()
+        .all(|c| col(c).is_some());
     let need: &[&str] = if session {
         &[
             "subject", "trial", "block", "design", "first", "second", "score", "level", "correct",
@@ -130,14 +134,16 @@ pub fn read_csv(file: &str, text: &str, into: &mut Dataset) -> Result<(), InputE
                 _ => Err(err(line, n, format!("{s:?} is not a finite number"))),
             }
         };
-        let flag = |n: &str| -> Result<bool, InputError> {
+        let flag = |n: &str, empty_is_false: bool| -> Result<bool, InputError> {
             match get(n).as_str() {
                 "1" => Ok(true),
-                "0" | "" => Ok(false),
+                "0" => Ok(false),
+                "" if empty_is_false => Ok(false),
                 s => Err(err(line, n, format!("{s:?} is not 0 or 1"))),
             }
         };
-        let block = if session {
+        // A lab's file may name blocks in a `block` column; without one the file is a block.
+        let block = if col("block").is_some() && !get("block").is_empty() {
             get("block")
         } else {
             file.to_string()
@@ -188,8 +194,10 @@ pub fn read_csv(file: &str, text: &str, into: &mut Dataset) -> Result<(), InputE
                     track: (design == "staircase").then_some(track),
                     trial: number("trial")? as u32,
                     level: number("level")?,
-                    correct: flag("correct")?,
-                    reversal: flag("reversal")?,
+                    // A two-interval trial was answered right or wrong: an empty `correct` is
+                    // refused, not read as wrong. `reversal` is empty for constant stimuli.
+                    correct: flag("correct", false)?,
+                    reversal: flag("reversal", true)?,
                 });
             }
             other => {
@@ -204,9 +212,109 @@ pub fn read_csv(file: &str, text: &str, into: &mut Dataset) -> Result<(), InputE
     Ok(())
 }
 
+/// What a session's sidecar (`<subject>.json` beside its CSV) tells the analysis from the
+/// protocol it kept: each block's stimuli in the protocol's order (for correlating two blocks'
+/// scales), each paired block's variant, each staircase track's threshold rule. Text that is
+/// not a sidecar adds nothing.
+pub fn sidecar_options(sidecar_text: &str, into: &mut super::report::Options) {
+    use crate::staircase::StepScale;
+    let Ok(v) = serde_json::from_str::<serde_json::Value>(sidecar_text) else {
+        return;
+    };
+    let Some(Ok(t)) = v["session"]["protocol_text"]
+        .as_str()
+        .map(|s| s.parse::<toml::Table>())
+    else {
+        return;
+    };
+    for b in t
+        .get("block")
+        .and_then(|b| b.as_array())
+        .into_iter()
+        .flatten()
+    {
+        let Some(block) = b.get("name").and_then(|n| n.as_str()) else {
+            continue;
+        };
+        if let Some(list) = b.get("stimuli").and_then(|s| s.as_array()) {
+            into.block_stimuli.insert(
+                block.to_string(),
+                list.iter()
+                    .filter_map(|s| s.as_str().map(str::to_string))
+                    .collect(),
+            );
+        }
+        if b.get("design").and_then(|d| d.as_str()) == Some("paired") {
+            use super::paired::Variant;
+            // The protocol reader's default is Ura's.
+            let variant = match b.get("variant").and_then(|v| v.as_str()) {
+                Some("scheffe") => Variant::Scheffe,
+                Some("haga") => Variant::Haga,
+                Some("nakaya") => Variant::Nakaya,
+                _ => Variant::Ura,
+            };
+            into.block_methods.insert(block.to_string(), variant);
+        }
+        for tr in b
+            .get("staircase")
+            .and_then(|s| s.as_array())
+            .into_iter()
+            .flatten()
+        {
+            let Some(name) = tr.get("name").and_then(|n| n.as_str()) else {
+                continue;
+            };
+            // The protocol reader's defaults: the last 6 reversals, linear steps.
+            let last = tr
+                .get("threshold_reversals")
+                .and_then(|v| v.as_integer())
+                .map_or(6, |v| v.max(1) as usize);
+            let scale = match tr.get("scale").and_then(|v| v.as_str()) {
+                Some("log") => StepScale::Log,
+                _ => StepScale::Linear,
+            };
+            into.track_rules
+                .insert((block.to_string(), name.to_string()), (last, scale));
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_labs_block_column_splits_blocks_and_a_design_column_is_not_a_session() {
+        let mut d = Dataset::default();
+        read_csv(
+            "lab.csv",
+            "subject,block,design,first,second,score\ns1,real,x,a,b,1\ns1,virtual,x,c,d,2\n",
+            &mut d,
+        )
+        .unwrap();
+        let blocks: Vec<&str> = d.paired.iter().map(|r| r.block.as_str()).collect();
+        assert_eq!(blocks, ["real", "virtual"]);
+    }
+
+    #[test]
+    fn an_empty_correct_is_refused_for_a_two_interval_row() {
+        let head = "subject,subject_index,trial,block,design,track,level,target_interval,first,second,response,response_word,score,correct,reversal\n";
+        let mut d = Dataset::default();
+        let e = read_csv(
+            "s.csv",
+            &format!("{head}s,0,0,b,constant,,4,1,x,y,1,first,,,\n"),
+            &mut d,
+        )
+        .unwrap_err();
+        assert_eq!((e.line, e.column.as_str()), (2, "correct"), "{e}");
+        read_csv(
+            "s.csv",
+            &format!("{head}s,0,0,b,constant,,4,1,x,y,1,first,,1,\n"),
+            &mut d,
+        )
+        .unwrap();
+        assert!(d.intervals[0].correct && !d.intervals[0].reversal);
+    }
 
     #[test]
     fn a_labs_csv_is_read_and_its_mistakes_located() {

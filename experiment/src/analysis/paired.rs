@@ -768,7 +768,9 @@ pub fn analyze(
         p: None,
     });
 
-    let yardstick = match ms_error {
+    // No error variance (every judgment exactly additive): no F and no yardstick either; a
+    // yardstick of 0 would separate every pair.
+    let yardstick = match testable_error {
         Some(mse) => [0.05, 0.01]
             .iter()
             .map(|&alpha| {

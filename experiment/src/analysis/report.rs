@@ -20,8 +20,11 @@ use crate::staircase::{self, StepScale};
 /// What the analysis is asked.
 #[derive(Clone, Debug)]
 pub struct Options {
-    /// Force a paired-comparison variant (None: the one the design implies).
+    /// Force a paired-comparison variant on every paired block (None: each block's own).
     pub method: Option<Variant>,
+    /// Each paired block's variant as its protocol gave it (the sidecars'); a block without
+    /// one is analysed by the variant its data imply.
+    pub block_methods: BTreeMap<String, Variant>,
     /// Each block's stimuli in the protocol's order (the sidecars give it): two blocks with
     /// as many stimuli are correlated in that order, as table 1 pairs #60 with 20 Hz.
     pub block_stimuli: BTreeMap<String, Vec<String>>,
@@ -41,6 +44,7 @@ impl Default for Options {
     fn default() -> Self {
         Options {
             method: None,
+            block_methods: BTreeMap::new(),
             block_stimuli: BTreeMap::new(),
             threshold_reversals: 6,
             track_rules: BTreeMap::new(),
@@ -132,15 +136,18 @@ pub struct Report {
     pub correlations: Vec<Correlation>,
     /// Staircase tracks.
     pub tracks: Vec<Track>,
-    /// Constant-stimuli blocks.
+    /// Constant-stimuli blocks (subjects pooled: descriptive of the group's trials; a
+    /// subject's own fit comes from analysing that subject's CSV alone).
     pub constant: Vec<ConstantBlock>,
+    /// Blocks that could not be analysed, each with its sentence (the others are reported).
+    pub refused: Vec<ReportError>,
     /// Staircase blocks' trials fitted as constant stimuli are (every level a track visited,
     /// its subjects and tracks pooled).
     pub staircase_fits: Vec<ConstantBlock>,
 }
 
 /// An analysis refused: which block, why.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ReportError {
     /// The block.
     pub block: String,
@@ -156,6 +163,9 @@ impl fmt::Display for ReportError {
 
 impl std::error::Error for ReportError {}
 
+/// The most stimuli a paired block may have in the analysis.
+pub const MAX_STIMULI: usize = 100;
+
 /// Analyses `data`.
 pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
     let mut report = Report {
@@ -164,6 +174,7 @@ pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
         tracks: Vec::new(),
         constant: Vec::new(),
         staircase_fits: Vec::new(),
+        refused: Vec::new(),
     };
     // Paired blocks, in order of first appearance.
     let mut blocks: Vec<String> = Vec::new();
@@ -187,7 +198,31 @@ pub fn analyze(data: &Dataset, o: &Options) -> Result<Report, ReportError> {
             block: b.clone(),
             message: m,
         };
-        let scheffe = paired::analyze(&judgments, o.method).map_err(|e| err(e.to_string()))?;
+        // Dense per-subject tables of t × t: a file whose stimulus columns hold ids (swapped
+        // columns, say) would ask for terabytes. The protocol reader allows 20.
+        let mut names: Vec<&str> = rows
+            .iter()
+            .flat_map(|r| [r.first.as_str(), r.second.as_str()])
+            .collect();
+        names.sort_unstable();
+        names.dedup();
+        if names.len() > MAX_STIMULI {
+            report.refused.push(err(format!(
+                "{} stimuli; a paired analysis takes at most {MAX_STIMULI} (are the first and second columns stimulus names?)",
+                names.len()
+            )));
+            continue;
+        }
+        let method = o.method.or_else(|| o.block_methods.get(b).copied());
+        let scheffe = match paired::analyze(&judgments, method) {
+            Ok(a) => a,
+            // One block that cannot be analysed (a subject who stopped early) does not take
+            // the others down: it is listed with its sentence.
+            Err(e) => {
+                report.refused.push(err(e.to_string()));
+                continue;
+            }
+        };
         let scale = keyed(&scheffe.stimuli, &scheffe.scale);
         let choices = scaling::choices_from_scores(
             &rows
