@@ -115,7 +115,8 @@ pub fn summarize(records: &[Record]) -> Exploration {
         e.mean_speed_mm_s = (speed_time / moving_us as f64 * 1000.0).round() / 1000.0;
     }
     if fb_n > 0 {
-        e.f_b_hz = fb_sum / fb_n as f64;
+        // To the mHz the records carry (no float noise in the CSV).
+        e.f_b_hz = (fb_sum / fb_n as f64 * 1000.0).round() / 1000.0;
     }
     e
 }

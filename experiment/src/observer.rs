@@ -32,6 +32,7 @@ pub const GUESS_2IFC: f64 = 0.5;
 /// spring (k) – mass (m) finger pressed with P and drawn at speed U over a surface whose
 /// static and kinetic friction coefficients differ by μs − μc.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct StickSlipParams {
     /// P, the total normal force of the skin, N.
     pub normal_force_n: f64,
@@ -176,9 +177,11 @@ pub enum Percept {
     /// at ω0/2π: the percept compresses high f_b, which LogFb does not.
     StickSlip {
         /// P, m, k and U of the finger (fig. 5's by default).
+        #[serde(default)]
         finger: StickSlipParams,
         /// (μs − μc) × f_b, Hz: the friction difference of the surface a 1 Hz burst stands
-        /// for. 2 Hz gives μs − μc = 0.1 at 20 Hz and 0.01 at 200 Hz.
+        /// for. 2 Hz gives μs − μc = 0.1 at 20 Hz and 0.01 at 200 Hz (the default).
+        #[serde(default = "default_friction_difference_hz")]
         friction_difference_hz: f64,
     },
 }
@@ -208,8 +211,10 @@ impl Percept {
     }
 }
 
-/// The simulated participant's description (a planning file's `[observer]`, say).
+/// The simulated participant's description (a planning file's `[observer]`, say). Every key
+/// has a default ([`ObserverSpec::default`]); a key it does not know is refused.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct ObserverSpec {
     /// SD of the perceived roughness per presentation, in units of ln f_b (≥ 0).
     pub noise: f64,
@@ -233,6 +238,10 @@ pub struct ObserverSpec {
     /// difference divided by `category_width` × `noise`, rounded, is the grade.
     #[serde(default = "default_category_width")]
     pub category_width: f64,
+}
+
+fn default_friction_difference_hz() -> f64 {
+    2.0
 }
 
 fn default_threshold() -> f64 {

@@ -886,6 +886,13 @@ pub fn parse(file: &str, text: &str, files: &dyn Files) -> Result<Protocol, Prot
                 _ => INTERVAL_WORDS.iter().map(|s| s.to_string()).collect(),
             },
         };
+        if let Some(k) = words.iter().position(|w| w.trim().is_empty()) {
+            let (span, key) = match bp.words.as_ref().or(words_span(&spec)) {
+                Some(w) => (w.span(), if bp.words.is_some() { field("words") } else { "response.words".into() }),
+                None => (b.span(), field("words")),
+            };
+            return Err(cx.err(span, &key, format_args!("word {} is empty; every response needs a word the participant reads", k + 1)));
+        }
         let words_span = bp
             .words
             .as_ref()
@@ -900,10 +907,10 @@ pub fn parse(file: &str, text: &str, files: &dyn Files) -> Result<Protocol, Prot
             Design::Paired { .. }
                 if words.len() < 3 || words.len() % 2 == 0 || words.len() > 11 =>
             {
-                return Err(cx.err(words_span, &words_field, format_args!("{} words for block \"{}\": paired grades are an odd number from 3 to 11, the middle one no difference", words.len(), bp.name.get_ref())));
+                return Err(cx.err(words_span, &words_field, format_args!("{} words for block \"{}\": paired grades are an odd number from 3 to 11, the middle one no difference; a block sets its own with words = [...]", words.len(), bp.name.get_ref())));
             }
             Design::Constant { .. } | Design::Staircase { .. } if words.len() != 2 => {
-                return Err(cx.err(words_span, &words_field, format_args!("{} words for block \"{}\": a two-interval block answers with two (the first interval, the second)", words.len(), bp.name.get_ref())));
+                return Err(cx.err(words_span, &words_field, format_args!("{} words for block \"{}\": a two-interval block answers with two (the first interval, the second); a block sets its own with words = [...]", words.len(), bp.name.get_ref())));
             }
             _ => {}
         }
@@ -1020,6 +1027,25 @@ fn track(
         threshold_reversals: whole(&tp.threshold_reversals, "threshold_reversals", 1, 1_000)?
             .unwrap_or(6),
     };
+    if let Some(maxr) = spec.max_reversals {
+        if spec.threshold_reversals > maxr {
+            // At the threshold's count when written, else at the limit (the count's default
+            // is 6).
+            let (span, key) = match (&tp.threshold_reversals, &tp.max_reversals) {
+                (Some(t), _) => (t.span(), "threshold_reversals"),
+                (None, Some(m)) => (m.span(), "max_reversals"),
+                (None, None) => (t.span(), "max_reversals"),
+            };
+            return Err(cx.err(
+                span,
+                &f(key),
+                format_args!(
+                    "the threshold averages the last {} reversals, more than max_reversals = {maxr}: the track would stop before it has them",
+                    spec.threshold_reversals
+                ),
+            ));
+        }
+    }
     // The staircase's own rules (steps, bounds, a stopping rule), at the track's table.
     spec.check()
         .map_err(|e| cx.err(t.span(), &f("(track)").replace(".(track)", ""), e))?;
@@ -1056,8 +1082,29 @@ fn check_scene(text: &str) -> Result<(), String> {
             counter_bits: b.burst_timer_bits,
             max_burst_hz: b.max_burst_hz,
         };
-        saw_core::scene_file::load_for_board("(region)", text, timer, 1_000_000 / b.sample_rate_hz)
-            .map_err(|e| format!("{} (on the {})", e.message, b.name))?;
+        let config = saw_core::scene_file::load_for_board(
+            "(region)",
+            text,
+            timer,
+            1_000_000 / b.sample_rate_hz,
+        )
+        .map_err(|e| format!("{} (on the {})", e.message, b.name))?;
+        // A constant burst longer than the on-time cap is played shorter, not refused, by the
+        // board (its log warns): as a stimulus it would not be the one the protocol names.
+        for t in config.scene.textures.iter() {
+            if let saw_core::texture::Texture::Constant(c) = t {
+                let f_b_hz = c.burst_millihz as f64 / 1000.0;
+                let on_ms = c.duty_permille as f64 / 10.0 / 100.0 / f_b_hz * 1000.0;
+                let cap_ms = config.limits.max_on_time_us as f64 / 1000.0;
+                if c.burst_millihz > 0 && on_ms > cap_ms {
+                    return Err(format!(
+                        "f_b {f_b_hz} Hz at {} % duty is a burst of {on_ms:.0} ms, over the scene's on-time cap of {cap_ms} ms: the board would play a shorter one ({:.1} % duty); lower the duty, raise f_b or the cap",
+                        c.duty_permille as f64 / 10.0,
+                        cap_ms / 1000.0 * f_b_hz * 100.0
+                    ));
+                }
+            }
+        }
     }
     Ok(())
 }

@@ -41,9 +41,29 @@ fn designs_the_analysis_cannot_read_are_refused_at_the_door() {
             "block[0].vary: until_mm cannot be varied",
         ),
     ];
-    for (blocks, says) in cases {
+    let cases: Vec<(String, &str)> = cases
+        .iter()
+        .map(|(b, s)| (b.to_string(), *s))
+        .chain([
+            (
+                // 0.5 Hz at 40 %: an 800 ms burst, over the 50 ms on-time cap.
+                "[[stimulus]]\nname = \"slow\"\nregion = { kind = \"constant\", f_b_hz = 0.5, duty_percent = 40 }\n[[block]]\nname = \"x\"\ndesign = \"paired\"\nstimuli = [\"a\", \"slow\"]\n".to_string(),
+                "stimulus[3].region: f_b 0.5 Hz at 40 % duty is a burst of 800 ms, over the scene's on-time cap of 50 ms",
+            ),
+            (
+                "[[block]]\nname = \"s\"\ndesign = \"staircase\"\nstandard = \"a\"\nvary = \"f_b_hz\"\n[[block.staircase]]\nname = \"t\"\nstart = 10.0\nsteps = [2.0]\nmin = 1.0\nmax = 20.0\nmax_trials = 50\nmax_reversals = 6\nthreshold_reversals = 10\n".to_string(),
+                "block[0].staircase[0].threshold_reversals: the threshold averages the last 10 reversals, more than max_reversals = 6",
+            ),
+            (
+                "[[block]]\nname = \"x\"\ndesign = \"paired\"\nstimuli = [\"a\", \"b\"]\nwords = [\"less\", \"\", \"more\"]\n".to_string(),
+                "block[0].words: word 2 is empty",
+            ),
+        ])
+        .collect();
+    for (blocks, says) in &cases {
         let e = parse(&with_blocks(blocks)).unwrap_err().to_string();
         assert!(e.starts_with("p.toml:") && e.contains(says), "{e}");
+        assert_eq!(e.lines().count(), 1, "{e}");
     }
     // A file with no block: the file as a whole, no line to point at.
     let e = parse(&with_blocks("")).unwrap_err().to_string();
@@ -51,6 +71,20 @@ fn designs_the_analysis_cannot_read_are_refused_at_the_door() {
         e,
         "p.toml: block: the protocol has no [[block]]; there is nothing to run"
     );
+}
+
+/// A simulated participant's file: every key has its default; a misspelt key is refused.
+#[test]
+fn an_observer_file_takes_defaults_and_refuses_unknown_keys() {
+    use saw_experiment::observer::ObserverSpec;
+    let s: ObserverSpec = toml::from_str("threshold = 6.0\n").unwrap();
+    assert_eq!(s.threshold, 6.0);
+    assert_eq!(s.noise, ObserverSpec::default().noise);
+    let e = toml::from_str::<ObserverSpec>("nois = 0.3\n").unwrap_err();
+    assert!(e.message().contains("unknown field `nois`"), "{e}");
+    let shipped: ObserverSpec =
+        toml::from_str(include_str!("../../experiments/fb-threshold-observer.toml")).unwrap();
+    assert_eq!((shipped.threshold, shipped.spread), (6.0, 3.0));
 }
 
 #[test]

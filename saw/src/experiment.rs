@@ -48,8 +48,9 @@ pub enum ExperimentCommand {
         /// "The simulated participant"), or the default observer with `--simulate default`.
         #[arg(long, value_name = "FILE|default")]
         simulate: Option<String>,
-        /// The simulated participant's noise seed (0 to 2^63; default: the subject index).
-        #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = seed_n)]
+        /// The simulated participant's noise seed (0 to 9223372036854775807; default: the subject
+        /// index).
+        #[arg(long, value_name = "N", requires = "simulate", allow_negative_numbers = true, value_parser = seed_n)]
         observer_seed: Option<u64>,
         /// Ask on web pages as well as in the terminal: the participant's view (large response
         /// buttons, for a tablet) at http://ADDR:PORT/participant and the experimenter's at
@@ -156,6 +157,7 @@ pub fn command(
                     ));
                 }
             };
+            on_interrupt();
             let opened = crate::port::open(port).map_err(Failure::link)?;
             let mut client = Client::new(opened, timeout);
             let hello = client.hello()?;
@@ -197,6 +199,8 @@ pub trait Participant {
     fn hand_over(&mut self, interval: usize, stimulus: &str, prompt: &str) -> Result<(), Failure>;
     /// The participant explores interval `interval` now.
     fn explore(&mut self, interval: usize, of: usize);
+    /// A trial begins (the experimenter's bearings: which, of how many, in which block).
+    fn begin(&mut self, _trial: &Trial, _planned: u32) {}
     /// The response to `trial`, having felt `shown` (what the finger did and the f_b the board
     /// produced).
     fn respond(&mut self, trial: &Trial, shown: &[Shown]) -> Result<i32, Failure>;
@@ -253,6 +257,14 @@ impl Participant for Terminal {
         eprintln!("Explore {} of {of} now.", interval + 1);
     }
 
+    fn begin(&mut self, trial: &Trial, planned: u32) {
+        eprintln!(
+            "\n— trial {} of {planned}, block \"{}\"",
+            trial.number + 1,
+            trial.block
+        );
+    }
+
     fn respond(&mut self, trial: &Trial, _shown: &[Shown]) -> Result<i32, Failure> {
         loop {
             eprintln!("{}", trial.question);
@@ -261,6 +273,7 @@ impl Participant for Terminal {
             }
             eprint!("> ");
             let _ = std::io::stderr().flush();
+            discard_typed_ahead();
             let s = self.line()?;
             match s.parse::<i32>() {
                 Ok(v) if trial.values.contains(&v) => return Ok(v),
@@ -278,6 +291,37 @@ impl Participant for Terminal {
                 }
             }
         }
+    }
+}
+
+/// Ctrl-C (SIGINT) or SIGTERM during a session: one line saying that the log keeps every
+/// trial answered and how to go on, then exit 130 as a shell expects. The log is synced at
+/// each trial, so there is nothing to flush; only async-signal-safe calls in the handler.
+fn on_interrupt() {
+    use nix::sys::signal::{sigaction, SaFlags, SigAction, SigHandler, SigSet, Signal};
+    extern "C" fn stop(_: i32) {
+        const SAID: &[u8] = b"\nsaw experiment: interrupted; the log keeps every trial answered (the one in progress is not): --resume continues\n";
+        // SAFETY: write(2) and _exit(2) are async-signal-safe; SAID is static.
+        unsafe {
+            nix::libc::write(2, SAID.as_ptr().cast(), SAID.len());
+            nix::libc::_exit(130);
+        }
+    }
+    let action = SigAction::new(SigHandler::Handler(stop), SaFlags::empty(), SigSet::empty());
+    for sig in [Signal::SIGINT, Signal::SIGTERM] {
+        // SAFETY: the handler only calls async-signal-safe functions.
+        let _ = unsafe { sigaction(sig, &action) };
+    }
+}
+
+/// Drops what was typed at the terminal before the question was asked (a key pressed while
+/// exploring is not an answer; the panel refuses those too). Nothing to drop when stdin is a
+/// pipe: a script's answers are meant in order.
+fn discard_typed_ahead() {
+    use std::os::fd::AsFd;
+    let stdin = std::io::stdin();
+    if nix::unistd::isatty(stdin.as_fd()).unwrap_or(false) {
+        let _ = nix::sys::termios::tcflush(stdin.as_fd(), nix::sys::termios::FlushArg::TCIFLUSH);
     }
 }
 
@@ -462,6 +506,7 @@ fn present_trial<P: std::io::Read + std::io::Write>(
     off_scene: &str,
 ) -> Result<(), Failure> {
     let timing = runner.protocol().timing;
+    participant.begin(trial, planned);
     if trial.break_before && trial.number > resumed_at {
         load(client, "the RF-off scene", off_scene)?;
         participant.rest(trial.number, planned)?;
@@ -526,24 +571,116 @@ fn board_json(h: &Hello) -> Value {
 
 /// `saw experiment check`: the protocol's plan.
 fn check(path: &Path) -> Result<Done, Failure> {
+    use saw_experiment::protocol::{Design, PairedVariant};
     let p = protocol::load(path).map_err(|e| Failure::input(e.to_string()))?;
     let r = Runner::new(p.clone(), "check", 0).map_err(|e| Failure::input(e.to_string()))?;
     let trials = r.planned_trials();
+    let adaptive = p
+        .blocks
+        .iter()
+        .any(|b| matches!(b.design, Design::Staircase { .. }));
     let per_trial_s = 2.0 * p.timing.explore_s + 2.0 * p.timing.pause_s;
+    let minutes = trials as f64 * per_trial_s / 60.0;
     let mut text = format!(
-        "{}: \"{}\", {} stimuli, {} block{}, {} trials per subject (about {:.0} min at {} s per exploration and {} s pauses, before responses)",
+        "{}: \"{}\", {} stimuli, {} block{}, {}{} trials per subject (about {:.1} min at {} s per exploration and {} s pauses, before the answers)",
         p.file,
         p.name,
         p.stimuli.len(),
         p.blocks.len(),
         if p.blocks.len() == 1 { "" } else { "s" },
+        if adaptive { "at most " } else { "" },
         trials,
-        trials as f64 * per_trial_s / 60.0,
+        minutes,
         p.timing.explore_s,
         p.timing.pause_s
     );
+    let mut blocks = Vec::new();
     for b in &p.blocks {
-        text += &format!("\n  block \"{}\": {}", b.name, b.design.name());
+        let names = |ix: &[usize]| {
+            ix.iter()
+                .map(|&i| p.stimuli[i].name.clone())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let (line, n) = match &b.design {
+            Design::Paired {
+                variant, stimuli, ..
+            } => {
+                let t = stimuli.len() as u32;
+                let (n, who) = match variant {
+                    PairedVariant::Ura => (t * (t - 1), String::new()),
+                    PairedVariant::Nakaya => (t * (t - 1) / 2, String::new()),
+                    // One pair a subject: a complete design needs a subject per pair.
+                    PairedVariant::Scheffe => (
+                        1,
+                        format!("; a complete design takes a multiple of {} subjects", t * (t - 1)),
+                    ),
+                    PairedVariant::Haga => (
+                        1,
+                        format!(
+                            "; a complete design takes a multiple of {} subjects ({} pairs in both orders)",
+                            t * (t - 1),
+                            t * (t - 1) / 2
+                        ),
+                    ),
+                };
+                (
+                    format!(
+                        "paired comparisons ({} variant) of {}: {n} trial{} per subject{who}",
+                        variant.name(),
+                        names(stimuli),
+                        if n == 1 { "" } else { "s" }
+                    ),
+                    n,
+                )
+            }
+            Design::Constant {
+                standard,
+                vary,
+                levels,
+                repeats,
+            } => {
+                let n = levels.len() as u32 * repeats;
+                (
+                    format!(
+                        "constant stimuli on \"{}\", {vary} raised by {} ({repeats} each): {n} trials",
+                        p.stimuli[*standard].name,
+                        levels
+                            .iter()
+                            .map(|l| l.to_string())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                    n,
+                )
+            }
+            Design::Staircase {
+                standard,
+                vary,
+                tracks,
+            } => {
+                let n: u32 = tracks.iter().map(|t| t.max_trials.unwrap_or(0)).sum();
+                (
+                    format!(
+                        "{} staircase{} on \"{}\"'s {vary} ({}): at most {n} trials",
+                        tracks.len(),
+                        if tracks.len() == 1 { "" } else { "s" },
+                        p.stimuli[*standard].name,
+                        tracks
+                            .iter()
+                            .map(|t| format!(
+                                "{}: {}-down-{}-up from {}",
+                                t.name, t.down, t.up, t.start
+                            ))
+                            .collect::<Vec<_>>()
+                            .join("; ")
+                    ),
+                    n,
+                )
+            }
+        };
+        text += &format!("\n  block \"{}\": {line}", b.name);
+        blocks.push(json!({"name": b.name, "design": b.design.name(), "trials": n}));
     }
     Ok(Done {
         text,
@@ -551,9 +688,10 @@ fn check(path: &Path) -> Result<Done, Failure> {
             "file": p.file,
             "name": p.name,
             "stimuli": p.stimuli.iter().map(|s| s.name.clone()).collect::<Vec<_>>(),
-            "blocks": p.blocks.iter().map(|b| json!({"name": b.name, "design": b.design.name()})).collect::<Vec<_>>(),
+            "blocks": blocks,
             "trials_per_subject": trials,
-            "minutes_per_subject": trials as f64 * per_trial_s / 60.0,
+            "trials_are_a_limit": adaptive,
+            "minutes_per_subject": minutes,
         }),
     })
 }

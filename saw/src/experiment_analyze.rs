@@ -28,8 +28,14 @@ pub fn analyze(
         }),
         ..Options::default()
     };
-    for f in files {
+    for (k, f) in files.iter().enumerate() {
         let name = f.display().to_string();
+        // The same file twice would read as every judgment made twice.
+        if files[..k].iter().any(|g| same_file(f, g)) {
+            return Err(Failure::input(format!(
+                "{name} is given twice; each file is read once"
+            )));
+        }
         let text =
             std::fs::read_to_string(f).map_err(|e| Failure::input(format!("{name}: {e}")))?;
         read_csv(&name, &text, &mut data).map_err(|e| Failure::input(e.to_string()))?;
@@ -73,9 +79,26 @@ pub fn analyze(
     })
 }
 
+/// Whether two paths name one file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a == b,
+    }
+}
+
 /// Draws the report's chart.
 #[cfg(feature = "chart")]
 fn chart(r: &Report, png: &Path) -> Result<(), Failure> {
+    if let Some(dir) = png.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if !dir.is_dir() {
+            return Err(Failure::input(format!(
+                "-o {}: the directory {} does not exist",
+                png.display(),
+                dir.display()
+            )));
+        }
+    }
     saw_experiment::chart::draw(r, png)
         .map_err(|e| Failure::input(format!("-o {}: {e}", png.display())))
 }
@@ -131,7 +154,11 @@ fn render(r: &Report) -> String {
                 num(row.df),
                 row.ms.map_or("".into(), num),
                 row.f.map_or("".into(), num),
-                row.p.map_or("".into(), |p| format!("{p:.4}")),
+                row.p.map_or("".into(), |p| if p < 1e-4 {
+                    "<0.0001".to_string()
+                } else {
+                    format!("{p:.4}")
+                }),
             );
         }
         for y in &a.yardstick {
@@ -193,19 +220,31 @@ fn render(r: &Report) -> String {
         for f in &c.fits {
             match &f.result {
                 Ok(ci) => {
+                    let level_ci = ci.level_at_target.map_or(String::new(), |i| {
+                        format!(" [{}, {}]", num(i.lower), num(i.upper))
+                    });
                     out += &format!(
-                        "  {:?}: α = {} [{}, {}], β = {} [{}, {}], level at {:.1} % = {} (95 % bootstrap, {} resamples)\n",
+                        "  {:?}: level at {:.1} % = {}{}; α = {} [{}, {}], β = {} [{}, {}] (95 % bootstrap, {} resamples)\n",
                         f.model,
+                        ci.fit.target * 100.0,
+                        ci.fit.level_at_target.map_or("-".into(), num),
+                        level_ci,
                         num(ci.fit.alpha),
                         num(ci.alpha.lower),
                         num(ci.alpha.upper),
                         num(ci.fit.beta),
                         num(ci.beta.lower),
                         num(ci.beta.upper),
-                        ci.fit.target * 100.0,
-                        ci.fit.level_at_target.map_or("-".into(), num),
                         ci.n_resamples
-                    )
+                    );
+                    // Resamples with no maximum (all right at every level, say) pile up at the
+                    // search's bounds: an interval built on many of them says little.
+                    if ci.n_degenerate * 10 > ci.n_resamples {
+                        out += &format!(
+                            "    caution: {} of {} resamples had no maximum-likelihood fit, so these intervals are unreliable; levels nearer the threshold or more trials would steady them\n",
+                            ci.n_degenerate, ci.n_resamples
+                        );
+                    }
                 }
                 Err(e) => out += &format!("  {:?}: no fit: {e}\n", f.model),
             }
