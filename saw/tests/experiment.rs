@@ -295,9 +295,64 @@ fn protocol_and_command_line_mistakes_are_one_line_each() {
     );
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("--subject-index"), "{stderr}");
+    // analyze: a file twice, a chart into a directory that is not there.
+    let lab = dir.path().join("lab.csv");
+    std::fs::write(&lab, "subject,first,second,score\ns1,a,b,1\ns1,b,a,-1\n").unwrap();
+    let l = lab.display().to_string();
+    let (code, _, stderr) = saw(None, &["experiment", "analyze", &l, &l]);
+    assert_eq!(
+        (code, stderr.trim()),
+        (
+            2,
+            format!("error: {l} is given twice; each file is read once").as_str()
+        )
+    );
+    let (code, _, stderr) = saw(
+        None,
+        &["experiment", "analyze", &l, "-o", "/nonexistent/x.png"],
+    );
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("the directory /nonexistent does not exist"),
+        "{stderr}"
+    );
     // check prints the plan.
     let (code, stdout, stderr) = saw(None, &["--json", "experiment", "check", &p]);
     assert_eq!(code, 0, "{stderr}");
     let v: Value = serde_json::from_str(stdout.trim()).unwrap();
     assert_eq!(v["result"]["trials_per_subject"], 12);
+}
+
+/// Ctrl-C mid-session: one line on how to go on, exit 130, every answered trial kept.
+#[test]
+fn an_interrupt_says_how_to_go_on() {
+    let vb = VirtualBoard::start(&[]);
+    let dir = tempfile::tempdir().unwrap();
+    let protocol = virtual_study(dir.path());
+    let p = protocol.display().to_string();
+    let out = dir.path().join("int");
+    let o = out.display().to_string();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_saw"))
+        .arg("--port")
+        .arg(&vb.port)
+        .args(run_args(&p, "i", &o))
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for_trials(&out.join("i.csv"), 2, &mut child);
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGINT,
+    )
+    .unwrap();
+    let run = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(130), "{stderr}");
+    assert_eq!(
+        stderr.trim(),
+        "saw experiment: interrupted; the log keeps every trial answered (the one in progress is not): --resume continues"
+    );
+    assert!(trials(&out.join("i.csv")).len() >= 2);
 }
