@@ -888,10 +888,24 @@ pub fn parse(file: &str, text: &str, files: &dyn Files) -> Result<Protocol, Prot
         };
         if let Some(k) = words.iter().position(|w| w.trim().is_empty()) {
             let (span, key) = match bp.words.as_ref().or(words_span(&spec)) {
-                Some(w) => (w.span(), if bp.words.is_some() { field("words") } else { "response.words".into() }),
+                Some(w) => (
+                    w.span(),
+                    if bp.words.is_some() {
+                        field("words")
+                    } else {
+                        "response.words".into()
+                    },
+                ),
                 None => (b.span(), field("words")),
             };
-            return Err(cx.err(span, &key, format_args!("word {} is empty; every response needs a word the participant reads", k + 1)));
+            return Err(cx.err(
+                span,
+                &key,
+                format_args!(
+                    "word {} is empty; every response needs a word the participant reads",
+                    k + 1
+                ),
+            ));
         }
         let words_span = bp
             .words
