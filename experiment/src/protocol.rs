@@ -31,16 +31,33 @@ pub struct ProtocolError {
 
 impl fmt::Display for ProtocolError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (field, message) = (one_line(&self.field), one_line(&self.message));
         if self.line == 0 {
-            write!(f, "{}: {}: {}", self.file, self.field, self.message)
+            write!(f, "{}: {field}: {message}", one_line(&self.file))
         } else {
             write!(
                 f,
-                "{}:{}:{}: {}: {}",
-                self.file, self.line, self.column, self.field, self.message
+                "{}:{}:{}: {field}: {message}",
+                one_line(&self.file),
+                self.line,
+                self.column
             )
         }
     }
+}
+
+/// `text` on one line: line breaks and other control characters a file's value may hold are
+/// written as escapes (`\n`), so an error quoting the value stays one line.
+pub fn one_line(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 impl std::error::Error for ProtocolError {}

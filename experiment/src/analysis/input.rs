@@ -64,13 +64,17 @@ pub struct InputError {
 
 impl fmt::Display for InputError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use crate::protocol::one_line;
         if self.line == 0 {
-            write!(f, "{}: {}", self.file, self.message)
+            write!(f, "{}: {}", one_line(&self.file), one_line(&self.message))
         } else {
             write!(
                 f,
                 "{}:{}: {}: {}",
-                self.file, self.line, self.column, self.message
+                one_line(&self.file),
+                self.line,
+                one_line(&self.column),
+                one_line(&self.message)
             )
         }
     }
@@ -148,6 +152,20 @@ pub fn read_csv(file: &str, text: &str, into: &mut Dataset) -> Result<(), InputE
         } else {
             file.to_string()
         };
+        // Names with line breaks (a quoted field left open) would break every sentence and
+        // chart label that quotes them.
+        for c in ["subject", "first", "second", "block", "track"] {
+            if col(c).is_some() && get(c).chars().any(char::is_control) {
+                return Err(err(
+                    line,
+                    c,
+                    format!(
+                        "{:?} holds a line break or another control character (an unclosed quote?)",
+                        get(c)
+                    ),
+                ));
+            }
+        }
         let subject = get("subject");
         if subject.is_empty() {
             return Err(err(

@@ -157,7 +157,13 @@ pub struct ReportError {
 
 impl fmt::Display for ReportError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "block \"{}\": {}", self.block, self.message)
+        use crate::protocol::one_line;
+        write!(
+            f,
+            "block \"{}\": {}",
+            one_line(&self.block),
+            one_line(&self.message)
+        )
     }
 }
 
