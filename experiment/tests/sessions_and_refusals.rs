@@ -65,6 +65,19 @@ fn designs_the_analysis_cannot_read_are_refused_at_the_door() {
         assert!(e.starts_with("p.toml:") && e.contains(says), "{e}");
         assert_eq!(e.lines().count(), 1, "{e}");
     }
+    // A value holding a line break is quoted with it escaped: the sentence stays one line.
+    let e = parse(&with_blocks(
+        "[[block]]\nname = \"p\"\ndesign = \"paired\"\nstimuli = [\"a\", \"b\\nc\"]\n",
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.ends_with(
+            "block[0].stimuli[1]: \"b\\nc\" is not a stimulus of this file (they are: a, b, c)"
+        ),
+        "{e}"
+    );
+    assert_eq!(e.lines().count(), 1, "{e}");
     // A file with no block: the file as a whole, no line to point at.
     let e = parse(&with_blocks("")).unwrap_err().to_string();
     assert_eq!(
