@@ -14,9 +14,14 @@
 # `scene_file` — a scene file's bytes through the reader and the board check, an accepted one
 # written back and read again; `scene_struct` — the same reading of scene files built from the
 # fuzzer's bytes as choices (tables, keys, array lengths, values), so the mutator changes a
-# scene's shape rather than its characters. New inputs that reach new code are kept in
-# fuzz/corpus/<target>/ (or in $NEW_INPUTS when set, leaving the corpus as it is), which
-# `cargo test -p saw-link --test fuzz_corpus` replays. A crash leaves its input in
+# scene's shape rather than its characters. The experiment's inputs, bodies in
+# saw_experiment::testing: `protocol` — a protocol file through the reader, an accepted one run
+# by the runner (every trial answered, values it does not allow refused, half of it resumed);
+# `analysis_csv` — a session or lab CSV through the analysis' reader and the analysis;
+# `session_log` — a session log reopened as a resume does, its CSV read back and its protocol
+# resumed. New inputs that reach new code are kept in fuzz/corpus/<target>/ (or in $NEW_INPUTS
+# when set, leaving the corpus as it is), which `cargo test -p saw-link --test fuzz_corpus` and
+# `cargo test -p saw-experiment --test fuzz_corpus` replay. A crash leaves its input in
 # fuzz/artifacts/<target>/ and fails the script.
 #
 # --plant NAME builds saw-core's `fuzz-plant-NAME` panic into the reader (docs/fuzzing.md) and
@@ -116,7 +121,7 @@ if [ -n "$PLANT" ]; then
     exit 1
 fi
 
-[ "${#TARGETS[@]}" -eq 0 ] && TARGETS=(link_bytes scene_file scene_struct)
+[ "${#TARGETS[@]}" -eq 0 ] && TARGETS=(link_bytes scene_file scene_struct protocol analysis_csv session_log)
 for t in "${TARGETS[@]}"; do
     mkdir -p "corpus/$t"
     options "$t"

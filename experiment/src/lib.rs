@@ -25,3 +25,6 @@ pub mod runner;
 pub mod session;
 pub mod simulate;
 pub mod staircase;
+/// The fuzz bodies of the outside inputs (protocol files, analysis CSVs, session logs), shared
+/// by the targets in `fuzz/` and the corpus replay test (docs/fuzzing.md).
+pub mod testing;
