@@ -121,7 +121,9 @@ impl fmt::Display for RunnerError {
                 planned,
             } => write!(
                 f,
-                "trial {number} of the log presented {logged} but this protocol and subject give {planned}: the protocol changed since the session began, so it cannot resume"
+                "trial {number} of the log presented {} but this protocol and subject give {}: the protocol changed since the session began, so it cannot resume",
+                crate::protocol::one_line(logged),
+                crate::protocol::one_line(planned)
             ),
             RunnerError::Staircase(e) => write!(f, "staircase: {e}"),
         }

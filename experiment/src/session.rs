@@ -379,7 +379,7 @@ impl Log {
         let read = read_log(&paths.log)?;
         if read.header.subject != subject {
             return Err(format!(
-                "{}: the log is subject {}'s, not {subject}'s",
+                "{}: the log is subject {:?}'s, not {subject}'s",
                 paths.log.display(),
                 read.header.subject
             ));
