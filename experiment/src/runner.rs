@@ -347,21 +347,26 @@ impl Runner {
 
     fn enter_block(&mut self) -> Result<(), RunnerError> {
         self.trial_in_block = 0;
-        let Some(&b) = self.order.get(self.block_pos) else {
-            self.pending = None;
-            return Ok(());
-        };
+        if let Some(&b) = self.order.get(self.block_pos) {
+            self.plan = self.plan_of(b)?;
+        }
+        self.advance()
+    }
+
+    /// Block `b`'s plan for this subject: its fixed trials, or its tracks with the stream
+    /// that draws each trial's target interval (both from the block's own seed, so a resume
+    /// replays them).
+    fn plan_of(&self, b: usize) -> Result<Plan, RunnerError> {
         let block_seed = self.seed ^ (b as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
         let mut rng = ChaCha8Rng::seed_from_u64(block_seed);
-        self.plan = match &self.protocol.blocks[b].design {
+        Ok(match &self.protocol.blocks[b].design {
             Design::Staircase { tracks, .. } => Plan::Stairs {
                 tracks: Interleaved::new(tracks.clone(), rng.random())
                     .map_err(|e| RunnerError::Staircase(e.to_string()))?,
                 rng,
             },
             _ => Plan::Fixed(self.fixed_trials(b, &mut rng)),
-        };
-        self.advance_to_pending()
+        })
     }
 
     fn advance(&mut self) -> Result<(), RunnerError> {
@@ -404,17 +409,7 @@ impl Runner {
                         return Ok(());
                     }
                     self.trial_in_block = 0;
-                    let b = self.order[self.block_pos];
-                    let block_seed = self.seed ^ (b as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-                    let mut rng = ChaCha8Rng::seed_from_u64(block_seed);
-                    self.plan = match &self.protocol.blocks[b].design {
-                        Design::Staircase { tracks, .. } => Plan::Stairs {
-                            tracks: Interleaved::new(tracks.clone(), rng.random())
-                                .map_err(|e| RunnerError::Staircase(e.to_string()))?,
-                            rng,
-                        },
-                        _ => Plan::Fixed(self.fixed_trials(b, &mut rng)),
-                    };
+                    self.plan = self.plan_of(self.order[self.block_pos])?;
                 }
             }
         }

@@ -604,3 +604,43 @@ pub fn sidecar(h: &Header, records: &[TrialRecord]) -> Value {
         "scene_ids": scenes,
     })
 }
+
+/// Reads the files an analysis is given — session CSVs (with the sidecar beside each, which
+/// tells each block's stimulus order, variant and threshold rule into `opts`) or a lab's own
+/// CSVs — into one data set; `saw experiment analyze` and the Python module's `analyze` both
+/// read through here. A file named twice, one that cannot be read, and a set with no trials
+/// are refused with a sentence.
+pub fn read_for_analysis(
+    files: &[PathBuf],
+    opts: &mut crate::analysis::report::Options,
+) -> Result<crate::analysis::input::Dataset, String> {
+    use crate::analysis::input::{read_csv, sidecar_options, Dataset};
+    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a == b,
+    };
+    let mut data = Dataset::default();
+    for (k, f) in files.iter().enumerate() {
+        let name = f.display().to_string();
+        // The same file twice would read as every judgment made twice.
+        if files[..k].iter().any(|g| same(f, g)) {
+            return Err(format!("{name} is given twice; each file is read once"));
+        }
+        let text = fs::read_to_string(f).map_err(|e| format!("{name}: {e}"))?;
+        read_csv(&name, &text, &mut data).map_err(|e| e.to_string())?;
+        if let Ok(s) = fs::read_to_string(f.with_extension("json")) {
+            sidecar_options(&s, opts);
+        }
+    }
+    if data.paired.is_empty() && data.intervals.is_empty() {
+        return Err(format!(
+            "{}: no trials to analyse",
+            files
+                .iter()
+                .map(|f| f.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    Ok(data)
+}

@@ -21,7 +21,6 @@ use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyInt, PyTuple};
-use saw_experiment::analysis::input::{read_csv, Dataset};
 use saw_experiment::analysis::paired::Variant;
 use saw_experiment::analysis::report::{self, Options};
 use saw_experiment::exploration;
@@ -594,32 +593,12 @@ fn analyze(
         }
     };
     let bootstrap = whole_in("bootstrap", bootstrap, BOOTSTRAP)? as u32;
-    let mut data = Dataset::default();
     let mut opts = Options {
         method,
         bootstrap,
         ..Options::default()
     };
-    for f in &files {
-        let name = f.display().to_string();
-        let text = std::fs::read_to_string(f).map_err(|e| refused(format!("{name}: {e}")))?;
-        read_csv(&name, &text, &mut data).map_err(refused)?;
-        // The sidecar beside a session CSV: stimulus orders, variants, threshold rules, read
-        // as `saw experiment analyze` reads them.
-        if let Ok(s) = std::fs::read_to_string(f.with_extension("json")) {
-            saw_experiment::analysis::input::sidecar_options(&s, &mut opts);
-        }
-    }
-    if data.paired.is_empty() && data.intervals.is_empty() {
-        return Err(refused(format!(
-            "{}: no trials to analyse",
-            files
-                .iter()
-                .map(|f| f.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        )));
-    }
+    let data = session::read_for_analysis(&files, &mut opts).map_err(refused)?;
     let report = py
         .allow_threads(|| report::analyze(&data, &opts))
         .map_err(refused)?;

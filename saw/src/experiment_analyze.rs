@@ -4,7 +4,6 @@
 
 use std::path::Path;
 
-use saw_experiment::analysis::input::{read_csv, Dataset};
 use saw_experiment::analysis::paired::Variant;
 use saw_experiment::analysis::report::{self, Options, Report};
 use serde_json::{json, Value};
@@ -18,7 +17,6 @@ pub fn analyze(
     method: Option<Method>,
     output: Option<&Path>,
 ) -> Result<Done, Failure> {
-    let mut data = Dataset::default();
     let mut opts = Options {
         method: method.map(|m| match m {
             Method::Scheffe => Variant::Scheffe,
@@ -28,33 +26,8 @@ pub fn analyze(
         }),
         ..Options::default()
     };
-    for (k, f) in files.iter().enumerate() {
-        let name = f.display().to_string();
-        // The same file twice would read as every judgment made twice.
-        if files[..k].iter().any(|g| same_file(f, g)) {
-            return Err(Failure::input(format!(
-                "{name} is given twice; each file is read once"
-            )));
-        }
-        let text =
-            std::fs::read_to_string(f).map_err(|e| Failure::input(format!("{name}: {e}")))?;
-        read_csv(&name, &text, &mut data).map_err(|e| Failure::input(e.to_string()))?;
-        // A session's sidecar (<subject>.json beside <subject>.csv) holds the protocol: each
-        // block's stimuli in its order, its variant, each track's threshold rule.
-        if let Ok(text) = std::fs::read_to_string(f.with_extension("json")) {
-            saw_experiment::analysis::input::sidecar_options(&text, &mut opts);
-        }
-    }
-    if data.paired.is_empty() && data.intervals.is_empty() {
-        return Err(Failure::input(format!(
-            "{}: no trials to analyse",
-            files
-                .iter()
-                .map(|f| f.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        )));
-    }
+    let data =
+        saw_experiment::session::read_for_analysis(files, &mut opts).map_err(Failure::input)?;
     let r = report::analyze(&data, &opts).map_err(|e| Failure::input(e.to_string()))?;
     // Every block refused: the refusals are the answer (exit 2); some refused: reported with
     // the rest.
@@ -77,14 +50,6 @@ pub fn analyze(
         text,
         json: serde_json::to_value(&r).unwrap_or(Value::Null),
     })
-}
-
-/// Whether two paths name one file.
-fn same_file(a: &Path, b: &Path) -> bool {
-    match (a.canonicalize(), b.canonicalize()) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => a == b,
-    }
 }
 
 /// Draws the report's chart.
