@@ -444,6 +444,12 @@ fn two_down_one_up_converges_on_70_7_percent() {
         "median |error| {} > final step",
         c.median_abs_error
     );
+    // The figure docs/experiment.md publishes (seeded: the same 200 runs every time).
+    assert!(
+        (c.median_abs_error - 1.125).abs() < 5e-4,
+        "docs/experiment.md says 1.125: {}",
+        c.median_abs_error
+    );
     // And no gross bias: the mean error is within one final step too.
     assert!(
         c.mean_error.abs() <= c.final_step,
@@ -459,6 +465,11 @@ fn three_down_one_up_converges_on_79_4_percent() {
     assert!(
         c.median_abs_error <= c.final_step,
         "median |error| {} > final step",
+        c.median_abs_error
+    );
+    assert!(
+        (c.median_abs_error - 0.887).abs() < 5e-4,
+        "docs/experiment.md says 0.887: {}",
         c.median_abs_error
     );
     assert!(
