@@ -878,38 +878,14 @@ impl Panel {
             .layer(DefaultBodyLimit::max(MAX_BODY))
             .layer(middleware::from_fn_with_state(app.clone(), guard))
             .with_state(app);
-        let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-        let (stopped_tx, stopped_rx) = std::sync::mpsc::channel();
-        std::thread::Builder::new()
-            .name("saw-panel-http".into())
-            .spawn(move || {
-                let rt = match tokio::runtime::Builder::new_current_thread()
-                    .enable_all()
-                    .build()
-                {
-                    Ok(rt) => rt,
-                    Err(e) => {
-                        eprintln!("error: the participant's panel did not start: {e}");
-                        return;
-                    }
-                };
-                rt.block_on(async move {
-                    let listener = match tokio::net::TcpListener::from_std(std_listener) {
-                        Ok(l) => l,
-                        Err(e) => {
-                            eprintln!("error: --panel: {e}");
-                            return;
-                        }
-                    };
-                    let _ = axum::serve(listener, router)
-                        .with_graceful_shutdown(async {
-                            let _ = stop_rx.await;
-                        })
-                        .await;
-                });
-                let _ = stopped_tx.send(());
-            })
-            .map_err(|e| Failure::input(format!("the panel's server thread did not start: {e}")))?;
+        let served = super::serve_thread(
+            "saw-panel-http",
+            std_listener,
+            router,
+            "the participant's panel did not start",
+            "--panel",
+        )
+        .map_err(Failure::input)?;
         // The terminal answers too: Enter continues, a number answers; the first answer counts.
         // At the end of stdin (none attached) the pages alone answer.
         let reader = shared.clone();
@@ -954,8 +930,8 @@ impl Panel {
             subject: opts.subject,
             subject_index: opts.subject_index,
             out: opts.out,
-            stop: Some(stop_tx),
-            stopped: Some(stopped_rx),
+            stop: Some(served.stop),
+            stopped: Some(served.stopped),
             participant_url,
             experimenter_url,
         })

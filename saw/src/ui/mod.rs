@@ -265,6 +265,65 @@ async fn session(app: App, mut socket: WebSocket) {
     }
 }
 
+/// An HTTP server on its own thread (a current-thread tokio runtime): the panel's and the
+/// participant's.
+pub(crate) struct Served {
+    /// Send (or drop) to stop it gracefully.
+    pub(crate) stop: tokio::sync::oneshot::Sender<()>,
+    /// Receives once the server has stopped (to wait with a time limit).
+    pub(crate) stopped: std::sync::mpsc::Receiver<()>,
+    /// The thread.
+    pub(crate) thread: std::thread::JoinHandle<()>,
+}
+
+/// Serves `router` on `listener` from a thread named `name`; a failure to start the runtime or
+/// to take the listener is said on stderr as `runtime_error: …` or `flag: …`.
+pub(crate) fn serve_thread(
+    name: &str,
+    listener: std::net::TcpListener,
+    router: Router,
+    runtime_error: &'static str,
+    flag: &'static str,
+) -> Result<Served, String> {
+    let (stop, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let (stopped_tx, stopped) = std::sync::mpsc::channel();
+    let thread = std::thread::Builder::new()
+        .name(name.into())
+        .spawn(move || {
+            let rt = match tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+            {
+                Ok(rt) => rt,
+                Err(e) => {
+                    eprintln!("error: {runtime_error}: {e}");
+                    return;
+                }
+            };
+            rt.block_on(async move {
+                let listener = match tokio::net::TcpListener::from_std(listener) {
+                    Ok(l) => l,
+                    Err(e) => {
+                        eprintln!("error: {flag}: {e}");
+                        return;
+                    }
+                };
+                let _ = axum::serve(listener, router)
+                    .with_graceful_shutdown(async {
+                        let _ = stop_rx.await;
+                    })
+                    .await;
+            });
+            let _ = stopped_tx.send(());
+        })
+        .map_err(|e| format!("the panel's server thread did not start: {e}"))?;
+    Ok(Served {
+        stop,
+        stopped,
+        thread,
+    })
+}
+
 /// Starts the panel: the bridge thread on the port and the HTTP server on `opts.listen` (port 0:
 /// any free one). Returns once the server listens.
 pub fn start(opts: UiOptions) -> Result<UiHandle, String> {
@@ -312,40 +371,17 @@ pub fn start(opts: UiOptions) -> Result<UiHandle, String> {
         .route("/ws", get(ws))
         .layer(middleware::from_fn_with_state(app.clone(), guard))
         .with_state(app);
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let thread = std::thread::Builder::new()
-        .name("saw-ui-http".into())
-        .spawn(move || {
-            let rt = match tokio::runtime::Builder::new_current_thread()
-                .enable_all()
-                .build()
-            {
-                Ok(rt) => rt,
-                Err(e) => {
-                    eprintln!("error: the panel's runtime did not start: {e}");
-                    return;
-                }
-            };
-            rt.block_on(async move {
-                let listener = match tokio::net::TcpListener::from_std(std_listener) {
-                    Ok(l) => l,
-                    Err(e) => {
-                        eprintln!("error: --listen: {e}");
-                        return;
-                    }
-                };
-                let _ = axum::serve(listener, router)
-                    .with_graceful_shutdown(async {
-                        let _ = stop_rx.await;
-                    })
-                    .await;
-            });
-        })
-        .map_err(|e| format!("the panel's server thread did not start: {e}"))?;
+    let served = serve_thread(
+        "saw-ui-http",
+        std_listener,
+        router,
+        "the panel's runtime did not start",
+        "--listen",
+    )?;
     Ok(UiHandle {
         addr,
-        stop: Some(stop_tx),
-        thread: Some(thread),
+        stop: Some(served.stop),
+        thread: Some(served.thread),
         bridge,
         bridge_stop,
     })
