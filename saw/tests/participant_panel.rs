@@ -21,9 +21,10 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
+use common::browser::{browser, js, until};
 use common::VirtualBoard;
-use fantoccini::{Client, ClientBuilder, Locator};
-use serde_json::{json, Value};
+use fantoccini::{Client, Locator};
+use serde_json::Value;
 
 /// Two inline-region stimuli compared both ways (Ura's variant): two trials, quick.
 fn protocol(dir: &Path, explore_s: f64) -> std::path::PathBuf {
@@ -175,62 +176,6 @@ fn responses(csv: &Path) -> BTreeMap<u32, i32> {
 
 // --- the browser ---------------------------------------------------------------------------
 
-/// chromedriver in a process group of its own, killed with the Chromium it started on drop.
-struct Driver(Child);
-
-impl Drop for Driver {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .args(["-KILL", "--", &format!("-{}", self.0.id())])
-            .status();
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// Headless Chromium the size of a tablet held landscape.
-async fn browser() -> (Driver, Client) {
-    let port = free_port();
-    let child = Command::new("chromedriver")
-        .process_group(0)
-        .arg(format!("--port={port}"))
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("chromedriver");
-    let driver = Driver(child);
-    let mut caps = serde_json::Map::new();
-    caps.insert(
-        "goog:chromeOptions".into(),
-        json!({"args": ["--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1024,768"]}),
-    );
-    let end = Instant::now() + Duration::from_secs(20);
-    loop {
-        let connector = hyper_util::client::legacy::connect::HttpConnector::new();
-        match ClientBuilder::new(connector)
-            .capabilities(caps.clone())
-            .connect(&format!("http://127.0.0.1:{port}"))
-            .await
-        {
-            Ok(c) => return (driver, c),
-            Err(e) if Instant::now() > end => panic!("chromedriver did not start: {e}"),
-            Err(_) => tokio::time::sleep(Duration::from_millis(200)).await,
-        }
-    }
-}
-
-async fn js(c: &Client, script: &str) -> Value {
-    c.execute(script, vec![]).await.unwrap()
-}
-
 /// Clicks the element `css` finds, as a person would (WebDriver's click: it must be shown and
 /// enabled). The page re-renders on every state it is sent, so the element found can be
 /// replaced before the click lands (a stale reference): found again and retried, for up to 5 s.
@@ -250,18 +195,6 @@ async fn click(c: &Client, css: &str) {
             Err(e) => panic!("clicking {css}: {e}"),
         }
     }
-}
-
-/// Waits until `script` returns true.
-async fn until(c: &Client, what: &str, script: &str, secs: u64) {
-    let end = Instant::now() + Duration::from_secs(secs);
-    while Instant::now() < end {
-        if js(c, script).await == json!(true) {
-            return;
-        }
-        tokio::time::sleep(Duration::from_millis(40)).await;
-    }
-    panic!("{what}: not within {secs} s");
 }
 
 async fn screenshot(c: &Client, name: &str) {
@@ -298,7 +231,7 @@ async fn a_participant_answers_every_trial_with_the_panel_buttons() {
     let dir = tempfile::tempdir().unwrap();
     let proto = protocol(dir.path(), 0.2);
     let mut s = Session::start(&vb, dir.path(), &proto, &["--panel", "127.0.0.1:0"]);
-    let (_driver, c) = browser().await;
+    let (_driver, c) = browser("1024,768").await;
     c.goto(s.panel["participant"].as_str().unwrap())
         .await
         .unwrap();

@@ -1,5 +1,7 @@
 //! Test helpers shared by the `saw` tests: the virtual board of `host-sim serve` in a thread.
 
+pub mod browser;
+
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
