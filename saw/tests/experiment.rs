@@ -77,6 +77,43 @@ fn trials(csv: &Path) -> BTreeMap<u32, (String, String)> {
     out
 }
 
+/// `saw experiment run` of `protocol` for `subject` into `out`, in the background.
+fn spawn_run(
+    port: &Path,
+    protocol: &str,
+    subject: &str,
+    out: &str,
+    stdout: Stdio,
+    stderr: Stdio,
+) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_saw"))
+        .arg("--port")
+        .arg(port)
+        .args(run_args(protocol, subject, out))
+        .stdin(Stdio::null())
+        .stdout(stdout)
+        .stderr(stderr)
+        .spawn()
+        .unwrap()
+}
+
+/// The order an uninterrupted session of `subject` gives (run into `dir`/whole): what a
+/// resumed one must reproduce.
+fn uninterrupted(
+    port: &Path,
+    protocol: &str,
+    subject: &str,
+    dir: &Path,
+) -> BTreeMap<u32, (String, String)> {
+    let whole = dir.join("whole");
+    let (code, stdout, stderr) = saw(
+        Some(port),
+        &run_args(protocol, subject, &whole.display().to_string()),
+    );
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    trials(&whole.join(format!("{subject}.csv")))
+}
+
 /// Waits until `csv` holds at least `n` trials.
 fn wait_for_trials(csv: &Path, n: usize, child: &mut Child) {
     let end = Instant::now() + Duration::from_secs(60);
@@ -159,25 +196,11 @@ fn a_runner_killed_mid_session_resumes_with_no_trial_lost_or_repeated() {
     let protocol = virtual_study(dir.path());
     let p = protocol.display().to_string();
     // The uninterrupted order, for reference.
-    let whole = dir.path().join("whole");
-    let (code, stdout, stderr) = saw(
-        Some(&vb.port),
-        &run_args(&p, "k", &whole.display().to_string()),
-    );
-    assert_eq!(code, 0, "{stdout}{stderr}");
-    let reference = trials(&whole.join("k.csv"));
+    let reference = uninterrupted(&vb.port, &p, "k", dir.path());
 
     let out = dir.path().join("killed");
     let o = out.display().to_string();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_saw"))
-        .arg("--port")
-        .arg(&vb.port)
-        .args(run_args(&p, "k", &o))
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_run(&vb.port, &p, "k", &o, Stdio::null(), Stdio::null());
     wait_for_trials(&out.join("k.csv"), 5, &mut child);
     // SIGKILL: no handler runs, whatever the runner was doing.
     child.kill().unwrap();
@@ -215,26 +238,11 @@ fn a_board_pulled_mid_session_fails_with_a_sentence_and_resumes_where_it_stopped
     let dir = tempfile::tempdir().unwrap();
     let protocol = virtual_study(dir.path());
     let p = protocol.display().to_string();
-    let whole = dir.path().join("whole");
-    let (code, stdout, stderr) = saw(
-        Some(&vb.port),
-        &run_args(&p, "u", &whole.display().to_string()),
-    );
-    assert_eq!(code, 0, "{stdout}{stderr}");
-    let reference = trials(&whole.join("u.csv"));
+    let reference = uninterrupted(&vb.port, &p, "u", dir.path());
 
     let out = dir.path().join("pulled");
     let o = out.display().to_string();
-    let child = Command::new(env!("CARGO_BIN_EXE_saw"))
-        .arg("--port")
-        .arg(&vb.port)
-        .args(run_args(&p, "u", &o))
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut child = child;
+    let mut child = spawn_run(&vb.port, &p, "u", &o, Stdio::piped(), Stdio::piped());
     wait_for_trials(&out.join("u.csv"), 4, &mut child);
     let board_dir = vb.power_off();
     let out_run = child.wait_with_output().unwrap();
@@ -332,15 +340,7 @@ fn an_interrupt_says_how_to_go_on() {
     let p = protocol.display().to_string();
     let out = dir.path().join("int");
     let o = out.display().to_string();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_saw"))
-        .arg("--port")
-        .arg(&vb.port)
-        .args(run_args(&p, "i", &o))
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_run(&vb.port, &p, "i", &o, Stdio::null(), Stdio::piped());
     wait_for_trials(&out.join("i.csv"), 2, &mut child);
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(child.id() as i32),
