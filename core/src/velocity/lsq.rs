@@ -35,6 +35,9 @@ pub struct LsqSlope<const N: usize> {
     /// exact.
     weighted: i64,
     sampler: Sampler,
+    /// Positions were written by [`VelocityEstimator::rest`] without the sums: `sum` and
+    /// `weighted` are out of date until [`VelocityEstimator::wake`] works them out of the window.
+    resting: bool,
     /// µm/s per unit of 2·Σ(k − (N−1)/2)·x_k, Q32: 6·10⁶ / (N (N²−1) T_s).
     gain_q32: i64,
     /// The range of the centred sum whose rounded product with `gain_q32` is an i32 speed:
@@ -64,6 +67,7 @@ impl<const N: usize> LsqSlope<N> {
             sum: 0,
             weighted: 0,
             sampler: Sampler::new(sample_period_us),
+            resting: false,
             gain_q32,
             centred_min,
             centred_max,
@@ -72,18 +76,21 @@ impl<const N: usize> LsqSlope<N> {
 }
 
 impl<const N: usize> LsqSlope<N> {
-    /// Adds a position at the next slot, dropping the oldest once the window is full.
+    /// Adds a position at the next slot, dropping the oldest once the window is full; keeps the
+    /// sums only when `SUMS` (a rest writes the window alone).
     #[inline(always)]
     #[allow(
         clippy::indexing_slicing,
         reason = "ring indices stay below the ring's length: each is reduced mod the length or is `head`/`newest`, which only ever take such values"
     )]
-    fn push(&mut self, position_um: i32) {
+    fn push_as<const SUMS: bool>(&mut self, position_um: i32) {
         // `head` < N always; the `% N` (an AND for N = 32) shows it to the compiler, so no
         // bounds check stays on the per-sample path (scripts/panic-check.sh).
         let head = self.head % N;
         if self.len < N {
-            self.fill(position_um);
+            if SUMS {
+                self.fill(position_um);
+            }
             self.window[(head + self.len) % N] = position_um;
             self.len += 1;
             return;
@@ -92,7 +99,7 @@ impl<const N: usize> LsqSlope<N> {
         // Every remaining entry's index drops by one and the newest enters at N − 1:
         // W' = W − (S − oldest) + (N − 1)x and S' = S − oldest + x, so the centred sum
         // C = 2W − (N − 1)S moves by C' − C = −2S + (N + 1)·oldest + (N − 1)x.
-        if N <= LSQ_NARROW_WINDOW {
+        if SUMS && N <= LSQ_NARROW_WINDOW {
             let (s, c, x, o) = (self.sum as i32, self.weighted as i32, position_um, oldest);
             let c = c
                 .wrapping_sub(s.wrapping_mul(2))
@@ -100,7 +107,7 @@ impl<const N: usize> LsqSlope<N> {
                 .wrapping_add((N as i32 - 1).wrapping_mul(x));
             self.weighted = c as i64;
             self.sum = s.wrapping_add(x.wrapping_sub(o)) as i64;
-        } else {
+        } else if SUMS {
             let (x, o) = (position_um as i64, oldest as i64);
             self.weighted += -2 * self.sum + (N as i64 + 1) * o + (N as i64 - 1) * x;
             self.sum += x - o;
@@ -137,7 +144,7 @@ impl<const N: usize> LsqSlope<N> {
 
     /// The slope of a full window, µm/s.
     #[inline(always)]
-    fn estimate(&self) -> Option<i32> {
+    fn slope(&self) -> Option<i32> {
         if self.len < N {
             return None;
         }
@@ -166,6 +173,70 @@ impl<const N: usize> LsqSlope<N> {
         self.len = 0;
         self.sum = 0;
         self.weighted = 0;
+        self.resting = false;
+    }
+
+    /// Places a sample on the grid and writes it (and the lost samples before it, on the line
+    /// between their neighbours) into the window, the sums kept only when `SUMS`. None for a
+    /// duplicate, which changes nothing.
+    #[inline(always)]
+    fn place<const SUMS: bool>(&mut self, position_um: i32, t_us: u32) -> Option<()> {
+        // The clock's own tick, not `Sampler::step`: on a gap the clock has restarted on this
+        // sample already, keeping its sub-µs grid phase (`step` would restart it from scratch, as
+        // the other estimators do), and only the window is cleared.
+        match self.sampler.tick(t_us) {
+            Tick::Duplicate => return None,
+            Tick::Gap => self.clear(),
+            Tick::Slots(m) if m > 1 && self.len > 0 => {
+                // Lost samples: fill their slots on the line between the neighbours. The newest
+                // is at (head + len − 1) mod N, always inside the window: `get` is never None.
+                if let Some(&newest) = self.window.get((self.head + self.len - 1) % N) {
+                    let (a, b) = (newest as i64, position_um as i64);
+                    for k in 1..m as i64 {
+                        self.push_as::<SUMS>((a + (b - a) * k / m as i64) as i32);
+                    }
+                }
+            }
+            Tick::First | Tick::Slots(_) => {}
+        }
+        self.push_as::<SUMS>(position_um);
+        Some(())
+    }
+
+    /// Σx and the weighted sum of the window as it stands, worked out from its positions in
+    /// the order [`Self::fill`] and [`Self::push_as`] keep them (oldest first, Σk·x_k while
+    /// filling, the centred sum once full): the same integers, mod 2^32 for a narrow window.
+    #[allow(
+        clippy::indexing_slicing,
+        reason = "ring indices are reduced mod the ring's length"
+    )]
+    fn sums_from_window(&self) -> (i64, i64) {
+        let len = self.len.min(N);
+        if N <= LSQ_NARROW_WINDOW {
+            let (mut s, mut w) = (0i32, 0i32);
+            for k in 0..len {
+                let x = self.window[(self.head + k) % N];
+                w = w.wrapping_add((k as i32).wrapping_mul(x));
+                s = s.wrapping_add(x);
+            }
+            if len == N {
+                w = w
+                    .wrapping_mul(2)
+                    .wrapping_sub((N as i32 - 1).wrapping_mul(s));
+            }
+            (s as i64, w as i64)
+        } else {
+            let (mut s, mut w) = (0i64, 0i64);
+            for k in 0..len {
+                let x = self.window[(self.head + k) % N] as i64;
+                w += k as i64 * x;
+                s += x;
+            }
+            if len == N {
+                w = 2 * w - (N as i64 - 1) * s;
+            }
+            (s, w)
+        }
     }
 }
 
@@ -193,26 +264,11 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
     // (a call costs the M4F a prologue, spills and an epilogue every sample).
     #[inline(always)]
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
-        // The clock's own tick, not `Sampler::step`: on a gap the clock has restarted on this
-        // sample already, keeping its sub-µs grid phase (`step` would restart it from scratch, as
-        // the other estimators do), and only the window is cleared.
-        match self.sampler.tick(t_us) {
-            Tick::Duplicate => return self.sampler.last_out(),
-            Tick::Gap => self.clear(),
-            Tick::Slots(m) if m > 1 && self.len > 0 => {
-                // Lost samples: fill their slots on the line between the neighbours. The newest
-                // is at (head + len − 1) mod N, always inside the window: `get` is never None.
-                if let Some(&newest) = self.window.get((self.head + self.len - 1) % N) {
-                    let (a, b) = (newest as i64, position_um as i64);
-                    for k in 1..m as i64 {
-                        self.push((a + (b - a) * k / m as i64) as i32);
-                    }
-                }
-            }
-            Tick::First | Tick::Slots(_) => {}
+        debug_assert!(!self.resting, "update after rest without wake");
+        match self.place::<true>(position_um, t_us) {
+            None => self.sampler.last_out(),
+            Some(()) => self.sampler.answer(self.slope()),
         }
-        self.push(position_um);
-        self.sampler.answer(self.estimate())
     }
 
     fn reset(&mut self) {
@@ -222,6 +278,37 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
 
     fn group_delay_us(&self) -> u32 {
         (N as u32 - 1) * self.sampler.period_us() / 2
+    }
+
+    /// The window's positions and the slot clock are all a slope needs; the two sums follow
+    /// from them in O(N) at [`Self::wake`].
+    const RESTS: bool = true;
+
+    #[inline(always)]
+    fn rest(&mut self, position_um: i32, t_us: u32) {
+        if self.place::<false>(position_um, t_us).is_some() {
+            self.resting = true;
+        }
+    }
+
+    fn wake(&mut self) {
+        if self.resting {
+            (self.sum, self.weighted) = self.sums_from_window();
+            self.resting = false;
+            // What `update` would have answered on the last rested sample: a duplicate next
+            // repeats it.
+            self.sampler.answer(self.slope());
+        }
+    }
+
+    fn estimate(&self) -> Option<i32> {
+        if !self.resting {
+            return self.sampler.last_out();
+        }
+        if self.len < N {
+            return None;
+        }
+        Some(self.speed(self.sums_from_window().1))
     }
 }
 

@@ -20,7 +20,7 @@ pub struct Median3<E> {
     x_mid: i32,
     /// Timestamp of `x_mid`, the time the median is stamped with.
     t_mid: u32,
-    /// Samples seen since the last reset, saturating at 2.
+    /// Samples seen since the last reset, saturating at 3 (the first median).
     len: u8,
     period_us: u32,
     /// ⌊period/2⌋, so that an offset rounds to the nearest whole period as the slot clock does.
@@ -50,13 +50,11 @@ impl<E: VelocityEstimator> Median3<E> {
     }
 }
 
-fn median3(a: i32, b: i32, c: i32) -> i32 {
-    a.max(b).min(a.min(b).max(c))
-}
-
-impl<E: VelocityEstimator> VelocityEstimator for Median3<E> {
+impl<E> Median3<E> {
+    /// Takes a sample into the three-position window: the median of the last three and the
+    /// middle one's time, or None while the window refills (after a reset or a gap).
     #[inline(always)]
-    fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
+    fn median(&mut self, position_um: i32, t_us: u32) -> Option<(i32, u32)> {
         // A gap (or time run backwards, which wraps to a huge offset): start the window over.
         if t_us.wrapping_sub(self.t_mid).wrapping_add(self.half_us) >= self.gap_us {
             self.len = 0;
@@ -65,16 +63,55 @@ impl<E: VelocityEstimator> VelocityEstimator for Median3<E> {
         self.x_old = b;
         self.x_mid = position_um;
         self.t_mid = t_us;
-        if self.len < 2 {
+        if self.len < 3 {
+            // The third sample since the start is the first median: from then on `len` stays
+            // at 3, which tells `estimate` a median has gone in.
             self.len += 1;
-            return None;
+            if self.len < 3 {
+                return None;
+            }
         }
-        self.inner.update(median3(a, b, position_um), t)
+        Some((median3(a, b, position_um), t))
+    }
+}
+
+fn median3(a: i32, b: i32, c: i32) -> i32 {
+    a.max(b).min(a.min(b).max(c))
+}
+
+impl<E: VelocityEstimator> VelocityEstimator for Median3<E> {
+    #[inline(always)]
+    fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
+        let (m, t) = self.median(position_um, t_us)?;
+        self.inner.update(m, t)
     }
 
     fn reset(&mut self) {
         self.len = 0;
         self.inner.reset();
+    }
+
+    /// The window is three positions: a rest keeps it as an update does and rests the inner
+    /// estimator, if that one rests.
+    const RESTS: bool = E::RESTS;
+
+    #[inline(always)]
+    fn rest(&mut self, position_um: i32, t_us: u32) {
+        if let Some((m, t)) = self.median(position_um, t_us) {
+            self.inner.rest(m, t);
+        }
+    }
+
+    fn wake(&mut self) {
+        self.inner.wake();
+    }
+
+    fn estimate(&self) -> Option<i32> {
+        // While the window refills after a reset or a gap `update` answers None.
+        if self.len < 3 {
+            return None;
+        }
+        self.inner.estimate()
     }
 
     fn group_delay_us(&self) -> u32 {
@@ -153,5 +190,76 @@ mod tests {
             assert!(v.is_none() || v == Some(30_000), "{i}: {v:?}");
         }
         assert_eq!(v, Some(30_000));
+    }
+
+    /// The controller's contract (docs/sample-contract.md): an estimator rested through any
+    /// run of samples and woken answers, from then on, exactly what one updated on every
+    /// sample answers, and `estimate` reads the same figure at any point of a rest. Streams
+    /// with jitter, lost samples, duplicates, silences (restarts) and time running backwards;
+    /// rest runs of every length, the window's edge included. The plain slope at a narrow
+    /// window (wrapping i32 sums), a short one and a wide one (i64 sums), and the default
+    /// median-of-3 in front of it.
+    mod rest_then_wake {
+        use super::*;
+        use crate::velocity::VelocityEstimator;
+        use proptest::prelude::*;
+
+        fn check<E: VelocityEstimator + Clone>(
+            fresh: E,
+            steps: &[(i32, u32, bool)],
+        ) -> Result<(), TestCaseError> {
+            prop_assert!(E::RESTS);
+            let (mut always, mut rested) = (fresh.clone(), fresh);
+            let (mut t, mut x, mut resting) = (1_000u32, 20_000i32, false);
+            for (i, &(dx, dt, rest)) in steps.iter().enumerate() {
+                x = x.wrapping_add(dx).clamp(0, 1_000_000);
+                t = t.wrapping_add(dt);
+                let want = always.update(x, t);
+                if rest {
+                    rested.rest(x, t);
+                    resting = true;
+                    prop_assert_eq!(rested.estimate(), want, "estimate while resting, sample {}", i);
+                } else {
+                    if resting {
+                        rested.wake();
+                        resting = false;
+                    }
+                    prop_assert_eq!(rested.update(x, t), want, "update after wake, sample {}", i);
+                    prop_assert_eq!(rested.estimate(), want, "estimate awake, sample {} of {}", i, core::any::type_name::<E>());
+                }
+            }
+            Ok(())
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(400))]
+            #[test]
+            fn a_rested_estimator_woken_answers_as_one_never_rested(
+                steps in proptest::collection::vec(
+                    (
+                        prop_oneof![8 => -300i32..300, 1 => -600_000i32..600_000],
+                        // On the grid with jitter; lost samples; duplicates; a silence (gap);
+                        // time run backwards (wraps to a huge step).
+                        prop_oneof![12 => 60u32..140, 2 => 150u32..450, 1 => 0u32..40, 1 => 500u32..5_000, 1 => (u32::MAX - 300)..=u32::MAX],
+                        // Rest runs: long and short.
+                        prop::bool::weighted(0.5),
+                    ),
+                    1..400,
+                ),
+                run_len in 1usize..80,
+            ) {
+                // Stretch each rest/awake choice over `run_len` samples so rests span windows.
+                let steps: std::vec::Vec<_> = steps
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &(dx, dt, _))| (dx, dt, steps[i / run_len * run_len].2))
+                    .collect();
+                check(LsqSlope::<32>::new(100).unwrap(), &steps)?;
+                check(LsqSlope::<7>::new(100).unwrap(), &steps)?;
+                check(LsqSlope::<80>::new(100).unwrap(), &steps)?;
+                check(Median3::new(LsqSlope::<32>::new(100).unwrap(), 100), &steps)?;
+                check(Median3::new(LsqSlope::<26>::new(100).unwrap(), 100), &steps)?;
+            }
+        }
     }
 }

@@ -41,6 +41,29 @@ pub trait VelocityEstimator {
     fn reset(&mut self);
     /// Group delay of the estimate at constant speed, µs.
     fn group_delay_us(&self) -> u32;
+
+    /// True when [`Self::rest`] does less than [`Self::update`]: the controller then rests the
+    /// estimator in regions whose texture reads no velocity (`docs/sample-contract.md`). An
+    /// estimator that leaves this false is updated on every sample, as before the contract.
+    const RESTS: bool = false;
+
+    /// Feeds one position while nobody reads the estimate: keeps only what [`Self::wake`] needs
+    /// to give the estimate `update` would have given. The default updates.
+    #[inline(always)]
+    fn rest(&mut self, position_um: i32, t_us: u32) {
+        let _ = self.update(position_um, t_us);
+    }
+
+    /// Makes the state whole again after [`Self::rest`]s, so the next `update` answers exactly
+    /// what it would have answered had every rested sample been an `update`.
+    fn wake(&mut self) {}
+
+    /// The estimate after the samples fed so far, rests included, without changing anything:
+    /// for telemetry, read at the stream's rate rather than every sample. Only called on an
+    /// estimator with [`Self::RESTS`]; the default says nothing.
+    fn estimate(&self) -> Option<i32> {
+        None
+    }
 }
 
 /// Why an estimator could not be configured (the values its sentence, `Display`, names).
