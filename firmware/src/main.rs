@@ -371,7 +371,9 @@ fn sample_step(ctrl: &mut Controller, burst: &mut BurstGate, tap: &mut link::Str
             scene_id: tap.stamp.scene_id,
             change: tap.stamp.change,
             position_um: out.position_um,
-            velocity_um_s: out.velocity_um_s,
+            // At the stream's rate, not per sample: in a region that reads no velocity the
+            // estimator rests and this works it out from its window (docs/sample-contract.md).
+            velocity_um_s: ctrl.velocity_um_s(),
             region: out.region,
             burst_millihz: ctrl.burst_millihz(),
             bursting: burst.line() != rf::Line::Off,

@@ -19,7 +19,7 @@ use crate::position::{PositionMapper, SensorFault};
 use crate::region::{RegionMap, MAX_REGIONS};
 use crate::sample::{PositionSource, Sample};
 use crate::scene::Config;
-use crate::texture::compiled::{CompileError, Compiled, Moment, Render, Request, Want};
+use crate::texture::compiled::{CompileError, Compiled, Moment, Need, Render, Request, Want};
 use crate::texture::lines::{LinePulses, LineStep, LineTracker};
 use crate::velocity::{LsqSlope, Median3, VelocityEstimator};
 
@@ -51,6 +51,10 @@ struct Active {
     limits: SafetyLimits,
     stale_after_us: u32,
     drive: DriveMode,
+    /// Bit r set: region r's texture reads only the position ([`Need::Position`]) and the
+    /// scene draws no lines, so the estimator rests there (the sample path's contract,
+    /// docs/sample-contract.md).
+    rest_mask: u32,
 }
 
 /// A configuration validated and compiled, ready to [`Controller::install`].
@@ -126,6 +130,17 @@ impl Prepared {
         for (i, t) in scene.textures.iter().enumerate() {
             debug!("region {}: {}", i, t.kind());
         }
+        // Lines overlay every region and fire ahead by the velocity: a scene with lines needs
+        // it everywhere.
+        let rest_mask = if lines.is_some() {
+            0
+        } else {
+            compiled
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.need() == Need::Position)
+                .fold(0u32, |m, (i, _)| m | 1 << i)
+        };
         Ok(Prepared {
             active: Active {
                 mapper,
@@ -135,6 +150,7 @@ impl Prepared {
                 limits: config.limits,
                 stale_after_us: config.stale_after_us,
                 drive: scene.drive,
+                rest_mask,
             },
             lines: scene.lines.positions_um.len(),
             hysteresis_um: scene.hysteresis_um,
@@ -149,6 +165,15 @@ pub struct Controller<E: VelocityEstimator = DefaultEstimator> {
     sample_period_us: u32,
     active: Option<Active>,
     estimator: E,
+    /// The estimator was rested on the last sample (a region that reads no velocity): it is
+    /// woken before its next update.
+    resting: bool,
+    /// The velocity the last awake sample computed (None while resting: see
+    /// [`Self::velocity_um_s`]).
+    velocity_um_s: Option<i32>,
+    /// Update the estimator on every sample whatever the region needs (host analyses that
+    /// read the velocity of every sample; see [`Self::velocity_every_sample`]).
+    velocity_every_sample: bool,
     gate: Gate,
     region: Option<u8>,
     fault: Option<SensorFault>,
@@ -201,6 +226,9 @@ impl<E: VelocityEstimator> Controller<E> {
             active: None,
             level_cap_permille: 1000,
             estimator,
+            resting: false,
+            velocity_um_s: None,
+            velocity_every_sample: false,
             gate: Gate::default(),
             region: None,
             fault: None,
@@ -265,6 +293,26 @@ impl<E: VelocityEstimator> Controller<E> {
         self.caps_pending = true;
     }
 
+    /// Updates the velocity estimator on every sample, also in regions whose texture reads
+    /// only the position, so [`Output::velocity_um_s`] carries it on every sample (a host
+    /// simulation's velocity figures). Off by default: per sample the controller computes only
+    /// what the region in force needs, and the stream reads [`Self::velocity_um_s`] at its own
+    /// rate. Changes no burst: the estimate a texture sees is the same either way.
+    pub fn velocity_every_sample(&mut self, on: bool) {
+        self.velocity_every_sample = on;
+    }
+
+    /// The velocity after the last sample, µm/s (None without a full window): what the
+    /// estimator answered, or, in a region where it rests, what it would have answered, worked
+    /// out now from its window (O(window), for a stream record or telemetry, not per sample).
+    pub fn velocity_um_s(&self) -> Option<i32> {
+        if E::RESTS && self.resting {
+            self.estimator.estimate()
+        } else {
+            self.velocity_um_s
+        }
+    }
+
     /// The burst timer this controller plans for.
     pub fn timer(&self) -> &BurstTimer {
         &self.timer
@@ -274,6 +322,7 @@ impl<E: VelocityEstimator> Controller<E> {
     pub fn telemetry(&self) -> Telemetry {
         Telemetry {
             burst_millihz: self.burst_millihz(),
+            velocity_um_s: self.velocity_um_s().unwrap_or(0),
             ..self.telemetry
         }
     }
@@ -317,7 +366,7 @@ impl<E: VelocityEstimator> Controller<E> {
             self.pulse_us[1].set(None);
             return 0;
         }
-        if self.telemetry.velocity_um_s == 0 || interval_us == 0 {
+        if self.velocity_um_s().unwrap_or(0) == 0 || interval_us == 0 {
             return 0;
         }
         // 10^9 µs·mHz / interval: 1 mHz at 10^9 µs, 10^9 mHz at 1 µs; fits u32.
@@ -365,14 +414,28 @@ impl<E: VelocityEstimator> Controller<E> {
             self.fault = None;
         }
         let drive = core::mem::take(&mut self.drive_pending).then_some(active.drive);
-        let velocity_um_s = self.estimator.update(position_um, t_us);
+        // The region first (position only), then what it needs: a region whose texture reads
+        // no velocity rests the estimator (its window kept, the sums not), and the first
+        // sample of one that reads it wakes it whole (docs/sample-contract.md).
         let region = match self.region {
             None => active.regions.lookup(position_um),
             Some(r) => active.regions.track(r, position_um),
         };
+        let rests = E::RESTS && (active.rest_mask >> (region & 31)) & 1 != 0;
         if self.region != Some(region) {
             self.note_region_change(region, position_um, t_us);
         }
+        let velocity_um_s = if rests && !self.velocity_every_sample {
+            self.estimator.rest(position_um, t_us);
+            self.resting = true;
+            None
+        } else {
+            if self.resting {
+                self.resting = false;
+                self.estimator.wake();
+            }
+            self.estimator.update(position_um, t_us)
+        };
         let mut out = Output {
             position_um: Some(position_um),
             velocity_um_s,
@@ -384,9 +447,9 @@ impl<E: VelocityEstimator> Controller<E> {
         if !self.lines_step(position_um, velocity_um_s, t_us, &mut out) {
             self.texture_step(region, position_um, velocity_um_s, t_us, &mut out);
         }
+        self.velocity_um_s = velocity_um_s;
         let t = &mut self.telemetry;
         t.position_um = position_um;
-        t.velocity_um_s = velocity_um_s.unwrap_or(0);
         t.region = region;
         out
     }
@@ -565,6 +628,8 @@ impl<E: VelocityEstimator> Controller<E> {
         self.fault = Some(fault);
         self.good_run = 0;
         self.estimator.reset();
+        self.resting = false;
+        self.velocity_um_s = None;
         self.region = None;
         self.lines.cut();
         if let Some(active) = self.active.as_mut() {

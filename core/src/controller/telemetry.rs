@@ -9,7 +9,9 @@ use crate::position::SensorFault;
 pub struct Output {
     /// Position, µm, when the sensor is healthy.
     pub position_um: Option<i32>,
-    /// Velocity, µm/s, once the estimator has a full window.
+    /// Velocity, µm/s, once the estimator has a full window, on a sample whose region reads
+    /// it (its texture or the scene's lines); None where the region needs only the position
+    /// (the estimator rests: `Controller::velocity_um_s` works it out when asked).
     pub velocity_um_s: Option<i32>,
     /// Region under the finger.
     pub region: Option<u8>,

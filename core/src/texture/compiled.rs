@@ -62,6 +62,20 @@ impl Request {
     }
 }
 
+/// What a compiled texture needs computed per sample: the sample path's contract
+/// (docs/sample-contract.md). The controller computes nothing a region in force does not need.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Need {
+    /// The position alone (off, constant, random): the velocity estimator rests.
+    Position,
+    /// The estimator's velocity (gratings, materials; lines everywhere in their scene).
+    Velocity,
+    /// A fit of its own that also gives the velocity (the hybrid grating). The shared
+    /// estimator runs beside it for now: the fit does not yet stand in for it.
+    OwnFit,
+}
+
 /// What a texture sees of one sample.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Moment<'a> {
@@ -168,6 +182,19 @@ impl Compiled {
             ),
             Texture::Random(r) => (Compiled::Random(RandomDraws::new(r, timer, limits)?), false),
         })
+    }
+}
+
+impl Compiled {
+    /// What this texture reads per sample.
+    pub fn need(&self) -> Need {
+        match self {
+            Compiled::Off | Compiled::Fixed(_) | Compiled::Random(_) => Need::Position,
+            Compiled::Ridges(r) if r.is_hybrid() => Need::OwnFit,
+            Compiled::Ridges(_) | Compiled::Synthesis(_) | Compiled::StickSlip(_) => {
+                Need::Velocity
+            }
+        }
     }
 }
 

@@ -343,6 +343,11 @@ impl Ridges {
         ok
     }
 
+    /// Rendered by the hybrid (its own line fit), not by position phase alone.
+    pub(crate) fn is_hybrid(&self) -> bool {
+        self.hybrid.is_some()
+    }
+
     /// [`Self::step_as`] for this grating's renderer.
     #[inline(always)]
     pub(crate) fn step(

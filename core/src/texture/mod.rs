@@ -27,6 +27,7 @@ mod motion;
 pub mod predict;
 pub mod random;
 
+pub use compiled::Need;
 pub use grating::{Grating, GratingRender};
 pub use lines::{Envelope, Lines};
 pub use material::Material;
