@@ -306,7 +306,7 @@ impl<E: VelocityEstimator> Controller<E> {
     /// estimator answered, or, in a region where it rests, what it would have answered, worked
     /// out now from its window (O(window), for a stream record or telemetry, not per sample).
     pub fn velocity_um_s(&self) -> Option<i32> {
-        if E::RESTS && self.resting {
+        if self.resting && self.estimator.rests() {
             self.estimator.estimate()
         } else {
             self.velocity_um_s
@@ -421,7 +421,7 @@ impl<E: VelocityEstimator> Controller<E> {
             None => active.regions.lookup(position_um),
             Some(r) => active.regions.track(r, position_um),
         };
-        let rests = E::RESTS && (active.rest_mask >> (region & 31)) & 1 != 0;
+        let rests = self.estimator.rests() && (active.rest_mask >> (region & 31)) & 1 != 0;
         if self.region != Some(region) {
             self.note_region_change(region, position_um, t_us);
         }

@@ -282,7 +282,10 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
 
     /// The window's positions and the slot clock are all a slope needs; the two sums follow
     /// from them in O(N) at [`Self::wake`].
-    const RESTS: bool = true;
+    #[inline(always)]
+    fn rests(&self) -> bool {
+        true
+    }
 
     #[inline(always)]
     fn rest(&mut self, position_um: i32, t_us: u32) {

@@ -93,7 +93,10 @@ impl<E: VelocityEstimator> VelocityEstimator for Median3<E> {
 
     /// The window is three positions: a rest keeps it as an update does and rests the inner
     /// estimator, if that one rests.
-    const RESTS: bool = E::RESTS;
+    #[inline(always)]
+    fn rests(&self) -> bool {
+        self.inner.rests()
+    }
 
     #[inline(always)]
     fn rest(&mut self, position_um: i32, t_us: u32) {
@@ -208,7 +211,7 @@ mod tests {
             fresh: E,
             steps: &[(i32, u32, bool)],
         ) -> Result<(), TestCaseError> {
-            prop_assert!(E::RESTS);
+            prop_assert!(fresh.rests());
             let (mut always, mut rested) = (fresh.clone(), fresh);
             let (mut t, mut x, mut resting) = (1_000u32, 20_000i32, false);
             for (i, &(dx, dt, rest)) in steps.iter().enumerate() {

@@ -45,7 +45,11 @@ pub trait VelocityEstimator {
     /// True when [`Self::rest`] does less than [`Self::update`]: the controller then rests the
     /// estimator in regions whose texture reads no velocity (`docs/sample-contract.md`). An
     /// estimator that leaves this false is updated on every sample, as before the contract.
-    const RESTS: bool = false;
+    /// (A method, not a constant, so the trait stays usable as `dyn`; inlined, it is one.)
+    #[inline(always)]
+    fn rests(&self) -> bool {
+        false
+    }
 
     /// Feeds one position while nobody reads the estimate: keeps only what [`Self::wake`] needs
     /// to give the estimate `update` would have given. The default updates.
@@ -60,7 +64,7 @@ pub trait VelocityEstimator {
 
     /// The estimate after the samples fed so far, rests included, without changing anything:
     /// for telemetry, read at the stream's rate rather than every sample. Only called on an
-    /// estimator with [`Self::RESTS`]; the default says nothing.
+    /// estimator that [`Self::rests`]; the default says nothing.
     fn estimate(&self) -> Option<i32> {
         None
     }
