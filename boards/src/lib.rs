@@ -446,6 +446,11 @@ impl RfLevelDef {
     }
 }
 
+/// The velocity windows a board may pick, samples: from 8 (below, the slope's noise grows as
+/// N^-1.5 past any acquisition's reach) to 64, the longest whose sums saw-core keeps in 32-bit
+/// arithmetic (`saw_core::velocity::LSQ_NARROW_WINDOW`).
+pub const VELOCITY_WINDOWS: core::ops::RangeInclusive<usize> = 8..=64;
+
 /// One board: chip, clocks, timers, pins, memory.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BoardDef {
@@ -483,6 +488,11 @@ pub struct BoardDef {
     pub adc: AdcDef,
     pub sample_rate_hz: u32,
     pub adc_oversample: u32,
+    /// Samples in the velocity estimator's least-squares window (behind the median-of-3): the
+    /// board's acquisition noise picks it (`docs/conversion-budget.md`, "The pick": the G474's
+    /// 32 conversions a sample buy 26 samples, 1.33 ms of lag, where the F446's 16 need 32,
+    /// 1.66 ms, both under the 1.66 mm/s noise bound). 8 ..= 64 ([`VELOCITY_WINDOWS`]).
+    pub velocity_window: usize,
 
     /// RF level: DAC1 channel 1 into the amplifier's gain control, and the timer that paces
     /// envelopes (`docs/rf-level.md`).
@@ -567,6 +577,9 @@ impl BoardDef {
             // trigger rate exactly reachable.
             && self.sample_rate_hz == SAMPLE_RATE_HZ
             && self.adc_oversample == ADC_OVERSAMPLE
+            // The estimator's window: long enough to average, short enough for 32-bit sums.
+            && self.velocity_window >= *VELOCITY_WINDOWS.start()
+            && self.velocity_window <= *VELOCITY_WINDOWS.end()
             && matches!(self.adc.oversampling.code_conversions(), Some(ADC_OVERSAMPLE))
             && match self.adc.oversampling {
                 Oversampling::Software { .. } => true,

@@ -132,6 +132,10 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
     },
     sample_rate_hz: SAMPLE_RATE_HZ,
     adc_oversample: ADC_OVERSAMPLE,
+    // 32 conversions a sample (1/√2 the F446's noise): 26 samples give 1.54 mm/s (1.58 worst
+    // seed), under the 1.66 mm/s bound, for 1.33 ms of lag instead of 1.66 (docs/conversion-budget.md,
+    // "The pick"; host-sim/tests/budget.rs `the_g474_acquisition_could_buy_a_fifth_of_the_lag`).
+    velocity_window: 26,
 
     // PA4 = DAC1_OUT1 (Arduino A2), the amplifier's gain control; TIM8 paces envelopes.
     rf_level: crate::RfLevelDef::nucleo64(

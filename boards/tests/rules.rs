@@ -852,6 +852,20 @@ fn sample_rate_is_fixed() {
 /// A board whose code is not the sum of 16 conversions is refused (flattened count or the
 /// ADC's own).
 #[test]
+fn the_velocity_window_stays_within_the_narrow_sums() {
+    // 8 ..= 64: both ends kept, one past either refused.
+    for b in [F446, G474] {
+        for (window, ok) in [(7, false), (8, true), (26, true), (64, true), (65, false)] {
+            let w = BoardDef {
+                velocity_window: window,
+                ..b
+            };
+            assert_eq!(w.is_consistent(), ok, "{} window {window}", b.name);
+        }
+    }
+}
+
+#[test]
 fn oversampling_is_sixteen() {
     for b in [F446, G474] {
         let flat = BoardDef {

@@ -102,7 +102,7 @@ impl StreamTap {
 
 /// The control loop's end of the hand-over, called once per iteration between samples.
 /// Returns a `QUIET` request for the control loop to carry out (then it calls `quieted`).
-pub fn service(ctrl: &mut saw_core::Controller, tap: &mut StreamTap) -> Option<bool> {
+pub fn service(ctrl: &mut crate::board::Controller, tap: &mut StreamTap) -> Option<bool> {
     if let Some(p) = INSTALL.try_take() {
         ctrl.install(p);
         // The new scene's first sample is a record, stamped with it.

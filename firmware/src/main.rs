@@ -39,7 +39,7 @@ use saw_core::burst::BurstTimer;
 use saw_core::controller::Prepared;
 use saw_core::gate::BurstOutput;
 use saw_core::sample::Sample;
-use saw_core::Controller;
+use board::Controller;
 
 /// Panic: RF off first (the burst timer keeps running without the CPU), then the stop of the
 /// fault path (`fault.rs`): with a debugger the message is logged and the core halts at a
@@ -172,7 +172,7 @@ async fn main(spawner: Spawner) {
     // Test images only: one delayed pulse, RF arm still low (src/selftest.rs).
     #[cfg(feature = "selftest-delayed-pulse")]
     selftest::delayed_pulse(&mut burst, &timer).await;
-    let mut ctrl = unwrap!(Controller::new(timer, SAMPLE_PERIOD_US));
+    let mut ctrl = unwrap!(Controller::with_window(timer, SAMPLE_PERIOD_US));
     let mut store = store::open(parts.store);
     let (config, prepared, source) = boot_scene(&timer, store.as_mut()).await;
     ctrl.install(prepared);

@@ -329,8 +329,9 @@ fn the_settling_rule_marks_the_short_sampling_times() {
     assert!((dual.max_rate() - 37.5e6 / 25.5).abs() < 1.0);
 }
 
-/// What the G474's lower noise could buy instead (not applied: it needs a per-board estimator
-/// window, `docs/conversion-budget.md` "What is not done"): the same acquisition with
+/// What the G474's lower noise buys (applied since issue #35: the board plan's
+/// `velocity_window` is 26, which the firmware's G474 image builds its estimator with): the
+/// same acquisition with
 /// `Median3<LsqSlope<26>>` keeps the noise under the issue's 1.66 mm/s and cuts a fifth of the
 /// lag. Design lag 12.5 + 1 periods + half the 51.2 µs window = 1 375.6 µs. Published
 /// (`docs/conversion-budget.md`, seeds 2026–2028): lag 1.33 ms (1.34 worst seed), noise 1.54
@@ -339,6 +340,9 @@ fn the_settling_rule_marks_the_short_sampling_times() {
 /// `Median3<LsqSlope<32>>`'s on the same acquisition and seed.
 #[test]
 fn the_g474_acquisition_could_buy_a_fifth_of_the_lag() {
+    // The board plan picks the window measured here, and the F446 keeps the default's.
+    assert_eq!(saw_boards::NUCLEO_G474RE.velocity_window, 26);
+    assert_eq!(saw_boards::NUCLEO_F446RE.velocity_window, 32);
     let design = budget::design_lag_us(26, true, 10_000, 32.0 * 60.0 / 37.5);
     assert!((design - 1_375.6).abs() < 0.1, "{design}");
     let short = measured("single smp47.5", 10_000, 32, "med3+lsq26");

@@ -15,7 +15,7 @@ use host_sim::adc::{AdcModel, AdcParams, FaultKind, FaultWindow};
 use host_sim::sim::{burst_timer, sample_period_us};
 use host_sim::trajectory::Trajectory;
 use saw_boards::NUCLEO_F446RE;
-use saw_core::controller::{Controller, Output};
+use saw_core::controller::{Controller, Output, WindowEstimator};
 use saw_core::gate::GateAction;
 use saw_core::sample::Sample;
 use saw_core::scene::Config;
@@ -324,4 +324,52 @@ fn entering_a_velocity_region_the_woken_estimator_bursts_as_the_background_one()
         worst_restart_percent <= STATED_WORST_RESTART_ERROR_PERCENT,
         "{worst_restart_percent}"
     );
+}
+
+/// Each board's controller has its plan's window: the first velocity comes on the window's
+/// last sample (the median's three, then the slope's N), and the boards' range of windows ends
+/// where saw-core's 32-bit sums do.
+#[test]
+fn each_board_estimates_over_its_own_window() {
+    assert_eq!(
+        *saw_boards::VELOCITY_WINDOWS.end(),
+        saw_core::velocity::LSQ_NARROW_WINDOW
+    );
+    fn first_estimate_at<E: VelocityEstimator>(mut c: Controller<E>, input: &[Sample]) -> usize {
+        input
+            .iter()
+            .position(|&s| c.on_sample(s).velocity_um_s.is_some())
+            .expect("an estimate")
+    }
+    let cfg = config(ENTRY);
+    let stroke = Trajectory::Constant {
+        from_um: 32_000.0,
+        speed_um_s: 20_000.0,
+    };
+    let input = samples(&cfg, &stroke, 0.05, 1, vec![]);
+    for b in saw_boards::ALL {
+        let (timer, period) = (burst_timer(b), sample_period_us(b));
+        let at = match b.velocity_window {
+            26 => first_estimate_at(
+                {
+                    let mut c =
+                        Controller::<WindowEstimator<26>>::with_window(timer, period).unwrap();
+                    c.load(&cfg).unwrap();
+                    c
+                },
+                &input,
+            ),
+            32 => first_estimate_at(
+                {
+                    let mut c = Controller::new(timer, period).unwrap();
+                    c.load(&cfg).unwrap();
+                    c
+                },
+                &input,
+            ),
+            w => panic!("{}: window {w} has no controller type in this test", b.name),
+        };
+        // Sample index (from 0) of the first estimate: 2 for the median, then N − 1 more.
+        assert_eq!(at, b.velocity_window + 1, "{}", b.name);
+    }
 }

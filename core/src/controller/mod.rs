@@ -35,7 +35,7 @@ pub const DEFAULT_WINDOW: usize = 32;
 /// The default velocity estimator: the least-squares slope behind a median-of-3 pre-filter.
 /// Chosen on the bench (docs/estimators.md): the median costs 0.1 ms of lag and 5 % of noise,
 /// and cuts the worst error under single-sample outliers and drops from 130 to 22 mm/s.
-pub type DefaultEstimator = Median3<LsqSlope<DEFAULT_WINDOW>>;
+pub type DefaultEstimator = WindowEstimator<DEFAULT_WINDOW>;
 /// Consecutive good samples needed to leave a sensor fault (1.6 ms at 10 kHz): a wiper bouncing
 /// on a worn track must not flash the carrier on between bounces.
 pub const RECOVERY_SAMPLES: u16 = 16;
@@ -211,7 +211,19 @@ pub struct Controller<E: VelocityEstimator = DefaultEstimator> {
 impl Controller<DefaultEstimator> {
     /// A controller with the default estimator, no configuration loaded (line off).
     pub fn new(timer: BurstTimer, sample_period_us: u32) -> Result<Self, ConfigError> {
-        let lsq = LsqSlope::new(sample_period_us).map_err(ConfigError::Estimator)?;
+        Self::with_window(timer, sample_period_us)
+    }
+}
+
+/// The default estimator at a board's window ([`DEFAULT_WINDOW`] samples on the F446, fewer
+/// where the acquisition's noise allows: `saw_boards::BoardDef::velocity_window`).
+pub type WindowEstimator<const N: usize> = Median3<LsqSlope<N>>;
+
+impl<const N: usize> Controller<WindowEstimator<N>> {
+    /// A controller with the default estimator over an `N`-sample window, no configuration
+    /// loaded (line off).
+    pub fn with_window(timer: BurstTimer, sample_period_us: u32) -> Result<Self, ConfigError> {
+        let lsq = LsqSlope::<N>::new(sample_period_us).map_err(ConfigError::Estimator)?;
         let estimator = Median3::new(lsq, sample_period_us);
         Ok(Self::with_estimator(timer, sample_period_us, estimator))
     }

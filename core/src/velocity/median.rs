@@ -221,14 +221,25 @@ mod tests {
                 if rest {
                     rested.rest(x, t);
                     resting = true;
-                    prop_assert_eq!(rested.estimate(), want, "estimate while resting, sample {}", i);
+                    prop_assert_eq!(
+                        rested.estimate(),
+                        want,
+                        "estimate while resting, sample {}",
+                        i
+                    );
                 } else {
                     if resting {
                         rested.wake();
                         resting = false;
                     }
                     prop_assert_eq!(rested.update(x, t), want, "update after wake, sample {}", i);
-                    prop_assert_eq!(rested.estimate(), want, "estimate awake, sample {} of {}", i, core::any::type_name::<E>());
+                    prop_assert_eq!(
+                        rested.estimate(),
+                        want,
+                        "estimate awake, sample {} of {}",
+                        i,
+                        core::any::type_name::<E>()
+                    );
                 }
             }
             Ok(())

@@ -28,7 +28,7 @@ pub use alpha_beta_fixed::AlphaBetaFixed;
 pub use common::{TuningError, MAX_BRIDGED_SLOTS, MIN_FIXED_BETA};
 pub use diff::{BackwardDifference, OneSampleDifference};
 pub use foaw::{Foaw, FoawFit};
-pub use lsq::LsqSlope;
+pub use lsq::{LsqSlope, LSQ_NARROW_WINDOW};
 pub use median::Median3;
 pub use super_twisting::{SuperTwisting, STD_LAMBDA0, STD_LAMBDA1};
 

@@ -16,6 +16,11 @@ pub use g474::*;
 
 use embassy_stm32::rcc::{AHBPrescaler, APBPrescaler};
 
+/// The control core with this board's velocity window (`BoardDef::velocity_window`: the
+/// acquisition's noise picks it, docs/conversion-budget.md).
+pub type Controller =
+    saw_core::Controller<saw_core::controller::WindowEstimator<{ BOARD.velocity_window }>>;
+
 /// How long HSE may take to become ready: ST's HAL's HSE_STARTUP_TIMEOUT (100 ms). A crystal
 /// starts in ~2 ms (t_SU(HSE), DS12288), an external clock at once.
 pub const HSE_TIMEOUT_MS: u32 = 100;
