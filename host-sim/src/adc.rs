@@ -33,6 +33,7 @@ use saw_core::sample::{Sample, CONVERSION_FULL_SCALE, OVERSAMPLE};
 use serde::Deserialize;
 
 use crate::noise::SumTable;
+use crate::trajectory::State;
 
 /// What goes wrong with the sensor during a fault window.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
@@ -396,6 +397,26 @@ impl AdcModel {
             None => self.sum_of_conversions(position_um),
         };
         Some(Sample::from_sum(sum, t_us as u32))
+    }
+
+    /// The control samples of a block: for each of `states`, at (`k0` + i) × `period_us` µs,
+    /// what [`Self::sample`] gives (the same draws in the same order), into `out` (cleared
+    /// first). Drawn in a loop of their own, the table lookups of consecutive samples overlap
+    /// their cache misses instead of waiting for the core between them.
+    pub fn samples_into(
+        &mut self,
+        states: &[State],
+        k0: u64,
+        period_us: u32,
+        out: &mut Vec<Option<Sample>>,
+    ) {
+        out.clear();
+        out.extend(
+            states
+                .iter()
+                .enumerate()
+                .map(|(i, s)| self.sample(s.position_um, (k0 + i as u64) * period_us as u64)),
+        );
     }
 
     /// The control sample at `t_us` for a finger whose position at time t (s) is

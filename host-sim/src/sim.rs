@@ -268,9 +268,6 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
     pub fn new(params: &SimParams, mut ctrl: Controller<E>) -> Result<Self, SimError> {
         let timer = burst_timer(params.board);
         ctrl.load(&params.config).map_err(SimError::Config)?;
-        // Every trace point carries the estimated velocity (the velocity figures read it), so
-        // the estimator runs on every sample here; the bursts are the same either way.
-        ctrl.velocity_every_sample(true);
         let adc =
             AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
         Ok(Self {
@@ -298,13 +295,22 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
     /// Sample period `k`: the finger at `state`, the sample (unless the ADC model drops it),
     /// its gate action, and the stale watchdog's tick half a period later.
     pub fn step(&mut self, k: u64, state: State) -> TracePoint {
+        let sample = self
+            .adc
+            .sample(state.position_um, k * self.period_us as u64);
+        self.step_sampled(k, state, sample)
+    }
+
+    /// [`Self::step`] with the ADC model's sample for period `k` already drawn (by
+    /// [`AdcModel::samples_into`], for a block of periods: the samples do not depend on the
+    /// loop, so they can be drawn ahead).
+    pub fn step_sampled(&mut self, k: u64, state: State, sample: Option<Sample>) -> TracePoint {
         let t_us = k * self.period_us as u64;
         let latency = self.action_latency_us as u64;
         let State {
             position_um,
             velocity_um_s,
         } = state;
-        let sample: Option<Sample> = self.adc.sample(position_um, t_us);
         let mut point = TracePoint {
             t_us,
             true_um: position_um,
@@ -409,9 +415,7 @@ pub fn stream_with(
     let (mut edges, mut levels) = (Vec::new(), Vec::new());
     let started = std::time::Instant::now();
     let n = samples_in(params);
-    for k in 0..n {
-        let t_us = k * period_us as u64;
-        let point = lp.step(k, params.trajectory.state(t_us as f64 * 1e-6));
+    drive(&mut lp, params, n, |k, point, lp| {
         lp.tm.take_settled(&mut edges, &mut levels);
         metrics.edges(&edges);
         metrics.point(&point);
@@ -420,7 +424,7 @@ pub fn stream_with(
             r.edges(&edges, &levels);
         }
         at_sample(k);
-    }
+    });
     let end = lp.clk(n * period_us as u64);
     lp.tm.advance_to(end);
     lp.tm.take_settled(&mut edges, &mut levels);
@@ -453,8 +457,6 @@ pub fn bare_core_s_per_sample(params: &SimParams, samples: u64) -> Result<f64, S
     let period_us = sample_period_us(params.board);
     let mut ctrl = Controller::new(timer, period_us).map_err(SimError::Controller)?;
     ctrl.load(&params.config).map_err(SimError::Config)?;
-    // The same core work as the closed loop's (which reads the velocity of every sample).
-    ctrl.velocity_every_sample(true);
     let mut adc =
         AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
     let input: Vec<Sample> = (0..samples)
@@ -479,6 +481,36 @@ pub fn bare_core_s_per_sample(params: &SimParams, samples: u64) -> Result<f64, S
     Ok(started.elapsed().as_secs_f64() / input.len().max(1) as f64)
 }
 
+/// Sample periods whose finger states and ADC samples are worked out ahead, together.
+const BLOCK: usize = 512;
+
+/// Runs sample periods 0..`n` of `params` through `lp`, handing each period's trace point to
+/// `each` (with its index, and the loop for its timer model). The trajectory and the ADC
+/// model do not depend on the loop, so they are worked out a block at a time: the same states
+/// and draws, in the same order, as [`ClosedLoop::step`] period by period.
+fn drive<E: VelocityEstimator>(
+    lp: &mut ClosedLoop<E>,
+    params: &SimParams,
+    n: u64,
+    mut each: impl FnMut(u64, TracePoint, &mut ClosedLoop<E>),
+) {
+    let (mut states, mut samples) = (Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK));
+    let mut k0 = 0;
+    while k0 < n {
+        let len = (n - k0).min(BLOCK as u64) as usize;
+        params
+            .trajectory
+            .states_into(k0, lp.period_us, len, &mut states);
+        lp.adc.samples_into(&states, k0, lp.period_us, &mut samples);
+        for (i, (&state, &sample)) in states.iter().zip(&samples).enumerate() {
+            let k = k0 + i as u64;
+            let point = lp.step_sampled(k, state, sample);
+            each(k, point, lp);
+        }
+        k0 += len as u64;
+    }
+}
+
 /// Sample periods in a run of `params`.
 pub fn samples_in(params: &SimParams) -> u64 {
     (params.duration_s * 1e6 / sample_period_us(params.board) as f64).round() as u64
@@ -495,10 +527,7 @@ fn run_controller<E: VelocityEstimator>(
     let region_settings = region_settings(params);
     let n = samples_in(params);
     let mut trace = Vec::with_capacity(n as usize);
-    for k in 0..n {
-        let t_us = k * period_us as u64;
-        trace.push(lp.step(k, params.trajectory.state(t_us as f64 * 1e-6)));
-    }
+    drive(&mut lp, params, n, |_, point, _| trace.push(point));
     let end = lp.clk(n * period_us as u64);
     let timer_protocol_errors = lp.tm.protocol_errors;
     let telemetry = lp.ctrl.telemetry();
@@ -518,6 +547,47 @@ fn run_controller<E: VelocityEstimator>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A run driven in blocks (states and ADC samples worked out ahead) gives the trace that
+    /// stepping period by period gives: the same draws in the same order, dropouts (which
+    /// draw nothing) and a spike (which draws every conversion) included, across block ends.
+    #[test]
+    fn blocks_give_the_trace_of_single_steps() {
+        use crate::adc::{FaultKind, FaultWindow};
+        let params = SimParams::new(
+            &saw_boards::ALL[0],
+            Trajectory::Triangle {
+                a_um: 1_500.0,
+                b_um: 61_500.0,
+                speed_um_s: 90_000.0,
+            },
+            0.35,
+        )
+        .with_noise(3.0, 11)
+        .with_faults(vec![
+            FaultWindow {
+                kind: FaultKind::Dropout,
+                start_us: 50_000,
+                end_us: 51_230,
+            },
+            FaultWindow {
+                kind: FaultKind::Spike { offset_lsb: 200 },
+                start_us: 102_300,
+                end_us: 102_500,
+            },
+        ]);
+        let blocks = run(&params).unwrap();
+        let ctrl =
+            Controller::new(burst_timer(params.board), sample_period_us(params.board)).unwrap();
+        let mut lp = ClosedLoop::new(&params, ctrl).unwrap();
+        let period_us = sample_period_us(params.board) as u64;
+        let single: Vec<TracePoint> = (0..samples_in(&params))
+            .map(|k| lp.step(k, params.trajectory.state((k * period_us) as f64 * 1e-6)))
+            .collect();
+        assert!(single.len() > 3 * BLOCK);
+        assert!(single.iter().any(|p| !p.sampled));
+        assert_eq!(blocks.trace, single);
+    }
 
     /// A refused scene reads as the stage that refused it and the core's sentence, one line.
     #[test]

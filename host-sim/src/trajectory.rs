@@ -78,6 +78,26 @@ pub struct Piece {
     pub duration_s: f64,
 }
 
+/// A triangle's (position µm, velocity µm/s) at `t` ≥ 0 s: [`Trajectory::state`] and
+/// [`Trajectory::states_into`] share it, so a block gives the very same values.
+#[inline(always)]
+fn triangle_at(a_um: f64, b_um: f64, speed_um_s: f64, t: f64) -> (f64, f64) {
+    let span = (b_um - a_um).abs();
+    if span == 0.0 || speed_um_s <= 0.0 {
+        (a_um, 0.0)
+    } else {
+        let dir = (b_um - a_um).signum();
+        let leg = span / speed_um_s;
+        let phase = (t / leg) as u64;
+        let within = t - phase as f64 * leg;
+        if phase.is_multiple_of(2) {
+            (a_um + dir * speed_um_s * within, dir * speed_um_s)
+        } else {
+            (b_um - dir * speed_um_s * within, -dir * speed_um_s)
+        }
+    }
+}
+
 /// Position and velocity at one instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct State {
@@ -101,22 +121,7 @@ impl Trajectory {
                 a_um,
                 b_um,
                 speed_um_s,
-            } => {
-                let span = (b_um - a_um).abs();
-                if span == 0.0 || *speed_um_s <= 0.0 {
-                    (*a_um, 0.0)
-                } else {
-                    let dir = (b_um - a_um).signum();
-                    let leg = span / speed_um_s;
-                    let phase = (t / leg) as u64;
-                    let within = t - phase as f64 * leg;
-                    if phase.is_multiple_of(2) {
-                        (a_um + dir * speed_um_s * within, dir * speed_um_s)
-                    } else {
-                        (b_um - dir * speed_um_s * within, -dir * speed_um_s)
-                    }
-                }
-            }
+            } => triangle_at(*a_um, *b_um, *speed_um_s, t),
             Trajectory::Sine {
                 a_um,
                 b_um,
@@ -174,6 +179,30 @@ impl Trajectory {
         State {
             position_um,
             velocity_um_s,
+        }
+    }
+
+    /// The states at the sample times (`k0` + i) × `period_us` µs for i in 0..`n`, into `out`
+    /// (cleared first): what [`Self::state`] gives at each, with the kind matched once for the
+    /// block (the closed loop's default triangle in a loop the compiler keeps free of the
+    /// match and the call).
+    pub fn states_into(&self, k0: u64, period_us: u32, n: usize, out: &mut Vec<State>) {
+        out.clear();
+        let t_s = |i: usize| ((k0 + i as u64) * period_us as u64) as f64 * 1e-6;
+        match self {
+            Trajectory::Triangle {
+                a_um,
+                b_um,
+                speed_um_s,
+            } => out.extend((0..n).map(|i| {
+                let (position_um, velocity_um_s) =
+                    triangle_at(*a_um, *b_um, *speed_um_s, t_s(i).max(0.0));
+                State {
+                    position_um,
+                    velocity_um_s,
+                }
+            })),
+            _ => out.extend((0..n).map(|i| self.state(t_s(i)))),
         }
     }
 
@@ -247,6 +276,52 @@ impl Trajectory {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A block of states is what the state at each time gives, bit for bit, for every kind
+    /// (the triangle's own loop and the others'), from a block that starts mid-run.
+    #[test]
+    fn a_block_of_states_is_the_state_at_each_time() {
+        let kinds = [
+            Trajectory::Triangle {
+                a_um: 1_500.0,
+                b_um: 61_500.0,
+                speed_um_s: 60_000.0,
+            },
+            Trajectory::Triangle {
+                a_um: 40_000.0,
+                b_um: 10_000.0,
+                speed_um_s: 333_333.3,
+            },
+            Trajectory::Sine {
+                a_um: 0.0,
+                b_um: 63_000.0,
+                period_s: 0.7,
+            },
+            Trajectory::Ramp {
+                from_um: 1_000.0,
+                v0_um_s: 0.0,
+                accel_um_s2: 2e6,
+                v_max_um_s: 60_000.0,
+            },
+        ];
+        let mut out = Vec::new();
+        for tr in &kinds {
+            for (k0, period_us) in [(0, 100), (123_457, 100), (7, 50)] {
+                tr.states_into(k0, period_us, 3_000, &mut out);
+                assert_eq!(out.len(), 3_000);
+                for (i, s) in out.iter().enumerate() {
+                    let t_s = ((k0 + i as u64) * period_us as u64) as f64 * 1e-6;
+                    let want = tr.state(t_s);
+                    assert_eq!(
+                        s.position_um.to_bits(),
+                        want.position_um.to_bits(),
+                        "{tr:?}"
+                    );
+                    assert_eq!(s.velocity_um_s.to_bits(), want.velocity_um_s.to_bits());
+                }
+            }
+        }
+    }
 
     #[test]
     fn triangle_turns_at_the_ends() {
