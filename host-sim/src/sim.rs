@@ -268,6 +268,9 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
     pub fn new(params: &SimParams, mut ctrl: Controller<E>) -> Result<Self, SimError> {
         let timer = burst_timer(params.board);
         ctrl.load(&params.config).map_err(SimError::Config)?;
+        // Every trace point carries the estimated velocity (the velocity figures read it), so
+        // the estimator runs on every sample here; the bursts are the same either way.
+        ctrl.velocity_every_sample(true);
         let adc =
             AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
         Ok(Self {
@@ -457,6 +460,8 @@ pub fn bare_core_s_per_sample(params: &SimParams, samples: u64) -> Result<f64, S
     let period_us = sample_period_us(params.board);
     let mut ctrl = Controller::new(timer, period_us).map_err(SimError::Controller)?;
     ctrl.load(&params.config).map_err(SimError::Config)?;
+    // The same core work as the closed loop's (which reads the velocity of every sample).
+    ctrl.velocity_every_sample(true);
     let mut adc =
         AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
     let input: Vec<Sample> = (0..samples)
