@@ -174,6 +174,10 @@ pub struct Controller<E: VelocityEstimator = DefaultEstimator> {
     /// Update the estimator on every sample whatever the region needs (host analyses that
     /// read the velocity of every sample; see [`Self::velocity_every_sample`]).
     velocity_every_sample: bool,
+    /// The regions where the estimator rests now: the active scene's
+    /// [`Active::rest_mask`], 0 with [`Self::velocity_every_sample`] or an estimator that
+    /// cannot rest. A copy, so the sample path tests one word (M4F instruction counts).
+    rest_mask: u32,
     gate: Gate,
     region: Option<u8>,
     fault: Option<SensorFault>,
@@ -241,6 +245,7 @@ impl<E: VelocityEstimator> Controller<E> {
             resting: false,
             velocity_um_s: None,
             velocity_every_sample: false,
+            rest_mask: 0,
             gate: Gate::default(),
             region: None,
             fault: None,
@@ -295,6 +300,9 @@ impl<E: VelocityEstimator> Controller<E> {
         // The same ask may give another level under the new cap.
         self.amplitude_asked = u16::MAX;
         self.active = Some(active);
+        // The first sample finds its region anew (a region change), which wakes the estimator
+        // if that region reads the velocity.
+        self.update_rest_mask();
         // The old region index and line arming mean nothing in the new layout (a running line
         // pulse keeps its window: the gate may be in its rest).
         self.region = None;
@@ -312,6 +320,25 @@ impl<E: VelocityEstimator> Controller<E> {
     /// rate. Changes no burst: the estimate a texture sees is the same either way.
     pub fn velocity_every_sample(&mut self, on: bool) {
         self.velocity_every_sample = on;
+        self.update_rest_mask();
+        if on {
+            self.wake_estimator();
+        }
+    }
+
+    /// [`Self::rest_mask`] from the active scene and the settings.
+    fn update_rest_mask(&mut self) {
+        self.rest_mask = match self.active.as_ref() {
+            Some(a) if !self.velocity_every_sample && self.estimator.rests() => a.rest_mask,
+            _ => 0,
+        };
+    }
+
+    /// Makes a resting estimator whole (its next update answers as if it had never rested).
+    fn wake_estimator(&mut self) {
+        if core::mem::take(&mut self.resting) {
+            self.estimator.wake();
+        }
     }
 
     /// The velocity after the last sample, µm/s (None without a full window): what the
@@ -433,19 +460,16 @@ impl<E: VelocityEstimator> Controller<E> {
             None => active.regions.lookup(position_um),
             Some(r) => active.regions.track(r, position_um),
         };
-        let rests = self.estimator.rests() && (active.rest_mask >> (region & 31)) & 1 != 0;
         if self.region != Some(region) {
+            // Wakes the estimator when the new region reads the velocity: off the per-sample
+            // path, which then tests one bit.
             self.note_region_change(region, position_um, t_us);
         }
-        let velocity_um_s = if rests && !self.velocity_every_sample {
+        let velocity_um_s = if (self.rest_mask >> (region & 31)) & 1 != 0 {
             self.estimator.rest(position_um, t_us);
             self.resting = true;
             None
         } else {
-            if self.resting {
-                self.resting = false;
-                self.estimator.wake();
-            }
             self.estimator.update(position_um, t_us)
         };
         let mut out = Output {
@@ -662,6 +686,9 @@ impl<E: VelocityEstimator> Controller<E> {
     }
 
     fn note_region_change(&mut self, region: u8, position_um: i32, t_us: u32) {
+        if (self.rest_mask >> (region & 31)) & 1 == 0 {
+            self.wake_estimator();
+        }
         if self.region.is_some() {
             self.telemetry.region_switches = self.telemetry.region_switches.wrapping_add(1);
         }

@@ -209,6 +209,13 @@ impl SlotClock {
         // so the division has no zero check on the per-sample path (scripts/panic-check.sh).
         let step = self.step_us;
         let p = step.get();
+        // A timestamp exactly one period on (the firmware stamps its samples so): one slot and
+        // no offset to follow, the general path's result without its arithmetic. `grid_frac`
+        // stays in 0..256, so a zero offset moves the grid by nothing there either.
+        if rounded == p.wrapping_add(self.half_us) {
+            self.grid_us = Some(t_us);
+            return Tick::Slots(1);
+        }
         let (slots, on_grid) = if rounded < p {
             return Tick::Duplicate;
         } else if rounded < self.two_periods_us {
@@ -322,6 +329,71 @@ pub(crate) fn to_um_s(v: f32) -> i32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    /// The slot clock as it was before the on-grid fast path (issue #35): the fast path must
+    /// change no tick and no grid, over on-grid runs, jitter, drops, duplicates, gaps and time
+    /// running backwards.
+    #[derive(Clone, Copy)]
+    struct ReferenceClock {
+        p: u32,
+        grid: Option<u32>,
+        frac: i32,
+    }
+
+    impl ReferenceClock {
+        fn tick(&mut self, t: u32) -> Tick {
+            let Some(grid) = self.grid else {
+                self.grid = Some(t);
+                return Tick::First;
+            };
+            let p = self.p;
+            let rounded = t.wrapping_sub(grid).wrapping_add(p / 2);
+            let (slots, on_grid) = if rounded < p {
+                return Tick::Duplicate;
+            } else if rounded < 2 * p {
+                (1, grid.wrapping_add(p))
+            } else if rounded < p * (MAX_BRIDGED_SLOTS + 1) {
+                (rounded / p, grid.wrapping_add(rounded / p * p))
+            } else {
+                self.grid = Some(t);
+                return Tick::Gap;
+            };
+            self.frac += t.wrapping_sub(on_grid) as i32 * 16;
+            let whole = self.frac >> 8;
+            self.frac -= whole << 8;
+            self.grid = Some(on_grid.wrapping_add(whole as u32));
+            Tick::Slots(slots)
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn the_on_grid_path_is_the_general_path(
+            period in prop_oneof![Just(100u32), 10u32..2_000],
+            steps in proptest::collection::vec(
+                prop_oneof![
+                    6 => Just(0i64),
+                    2 => -60i64..60,
+                    1 => Just(100_000i64),
+                    1 => -3_000i64..3_000,
+                    1 => Just(-1i64 << 31),
+                ],
+                1..300,
+            ),
+        ) {
+            let mut fast = SlotClock::new(period);
+            let mut reference = ReferenceClock { p: period, grid: None, frac: 0 };
+            let mut t = u32::MAX - 50_000;
+            for (i, &d) in steps.iter().enumerate() {
+                // Mostly exactly one period on (the fast path), else off by `d` µs.
+                let step = period as i64 + if d == 100_000 { period as i64 } else { d };
+                t = t.wrapping_add(step as u32);
+                prop_assert_eq!(fast.tick(t), reference.tick(t), "tick {}", i);
+                prop_assert_eq!((fast.grid_us, fast.grid_frac), (reference.grid, reference.frac), "grid {}", i);
+            }
+        }
+    }
 
     #[test]
     fn slots_round_jitter_and_count_drops() {
@@ -377,7 +449,6 @@ mod tests {
     /// sample), kept here verbatim: the same ticks and the same grid state, step by step.
     mod equivalence {
         use super::*;
-        use proptest::prelude::*;
 
         /// The i64 implementation, as it was.
         struct OldSlotClock {
