@@ -544,13 +544,31 @@ pub fn configurations(si: &Silicon) -> Vec<(usize, u32, u32)> {
     v
 }
 
+/// One configuration's measurements: each estimator's design lag (µs), and per seed each
+/// estimator's (lag µs, noise µm/s).
+type PerConfig = (Vec<f64>, Vec<Vec<(f64, f64)>>);
+
 /// Runs the sweep for one board.
 pub fn sweep(si: &Silicon, opts: &BudgetOptions) -> Vec<Point> {
-    let configs = configurations(si);
+    sweeps(std::slice::from_ref(si), opts)
+        .pop()
+        .unwrap_or_default()
+}
+
+/// Runs the sweeps of `boards`, each board's points as [`sweep`] gives them: every
+/// configuration of every board is one job on the worker threads, so the second board's
+/// start while the first one's last jobs run (no core idles between the boards). Each job's
+/// seeds are its own, so the points do not depend on the threads or the order jobs finish.
+pub fn sweeps(boards: &[Silicon], opts: &BudgetOptions) -> Vec<Vec<Point>> {
+    let jobs: Vec<(usize, (usize, u32, u32))> = boards
+        .iter()
+        .enumerate()
+        .flat_map(|(b, si)| configurations(si).into_iter().map(move |c| (b, c)))
+        .collect();
     let ests = estimators();
-    let needed = si.needed_ns();
-    let per_config = crate::bench::par_map(configs.len(), opts.threads, |ci| {
-        let (mi, rate, m) = configs[ci];
+    let mut measured = crate::bench::par_map(jobs.len(), opts.threads, |j| {
+        let (b, (mi, rate, m)) = jobs[j];
+        let si = &boards[b];
         let mode = &si.modes[mi];
         let clean_lags: Vec<f64> = ests
             .iter()
@@ -576,7 +594,27 @@ pub fn sweep(si: &Silicon, opts: &BudgetOptions) -> Vec<Point> {
             si.board.name, mode.name, rate, m
         );
         (clean_lags, per_seed)
-    });
+    })
+    .into_iter();
+    boards
+        .iter()
+        .map(|si| {
+            let configs = configurations(si);
+            let per_config: Vec<_> = measured.by_ref().take(configs.len()).collect();
+            points(si, &configs, &ests, per_config)
+        })
+        .collect()
+}
+
+/// The points of one board from its configurations' measured (design lags, per-seed lag and
+/// noise per estimator).
+fn points(
+    si: &Silicon,
+    configs: &[(usize, u32, u32)],
+    ests: &[(usize, Method)],
+    per_config: Vec<PerConfig>,
+) -> Vec<Point> {
+    let needed = si.needed_ns();
     let mut out = Vec::new();
     for (ci, (clean_lags, per_seed)) in per_config.into_iter().enumerate() {
         let (mi, rate, m) = configs[ci];
@@ -820,8 +858,7 @@ pub fn run(opts: &BudgetOptions) -> Result<Vec<Point>, String> {
         opts.seeds,
     );
     let mut all = Vec::new();
-    for si in &boards {
-        let pts = sweep(si, opts);
+    for (si, pts) in boards.iter().zip(sweeps(&boards, opts)) {
         let file = format!("budget-{}.png", si.board.name);
         chart(
             &charts.join(&file),
