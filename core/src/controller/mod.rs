@@ -51,9 +51,9 @@ struct Active {
     limits: SafetyLimits,
     stale_after_us: u32,
     drive: DriveMode,
-    /// Bit r set: region r's texture reads only the position ([`Need::Position`]) and the
-    /// scene draws no lines, so the estimator rests there (the sample path's contract,
-    /// docs/sample-contract.md).
+    /// Bit r set: region r's texture reads only the position ([`Need::Position`]) or its own
+    /// fit ([`Need::OwnFit`]) and the scene draws no lines, so the estimator rests there (the
+    /// sample path's contract, docs/sample-contract.md).
     rest_mask: u32,
 }
 
@@ -138,7 +138,7 @@ impl Prepared {
             compiled
                 .iter()
                 .enumerate()
-                .filter(|(_, c)| c.need() == Need::Position)
+                .filter(|(_, c)| matches!(c.need(), Need::Position | Need::OwnFit))
                 .fold(0u32, |m, (i, _)| m | 1 << i)
         };
         Ok(Prepared {

@@ -71,8 +71,8 @@ pub enum Need {
     Position,
     /// The estimator's velocity (gratings, materials; lines everywhere in their scene).
     Velocity,
-    /// A fit of its own that also gives the velocity (the hybrid grating). The shared
-    /// estimator runs beside it for now: the fit does not yet stand in for it.
+    /// A fit of its own that also gives the velocity (the hybrid grating's 64-sample line):
+    /// the shared estimator rests, as for [`Need::Position`].
     OwnFit,
 }
 

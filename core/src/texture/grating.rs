@@ -419,8 +419,13 @@ impl Ridges {
             .tracker
             .update(position_um, self.wavelength_um, self.rearm_um);
         let mut crossing = crossing;
+        let mut velocity_um_s = velocity_um_s;
         if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
             let line = h.fit.push(position_um, t_us, h.sample_period_us);
+            // Its own fit is the hybrid's velocity (the sample path's contract, `Need::OwnFit`:
+            // the shared estimator rests in its region): the line's slope sizes the pulses of
+            // position phase too; without a line yet, position alone ends them.
+            velocity_um_s = line.map(|l| (l.slope_um * h.samples_per_s) as i32);
             // The last ridge fired re-arms once the finger is `rearm_um` clear of it.
             let here_um = line.map_or(position_um as f32, |l| l.end_um);
             if let Some(k) = h.last_fired {
@@ -932,12 +937,16 @@ mod tests {
     /// starts at 1 003.8, past the ridge. So the ridge fires undelayed at k = 63; prediction
     /// alone would look only ahead, to 2 mm, and never fire it. 2 mm: k = 161.5, predicted
     /// at k = 161 half a period late (the window is a clean ramp by then).
+    /// The pulse at k = 63 is sized by the hybrid's own line (its velocity since issue #35,
+    /// not the estimator's): 10 − 20·366/262 080 = 9.97207 µm a sample, 99 720 µm/s once
+    /// truncated, so duty·λ·clock / V = 0.4 · 1 000 µm · 90 MHz / 99 720 µm/s = 361 010 clocks
+    /// (floor), where the true 100 mm/s the test hands in would give 360 000.
     #[test]
     fn a_ridge_behind_the_first_trusted_window_fires_at_once() {
         let mut r = hybrid(1_000);
         let path = (0..200).map(|k| Some(385 + 10 * k - if k == 62 { 20 } else { 0 }));
         let got = pulses(&mut r, path, 100_000);
-        let now = TIMER.delayed_pulse(0, 360_000).unwrap();
+        let now = TIMER.delayed_pulse(0, 361_010).unwrap();
         let half = TIMER.delayed_pulse(4_500, 360_000).unwrap();
         assert_eq!(got, vec![(63, now), (161, half)]);
     }
