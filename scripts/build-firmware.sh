@@ -48,6 +48,9 @@ export CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER="$FLIP_LINK"
 PLANT=()
 SUFFIX=""
 if [ "${PANIC_CHECK_PLANT:-0}" = 1 ]; then PLANT=(--features plant-sample-unwrap); SUFFIX="-plant"; fi
+# DUAL_ADC=1 builds the F446 with the feature `dual-adc` (ADC1 + ADC2 interleaved on the wiper,
+# issue #35) and leaves firmware/target/nucleo-f446re-dual.elf; the G474 has no such image.
+if [ "${DUAL_ADC:-0}" = 1 ]; then PLANT+=(--features dual-adc); SUFFIX="$SUFFIX-dual"; fi
 case "${SELFTEST:-0}" in
     0) ;;
     1) PLANT+=(--features selftest-delayed-pulse); SUFFIX="$SUFFIX-selftest" ;;

@@ -411,6 +411,19 @@ impl Sim {
         self.bus_read(addr, 4)
     }
 
+    /// The F446 ADC's first interleaved conversion starts, (ADC 1 or 2, time); empty on the G474
+    /// or when the image never used dual interleaved mode.
+    pub fn adc_interleaved_starts(&self) -> Vec<(u8, Time)> {
+        self.periphs
+            .iter()
+            .find_map(|m| {
+                m.p.as_any()
+                    .downcast_ref::<crate::periph::adc_f4::AdcF4>()
+                    .map(|a| a.interleaved_starts().to_vec())
+            })
+            .unwrap_or_default()
+    }
+
     /// Queues bytes from the host on the link UART (the F446's USART2, the G474's LPUART1),
     /// arriving back to back from `at`; returns when the last one's stop bit ends. Fails on a
     /// board whose link UART is not modelled.
@@ -770,7 +783,8 @@ impl Machine {
         // flash in KiB. Its 4 KiB page is mapped read-only and holds nothing else the model
         // knows (reads of the rest return 0).
         let fs_page = chip_flash_size_reg & !0xFFF;
-        uc.mem_map(fs_page as u64, 0x1000, Prot::READ).map_err(uc_err)?;
+        uc.mem_map(fs_page as u64, 0x1000, Prot::READ)
+            .map_err(uc_err)?;
         uc.mem_write(
             chip_flash_size_reg as u64,
             &((flash_size / 1024) as u16).to_le_bytes(),
