@@ -4,7 +4,6 @@
 //! 16-rank regular sequence that converts the wiper (PA1 = IN1) 16 times; DMA2 stream 0 moves
 //! the 16 results into a circular buffer; the sampler task sums them into one 16-bit sample.
 use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
-use embassy_stm32::mode::Async;
 use embassy_stm32::pac;
 use embassy_stm32::peripherals::{DAC1, PA4, TIM1, TIM2, TIM3, TIM8};
 use embassy_stm32::rcc::{Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllSource, Sysclk};
@@ -13,6 +12,7 @@ use embassy_stm32::timer::low_level::MasterMode;
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::{Ch1, Ch3};
+use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::{bind_interrupts, dma, flash, peripherals, Config, Peri, Peripherals};
 use saw_boards::{BoardDef, OscSource, PllOut};
@@ -52,18 +52,9 @@ const _: () = assert!(matches!(PLLP, PllPDiv::DIV2));
 /// AHB /1, APB1 /4 (timers 90 MHz), APB2 /2 (timers 180 MHz). Over-drive is enabled by embassy.
 fn rcc_config() -> Config {
     let mut config = Config::default();
-    config.rcc.hse = Some(Hse {
-        freq: Hertz(C.osc_hz),
-        mode: HseMode::Bypass,
-    });
+    config.rcc.hse = Some(Hse { freq: Hertz(C.osc_hz), mode: HseMode::Bypass });
     config.rcc.pll_src = PllSource::HSE;
-    config.rcc.pll = Some(Pll {
-        prediv: PLLM,
-        mul: PLLN,
-        divp: Some(PLLP),
-        divq: None,
-        divr: None,
-    });
+    config.rcc.pll = Some(Pll { prediv: PLLM, mul: PLLN, divp: Some(PLLP), divq: None, divr: None });
     config.rcc.sys = Sysclk::PLL1_P;
     config.rcc.ahb_pre = super::ahb_pre(C.ahb_div);
     config.rcc.apb1_pre = super::apb_pre(C.apb1_div);
@@ -117,8 +108,7 @@ pub fn reset_flash_caches(icen: bool, dcen: bool) {
 }
 
 /// What HSE is on this board, for the log line of a board that never got it.
-pub const HSE_SOURCE: &str =
-    "the ST-LINK's 8 MHz MCO on OSC_IN: SB50/SB16 closed, the ST-LINK powered (UM1724 §6.7)";
+pub const HSE_SOURCE: &str = "the ST-LINK's 8 MHz MCO on OSC_IN: SB50/SB16 closed, the ST-LINK powered (UM1724 §6.7)";
 
 /// Clocks for the GPIO ports of the RF lines (PA0, PB10, PB5) when embassy never ran:
 /// RCC_AHB1ENR.GPIOAEN/GPIOBEN (RM0390 §6.3.10); writes to an unclocked port are ignored.
@@ -206,9 +196,7 @@ pub fn split(p: Peripherals) -> Parts {
     // transmits, stream 5 channel 4 receives into a ring buffer (RM0390 §9.3.3 Table 28).
     let mut cfg = usart::Config::default();
     cfg.baudrate = crate::link::BAUD;
-    let uart = defmt::unwrap!(Uart::new(
-        p.USART2, p.PA3, p.PA2, p.DMA1_CH6, p.DMA1_CH5, Irqs, cfg
-    ));
+    let uart = defmt::unwrap!(Uart::new(p.USART2, p.PA3, p.PA2, p.DMA1_CH6, p.DMA1_CH5, Irqs, cfg));
     let (link_tx, rx) = uart.split();
     let link_rx = rx.into_ring_buffered(LINK_RX.init([0; LINK_RX_BYTES]));
     Parts {
@@ -226,9 +214,7 @@ pub fn split(p: Peripherals) -> Parts {
         envelope_tim: p.TIM8,
         dac: p.DAC1,
         dac_pin: p.PA4,
-        envelope_dma: EnvelopeDma {
-            _stream: p.DMA2_CH2,
-        },
+        envelope_dma: EnvelopeDma { _stream: p.DMA2_CH2 },
     }
 }
 
@@ -301,14 +287,13 @@ pub fn dac_wait_ready() {
     cortex_m::asm::delay(10 * (BOARD.sysclk_hz / 1_000_000));
 }
 
+/// The single-ADC acquisition (the default): ADC1's 16-rank sequence, summed in software.
 #[cfg(not(feature = "dual-adc"))]
 mod single {
     use super::*;
     use crate::board::{AdcFault, Batch};
-    use embassy_stm32::adc::{Adc, AdcChannel, Exten, RingBufferedAdc, SampleTime};
-    use embassy_stm32::peripherals::ADC1;
-    use embassy_time::with_timeout;
-
+        use embassy_stm32::peripherals::ADC1;
+    
     /// Sampling time against the rheostat's source impedance (assumed 10 kΩ divider, ≤ 2.5 kΩ
     /// mid-travel; see g474.rs). STM32F446 datasheet, ADC characteristics: R_AIN < (k − 0.5) /
     /// (f_ADC · C_ADC · ln 2^(N+2)) − R_ADC with N = 12, R_ADC = 6 kΩ max, C_ADC = 4 pF typ (7 pF
@@ -352,9 +337,7 @@ mod single {
             let trigger = trigger_timer(tim);
             // The EXTSEL code documented in saw-boards must be the one embassy uses for TIM3_TRGO.
             defmt::assert_eq!(
-                embassy_stm32::adc::RegularTrigger::<ADC1>::signal(
-                    &embassy_stm32::triggers::TIM3_TRGO
-                ),
+                embassy_stm32::adc::RegularTrigger::<ADC1>::signal(&embassy_stm32::triggers::TIM3_TRGO),
                 BOARD.adc.trigger_extsel
             );
             let adc = Adc::new(adc);
@@ -384,11 +367,7 @@ mod single {
             let mut adc = adc;
             // Overrun recovery must restart on a sequence boundary.
             adc.set_alignment(RANKS);
-            Sampler {
-                adc,
-                trigger,
-                buf: [0; DMA_LEN / 2],
-            }
+            Sampler { adc, trigger, buf: [0; DMA_LEN / 2] }
         }
 
         /// DMA stream first, then the ADC, then the trigger timer: the first TRGO (one period after
@@ -406,18 +385,13 @@ mod single {
         /// Wait for the next trigger's conversions; returns the 16-bit sums (sum of 16 × 12 bit).
         /// On an overrun or a stall the acquisition is restarted before this returns the fault.
         pub async fn read(&mut self) -> Result<Batch, AdcFault> {
-            let fault = match with_timeout(crate::board::READ_TIMEOUT, self.adc.read(&mut self.buf))
-                .await
-            {
+            let fault = match with_timeout(crate::board::READ_TIMEOUT, self.adc.read(&mut self.buf)).await {
                 Ok(Ok(remaining)) => {
                     let mut codes = [0u16; SAMPLES_PER_READ];
                     for (o, chunk) in codes.iter_mut().zip(self.buf.chunks_exact(RANKS)) {
                         *o = chunk.iter().map(|&x| x as u32).sum::<u32>() as u16;
                     }
-                    return Ok(Batch {
-                        codes,
-                        backlog: (remaining / RANKS) as u32,
-                    });
+                    return Ok(Batch { codes, backlog: (remaining / RANKS) as u32 });
                 }
                 Ok(Err(_)) => AdcFault::Overrun,
                 Err(_) => AdcFault::Stalled,
