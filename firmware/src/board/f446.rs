@@ -292,8 +292,10 @@ pub fn dac_wait_ready() {
 mod single {
     use super::*;
     use crate::board::{AdcFault, Batch};
-        use embassy_stm32::peripherals::ADC1;
-    
+    use embassy_stm32::adc::{Adc, AdcChannel, Exten, RingBufferedAdc, SampleTime};
+    use embassy_stm32::peripherals::ADC1;
+    use embassy_time::with_timeout;
+
     /// Sampling time against the rheostat's source impedance (assumed 10 kΩ divider, ≤ 2.5 kΩ
     /// mid-travel; see g474.rs). STM32F446 datasheet, ADC characteristics: R_AIN < (k − 0.5) /
     /// (f_ADC · C_ADC · ln 2^(N+2)) − R_ADC with N = 12, R_ADC = 6 kΩ max, C_ADC = 4 pF typ (7 pF
