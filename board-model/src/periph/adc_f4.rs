@@ -1191,6 +1191,201 @@ mod tests {
         b.dma_w(S0CR, cr);
     }
 
+    /// ADC1 and ADC2 as `f446_dual.rs` leaves them: channel 1 at `smp_code` in `ranks` ranks,
+    /// SCAN, EOCS; ADC1 triggered by TIM3 TRGO; ADC_CCR ADCPRE /4, DELAY `delay`, DMA mode 2,
+    /// DDS, MULTI 00111; both ADON.
+    fn arm_dual(adc: &mut AdcF4, smp_code: u32, ranks: u32, delay: u32) {
+        w(
+            adc,
+            0,
+            CCR,
+            (1 << CCR_ADCPRE_SHIFT)
+                | (delay << 8)
+                | CCR_DMA_MODE2
+                | CCR_DDS
+                | MULTI_DUAL_INTERLEAVED,
+        );
+        let ch1 = (0..6).fold(0, |acc, i| acc | (1 << (5 * i)));
+        for base in [0, 0x100] {
+            w(adc, 0, base + SMPR2, smp_code << 3);
+            w(adc, 0, base + SQR3, ch1);
+            w(adc, 0, base + SQR2, ch1);
+            w(
+                adc,
+                0,
+                base + SQR1,
+                (0..4).fold(0, |acc, i| acc | (1 << (5 * i))) | ((ranks - 1) << 20),
+            );
+            w(adc, 0, base + CR1, CR1_SCAN);
+            w(adc, 0, base + CR2, CR2_ADON | CR2_EOCS);
+        }
+        w(
+            adc,
+            0,
+            CR2,
+            CR2_ADON | CR2_EOCS | (0b01 << CR2_EXTEN_SHIFT) | (0b1000 << CR2_EXTSEL_SHIFT),
+        );
+    }
+
+    /// Runs `adc` to `t`, stopping at every next_event; each DMA request is served at once by a
+    /// read of ADC_CDR (as DMA2 stream 0 does in the board) when `serve`. Returns (request time,
+    /// the word read).
+    fn run_dual(adc: &mut AdcF4, t: Time, serve: bool) -> Vec<(Time, u32)> {
+        let mut words = Vec::new();
+        while let Some(next) = adc.next_event().filter(|&n| n <= t) {
+            let mut s = Signals::default();
+            adc.advance(next, &mut s);
+            for (at, ev) in s.events {
+                if ev == Event::DmaRequest(Request::Adc1) {
+                    let v = if serve { r(adc, at, CDR) } else { 0 };
+                    words.push((at, v));
+                }
+            }
+        }
+        words
+    }
+
+    /// RM0390 §13.9.3: ADC1 at the trigger, ADC2 max(5 + DELAY, sampling + 2) cycles later, no
+    /// start while the other ADC samples; a DMA request at each ADC2 EOC; ADC_CDR = ADC2_DR <<
+    /// 16 | ADC1_DR. 15-cycle sampling, DELAY 12 (17 cycles): pairs every 34 cycles.
+    #[test]
+    fn interleaved_pairs_follow_the_manuals_start_rule_and_pack_cdr() {
+        let log = Rc::new(RefCell::new(Vec::new()));
+        let mut adc = AdcF4::new(18, counting_input(100, log.clone()));
+        adc.set_clocks(0, &clocks());
+        arm_dual(&mut adc, 0b001, 4, 12);
+        let (t0, c) = (10_000, 160); // 160 master ticks per 22.5 MHz cycle
+        adc.on_event(t0, Event::Trgo { timer: 3 }, &mut Signals::default());
+        let words = run_dual(&mut adc, t0 + 1_000 * c, true);
+        let starts = adc.interleaved_starts().to_vec();
+        let want: Vec<(u8, Time)> = (0..4)
+            .flat_map(|k| [(1, t0 + 34 * k * c), (2, t0 + (17 + 34 * k) * c)])
+            .collect();
+        assert_eq!(starts, want);
+        // Inputs held at the end of each 15-cycle sampling phase, ADC1 and ADC2 alternating.
+        let held: Vec<Time> = log
+            .borrow()
+            .iter()
+            .map(|&(t, ch)| {
+                assert_eq!(ch, 1);
+                t
+            })
+            .collect();
+        let want_held: Vec<Time> = (0..4)
+            .flat_map(|k| [t0 + (15 + 34 * k) * c, t0 + (32 + 34 * k) * c])
+            .collect();
+        assert_eq!(held, want_held);
+        // One request per pair, at ADC2's end of conversion (17 + 15 + 12 cycles), the word
+        // packing ADC2's result above ADC1's (the counting input: 100, 101, 102, …).
+        let want_words: Vec<(Time, u32)> = (0..4)
+            .map(|k| {
+                (
+                    t0 + (44 + 34 * k) * c,
+                    ((101 + 2 * k as u32) << 16) | (100 + 2 * k as u32),
+                )
+            })
+            .collect();
+        assert_eq!(words, want_words);
+        assert_eq!(adc.fault(), None);
+    }
+
+    /// The separation is 5 + DELAY cycles when that is longer than the sampling time + 2: 3-cycle
+    /// sampling (15-cycle conversions), DELAY 0 (5 cycles): ADC1 at 0, 15, 30; ADC2 at 5, 20, 35 —
+    /// ADC2's next start waits for its own conversion (5 + 15), not the delay.
+    #[test]
+    fn interleaved_separation_is_the_delay_when_it_exceeds_the_sampling_rule() {
+        let log = Rc::new(RefCell::new(Vec::new()));
+        let mut adc = AdcF4::new(18, counting_input(0, log));
+        adc.set_clocks(0, &clocks());
+        arm_dual(&mut adc, 0b000, 3, 0);
+        let c = 160;
+        adc.on_event(0, Event::Trgo { timer: 3 }, &mut Signals::default());
+        run_dual(&mut adc, 1_000 * c, true);
+        let starts = adc.interleaved_starts().to_vec();
+        assert_eq!(
+            starts,
+            vec![
+                (1, 0),
+                (2, 5 * c),
+                (1, 15 * c),
+                (2, 20 * c),
+                (1, 30 * c),
+                (2, 35 * c)
+            ]
+        );
+        // Sampling time 15 cycles, DELAY 0: the rule, not the 5-cycle delay, separates them.
+        let mut adc = AdcF4::new(18, counting_input(0, Rc::new(RefCell::new(Vec::new()))));
+        adc.set_clocks(0, &clocks());
+        arm_dual(&mut adc, 0b001, 1, 0);
+        adc.on_event(0, Event::Trgo { timer: 3 }, &mut Signals::default());
+        run_dual(&mut adc, 1_000 * c, true);
+        assert_eq!(adc.interleaved_starts().to_vec(), vec![(1, 0), (2, 17 * c)]);
+    }
+
+    /// §13.9 "DMA requests in multi-ADC mode": a pair nobody reads is overrun by the next — OVR
+    /// set, the sequences aborted, no more requests, triggers ignored until OVR is cleared.
+    #[test]
+    fn an_unread_pair_overruns_stops_requests_and_locks_out_triggers() {
+        let mut adc = AdcF4::new(18, counting_input(0, Rc::new(RefCell::new(Vec::new()))));
+        adc.set_clocks(0, &clocks());
+        arm_dual(&mut adc, 0b001, 16, 12);
+        let c = 160;
+        adc.on_event(0, Event::Trgo { timer: 3 }, &mut Signals::default());
+        let words = run_dual(&mut adc, 1_000 * c, false);
+        assert_eq!(words.len(), 1, "one request, then the overrun stops them");
+        // ADC1's second result lands (61 cycles) while its first is still in ADC_CDR.
+        assert_ne!(r(&mut adc, 0, SR) & SR_OVR, 0);
+        assert_eq!(r(&mut adc, 0, CSR) & SR_OVR, SR_OVR);
+        assert_eq!(adc.next_event(), None, "both sequences aborted");
+        let n = adc.interleaved_starts().len();
+        adc.on_event(2_000 * c, Event::Trgo { timer: 3 }, &mut Signals::default());
+        assert_eq!(
+            adc.interleaved_starts().len(),
+            n,
+            "a trigger during OVR is ignored"
+        );
+        w(&mut adc, 2_000 * c, SR, !SR_OVR);
+        adc.on_event(3_000 * c, Event::Trgo { timer: 3 }, &mut Signals::default());
+        assert_eq!(
+            adc.interleaved_starts().len(),
+            n + 2,
+            "after OVR is cleared, a trigger starts a pair"
+        );
+    }
+
+    /// Multi-ADC modes other than dual regular interleaved, and DMA modes other than 2 with it,
+    /// are refused rather than guessed.
+    #[test]
+    fn other_multi_adc_modes_are_refused() {
+        let mut adc = AdcF4::new(18, counting_input(0, Rc::new(RefCell::new(Vec::new()))));
+        let mut s = Signals::default();
+        for (multi, dma) in [
+            (0b00110, CCR_DMA_MODE2),
+            (0b00111, 0b01 << 14),
+            (0b00111, 0b11 << 14),
+            (0b10111, CCR_DMA_MODE2),
+            (0, CCR_DMA_MODE2),
+        ] {
+            assert!(
+                adc.write(0, CCR, multi | dma, 0xFFFF_FFFF, &mut s).is_err(),
+                "MULTI {multi:#b} DMA {dma:#x}"
+            );
+        }
+        assert!(adc
+            .write(
+                0,
+                CCR,
+                MULTI_DUAL_INTERLEAVED | CCR_DMA_MODE2,
+                0xFFFF_FFFF,
+                &mut s
+            )
+            .is_ok());
+        // ADC2 started on its own is not modelled.
+        assert!(adc
+            .write(0, 0x100 + CR2, CR2_ADON | CR2_SWSTART, 0xFFFF_FFFF, &mut s)
+            .is_err());
+    }
+
     #[test]
     fn sequence_timing_from_adcclk_and_sampling_time() {
         let log = Rc::new(RefCell::new(Vec::new()));
@@ -1293,7 +1488,10 @@ mod tests {
         assert!(adc.write(0, CR1, 1 << CR1_RES_SHIFT, !0, &mut s).is_err());
         assert!(adc.write(0, CR1, CR1_DISCEN, !0, &mut s).is_err());
         assert!(adc.write(0, CCR, 0b00110, !0, &mut s).is_err());
-        assert!(adc.read(0, 0x100, &mut s).is_err());
+        // ADC2's regular group is modelled (dual interleaved mode); ADC3 and ADC2's injected
+        // registers are not.
+        assert!(adc.read(0, 0x200, &mut s).is_err());
+        assert!(adc.read(0, 0x100 + 0x3C, &mut s).is_err());
         assert!(adc.read(0, 0x3C, &mut s).is_err());
         // EXTEN = 0 with any EXTSEL is fine (the selector is inert).
         assert!(adc
