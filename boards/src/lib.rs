@@ -878,4 +878,39 @@ mod tests {
         assert!(is_pow2_le(512, 512));
         assert!(!is_pow2_le(1024, 512));
     }
+
+    /// The dual interleaved plan (issue #35): two ADCs, 32 conversions halved to the 16-conversion
+    /// code, 15-cycle sampling; a delay shorter than the sampling time + 2 cycles (two ADCs
+    /// sampling the pin at once, RM0390 §13.9.3) or a sum not scaled to the code is refused, and
+    /// the default plans stay single-ADC.
+    #[test]
+    fn dual_interleaved_plan_is_checked() {
+        let d = NUCLEO_F446RE_DUAL;
+        assert!(d.is_consistent());
+        assert_eq!(d.adc.mode, AdcMode::DualInterleaved { delay_cycles: 17 });
+        assert_eq!(d.adc.mode.adcs(), 2);
+        assert_eq!(d.adc.oversampling.conversions(), 32);
+        assert_eq!(d.adc.oversampling.code_conversions(), Some(ADC_OVERSAMPLE));
+        assert_eq!(NUCLEO_F446RE.adc.mode, AdcMode::Single);
+        assert_eq!(NUCLEO_G474RE.adc.mode, AdcMode::Single);
+        let with = |mode, oversampling| BoardDef {
+            adc: AdcDef {
+                mode,
+                oversampling,
+                ..d.adc
+            },
+            ..d
+        };
+        let ovs = d.adc.oversampling;
+        assert!(with(AdcMode::DualInterleaved { delay_cycles: 17 }, ovs).is_consistent());
+        assert!(!with(AdcMode::DualInterleaved { delay_cycles: 16 }, ovs).is_consistent());
+        assert!(!with(
+            AdcMode::DualInterleaved { delay_cycles: 17 },
+            Oversampling::Software {
+                conversions: 32,
+                shift: 0
+            }
+        )
+        .is_consistent());
+    }
 }
