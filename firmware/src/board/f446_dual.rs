@@ -49,14 +49,17 @@ const DELAY: u8 = match BOARD.adc.mode {
     }
     _ => panic!("F446 dual binding: DualInterleaved with a delay of 5..=20 cycles"),
 };
-// One trigger's pairs fit the period: a pair every max(delay, 15 + 12 conversion − delay …)
-// = 2 × 17 cycles (each ADC waits for the other's sampling: §13.9.3), the last ADC2 conversion
-// 17 + 27 cycles after its pair's start; at ADCCLK = 22.5 MHz, < 100 µs.
+// One trigger's pairs fit the period. Each ADC's next start waits for the other's sampling phase
+// plus 2 cycles (§13.9.3), so with 15-cycle sampling and a 17-cycle delay a pair takes 2 × 17 =
+// 34 cycles (each ADC's own 27-cycle conversion is shorter); the last ADC2 conversion ends 17 +
+// 27 cycles after its pair's start. At ADCCLK = 22.5 MHz: 15 × 34 + 44 = 554 cycles, 24.6 µs.
 const _: () = assert!(
-    ((PAIRS as u64 - 1) * 2 * (DELAY as u64 + 5) + (DELAY as u64 + 5) + 27) * 1_000_000
-        / 22_500_000
+    ((PAIRS as u64 - 1) * 2 * (DELAY as u64 + 5) + (DELAY as u64 + 5) + 15 + 12) * 1_000_000
+        / (BOARD.adc.clk_hz as u64)
         < 1_000_000 / BOARD.sample_rate_hz as u64
 );
+// The board plan's ADC clock is the one ADCPRE = /4 gives (`common_dual_mode`).
+const _: () = assert!(BOARD.adc.clk_hz == BOARD.clocks.pclk2_hz() / 4);
 
 /// Samples delivered per `read`.
 pub const SAMPLES_PER_READ: usize = 1;
@@ -91,7 +94,7 @@ impl Sampler {
         // TIM3 first, stopped (see f446.rs: its UG pulses TRGO; the ADCs are off here).
         let trigger = trigger_timer(tim);
         // ADC1 and ADC2 clocks on, the ADC interface reset (RCC_APB2ENR ADC1EN/ADC2EN,
-        // RCC_APB2RSTR.ADCRST — common to all ADCs; RM0390 §6.3.14, §6.3.6).
+        // RCC_APB2RSTR.ADCRST — common to all ADCs; RM0390 §6.3.14, §6.3.9).
         pac::RCC.apb2enr().modify(|w| {
             w.set_adc1en(true);
             w.set_adc2en(true);
