@@ -440,6 +440,11 @@ fn def_cap(host: &host_sim::sim::SimResult) -> (u64, u64) {
 /// reached memory to the group's last write.
 pub fn latency(o: &Outcome, board: BoardKind) -> Vec<f64> {
     let _ = board;
+    latency_from(o, &o.triggers, &o.sample_completions)
+}
+
+/// [`latency`] against the given sample-start triggers and sample completions.
+fn latency_from(o: &Outcome, triggers: &[Time], completions: &[Time]) -> Vec<f64> {
     let tim2: Vec<Time> = o
         .writes
         .iter()
@@ -458,18 +463,33 @@ pub fn latency(o: &Outcome, board: BoardKind) -> Vec<f64> {
         }
         last = Some(t);
     }
-    let completions = &o.sample_completions;
     let mut out = Vec::new();
     for w in groups {
         // Newest sample complete before the write.
         let k = completions.partition_point(|&c| c <= w);
-        if k == 0 || k > o.triggers.len() {
+        if k == 0 || k > triggers.len() {
             continue;
         }
-        out.push(us(w - o.triggers[k - 1]));
+        out.push(us(w - triggers[k - 1]));
     }
     out.sort_by(|a, b| a.partial_cmp(b).unwrap());
     out
+}
+
+/// [`latency`] for an acquisition of `tps` triggers per sample (`o.sample_completions` then
+/// counts triggers' worth of DMA reads): from the first trigger of the newest sample whose
+/// conversions had all reached memory.
+pub fn latency_per_sample(o: &Outcome, tps: usize) -> Vec<f64> {
+    let tps = tps.max(1);
+    let triggers: Vec<Time> = o.triggers.iter().copied().step_by(tps).collect();
+    let completions: Vec<Time> = o
+        .sample_completions
+        .iter()
+        .copied()
+        .skip(tps - 1)
+        .step_by(tps)
+        .collect();
+    latency_from(o, &triggers, &completions)
 }
 
 /// Sensor fault: the wiper opens (reads 0) from 105 to 305 ms of trajectory time — 5 ms into a
@@ -1623,14 +1643,41 @@ pub fn dual_adc(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     if board != BoardKind::F446 {
         return Err("dual-adc: only the NUCLEO-F446RE has a dual interleaved image".into());
     }
-    let def = &saw_boards::NUCLEO_F446RE_DUAL;
-    let saw_boards::AdcMode::DualInterleaved { delay_cycles } = def.adc.mode else {
-        return Err("NUCLEO_F446RE_DUAL is not dual interleaved".into());
-    };
     const PAIRS_PER_TRIGGER: usize = 16;
     let mut out = Vec::new();
     let opts = Options::new(board, elf, 2.2);
     let (o, mut m) = run::run(&opts)?;
+    // The plan the image was built with, from its `adc:` log line's conversions per sample:
+    // `dual-adc` (32) or the experiment `dual-adc-128` (128).
+    let conversions = o
+        .log
+        .iter()
+        .find(|l| l.text.starts_with("adc: "))
+        .and_then(|l| {
+            let i = l.text.find(" Hz x")? + " Hz x".len();
+            l.text[i..]
+                .chars()
+                .take_while(|c| c.is_ascii_digit())
+                .collect::<String>()
+                .parse::<u32>()
+                .ok()
+        });
+    let def = match conversions {
+        Some(128) => &saw_boards::NUCLEO_F446RE_DUAL128,
+        _ => &saw_boards::NUCLEO_F446RE_DUAL,
+    };
+    let saw_boards::AdcMode::DualInterleaved { delay_cycles } = def.adc.mode else {
+        return Err("NUCLEO_F446RE_DUAL is not dual interleaved".into());
+    };
+    let tps = def.adc.triggers_per_sample as usize;
+    out.push(check(
+        "dual: the image's plan",
+        conversions == Some(def.adc.oversampling.conversions()),
+        format!(
+            "the adc log line says {conversions:?} conversions per sample; plan: {} conversions, {tps} trigger(s) per sample",
+            def.adc.oversampling.conversions()
+        ),
+    ));
     out.push(check(
         "dual: runs to the end",
         o.stop.is_none(),
@@ -1712,7 +1759,8 @@ pub fn dual_adc(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
             def.sample_rate_hz
         ),
     ));
-    let lat = latency(&o, board);
+    // From the trigger that starts a sample's conversions (the first of its `tps`).
+    let lat = latency_per_sample(&o, tps);
     let worst = lat.last().copied();
     out.push(check(
         "dual: sensor-to-gate latency ≤ 100 µs",

@@ -210,3 +210,22 @@ pub const NUCLEO_F446RE_DUAL: BoardDef = BoardDef {
 };
 const _: () = assert!(NUCLEO_F446RE_DUAL.adc.settles_source());
 const _: () = assert!(NUCLEO_F446RE_DUAL.is_consistent());
+
+/// [`NUCLEO_F446RE_DUAL`] at the conversion budget's 128 conversions per sample (the firmware's
+/// `dual-adc-128` feature, an experiment, not a shipping plan): TIM3 at 40 kHz, four triggers
+/// per 10 kHz sample, each running both ADCs' 16 ranks (16 pairs, 24.6 µs of its 25 µs); the sum
+/// of 128 shifted by 3. Its conversions span 99.6 µs of the sample's 100 µs, which the board
+/// model's sensor-to-gate latency (from the sample's first trigger) holds against 100 µs
+/// (`docs/board-model.md`, "Issue #35").
+pub const NUCLEO_F446RE_DUAL128: BoardDef = BoardDef {
+    adc: AdcDef {
+        oversampling: Oversampling::Software {
+            conversions: 8 * ADC_OVERSAMPLE,
+            shift: 3,
+        },
+        triggers_per_sample: 4,
+        ..NUCLEO_F446RE_DUAL.adc
+    },
+    ..NUCLEO_F446RE_DUAL
+};
+const _: () = assert!(NUCLEO_F446RE_DUAL128.is_consistent());

@@ -24,8 +24,11 @@ pub const FLASH_SIZE_REG: u32 = 0x1FFF_7A22;
 #[cfg(not(feature = "dual-adc"))]
 pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE;
 /// `dual-adc`: ADC1 + ADC2 interleaved on the wiper (`f446_dual.rs`).
-#[cfg(feature = "dual-adc")]
+#[cfg(all(feature = "dual-adc", not(feature = "dual-adc-128")))]
 pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE_DUAL;
+/// `dual-adc-128`: the same at 128 conversions per sample (four triggers), an experiment.
+#[cfg(feature = "dual-adc-128")]
+pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE_DUAL128;
 
 #[cfg(feature = "dual-adc")]
 #[path = "f446_dual.rs"]

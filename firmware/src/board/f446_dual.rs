@@ -24,12 +24,19 @@ use crate::board::{AdcFault, Batch};
 /// Ranks per ADC and trigger: the regular sequence's 16 (RM0390 §13.13.9 SQR1.L); one pair per
 /// rank.
 const PAIRS: usize = 16;
-// 16 pairs = the board plan's conversions, scaled to the core's code by its shift.
+/// Triggers per sample: 1 (`dual-adc`), or 4 for the experiment `dual-adc-128`.
+const TRIGGERS: usize = BOARD.adc.triggers_per_sample as usize;
+/// Pairs (DMA words) per sample.
+const SAMPLE_PAIRS: usize = PAIRS * TRIGGERS;
+// 16 pairs per trigger = the board plan's conversions, scaled to the core's code by its shift.
 const SHIFT: u32 = match BOARD.adc.oversampling {
-    Oversampling::Software { conversions, shift } if conversions == 2 * PAIRS as u32 => shift,
+    Oversampling::Software { conversions, shift } if conversions == 2 * SAMPLE_PAIRS as u32 => {
+        shift
+    }
     _ => panic!("F446 dual binding: 2 × 16 conversions per trigger"),
 };
-const _: () = assert!(SHIFT == 1 && BOARD.adc.triggers_per_sample == 1);
+const _: () =
+    assert!(SHIFT >= 1 && (2 * SAMPLE_PAIRS as u32) >> SHIFT == saw_boards::ADC_OVERSAMPLE);
 
 /// 15-cycle sampling (SMPx = 001, RM0390 §13.13.5 ADC_SMPR2); the rheostat settles in it
 /// (`NUCLEO_F446RE_DUAL`'s const assertion, DS10693's R_AIN equation).
@@ -56,7 +63,7 @@ const DELAY: u8 = match BOARD.adc.mode {
 const _: () = assert!(
     ((PAIRS as u64 - 1) * 2 * (DELAY as u64 + 5) + (DELAY as u64 + 5) + 15 + 12) * 1_000_000
         / (BOARD.adc.clk_hz as u64)
-        < 1_000_000 / BOARD.sample_rate_hz as u64
+        < 1_000_000 / (BOARD.sample_rate_hz as u64 * TRIGGERS as u64)
 );
 // The board plan's ADC clock is the one ADCPRE = /4 gives (`common_dual_mode`).
 const _: () = assert!(BOARD.adc.clk_hz == BOARD.clocks.pclk2_hz() / 4);
@@ -64,7 +71,7 @@ const _: () = assert!(BOARD.adc.clk_hz == BOARD.clocks.pclk2_hz() / 4);
 /// Samples delivered per `read`.
 pub const SAMPLES_PER_READ: usize = 1;
 /// Two samples of pairs: the ring buffer wakes the reader at half and full transfer.
-const DMA_LEN: usize = 2 * PAIRS * SAMPLES_PER_READ;
+const DMA_LEN: usize = 2 * SAMPLE_PAIRS * SAMPLES_PER_READ;
 /// DMA2 stream of `DMA2_CH0` (RM0390 §9.3.3 table 29: stream 0 channel 0 = ADC1, which carries
 /// the multi-ADC mode's requests).
 const DMA_STREAM: usize = 0;
@@ -75,7 +82,7 @@ static DMA_BUF: StaticCell<[u32; DMA_LEN]> = StaticCell::new();
 pub struct Sampler {
     ring: ReadableRingBuffer<'static, u32>,
     trigger: Timer<'static, TIM3>,
-    buf: [u32; PAIRS * SAMPLES_PER_READ],
+    buf: [u32; SAMPLE_PAIRS * SAMPLES_PER_READ],
     _adcs: (
         Peri<'static, ADC1>,
         Peri<'static, ADC2>,
@@ -146,7 +153,7 @@ impl Sampler {
         Sampler {
             ring,
             trigger,
-            buf: [0; PAIRS * SAMPLES_PER_READ],
+            buf: [0; SAMPLE_PAIRS * SAMPLES_PER_READ],
             _adcs: (adc1, adc2, pin),
         }
     }
@@ -159,8 +166,8 @@ impl Sampler {
         self.trigger.start();
     }
 
-    /// Wait for the next trigger's 16 pairs; returns their 32 results summed and halved (the
-    /// 16-conversion code). On an overrun or a stall the acquisition is restarted first.
+    /// Wait for the next sample's pairs (16 per trigger); returns their results summed and
+    /// shifted to the 16-conversion code. On an overrun or a stall the acquisition is restarted first.
     pub async fn read(&mut self) -> Result<Batch, AdcFault> {
         let fault = match with_timeout(
             crate::board::READ_TIMEOUT,
@@ -170,12 +177,12 @@ impl Sampler {
         {
             Ok(Ok(remaining)) => {
                 let mut codes = [0u16; SAMPLES_PER_READ];
-                for (o, pairs) in codes.iter_mut().zip(self.buf.chunks_exact(PAIRS)) {
+                for (o, pairs) in codes.iter_mut().zip(self.buf.chunks_exact(SAMPLE_PAIRS)) {
                     *o = code_of(pairs);
                 }
                 return Ok(Batch {
                     codes,
-                    backlog: (remaining / PAIRS) as u32,
+                    backlog: (remaining / SAMPLE_PAIRS) as u32,
                 });
             }
             Ok(Err(_)) => AdcFault::Overrun,
@@ -216,8 +223,9 @@ impl Sampler {
     }
 }
 
-/// The 16-conversion code of one trigger's pairs: each word is ADC2_DR << 16 | ADC1_DR (DMA
-/// mode 2, RM0390 §13.9.3); 32 12-bit results summed (≤ 131 040) and halved with rounding.
+/// The 16-conversion code of one sample's pairs: each word is ADC2_DR << 16 | ADC1_DR (DMA
+/// mode 2, RM0390 §13.9.3); the 12-bit results summed (32: ≤ 131 040; 128: ≤ 524 160) and
+/// shifted right with rounding.
 fn code_of(pairs: &[u32]) -> u16 {
     let sum: u32 = pairs.iter().map(|&w| (w & 0xFFFF) + (w >> 16)).sum();
     ((sum + (1 << (SHIFT - 1))) >> SHIFT) as u16
