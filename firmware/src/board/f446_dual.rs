@@ -1,12 +1,13 @@
 //! NUCLEO-F446RE, feature `dual-adc`: ADC1 + ADC2 in dual regular interleaved mode on the wiper
 //! (issue #35; `saw_boards::NUCLEO_F446RE_DUAL`).
 //!
-//! TIM3 TRGO (update, 10 kHz) triggers ADC1 (EXTSEL 8); in interleaved mode ADC1 starts at the
-//! trigger and ADC2 the configured delay later, each converting its 16-rank sequence of PA1 =
-//! ADC123_IN1 (RM0390 §13.9.3). DMA mode 2 moves each pair as one word from ADC_CDR (ADC2 in the
-//! upper half-word, ADC1 in the lower) into a circular buffer through DMA2 stream 0 (ADC1's
-//! request, channel 0); the sampler sums the 16 words' 32 results and halves the sum (rounded)
-//! into the core's 16-conversion code.
+//! TIM3 TRGO (update, 10 kHz; 40 kHz in the experiment `dual-adc-128`) triggers ADC1 (EXTSEL
+//! 8); in interleaved mode ADC1 starts at the trigger and ADC2 the configured delay later, each
+//! converting its 16-rank sequence of PA1 = ADC123_IN1 (RM0390 §13.9.3). DMA mode 2 moves each
+//! pair as one word from ADC_CDR (ADC2 in the upper half-word, ADC1 in the lower) into a
+//! circular buffer through DMA2 stream 0 (ADC1's request, channel 0); the sampler sums a
+//! sample's results (16 words, 32 results; 64 and 128 in the experiment) and shifts the sum
+//! (rounded) into the core's 16-conversion code.
 use embassy_stm32::dma::{ReadableRingBuffer, TransferOptions};
 use embassy_stm32::pac;
 use embassy_stm32::pac::adc::vals as adcv;
@@ -72,8 +73,9 @@ const _: () = assert!(BOARD.adc.clk_hz == BOARD.clocks.pclk2_hz() / 4);
 pub const SAMPLES_PER_READ: usize = 1;
 /// Two samples of pairs: the ring buffer wakes the reader at half and full transfer.
 const DMA_LEN: usize = 2 * SAMPLE_PAIRS * SAMPLES_PER_READ;
-/// DMA2 stream of `DMA2_CH0` (RM0390 §9.3.3 table 29: stream 0 channel 0 = ADC1, which carries
-/// the multi-ADC mode's requests).
+/// DMA2 stream of `DMA2_CH0` (RM0390 §9.3.3 table 29: stream 0 channel 0 = ADC1). The
+/// multi-ADC mode's requests are taken on ADC1's (the master's) request, as ST's HAL
+/// (HAL_ADCEx_MultiModeStart_DMA) does; §13.9 names no request of its own for ADC_CDR.
 const DMA_STREAM: usize = 0;
 const DMA_REQUEST_ADC1: u8 = 0;
 static DMA_BUF: StaticCell<[u32; DMA_LEN]> = StaticCell::new();
