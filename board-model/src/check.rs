@@ -1590,22 +1590,13 @@ pub fn delayed_pulse(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String>
             a.iter().map(|e| (us(e.0 - cen), e.1)).collect::<Vec<_>>()
         ),
     ));
-    let log_line = |part: &str| {
-        o.log
-            .iter()
-            .find(|l| l.text.contains(part))
-            .map(|l| l.text.clone())
-    };
+    let log_line = |part: &str| o.log.iter().find(|l| l.text.contains(part)).map(|l| l.text.clone());
     let stopped = log_line("self-test: delayed pulse over");
     let refused = log_line("self-test: delayed triangle");
     checks.push(check(
         "delayed pulse: the counter stopped itself; a delayed triangle refused",
-        stopped
-            .as_deref()
-            .is_some_and(|l| l.ends_with("counter stopped"))
-            && refused
-                .as_deref()
-                .is_some_and(|l| l.contains("line Off, refused 1")),
+        stopped.as_deref().is_some_and(|l| l.ends_with("counter stopped"))
+            && refused.as_deref().is_some_and(|l| l.contains("line Off, refused 1")),
         format!(
             "{}; {}",
             stopped.unwrap_or_else(|| "no `delayed pulse over` line".into()),

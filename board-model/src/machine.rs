@@ -783,8 +783,7 @@ impl Machine {
         // flash in KiB. Its 4 KiB page is mapped read-only and holds nothing else the model
         // knows (reads of the rest return 0).
         let fs_page = chip_flash_size_reg & !0xFFF;
-        uc.mem_map(fs_page as u64, 0x1000, Prot::READ)
-            .map_err(uc_err)?;
+        uc.mem_map(fs_page as u64, 0x1000, Prot::READ).map_err(uc_err)?;
         uc.mem_write(
             chip_flash_size_reg as u64,
             &((flash_size / 1024) as u16).to_le_bytes(),

@@ -3,8 +3,12 @@
 //! ADC: TIM3 TRGO (update, 10 kHz) triggers ADC1 (EXTSEL 8 = TIM3_TRGO); one trigger runs a
 //! 16-rank regular sequence that converts the wiper (PA1 = IN1) 16 times; DMA2 stream 0 moves
 //! the 16 results into a circular buffer; the sampler task sums them into one 16-bit sample.
+#[cfg(not(feature = "dual-adc"))]
+use embassy_stm32::adc::{Adc, AdcChannel, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
 use embassy_stm32::pac;
+#[cfg(not(feature = "dual-adc"))]
+use embassy_stm32::peripherals::ADC1;
 use embassy_stm32::peripherals::{DAC1, PA4, TIM1, TIM2, TIM3, TIM8};
 use embassy_stm32::rcc::{Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllSource, Sysclk};
 use embassy_stm32::time::Hertz;
@@ -15,8 +19,13 @@ use embassy_stm32::timer::{Ch1, Ch3};
 use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::{bind_interrupts, dma, flash, peripherals, Config, Peri, Peripherals};
+#[cfg(not(feature = "dual-adc"))]
+use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, PllOut};
 use static_cell::StaticCell;
+
+#[cfg(not(feature = "dual-adc"))]
+use super::{AdcFault, Batch};
 
 /// FLASHSIZE, the flash size data register (RM0390 §39.2).
 pub const FLASH_SIZE_REG: u32 = 0x1FFF_7A22;
@@ -30,6 +39,8 @@ pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE_DUAL;
 #[cfg(feature = "dual-adc-128")]
 pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE_DUAL128;
 
+// The dual interleaved acquisition replaces the single-ADC one below (every item of which is
+// `cfg(not(feature = "dual-adc"))`).
 #[cfg(feature = "dual-adc")]
 #[path = "f446_dual.rs"]
 mod dual;
@@ -290,165 +301,162 @@ pub fn dac_wait_ready() {
     cortex_m::asm::delay(10 * (BOARD.sysclk_hz / 1_000_000));
 }
 
-/// The single-ADC acquisition (the default): ADC1's 16-rank sequence, summed in software.
+/// Sampling time against the rheostat's source impedance (assumed 10 kΩ divider, ≤ 2.5 kΩ
+/// mid-travel; see g474.rs). STM32F446 datasheet, ADC characteristics: R_AIN < (k − 0.5) /
+/// (f_ADC · C_ADC · ln 2^(N+2)) − R_ADC with N = 12, R_ADC = 6 kΩ max, C_ADC = 4 pF typ (7 pF
+/// max taken), f_ADC = 90 MHz / 4 = 22.5 MHz (embassy's ADCPRE for ≤ 36 MHz): 56 cycles allow
+/// < 30 kΩ. 16 × (56 + 12) cycles = 48 µs per trigger.
 #[cfg(not(feature = "dual-adc"))]
-mod single {
-    use super::*;
-    use crate::board::{AdcFault, Batch};
-    use embassy_stm32::adc::{Adc, AdcChannel, Exten, RingBufferedAdc, SampleTime};
-    use embassy_stm32::peripherals::ADC1;
-    use embassy_time::with_timeout;
+const SAMPLE_TIME: SampleTime = match BOARD.adc.sample_half_cycles {
+    112 => SampleTime::CYCLES56,
+    _ => panic!("F446 binding: a sampling time this board plan does not use"),
+};
 
-    /// Sampling time against the rheostat's source impedance (assumed 10 kΩ divider, ≤ 2.5 kΩ
-    /// mid-travel; see g474.rs). STM32F446 datasheet, ADC characteristics: R_AIN < (k − 0.5) /
-    /// (f_ADC · C_ADC · ln 2^(N+2)) − R_ADC with N = 12, R_ADC = 6 kΩ max, C_ADC = 4 pF typ (7 pF
-    /// max taken), f_ADC = 90 MHz / 4 = 22.5 MHz (embassy's ADCPRE for ≤ 36 MHz): 56 cycles allow
-    /// < 30 kΩ. 16 × (56 + 12) cycles = 48 µs per trigger.
-    const SAMPLE_TIME: SampleTime = match BOARD.adc.sample_half_cycles {
-        112 => SampleTime::CYCLES56,
-        _ => panic!("F446 binding: a sampling time this board plan does not use"),
-    };
+/// 16 conversions per trigger (one 16-rank sequence).
+#[cfg(not(feature = "dual-adc"))]
+const RANKS: usize = saw_boards::ADC_OVERSAMPLE as usize;
+/// Samples delivered per `read` (one trigger's worth).
+#[cfg(not(feature = "dual-adc"))]
+pub const SAMPLES_PER_READ: usize = 1;
+#[cfg(not(feature = "dual-adc"))]
+const DMA_LEN: usize = 2 * RANKS * SAMPLES_PER_READ;
+/// DMA2 stream of `DMA2_CH0` (for the raw re-initialisation in `Sampler::restart`).
+#[cfg(not(feature = "dual-adc"))]
+const DMA_STREAM: usize = 0;
+#[cfg(not(feature = "dual-adc"))]
+static DMA_BUF: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 
-    /// 16 conversions per trigger (one 16-rank sequence).
-    const RANKS: usize = saw_boards::ADC_OVERSAMPLE as usize;
-    /// Samples delivered per `read` (one trigger's worth).
-    pub const SAMPLES_PER_READ: usize = 1;
-    const DMA_LEN: usize = 2 * RANKS * SAMPLES_PER_READ;
-    /// DMA2 stream of `DMA2_CH0` (for the raw re-initialisation in `Sampler::restart`).
-    const DMA_STREAM: usize = 0;
-    static DMA_BUF: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
+/// Timer-triggered, DMA-fed rheostat acquisition.
+#[cfg(not(feature = "dual-adc"))]
+pub struct Sampler {
+    adc: RingBufferedAdc<'static, ADC1>,
+    trigger: Timer<'static, TIM3>,
+    buf: [u16; DMA_LEN / 2],
+}
 
-    /// Timer-triggered, DMA-fed rheostat acquisition.
-    pub struct Sampler {
-        adc: RingBufferedAdc<'static, ADC1>,
-        trigger: Timer<'static, TIM3>,
-        buf: [u16; DMA_LEN / 2],
+#[cfg(not(feature = "dual-adc"))]
+impl Sampler {
+    fn new(
+        adc: Peri<'static, ADC1>,
+        pin: Peri<'static, peripherals::PA1>,
+        dma: Peri<'static, peripherals::DMA2_CH0>,
+        tim: Peri<'static, TIM3>,
+    ) -> Self {
+        // TIM3 first, completely, counter stopped. Every UG it takes is a TRGO pulse (with
+        // MMS = 000 UG itself is TRGO; with MMS = 010, set first here, UG is an update event and
+        // so TRGO: RM0390 §17.4.2 TIMx_CR2.MMS), and embassy's `set_max_compare_value` writes one. Had ADC1 been armed already (EXTEN rising, EXTSEL
+        // TIM3_TRGO, DMA = 1), that pulse would start a sequence into a DMA stream that is not
+        // running yet: overrun, after which the ADC blocks DMA requests and ignores regular
+        // triggers until OVR is cleared and the DMA re-initialised (RM0390 §13.8.1) — no sample,
+        // ever. `Adc::new` below resets ADC1 through RCC, so nothing here can reach it.
+        let trigger = trigger_timer(tim);
+        // The EXTSEL code documented in saw-boards must be the one embassy uses for TIM3_TRGO.
+        defmt::assert_eq!(
+            embassy_stm32::adc::RegularTrigger::<ADC1>::signal(&embassy_stm32::triggers::TIM3_TRGO),
+            BOARD.adc.trigger_extsel
+        );
+        let adc = Adc::new(adc);
+        let ch = BOARD.adc.channel;
+        let buf = DMA_BUF.init([0; DMA_LEN]);
+        // embassy-stm32 0.6's adc_v2 `configure_sequence` writes every rank into SQR3, which has
+        // only 6 slots (rank 7+ panics). So hand embassy a 1-rank sequence (it sets SMPR for the
+        // channel, SCAN, DMA, EXTSEL/EXTEN) and extend it to 16 ranks of the same channel below.
+        let adc = adc.into_ring_buffered(
+            dma,
+            buf,
+            Irqs,
+            [(pin.degrade_adc(), SAMPLE_TIME)].into_iter(),
+            embassy_stm32::triggers::TIM3_TRGO,
+            Exten::RISING_EDGE,
+        );
+        let r = pac::ADC1;
+        r.sqr3().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
+        r.sqr2().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
+        r.sqr1().write(|w| {
+            (0..4).for_each(|i| w.set_sq(i, ch));
+            w.set_l((RANKS - 1) as u8);
+        });
+        const _: () = assert!(RANKS == 16);
+        // Powered down until `start` (into_ring_buffered left ADON = 1): see there.
+        r.cr2().modify(|w| w.set_adon(false));
+        let mut adc = adc;
+        // Overrun recovery must restart on a sequence boundary.
+        adc.set_alignment(RANKS);
+        Sampler { adc, trigger, buf: [0; DMA_LEN / 2] }
     }
 
-    impl Sampler {
-        pub(super) fn new(
-            adc: Peri<'static, ADC1>,
-            pin: Peri<'static, peripherals::PA1>,
-            dma: Peri<'static, peripherals::DMA2_CH0>,
-            tim: Peri<'static, TIM3>,
-        ) -> Self {
-            // TIM3 first, completely, counter stopped. Every UG it takes is a TRGO pulse (with
-            // MMS = 000 UG itself is TRGO; with MMS = 010, set first here, UG is an update event and
-            // so TRGO: RM0390 §17.4.2 TIMx_CR2.MMS), and embassy's `set_max_compare_value` writes one. Had ADC1 been armed already (EXTEN rising, EXTSEL
-            // TIM3_TRGO, DMA = 1), that pulse would start a sequence into a DMA stream that is not
-            // running yet: overrun, after which the ADC blocks DMA requests and ignores regular
-            // triggers until OVR is cleared and the DMA re-initialised (RM0390 §13.8.1) — no sample,
-            // ever. `Adc::new` below resets ADC1 through RCC, so nothing here can reach it.
-            let trigger = trigger_timer(tim);
-            // The EXTSEL code documented in saw-boards must be the one embassy uses for TIM3_TRGO.
-            defmt::assert_eq!(
-                embassy_stm32::adc::RegularTrigger::<ADC1>::signal(&embassy_stm32::triggers::TIM3_TRGO),
-                BOARD.adc.trigger_extsel
-            );
-            let adc = Adc::new(adc);
-            let ch = BOARD.adc.channel;
-            let buf = DMA_BUF.init([0; DMA_LEN]);
-            // embassy-stm32 0.6's adc_v2 `configure_sequence` writes every rank into SQR3, which has
-            // only 6 slots (rank 7+ panics). So hand embassy a 1-rank sequence (it sets SMPR for the
-            // channel, SCAN, DMA, EXTSEL/EXTEN) and extend it to 16 ranks of the same channel below.
-            let adc = adc.into_ring_buffered(
-                dma,
-                buf,
-                Irqs,
-                [(pin.degrade_adc(), SAMPLE_TIME)].into_iter(),
-                embassy_stm32::triggers::TIM3_TRGO,
-                Exten::RISING_EDGE,
-            );
-            let r = pac::ADC1;
-            r.sqr3().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
-            r.sqr2().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
-            r.sqr1().write(|w| {
-                (0..4).for_each(|i| w.set_sq(i, ch));
-                w.set_l((RANKS - 1) as u8);
-            });
-            const _: () = assert!(RANKS == 16);
-            // Powered down until `start` (into_ring_buffered left ADON = 1): see there.
-            r.cr2().modify(|w| w.set_adon(false));
-            let mut adc = adc;
-            // Overrun recovery must restart on a sequence boundary.
-            adc.set_alignment(RANKS);
-            Sampler { adc, trigger, buf: [0; DMA_LEN / 2] }
-        }
+    /// DMA stream first, then the ADC, then the trigger timer: the first TRGO (one period after
+    /// this) starts rank 1 into a running stream. Call from the task that reads, right before the
+    /// first `read`.
+    pub fn start(&mut self) {
+        // embassy's `start` enables the stream and also writes SWSTART, which would start an
+        // extra, unaligned sequence now — but SWSTART "can be set only when ADON = 1, otherwise no
+        // conversion is launched" (RM0390 §13.13.3 ADC_CR2), and the ADC is still off.
+        self.adc.start();
+        power_up();
+        self.trigger.start();
+    }
 
-        /// DMA stream first, then the ADC, then the trigger timer: the first TRGO (one period after
-        /// this) starts rank 1 into a running stream. Call from the task that reads, right before the
-        /// first `read`.
-        pub fn start(&mut self) {
-            // embassy's `start` enables the stream and also writes SWSTART, which would start an
-            // extra, unaligned sequence now — but SWSTART "can be set only when ADON = 1, otherwise no
-            // conversion is launched" (RM0390 §13.13.3 ADC_CR2), and the ADC is still off.
-            self.adc.start();
-            power_up();
-            self.trigger.start();
-        }
-
-        /// Wait for the next trigger's conversions; returns the 16-bit sums (sum of 16 × 12 bit).
-        /// On an overrun or a stall the acquisition is restarted before this returns the fault.
-        pub async fn read(&mut self) -> Result<Batch, AdcFault> {
-            let fault = match with_timeout(crate::board::READ_TIMEOUT, self.adc.read(&mut self.buf)).await {
-                Ok(Ok(remaining)) => {
-                    let mut codes = [0u16; SAMPLES_PER_READ];
-                    for (o, chunk) in codes.iter_mut().zip(self.buf.chunks_exact(RANKS)) {
-                        *o = chunk.iter().map(|&x| x as u32).sum::<u32>() as u16;
-                    }
-                    return Ok(Batch { codes, backlog: (remaining / RANKS) as u32 });
+    /// Wait for the next trigger's conversions; returns the 16-bit sums (sum of 16 × 12 bit).
+    /// On an overrun or a stall the acquisition is restarted before this returns the fault.
+    pub async fn read(&mut self) -> Result<Batch, AdcFault> {
+        let fault = match with_timeout(super::READ_TIMEOUT, self.adc.read(&mut self.buf)).await {
+            Ok(Ok(remaining)) => {
+                let mut codes = [0u16; SAMPLES_PER_READ];
+                for (o, chunk) in codes.iter_mut().zip(self.buf.chunks_exact(RANKS)) {
+                    *o = chunk.iter().map(|&x| x as u32).sum::<u32>() as u16;
                 }
-                Ok(Err(_)) => AdcFault::Overrun,
-                Err(_) => AdcFault::Stalled,
-            };
-            self.restart();
-            Err(fault)
-        }
-
-        /// Recovery from an ADC overrun in DMA mode (RM0390 §13.8.1: re-initialise the DMA —
-        /// address and NDTR —, clear OVR, trigger again), also used after a ring-buffer lap: ADC off
-        /// (ADON = 0 aborts any conversion; the next trigger starts at rank 1) and its DMA requests
-        /// off, stream stopped and reloaded with the whole buffer, flags cleared, ring buffer emptied,
-        /// then the order of `start`. TIM3 keeps running throughout.
-        fn restart(&mut self) {
-            // Triggers stop first: `start` restarts TIM3 only after the ADC's stabilisation time
-            // (t_STAB), so no sequence can begin on an ADC that is still powering up (RM0390 §13.3.1).
-            self.trigger.stop();
-            let adc = pac::ADC1;
-            adc.cr2().modify(|w| {
-                w.set_adon(false);
-                w.set_dma(false);
-            });
-            // Stream EN = 0.
-            self.adc.stop();
-            // RM0390 §9.3.17: EN must read 0 and the stream's flags must be cleared before the
-            // stream is reprogrammed and re-enabled. NDTR = full length puts the stream back at the
-            // buffer's start, where `clear` puts the ring buffer's indices.
-            let (dma, st) = (pac::DMA2, DMA_STREAM);
-            while dma.st(st).cr().read().en() {}
-            clear_stream_flags(dma, st);
-            dma.st(st).ndtr().write(|w| w.set_ndt(DMA_LEN as u16));
-            // SR flags are rc_w0.
-            adc.sr().modify(|w| {
-                w.set_ovr(false);
-                w.set_eoc(false);
-                w.set_strt(false);
-            });
-            adc.cr2().modify(|w| w.set_dma(true));
-            self.adc.clear();
-            self.start();
-        }
+                return Ok(Batch { codes, backlog: (remaining / RANKS) as u32 });
+            }
+            Ok(Err(_)) => AdcFault::Overrun,
+            Err(_) => AdcFault::Stalled,
+        };
+        self.restart();
+        Err(fault)
     }
 
-    /// ADON = 1, then wait t_STAB (3 µs max, STM32F446 datasheet ADC characteristics) before the
-    /// first trigger can come (RM0390 §13.3.1).
-    fn power_up() {
-        pac::ADC1.cr2().modify(|w| w.set_adon(true));
-        cortex_m::asm::delay(3 * (BOARD.sysclk_hz / 1_000_000));
+    /// Recovery from an ADC overrun in DMA mode (RM0390 §13.8.1: re-initialise the DMA —
+    /// address and NDTR —, clear OVR, trigger again), also used after a ring-buffer lap: ADC off
+    /// (ADON = 0 aborts any conversion; the next trigger starts at rank 1) and its DMA requests
+    /// off, stream stopped and reloaded with the whole buffer, flags cleared, ring buffer emptied,
+    /// then the order of `start`. TIM3 keeps running throughout.
+    fn restart(&mut self) {
+        // Triggers stop first: `start` restarts TIM3 only after the ADC's stabilisation time
+        // (t_STAB), so no sequence can begin on an ADC that is still powering up (RM0390 §13.3.1).
+        self.trigger.stop();
+        let adc = pac::ADC1;
+        adc.cr2().modify(|w| {
+            w.set_adon(false);
+            w.set_dma(false);
+        });
+        // Stream EN = 0.
+        self.adc.stop();
+        // RM0390 §9.3.17: EN must read 0 and the stream's flags must be cleared before the
+        // stream is reprogrammed and re-enabled. NDTR = full length puts the stream back at the
+        // buffer's start, where `clear` puts the ring buffer's indices.
+        let (dma, st) = (pac::DMA2, DMA_STREAM);
+        while dma.st(st).cr().read().en() {}
+        clear_stream_flags(dma, st);
+        dma.st(st).ndtr().write(|w| w.set_ndt(DMA_LEN as u16));
+        // SR flags are rc_w0.
+        adc.sr().modify(|w| {
+            w.set_ovr(false);
+            w.set_eoc(false);
+            w.set_strt(false);
+        });
+        adc.cr2().modify(|w| w.set_dma(true));
+        self.adc.clear();
+        self.start();
     }
 }
+
+/// ADON = 1, then wait t_STAB (3 µs max, STM32F446 datasheet ADC characteristics) before the
+/// first trigger can come (RM0390 §13.3.1).
 #[cfg(not(feature = "dual-adc"))]
-pub use single::{Sampler, SAMPLES_PER_READ};
+fn power_up() {
+    pac::ADC1.cr2().modify(|w| w.set_adon(true));
+    cortex_m::asm::delay(3 * (BOARD.sysclk_hz / 1_000_000));
+}
 
 /// TIM3: `sample_rate_hz` period, TRGO = update event; counter stopped until `Sampler::start`.
 fn trigger_timer(tim: Peri<'static, TIM3>) -> Timer<'static, TIM3> {
