@@ -17,6 +17,11 @@
 #    delayed one-pulse fired at boot by the self-test image: rise arr + 1 − ccr ticks after CEN,
 #    high ccr ticks, docs/board-model.md); skipped, saying so, when that image is missing
 #    (`SELFTEST=1 scripts/build-firmware.sh` builds it; scripts/test.sh does);
+# 3b. on the NUCLEO-F446RE, issue #35's dual interleaved image (firmware/target/
+#    nucleo-f446re-dual.elf, `DUAL_ADC=1 scripts/build-firmware.sh nucleo-f446re`): every `check`
+#    above, then `board-model dual-adc` (ADC2 the plan's delay after ADC1, 16 pairs per trigger,
+#    10 kHz, the position's scale at rest, latency, open and shorted wiper); skipped, saying so,
+#    when that image is missing;
 # 4. `saw` against the images through `board-model serve` (board-model/tests/serve.rs, both boards:
 #    hello, every scene pushed and read back, refusals, a save that must erase — the F446's
 #    128 KiB sector — with a power cycle into it, a 1 kHz stream) and the panel's save on the
@@ -50,6 +55,16 @@ for b in "${BOARDS[@]}"; do
         "$CARGO_TARGET_DIR/release/board-model" delayed-pulse --board "$b" --elf "$st" || fail=1
     else
         echo "board model: $b: delayed-pulse check SKIPPED: no $st (SELFTEST=1 scripts/build-firmware.sh)"
+    fi
+    dual="$SAW_FIRMWARE_DIR/$b-dual.elf"
+    if [ "$b" = nucleo-f446re ]; then
+        if [ -f "$dual" ]; then
+            "$CARGO_TARGET_DIR/release/board-model" check --board "$b" --elf "$dual" \
+                --json-file "$OUT/$b-dual.json" || fail=1
+            "$CARGO_TARGET_DIR/release/board-model" dual-adc --board "$b" --elf "$dual" || fail=1
+        else
+            echo "board model: $b: dual-adc check SKIPPED: no $dual (DUAL_ADC=1 scripts/build-firmware.sh nucleo-f446re)"
+        fi
     fi
 done
 

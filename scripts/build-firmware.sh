@@ -48,6 +48,16 @@ export CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER="$FLIP_LINK"
 PLANT=()
 SUFFIX=""
 if [ "${PANIC_CHECK_PLANT:-0}" = 1 ]; then PLANT=(--features plant-sample-unwrap); SUFFIX="-plant"; fi
+# DUAL_ADC=1 builds the F446 with the feature `dual-adc` (ADC1 + ADC2 interleaved on the wiper,
+# issue #35) and leaves firmware/target/nucleo-f446re-dual.elf; the G474 has no such image.
+# DUAL_ADC=128 builds the experiment `dual-adc-128` (the conversion budget's 128 conversions per
+# sample, four triggers) into nucleo-f446re-dual128.elf.
+case "${DUAL_ADC:-0}" in
+    0) ;;
+    1) PLANT+=(--features dual-adc); SUFFIX="$SUFFIX-dual" ;;
+    128) PLANT+=(--features dual-adc-128); SUFFIX="$SUFFIX-dual128" ;;
+    *) echo "build-firmware: DUAL_ADC is 0, 1 or 128, not '$DUAL_ADC'" >&2; exit 2 ;;
+esac
 case "${SELFTEST:-0}" in
     0) ;;
     1) PLANT+=(--features selftest-delayed-pulse); SUFFIX="$SUFFIX-selftest" ;;

@@ -27,6 +27,9 @@ echo "== firmware builds"
 ./scripts/build-firmware.sh
 # The self-test images for the board model's delayed-pulse check (firmware/src/selftest.rs).
 SELFTEST=1 ./scripts/build-firmware.sh
+# The F446 image with ADC1 + ADC2 interleaved on the wiper (feature dual-adc, issue #35) for the
+# board model's dual-adc check.
+DUAL_ADC=1 ./scripts/build-firmware.sh nucleo-f446re
 echo "== panic check of the per-sample path (and its planted unwrap)"
 PANIC_CHECK_PLANT=1 ./scripts/panic-check.sh
 ./scripts/emu.sh

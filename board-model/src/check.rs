@@ -440,6 +440,11 @@ fn def_cap(host: &host_sim::sim::SimResult) -> (u64, u64) {
 /// reached memory to the group's last write.
 pub fn latency(o: &Outcome, board: BoardKind) -> Vec<f64> {
     let _ = board;
+    latency_from(o, &o.triggers, &o.sample_completions)
+}
+
+/// [`latency`] against the given sample-start triggers and sample completions.
+fn latency_from(o: &Outcome, triggers: &[Time], completions: &[Time]) -> Vec<f64> {
     let tim2: Vec<Time> = o
         .writes
         .iter()
@@ -458,27 +463,47 @@ pub fn latency(o: &Outcome, board: BoardKind) -> Vec<f64> {
         }
         last = Some(t);
     }
-    let completions = &o.sample_completions;
     let mut out = Vec::new();
     for w in groups {
         // Newest sample complete before the write.
         let k = completions.partition_point(|&c| c <= w);
-        if k == 0 || k > o.triggers.len() {
+        if k == 0 || k > triggers.len() {
             continue;
         }
-        out.push(us(w - o.triggers[k - 1]));
+        out.push(us(w - triggers[k - 1]));
     }
     out.sort_by(|a, b| a.partial_cmp(b).unwrap());
     out
+}
+
+/// [`latency`] for an acquisition of `tps` triggers per sample (`o.sample_completions` then
+/// counts triggers' worth of DMA reads): from the first trigger of the newest sample whose
+/// conversions had all reached memory.
+pub fn latency_per_sample(o: &Outcome, tps: usize) -> Vec<f64> {
+    let tps = tps.max(1);
+    let triggers: Vec<Time> = o.triggers.iter().copied().step_by(tps).collect();
+    let completions: Vec<Time> = o
+        .sample_completions
+        .iter()
+        .copied()
+        .skip(tps - 1)
+        .step_by(tps)
+        .collect();
+    latency_from(o, &triggers, &completions)
 }
 
 /// Sensor fault: the wiper opens (reads 0) from 105 to 305 ms of trajectory time — 5 ms into a
 /// 20 ms burst of the 20 Hz region, so the line is high when the fault begins. The enables must
 /// be low from the first faulted sample's processing on, through the fault window.
 pub fn rail_fault(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
+    rail_fault_of(board, elf, FaultKind::Open)
+}
+
+/// [`rail_fault`] with the wiper fault `kind` (Open: the pull-down's 0; Short: the supply's 4095).
+pub fn rail_fault_of(board: BoardKind, elf: &Path, kind: FaultKind) -> Result<Vec<Check>, String> {
     let mut opts = Options::new(board, elf, 0.5);
     opts.adc.faults = vec![FaultWindow {
-        kind: FaultKind::Open,
+        kind,
         start_us: 105_000,
         end_us: 305_000,
     }];
@@ -1595,4 +1620,191 @@ pub fn delayed_pulse(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String>
         },
     ));
     Ok(checks)
+}
+
+/// Issue #35's dual interleaved acquisition (`saw_boards::NUCLEO_F446RE_DUAL`, the firmware's
+/// `dual-adc` feature), on an image built with it (`DUAL_ADC=1 scripts/build-firmware.sh` leaves
+/// firmware/target/nucleo-f446re-dual.elf): the ADC block's record of conversion starts shows
+/// ADC1 and ADC2 alternating, ADC2 exactly the plan's delay after ADC1 (ADC_CCR.DELAY read back
+/// too), 16 pairs per TIM3 trigger, the first at the trigger; 10 000 samples/s reach the core;
+/// the position at rest at two places is the wiper's (the code's scale: 32 conversions halved);
+/// the sensor-to-gate latency and the rail fault's and the open wiper's responses within the
+/// limits `check` holds every image to.
+pub fn dual_adc(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
+    if board != BoardKind::F446 {
+        return Err("dual-adc: only the NUCLEO-F446RE has a dual interleaved image".into());
+    }
+    const PAIRS_PER_TRIGGER: usize = 16;
+    let mut out = Vec::new();
+    let opts = Options::new(board, elf, 2.2);
+    let (o, mut m) = run::run(&opts)?;
+    // The plan the image was built with, from its `adc:` log line's conversions per sample:
+    // `dual-adc` (32) or the experiment `dual-adc-128` (128).
+    let conversions = o
+        .log
+        .iter()
+        .find(|l| l.text.starts_with("adc: "))
+        .and_then(|l| {
+            let i = l.text.find(" Hz x")? + " Hz x".len();
+            l.text[i..]
+                .chars()
+                .take_while(|c| c.is_ascii_digit())
+                .collect::<String>()
+                .parse::<u32>()
+                .ok()
+        });
+    let def = match conversions {
+        Some(128) => &saw_boards::NUCLEO_F446RE_DUAL128,
+        _ => &saw_boards::NUCLEO_F446RE_DUAL,
+    };
+    let saw_boards::AdcMode::DualInterleaved { delay_cycles } = def.adc.mode else {
+        return Err("NUCLEO_F446RE_DUAL is not dual interleaved".into());
+    };
+    let tps = def.adc.triggers_per_sample as usize;
+    out.push(check(
+        "dual: the image's plan",
+        conversions == Some(def.adc.oversampling.conversions()),
+        format!(
+            "the adc log line says {conversions:?} conversions per sample; plan: {} conversions, {tps} trigger(s) per sample",
+            def.adc.oversampling.conversions()
+        ),
+    ));
+    out.push(check(
+        "dual: runs to the end",
+        o.stop.is_none(),
+        match &o.stop {
+            None => "2.2 s of board time without an unmodelled access, fault or lockup".to_string(),
+            Some(s) => format!("stopped at {:.6} s: {s}", o.end as f64 / TICKS_PER_S as f64),
+        },
+    ));
+    // ADCCLK = PCLK2 / 4 (the binding's ADCPRE), in master ticks.
+    let adcclk_ticks = TICKS_PER_S * 4 / m.sim().clocks.pclk2_hz.max(1);
+    let ccr = m.sim_mut().peek(0x4001_2304).unwrap_or(0);
+    let (multi, dma_mode, delay_field) = (ccr & 0x1F, (ccr >> 14) & 0x3, (ccr >> 8) & 0xF);
+    let starts = m.sim().adc_interleaved_starts();
+    // Pairs: ADC1 then ADC2, strictly alternating.
+    let alternating = !starts.is_empty()
+        && starts
+            .iter()
+            .enumerate()
+            .all(|(i, &(adc, _))| adc == if i % 2 == 0 { 1 } else { 2 });
+    let seps: Vec<Time> = starts.chunks_exact(2).map(|p| p[1].1 - p[0].1).collect();
+    let want = delay_cycles as u64 * adcclk_ticks;
+    let bad_sep = seps.iter().position(|&s| s != want);
+    // The first pair of each trigger starts at a TIM3 TRGO; 16 pairs per trigger.
+    let pair_starts: Vec<Time> = starts.chunks_exact(2).map(|p| p[0].1).collect();
+    let at_trigger: Vec<usize> = pair_starts
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| o.triggers.binary_search(t).is_ok())
+        .map(|(i, _)| i)
+        .collect();
+    let per_trigger_ok = at_trigger.len() > 10
+        && at_trigger
+            .windows(2)
+            .all(|w| w[1] - w[0] == PAIRS_PER_TRIGGER);
+    let pair_period: Option<Time> = pair_starts
+        .get(1)
+        .zip(pair_starts.first())
+        .map(|(b, a)| b - a);
+    out.push(check(
+        "dual: ADC2 starts the configured delay after ADC1",
+        multi == 0b00111 && dma_mode == 0b10 && delay_field as u32 + 5 == delay_cycles
+            && alternating && bad_sep.is_none() && seps.len() > 100,
+        format!(
+            "ADC_CCR MULTI {multi:#07b} (want 00111, dual interleaved), DMA mode {dma_mode} (want 2), DELAY {} cycles (plan {delay_cycles}); {} starts recorded, {}; ADC2 − ADC1 {}",
+            delay_field + 5,
+            starts.len(),
+            if alternating { "ADC1, ADC2 alternating" } else { "NOT alternating ADC1, ADC2" },
+            match bad_sep {
+                None => format!("{:.3} µs = {delay_cycles} ADCCLK cycles in all {} pairs", us(want), seps.len()),
+                Some(i) => format!("{:.3} µs in pair {i}, want {:.3} µs ({delay_cycles} cycles)", us(seps[i]), us(want)),
+            }
+        ),
+    ));
+    out.push(check(
+        "dual: 16 pairs per trigger, the first at the TIM3 trigger",
+        per_trigger_ok,
+        format!(
+            "{} pair starts at a TRGO among {}; pair period {}",
+            at_trigger.len(),
+            pair_starts.len(),
+            pair_period.map_or("—".into(), |p| format!(
+                "{:.3} µs ({} ADCCLK cycles)",
+                us(p),
+                p / adcclk_ticks.max(1)
+            ))
+        ),
+    ));
+    let tele = telemetry_samples(&o);
+    let rate = tele
+        .windows(2)
+        .map(|w| (w[1].1 - w[0].1) as f64 / (w[1].0 - w[0].0))
+        .next_back()
+        .map(|r| r.round() as u64);
+    out.push(check(
+        "dual: samples reach the core at 10 kHz",
+        rate == Some(def.sample_rate_hz as u64),
+        format!(
+            "{rate:?} samples/s between the telemetry lines at 1 s and 2 s; want {}",
+            def.sample_rate_hz
+        ),
+    ));
+    // From the trigger that starts a sample's conversions (the first of its `tps`).
+    let lat = latency_per_sample(&o, tps);
+    let worst = lat.last().copied();
+    out.push(check(
+        "dual: sensor-to-gate latency ≤ 100 µs",
+        worst.is_some_and(|w| w <= 100.0),
+        format!(
+            "{} burst-timer updates: median {}, worst {}",
+            lat.len(),
+            fmt_us(lat.get(lat.len() / 2).copied()),
+            fmt_us(worst)
+        ),
+    ));
+    // The code's scale: at rest, the telemetry position is the wiper's.
+    for at_um in [12_000.0, 47_000.0] {
+        let mut opts = Options::new(board, elf, 1.1);
+        opts.trajectory = host_sim::trajectory::Trajectory::Rest { at_um };
+        let (o, _m) = run::run(&opts)?;
+        let pos = o
+            .log
+            .iter()
+            .filter(|l| l.text.starts_with("telemetry"))
+            .find_map(|l| {
+                let i = l.text.find("position_um: ")? + "position_um: ".len();
+                l.text[i..]
+                    .chars()
+                    .take_while(|c| c.is_ascii_digit() || *c == '-')
+                    .collect::<String>()
+                    .parse::<f64>()
+                    .ok()
+            });
+        out.push(check(
+            &format!(
+                "dual: position at rest at {:.0} mm is the wiper's",
+                at_um / 1000.0
+            ),
+            pos.is_some_and(|p| (p - at_um).abs() <= 200.0),
+            format!(
+                "telemetry position {} µm at 1 s; the wiper at {at_um:.0} µm (limit ±200 µm)",
+                pos.map_or("—".into(), |p| format!("{p:.0}"))
+            ),
+        ));
+    }
+    for (what, kind) in [
+        ("open wiper", FaultKind::Open),
+        ("wiper at the supply", FaultKind::Short),
+    ] {
+        out.extend(rail_fault_of(board, elf, kind)?.into_iter().map(|mut c| {
+            c.name = format!("dual, {what}: {}", c.name);
+            c
+        }));
+    }
+    out.extend(fast_strokes(board, elf)?.into_iter().map(|mut c| {
+        c.name = format!("dual: {}", c.name);
+        c
+    }));
+    Ok(out)
 }

@@ -411,6 +411,19 @@ impl Sim {
         self.bus_read(addr, 4)
     }
 
+    /// The F446 ADC's first interleaved conversion starts, (ADC 1 or 2, time); empty on the G474
+    /// or when the image never used dual interleaved mode.
+    pub fn adc_interleaved_starts(&self) -> Vec<(u8, Time)> {
+        self.periphs
+            .iter()
+            .find_map(|m| {
+                m.p.as_any()
+                    .downcast_ref::<crate::periph::adc_f4::AdcF4>()
+                    .map(|a| a.interleaved_starts().to_vec())
+            })
+            .unwrap_or_default()
+    }
+
     /// Queues bytes from the host on the link UART (the F446's USART2, the G474's LPUART1),
     /// arriving back to back from `at`; returns when the last one's stop bit ends. Fails on a
     /// board whose link UART is not modelled.

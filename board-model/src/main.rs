@@ -66,6 +66,18 @@ enum Cmd {
         #[arg(long)]
         elf: PathBuf,
     },
+    /// Issue #35's dual interleaved acquisition on an image built with the `dual-adc` feature
+    /// (`DUAL_ADC=1 scripts/build-firmware.sh` leaves firmware/target/nucleo-f446re-dual.elf):
+    /// ADC2 the plan's delay after ADC1, 16 pairs per trigger, 10 kHz, the position's scale,
+    /// latency, rail faults; exits 1 if any fails, 2 on a usage error. F446 only.
+    DualAdc {
+        /// Board: nucleo-f446re.
+        #[arg(long)]
+        board: String,
+        /// The dual-adc ELF.
+        #[arg(long)]
+        elf: PathBuf,
+    },
     /// Serve the image's host link behind a pseudo-terminal for `saw --port PATH` (and the
     /// panel): the firmware runs on the model paced to the wall clock (never ahead of it; as
     /// fast as it can when slower, with its speed printed), its link UART bridged to the pty, its
@@ -227,7 +239,33 @@ fn real_main(cli: Cli) -> Result<ExitCode, String> {
         Cmd::DelayedPulse { board, elf } => {
             let kind = BoardKind::parse(&board)?;
             let checks = check::delayed_pulse(kind, &elf)?;
-            println!("board model: {} running {} (delayed pulse)", kind.name(), elf.display());
+            println!(
+                "board model: {} running {} (delayed pulse)",
+                kind.name(),
+                elf.display()
+            );
+            for c in &checks {
+                println!(
+                    "  {} {}: {}",
+                    if c.pass { "ok  " } else { "FAIL" },
+                    c.name,
+                    c.detail
+                );
+            }
+            Ok(if checks.iter().all(|c| c.pass) {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            })
+        }
+        Cmd::DualAdc { board, elf } => {
+            let kind = BoardKind::parse(&board)?;
+            let checks = check::dual_adc(kind, &elf)?;
+            println!(
+                "board model: {} running {} (dual interleaved ADC)",
+                kind.name(),
+                elf.display()
+            );
             for c in &checks {
                 println!(
                     "  {} {}: {}",

@@ -14,7 +14,7 @@ pub mod nucleo_f446re;
 pub mod nucleo_g474re;
 pub mod rf_level;
 
-pub use nucleo_f446re::NUCLEO_F446RE;
+pub use nucleo_f446re::{NUCLEO_F446RE, NUCLEO_F446RE_DUAL, NUCLEO_F446RE_DUAL128};
 pub use nucleo_g474re::NUCLEO_G474RE;
 
 /// SAW carrier frequency (Hz). Fixed by the interdigital transducer on the LiNbO3 substrate.
@@ -258,9 +258,10 @@ pub struct PwmTimer {
 /// How the conversions of one sample are obtained, and scaled to the 16-conversion code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Oversampling {
-    /// 16 conversions summed in software (F446: no hardware oversampler; the 16 come from a
-    /// 16-rank regular sequence or from 16 back-to-back single conversions).
-    Software { conversions: u32 },
+    /// `conversions` summed in software and shifted right by `shift` (F446: no hardware
+    /// oversampler; 16 from a 16-rank regular sequence, shift 0; or, in dual interleaved mode,
+    /// both ADCs' 16 ranks, shift 1).
+    Software { conversions: u32, shift: u32 },
     /// ADC hardware oversampler (G474): `ratio` conversions accumulated, then shifted right by
     /// `shift` with rounding (RM0440 §21.4.30), so ratio / 2^shift conversions' worth of code.
     Hardware { ratio: u32, shift: u32 },
@@ -276,7 +277,7 @@ impl Oversampling {
     /// Conversions made per sample.
     pub const fn conversions(&self) -> u32 {
         match *self {
-            Oversampling::Software { conversions } => conversions,
+            Oversampling::Software { conversions, .. } => conversions,
             Oversampling::Hardware { ratio, .. } => ratio,
         }
     }
@@ -286,8 +287,11 @@ impl Oversampling {
     /// a sum of whole conversions).
     pub const fn code_conversions(&self) -> Option<u32> {
         match *self {
-            Oversampling::Software { conversions } => Some(conversions),
-            Oversampling::Hardware { ratio, shift } => {
+            Oversampling::Software {
+                conversions: ratio,
+                shift,
+            }
+            | Oversampling::Hardware { ratio, shift } => {
                 if shift >= 32 || ratio % (1 << shift) != 0 {
                     None
                 } else {
@@ -298,9 +302,35 @@ impl Oversampling {
     }
 }
 
+/// Which ADCs convert the wiper, and how (the board plan selects it; the binding refuses a mode
+/// its chip does not have).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AdcMode {
+    /// One ADC (`AdcDef::adc`) converts every conversion of a sample.
+    Single,
+    /// ADC1 and ADC2 in dual regular interleaved mode on the same pin (RM0390 §13.9.3): a
+    /// trigger starts ADC1 at once and ADC2 `delay_cycles` ADC clock cycles later, each
+    /// converting its regular sequence; results are read in pairs from the common data
+    /// register. `delay_cycles` must be at least the sampling time + 2 cycles (only one ADC may
+    /// sample the pin at a time; the manual's rule) and is what the binding writes to DELAY.
+    DualInterleaved { delay_cycles: u32 },
+}
+
+impl AdcMode {
+    /// ADCs converting the wiper.
+    pub const fn adcs(&self) -> u32 {
+        match self {
+            AdcMode::Single => 1,
+            AdcMode::DualInterleaved { .. } => 2,
+        }
+    }
+}
+
 /// The rheostat (slider position) acquisition.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct AdcDef {
+    /// One ADC, or two interleaved on the wiper.
+    pub mode: AdcMode,
     /// e.g. `"ADC1"`.
     pub adc: &'static str,
     /// ADC input channel number of the wiper pin.
@@ -581,6 +611,15 @@ impl BoardDef {
             && self.velocity_window >= *VELOCITY_WINDOWS.start()
             && self.velocity_window <= *VELOCITY_WINDOWS.end()
             && matches!(self.adc.oversampling.code_conversions(), Some(ADC_OVERSAMPLE))
+            // Dual interleaved: the second ADC starts at least the sampling time + 2 cycles
+            // after the first (one ADC samples the pin at a time, RM0390 §13.9.3), so the
+            // delay in half cycles is at least the sampling time's + 4.
+            && match self.adc.mode {
+                AdcMode::Single => true,
+                AdcMode::DualInterleaved { delay_cycles } => {
+                    2 * delay_cycles >= self.adc.sample_half_cycles + 4
+                }
+            }
             && match self.adc.oversampling {
                 Oversampling::Software { .. } => true,
                 Oversampling::Hardware { ratio, .. } => Oversampling::is_hardware_ratio(ratio),
@@ -851,5 +890,40 @@ mod tests {
         }
         assert!(is_pow2_le(512, 512));
         assert!(!is_pow2_le(1024, 512));
+    }
+
+    /// The dual interleaved plan (issue #35): two ADCs, 32 conversions halved to the 16-conversion
+    /// code, 15-cycle sampling; a delay shorter than the sampling time + 2 cycles (two ADCs
+    /// sampling the pin at once, RM0390 §13.9.3) or a sum not scaled to the code is refused, and
+    /// the default plans stay single-ADC.
+    #[test]
+    fn dual_interleaved_plan_is_checked() {
+        let d = NUCLEO_F446RE_DUAL;
+        assert!(d.is_consistent());
+        assert_eq!(d.adc.mode, AdcMode::DualInterleaved { delay_cycles: 17 });
+        assert_eq!(d.adc.mode.adcs(), 2);
+        assert_eq!(d.adc.oversampling.conversions(), 32);
+        assert_eq!(d.adc.oversampling.code_conversions(), Some(ADC_OVERSAMPLE));
+        assert_eq!(NUCLEO_F446RE.adc.mode, AdcMode::Single);
+        assert_eq!(NUCLEO_G474RE.adc.mode, AdcMode::Single);
+        let with = |mode, oversampling| BoardDef {
+            adc: AdcDef {
+                mode,
+                oversampling,
+                ..d.adc
+            },
+            ..d
+        };
+        let ovs = d.adc.oversampling;
+        assert!(with(AdcMode::DualInterleaved { delay_cycles: 17 }, ovs).is_consistent());
+        assert!(!with(AdcMode::DualInterleaved { delay_cycles: 16 }, ovs).is_consistent());
+        assert!(!with(
+            AdcMode::DualInterleaved { delay_cycles: 17 },
+            Oversampling::Software {
+                conversions: 32,
+                shift: 0
+            }
+        )
+        .is_consistent());
     }
 }

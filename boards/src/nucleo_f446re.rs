@@ -102,6 +102,7 @@ pub const NUCLEO_F446RE: BoardDef = BoardDef {
 
     // Rheostat wiper on PA1 = ADC123_IN1 (Arduino A1). ADC1 EXTSEL 0b1000 = TIM3_TRGO.
     adc: AdcDef {
+        mode: AdcMode::Single,
         adc: "ADC1",
         channel: 1,
         pin: Pin {
@@ -112,6 +113,7 @@ pub const NUCLEO_F446RE: BoardDef = BoardDef {
         },
         oversampling: Oversampling::Software {
             conversions: ADC_OVERSAMPLE,
+            shift: 0,
         },
         // 56 cycles (firmware/src/board/f446.rs: the rheostat's source impedance).
         sample_half_cycles: 112,
@@ -183,3 +185,50 @@ const _: () = assert!(
      2 500 Ω mid-travel source) to 1/4 LSB (DS10693 R_AIN equation, AdcDef::max_source_ohm)"
 );
 const _: () = assert!(NUCLEO_F446RE.is_consistent());
+
+/// NUCLEO-F446RE with ADC1 + ADC2 in dual regular interleaved mode on the wiper (issue #35; the
+/// firmware's `dual-adc` feature): PA1 is ADC123_IN1, so both ADCs reach it (DS10693 pin
+/// table). One TIM3 trigger per 10 kHz sample runs both ADCs' 16-rank sequences, ADC2
+/// 17 cycles behind ADC1 (15-cycle sampling + 2: only one ADC may sample the pin at a time,
+/// RM0390 §13.9.3): 32 conversions at 15 cycles, 16 pairs of 34 ADC clock cycles, 24.6 µs of
+/// the 100 µs period; the sum of 32 halved (shift 1) is the core's 16-conversion code.
+///
+/// Not the conversion budget's 128 per sample (`docs/conversion-budget.md`): 64 pairs at 34
+/// cycles are 96.7 µs, nearly the whole period, and the sensor-to-gate latency is measured from
+/// the trigger that starts a sample's conversions (limit 100 µs; the sample path after the last
+/// conversion takes ~25 µs on this board): see `docs/board-model.md`, "Dual interleaved".
+pub const NUCLEO_F446RE_DUAL: BoardDef = BoardDef {
+    adc: AdcDef {
+        mode: AdcMode::DualInterleaved { delay_cycles: 17 },
+        oversampling: Oversampling::Software {
+            conversions: 2 * ADC_OVERSAMPLE,
+            shift: 1,
+        },
+        // 15 cycles at 22.5 MHz settle ≤ 3 488 Ω against the rheostat's 2 500 Ω (the const
+        // assertion below; the conversion budget's feasibility rule, 536 ns, is met by 667 ns).
+        sample_half_cycles: 30,
+        ..NUCLEO_F446RE.adc
+    },
+    ..NUCLEO_F446RE
+};
+const _: () = assert!(NUCLEO_F446RE_DUAL.adc.settles_source());
+const _: () = assert!(NUCLEO_F446RE_DUAL.is_consistent());
+
+/// [`NUCLEO_F446RE_DUAL`] at the conversion budget's 128 conversions per sample (the firmware's
+/// `dual-adc-128` feature, an experiment, not a shipping plan): TIM3 at 40 kHz, four triggers
+/// per 10 kHz sample, each running both ADCs' 16 ranks (16 pairs, 24.6 µs of its 25 µs); the sum
+/// of 128 shifted by 3. Its conversions span 99.6 µs of the sample's 100 µs, which the board
+/// model's sensor-to-gate latency (from the sample's first trigger) holds against 100 µs
+/// (`docs/board-model.md`, "Issue #35").
+pub const NUCLEO_F446RE_DUAL128: BoardDef = BoardDef {
+    adc: AdcDef {
+        oversampling: Oversampling::Software {
+            conversions: 8 * ADC_OVERSAMPLE,
+            shift: 3,
+        },
+        triggers_per_sample: 4,
+        ..NUCLEO_F446RE_DUAL.adc
+    },
+    ..NUCLEO_F446RE_DUAL
+};
+const _: () = assert!(NUCLEO_F446RE_DUAL128.is_consistent());

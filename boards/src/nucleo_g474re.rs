@@ -103,6 +103,7 @@ pub const NUCLEO_G474RE: BoardDef = BoardDef {
 
     // Rheostat wiper on PA1 = ADC12_IN2 (Arduino A1). ADC12 EXTSEL 4 = TIM3_TRGO (RM0440).
     adc: AdcDef {
+        mode: AdcMode::Single,
         adc: "ADC1",
         channel: 2,
         pin: Pin {

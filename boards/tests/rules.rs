@@ -876,7 +876,10 @@ fn oversampling_is_sixteen() {
     }
     let f = BoardDef {
         adc: AdcDef {
-            oversampling: Oversampling::Software { conversions: 8 },
+            oversampling: Oversampling::Software {
+                conversions: 8,
+                shift: 0,
+            },
             ..F446.adc
         },
         ..F446

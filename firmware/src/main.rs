@@ -191,9 +191,15 @@ async fn main(spawner: Spawner) {
     // The conversions made per sample and their sampling time (the G474 makes 32 and halves
     // the sum to the 16-conversion code the core reads).
     let half_cycles = BOARD.adc.sample_half_cycles;
+    // Dual interleaved (`dual-adc`): ADC1 + ADC2, ADC2 the plan's delay behind.
+    let adcs = match BOARD.adc.mode {
+        saw_boards::AdcMode::Single => "",
+        saw_boards::AdcMode::DualInterleaved { .. } => "+ADC2 interleaved",
+    };
     info!(
-        "adc: {} ch{} @ {} Hz x{} ({}.{}-cycle sampling, code = {} conversions' sum; trigger {} TRGO); enables CH{} + CH{}; rf arm high",
+        "adc: {}{} ch{} @ {} Hz x{} ({}.{}-cycle sampling, code = {} conversions' sum; trigger {} TRGO); enables CH{} + CH{}; rf arm high",
         BOARD.adc.adc,
+        adcs,
         BOARD.adc.channel,
         BOARD.sample_rate_hz,
         BOARD.adc.oversampling.conversions(),

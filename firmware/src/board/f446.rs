@@ -3,10 +3,13 @@
 //! ADC: TIM3 TRGO (update, 10 kHz) triggers ADC1 (EXTSEL 8 = TIM3_TRGO); one trigger runs a
 //! 16-rank regular sequence that converts the wiper (PA1 = IN1) 16 times; DMA2 stream 0 moves
 //! the 16 results into a circular buffer; the sampler task sums them into one 16-bit sample.
+#[cfg(not(feature = "dual-adc"))]
 use embassy_stm32::adc::{Adc, AdcChannel, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
 use embassy_stm32::pac;
-use embassy_stm32::peripherals::{ADC1, DAC1, PA4, TIM1, TIM2, TIM3, TIM8};
+#[cfg(not(feature = "dual-adc"))]
+use embassy_stm32::peripherals::ADC1;
+use embassy_stm32::peripherals::{DAC1, PA4, TIM1, TIM2, TIM3, TIM8};
 use embassy_stm32::rcc::{Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllSource, Sysclk};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::MasterMode;
@@ -16,16 +19,33 @@ use embassy_stm32::timer::{Ch1, Ch3};
 use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::{bind_interrupts, dma, flash, peripherals, Config, Peri, Peripherals};
+#[cfg(not(feature = "dual-adc"))]
 use embassy_time::with_timeout;
 use saw_boards::{BoardDef, OscSource, PllOut};
 use static_cell::StaticCell;
 
+#[cfg(not(feature = "dual-adc"))]
 use super::{AdcFault, Batch};
 
 /// FLASHSIZE, the flash size data register (RM0390 §39.2).
 pub const FLASH_SIZE_REG: u32 = 0x1FFF_7A22;
 
+#[cfg(not(feature = "dual-adc"))]
 pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE;
+/// `dual-adc`: ADC1 + ADC2 interleaved on the wiper (`f446_dual.rs`).
+#[cfg(all(feature = "dual-adc", not(feature = "dual-adc-128")))]
+pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE_DUAL;
+/// `dual-adc-128`: the same at 128 conversions per sample (four triggers), an experiment.
+#[cfg(feature = "dual-adc-128")]
+pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE_DUAL128;
+
+// The dual interleaved acquisition replaces the single-ADC one below (every item of which is
+// `cfg(not(feature = "dual-adc"))`).
+#[cfg(feature = "dual-adc")]
+#[path = "f446_dual.rs"]
+mod dual;
+#[cfg(feature = "dual-adc")]
+pub use dual::{Sampler, SAMPLES_PER_READ};
 
 // The numbers below are what the embassy RCC config is built from; make sure the plan is the one
 // this file knows how to express (HSE bypass, PLL P output).
@@ -181,7 +201,10 @@ pub fn split(p: Peripherals) -> Parts {
     let carrier_pin = PwmPin::new(p.PA8, OutputType::PushPull);
     // PB10: TIM2_CH3 AF1 (second RF enable, IDT B).
     let burst_b_pin = PwmPin::new(p.PB10, OutputType::PushPull);
+    #[cfg(not(feature = "dual-adc"))]
     let sampler = Sampler::new(p.ADC1, p.PA1, p.DMA2_CH0, p.TIM3);
+    #[cfg(feature = "dual-adc")]
+    let sampler = Sampler::new(p.ADC1, p.ADC2, p.PA1, p.DMA2_CH0, p.TIM3);
     // The link: USART2 on PA2 (TX) / PA3 (RX), AF7, wired to the ST-LINK/V2-1's virtual COM port
     // (UM1724 §6.8 "USART communication": SB13/SB14 closed by default). DMA1 stream 6 channel 4
     // transmits, stream 5 channel 4 receives into a ring buffer (RM0390 §9.3.3 Table 28).
@@ -283,27 +306,35 @@ pub fn dac_wait_ready() {
 /// (f_ADC · C_ADC · ln 2^(N+2)) − R_ADC with N = 12, R_ADC = 6 kΩ max, C_ADC = 4 pF typ (7 pF
 /// max taken), f_ADC = 90 MHz / 4 = 22.5 MHz (embassy's ADCPRE for ≤ 36 MHz): 56 cycles allow
 /// < 30 kΩ. 16 × (56 + 12) cycles = 48 µs per trigger.
+#[cfg(not(feature = "dual-adc"))]
 const SAMPLE_TIME: SampleTime = match BOARD.adc.sample_half_cycles {
     112 => SampleTime::CYCLES56,
     _ => panic!("F446 binding: a sampling time this board plan does not use"),
 };
 
 /// 16 conversions per trigger (one 16-rank sequence).
+#[cfg(not(feature = "dual-adc"))]
 const RANKS: usize = saw_boards::ADC_OVERSAMPLE as usize;
 /// Samples delivered per `read` (one trigger's worth).
+#[cfg(not(feature = "dual-adc"))]
 pub const SAMPLES_PER_READ: usize = 1;
+#[cfg(not(feature = "dual-adc"))]
 const DMA_LEN: usize = 2 * RANKS * SAMPLES_PER_READ;
 /// DMA2 stream of `DMA2_CH0` (for the raw re-initialisation in `Sampler::restart`).
+#[cfg(not(feature = "dual-adc"))]
 const DMA_STREAM: usize = 0;
+#[cfg(not(feature = "dual-adc"))]
 static DMA_BUF: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 
 /// Timer-triggered, DMA-fed rheostat acquisition.
+#[cfg(not(feature = "dual-adc"))]
 pub struct Sampler {
     adc: RingBufferedAdc<'static, ADC1>,
     trigger: Timer<'static, TIM3>,
     buf: [u16; DMA_LEN / 2],
 }
 
+#[cfg(not(feature = "dual-adc"))]
 impl Sampler {
     fn new(
         adc: Peri<'static, ADC1>,
@@ -421,6 +452,7 @@ impl Sampler {
 
 /// ADON = 1, then wait t_STAB (3 µs max, STM32F446 datasheet ADC characteristics) before the
 /// first trigger can come (RM0390 §13.3.1).
+#[cfg(not(feature = "dual-adc"))]
 fn power_up() {
     pac::ADC1.cr2().modify(|w| w.set_adon(true));
     cortex_m::asm::delay(3 * (BOARD.sysclk_hz / 1_000_000));
