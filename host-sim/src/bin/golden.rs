@@ -49,7 +49,9 @@ const BUDGET: u64 = host_sim::budget::SAMPLE_BUDGET_INSTR;
 /// measured, so a regression still fails. Remove a line once its kind is under the budget.
 /// The hybrid pays its 64-sample line fit on every sample (the position-phase grating is
 /// under the budget since stop 27, the material since stop 28: both checked against it).
-const OVER_BUDGET: [(&str, f64); 1] = [("grating-hybrid/", 569.0)];
+/// Issue #35 (the estimator rests in the hybrid's region, its line is its velocity) took its
+/// worst row from 552.8 to 518.4: the ceiling follows, 3 % over.
+const OVER_BUDGET: [(&str, f64); 1] = [("grating-hybrid/", 534.0)];
 
 struct VecSink(Vec<u8>);
 impl Sink for VecSink {
