@@ -1362,6 +1362,61 @@ mod tests {
         c
     }
 
+    /// The sample path's contract (docs/sample-contract.md): below 30 mm an `off` region, where
+    /// the estimator rests (no velocity in the output), above it a velocity-synthesis grating,
+    /// where it runs. A stroke up and back at 50 mm/s: every output but the velocity field is
+    /// the one of a controller updating the estimator on every sample; the velocity is there
+    /// wherever a texture reads it, the same figure, and asked for (`velocity_um_s`) anywhere;
+    /// the grating's bursts follow |V|/λ from its first sample on (no warm-up on entry).
+    #[test]
+    fn the_estimator_rests_where_no_velocity_is_read_and_wakes_whole() {
+        let mut rests = two(Texture::Off, synth(1_000));
+        let mut always = two(Texture::Off, synth(1_000));
+        always.velocity_every_sample(true);
+        let (mut rested, mut computed, mut t) = (0, 0, 0u32);
+        let path = (0..1_200).map(|k| 20_000.0 + 50.0 * (600 - (k as i32 - 600).abs()) as f32);
+        for um in path {
+            let code = code_at(&rests, um);
+            let a = rests.on_sample(Sample { code, t_us: t });
+            let b = always.on_sample(Sample { code, t_us: t });
+            t += 100;
+            assert_eq!(
+                Output {
+                    velocity_um_s: None,
+                    ..a
+                },
+                Output {
+                    velocity_um_s: None,
+                    ..b
+                },
+                "{um} µm"
+            );
+            assert_eq!(rests.velocity_um_s(), b.velocity_um_s, "{um} µm: asked");
+            assert_eq!(rests.telemetry(), always.telemetry(), "{um} µm");
+            match a.region {
+                Some(0) if b.velocity_um_s.is_some() => {
+                    assert_eq!(a.velocity_um_s, None, "{um} µm: rested");
+                    rested += 1;
+                }
+                Some(1) => {
+                    assert_eq!(a.velocity_um_s, b.velocity_um_s, "{um} µm");
+                    assert!(a.velocity_um_s.is_some(), "{um} µm: warm on entry");
+                    computed += 1;
+                }
+                _ => {}
+            }
+        }
+        // 20 → 50 → 20 mm: 200 samples each way below the boundary, 400 above it.
+        assert!(
+            rested > 300 && computed > 700,
+            "{rested} rested, {computed} computed"
+        );
+        // Telling it to update on every sample wakes it: nothing rests from then on.
+        rests.velocity_every_sample(true);
+        let (o, _) = feed(&mut rests, 25_000.0, &mut t, 40);
+        assert_eq!(o.velocity_um_s, Some(0));
+    }
+
     /// Entering a region starts its speed threshold over: having moved at 20 mm/s (above the
     /// 15 mm/s threshold) in a velocity region, left it and come back at 10 mm/s (above half
     /// the threshold, below the threshold), the region stays silent. Both velocity kinds.
