@@ -1417,6 +1417,59 @@ mod tests {
         assert_eq!(o.velocity_um_s, Some(0));
     }
 
+    /// What each texture kind declares, seen from outside: on a 40 mm/s stroke a region whose
+    /// texture reads only the position (off, constant, random) or its own fit (the hybrid
+    /// grating) computes no velocity, one that reads the estimator's (position phase,
+    /// velocity synthesis, material) computes it on every sample once the window is full;
+    /// lines make every region compute it. The velocity asked for is there in every case.
+    #[test]
+    fn each_kind_rests_the_estimator_or_not() {
+        let random = Texture::Random(crate::texture::RandomBurst {
+            center_millihz: 100_000,
+            spread_permille: 100,
+            amplitude_permille: 1000,
+            amplitude_spread_permille: 0,
+            duty_permille: 400,
+            seed: 7,
+        });
+        let hybrid = Texture::Grating(crate::texture::Grating {
+            render: GratingRender::Hybrid,
+            ..crate::texture::Grating::new(1_000)
+        });
+        let kinds = [
+            ("off", Texture::Off, &[][..], true),
+            ("constant", Texture::constant_hz(80), &[], true),
+            ("random", random, &[], true),
+            ("hybrid", hybrid, &[], true),
+            (
+                "position",
+                Texture::Grating(crate::texture::Grating::new(1_000)),
+                &[],
+                false,
+            ),
+            ("synthesis", synth(1_000), &[], false),
+            (
+                "material",
+                Texture::Material(crate::texture::Material::fig5(0.3)),
+                &[],
+                false,
+            ),
+            ("off with a line", Texture::Off, &[40_000], false),
+        ];
+        for (name, texture, lines, rests) in kinds {
+            let mut c = single(texture, lines);
+            let mut t = 0;
+            let outs = stroke(&mut c, 20_000.0, 40_000.0, &mut t, 400);
+            let computed = outs[40..]
+                .iter()
+                .filter(|o| o.velocity_um_s.is_some())
+                .count();
+            assert_eq!(computed, if rests { 0 } else { 360 }, "{name}");
+            let v = c.velocity_um_s().unwrap_or(0);
+            assert!((35_000..=45_000).contains(&v), "{name}: asked {v} µm/s");
+        }
+    }
+
     /// Entering a region starts its speed threshold over: having moved at 20 mm/s (above the
     /// 15 mm/s threshold) in a velocity region, left it and come back at 10 mm/s (above half
     /// the threshold, below the threshold), the region stays silent. Both velocity kinds.

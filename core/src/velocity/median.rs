@@ -195,6 +195,21 @@ mod tests {
         assert_eq!(v, Some(30_000));
     }
 
+    /// An estimator whose state is not a window does not rest: it says so, a rest is an
+    /// update, and it has no estimate of its own to offer (the controller keeps the last).
+    #[test]
+    fn an_estimator_that_cannot_rest_is_updated() {
+        let mut e = OneSampleDifference::new(100).unwrap();
+        assert!(!e.rests());
+        for i in 0..5u32 {
+            e.rest(10 * i as i32, i * 100);
+        }
+        assert_eq!(e.update(50, 500), Some(100_000));
+        assert_eq!(e.estimate(), None);
+        assert!(Median3::new(LsqSlope::<8>::new(100).unwrap(), 100).rests());
+        assert!(!Median3::new(OneSampleDifference::new(100).unwrap(), 100).rests());
+    }
+
     /// The controller's contract (docs/sample-contract.md): an estimator rested through any
     /// run of samples and woken answers, from then on, exactly what one updated on every
     /// sample answers, and `estimate` reads the same figure at any point of a rest. Streams
