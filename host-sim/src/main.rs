@@ -132,6 +132,7 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
     let mut memory: Vec<(f64, u64)> = Vec::new();
     // A scenario's expectations look at the whole trace; a plain run keeps none (constant
     // memory whatever its duration) and computes its figures and chart as it goes.
+    let mut busy_s = Vec::new();
     let (header, m, data, recorded) = match &scenario {
         Some(_) => {
             let r = sim::run(&params)?;
@@ -154,6 +155,7 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
                 }
             })?;
             let data = st.chart.ok_or("the streamed run kept no chart")?;
+            busy_s = st.busy_s;
             (st.header, st.metrics, data, None)
         }
     };
@@ -189,23 +191,42 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
     println!(
         "simulated {:.2} s in {:.3} s: {:.0}× real time ({:.0} ns per sample: ADC model, core, \
          timer model, metrics{}); the bare core loop alone runs at {:.0}× ({:.0} ns per sample, \
-         timed now over {} samples), so the closed loop costs {:.1}× the core; with the chart \
+         the best of {} passes timed now over {} samples), so the closed loop costs {:.1}× the core; with the chart \
          written, {:.2} s in all",
         params.duration_s,
         sim_s,
         params.duration_s / sim_s,
         per_sample * 1e9,
         if recorded.is_some() {
-            ", whole trace kept"
+            ", whole trace kept".to_string()
         } else {
-            ", chart recording"
+            match sim::stream_threads() {
+                1 => ", chart recording".to_string(),
+                n => format!(", chart recording; pipelined on {n} threads"),
+            }
         },
         period_s / bare,
         bare * 1e9,
+        sim::BARE_CORE_PASSES,
         BARE_CORE_SAMPLES,
         per_sample / bare,
         started.elapsed().as_secs_f64()
     );
+    if busy_s.len() > 1 {
+        // On a machine busy with other work the threads wait for a CPU: their own time is
+        // what an idle machine's wall time would be near.
+        let ns: Vec<String> = busy_s
+            .iter()
+            .map(|b| format!("{:.0}", b / m.samples.max(1) as f64 * 1e9))
+            .collect();
+        let most = busy_s.iter().copied().fold(0.0, f64::max) / m.samples.max(1) as f64;
+        println!(
+            "the loop's threads ran {} ns per sample (CPU time; the loop and the feeder): the \
+             busier {:.1}× the core",
+            ns.join(" and "),
+            most / bare
+        );
+    }
     if memory.len() > 1 {
         let marks: Vec<String> = memory
             .iter()

@@ -337,6 +337,10 @@ pub struct Online {
     /// The minute the current f32 block of lag sums belongs to (flushed when it changes).
     lag_minute: usize,
     minutes: Vec<MinuteSums>,
+    /// The minute [`Online::minute`] last looked up, and its start (µs): most lookups are of
+    /// it, and need no division.
+    minute_at: usize,
+    minute_from_us: u64,
     /// Gate actions not yet reached by a placed rise: (kernel clock it acts at, the line it
     /// fires for). The first rise after a line's pulse is that line's.
     actions: VecDeque<(u64, Option<u8>)>,
@@ -402,6 +406,9 @@ impl Online {
             block_n: 0,
             lag_minute: 0,
             minutes: Vec::new(),
+            minute_at: 0,
+            // No time is in this "minute" (the first lookup works its minute out).
+            minute_from_us: u64::MAX - MINUTE_US,
             actions: VecDeque::new(),
             line_armed: None,
             latency_clk: params.action_latency_us as u64 * clock_hz as u64 / 1_000_000,
@@ -411,12 +418,25 @@ impl Online {
         }
     }
 
-    /// The running sums of the minute `t_us` falls in.
-    fn minute(&mut self, t_us: u64) -> &mut MinuteSums {
+    /// The index of the minute `t_us` falls in, its running sums there.
+    #[inline]
+    fn minute_index(&mut self, t_us: u64) -> usize {
+        if t_us.wrapping_sub(self.minute_from_us) < MINUTE_US {
+            return self.minute_at;
+        }
         let i = (t_us / MINUTE_US) as usize;
         while self.minutes.len() <= i {
             self.minutes.push(MinuteSums::new(self.textures.len()));
         }
+        self.minute_at = i;
+        self.minute_from_us = i as u64 * MINUTE_US;
+        i
+    }
+
+    /// The running sums of the minute `t_us` falls in.
+    #[inline]
+    fn minute(&mut self, t_us: u64) -> &mut MinuteSums {
+        let i = self.minute_index(t_us);
         &mut self.minutes[i]
     }
 
@@ -541,12 +561,12 @@ impl Online {
             return;
         };
         // A block of f32 sums belongs to one minute: a new minute flushes the last one's.
-        let minute = (p.t_us / MINUTE_US) as usize;
+        let minute = self.minute_index(p.t_us);
         if minute != self.lag_minute {
             self.flush_lags();
             self.lag_minute = minute;
         }
-        self.minute(p.t_us).vel_n += 1;
+        self.minutes[minute].vel_n += 1;
         let e = est as f32 * 1e-3;
         let window = &self.true_ring[self.ring_at..self.ring_at + VELOCITY_LAGS];
         match () {
