@@ -345,7 +345,8 @@ impl<E: VelocityEstimator> Controller<E> {
     /// estimator answered, or, in a region where it rests, what it would have answered, worked
     /// out now from its window (O(window), for a stream record or telemetry, not per sample).
     pub fn velocity_um_s(&self) -> Option<i32> {
-        if self.resting && self.estimator.rests() {
+        // An estimator that rests answers for itself, resting or not (awake, its last answer).
+        if self.estimator.rests() {
             self.estimator.estimate()
         } else {
             self.velocity_um_s
@@ -461,8 +462,7 @@ impl<E: VelocityEstimator> Controller<E> {
             Some(r) => active.regions.track(r, position_um),
         };
         if self.region != Some(region) {
-            // Wakes the estimator when the new region reads the velocity: off the per-sample
-            // path, which then tests one bit.
+            // Wakes a resting estimator: off the per-sample path, which then tests one bit.
             self.note_region_change(region, position_um, t_us);
         }
         let velocity_um_s = if (self.rest_mask >> (region & 31)) & 1 != 0 {
@@ -686,9 +686,9 @@ impl<E: VelocityEstimator> Controller<E> {
     }
 
     fn note_region_change(&mut self, region: u8, position_um: i32, t_us: u32) {
-        if (self.rest_mask >> (region & 31)) & 1 == 0 {
-            self.wake_estimator();
-        }
+        // Whatever the new region needs: a wake is exact and idempotent, and a region change is
+        // rare enough that one into a resting region may pay its O(window) for nothing.
+        self.wake_estimator();
         if self.region.is_some() {
             self.telemetry.region_switches = self.telemetry.region_switches.wrapping_add(1);
         }
@@ -1467,6 +1467,7 @@ mod tests {
             assert_eq!(computed, if rests { 0 } else { 360 }, "{name}");
             let v = c.velocity_um_s().unwrap_or(0);
             assert!((35_000..=45_000).contains(&v), "{name}: asked {v} µm/s");
+            assert_eq!(c.telemetry().velocity_um_s, v, "{name}: telemetry");
         }
     }
 
