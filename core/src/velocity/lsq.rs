@@ -35,8 +35,8 @@ pub struct LsqSlope<const N: usize> {
     /// exact.
     weighted: i64,
     sampler: Sampler,
-    /// Positions were written by [`VelocityEstimator::rest`] without the sums: `sum` and
-    /// `weighted` are out of date until [`VelocityEstimator::wake`] works them out of the window.
+    /// Samples went in by [`VelocityEstimator::rest`] since the last update: the window and
+    /// the sums are current, the slope and `Sampler`'s last answer are not.
     resting: bool,
     /// µm/s per unit of 2·Σ(k − (N−1)/2)·x_k, Q32: 6·10⁶ / (N (N²−1) T_s).
     gain_q32: i64,
@@ -76,21 +76,18 @@ impl<const N: usize> LsqSlope<N> {
 }
 
 impl<const N: usize> LsqSlope<N> {
-    /// Adds a position at the next slot, dropping the oldest once the window is full; keeps the
-    /// sums only when `SUMS` (a rest writes the window alone).
+    /// Adds a position at the next slot, dropping the oldest once the window is full.
     #[inline(always)]
     #[allow(
         clippy::indexing_slicing,
         reason = "ring indices stay below the ring's length: each is reduced mod the length or is `head`/`newest`, which only ever take such values"
     )]
-    fn push_as<const SUMS: bool>(&mut self, position_um: i32) {
+    fn push(&mut self, position_um: i32) {
         // `head` < N always; the `% N` (an AND for N = 32) shows it to the compiler, so no
         // bounds check stays on the per-sample path (scripts/panic-check.sh).
         let head = self.head % N;
         if self.len < N {
-            if SUMS {
-                self.fill(position_um);
-            }
+            self.fill(position_um);
             self.window[(head + self.len) % N] = position_um;
             self.len += 1;
             return;
@@ -99,7 +96,7 @@ impl<const N: usize> LsqSlope<N> {
         // Every remaining entry's index drops by one and the newest enters at N − 1:
         // W' = W − (S − oldest) + (N − 1)x and S' = S − oldest + x, so the centred sum
         // C = 2W − (N − 1)S moves by C' − C = −2S + (N + 1)·oldest + (N − 1)x.
-        if SUMS && N <= LSQ_NARROW_WINDOW {
+        if N <= LSQ_NARROW_WINDOW {
             let (s, c, x, o) = (self.sum as i32, self.weighted as i32, position_um, oldest);
             let c = c
                 .wrapping_sub(s.wrapping_mul(2))
@@ -107,7 +104,7 @@ impl<const N: usize> LsqSlope<N> {
                 .wrapping_add((N as i32 - 1).wrapping_mul(x));
             self.weighted = c as i64;
             self.sum = s.wrapping_add(x.wrapping_sub(o)) as i64;
-        } else if SUMS {
+        } else {
             let (x, o) = (position_um as i64, oldest as i64);
             self.weighted += -2 * self.sum + (N as i64 + 1) * o + (N as i64 - 1) * x;
             self.sum += x - o;
@@ -176,11 +173,11 @@ impl<const N: usize> LsqSlope<N> {
         self.resting = false;
     }
 
-    /// Places a sample on the grid and writes it (and the lost samples before it, on the line
-    /// between their neighbours) into the window, the sums kept only when `SUMS`. None for a
-    /// duplicate, which changes nothing.
+    /// Places a sample on the grid and pushes it (and the lost samples before it, on the line
+    /// between their neighbours) into the window and its sums. None for a duplicate, which
+    /// changes nothing.
     #[inline(always)]
-    fn place<const SUMS: bool>(&mut self, position_um: i32, t_us: u32) -> Option<()> {
+    fn place(&mut self, position_um: i32, t_us: u32) -> Option<()> {
         // The clock's own tick, not `Sampler::step`: on a gap the clock has restarted on this
         // sample already, keeping its sub-µs grid phase (`step` would restart it from scratch, as
         // the other estimators do), and only the window is cleared.
@@ -193,50 +190,14 @@ impl<const N: usize> LsqSlope<N> {
                 if let Some(&newest) = self.window.get((self.head + self.len - 1) % N) {
                     let (a, b) = (newest as i64, position_um as i64);
                     for k in 1..m as i64 {
-                        self.push_as::<SUMS>((a + (b - a) * k / m as i64) as i32);
+                        self.push((a + (b - a) * k / m as i64) as i32);
                     }
                 }
             }
             Tick::First | Tick::Slots(_) => {}
         }
-        self.push_as::<SUMS>(position_um);
+        self.push(position_um);
         Some(())
-    }
-
-    /// Σx and the weighted sum of the window as it stands, worked out from its positions in
-    /// the order [`Self::fill`] and [`Self::push_as`] keep them (oldest first, Σk·x_k while
-    /// filling, the centred sum once full): the same integers, mod 2^32 for a narrow window.
-    #[allow(
-        clippy::indexing_slicing,
-        reason = "ring indices are reduced mod the ring's length"
-    )]
-    fn sums_from_window(&self) -> (i64, i64) {
-        let len = self.len.min(N);
-        if N <= LSQ_NARROW_WINDOW {
-            let (mut s, mut w) = (0i32, 0i32);
-            for k in 0..len {
-                let x = self.window[(self.head + k) % N];
-                w = w.wrapping_add((k as i32).wrapping_mul(x));
-                s = s.wrapping_add(x);
-            }
-            if len == N {
-                w = w
-                    .wrapping_mul(2)
-                    .wrapping_sub((N as i32 - 1).wrapping_mul(s));
-            }
-            (s as i64, w as i64)
-        } else {
-            let (mut s, mut w) = (0i64, 0i64);
-            for k in 0..len {
-                let x = self.window[(self.head + k) % N] as i64;
-                w += k as i64 * x;
-                s += x;
-            }
-            if len == N {
-                w = 2 * w - (N as i64 - 1) * s;
-            }
-            (s, w)
-        }
     }
 }
 
@@ -265,7 +226,7 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
     #[inline(always)]
     fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
         debug_assert!(!self.resting, "update after rest without wake");
-        match self.place::<true>(position_um, t_us) {
+        match self.place(position_um, t_us) {
             None => self.sampler.last_out(),
             Some(()) => self.sampler.answer(self.slope()),
         }
@@ -280,8 +241,9 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
         (N as u32 - 1) * self.sampler.period_us() / 2
     }
 
-    /// The window's positions and the slot clock are all a slope needs; the two sums follow
-    /// from them in O(N) at [`Self::wake`].
+    /// A rest keeps the slot clock, the window and its two running sums (a few adds) and skips
+    /// the slope (a 64-bit multiply and the range test) and its bookkeeping: the slope is
+    /// there in O(1) whenever asked.
     #[inline(always)]
     fn rests(&self) -> bool {
         true
@@ -289,14 +251,13 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
 
     #[inline(always)]
     fn rest(&mut self, position_um: i32, t_us: u32) {
-        if self.place::<false>(position_um, t_us).is_some() {
+        if self.place(position_um, t_us).is_some() {
             self.resting = true;
         }
     }
 
     fn wake(&mut self) {
         if self.resting {
-            (self.sum, self.weighted) = self.sums_from_window();
             self.resting = false;
             // What `update` would have answered on the last rested sample: a duplicate next
             // repeats it.
@@ -308,10 +269,7 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
         if !self.resting {
             return self.sampler.last_out();
         }
-        if self.len < N {
-            return None;
-        }
-        Some(self.speed(self.sums_from_window().1))
+        self.slope()
     }
 }
 
