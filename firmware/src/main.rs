@@ -378,7 +378,7 @@ fn sample_step(ctrl: &mut Controller, burst: &mut BurstGate, tap: &mut link::Str
             change: tap.stamp.change,
             position_um: out.position_um,
             // At the stream's rate, not per sample: in a region that reads no velocity the
-            // estimator rests and this works it out from its window (docs/sample-contract.md).
+            // estimator rests and this makes it from its sums (docs/sample-contract.md).
             velocity_um_s: ctrl.velocity_um_s(),
             region: out.region,
             burst_millihz: ctrl.burst_millihz(),

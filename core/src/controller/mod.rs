@@ -342,8 +342,8 @@ impl<E: VelocityEstimator> Controller<E> {
     }
 
     /// The velocity after the last sample, µm/s (None without a full window): what the
-    /// estimator answered, or, in a region where it rests, what it would have answered, worked
-    /// out now from its window (O(window), for a stream record or telemetry, not per sample).
+    /// estimator answered, or, in a region where it rests, what it would have answered, made now
+    /// from its running sums (O(1): for a stream record or telemetry, not per sample).
     pub fn velocity_um_s(&self) -> Option<i32> {
         // An estimator that rests answers for itself, resting or not (awake, its last answer).
         if self.estimator.rests() {
@@ -686,8 +686,7 @@ impl<E: VelocityEstimator> Controller<E> {
     }
 
     fn note_region_change(&mut self, region: u8, position_um: i32, t_us: u32) {
-        // Whatever the new region needs: a wake is exact and idempotent, and a region change is
-        // rare enough that one into a resting region may pay its O(window) for nothing.
+        // Whatever the new region needs: a wake is exact, idempotent and O(1).
         self.wake_estimator();
         if self.region.is_some() {
             self.telemetry.region_switches = self.telemetry.region_switches.wrapping_add(1);
