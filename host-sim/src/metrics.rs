@@ -419,11 +419,19 @@ impl Online {
     }
 
     /// The index of the minute `t_us` falls in, its running sums there.
-    #[inline]
+    #[inline(always)]
     fn minute_index(&mut self, t_us: u64) -> usize {
         if t_us.wrapping_sub(self.minute_from_us) < MINUTE_US {
-            return self.minute_at;
+            self.minute_at
+        } else {
+            self.new_minute_index(t_us)
         }
+    }
+
+    /// [`Self::minute_index`] of a minute other than the last looked up.
+    #[cold]
+    #[inline(never)]
+    fn new_minute_index(&mut self, t_us: u64) -> usize {
         let i = (t_us / MINUTE_US) as usize;
         while self.minutes.len() <= i {
             self.minutes.push(MinuteSums::new(self.textures.len()));
