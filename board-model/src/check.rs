@@ -1038,13 +1038,23 @@ pub fn save(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     Ok(out)
 }
 
+/// What a stream at every sample may add to the sample path beyond the tap's 10 %, instructions
+/// per sample: the velocity estimator's update over its rest (docs/sample-contract.md), which the
+/// records' velocity needs on every sample. Measured on the G474 image (2026-11-29): 1 163
+/// instructions per sample stopped with the estimator resting, 1 199 with it forced on (a
+/// one-off image, not kept), so 36; 40 allowed.
+pub const STREAM_VELOCITY_ALLOWANCE: f64 = 40.0;
+
 /// What the telemetry stream costs the sample path (issue #13: "nothing on the link may delay
 /// the control loop"): instructions executed per sample inside the sample path's interrupt
 /// executor (UART4's vector, position 52 on both chips: RM0390 table 38, RM0440 table 97) over
 /// 0.1 s with the stream stopped, at every 10th sample and at every sample (more records than the
 /// line carries: the queue drops and counts), and, for information, in thread mode (the link task
 /// that frames and sends the records). Asserted: the tap at every sample adds at most 10 % to the
-/// sample path.
+/// sample path, plus [`STREAM_VELOCITY_ALLOWANCE`]: since issue #35 the stopped sample path rests
+/// the velocity estimator in the default scene's constant regions, and a stream at every sample
+/// wakes it (its records carry the velocity), so that much of the difference is the estimator's
+/// update, not the tap.
 pub fn stream_cost(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     use saw_link::msg::Request;
     const SAMPLE_PATH: usize = 16 + 52;
@@ -1082,7 +1092,7 @@ pub fn stream_cost(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String> {
     );
     Ok(vec![check(
         "stream cost: the tap adds at most 10 % to the sample path",
-        off > 0.0 && every <= off * 1.10,
+        off > 0.0 && every <= off * 1.10 + STREAM_VELOCITY_ALLOWANCE,
         format!(
             "sample path (the interrupt executor) per sample: {off:.0} instructions with the stream stopped, {tenth:.0} at every 10th sample, {every:.0} at every sample (+{:.0}, +{:.1} %); thread mode (the link task) per sample: {t_off:.0}, {t_tenth:.0}, {t_every:.0}",
             every - off,
@@ -1590,13 +1600,22 @@ pub fn delayed_pulse(board: BoardKind, elf: &Path) -> Result<Vec<Check>, String>
             a.iter().map(|e| (us(e.0 - cen), e.1)).collect::<Vec<_>>()
         ),
     ));
-    let log_line = |part: &str| o.log.iter().find(|l| l.text.contains(part)).map(|l| l.text.clone());
+    let log_line = |part: &str| {
+        o.log
+            .iter()
+            .find(|l| l.text.contains(part))
+            .map(|l| l.text.clone())
+    };
     let stopped = log_line("self-test: delayed pulse over");
     let refused = log_line("self-test: delayed triangle");
     checks.push(check(
         "delayed pulse: the counter stopped itself; a delayed triangle refused",
-        stopped.as_deref().is_some_and(|l| l.ends_with("counter stopped"))
-            && refused.as_deref().is_some_and(|l| l.contains("line Off, refused 1")),
+        stopped
+            .as_deref()
+            .is_some_and(|l| l.ends_with("counter stopped"))
+            && refused
+                .as_deref()
+                .is_some_and(|l| l.contains("line Off, refused 1")),
         format!(
             "{}; {}",
             stopped.unwrap_or_else(|| "no `delayed pulse over` line".into()),

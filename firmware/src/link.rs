@@ -43,6 +43,10 @@ pub static QUIET: Signal<CriticalSectionRawMutex, bool> = Signal::new();
 /// The control loop has done what `QUIET` asked.
 pub static QUIETED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
+/// Streams with a record at least this often (samples) have the estimator updated on every
+/// sample rather than rested (see [`StreamTap::take`]).
+const STREAM_VELOCITY_EVERY_SAMPLE: u16 = 2;
+
 /// The control loop's end of the stream: one atomic load and a compare per sample while
 /// stopped.
 pub struct StreamTap {
@@ -77,15 +81,19 @@ impl StreamTap {
         wide
     }
 
-    /// Whether this sample becomes a record (follows `EVERY`).
+    /// Whether this sample becomes a record (follows `EVERY`). A stream that reads the
+    /// velocity at every sample or every other one makes the controller update its estimator on
+    /// every sample: resting it and making the slope for each record would cost the sample
+    /// path more than updating it (docs/sample-contract.md; the board model's stream-cost check).
     #[inline]
-    pub fn take(&mut self) -> bool {
+    pub fn take(&mut self, ctrl: &mut crate::board::Controller) -> bool {
         let every = EVERY.load(Ordering::Relaxed);
         if every != self.every {
             self.every = every;
             self.decimator.set(every);
             // A new stream's first record is widened against the clock again.
             self.last_us = None;
+            ctrl.velocity_every_sample((1..=STREAM_VELOCITY_EVERY_SAMPLE).contains(&every));
         }
         self.decimator.take()
     }

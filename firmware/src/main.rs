@@ -370,16 +370,17 @@ fn sample_step(ctrl: &mut Controller, burst: &mut BurstGate, tap: &mut link::Str
     core::hint::black_box([1u8, 2, 3, 4].get(usize::from(sample.code & 7)).copied().unwrap());
     // Drive mode, then amplitude, then the line (saw-core's order).
     saw_core::controller::apply(&out, burst);
-    if tap.take() {
+    if tap.take(ctrl) {
         let time_us = tap.widen(sample.t_us);
         tap.push(saw_link::msg::Record {
             time_us,
             scene_id: tap.stamp.scene_id,
             change: tap.stamp.change,
             position_um: out.position_um,
-            // At the stream's rate, not per sample: in a region that reads no velocity the
-            // estimator rests and this makes it from its sums (docs/sample-contract.md).
-            velocity_um_s: ctrl.velocity_um_s(),
+            // The sample's own when it computed one; in a region that reads no velocity the
+            // estimator rests and the controller makes it from its sums, at the stream's rate
+            // (docs/sample-contract.md).
+            velocity_um_s: out.velocity_um_s.or_else(|| ctrl.velocity_um_s()),
             region: out.region,
             burst_millihz: ctrl.burst_millihz(),
             bursting: burst.line() != rf::Line::Off,

@@ -344,6 +344,9 @@ impl<E: VelocityEstimator> Controller<E> {
     /// The velocity after the last sample, µm/s (None without a full window): what the
     /// estimator answered, or, in a region where it rests, what it would have answered, made now
     /// from its running sums (O(1): for a stream record or telemetry, not per sample).
+    // Inlined into the firmware's stream tap (the board model's stream-cost check: a call here
+    // took the G474's tap at every sample from +8.4 % to +11.5 % of the sample path).
+    #[inline]
     pub fn velocity_um_s(&self) -> Option<i32> {
         // An estimator that rests answers for itself, resting or not (awake, its last answer).
         if self.estimator.rests() {

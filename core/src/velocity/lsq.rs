@@ -265,6 +265,7 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
         }
     }
 
+    #[inline(always)]
     fn estimate(&self) -> Option<i32> {
         if !self.resting {
             return self.sampler.last_out();

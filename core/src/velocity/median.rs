@@ -109,6 +109,7 @@ impl<E: VelocityEstimator> VelocityEstimator for Median3<E> {
         self.inner.wake();
     }
 
+    #[inline(always)]
     fn estimate(&self) -> Option<i32> {
         // While the window refills after a reset or a gap `update` answers None.
         if self.len < 3 {
