@@ -103,7 +103,11 @@ fn two_threads_give_the_single_threads_run_bit_for_bit() {
         let (mut one_k, mut two_k) = (Vec::new(), Vec::new());
         let one = sim::stream_on(&p, true, 1, |k| one_k.push(k)).unwrap();
         let two = sim::stream_on(&p, true, 2, |k| two_k.push(k)).unwrap();
-        assert!(one.metrics.pulses > 5, "{what}: {} pulses", one.metrics.pulses);
+        assert!(
+            one.metrics.pulses > 5,
+            "{what}: {} pulses",
+            one.metrics.pulses
+        );
         // Debug formatting shows every float's bits that differ (and NaNs, which == would not).
         assert_eq!(
             format!("{:?}", one.metrics),
@@ -120,7 +124,10 @@ fn two_threads_give_the_single_threads_run_bit_for_bit() {
         );
         assert_eq!(one_k, two_k, "{what}");
         assert_eq!(one_k.len() as u64, sim::samples_in(&p), "{what}");
-        assert!(one_k.iter().enumerate().all(|(i, &k)| i as u64 == k), "{what}");
+        assert!(
+            one_k.iter().enumerate().all(|(i, &k)| i as u64 == k),
+            "{what}"
+        );
     }
 }
 

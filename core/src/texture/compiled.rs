@@ -191,9 +191,7 @@ impl Compiled {
         match self {
             Compiled::Off | Compiled::Fixed(_) | Compiled::Random(_) => Need::Position,
             Compiled::Ridges(r) if r.is_hybrid() => Need::OwnFit,
-            Compiled::Ridges(_) | Compiled::Synthesis(_) | Compiled::StickSlip(_) => {
-                Need::Velocity
-            }
+            Compiled::Ridges(_) | Compiled::Synthesis(_) | Compiled::StickSlip(_) => Need::Velocity,
         }
     }
 }
