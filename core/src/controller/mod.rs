@@ -1161,6 +1161,18 @@ mod tests {
     }
 
     /// A grating rendered by velocity synthesis.
+    /// A random texture around 100 Hz (±10 %), full amplitude, 40 % duty, seed 7.
+    fn random_100hz() -> Texture {
+        Texture::Random(crate::texture::RandomBurst {
+            center_millihz: 100_000,
+            spread_permille: 100,
+            amplitude_permille: 1000,
+            amplitude_spread_permille: 0,
+            duty_permille: 400,
+            seed: 7,
+        })
+    }
+
     fn synth(wavelength_um: u32) -> Texture {
         Texture::Grating(crate::texture::Grating {
             render: GratingRender::VelocitySynthesis,
@@ -1426,14 +1438,7 @@ mod tests {
     /// lines make every region compute it. The velocity asked for is there in every case.
     #[test]
     fn each_kind_rests_the_estimator_or_not() {
-        let random = Texture::Random(crate::texture::RandomBurst {
-            center_millihz: 100_000,
-            spread_permille: 100,
-            amplitude_permille: 1000,
-            amplitude_spread_permille: 0,
-            duty_permille: 400,
-            seed: 7,
-        });
+        let random = random_100hz();
         let hybrid = Texture::Grating(crate::texture::Grating {
             render: GratingRender::Hybrid,
             ..crate::texture::Grating::new(1_000)
@@ -1499,14 +1504,7 @@ mod tests {
     /// kept until the random texture's next draw.
     #[test]
     fn random_region_draws_anew_on_entry() {
-        let random = Texture::Random(crate::texture::RandomBurst {
-            center_millihz: 100_000,
-            spread_permille: 100,
-            amplitude_permille: 1000,
-            amplitude_spread_permille: 0,
-            duty_permille: 400,
-            seed: 7,
-        });
+        let random = random_100hz();
         let mut c = two(random, Texture::constant_hz(500));
         let mut t = 0;
         let hz = |outs: &[Output]| {
