@@ -21,6 +21,6 @@ fi
 TESTS=(--test-package saw-core --test-package saw-boards --test-package saw-link
        --test-package saw-store --test-package host-sim --test-package saw-tests)
 case " $* " in
-    *" --file "*|*" -f "*|*" --in-diff "*|*" -D "*) exec cargo mutants "${TESTS[@]}" "$@" ;;
-    *) exec cargo mutants "${TESTS[@]}" --file 'core/src/**/*.rs' --file 'boards/src/*.rs' "$@" ;;
+    *" --file "*|*" -f "*|*" --in-diff "*|*" -D "*) exec cargo mutants "${TESTS[@]}" --gitignore true "$@" ;;
+    *) exec cargo mutants "${TESTS[@]}" --gitignore true --file 'core/src/**/*.rs' --file 'boards/src/*.rs' "$@" ;;
 esac
