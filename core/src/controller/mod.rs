@@ -55,6 +55,10 @@ struct Active {
     /// fit ([`Need::OwnFit`]) and the scene draws no lines, so the estimator rests there (the
     /// sample path's contract, docs/sample-contract.md).
     rest_mask: u32,
+    /// Bit r set: region r's texture has a fit of its own that gives the velocity
+    /// ([`Need::OwnFit`]) and the scene draws no lines: there the estimator may sleep (no work
+    /// at all) and be seeded from that fit on leaving.
+    own_fit_mask: u32,
 }
 
 /// A configuration validated and compiled, ready to [`Controller::install`].
@@ -132,15 +136,18 @@ impl Prepared {
         }
         // Lines overlay every region and fire ahead by the velocity: a scene with lines needs
         // it everywhere.
-        let rest_mask = if lines.is_some() {
-            0
-        } else {
+        let mask = |needs: &[Need]| {
+            if lines.is_some() {
+                return 0;
+            }
             compiled
                 .iter()
                 .enumerate()
-                .filter(|(_, c)| matches!(c.need(), Need::Position | Need::OwnFit))
+                .filter(|(_, c)| needs.contains(&c.need()))
                 .fold(0u32, |m, (i, _)| m | 1 << i)
         };
+        let rest_mask = mask(&[Need::Position, Need::OwnFit]);
+        let own_fit_mask = mask(&[Need::OwnFit]);
         Ok(Prepared {
             active: Active {
                 mapper,
@@ -151,11 +158,24 @@ impl Prepared {
                 stale_after_us: config.stale_after_us,
                 drive: scene.drive,
                 rest_mask,
+                own_fit_mask,
             },
             lines: scene.lines.positions_um.len(),
             hysteresis_um: scene.hysteresis_um,
         })
     }
+}
+
+/// What a sample does with the velocity estimator in the region in force (the sample path's
+/// contract, docs/sample-contract.md).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum SampleMode {
+    /// The region reads the velocity: update.
+    Update,
+    /// It reads only the position: rest (window and sums kept, the slope skipped).
+    Rest,
+    /// Its texture's own fit gives the velocity: nothing; seeded from that fit on leaving.
+    Sleep,
 }
 
 /// The control core.
@@ -176,8 +196,14 @@ pub struct Controller<E: VelocityEstimator = DefaultEstimator> {
     velocity_every_sample: bool,
     /// The regions where the estimator rests now: the active scene's
     /// [`Active::rest_mask`], 0 with [`Self::velocity_every_sample`] or an estimator that
-    /// cannot rest. A copy, so the sample path tests one word (M4F instruction counts).
+    /// cannot rest.
     rest_mask: u32,
+    /// The regions where the estimator sleeps: the active scene's [`Active::own_fit_mask`]
+    /// where the estimator rests there and can be seeded, else 0.
+    sleep_mask: u32,
+    /// What the sample path does with the estimator in the region in force, worked out when
+    /// the region (or a setting) changes, so a sample tests one byte (M4F instruction counts).
+    sample_mode: SampleMode,
     gate: Gate,
     region: Option<u8>,
     fault: Option<SensorFault>,
@@ -246,6 +272,8 @@ impl<E: VelocityEstimator> Controller<E> {
             velocity_um_s: None,
             velocity_every_sample: false,
             rest_mask: 0,
+            sleep_mask: 0,
+            sample_mode: SampleMode::Update,
             gate: Gate::default(),
             region: None,
             fault: None,
@@ -287,6 +315,9 @@ impl<E: VelocityEstimator> Controller<E> {
     /// a move, no checks and no compile on the sample path (the firmware compiles in its link
     /// task and hands the result over).
     pub fn install(&mut self, prepared: Prepared) {
+        // An estimator asleep in the old scene's region is seeded from that region's fit
+        // before the scene goes (the next region's needs are the new scene's).
+        self.leave_sleep();
         let active = prepared.active;
         info!(
             "scene loaded: {} regions, {} lines, hysteresis {} um, duty cap {} permille, on-time cap {} us",
@@ -302,6 +333,7 @@ impl<E: VelocityEstimator> Controller<E> {
         self.active = Some(active);
         // The first sample finds its region anew (a region change), which wakes the estimator
         // if that region reads the velocity.
+        self.region = None;
         self.update_rest_mask();
         // The old region index and line arming mean nothing in the new layout (a running line
         // pulse keeps its window: the gate may be in its rest).
@@ -326,12 +358,55 @@ impl<E: VelocityEstimator> Controller<E> {
         }
     }
 
-    /// [`Self::rest_mask`] from the active scene and the settings.
+    /// [`Self::rest_mask`] and [`Self::sleep_mask`] from the active scene and the settings,
+    /// and the region in force's mode from them.
     fn update_rest_mask(&mut self) {
-        self.rest_mask = match self.active.as_ref() {
-            Some(a) if !self.velocity_every_sample && self.estimator.rests() => a.rest_mask,
-            _ => 0,
+        (self.rest_mask, self.sleep_mask) = match self.active.as_ref() {
+            Some(a) if !self.velocity_every_sample && self.estimator.rests() => (
+                a.rest_mask,
+                if self.estimator.window_samples() > 0 {
+                    a.own_fit_mask
+                } else {
+                    0
+                },
+            ),
+            _ => (0, 0),
         };
+        let mode = self.region.map_or(SampleMode::Update, |r| self.mode_of(r));
+        if mode != SampleMode::Sleep {
+            self.leave_sleep();
+        }
+        self.sample_mode = mode;
+    }
+
+    /// What the sample path does with the estimator in `region`.
+    fn mode_of(&self, region: u8) -> SampleMode {
+        let bit = 1u32.checked_shl(region as u32).unwrap_or(0);
+        if self.sleep_mask & bit != 0 {
+            SampleMode::Sleep
+        } else if self.rest_mask & bit != 0 {
+            SampleMode::Rest
+        } else {
+            SampleMode::Update
+        }
+    }
+
+    /// Ends a sleep: the estimator is fed the newest positions of the fit of the region it
+    /// slept in (its window's worth, O(window) once), so it answers as one fed all along
+    /// would have over those samples (docs/sample-contract.md, "Sleep"). No-op when awake.
+    fn leave_sleep(&mut self) {
+        if core::mem::replace(&mut self.sample_mode, SampleMode::Update) != SampleMode::Sleep {
+            return;
+        }
+        self.resting = false;
+        let k = self.estimator.window_samples();
+        match (self.active.as_ref(), self.region) {
+            (Some(a), Some(r)) => match a.compiled.get(r as usize) {
+                Some(c) => c.seed(&mut self.estimator, k),
+                None => self.estimator.reset(),
+            },
+            _ => self.estimator.reset(),
+        }
     }
 
     /// Makes a resting estimator whole (its next update answers as if it had never rested).
@@ -348,12 +423,23 @@ impl<E: VelocityEstimator> Controller<E> {
     // took the G474's tap at every sample from +8.4 % to +11.5 % of the sample path).
     #[inline]
     pub fn velocity_um_s(&self) -> Option<i32> {
+        // Asleep: the region's own fit is the velocity.
+        if self.sample_mode == SampleMode::Sleep {
+            return self.own_velocity_um_s();
+        }
         // An estimator that rests answers for itself, resting or not (awake, its last answer).
         if self.estimator.rests() {
             self.estimator.estimate()
         } else {
             self.velocity_um_s
         }
+    }
+
+    /// The velocity of the region in force's own fit (the hybrid's line), µm/s.
+    #[inline(never)]
+    fn own_velocity_um_s(&self) -> Option<i32> {
+        let c = self.active.as_ref()?.compiled.get(self.region? as usize)?;
+        c.own_velocity_um_s()
     }
 
     /// The burst timer this controller plans for.
@@ -468,12 +554,14 @@ impl<E: VelocityEstimator> Controller<E> {
             // Wakes a resting estimator: off the per-sample path, which then tests one bit.
             self.note_region_change(region, position_um, t_us);
         }
-        let velocity_um_s = if (self.rest_mask >> (region & 31)) & 1 != 0 {
-            self.estimator.rest(position_um, t_us);
-            self.resting = true;
-            None
-        } else {
-            self.estimator.update(position_um, t_us)
+        let velocity_um_s = match self.sample_mode {
+            SampleMode::Update => self.estimator.update(position_um, t_us),
+            SampleMode::Rest => {
+                self.estimator.rest(position_um, t_us);
+                self.resting = true;
+                None
+            }
+            SampleMode::Sleep => None,
         };
         let mut out = Output {
             position_um: Some(position_um),
@@ -668,6 +756,8 @@ impl<E: VelocityEstimator> Controller<E> {
         self.good_run = 0;
         self.estimator.reset();
         self.resting = false;
+        // The textures' fits are reset below: nothing to seed from, the region is found anew.
+        self.sample_mode = SampleMode::Update;
         self.velocity_um_s = None;
         self.region = None;
         self.lines.cut();
@@ -689,12 +779,15 @@ impl<E: VelocityEstimator> Controller<E> {
     }
 
     fn note_region_change(&mut self, region: u8, position_um: i32, t_us: u32) {
+        // Leaving a region where the estimator slept: seeded from that region's fit, O(window).
+        self.leave_sleep();
         // Whatever the new region needs: a wake is exact, idempotent and O(1).
         self.wake_estimator();
         if self.region.is_some() {
             self.telemetry.region_switches = self.telemetry.region_switches.wrapping_add(1);
         }
         self.region = Some(region);
+        self.sample_mode = self.mode_of(region);
         if let Some(c) = self
             .active
             .as_mut()
@@ -1429,6 +1522,65 @@ mod tests {
         rests.velocity_every_sample(true);
         let (o, _) = feed(&mut rests, 25_000.0, &mut t, 40);
         assert_eq!(o.velocity_um_s, Some(0));
+    }
+
+    /// The hybrid's region lets the estimator sleep (its own line is the velocity) and seeds it
+    /// from that line's newest positions on leaving: below 30 mm a hybrid grating, above it a
+    /// velocity-synthesis grating, a stroke up and back at 50 mm/s. Every output but the
+    /// velocity field is the one of a controller updating the estimator on every sample, and
+    /// above 30 mm the velocity is the same figure from the first sample on (the seed is the
+    /// window an estimator fed all along holds); below, the velocity asked for is the hybrid's
+    /// line's, within 1 mm/s of the estimator's on this steady stroke.
+    #[test]
+    fn a_sleeping_estimator_is_seeded_whole_from_the_hybrids_line() {
+        let hybrid = || {
+            Texture::Grating(crate::texture::Grating {
+                render: GratingRender::Hybrid,
+                ..crate::texture::Grating::new(1_000)
+            })
+        };
+        let mut sleeps = two(hybrid(), synth(1_000));
+        let mut always = two(hybrid(), synth(1_000));
+        always.velocity_every_sample(true);
+        let (mut slept, mut entries, mut t) = (0, 0, 0u32);
+        let mut last_region = None;
+        let path = (0..1_200).map(|k| 20_000.0 + 50.0 * (600 - (k as i32 - 600).abs()) as f32);
+        for um in path {
+            let code = code_at(&sleeps, um);
+            let a = sleeps.on_sample(Sample { code, t_us: t });
+            let b = always.on_sample(Sample { code, t_us: t });
+            t += 100;
+            let strip = |o: Output| Output {
+                velocity_um_s: None,
+                ..o
+            };
+            assert_eq!(strip(a), strip(b), "{um} µm");
+            match a.region {
+                Some(0) if b.velocity_um_s.is_some() => {
+                    assert_eq!(a.velocity_um_s, None, "{um} µm: asleep");
+                    // The line has a velocity once its 64-sample window is full.
+                    if let Some(own) = sleeps.velocity_um_s() {
+                        let est = b.velocity_um_s.unwrap_or(0);
+                        assert!(own.abs_diff(est) <= 1_000, "{um} µm: own {own}, est {est}");
+                        slept += 1;
+                    }
+                }
+                Some(1) => {
+                    if last_region == Some(0) {
+                        entries += 1;
+                    }
+                    assert_eq!(a.velocity_um_s, b.velocity_um_s, "{um} µm: seeded");
+                    assert!(a.velocity_um_s.is_some(), "{um} µm: warm on entry");
+                }
+                _ => {}
+            }
+            last_region = a.region;
+        }
+        // 200 samples each way below 30 mm, less the line's 64-sample fill after each entry.
+        assert!(
+            slept > 250 && entries == 1,
+            "{slept} asleep, {entries} entries"
+        );
     }
 
     /// What each texture kind declares, seen from outside: on a 40 mm/s stroke a region whose

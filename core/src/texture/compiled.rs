@@ -6,6 +6,7 @@
 
 use crate::burst::{self, BurstError, BurstTimer, SafetyLimits, TimerSettings};
 use crate::gate::Gate;
+use crate::velocity::VelocityEstimator;
 
 use super::grating::{GratingRender, Ridges, Synthesis};
 use super::material::StickSlip;
@@ -192,6 +193,29 @@ impl Compiled {
             Compiled::Off | Compiled::Fixed(_) | Compiled::Random(_) => Need::Position,
             Compiled::Ridges(r) if r.is_hybrid() => Need::OwnFit,
             Compiled::Ridges(_) | Compiled::Synthesis(_) | Compiled::StickSlip(_) => Need::Velocity,
+        }
+    }
+}
+
+impl Compiled {
+    /// The velocity of a texture with a fit of its own ([`Need::OwnFit`]), µm/s; None for
+    /// every other kind, or before its fit has a full window.
+    pub(crate) fn own_velocity_um_s(&self) -> Option<i32> {
+        match self {
+            Compiled::Ridges(r) => r.own_velocity_um_s(),
+            _ => None,
+        }
+    }
+
+    /// Feeds the newest `k` positions of a texture's own fit to `estimator` (from scratch):
+    /// the estimator slept in its region and wakes seeded, not empty. Feeds nothing for a kind
+    /// without a fit of its own.
+    pub(crate) fn seed<E: VelocityEstimator + ?Sized>(&self, estimator: &mut E, k: usize) {
+        estimator.reset();
+        if let Compiled::Ridges(r) = self {
+            for (position_um, t_us) in r.own_history(k) {
+                let _ = estimator.update(position_um, t_us);
+            }
         }
     }
 }

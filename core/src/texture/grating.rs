@@ -348,6 +348,22 @@ impl Ridges {
         self.hybrid.is_some()
     }
 
+    /// The hybrid's velocity, µm/s: its line's slope, as its pulses are sized (None without a
+    /// full window, or for a position-phase grating).
+    pub(crate) fn own_velocity_um_s(&self) -> Option<i32> {
+        let h = self.hybrid.as_ref()?;
+        h.fit.line().map(|l| (l.slope_um * h.samples_per_s) as i32)
+    }
+
+    /// The hybrid's newest `k` positions and their times, oldest first (none for a
+    /// position-phase grating): what a velocity estimator is seeded from on leaving its region.
+    pub(crate) fn own_history(&self, k: usize) -> impl Iterator<Item = (i32, u32)> + '_ {
+        self.hybrid
+            .as_ref()
+            .into_iter()
+            .flat_map(move |h| h.fit.history(k, h.sample_period_us))
+    }
+
     /// [`Self::step_as`] for this grating's renderer.
     #[inline(always)]
     pub(crate) fn step(

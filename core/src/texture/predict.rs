@@ -135,15 +135,50 @@ impl LineFit {
             self.head = if self.head + 1 == N { 0 } else { self.head + 1 };
             self.full.slide(position_um, oldest);
         }
+        let line = self.chosen();
+        self.expected_um = Some(line.end_um + line.slope_um);
+        Some(line)
+    }
+
+    /// The full window's line, or its newer half's where the two disagree (an acceleration).
+    #[inline(always)]
+    fn chosen(&self) -> Line {
         let full = self.full.line();
         let half = self.half.line();
-        let line = if (full.end_um - half.end_um).abs() <= DISAGREE_UM {
+        if (full.end_um - half.end_um).abs() <= DISAGREE_UM {
             full
         } else {
             half
-        };
-        self.expected_um = Some(line.end_um + line.slope_um);
-        Some(line)
+        }
+    }
+
+    /// The line the last [`Self::push`] returned (None while the window fills), made again
+    /// from the sums: O(1), for a velocity read at a stream's rate, not per sample.
+    pub(crate) fn line(&self) -> Option<Line> {
+        (self.full.count == N).then(|| self.chosen())
+    }
+
+    /// The newest `k` samples of the window (fewer if it holds fewer), oldest first, with the
+    /// times they were taken at, µs: every sample in the window came one period after the one
+    /// before (`push` starts over on any other step), the newest at the last push's time.
+    pub(crate) fn history(
+        &self,
+        k: usize,
+        period_us: u32,
+    ) -> impl Iterator<Item = (i32, u32)> + '_ {
+        let count = self.full.count;
+        let k = k.min(count);
+        // Oldest of the window at ring index `head` once full (0 while filling).
+        let first = if count == N { self.head } else { 0 };
+        let last_t_us = self.last_t_us;
+        (count - k..count).map(move |age_from_oldest| {
+            let at = (first + age_from_oldest) & (N - 1);
+            let back = (count - 1 - age_from_oldest) as u32;
+            (
+                self.ring.get(at).copied().unwrap_or(0),
+                last_t_us.wrapping_sub(back.wrapping_mul(period_us)),
+            )
+        })
     }
 
     /// The newer half's line (tests).

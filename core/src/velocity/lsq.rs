@@ -265,6 +265,12 @@ impl<const N: usize> VelocityEstimator for LsqSlope<N> {
         }
     }
 
+    /// N on-grid samples fill the window, whose slope is the estimate.
+    #[inline(always)]
+    fn window_samples(&self) -> usize {
+        N
+    }
+
     #[inline(always)]
     fn estimate(&self) -> Option<i32> {
         if !self.resting {

@@ -109,6 +109,15 @@ impl<E: VelocityEstimator> VelocityEstimator for Median3<E> {
         self.inner.wake();
     }
 
+    /// Two samples more than the inner window: the first median needs three.
+    #[inline(always)]
+    fn window_samples(&self) -> usize {
+        match self.inner.window_samples() {
+            0 => 0,
+            n => n + 2,
+        }
+    }
+
     #[inline(always)]
     fn estimate(&self) -> Option<i32> {
         // While the window refills after a reset or a gap `update` answers None.

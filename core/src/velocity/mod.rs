@@ -68,6 +68,15 @@ pub trait VelocityEstimator {
     fn estimate(&self) -> Option<i32> {
         None
     }
+
+    /// The samples, fed from scratch by [`Self::update`], after which the estimate is the one
+    /// an estimator fed all along would give (its window; 0: no such number, never seeded).
+    /// The controller lets an estimator with a window sleep where a texture's own fit gives
+    /// the velocity, and seeds it from that fit's newest positions on leaving.
+    #[inline(always)]
+    fn window_samples(&self) -> usize {
+        0
+    }
 }
 
 /// Why an estimator could not be configured (the values its sentence, `Display`, names).
