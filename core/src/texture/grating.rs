@@ -364,8 +364,9 @@ impl Ridges {
             .flat_map(move |h| h.fit.history(k, h.sample_period_us))
     }
 
-    /// [`Self::step_as`] for this grating's renderer.
-    #[inline(always)]
+    /// [`Self::step_as`] for this grating's renderer (tests; the controller asks through
+    /// [`Render::request`]).
+    #[cfg(test)]
     pub(crate) fn step(
         &mut self,
         position_um: i32,
@@ -374,23 +375,28 @@ impl Ridges {
         timer: &BurstTimer,
     ) -> (Want, Option<TimerSettings>, u32) {
         if self.hybrid.is_some() {
-            self.step_hybrid(position_um, velocity_um_s, t_us, timer)
+            let r = self.step_hybrid(position_um, t_us, timer);
+            (r.want, r.settings, r.skipped)
         } else {
             self.step_as::<false>(position_um, velocity_um_s, t_us, timer)
         }
     }
 
     /// The hybrid's copy, a call of its own: inlined into the controller it spills the
-    /// sample path's registers (M4F: +30 instructions per sample, `scripts/emu.sh`).
+    /// sample path's registers (M4F: +30 instructions per sample, `scripts/emu.sh`). It
+    /// returns the whole request, written once into the caller's (a tuple copied into a
+    /// request after the call cost the M4F ~14 instructions a sample), and takes no velocity:
+    /// its own line is its velocity (the estimator sleeps in its region).
     #[inline(never)]
-    fn step_hybrid(
-        &mut self,
-        position_um: i32,
-        velocity_um_s: Option<i32>,
-        t_us: u32,
-        timer: &BurstTimer,
-    ) -> (Want, Option<TimerSettings>, u32) {
-        self.step_as::<true>(position_um, velocity_um_s, t_us, timer)
+    fn step_hybrid(&mut self, position_um: i32, t_us: u32, timer: &BurstTimer) -> Request {
+        let (want, settings, skipped) = self.step_as::<true>(position_um, None, t_us, timer);
+        Request {
+            settings,
+            skipped,
+            amplitude: self.amplitude,
+            want,
+            clamped: false,
+        }
     }
 
     /// What to do on this sample, the pulse's settings, and the ridges passed without a pulse.
@@ -629,8 +635,11 @@ impl Render for Ridges {
     // sample's fields stay in registers.
     #[inline(always)]
     fn request(&mut self, now: &Moment<'_>) -> Request {
+        if self.hybrid.is_some() {
+            return self.step_hybrid(now.position_um, now.t_us, now.timer);
+        }
         let (want, settings, skipped) =
-            self.step(now.position_um, now.velocity_um_s, now.t_us, now.timer);
+            self.step_as::<false>(now.position_um, now.velocity_um_s, now.t_us, now.timer);
         Request {
             settings,
             skipped,
