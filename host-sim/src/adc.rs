@@ -189,6 +189,18 @@ impl Default for AdcParams {
 }
 
 impl AdcParams {
+    /// The closed loop's model of `board`'s acquisition: the default (2 LSB RMS of white noise
+    /// per conversion, no silicon effect) converting the board's conversions per sample
+    /// (`saw_boards::Oversampling::conversions`: 16 on the F446, 32 on the G474), the sum
+    /// scaled to the core's 16-conversion code as the board's shift does. On the F446 this is
+    /// exactly [`AdcParams::default`].
+    pub fn for_board(board: &saw_boards::BoardDef) -> Self {
+        Self {
+            oversample: board.adc.oversampling.conversions(),
+            ..Self::default()
+        }
+    }
+
     /// The same model with `noise_lsb_rms` of noise per conversion, drawn from `seed`.
     pub fn with_noise(mut self, noise_lsb_rms: f64, seed: u64) -> Self {
         self.noise_lsb_rms = noise_lsb_rms;
@@ -396,7 +408,20 @@ impl AdcModel {
             }
             None => self.sum_of_conversions(position_um),
         };
-        Some(Sample::from_sum(sum, t_us as u32))
+        Some(Sample::from_sum(self.code_of_sum(sum as f64), t_us as u32))
+    }
+
+    /// The core's 16-conversion code of a sum of [`AdcParams::oversample`] conversions: the sum
+    /// itself at 16, else scaled with rounding (the G474 oversampler's right shift rounds; the
+    /// F446's software sum is shifted the same way). One rule for [`Self::sample`] and
+    /// [`Self::sample_moving`].
+    fn code_of_sum(&self, sum: f64) -> u32 {
+        let m = self.params.oversample;
+        if m == OVERSAMPLE {
+            sum as u32
+        } else {
+            (sum * OVERSAMPLE as f64 / m as f64).round() as u32
+        }
     }
 
     /// The control samples of a block: for each of `states`, at (`k0` + i) × `period_us` µs,
@@ -447,10 +472,8 @@ impl AdcModel {
             }
             sum += v.round().clamp(0.0, top);
         }
-        // The core's code is the sum of 16 conversions: scale with rounding (the G474
-        // oversampler's shift rounds; the F446's software sum is shifted the same way).
-        let code = (sum * OVERSAMPLE as f64 / m as f64).round() as u32;
-        Some(Sample::from_sum(code, t_us as u32))
+        // The core's code is the sum of 16 conversions (scaled when there are more or fewer).
+        Some(Sample::from_sum(self.code_of_sum(sum), t_us as u32))
     }
 
     /// The noise floor for the sample at `t_us`: a first-order (Ornstein–Uhlenbeck) process of

@@ -19,14 +19,13 @@ use clap::Parser;
 use embassy_futures::block_on;
 use saw_boards::BoardDef;
 use saw_core::velocity::VelocityEstimator;
-use saw_core::Controller;
 use saw_link::frame::{self, Receiver, MAX_ENCODED};
 use saw_link::msg::{Header, Reply, SceneSource};
 use saw_link::session::{Identity, Session};
 use saw_link::stream::Batcher;
 
 use crate::door::{Range, Whole};
-use crate::sim::{burst_timer, sample_period_us, SimParams};
+use crate::sim::{board_controller, burst_timer, sample_period_us, SimParams};
 use crate::trajectory::Trajectory;
 use board::VirtualBoard;
 use pty::Pty;
@@ -194,8 +193,7 @@ pub fn serve_with_clock(
         Some(path) => Some(flash::open(path, board)?),
         None => None,
     };
-    let ctrl =
-        Controller::new(burst_timer(board), sample_period_us(board)).map_err(|e| e.to_string())?;
+    let ctrl = board_controller(board).map_err(|e| e.to_string())?;
     let boot = VirtualBoard::boot(&params, ctrl, source, store).map_err(|e| e.to_string())?;
     let identity = Identity {
         firmware: concat!("host-sim serve ", env!("CARGO_PKG_VERSION")),
