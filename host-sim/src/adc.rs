@@ -670,6 +670,68 @@ mod tests {
         assert_eq!(adc.sample(30_000.0, 2_000_000).unwrap().code, clean);
     }
 
+    /// A sample of other than 16 conversions is scaled to the core's 16-conversion code with
+    /// rounding, on the tabulated and the per-conversion paths and through rails and spikes:
+    /// the same code for the same voltage at 8, 16 or 32 conversions, and the noise of m
+    /// conversions (σ·√m in the sum, σ·16/√m in the code: σ = 3 LSB gives 12 codes at 16,
+    /// 8.49 at 32, 16.97 at 8).
+    #[test]
+    fn other_conversion_counts_are_scaled_to_the_core_code() {
+        let model = |oversample: u32, noise: f64, per_conversion: bool, faults| {
+            AdcModel::new(
+                Calibration::default(),
+                AdcParams {
+                    noise_lsb_rms: noise,
+                    oversample,
+                    seed: 5,
+                    per_conversion,
+                    faults,
+                    ..AdcParams::default()
+                },
+            )
+            .unwrap()
+        };
+        let faults = vec![
+            FaultWindow {
+                kind: FaultKind::Short,
+                start_us: 100,
+                end_us: 200,
+            },
+            FaultWindow {
+                kind: FaultKind::Spike { offset_lsb: 100 },
+                start_us: 200,
+                end_us: 300,
+            },
+        ];
+        for m in [8, 16, 32] {
+            let mut adc = model(m, 0.0, false, faults.clone());
+            assert_eq!(adc.sample(0.0, 0).unwrap().code, 82 * 16, "{m}");
+            let clean = adc.sample(30_000.0, 0).unwrap().code;
+            assert_eq!(adc.sample(30_000.0, 100).unwrap().code, 65_520, "{m}");
+            assert_eq!(
+                adc.sample(30_000.0, 200).unwrap().code,
+                clean + 100 * 16,
+                "{m}"
+            );
+            for per_conversion in [false, true] {
+                let mut adc = model(m, 3.0, per_conversion, Vec::new());
+                let xs: Vec<f64> = (0..4000)
+                    .map(|i| adc.sample(31_500.0, i).unwrap().code as f64)
+                    .collect();
+                let n = xs.len() as f64;
+                let mean = xs.iter().sum::<f64>() / n;
+                let sd = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
+                let want = 3.0 * 16.0 / (m as f64).sqrt();
+                assert!(
+                    (sd - want).abs() < 0.06 * want,
+                    "{m} {per_conversion}: {sd}"
+                );
+                let ideal = adc.ideal_conversion(31_500.0) * 16.0;
+                assert!((mean - ideal).abs() < 1.0, "{m} {per_conversion}: {mean}");
+            }
+        }
+    }
+
     /// The ADC model's refusals read as sentences (the calibration's is the core's own).
     #[test]
     fn errors_read_as_sentences() {
