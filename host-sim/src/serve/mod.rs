@@ -65,7 +65,7 @@ pub struct ServeArgs {
     /// Where to put the link to the pty's slave (`saw --port` takes this path).
     #[arg(long, value_name = "PATH")]
     pub pty: PathBuf,
-    /// The board to stand for.
+    /// The board to stand for (its timers, acquisition and velocity window).
     #[arg(long, default_value = saw_boards::NUCLEO_F446RE.name, value_parser = crate::cli::board_parser())]
     pub board: &'static BoardDef,
     /// The scene to run when no saved scene is stored (the built-in default without it).
