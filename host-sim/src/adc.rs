@@ -189,6 +189,18 @@ impl Default for AdcParams {
 }
 
 impl AdcParams {
+    /// The closed loop's model of `board`'s acquisition: the default (2 LSB RMS of white noise
+    /// per conversion, no silicon effect) converting the board's conversions per sample
+    /// (`saw_boards::Oversampling::conversions`: 16 on the F446, 32 on the G474), the sum
+    /// scaled to the core's 16-conversion code as the board's shift does. On the F446 this is
+    /// exactly [`AdcParams::default`].
+    pub fn for_board(board: &saw_boards::BoardDef) -> Self {
+        Self {
+            oversample: board.adc.oversampling.conversions(),
+            ..Self::default()
+        }
+    }
+
     /// The same model with `noise_lsb_rms` of noise per conversion, drawn from `seed`.
     pub fn with_noise(mut self, noise_lsb_rms: f64, seed: u64) -> Self {
         self.noise_lsb_rms = noise_lsb_rms;
@@ -396,7 +408,20 @@ impl AdcModel {
             }
             None => self.sum_of_conversions(position_um),
         };
-        Some(Sample::from_sum(sum, t_us as u32))
+        Some(Sample::from_sum(self.code_of_sum(sum as f64), t_us as u32))
+    }
+
+    /// The core's 16-conversion code of a sum of [`AdcParams::oversample`] conversions: the sum
+    /// itself at 16, else scaled with rounding (the G474 oversampler's right shift rounds; the
+    /// F446's software sum is shifted the same way). One rule for [`Self::sample`] and
+    /// [`Self::sample_moving`].
+    fn code_of_sum(&self, sum: f64) -> u32 {
+        let m = self.params.oversample;
+        if m == OVERSAMPLE {
+            sum as u32
+        } else {
+            (sum * OVERSAMPLE as f64 / m as f64).round() as u32
+        }
     }
 
     /// The control samples of a block: for each of `states`, at (`k0` + i) × `period_us` µs,
@@ -447,10 +472,8 @@ impl AdcModel {
             }
             sum += v.round().clamp(0.0, top);
         }
-        // The core's code is the sum of 16 conversions: scale with rounding (the G474
-        // oversampler's shift rounds; the F446's software sum is shifted the same way).
-        let code = (sum * OVERSAMPLE as f64 / m as f64).round() as u32;
-        Some(Sample::from_sum(code, t_us as u32))
+        // The core's code is the sum of 16 conversions (scaled when there are more or fewer).
+        Some(Sample::from_sum(self.code_of_sum(sum), t_us as u32))
     }
 
     /// The noise floor for the sample at `t_us`: a first-order (Ornstein–Uhlenbeck) process of
@@ -645,6 +668,68 @@ mod tests {
             clean + 500 * 16
         );
         assert_eq!(adc.sample(30_000.0, 2_000_000).unwrap().code, clean);
+    }
+
+    /// A sample of other than 16 conversions is scaled to the core's 16-conversion code with
+    /// rounding, on the tabulated and the per-conversion paths and through rails and spikes:
+    /// the same code for the same voltage at 8, 16 or 32 conversions, and the noise of m
+    /// conversions (σ·√m in the sum, σ·16/√m in the code: σ = 3 LSB gives 12 codes at 16,
+    /// 8.49 at 32, 16.97 at 8).
+    #[test]
+    fn other_conversion_counts_are_scaled_to_the_core_code() {
+        let model = |oversample: u32, noise: f64, per_conversion: bool, faults| {
+            AdcModel::new(
+                Calibration::default(),
+                AdcParams {
+                    noise_lsb_rms: noise,
+                    oversample,
+                    seed: 5,
+                    per_conversion,
+                    faults,
+                    ..AdcParams::default()
+                },
+            )
+            .unwrap()
+        };
+        let faults = vec![
+            FaultWindow {
+                kind: FaultKind::Short,
+                start_us: 100,
+                end_us: 200,
+            },
+            FaultWindow {
+                kind: FaultKind::Spike { offset_lsb: 100 },
+                start_us: 200,
+                end_us: 300,
+            },
+        ];
+        for m in [8, 16, 32] {
+            let mut adc = model(m, 0.0, false, faults.clone());
+            assert_eq!(adc.sample(0.0, 0).unwrap().code, 82 * 16, "{m}");
+            let clean = adc.sample(30_000.0, 0).unwrap().code;
+            assert_eq!(adc.sample(30_000.0, 100).unwrap().code, 65_520, "{m}");
+            assert_eq!(
+                adc.sample(30_000.0, 200).unwrap().code,
+                clean + 100 * 16,
+                "{m}"
+            );
+            for per_conversion in [false, true] {
+                let mut adc = model(m, 3.0, per_conversion, Vec::new());
+                let xs: Vec<f64> = (0..4000)
+                    .map(|i| adc.sample(31_500.0, i).unwrap().code as f64)
+                    .collect();
+                let n = xs.len() as f64;
+                let mean = xs.iter().sum::<f64>() / n;
+                let sd = (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
+                let want = 3.0 * 16.0 / (m as f64).sqrt();
+                assert!(
+                    (sd - want).abs() < 0.06 * want,
+                    "{m} {per_conversion}: {sd}"
+                );
+                let ideal = adc.ideal_conversion(31_500.0) * 16.0;
+                assert!((mean - ideal).abs() < 1.0, "{m} {per_conversion}: {mean}");
+            }
+        }
     }
 
     /// The ADC model's refusals read as sentences (the calibration's is the core's own).

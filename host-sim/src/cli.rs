@@ -182,7 +182,8 @@ pub struct Args {
     #[arg(long, value_name = "SEED", default_value_t = 1, allow_hyphen_values = true,
           help = SEED.help("Noise seed"), value_parser = SEED.parser())]
     pub seed: u64,
-    /// Board.
+    /// Board: its timers, its acquisition and its velocity window (F446: 16 conversions a
+    /// sample, 32 samples; G474: 32 conversions, 26 samples).
     #[arg(long, default_value = saw_boards::NUCLEO_F446RE.name, value_parser = board_parser())]
     pub board: &'static BoardDef,
     /// Disable timer preload (ARPE, OCxPE = 0): a new ARR/CCR acts at once, so a 16-bit timer

@@ -4,13 +4,20 @@
 //! `on_sample` and its gate action applied to the timer model at the sample's time (plus an
 //! optional latency). Half a period later `on_tick` runs the stale watchdog, as the firmware's
 //! supervision timer does. Every sample period leaves one [`TracePoint`].
+//!
+//! Each board runs its own acquisition and estimator: [`SimParams::new`] takes the ADC model's
+//! conversions per sample from the board ([`AdcParams::for_board`]: 16 on the F446, 32 on the
+//! G474) and [`run`] (and [`stream`], the virtual board, the soak) builds the controller with the
+//! board's window ([`board_controller`]: `BoardDef::velocity_window`, 32 on the F446, 26 on the
+//! G474), as the firmware does.
 
 use saw_boards::BoardDef;
 use saw_core::burst::{self, BurstTimer, TimerSettings};
+use saw_core::controller::WindowEstimator;
 use saw_core::gate::GateAction;
 use saw_core::position::SensorFault;
 use saw_core::sample::Sample;
-use saw_core::velocity::VelocityEstimator;
+use saw_core::velocity::{LsqSlope, Median3, VelocityEstimator};
 use saw_core::{Config, ConfigError, Controller, Telemetry};
 
 use crate::adc::{AdcError, AdcModel, AdcParams, FaultWindow};
@@ -28,7 +35,7 @@ pub struct SimParams {
     pub trajectory: Trajectory,
     /// Simulated time, s.
     pub duration_s: f64,
-    /// Rheostat / ADC model.
+    /// Rheostat / ADC model ([`AdcParams::for_board`] unless changed).
     pub adc: AdcParams,
     /// Timer preload (ARPE/OCxPE) as the firmware sets it; `false` only to show what it prevents.
     pub preload: bool,
@@ -37,14 +44,15 @@ pub struct SimParams {
 }
 
 impl SimParams {
-    /// The default run: default scene on `board`, the given trajectory and time, 2 LSB noise.
+    /// The default run: default scene on `board`, the given trajectory and time, 2 LSB noise on
+    /// each of the board's conversions ([`AdcParams::for_board`]).
     pub fn new(board: &'static BoardDef, trajectory: Trajectory, duration_s: f64) -> Self {
         Self {
             board,
             config: saw_core::default_config(),
             trajectory,
             duration_s,
-            adc: AdcParams::default(),
+            adc: AdcParams::for_board(board),
             preload: true,
             action_latency_us: 0,
         }
@@ -96,6 +104,103 @@ pub fn burst_timer(board: &BoardDef) -> BurstTimer {
 /// The sample period of a board, µs.
 pub fn sample_period_us(board: &BoardDef) -> u32 {
     1_000_000 / board.sample_rate_hz
+}
+
+/// The default estimator at a board's window (`BoardDef::velocity_window`), chosen at run
+/// time: the firmware's `Controller<WindowEstimator<{ BOARD.velocity_window }>>` for each
+/// board host-sim runs. Each variant is the core's estimator itself, so a run gives what the
+/// bare `WindowEstimator<N>` gives, bit for bit.
+#[derive(Clone, Debug)]
+pub enum BoardEstimator {
+    /// 26 samples (the G474).
+    Window26(WindowEstimator<26>),
+    /// 32 samples (the F446; the core's `DEFAULT_WINDOW`).
+    Window32(WindowEstimator<32>),
+}
+
+/// The windows [`BoardEstimator`] has, samples.
+pub const BOARD_WINDOWS: [usize; 2] = [26, 32];
+
+macro_rules! each_window {
+    ($self:expr, $e:ident => $body:expr) => {
+        match $self {
+            BoardEstimator::Window26($e) => $body,
+            BoardEstimator::Window32($e) => $body,
+        }
+    };
+}
+
+impl BoardEstimator {
+    /// The estimator over `window` samples at `sample_period_us`; None for a window host-sim
+    /// does not build ([`BOARD_WINDOWS`]).
+    pub fn new(window: usize, sample_period_us: u32) -> Result<Option<Self>, ConfigError> {
+        fn build<const N: usize>(period_us: u32) -> Result<WindowEstimator<N>, ConfigError> {
+            let lsq = LsqSlope::<N>::new(period_us).map_err(ConfigError::Estimator)?;
+            Ok(Median3::new(lsq, period_us))
+        }
+        Ok(match window {
+            26 => Some(Self::Window26(build(sample_period_us)?)),
+            32 => Some(Self::Window32(build(sample_period_us)?)),
+            _ => None,
+        })
+    }
+
+    /// Its window, samples.
+    pub fn window(&self) -> usize {
+        match self {
+            Self::Window26(_) => 26,
+            Self::Window32(_) => 32,
+        }
+    }
+}
+
+impl VelocityEstimator for BoardEstimator {
+    #[inline]
+    fn update(&mut self, position_um: i32, t_us: u32) -> Option<i32> {
+        each_window!(self, e => e.update(position_um, t_us))
+    }
+    #[inline]
+    fn reset(&mut self) {
+        each_window!(self, e => e.reset())
+    }
+    #[inline]
+    fn group_delay_us(&self) -> u32 {
+        each_window!(self, e => e.group_delay_us())
+    }
+    #[inline]
+    fn rests(&self) -> bool {
+        each_window!(self, e => e.rests())
+    }
+    #[inline]
+    fn rest(&mut self, position_um: i32, t_us: u32) {
+        each_window!(self, e => e.rest(position_um, t_us))
+    }
+    #[inline]
+    fn wake(&mut self) {
+        each_window!(self, e => e.wake())
+    }
+    #[inline]
+    fn estimate(&self) -> Option<i32> {
+        each_window!(self, e => e.estimate())
+    }
+}
+
+/// The controller a board's firmware runs: its burst timer, its sample period and the default
+/// estimator over its window (`BoardDef::velocity_window`).
+pub fn board_controller(board: &BoardDef) -> Result<Controller<BoardEstimator>, SimError> {
+    let estimator = board_estimator(board)?;
+    Ok(Controller::with_estimator(
+        burst_timer(board),
+        sample_period_us(board),
+        estimator,
+    ))
+}
+
+/// The default estimator over `board`'s window at its sample period.
+pub fn board_estimator(board: &BoardDef) -> Result<BoardEstimator, SimError> {
+    BoardEstimator::new(board.velocity_window, sample_period_us(board))
+        .map_err(SimError::Controller)?
+        .ok_or(SimError::Window(board.velocity_window))
 }
 
 /// One sample period of the run.
@@ -224,6 +329,8 @@ pub enum SimError {
     Config(ConfigError),
     /// The ADC model could not be built.
     Adc(AdcError),
+    /// The board's velocity window is not one host-sim builds ([`BOARD_WINDOWS`]).
+    Window(usize),
 }
 
 impl std::fmt::Display for SimError {
@@ -233,17 +340,21 @@ impl std::fmt::Display for SimError {
             SimError::Controller(e) => write!(f, "the controller refused the board: {e}"),
             SimError::Config(e) => write!(f, "the scene was refused: {e}"),
             SimError::Adc(e) => write!(f, "the ADC model was refused: {e}"),
+            SimError::Window(w) => write!(
+                f,
+                "the board's velocity window of {w} samples is not one host-sim builds \
+                 ({BOARD_WINDOWS:?})"
+            ),
         }
     }
 }
 
 impl std::error::Error for SimError {}
 
-/// Runs the closed loop with the default estimator.
+/// Runs the closed loop with the default estimator over the board's window
+/// ([`board_controller`]).
 pub fn run(params: &SimParams) -> Result<SimResult, SimError> {
-    let ctrl = Controller::new(burst_timer(params.board), sample_period_us(params.board))
-        .map_err(SimError::Controller)?;
-    run_controller(params, ctrl)
+    run_controller(params, board_controller(params.board)?)
 }
 
 /// Runs the closed loop with another velocity estimator (the bench compares them).
@@ -524,7 +635,7 @@ pub fn stream_on(
 ) -> Result<Streamed, SimError> {
     let timer = burst_timer(params.board);
     let period_us = sample_period_us(params.board);
-    let ctrl = Controller::new(timer, period_us).map_err(SimError::Controller)?;
+    let ctrl = board_controller(params.board)?;
     let mut lp = ClosedLoop::new(params, ctrl)?;
     let mut sink = Sink::new(params, chart);
     let (mut edges, mut levels) = (Vec::new(), Vec::new());
@@ -645,9 +756,8 @@ pub const BARE_CORE_PASSES: usize = 5;
 /// s, the best of [`BARE_CORE_PASSES`] passes (each from the freshly loaded controller): the
 /// ceiling a closed loop on this machine is measured against.
 pub fn bare_core_s_per_sample(params: &SimParams, samples: u64) -> Result<f64, SimError> {
-    let timer = burst_timer(params.board);
     let period_us = sample_period_us(params.board);
-    let mut ctrl = Controller::new(timer, period_us).map_err(SimError::Controller)?;
+    let mut ctrl = board_controller(params.board)?;
     ctrl.load(&params.config).map_err(SimError::Config)?;
     // The same core work as the closed loop's (which reads the velocity of every sample).
     ctrl.velocity_every_sample(true);
@@ -776,8 +886,7 @@ mod tests {
             },
         ]);
         let blocks = run(&params).unwrap();
-        let ctrl =
-            Controller::new(burst_timer(params.board), sample_period_us(params.board)).unwrap();
+        let ctrl = board_controller(params.board).unwrap();
         let mut lp = ClosedLoop::new(&params, ctrl).unwrap();
         let period_us = sample_period_us(params.board) as u64;
         let single: Vec<TracePoint> = (0..samples_in(&params))

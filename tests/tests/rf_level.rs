@@ -44,12 +44,16 @@ const SLOW_RMS_UM: f64 = 16.0;
 const SLOW_P95_UM: f64 = 1.5 * LSB_UM;
 
 /// Snapshot: the worst distance of a triangle's peak from its line over [`SEEDS`] on the
-/// reference noise stream, 36.02 µm (G474, −60 mm/s, seed 4), as docs/rf-level.md and the
-/// README state it (per speed 24 µm at +20 and +60 mm/s, 32 at −20, 36 at −60; at 200 mm/s
-/// within one sample of travel, 20 µm). Not a specification: another noise realisation moves
-/// it (on the tabulated stream seed 7 at −20 mm/s peaks 40 µm from the line).
-const SNAPSHOT_WORST_UM: f64 = 36.02;
-const SNAPSHOT_WORST_CASE: &str = "nucleo-g474re -60000 µm/s seed 4";
+/// reference noise stream, 40.06 µm (G474, +200 mm/s, seed 3: two samples of travel early), as
+/// docs/rf-level.md and the README state it. Since each board runs its own acquisition and
+/// window (issue #35) the G474 peaks within 18 µm at 20–60 mm/s (its lower noise) and within one
+/// sample of travel at 200 mm/s on 11 of 12 seeds each way; the F446, unchanged: per speed 24 µm
+/// at +20 and +60 mm/s, 32 at −20, 36 at −60, one sample of travel (20 µm) at 200 mm/s. Before,
+/// with the F446's acquisition and window on both boards: 36.02 µm (G474, −60 mm/s, seed 4).
+/// Not a specification: another noise realisation moves it (on the tabulated stream seed 7 at
+/// −20 mm/s peaks 40 µm from the line).
+const SNAPSHOT_WORST_UM: f64 = 40.064;
+const SNAPSHOT_WORST_CASE: &str = "nucleo-g474re 200000 µm/s seed 3";
 
 fn lines_config(envelope: Envelope, amplitude_permille: u16) -> saw_core::Config {
     let mut cfg = default_config();
@@ -82,7 +86,7 @@ fn crossing(
     )
     .with_config(cfg)
     .with_noise(2.0, seed)
-    // The snapshot figure (36 µm over these 12 seeds) was measured on this noise stream; on
+    // The snapshot figure (40 µm over these 12 seeds) was measured on this noise stream; on
     // the tabulated one seed 7 at −20 mm/s peaks 40 µm from the line (docs/streaming.md).
     .with_reference_noise();
     sim::run(&p).unwrap()

@@ -19,14 +19,13 @@ use clap::Parser;
 use embassy_futures::block_on;
 use saw_boards::BoardDef;
 use saw_core::velocity::VelocityEstimator;
-use saw_core::Controller;
 use saw_link::frame::{self, Receiver, MAX_ENCODED};
 use saw_link::msg::{Header, Reply, SceneSource};
 use saw_link::session::{Identity, Session};
 use saw_link::stream::Batcher;
 
 use crate::door::{Range, Whole};
-use crate::sim::{burst_timer, sample_period_us, SimParams};
+use crate::sim::{board_controller, burst_timer, sample_period_us, SimParams};
 use crate::trajectory::Trajectory;
 use board::VirtualBoard;
 use pty::Pty;
@@ -66,7 +65,7 @@ pub struct ServeArgs {
     /// Where to put the link to the pty's slave (`saw --port` takes this path).
     #[arg(long, value_name = "PATH")]
     pub pty: PathBuf,
-    /// The board to stand for.
+    /// The board to stand for (its timers, acquisition and velocity window).
     #[arg(long, default_value = saw_boards::NUCLEO_F446RE.name, value_parser = crate::cli::board_parser())]
     pub board: &'static BoardDef,
     /// The scene to run when no saved scene is stored (the built-in default without it).
@@ -194,8 +193,7 @@ pub fn serve_with_clock(
         Some(path) => Some(flash::open(path, board)?),
         None => None,
     };
-    let ctrl =
-        Controller::new(burst_timer(board), sample_period_us(board)).map_err(|e| e.to_string())?;
+    let ctrl = board_controller(board).map_err(|e| e.to_string())?;
     let boot = VirtualBoard::boot(&params, ctrl, source, store).map_err(|e| e.to_string())?;
     let identity = Identity {
         firmware: concat!("host-sim serve ", env!("CARGO_PKG_VERSION")),

@@ -253,7 +253,7 @@ pub fn run_episode(seed: u64, episode: u64, samples: u64, plant: Plant) -> Episo
     .with_config(cfg.clone())
     .with_faults(faults)
     .with_noise(noise, noise_seed);
-    let ctrl = match Controller::new(timer, period_us as u32) {
+    let ctrl = match crate::sim::board_controller(board) {
         Ok(c) => c,
         Err(e) => return refused_board(report, global0, &e.to_string()),
     };
@@ -276,7 +276,7 @@ pub fn run_episode(seed: u64, episode: u64, samples: u64, plant: Plant) -> Episo
     let base_clk = clk(t0_us);
     let mut next_event = 0;
     // The controller as it was before a refused load, and the last sample to compare it on.
-    let mut shadow: Option<(Controller, u64)> = None;
+    let mut shadow: Option<(Controller<crate::sim::BoardEstimator>, u64)> = None;
     // The last periodic settings the core issued (for the carrier-on-fault plant).
     let mut last_settings: Option<TimerSettings> = None;
 
