@@ -343,6 +343,60 @@ fn entering_a_velocity_region_the_woken_estimator_bursts_as_the_background_one()
     );
 }
 
+/// [`ENTRY`] with hybrid gratings (λ = 0.5 mm) either side: the finger comes from a region where
+/// the estimator sleeps (the hybrid's own line is the velocity there).
+const ENTRY_FROM_HYBRID: &str = r#"
+[[region]]
+kind = "grating"
+until_mm = 30
+wavelength_mm = 0.5
+render = "hybrid"
+
+[[region]]
+kind = "grating"
+until_mm = 40
+wavelength_mm = 1.0
+render = "velocity"
+
+[[region]]
+kind = "grating"
+wavelength_mm = 0.5
+render = "hybrid"
+"#;
+
+/// Leaving the hybrid's region, the sleeping estimator is seeded from the hybrid's line's newest
+/// positions ("seed it from the last positions", issue #35): the first burst in the velocity
+/// region that follows is the background estimator's, sample and f_b, on every entry at
+/// 20–200 mm/s both ways over [`ENTRY_SEEDS`] (the line's window of 64 raw positions holds the
+/// estimator's 34 whenever no glitch or turn emptied it in the last 3.4 ms).
+#[test]
+fn entering_a_velocity_region_from_the_hybrids_the_seeded_estimator_bursts_as_the_background_one() {
+    let cfg = config(ENTRY_FROM_HYBRID);
+    let mut entries = 0;
+    for speed_mm_s in [20.0, 50.0, 100.0, 200.0] {
+        for dir in [1.0, -1.0] {
+            for seed in ENTRY_SEEDS {
+                let speed = speed_mm_s * 1e3 * dir;
+                let boundary = if dir > 0.0 { 30_000.0 } else { 40_000.0 };
+                let stroke = Trajectory::Constant {
+                    from_um: boundary - speed * 0.06,
+                    speed_um_s: speed,
+                };
+                let input = samples(&cfg, &stroke, 0.075, seed, vec![]);
+                let mut background = controller(&cfg, default_estimator());
+                background.velocity_every_sample(true);
+                let what = format!("{speed_mm_s} mm/s, dir {dir}, seed {seed}");
+                let today = first_burst(background, &input, 60_000).expect(&what);
+                let seeded = first_burst(controller(&cfg, default_estimator()), &input, 60_000)
+                    .expect(&what);
+                assert_eq!(seeded, today, "{what}");
+                entries += 1;
+            }
+        }
+    }
+    assert_eq!(entries, 48);
+}
+
 /// Each board's controller has its plan's window: the first velocity comes on the window's
 /// last sample (the median's three, then the slope's N), and the boards' range of windows ends
 /// where saw-core's 32-bit sums do.
