@@ -50,8 +50,9 @@ const BUDGET: u64 = host_sim::budget::SAMPLE_BUDGET_INSTR;
 /// The hybrid pays its 64-sample line fit on every sample (the position-phase grating is
 /// under the budget since stop 27, the material since stop 28: both checked against it).
 /// Issue #35 (the estimator rests in the hybrid's region, its line is its velocity) took its
-/// worst row from 552.8 to 525.4: the ceiling follows, 3 % over.
-const OVER_BUDGET: [(&str, f64); 1] = [("grating-hybrid/", 541.0)];
+/// worst row from 552.8 to 525.4, and letting it sleep there (seeded from the line on leaving)
+/// to 457.5 (its rest row, 389.4, is under the budget): the ceiling follows, 3 % over.
+const OVER_BUDGET: [(&str, f64); 1] = [("grating-hybrid/", 471.0)];
 
 struct VecSink(Vec<u8>);
 impl Sink for VecSink {
