@@ -1583,6 +1583,68 @@ mod tests {
         );
     }
 
+    /// An estimator that rests but cannot be seeded (`window_samples` 0) rests in the hybrid's
+    /// region instead of sleeping, so it is whole on leaving it: the same stroke as above, the
+    /// velocity region's every velocity that of a controller updating on every sample.
+    #[test]
+    fn an_estimator_without_a_window_rests_where_it_would_sleep() {
+        #[derive(Clone, Debug)]
+        struct NoWindow(DefaultEstimator);
+        impl VelocityEstimator for NoWindow {
+            fn update(&mut self, p: i32, t: u32) -> Option<i32> {
+                self.0.update(p, t)
+            }
+            fn reset(&mut self) {
+                self.0.reset()
+            }
+            fn group_delay_us(&self) -> u32 {
+                self.0.group_delay_us()
+            }
+            fn rests(&self) -> bool {
+                self.0.rests()
+            }
+            fn rest(&mut self, p: i32, t: u32) {
+                self.0.rest(p, t)
+            }
+            fn wake(&mut self) {
+                self.0.wake()
+            }
+            fn estimate(&self) -> Option<i32> {
+                self.0.estimate()
+            }
+        }
+        let hybrid = Texture::Grating(crate::texture::Grating {
+            render: GratingRender::Hybrid,
+            ..crate::texture::Grating::new(1_000)
+        });
+        let mut cfg = default_config();
+        cfg.scene.boundaries_um.clear();
+        cfg.scene.textures.clear();
+        let _ = cfg.scene.boundaries_um.push(30_000);
+        let _ = cfg.scene.textures.push(hybrid);
+        let _ = cfg.scene.textures.push(synth(1_000));
+        let est = NoWindow(DefaultEstimator::new(LsqSlope::new(100).unwrap(), 100));
+        let mut rests = Controller::with_estimator(TIMER, 100, est);
+        rests.load(&cfg).unwrap();
+        let mut always = two(Texture::Off, synth(1_000));
+        always.load(&cfg).unwrap();
+        always.velocity_every_sample(true);
+        let (mut t, mut above) = (0u32, 0);
+        let path = (0..1_200).map(|k| 20_000.0 + 50.0 * (600 - (k as i32 - 600).abs()) as f32);
+        for um in path {
+            let code = code_at(&always, um);
+            let a = rests.on_sample(Sample { code, t_us: t });
+            let b = always.on_sample(Sample { code, t_us: t });
+            t += 100;
+            if a.region == Some(1) {
+                assert_eq!(a.velocity_um_s, b.velocity_um_s, "{um} µm");
+                assert!(a.velocity_um_s.is_some(), "{um} µm: whole on entry");
+                above += 1;
+            }
+        }
+        assert!(above > 700, "{above}");
+    }
+
     /// What each texture kind declares, seen from outside: on a 40 mm/s stroke a region whose
     /// texture reads only the position (off, constant, random) or its own fit (the hybrid
     /// grating) computes no velocity, one that reads the estimator's (position phase,

@@ -880,6 +880,30 @@ mod tests {
         Ridges::new(&g, &TIMER, &SafetyLimits::default(), 100).unwrap()
     }
 
+    /// The hybrid's own velocity is its line's slope in µm/s (none until the line has its 64
+    /// samples); a position-phase grating has none, nor a history.
+    #[test]
+    fn the_hybrids_own_velocity_is_its_lines_slope() {
+        let mut r = hybrid(1_000);
+        for k in 0..200u32 {
+            r.step(5_000 + 7 * k as i32, None, k * 100, &TIMER);
+            let v = r.own_velocity_um_s();
+            // 7 µm a 100 µs sample: 70 mm/s.
+            assert_eq!(v, (k >= 63).then_some(70_000), "{k}");
+        }
+        assert_eq!(
+            r.own_history(3).map(|(p, _)| p).collect::<Vec<_>>(),
+            [5_000 + 7 * 197, 5_000 + 7 * 198, 5_000 + 7 * 199]
+        );
+        let mut p =
+            Ridges::new(&Grating::new(1_000), &TIMER, &SafetyLimits::default(), 100).unwrap();
+        for k in 0..200u32 {
+            p.step(5_000 + 7 * k as i32, Some(70_000), k * 100, &TIMER);
+        }
+        assert_eq!(p.own_velocity_um_s(), None);
+        assert_eq!(p.own_history(3).count(), 0);
+    }
+
     /// Every pulse of a run of positions sampled every 100 µs (None: a dropped sample): (sample
     /// index, settings). The velocity handed in is the true one; the hybrid uses its line.
     fn pulses(

@@ -353,6 +353,57 @@ mod tests {
         }
     }
 
+    /// The history an estimator is seeded from: the newest k positions, oldest first, stamped
+    /// one period apart back from the last push (the pushes' own stamps jitter within half a
+    /// period), while filling and once the ring has wrapped; empty after a reset.
+    #[test]
+    fn the_history_is_the_newest_positions_oldest_first_one_period_apart() {
+        let y = |k: u32| 3_000 + 7 * k as i32 + (k % 3) as i32;
+        let mut fit = LineFit::default();
+        // Stamps jittered by up to 30 µs: the window keeps them (on the grid).
+        let t = |k: u32| 50_000 + k * 100 + (k % 4) * 10;
+        for k in 0..10 {
+            fit.push(y(k), t(k), 100);
+        }
+        let got: std::vec::Vec<_> = fit.history(4, 100).collect();
+        let want: std::vec::Vec<_> = (6..10).map(|k| (y(k), t(9) - (9 - k) * 100)).collect();
+        assert_eq!(got, want);
+        assert_eq!(fit.history(100, 100).count(), 10);
+        assert_eq!(fit.history(100, 100).next(), Some((y(0), t(9) - 900)));
+        // Wrapped: 150 pushes in a 64-slot ring.
+        for k in 10..150 {
+            fit.push(y(k), t(k), 100);
+        }
+        let got: std::vec::Vec<_> = fit.history(34, 100).collect();
+        let want: std::vec::Vec<_> = (116..150)
+            .map(|k| (y(k), t(149) - (149 - k) * 100))
+            .collect();
+        assert_eq!(got, want);
+        let all: std::vec::Vec<_> = fit.history(1_000, 100).map(|(p, _)| p).collect();
+        assert_eq!(all, (86..150).map(y).collect::<std::vec::Vec<_>>());
+        fit.reset();
+        assert_eq!(fit.history(34, 100).count(), 0);
+    }
+
+    /// The line asked for again (a velocity read at a stream's rate) is the one the last push
+    /// returned; none while the window fills.
+    #[test]
+    fn the_line_asked_again_is_the_last_pushed() {
+        let mut fit = LineFit::default();
+        let mut last = None;
+        for k in 0..N as i32 + 20 {
+            last = fit.push(1_000 + 12 * k + k % 5, k as u32 * 100, 100);
+            assert_eq!(fit.line(), last, "{k}");
+        }
+        assert!(last.is_some());
+        // An acceleration hands both to the newer half.
+        for k in N as i32 + 20..N as i32 + 60 {
+            let x = (20.0 * k as f64 + 0.05 * (k as f64).powi(2) / 2.0) as i32;
+            last = fit.push(x, k as u32 * 100, 100);
+            assert_eq!(fit.line(), last, "{k}");
+        }
+    }
+
     /// A dropped sample, a stall and a sample off the line each empty the window.
     #[test]
     fn gaps_and_jumps_start_over() {

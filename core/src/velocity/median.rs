@@ -137,6 +137,26 @@ mod tests {
     use super::*;
     use crate::velocity::{LsqSlope, OneSampleDifference};
 
+    /// `window_samples` is where an estimator fed from scratch first answers (a seed of that
+    /// many positions gives it its whole window); 0 for one that is never seeded.
+    #[test]
+    fn the_window_is_where_the_first_answer_comes() {
+        fn first_answer<E: VelocityEstimator>(mut e: E) -> (usize, usize) {
+            let at = (1..200)
+                .find(|&k| e.update(1_000 + 9 * k as i32, k as u32 * 100).is_some())
+                .unwrap_or(0);
+            (e.window_samples(), at)
+        }
+        let (w, at) = first_answer(Median3::new(LsqSlope::<32>::new(100).unwrap(), 100));
+        assert_eq!((w, at), (34, 34));
+        let (w, at) = first_answer(Median3::new(LsqSlope::<26>::new(100).unwrap(), 100));
+        assert_eq!((w, at), (28, 28));
+        let (w, at) = first_answer(LsqSlope::<26>::new(100).unwrap());
+        assert_eq!((w, at), (26, 26));
+        let (w, _) = first_answer(Median3::new(OneSampleDifference::new(100).unwrap(), 100));
+        assert_eq!(w, 0);
+    }
+
     #[test]
     fn median_of_three() {
         for (a, b, c) in [
