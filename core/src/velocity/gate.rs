@@ -36,7 +36,7 @@ pub struct InnovationGate<E> {
     v_um_s: i32,
     /// The sample period in seconds, Q32 (T_s·2³²/10⁶): a step of speed v µm/s over one
     /// period is (v·this) >> 32 µm.
-    period_q32: i64,
+    period_q32: i32,
     /// False after a reset or a gap: the next sample is taken as it comes.
     primed: bool,
     /// ⌊period/2⌋ and (MAX_BRIDGED_SLOTS + 1) periods, as the median's gap test.
@@ -56,7 +56,9 @@ impl<E: VelocityEstimator> InnovationGate<E> {
             x_ref: 0,
             t_ref: 0,
             v_um_s: 0,
-            period_q32: ((sample_period_us as i64) << 32) / 1_000_000,
+            // ≤ 2³¹ − 1 up to a 0.5 s period (the estimators take ≤ 100 ms): one 32×32→64
+            // multiply per sample.
+            period_q32: (((sample_period_us as i64) << 32) / 1_000_000).min(i32::MAX as i64) as i32,
             primed: false,
             half_us: sample_period_us / 2,
             gap_us: sample_period_us.saturating_mul(MAX_BRIDGED_SLOTS + 1),
@@ -82,7 +84,7 @@ impl<E: VelocityEstimator> InnovationGate<E> {
             self.held = 0;
             position_um
         } else {
-            let step = ((v_um_s as i64 * self.period_q32) >> 32) as i32;
+            let step = ((v_um_s as i64 * self.period_q32 as i64) >> 32) as i32;
             let predicted = self.x_ref.wrapping_add(step);
             let off = position_um.wrapping_sub(predicted).unsigned_abs();
             if off <= self.gate_um {
