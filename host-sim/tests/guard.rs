@@ -45,7 +45,7 @@ fn measured(prefix: &str, names: &[&str]) -> Vec<Vec<(f64, f64, f64)>> {
 /// (published: 13.6–14.2 mm/s per seed; asserted ≤ 15). Its lag and noise are the bare
 /// slope's to the last bit (no clean sample reaches the gate), whose outlier worst is ≥ 449
 /// mm/s (asserted ≥ 400); the median gives 16.8–18.2 mm/s but 0.86–0.88 ms of lag (asserted
-/// > 0.8), and the 1 m/s step clamp leaves 43.5–66.9 mm/s (asserted ≥ 40).
+/// over 0.8), and the 1 m/s step clamp leaves 43.5–66.9 mm/s (asserted ≥ 40).
 /// Design lag, F446: 7.5 periods + half of 128 × 16 cycles at 22.5 MHz (91.02 µs) = 795.5 µs.
 #[test]
 fn the_gate_meets_all_three_targets_on_the_dual_points() {
