@@ -23,7 +23,7 @@ use crate::bench::measure::{errors, pool, replay, Errors};
 use crate::bench::methods::{BoxedEstimator, Family, Method};
 use crate::bench::scenario::{self, Input, Obs};
 use crate::budget::{self, Silicon, TARGET_LAG_MS, TARGET_NOISE_MM_S};
-use crate::door::Whole;
+use crate::door::{Range, Whole};
 
 /// The issue's bound on the worst error under single-sample outliers, mm/s (today's 22 with
 /// the median, plus a little).
@@ -41,7 +41,7 @@ pub const CLAMP_FAST_UM_S: u32 = 1_000_000;
 pub const CLAMP_SLOW_UM_S: u32 = 500_000;
 /// Outlier probability, size and lost-sample probability: the bench's.
 pub const OUTLIER_PROB: f64 = 1e-3;
-/// See [`OUTLIER_PROB`], µm.
+/// See [`OUTLIER_PROB`], µm: the default of `--outlier-um`.
 pub const OUTLIER_UM: f64 = 2_000.0;
 /// See [`OUTLIER_PROB`].
 pub const DROP_PROB: f64 = 2e-3;
@@ -233,8 +233,8 @@ pub fn estimators() -> Vec<(usize, Guard, Method)> {
 
 /// The bench's outlier and lost-sample draws on a clean stream (its `Spec::generate` draws,
 /// seeded the same way): a lost sample drops its slot; an outlier moves the position by
-/// ±`OUTLIER_UM`, kept on the substrate (the bench keeps its code off the rails).
-pub fn add_outliers(stream: &mut [Obs], seed: u64) {
+/// ±`outlier_um`, kept on the substrate (the bench keeps its code off the rails).
+pub fn add_outliers(stream: &mut [Obs], seed: u64, outlier_um: f64) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5A5A_0F0F_1234_8765);
     let length = Calibration::default().length_um as f64;
     for o in stream {
@@ -245,13 +245,13 @@ pub fn add_outliers(stream: &mut [Obs], seed: u64) {
             o.input = Input::Dropped;
         } else if rng.random::<f64>() < OUTLIER_PROB {
             let sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
-            o.input = Input::Position((x as f64 + sign * OUTLIER_UM).clamp(0.0, length) as i32);
+            o.input = Input::Position((x as f64 + sign * outlier_um).clamp(0.0, length) as i32);
         }
     }
 }
 
 /// One seed's outlier streams of an acquisition: the mixed motion with outliers and drops.
-pub fn outlier_streams(acq: &Acquisition, seed: u64) -> Vec<Vec<Obs>> {
+pub fn outlier_streams(acq: &Acquisition, seed: u64, outlier_um: f64) -> Vec<Vec<Obs>> {
     let si = (acq.silicon)();
     let mode = mode_of(&si, acq);
     let (t, d) = scenario::mixed();
@@ -260,7 +260,7 @@ pub fn outlier_streams(acq: &Acquisition, seed: u64) -> Vec<Vec<Obs>> {
             let s = seed.wrapping_mul(31).wrapping_add(400 + i);
             let p = budget::adc_params(&si, mode, acq.conversions, FLOOR_LSB, FLOOR_CORNER_HZ, s);
             let mut stream = budget::generate(&t, d, RATE_HZ, p);
-            add_outliers(&mut stream, s);
+            add_outliers(&mut stream, s, outlier_um);
             stream
         })
         .collect()
@@ -297,8 +297,14 @@ pub struct SeedFigures {
     pub outlier_worst_um_s: f64,
 }
 
-/// Measures `methods` on one acquisition for one seed (every method sees the same streams).
-pub fn measure_seed(acq: &Acquisition, seed: u64, methods: &[&Method]) -> Vec<SeedFigures> {
+/// Measures `methods` on one acquisition for one seed (every method sees the same streams),
+/// the outliers ±`outlier_um`.
+pub fn measure_seed(
+    acq: &Acquisition,
+    seed: u64,
+    outlier_um: f64,
+    methods: &[&Method],
+) -> Vec<SeedFigures> {
     let si = (acq.silicon)();
     let mode = mode_of(&si, acq);
     let (delay, steady) = budget::streams(
@@ -309,7 +315,7 @@ pub fn measure_seed(acq: &Acquisition, seed: u64, methods: &[&Method]) -> Vec<Se
         &budget_options(seed),
         seed,
     );
-    let outl = outlier_streams(acq, seed);
+    let outl = outlier_streams(acq, seed, outlier_um);
     let period = 1_000_000 / RATE_HZ;
     methods
         .iter()
@@ -384,6 +390,8 @@ pub struct GuardOptions {
     pub out_dir: PathBuf,
     /// Worker threads.
     pub threads: usize,
+    /// Outlier size, µm.
+    pub outlier_um: f64,
 }
 
 /// Measures every estimator on every acquisition over the seeds.
@@ -396,7 +404,7 @@ pub fn sweep(opts: &GuardOptions) -> Vec<GuardPoint> {
         .collect();
     let measured = crate::bench::par_map(jobs.len(), opts.threads, |j| {
         let (a, seed) = jobs[j];
-        let r = measure_seed(&acqs[a], seed, &methods);
+        let r = measure_seed(&acqs[a], seed, opts.outlier_um, &methods);
         eprintln!("guard: {} seed {seed} done", acqs[a].name);
         r
     });
@@ -496,13 +504,16 @@ macro_rules! markers {
 
 /// Lag against outlier worst error, one series per guard (a line per acquisition through its
 /// windows), only points at the noise bound, with the target lines.
-pub fn chart(path: &Path, points: &[GuardPoint]) -> Result<(), String> {
+pub fn chart(path: &Path, points: &[GuardPoint], outlier_um: f64) -> Result<(), String> {
     let e = |e: &dyn std::fmt::Display| e.to_string();
     let root = BitMapBackend::new(path, (1400, 900)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(&x))?;
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            "Outlier guards (issue #35): lag against worst error under ±2 mm outliers, at noise ≤ 1.66 mm/s",
+            format!(
+                "Outlier guards (issue #35): lag against worst error under ±{} µm outliers, at noise ≤ {TARGET_NOISE_MM_S} mm/s",
+                outlier_um
+            ),
             ("sans-serif", 20),
         )
         .margin(15)
@@ -626,25 +637,27 @@ pub fn run(opts: &GuardOptions) -> Result<Vec<GuardPoint>, String> {
     let charts = opts.out_dir.join("charts");
     std::fs::create_dir_all(&charts).map_err(|e| e.to_string())?;
     let points = sweep(opts);
-    chart(&charts.join("guard-frontier.png"), &points)?;
+    chart(&charts.join("guard-frontier.png"), &points, opts.outlier_um)?;
     let mut md = String::new();
     let w = &mut md;
     let _ = writeln!(w, "# Outlier guards: results (issue #35)\n");
     let _ = writeln!(
         w,
         "Generated by `cargo run --release -p host-sim --bin host-sim -- guard --seed {} --seeds {} \
-         --out {}` (do not edit by hand; `docs/conversion-budget.md`, \"Outlier guards\", explains \
+         --outlier-um {} --out {}` (do not edit by hand; `docs/conversion-budget.md`, \"Outlier guards\", explains \
          the candidates and the pick). 10 kHz output; the budget's ADC model (floor {FLOOR_LSB} LSB, \
          {FLOOR_CORNER_HZ} Hz corner, settling, conversion window). Lag and noise as the budget \
          measures them (pooled over the seeds); outlier worst: the largest |v̂ − v| over {OUTLIER_STREAMS} \
-         streams per seed of the bench's mixed motion (to 300 mm/s, 10 m/s²) with ±{OUTLIER_UM} µm \
+         streams per seed of the bench's mixed motion (to 300 mm/s, 10 m/s²) with ±{} µm \
          single-sample outliers (p = {OUTLIER_PROB}) and lost samples (p = {DROP_PROB}), worst of \
          every seed. Targets: lag ≤ {TARGET_LAG_MS} ms (measured and design), noise ≤ \
          {TARGET_NOISE_MM_S} mm/s, outlier worst ≤ {TARGET_OUTLIER_MM_S} mm/s. Chart: \
          `charts/guard-frontier.png`.\n",
         opts.seed,
         opts.seeds,
+        opts.outlier_um,
         opts.out_dir.display(),
+        opts.outlier_um,
     );
     let acqs = acquisitions();
     let _ = writeln!(
@@ -674,8 +687,10 @@ pub fn run(opts: &GuardOptions) -> Result<Vec<GuardPoint>, String> {
 const SEED: Whole = Whole::new(0, u64::MAX);
 const SEEDS: Whole = Whole::new(1, 20);
 const THREADS: Whole = Whole::new(1, 256);
+/// Outlier size flag range.
+pub const OUTLIER_SIZE: Range = Range::new(1.0, 60_000.0, "µm");
 
-/// `host-sim guard [--seed N] [--seeds N] [--out DIR] [--threads N]`.
+/// `host-sim guard [--seed N] [--seeds N] [--outlier-um X] [--out DIR] [--threads N]`.
 #[derive(clap::Parser, Debug)]
 #[command(
     name = "host-sim guard",
@@ -696,6 +711,10 @@ struct GuardArgs {
     #[arg(long, value_name = "N", default_value_t = 2, allow_hyphen_values = true,
           help = THREADS.help("Worker threads"), value_parser = THREADS.parser_usize())]
     threads: usize,
+    #[arg(long, value_name = "UM", default_value_t = OUTLIER_UM, allow_hyphen_values = true,
+          help = OUTLIER_SIZE.help("Size of the single-sample outliers (the bench's: 2000)"),
+          value_parser = OUTLIER_SIZE.parser())]
+    outlier_um: f64,
 }
 
 /// Runs the guard sweep when the first argument is `guard`; None otherwise.
@@ -712,6 +731,7 @@ pub fn run_from_env() -> Option<std::process::ExitCode> {
         seeds: a.seeds,
         out_dir: a.out.unwrap_or_else(|| PathBuf::from("out").join("guard")),
         threads: a.threads,
+        outlier_um: a.outlier_um,
     };
     match run(&opts) {
         Ok(points) => {

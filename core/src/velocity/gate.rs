@@ -10,8 +10,12 @@
 //! inner estimator sees exactly the samples it would see alone: no added lag, bit-exact
 //! output (issue #35; `docs/conversion-budget.md`, "Outlier guards").
 //!
-//! Cost per sample: one 32×32→64 multiply (the predicted step), a subtract, an absolute
-//! compare and a counter; no division. Not removed: an outlier smaller than the gate (it
+//! A sample outside the gate that is inside it from the position handed on before (two steps
+//! back) is passed too: the previous sample was an outlier just inside the gate, and holding
+//! its good neighbour against it would stretch it.
+//!
+//! Cost per sample: one 32×32→64 multiply (the predicted step), two subtract-and-absolute
+//! compares and a counter; no division. Not removed: an outlier smaller than the gate (it
 //! reaches the slope at its full size), and more than `max_held` outliers in a row.
 //! After a silence (the slot clock's gap rule) or a reset the first sample is taken as it
 //! comes.
@@ -30,12 +34,14 @@ pub struct InnovationGate<E> {
     held: u8,
     /// The position last handed to the inner estimator, µm.
     x_ref: i32,
+    /// The one handed on before it, µm.
+    x_prev: i32,
     /// Its timestamp, µs.
     t_ref: u32,
     /// The inner estimator's last answer, µm/s (0 while it has none).
     v_um_s: i32,
     /// The sample period in seconds, Q32 (T_s·2³²/10⁶): a step of speed v µm/s over one
-    /// period is (v·this) >> 32 µm.
+    /// period is (v·this + 2³¹) >> 32 µm, rounded.
     period_q32: i32,
     /// False after a reset or a gap: the next sample is taken as it comes.
     primed: bool,
@@ -54,6 +60,7 @@ impl<E: VelocityEstimator> InnovationGate<E> {
             max_held,
             held: 0,
             x_ref: 0,
+            x_prev: 0,
             t_ref: 0,
             v_um_s: 0,
             // ≤ 2³¹ − 1 up to a 0.5 s period (the estimators take ≤ 100 ms): one 32×32→64
@@ -82,12 +89,19 @@ impl<E: VelocityEstimator> InnovationGate<E> {
         let out = if !self.primed {
             self.primed = true;
             self.held = 0;
+            self.x_ref = position_um;
             position_um
         } else {
-            let step = ((v_um_s as i64 * self.period_q32 as i64) >> 32) as i32;
+            let step = ((v_um_s as i64 * self.period_q32 as i64 + (1 << 31)) >> 32) as i32;
             let predicted = self.x_ref.wrapping_add(step);
             let off = position_um.wrapping_sub(predicted).unsigned_abs();
-            if off <= self.gate_um {
+            // An outlier just inside the gate has passed and become the reference: the good
+            // sample after it is judged against the line before it too, so that it is not held
+            // against the outlier (which would stretch the outlier over more samples).
+            let off_prev = position_um
+                .wrapping_sub(self.x_prev.wrapping_add(step.wrapping_mul(2)))
+                .unsigned_abs();
+            if off <= self.gate_um || (self.held == 0 && off_prev <= self.gate_um) {
                 self.held = 0;
                 position_um
             } else if self.held >= self.max_held {
@@ -102,6 +116,7 @@ impl<E: VelocityEstimator> InnovationGate<E> {
                 predicted
             }
         };
+        self.x_prev = self.x_ref;
         self.x_ref = out;
         out
     }
@@ -196,6 +211,18 @@ mod tests {
         assert!(worst <= 3_000, "gated {worst} µm/s");
         // Without the gate the spike shows at the slope's largest weight (≈ 440 mm/s).
         assert!(worst_bare >= 400_000, "bare {worst_bare} µm/s");
+    }
+
+    /// A spike just inside the gate passes, as it would without the gate, and the good sample
+    /// after it (outside the gate from the spike) is not held against it: the output is the
+    /// bare slope's at every sample.
+    #[test]
+    fn a_spike_inside_the_gate_is_not_stretched() {
+        let (mut g, mut bare) = (gate16(), LsqSlope::<16>::new(T).unwrap());
+        for i in 0..200u32 {
+            let x = 10_000 + 2 * i as i32 + if i == 100 { 99 } else { 0 };
+            assert_eq!(g.update(x, i * T), bare.update(x, i * T), "sample {i}");
+        }
     }
 
     #[test]
