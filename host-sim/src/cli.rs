@@ -110,7 +110,7 @@ fn parse_level(s: &str) -> Result<log::LevelFilter, String> {
 /// The binary's other commands, each dispatched before the simulator's flags are parsed
 /// (`main.rs`), with what each does: `--help` lists them, `host-sim help COMMAND` shows one's
 /// help.
-pub const COMMANDS: [(&str, &str); 6] = [
+pub const COMMANDS: [(&str, &str); 7] = [
     (
         "serve",
         "a virtual board behind a pseudo-terminal, for saw and its panel (docs/link.md)",
@@ -131,6 +131,10 @@ pub const COMMANDS: [(&str, &str); 6] = [
     (
         "budget",
         "lag against noise per ADC configuration (docs/conversion-budget.md)",
+    ),
+    (
+        "guard",
+        "outlier guards: lag against outlier error (docs/conversion-budget.md)",
     ),
 ];
 

@@ -18,6 +18,7 @@ pub mod budget;
 pub mod chart;
 pub mod cli;
 pub mod door;
+pub mod guard;
 pub mod metrics;
 pub mod models;
 pub mod noise;

@@ -35,6 +35,10 @@ fn main() -> ExitCode {
     if let Some(code) = host_sim::budget::run_from_env() {
         return code;
     }
+    // `host-sim guard …`: outlier guards' lag, noise and outlier error (issue #35).
+    if let Some(code) = host_sim::guard::run_from_env() {
+        return code;
+    }
     // `host-sim serve …`: a virtual board behind a pty, for `saw` (docs/link.md). It logs
     // what the firmware logs (boot scene, refusals) at info.
     if std::env::args().nth(1).as_deref() == Some("serve") {

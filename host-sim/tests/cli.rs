@@ -723,6 +723,7 @@ fn help_lists_every_command() {
         "  tile-to-scene  a grooved tile as a scene file's grating region",
         "  bench          the velocity estimators measured and charted (docs/bench-results.md)",
         "  budget         lag against noise per ADC configuration (docs/conversion-budget.md)",
+        "  guard          outlier guards: lag against outlier error (docs/conversion-budget.md)",
         "  help           this help, or a command's: host-sim help serve",
     ] {
         assert!(lines.contains(&want), "missing {want:?} in\n{text}");
@@ -737,7 +738,15 @@ fn help_command_gives_each_commands_help() {
     let help = run(&["help"]);
     assert_eq!(help.status.code(), Some(0), "{help:?}");
     assert_eq!(help.stdout, main.stdout);
-    for cmd in ["serve", "soak", "model", "tile-to-scene", "bench", "budget"] {
+    for cmd in [
+        "serve",
+        "soak",
+        "model",
+        "tile-to-scene",
+        "bench",
+        "budget",
+        "guard",
+    ] {
         let own = run(&[cmd, "--help"]);
         let via = run(&["help", cmd]);
         assert_eq!(via.status.code(), Some(0), "help {cmd}: {via:?}");
@@ -768,7 +777,7 @@ fn help_command_gives_each_commands_help() {
         err.lines().next(),
         Some(
             "error: unknown command 'nope': host-sim's commands are serve, soak, model, \
-             tile-to-scene, bench, budget"
+             tile-to-scene, bench, budget, guard"
         )
     );
 }

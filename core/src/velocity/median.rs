@@ -318,6 +318,9 @@ mod tests {
                 check(LsqSlope::<80>::new(100).unwrap(), &steps)?;
                 check(Median3::new(LsqSlope::<32>::new(100).unwrap(), 100), &steps)?;
                 check(Median3::new(LsqSlope::<26>::new(100).unwrap(), 100), &steps)?;
+                // The outlier guards (issue #35): the same contract.
+                check(crate::velocity::InnovationGate::new(LsqSlope::<16>::new(100).unwrap(), 100, 100, 2), &steps)?;
+                check(crate::velocity::StepClamp::new(LsqSlope::<16>::new(100).unwrap(), 100, 1_000_000), &steps)?;
             }
         }
     }

@@ -16,18 +16,22 @@
 
 mod alpha_beta;
 mod alpha_beta_fixed;
+mod clamp;
 mod common;
 mod diff;
 mod foaw;
+mod gate;
 mod lsq;
 mod median;
 mod super_twisting;
 
 pub use alpha_beta::AlphaBeta;
 pub use alpha_beta_fixed::AlphaBetaFixed;
+pub use clamp::StepClamp;
 pub use common::{TuningError, MAX_BRIDGED_SLOTS, MIN_FIXED_BETA};
 pub use diff::{BackwardDifference, OneSampleDifference};
 pub use foaw::{Foaw, FoawFit};
+pub use gate::InnovationGate;
 pub use lsq::{LsqSlope, LSQ_NARROW_WINDOW};
 pub use median::Median3;
 pub use super_twisting::{SuperTwisting, STD_LAMBDA0, STD_LAMBDA1};
