@@ -986,13 +986,7 @@ struct BudgetArgs {
 
 /// Runs the budget when the first argument is `budget`; None otherwise.
 pub fn run_from_env() -> Option<std::process::ExitCode> {
-    use clap::Parser as _;
-    let mut args = std::env::args_os();
-    let bin = args.next()?;
-    if args.next()? != "budget" {
-        return None;
-    }
-    let a = BudgetArgs::parse_from(std::iter::once(bin).chain(args));
+    let a: BudgetArgs = crate::door::subcommand("budget")?;
     let opts = BudgetOptions {
         seed: a.seed,
         seeds: a.seeds,

@@ -223,3 +223,15 @@ mod tests {
         }
     }
 }
+
+/// Parses the command line as `A` when its first argument is `name` (a subcommand the main
+/// command line hands over: `bench`, `budget`, `guard`), the program name kept for clap's
+/// messages; None otherwise. A bad value exits with clap's one-line error, as the main line does.
+pub fn subcommand<A: clap::Parser>(name: &str) -> Option<A> {
+    let mut args = std::env::args_os();
+    let bin = args.next()?;
+    if args.next()? != name {
+        return None;
+    }
+    Some(A::parse_from(std::iter::once(bin).chain(args)))
+}

@@ -719,13 +719,7 @@ struct GuardArgs {
 
 /// Runs the guard sweep when the first argument is `guard`; None otherwise.
 pub fn run_from_env() -> Option<std::process::ExitCode> {
-    use clap::Parser as _;
-    let mut args = std::env::args_os();
-    let bin = args.next()?;
-    if args.next()? != "guard" {
-        return None;
-    }
-    let a = GuardArgs::parse_from(std::iter::once(bin).chain(args));
+    let a: GuardArgs = crate::door::subcommand("guard")?;
     let opts = GuardOptions {
         seed: a.seed,
         seeds: a.seeds,

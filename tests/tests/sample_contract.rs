@@ -281,54 +281,69 @@ const STATED_WORST_ENTRY_ERROR_PERCENT: f64 = 11.0;
 const STATED_WORST_RESTART_ERROR_PERCENT: f64 = 20.0;
 const STATED_RESTART_EXTRA_SAMPLES: u32 = 33;
 
+/// The true crossing of the boundary in [`entry_strokes`]' strokes, µs.
+const ENTRY_CROSSED_US: u32 = 60_000;
+
+/// The strokes into the middle region (30–40 mm) of an entry scene: at 20, 50, 100, 200 mm/s,
+/// both ways, [`ENTRY_SEEDS`] noise seeds each, warm before the boundary (60 ms of travel in the
+/// region before it, crossed at [`ENTRY_CROSSED_US`]): (what, speed in mm/s, samples).
+fn entry_strokes(cfg: &Config) -> impl Iterator<Item = (String, f64, Vec<Sample>)> + '_ {
+    [20.0, 50.0, 100.0, 200.0]
+        .into_iter()
+        .flat_map(move |speed_mm_s| {
+            [1.0, -1.0].into_iter().flat_map(move |dir| {
+                ENTRY_SEEDS.map(move |seed| {
+                    let speed = speed_mm_s * 1e3 * dir;
+                    let boundary = if dir > 0.0 { 30_000.0 } else { 40_000.0 };
+                    let stroke = Trajectory::Constant {
+                        from_um: boundary - speed * ENTRY_CROSSED_US as f64 * 1e-6,
+                        speed_um_s: speed,
+                    };
+                    let input = samples(cfg, &stroke, 0.075, seed, vec![]);
+                    (
+                        format!("{speed_mm_s} mm/s, dir {dir}, seed {seed}"),
+                        speed_mm_s,
+                        input,
+                    )
+                })
+            })
+        })
+}
+
 #[test]
 fn entering_a_velocity_region_the_woken_estimator_bursts_as_the_background_one() {
     let cfg = config(ENTRY);
     let period = sample_period_us(&NUCLEO_F446RE);
     let (mut worst_percent, mut worst_restart_percent): (f64, f64) = (0.0, 0.0);
-    for speed_mm_s in [20.0, 50.0, 100.0, 200.0] {
-        for dir in [1.0, -1.0] {
-            for seed in ENTRY_SEEDS {
-                let speed = speed_mm_s * 1e3 * dir;
-                // Warm before the boundary: 60 ms of travel in the constant region.
-                let boundary = if dir > 0.0 { 30_000.0 } else { 40_000.0 };
-                let from = boundary - speed * 0.06;
-                let stroke = Trajectory::Constant {
-                    from_um: from,
-                    speed_um_s: speed,
-                };
-                let input = samples(&cfg, &stroke, 0.075, seed, vec![]);
-                let crossed_us = 60_000;
-                let mut background = controller(&cfg, default_estimator());
-                background.velocity_every_sample(true);
-                let what = format!("{speed_mm_s} mm/s, dir {dir}, seed {seed}");
-                let today = first_burst(background, &input, crossed_us).expect(&what);
-                let woken = first_burst(controller(&cfg, default_estimator()), &input, crossed_us)
-                    .expect(&what);
-                let restarted = first_burst(
-                    controller(&cfg, RestartOnEntry(default_estimator())),
-                    &input,
-                    crossed_us,
-                )
-                .expect(&what);
-                // Seeded from the last positions = run in the background, exactly.
-                assert_eq!(woken, today, "{what}");
-                let want_hz = speed_mm_s; // |V| / λ with λ = 1 mm
-                let err = (today.1 - want_hz).abs() / want_hz * 100.0;
-                worst_percent = worst_percent.max(err);
-                let restart_err = (restarted.1 - want_hz).abs() / want_hz * 100.0;
-                worst_restart_percent = worst_restart_percent.max(restart_err);
-                let extra = restarted.0 - today.0;
-                eprintln!(
-                    "{what}: first burst {} µs after the crossing, {:.2} Hz ({err:.2} %); restart +{} µs",
-                    today.0, today.1, extra
-                );
-                assert!(
-                    extra >= STATED_RESTART_EXTRA_SAMPLES * period,
-                    "{what}: restart only {extra} µs later"
-                );
-            }
-        }
+    for (what, speed_mm_s, input) in entry_strokes(&cfg) {
+        let crossed_us = ENTRY_CROSSED_US;
+        let mut background = controller(&cfg, default_estimator());
+        background.velocity_every_sample(true);
+        let today = first_burst(background, &input, crossed_us).expect(&what);
+        let woken =
+            first_burst(controller(&cfg, default_estimator()), &input, crossed_us).expect(&what);
+        let restarted = first_burst(
+            controller(&cfg, RestartOnEntry(default_estimator())),
+            &input,
+            crossed_us,
+        )
+        .expect(&what);
+        // Seeded from the last positions = run in the background, exactly.
+        assert_eq!(woken, today, "{what}");
+        let want_hz = speed_mm_s; // |V| / λ with λ = 1 mm
+        let err = (today.1 - want_hz).abs() / want_hz * 100.0;
+        worst_percent = worst_percent.max(err);
+        let restart_err = (restarted.1 - want_hz).abs() / want_hz * 100.0;
+        worst_restart_percent = worst_restart_percent.max(restart_err);
+        let extra = restarted.0 - today.0;
+        eprintln!(
+            "{what}: first burst {} µs after the crossing, {:.2} Hz ({err:.2} %); restart +{} µs",
+            today.0, today.1, extra
+        );
+        assert!(
+            extra >= STATED_RESTART_EXTRA_SAMPLES * period,
+            "{what}: restart only {extra} µs later"
+        );
     }
     eprintln!(
         "worst first-burst error {worst_percent:.2} % (restarted: {worst_restart_percent:.2} %)"
@@ -373,26 +388,18 @@ render = "hybrid"
 fn entering_a_velocity_region_from_the_hybrids_the_seeded_estimator_bursts_as_the_background_one() {
     let cfg = config(ENTRY_FROM_HYBRID);
     let mut entries = 0;
-    for speed_mm_s in [20.0, 50.0, 100.0, 200.0] {
-        for dir in [1.0, -1.0] {
-            for seed in ENTRY_SEEDS {
-                let speed = speed_mm_s * 1e3 * dir;
-                let boundary = if dir > 0.0 { 30_000.0 } else { 40_000.0 };
-                let stroke = Trajectory::Constant {
-                    from_um: boundary - speed * 0.06,
-                    speed_um_s: speed,
-                };
-                let input = samples(&cfg, &stroke, 0.075, seed, vec![]);
-                let mut background = controller(&cfg, default_estimator());
-                background.velocity_every_sample(true);
-                let what = format!("{speed_mm_s} mm/s, dir {dir}, seed {seed}");
-                let today = first_burst(background, &input, 60_000).expect(&what);
-                let seeded = first_burst(controller(&cfg, default_estimator()), &input, 60_000)
-                    .expect(&what);
-                assert_eq!(seeded, today, "{what}");
-                entries += 1;
-            }
-        }
+    for (what, _, input) in entry_strokes(&cfg) {
+        let mut background = controller(&cfg, default_estimator());
+        background.velocity_every_sample(true);
+        let today = first_burst(background, &input, ENTRY_CROSSED_US).expect(&what);
+        let seeded = first_burst(
+            controller(&cfg, default_estimator()),
+            &input,
+            ENTRY_CROSSED_US,
+        )
+        .expect(&what);
+        assert_eq!(seeded, today, "{what}");
+        entries += 1;
     }
     assert_eq!(entries, 48);
 }

@@ -389,7 +389,13 @@ impl Ridges {
     /// its own line is its velocity (the estimator sleeps in its region).
     #[inline(never)]
     fn step_hybrid(&mut self, position_um: i32, t_us: u32, timer: &BurstTimer) -> Request {
-        let (want, settings, skipped) = self.step_as::<true>(position_um, None, t_us, timer);
+        let step = self.step_as::<true>(position_um, None, t_us, timer);
+        self.request_of(step)
+    }
+
+    /// A step's outcome as the controller's request (this grating's amplitude).
+    #[inline(always)]
+    fn request_of(&self, (want, settings, skipped): (Want, Option<TimerSettings>, u32)) -> Request {
         Request {
             settings,
             skipped,
@@ -638,15 +644,8 @@ impl Render for Ridges {
         if self.hybrid.is_some() {
             return self.step_hybrid(now.position_um, now.t_us, now.timer);
         }
-        let (want, settings, skipped) =
-            self.step_as::<false>(now.position_um, now.velocity_um_s, now.t_us, now.timer);
-        Request {
-            settings,
-            skipped,
-            amplitude: self.amplitude,
-            want,
-            clamped: false,
-        }
+        let step = self.step_as::<false>(now.position_um, now.velocity_um_s, now.t_us, now.timer);
+        self.request_of(step)
     }
 }
 

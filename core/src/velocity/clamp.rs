@@ -123,6 +123,7 @@ impl<E: VelocityEstimator> VelocityEstimator for StepClamp<E> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::velocity::test_strokes::{assert_a_clean_ramp_is_untouched, ramp};
     use crate::velocity::LsqSlope;
 
     const T: u32 = 100;
@@ -132,18 +133,9 @@ mod tests {
         StepClamp::new(LsqSlope::<16>::new(T).unwrap(), T, 1_000_000)
     }
 
-    fn ramp(i: u32) -> i32 {
-        10_000 + 2 * i as i32 + [0, 3, -2, 1, -3, 2][i as usize % 6]
-    }
-
     #[test]
     fn a_clean_ramp_gives_the_bare_slope_bit_exact() {
-        let (mut g, mut bare) = (clamp16(), LsqSlope::<16>::new(T).unwrap());
-        for i in 0..2_000u32 {
-            let x = ramp(i) + (i * i / 1_400) as i32;
-            assert_eq!(g.update(x, i * T), bare.update(x, i * T), "sample {i}");
-        }
-        assert_eq!(g.group_delay_us(), bare.group_delay_us());
+        assert_a_clean_ramp_is_untouched(clamp16(), LsqSlope::<16>::new(T).unwrap(), T);
     }
 
     #[test]

@@ -169,6 +169,7 @@ impl<E: VelocityEstimator> VelocityEstimator for InnovationGate<E> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::velocity::test_strokes::{assert_a_clean_ramp_is_untouched, ramp};
     use crate::velocity::LsqSlope;
 
     const T: u32 = 100;
@@ -177,20 +178,9 @@ mod tests {
         InnovationGate::new(LsqSlope::<16>::new(T).unwrap(), T, 100, 2)
     }
 
-    /// 20 mm/s with a small deterministic dither (±3 µm), as a clean stroke.
-    fn ramp(i: u32) -> i32 {
-        10_000 + 2 * i as i32 + [0, 3, -2, 1, -3, 2][i as usize % 6]
-    }
-
     #[test]
     fn a_clean_ramp_gives_the_bare_slope_bit_exact() {
-        let (mut g, mut bare) = (gate16(), LsqSlope::<16>::new(T).unwrap());
-        for i in 0..2_000u32 {
-            // 20 mm/s accelerating to 300 mm/s: steps up to 30 µm, well inside the gate.
-            let x = ramp(i) + (i * i / 1_400) as i32;
-            assert_eq!(g.update(x, i * T), bare.update(x, i * T), "sample {i}");
-        }
-        assert_eq!(g.group_delay_us(), bare.group_delay_us());
+        assert_a_clean_ramp_is_untouched(gate16(), LsqSlope::<16>::new(T).unwrap(), T);
     }
 
     #[test]

@@ -24,6 +24,8 @@ mod gate;
 mod lsq;
 mod median;
 mod super_twisting;
+#[cfg(test)]
+mod test_strokes;
 
 pub use alpha_beta::AlphaBeta;
 pub use alpha_beta_fixed::AlphaBetaFixed;

@@ -902,13 +902,7 @@ struct BenchArgs {
 /// Runs the bench when the first argument is `bench`; None otherwise (the caller goes on with
 /// its own command line).
 pub fn run_from_env() -> Option<std::process::ExitCode> {
-    use clap::Parser as _;
-    let mut args = std::env::args_os();
-    let bin = args.next()?;
-    if args.next()? != "bench" {
-        return None;
-    }
-    let a = BenchArgs::parse_from(std::iter::once(bin).chain(args));
+    let a: BenchArgs = crate::door::subcommand("bench")?;
     let opts = BenchOptions {
         seed: a.seed,
         out_dir: a.out.unwrap_or_else(default_out_dir),
