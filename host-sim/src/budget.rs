@@ -947,8 +947,6 @@ pub fn run(opts: &BudgetOptions) -> Result<Vec<Point>, String> {
 pub const FLOOR: Range = Range::new(0.0, 10.0, "LSB RMS");
 /// Floor corner flag range.
 pub const CORNER: Range = Range::new(1.0, 1e6, "Hz");
-const SEED: Whole = Whole::new(0, u64::MAX);
-const SEEDS: Whole = Whole::new(1, 20);
 const THREADS: Whole = Whole::new(1, 256);
 
 /// `host-sim budget [--seed N] [--seeds N] [--floor-lsb X] [--floor-corner-hz X] [--board B] [--out DIR] [--threads N]`.
@@ -959,12 +957,8 @@ const THREADS: Whole = Whole::new(1, 256);
     about = "Conversion budget: lag against velocity noise per ADC configuration, with CPU and DMA load"
 )]
 struct BudgetArgs {
-    #[arg(long, default_value_t = 2026, allow_hyphen_values = true,
-          help = SEED.help("Base seed"), value_parser = SEED.parser())]
-    seed: u64,
-    #[arg(long, default_value_t = 3, allow_hyphen_values = true,
-          help = SEEDS.help("Seeds each figure is measured over"), value_parser = SEEDS.parser())]
-    seeds: u64,
+    #[command(flatten)]
+    seeds: crate::door::SweepSeeds,
     #[arg(long, value_name = "LSB_RMS", default_value_t = 0.05, allow_hyphen_values = true,
           help = FLOOR.help("Noise common to every conversion of a sample (does not average down), 12-bit"),
           value_parser = FLOOR.parser())]
@@ -988,8 +982,8 @@ struct BudgetArgs {
 pub fn run_from_env() -> Option<std::process::ExitCode> {
     let a: BudgetArgs = crate::door::subcommand("budget")?;
     let opts = BudgetOptions {
-        seed: a.seed,
-        seeds: a.seeds,
+        seed: a.seeds.seed,
+        seeds: a.seeds.seeds,
         floor_lsb: a.floor_lsb,
         floor_corner_hz: a.floor_corner_hz,
         out_dir: a.out.unwrap_or_else(|| PathBuf::from("out").join("budget")),

@@ -235,3 +235,19 @@ pub fn subcommand<A: clap::Parser>(name: &str) -> Option<A> {
     }
     Some(A::parse_from(std::iter::once(bin).chain(args)))
 }
+
+/// The seeds a sweep (`budget`, `guard`) measures each figure over: `--seed` (the base) and
+/// `--seeds` (how many, 1 ..= 20), flattened into its arguments.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct SweepSeeds {
+    #[arg(long, default_value_t = 2026, allow_hyphen_values = true,
+          help = SWEEP_SEED.help("Base seed"), value_parser = SWEEP_SEED.parser())]
+    pub seed: u64,
+    #[arg(long, default_value_t = 3, allow_hyphen_values = true,
+          help = SWEEP_SEEDS.help("Seeds each figure is measured over"),
+          value_parser = SWEEP_SEEDS.parser())]
+    pub seeds: u64,
+}
+
+const SWEEP_SEED: Whole = Whole::new(0, u64::MAX);
+const SWEEP_SEEDS: Whole = Whole::new(1, 20);

@@ -684,8 +684,6 @@ pub fn run(opts: &GuardOptions) -> Result<Vec<GuardPoint>, String> {
     Ok(points)
 }
 
-const SEED: Whole = Whole::new(0, u64::MAX);
-const SEEDS: Whole = Whole::new(1, 20);
 const THREADS: Whole = Whole::new(1, 256);
 /// Outlier size flag range.
 pub const OUTLIER_SIZE: Range = Range::new(1.0, 60_000.0, "µm");
@@ -698,12 +696,8 @@ pub const OUTLIER_SIZE: Range = Range::new(1.0, 60_000.0, "µm");
     about = "Outlier guards: lag, noise and worst error under outliers per guard and window (issue #35)"
 )]
 struct GuardArgs {
-    #[arg(long, default_value_t = 2026, allow_hyphen_values = true,
-          help = SEED.help("Base seed"), value_parser = SEED.parser())]
-    seed: u64,
-    #[arg(long, default_value_t = 3, allow_hyphen_values = true,
-          help = SEEDS.help("Seeds each figure is measured over"), value_parser = SEEDS.parser())]
-    seeds: u64,
+    #[command(flatten)]
+    seeds: crate::door::SweepSeeds,
     /// Output directory for guard-frontier-results.md and charts/ (default: out/guard;
     /// `--out docs` refreshes the committed results).
     #[arg(long, value_name = "DIR", value_parser = crate::door::out_dir)]
@@ -721,8 +715,8 @@ struct GuardArgs {
 pub fn run_from_env() -> Option<std::process::ExitCode> {
     let a: GuardArgs = crate::door::subcommand("guard")?;
     let opts = GuardOptions {
-        seed: a.seed,
-        seeds: a.seeds,
+        seed: a.seeds.seed,
+        seeds: a.seeds.seeds,
         out_dir: a.out.unwrap_or_else(|| PathBuf::from("out").join("guard")),
         threads: a.threads,
         outlier_um: a.outlier_um,
