@@ -15,12 +15,14 @@ pub fn summary(r: &RunHeader, m: &Metrics) -> String {
     let p = &r.params;
     let _ = writeln!(
         s,
-        "board {}: burst timer {} MHz, {}-bit, f_b ≤ {} Hz; sample period {} µs",
+        "board {}: burst timer {} MHz, {}-bit, f_b ≤ {} Hz; sample period {} µs, {} conversions a sample, velocity window {} samples",
         p.board.name,
         r.timer.clock_hz as f64 / 1e6,
         r.timer.counter_bits,
         r.timer.max_burst_hz,
-        r.sample_period_us
+        r.sample_period_us,
+        p.adc.oversample,
+        p.board.velocity_window
     );
     let _ = writeln!(
         s,
