@@ -836,7 +836,13 @@ pub fn run(opts: &BudgetOptions) -> Result<Vec<Point>, String> {
         .filter(|s| opts.boards.is_empty() || opts.boards.iter().any(|b| b == s.board.name))
         .collect();
     let charts = opts.out_dir.join("charts");
-    std::fs::create_dir_all(&charts).map_err(|e| e.to_string())?;
+    std::fs::create_dir_all(&charts).map_err(|e| {
+        format!(
+            "--out {}: cannot create {}: {e}",
+            opts.out_dir.display(),
+            charts.display()
+        )
+    })?;
     let mut md = String::new();
     let w = &mut md;
     let _ = writeln!(w, "# Conversion budget: results\n");
@@ -938,8 +944,12 @@ pub fn run(opts: &BudgetOptions) -> Result<Vec<Point>, String> {
         let _ = writeln!(w);
         all.extend(pts);
     }
-    std::fs::write(opts.out_dir.join("conversion-budget-results.md"), md)
-        .map_err(|e| e.to_string())?;
+    std::fs::write(opts.out_dir.join("conversion-budget-results.md"), md).map_err(|e| {
+        format!(
+            "--out {}: cannot write conversion-budget-results.md: {e}",
+            opts.out_dir.display()
+        )
+    })?;
     Ok(all)
 }
 

@@ -635,7 +635,13 @@ fn row(w: &mut String, p: &GuardPoint) {
 /// Runs the sweep, writes the table and the chart.
 pub fn run(opts: &GuardOptions) -> Result<Vec<GuardPoint>, String> {
     let charts = opts.out_dir.join("charts");
-    std::fs::create_dir_all(&charts).map_err(|e| e.to_string())?;
+    std::fs::create_dir_all(&charts).map_err(|e| {
+        format!(
+            "--out {}: cannot create {}: {e}",
+            opts.out_dir.display(),
+            charts.display()
+        )
+    })?;
     let points = sweep(opts);
     chart(&charts.join("guard-frontier.png"), &points, opts.outlier_um)?;
     let mut md = String::new();
@@ -679,8 +685,12 @@ pub fn run(opts: &GuardOptions) -> Result<Vec<GuardPoint>, String> {
     for p in &points {
         row(w, p);
     }
-    std::fs::write(opts.out_dir.join("guard-frontier-results.md"), md)
-        .map_err(|e| e.to_string())?;
+    std::fs::write(opts.out_dir.join("guard-frontier-results.md"), md).map_err(|e| {
+        format!(
+            "--out {}: cannot write guard-frontier-results.md: {e}",
+            opts.out_dir.display()
+        )
+    })?;
     Ok(points)
 }
 
@@ -731,7 +741,7 @@ pub fn run_from_env() -> Option<std::process::ExitCode> {
                             acq.name, g.name(), p.k, p.lag_ms, p.design_lag_ms, p.noise_mm_s,
                             p.outlier_worst_mm_s, if p.meets() { " — meets all three" } else { "" }
                         ),
-                        None => println!("{} · {}: no window at both bounds", acq.name, g.name()),
+                        None => println!("{} · {}: none: no window reaches both bounds", acq.name, g.name()),
                     }
                 }
             }

@@ -813,3 +813,22 @@ fn the_summary_reports_lines_apart_from_regions() {
         "{text}"
     );
 }
+
+/// A sweep whose `--out` cannot be written says so in one line naming the flag and the path,
+/// exit 1, before measuring anything (a file where the directory should be).
+#[test]
+fn sweeps_name_an_out_dir_they_cannot_write() {
+    let file = scratch().join("not-a-dir");
+    std::fs::write(&file, b"x").unwrap();
+    let out_dir = file.join("sub");
+    let out_dir = out_dir.to_str().unwrap();
+    for cmd in ["guard", "budget"] {
+        let out = run(&[cmd, "--seeds", "1", "--out", out_dir]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{cmd}: {err}");
+        let lines: Vec<&str> = err.lines().collect();
+        assert_eq!(lines.len(), 1, "{cmd}: {err}");
+        let want = format!("{cmd}: --out {out_dir}: cannot create {out_dir}/charts: ");
+        assert!(lines[0].starts_with(&want), "{cmd}: {err}");
+    }
+}
