@@ -259,6 +259,8 @@ struct Predictor {
     trust_um: f32,
     /// Sample periods per second, to turn the slope into a speed.
     samples_per_s: f32,
+    /// λ, µm, as f32 (the reach test's).
+    wavelength_um: f32,
     /// The ridge fired last (by prediction or by position), until the finger is `rearm_um`
     /// clear of it: neither path fires it again before.
     last_fired: Option<i32>,
@@ -321,6 +323,7 @@ impl Ridges {
                 // In f32 from u32s: u64 → f32 is a soft-float helper on the M4F.
                 trust_um: TRUST_SPEED_UM_S as f32 * sample_period_us as f32 / 1e6,
                 samples_per_s: 1e6 / sample_period_us.max(1) as f32,
+                wavelength_um: g.wavelength_um as f32,
                 last_fired: None,
                 prev_end_um: None,
             }),
@@ -447,13 +450,14 @@ impl Ridges {
             .tracker
             .update(position_um, self.wavelength_um, self.rearm_um);
         let mut crossing = crossing;
-        let mut velocity_um_s = velocity_um_s;
+        // Its own fit is the hybrid's velocity (the sample path's contract, `Need::OwnFit`: the
+        // shared estimator rests in its region): the line's slope sizes the pulses of position
+        // phase too; without a line yet, position alone ends them. Made only where a pulse is
+        // sized (most samples fire nothing).
+        let mut own: Option<(Line, f32)> = None;
         if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
             let line = h.fit.push(position_um, t_us, h.sample_period_us);
-            // Its own fit is the hybrid's velocity (the sample path's contract, `Need::OwnFit`:
-            // the shared estimator rests in its region): the line's slope sizes the pulses of
-            // position phase too; without a line yet, position alone ends them.
-            velocity_um_s = line.map(|l| (l.slope_um * h.samples_per_s) as i32);
+            own = line.map(|l| (l, h.samples_per_s));
             // The last ridge fired re-arms once the finger is `rearm_um` clear of it.
             let here_um = line.map_or(position_um as f32, |l| l.end_um);
             if let Some(k) = h.last_fired {
@@ -484,6 +488,7 @@ impl Ridges {
                     passed && c.skipped == 0 && h.last_fired != Some(c.ridge)
                 });
                 if let Some(c) = behind {
+                    let velocity_um_s = Some((line.slope_um * h.samples_per_s) as i32);
                     let out = self.fire(c, velocity_um_s, 0, want, t_us, timer);
                     if out.1.is_some() {
                         if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
@@ -495,12 +500,11 @@ impl Ridges {
                 // The ridges nearest the raw position bound every candidate: one within reach of
                 // the line (two periods of travel, plus how far the raw sample may sit from the
                 // line) is its cell's edge above or below. Far from both, nothing to predict.
-                let reach_um = 2.0 * line.slope_um.abs() + INNOVATION_GATE_UM + 8.0;
-                let lo_um = self.tracker.cell_lo_um as f32;
-                let hi_um = lo_um + self.wavelength_um as f32;
-                let far = self.tracker.cell.is_some()
-                    && (line.end_um - lo_um).abs() > reach_um
-                    && (hi_um - line.end_um).abs() > reach_um;
+                // A line end outside the raw cell is never called far: `predict` decides then.
+                // (`update` has just set the cell: its edge is the raw position's.)
+                let reach_um = 2.0 * line.slope_um.abs() + (INNOVATION_GATE_UM + 8.0);
+                let above_lo_um = line.end_um - self.tracker.cell_lo_um as f32;
+                let far = above_lo_um > reach_um && h.wavelength_um - above_lo_um > reach_um;
                 if far {
                     return (want, None, 0);
                 }
@@ -513,6 +517,11 @@ impl Ridges {
         }
         let Some(c) = crossing else {
             return (want, None, 0);
+        };
+        let velocity_um_s = if HYBRID {
+            own.map(|(l, samples_per_s)| (l.slope_um * samples_per_s) as i32)
+        } else {
+            velocity_um_s
         };
         let out = self.fire(c, velocity_um_s, 0, want, t_us, timer);
         if out.1.is_some() {
