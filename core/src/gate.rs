@@ -671,6 +671,25 @@ impl Gate {
         }
     }
 
+    /// True when [`Gate::request`] would return None at once, changing nothing: [`Self::steady`],
+    /// or a one-pulse still on. The hardware ends that pulse, and nothing changes until then —
+    /// the first call after its end records it (`catch_up`). Returning then spares the samples
+    /// under every pulse the ledger's roll (a grating's ridge pulses cover ~a third of its
+    /// samples at 200 mm/s), and the controller the caps' copy. The bound keeps a deadline
+    /// seen across a wrapped clock out.
+    #[inline(always)]
+    pub fn quiet(&self, desired: Option<TimerSettings>, t_us: u32) -> bool {
+        if self.steady(desired) {
+            return true;
+        }
+        match self.state {
+            State::Pulse { end_us, .. } => {
+                before(t_us, end_us) && end_us.wrapping_sub(t_us) <= MAX_DUTY_WINDOW_US
+            }
+            _ => false,
+        }
+    }
+
     /// Brings the window's accounting to `t_us`: the ring rolled, and a pulse that has ended by
     /// itself recorded.
     fn catch_up(&mut self, t_us: u32, limits: &SafetyLimits) -> u32 {
@@ -769,17 +788,8 @@ impl Gate {
         timer: &BurstTimer,
         limits: &SafetyLimits,
     ) -> Option<GateAction> {
-        if self.steady(desired) {
+        if self.quiet(desired, t_us) {
             return None;
-        }
-        // A one-pulse still on: the hardware ends it, and nothing changes until then — the
-        // first call after its end records it (`catch_up`). Returning here spares the samples
-        // under every pulse the ledger's roll (a grating's ridge pulses cover ~a third of its
-        // samples at 200 mm/s). The bound keeps a deadline seen across a wrapped clock out.
-        if let State::Pulse { end_us, .. } = self.state {
-            if before(t_us, end_us) && end_us.wrapping_sub(t_us) <= MAX_DUTY_WINDOW_US {
-                return None;
-            }
         }
         let window_us = self.catch_up(t_us, limits);
         let desired = desired.filter(|s| limits.allows(timer, s));

@@ -821,9 +821,9 @@ impl<E: VelocityEstimator> Controller<E> {
     }
 
     fn drive(&mut self, desired: Option<TimerSettings>, t_us: u32) -> Option<GateAction> {
-        // The common cases, a burst running unchanged or the line idle and staying so, before
-        // the caps are even fetched.
-        if self.gate.steady(desired) {
+        // The common cases, a burst running unchanged, the line idle and staying so, or a
+        // one-pulse still on, before the caps are even fetched.
+        if self.gate.quiet(desired, t_us) {
             return None;
         }
         let limits = self.limits();

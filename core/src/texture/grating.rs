@@ -259,6 +259,8 @@ struct Predictor {
     trust_um: f32,
     /// Sample periods per second, to turn the slope into a speed.
     samples_per_s: f32,
+    /// λ, µm, as f32 (the reach test's).
+    wavelength_um: f32,
     /// The ridge fired last (by prediction or by position), until the finger is `rearm_um`
     /// clear of it: neither path fires it again before.
     last_fired: Option<i32>,
@@ -321,6 +323,7 @@ impl Ridges {
                 // In f32 from u32s: u64 → f32 is a soft-float helper on the M4F.
                 trust_um: TRUST_SPEED_UM_S as f32 * sample_period_us as f32 / 1e6,
                 samples_per_s: 1e6 / sample_period_us.max(1) as f32,
+                wavelength_um: g.wavelength_um as f32,
                 last_fired: None,
                 prev_end_um: None,
             }),
@@ -374,12 +377,12 @@ impl Ridges {
         t_us: u32,
         timer: &BurstTimer,
     ) -> (Want, Option<TimerSettings>, u32) {
-        if self.hybrid.is_some() {
-            let r = self.step_hybrid(position_um, t_us, timer);
-            (r.want, r.settings, r.skipped)
+        let r = if self.hybrid.is_some() {
+            self.step_hybrid(position_um, t_us, timer)
         } else {
             self.step_as::<false>(position_um, velocity_um_s, t_us, timer)
-        }
+        };
+        (r.want, r.settings, r.skipped)
     }
 
     /// The hybrid's copy, a call of its own: inlined into the controller it spills the
@@ -389,13 +392,14 @@ impl Ridges {
     /// its own line is its velocity (the estimator sleeps in its region).
     #[inline(never)]
     fn step_hybrid(&mut self, position_um: i32, t_us: u32, timer: &BurstTimer) -> Request {
-        let step = self.step_as::<true>(position_um, None, t_us, timer);
-        self.request_of(step)
+        self.step_as::<true>(position_um, None, t_us, timer)
     }
 
-    /// A step's outcome as the controller's request (this grating's amplitude).
+    /// A step's outcome as the controller's request (this grating's amplitude). Every path
+    /// builds its request where it ends, `fire`'s and `predict`'s in the caller's: a tuple
+    /// merged on the stack and copied into the request cost the M4F ~10 instructions a sample.
     #[inline(always)]
-    fn request_of(&self, (want, settings, skipped): (Want, Option<TimerSettings>, u32)) -> Request {
+    fn request_of(&self, want: Want, settings: Option<TimerSettings>, skipped: u32) -> Request {
         Request {
             settings,
             skipped,
@@ -425,13 +429,13 @@ impl Ridges {
         velocity_um_s: Option<i32>,
         t_us: u32,
         timer: &BurstTimer,
-    ) -> (Want, Option<TimerSettings>, u32) {
+    ) -> Request {
         let mut want = Want::Periodic;
         if !self.plausible(position_um) {
             if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
                 h.fit.reset();
             }
-            return (want, None, 0);
+            return self.request_of(want, None, 0);
         }
         if let Some((lo, hi)) = self.on_span_um {
             // Signed: a predicted pulse starts after the sample that fired it.
@@ -447,13 +451,14 @@ impl Ridges {
             .tracker
             .update(position_um, self.wavelength_um, self.rearm_um);
         let mut crossing = crossing;
-        let mut velocity_um_s = velocity_um_s;
+        // Its own fit is the hybrid's velocity (the sample path's contract, `Need::OwnFit`: the
+        // shared estimator rests in its region): the line's slope sizes the pulses of position
+        // phase too; without a line yet, position alone ends them. Made only where a pulse is
+        // sized (most samples fire nothing).
+        let mut own: Option<(Line, f32)> = None;
         if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
             let line = h.fit.push(position_um, t_us, h.sample_period_us);
-            // Its own fit is the hybrid's velocity (the sample path's contract, `Need::OwnFit`:
-            // the shared estimator rests in its region): the line's slope sizes the pulses of
-            // position phase too; without a line yet, position alone ends them.
-            velocity_um_s = line.map(|l| (l.slope_um * h.samples_per_s) as i32);
+            own = line.map(|l| (l, h.samples_per_s));
             // The last ridge fired re-arms once the finger is `rearm_um` clear of it.
             let here_um = line.map_or(position_um as f32, |l| l.end_um);
             if let Some(k) = h.last_fired {
@@ -484,8 +489,9 @@ impl Ridges {
                     passed && c.skipped == 0 && h.last_fired != Some(c.ridge)
                 });
                 if let Some(c) = behind {
+                    let velocity_um_s = Some((line.slope_um * h.samples_per_s) as i32);
                     let out = self.fire(c, velocity_um_s, 0, want, t_us, timer);
-                    if out.1.is_some() {
+                    if out.settings.is_some() {
                         if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
                             h.last_fired = Some(c.ridge);
                         }
@@ -495,14 +501,13 @@ impl Ridges {
                 // The ridges nearest the raw position bound every candidate: one within reach of
                 // the line (two periods of travel, plus how far the raw sample may sit from the
                 // line) is its cell's edge above or below. Far from both, nothing to predict.
-                let reach_um = 2.0 * line.slope_um.abs() + INNOVATION_GATE_UM + 8.0;
-                let lo_um = self.tracker.cell_lo_um as f32;
-                let hi_um = lo_um + self.wavelength_um as f32;
-                let far = self.tracker.cell.is_some()
-                    && (line.end_um - lo_um).abs() > reach_um
-                    && (hi_um - line.end_um).abs() > reach_um;
+                // A line end outside the raw cell is never called far: `predict` decides then.
+                // (`update` has just set the cell: its edge is the raw position's.)
+                let reach_um = 2.0 * line.slope_um.abs() + (INNOVATION_GATE_UM + 8.0);
+                let above_lo_um = line.end_um - self.tracker.cell_lo_um as f32;
+                let far = above_lo_um > reach_um && h.wavelength_um - above_lo_um > reach_um;
                 if far {
-                    return (want, None, 0);
+                    return self.request_of(want, None, 0);
                 }
                 return self.predict(line, from_um, want, t_us, timer);
             }
@@ -512,10 +517,15 @@ impl Ridges {
             }
         }
         let Some(c) = crossing else {
-            return (want, None, 0);
+            return self.request_of(want, None, 0);
+        };
+        let velocity_um_s = if HYBRID {
+            own.map(|(l, samples_per_s)| (l.slope_um * samples_per_s) as i32)
+        } else {
+            velocity_um_s
         };
         let out = self.fire(c, velocity_um_s, 0, want, t_us, timer);
-        if out.1.is_some() {
+        if out.settings.is_some() {
             if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
                 h.last_fired = Some(c.ridge);
             }
@@ -533,22 +543,22 @@ impl Ridges {
         want: Want,
         t_us: u32,
         timer: &BurstTimer,
-    ) -> (Want, Option<TimerSettings>, u32) {
+    ) -> Request {
         let Some(h) = self.hybrid.as_ref() else {
-            return (want, None, 0);
+            return self.request_of(want, None, 0);
         };
         let up = line.slope_um > 0.0;
         // The first ridge past `from_um` in the direction of motion. Positions are 0..=1 m:
         // the cast truncates towards 0, which is the floor there.
         let from_floor_um = from_um as i32;
         let Some(cell) = from_floor_um.checked_div_euclid(self.wavelength_um) else {
-            return (want, None, 0);
+            return self.request_of(want, None, 0);
         };
         let ridge = if up { cell + 1 } else { cell };
         let already = h.last_fired == Some(ridge);
         let fraction = ((ridge * self.wavelength_um) as f32 - line.end_um) / line.slope_um;
         if already || fraction > 1.0 {
-            return (want, None, 0);
+            return self.request_of(want, None, 0);
         }
         // Rounded to the nearest clock and µs (the cast truncates; a fraction of 0.7 in f32
         // is 0.699999988).
@@ -586,7 +596,7 @@ impl Ridges {
         want: Want,
         start_us: u32,
         timer: &BurstTimer,
-    ) -> (Want, Option<TimerSettings>, u32) {
+    ) -> Request {
         let t_us = start_us;
         let too_soon = self
             .last_pulse_us
@@ -609,7 +619,7 @@ impl Ridges {
             timer.delayed_pulse(delay_clocks, on).ok()
         };
         let Some(settings) = settings else {
-            return (want, None, c.skipped + 1);
+            return self.request_of(want, None, c.skipped + 1);
         };
         let ridge = c.ridge * self.wavelength_um;
         self.on_span_um = Some(if c.up {
@@ -618,7 +628,7 @@ impl Ridges {
             (ridge - self.ridge_um, ridge + self.rearm_um)
         });
         self.last_pulse_us = Some(t_us);
-        (Want::Pulse, Some(settings), c.skipped)
+        self.request_of(Want::Pulse, Some(settings), c.skipped)
     }
 }
 
@@ -644,8 +654,7 @@ impl Render for Ridges {
         if self.hybrid.is_some() {
             return self.step_hybrid(now.position_um, now.t_us, now.timer);
         }
-        let step = self.step_as::<false>(now.position_um, now.velocity_um_s, now.t_us, now.timer);
-        self.request_of(step)
+        self.step_as::<false>(now.position_um, now.velocity_um_s, now.t_us, now.timer)
     }
 }
 

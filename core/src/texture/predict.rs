@@ -50,7 +50,7 @@ const H: usize = FIT_SAMPLES / 2;
 const _: () = assert!(N == 2 * H && N.is_power_of_two());
 
 /// The running line fit.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug)]
 pub(crate) struct LineFit {
     ring: [i32; N],
     /// Index of the oldest sample in `ring` once full; the next write goes there.
@@ -60,8 +60,10 @@ pub(crate) struct LineFit {
     /// The same two sums over the newest [`H`] samples (fewer while filling).
     half: Sums<H>,
     last_t_us: u32,
-    /// Where the line said the next sample would be, µm.
-    expected_um: Option<f32>,
+    /// Where the line said the next sample would be, µm; NaN for nowhere (no line): every
+    /// comparison with NaN is false, so no sample is off it (an Option cost the M4F a load
+    /// and a test more per sample).
+    expected_um: f32,
 }
 
 impl Default for LineFit {
@@ -72,7 +74,7 @@ impl Default for LineFit {
             full: Sums::default(),
             half: Sums::default(),
             last_t_us: 0,
-            expected_um: None,
+            expected_um: f32::NAN,
         }
     }
 }
@@ -92,7 +94,7 @@ impl LineFit {
         self.head = 0;
         self.full = Sums::default();
         self.half = Sums::default();
-        self.expected_um = None;
+        self.expected_um = f32::NAN;
     }
 
     /// Adds a sample taken at `t_us`; returns the line once the window is full. A step of
@@ -102,9 +104,7 @@ impl LineFit {
         let step_us = t_us.wrapping_sub(self.last_t_us);
         self.last_t_us = t_us;
         let on_grid = step_us.abs_diff(period_us) <= period_us / 2;
-        let off_line = self
-            .expected_um
-            .is_some_and(|e| (position_um as f32 - e).abs() > INNOVATION_GATE_UM);
+        let off_line = (position_um as f32 - self.expected_um).abs() > INNOVATION_GATE_UM;
         if !on_grid || off_line {
             self.reset();
         }
@@ -128,15 +128,15 @@ impl LineFit {
                 return None;
             }
         } else {
-            let oldest = self.ring.get(self.head).copied().unwrap_or(0);
-            if let Some(slot) = self.ring.get_mut(self.head) {
-                *slot = position_um;
-            }
-            self.head = if self.head + 1 == N { 0 } else { self.head + 1 };
+            // Masked: `head` is below N, and the mask says so to the compiler (no bounds test).
+            let at = self.head & (N - 1);
+            let oldest = self.ring[at];
+            self.ring[at] = position_um;
+            self.head = (at + 1) & (N - 1);
             self.full.slide(position_um, oldest);
         }
         let line = self.chosen();
-        self.expected_um = Some(line.end_um + line.slope_um);
+        self.expected_um = line.end_um + line.slope_um;
         Some(line)
     }
 

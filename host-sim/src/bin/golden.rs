@@ -51,8 +51,10 @@ const BUDGET: u64 = host_sim::budget::SAMPLE_BUDGET_INSTR;
 /// under the budget since stop 27, the material since stop 28: both checked against it).
 /// Issue #35 (the estimator rests in the hybrid's region, its line is its velocity) took its
 /// worst row from 552.8 to 525.4, and letting it sleep there (seeded from the line on leaving)
-/// to 457.5 (its rest row, 389.4, is under the budget): the ceiling follows, 3 % over.
-const OVER_BUDGET: [(&str, f64); 1] = [("grating-hybrid/", 471.0)];
+/// to 457.5 (its rest row, 389.4, is under the budget); its step's cuts (a cheaper reach test,
+/// the request built where each path ends, the gate's pulse-on return before the caps) to
+/// 418.1 (rest 377.3): the ceiling follows, 3 % over.
+const OVER_BUDGET: [(&str, f64); 1] = [("grating-hybrid/", 431.0)];
 
 struct VecSink(Vec<u8>);
 impl Sink for VecSink {
