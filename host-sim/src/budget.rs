@@ -835,14 +835,7 @@ pub fn run(opts: &BudgetOptions) -> Result<Vec<Point>, String> {
         .into_iter()
         .filter(|s| opts.boards.is_empty() || opts.boards.iter().any(|b| b == s.board.name))
         .collect();
-    let charts = opts.out_dir.join("charts");
-    std::fs::create_dir_all(&charts).map_err(|e| {
-        format!(
-            "--out {}: cannot create {}: {e}",
-            opts.out_dir.display(),
-            charts.display()
-        )
-    })?;
+    let charts = crate::door::charts_dir(&opts.out_dir)?;
     let mut md = String::new();
     let w = &mut md;
     let _ = writeln!(w, "# Conversion budget: results\n");

@@ -251,3 +251,17 @@ pub struct SweepSeeds {
 
 const SWEEP_SEED: Whole = Whole::new(0, u64::MAX);
 const SWEEP_SEEDS: Whole = Whole::new(1, 20);
+
+/// Creates `out_dir/charts` for a sweep's results (`budget`, `guard`); the error is the one line
+/// naming `--out`, the path and the cause.
+pub fn charts_dir(out_dir: &std::path::Path) -> Result<PathBuf, String> {
+    let charts = out_dir.join("charts");
+    std::fs::create_dir_all(&charts).map_err(|e| {
+        format!(
+            "--out {}: cannot create {}: {e}",
+            out_dir.display(),
+            charts.display()
+        )
+    })?;
+    Ok(charts)
+}

@@ -634,14 +634,7 @@ fn row(w: &mut String, p: &GuardPoint) {
 
 /// Runs the sweep, writes the table and the chart.
 pub fn run(opts: &GuardOptions) -> Result<Vec<GuardPoint>, String> {
-    let charts = opts.out_dir.join("charts");
-    std::fs::create_dir_all(&charts).map_err(|e| {
-        format!(
-            "--out {}: cannot create {}: {e}",
-            opts.out_dir.display(),
-            charts.display()
-        )
-    })?;
+    let charts = crate::door::charts_dir(&opts.out_dir)?;
     let points = sweep(opts);
     chart(&charts.join("guard-frontier.png"), &points, opts.outlier_um)?;
     let mut md = String::new();
