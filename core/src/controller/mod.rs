@@ -1543,7 +1543,7 @@ mod tests {
         let mut always = two(hybrid(), synth(1_000));
         always.velocity_every_sample(true);
         let (mut slept, mut entries, mut t) = (0, 0, 0u32);
-        let mut last_region = None;
+        let (mut last_region, mut refilling) = (None, 0);
         let path = (0..1_200).map(|k| 20_000.0 + 50.0 * (600 - (k as i32 - 600).abs()) as f32);
         for um in path {
             let code = code_at(&sleeps, um);
@@ -1558,11 +1558,15 @@ mod tests {
             match a.region {
                 Some(0) if b.velocity_um_s.is_some() => {
                     assert_eq!(a.velocity_um_s, None, "{um} µm: asleep");
-                    // The line has a velocity once its 64-sample window is full.
-                    if let Some(own) = sleeps.velocity_um_s() {
-                        let est = b.velocity_um_s.unwrap_or(0);
-                        assert!(own.abs_diff(est) <= 1_000, "{um} µm: own {own}, est {est}");
-                        slept += 1;
+                    // The line has a velocity once its 64-sample window is full; until then
+                    // the asked velocity is None where a resting estimator would answer.
+                    match sleeps.velocity_um_s() {
+                        Some(own) => {
+                            let est = b.velocity_um_s.unwrap_or(0);
+                            assert!(own.abs_diff(est) <= 1_000, "{um} µm: own {own}, est {est}");
+                            slept += 1;
+                        }
+                        None => refilling += 1,
                     }
                 }
                 Some(1) => {
@@ -1580,6 +1584,12 @@ mod tests {
         assert!(
             slept > 250 && entries == 1,
             "{slept} asleep, {entries} entries"
+        );
+        // Asleep, not resting: the velocity asked is the line's, None while it refills (its 64
+        // samples after the turn back into the region, less the estimator's 34 it had).
+        assert!(
+            refilling >= 25,
+            "{refilling} samples without the line's velocity"
         );
     }
 
