@@ -1456,17 +1456,35 @@ mod tests {
             .collect()
     }
 
-    /// Two regions split at 30 mm.
-    fn two(below: Texture, above: Texture) -> Controller {
+    /// The default scene cut to two regions split at 30 mm.
+    fn two_config(below: Texture, above: Texture) -> Config {
         let mut cfg = default_config();
         cfg.scene.boundaries_um.clear();
         cfg.scene.textures.clear();
         let _ = cfg.scene.boundaries_um.push(30_000);
         let _ = cfg.scene.textures.push(below);
         let _ = cfg.scene.textures.push(above);
+        cfg
+    }
+
+    /// Two regions split at 30 mm.
+    fn two(below: Texture, above: Texture) -> Controller {
         let mut c = Controller::new(TIMER, 100).unwrap();
-        c.load(&cfg).unwrap();
+        c.load(&two_config(below, above)).unwrap();
         c
+    }
+
+    /// A hybrid grating of λ = 1 mm.
+    fn hybrid_1mm() -> Texture {
+        Texture::Grating(crate::texture::Grating {
+            render: GratingRender::Hybrid,
+            ..crate::texture::Grating::new(1_000)
+        })
+    }
+
+    /// Up from 20 to 50 mm at 50 mm/s and back, one position (µm) per 100 µs sample.
+    fn up_and_back() -> impl Iterator<Item = f32> {
+        (0..1_200).map(|k| 20_000.0 + 50.0 * (600 - (k as i32 - 600).abs()) as f32)
     }
 
     /// The sample path's contract (docs/sample-contract.md): below 30 mm an `off` region, where
@@ -1481,8 +1499,7 @@ mod tests {
         let mut always = two(Texture::Off, synth(1_000));
         always.velocity_every_sample(true);
         let (mut rested, mut computed, mut t) = (0, 0, 0u32);
-        let path = (0..1_200).map(|k| 20_000.0 + 50.0 * (600 - (k as i32 - 600).abs()) as f32);
-        for um in path {
+        for um in up_and_back() {
             let code = code_at(&rests, um);
             let a = rests.on_sample(Sample { code, t_us: t });
             let b = always.on_sample(Sample { code, t_us: t });
@@ -1533,19 +1550,12 @@ mod tests {
     /// line's, within 1 mm/s of the estimator's on this steady stroke.
     #[test]
     fn a_sleeping_estimator_is_seeded_whole_from_the_hybrids_line() {
-        let hybrid = || {
-            Texture::Grating(crate::texture::Grating {
-                render: GratingRender::Hybrid,
-                ..crate::texture::Grating::new(1_000)
-            })
-        };
-        let mut sleeps = two(hybrid(), synth(1_000));
-        let mut always = two(hybrid(), synth(1_000));
+        let mut sleeps = two(hybrid_1mm(), synth(1_000));
+        let mut always = two(hybrid_1mm(), synth(1_000));
         always.velocity_every_sample(true);
         let (mut slept, mut entries, mut t) = (0, 0, 0u32);
         let (mut last_region, mut refilling) = (None, 0);
-        let path = (0..1_200).map(|k| 20_000.0 + 50.0 * (600 - (k as i32 - 600).abs()) as f32);
-        for um in path {
+        for um in up_and_back() {
             let code = code_at(&sleeps, um);
             let a = sleeps.on_sample(Sample { code, t_us: t });
             let b = always.on_sample(Sample { code, t_us: t });
@@ -1623,25 +1633,14 @@ mod tests {
                 self.0.estimate()
             }
         }
-        let hybrid = Texture::Grating(crate::texture::Grating {
-            render: GratingRender::Hybrid,
-            ..crate::texture::Grating::new(1_000)
-        });
-        let mut cfg = default_config();
-        cfg.scene.boundaries_um.clear();
-        cfg.scene.textures.clear();
-        let _ = cfg.scene.boundaries_um.push(30_000);
-        let _ = cfg.scene.textures.push(hybrid);
-        let _ = cfg.scene.textures.push(synth(1_000));
+        let cfg = two_config(hybrid_1mm(), synth(1_000));
         let est = NoWindow(DefaultEstimator::new(LsqSlope::new(100).unwrap(), 100));
         let mut rests = Controller::with_estimator(TIMER, 100, est);
         rests.load(&cfg).unwrap();
-        let mut always = two(Texture::Off, synth(1_000));
-        always.load(&cfg).unwrap();
+        let mut always = two(hybrid_1mm(), synth(1_000));
         always.velocity_every_sample(true);
         let (mut t, mut above) = (0u32, 0);
-        let path = (0..1_200).map(|k| 20_000.0 + 50.0 * (600 - (k as i32 - 600).abs()) as f32);
-        for um in path {
+        for um in up_and_back() {
             let code = code_at(&always, um);
             let a = rests.on_sample(Sample { code, t_us: t });
             let b = always.on_sample(Sample { code, t_us: t });
@@ -1663,10 +1662,7 @@ mod tests {
     #[test]
     fn each_kind_rests_the_estimator_or_not() {
         let random = random_100hz();
-        let hybrid = Texture::Grating(crate::texture::Grating {
-            render: GratingRender::Hybrid,
-            ..crate::texture::Grating::new(1_000)
-        });
+        let hybrid = hybrid_1mm();
         let kinds = [
             ("off", Texture::Off, &[][..], true),
             ("constant", Texture::constant_hz(80), &[], true),
