@@ -1,7 +1,7 @@
 //! Host simulation of the SAW tactile display: the portable control core (`saw-core`) bound to
 //! models of its hardware.
 //!
-//! - [`trajectory`]: the finger's motion;
+//! - [`trajectory`]: the finger's motion; [`trajectory2d`]: on a 2D screen (issue #36);
 //! - [`adc`]: the slide rheostat and the oversampling ADC, with noise and rail faults;
 //! - [`timer`]: the burst timer as an STM32 timer with (or without) preload, recording edges;
 //! - [`sim`]: the closed loop, trajectory → ADC → controller → timer;
@@ -30,3 +30,4 @@ pub mod sim;
 pub mod soak;
 pub mod timer;
 pub mod trajectory;
+pub mod trajectory2d;
