@@ -1,0 +1,7 @@
+//! The 2D plane (issue #36): position in µm on a plate, windows with a texture each, edges that
+//! pulse when crossed and oriented gratings, built beside the 1D stages (which stay as they
+//! are). See docs/plane.md.
+
+pub mod geometry;
+
+pub use geometry::{GeometryError, PointUm, Polygon, SegmentUm, MAX_VERTICES};
