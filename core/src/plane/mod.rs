@@ -5,3 +5,8 @@
 pub mod geometry;
 
 pub use geometry::{GeometryError, PointUm, Polygon, SegmentUm, MAX_VERTICES};
+pub mod screen;
+#[cfg(test)]
+mod testing;
+
+pub use screen::{CompiledScreen, Place, Screen, ScreenError, ScreenTracker, Window};
