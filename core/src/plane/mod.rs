@@ -8,5 +8,7 @@ pub use geometry::{GeometryError, PointUm, Polygon, SegmentUm, MAX_VERTICES};
 pub mod screen;
 #[cfg(test)]
 mod testing;
+pub mod velocity;
 
 pub use screen::{CompiledScreen, Place, Screen, ScreenError, ScreenTracker, Window};
+pub use velocity::{PlaneVelocity, VelocityUmS};
