@@ -5,10 +5,12 @@
 pub mod geometry;
 
 pub use geometry::{GeometryError, PointUm, Polygon, SegmentUm, MAX_VERTICES};
+pub mod edges;
 pub mod screen;
 #[cfg(test)]
 mod testing;
 pub mod velocity;
 
+pub use edges::{CompiledEdges, EdgeError, EdgePulse, EdgeTracker, Edges, MAX_EDGES};
 pub use screen::{CompiledScreen, Place, Screen, ScreenError, ScreenTracker, Window};
 pub use velocity::{PlaneVelocity, VelocityUmS};
