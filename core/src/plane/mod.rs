@@ -3,6 +3,7 @@
 //! are). See docs/plane.md.
 
 pub mod geometry;
+pub mod grating;
 
 pub use geometry::{GeometryError, PointUm, Polygon, SegmentUm, MAX_VERTICES};
 pub mod edges;
@@ -12,5 +13,6 @@ mod testing;
 pub mod velocity;
 
 pub use edges::{CompiledEdges, EdgeError, EdgePulse, EdgeTracker, Edges, MAX_EDGES};
+pub use grating::{CompiledOriented, OrientedError, OrientedGrating};
 pub use screen::{CompiledScreen, Place, Screen, ScreenError, ScreenTracker, Window};
 pub use velocity::{PlaneVelocity, VelocityUmS};
