@@ -387,6 +387,9 @@ pub struct EdgeTracker {
     /// nothing).
     #[cfg(test)]
     visits: u32,
+    /// Zone scans made (tests).
+    #[cfg(test)]
+    scans: u32,
     /// Scan every zone on every sample (tests: the reference for the skip).
     #[cfg(test)]
     no_skip: bool,
@@ -402,6 +405,8 @@ impl Default for EdgeTracker {
             prev: None,
             #[cfg(test)]
             visits: 0,
+            #[cfg(test)]
+            scans: 0,
             #[cfg(test)]
             no_skip: false,
         }
@@ -430,6 +435,10 @@ impl EdgeTracker {
         #[cfg(test)]
         let scan = scan || self.no_skip;
         if scan {
+            #[cfg(test)]
+            {
+                self.scans += 1;
+            }
             let (mut mask, mut gap) = (0u32, i32::MAX);
             for (i, g) in edges.geoms.iter().enumerate() {
                 let d = g.zone_gap(p);
@@ -480,6 +489,18 @@ impl EdgeTracker {
         }
         self.prev = Some(p);
         fired
+    }
+
+    /// Edges visited so far (tests).
+    #[cfg(test)]
+    pub(crate) fn visits(&self) -> u32 {
+        self.visits
+    }
+
+    /// Zone scans so far (tests).
+    #[cfg(test)]
+    pub(crate) fn scans(&self) -> u32 {
+        self.scans
     }
 
     /// Forgets the edges of `mask`.

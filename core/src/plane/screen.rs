@@ -352,6 +352,12 @@ impl ScreenTracker {
         *self = Self::default();
     }
 
+    /// Full evaluations made so far (tests).
+    #[cfg(test)]
+    pub(crate) fn evaluations(&self) -> u32 {
+        self.evaluations
+    }
+
     /// The place now.
     pub fn place(&self) -> Place {
         self.place
