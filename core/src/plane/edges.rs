@@ -309,10 +309,11 @@ impl Geom {
     /// How far `p` is outside the zone, µm per axis (Chebyshev); ≤ 0 inside.
     #[inline(always)]
     fn zone_gap(&self, p: PointUm) -> i32 {
-        (self.lo.x_um - p.x_um)
-            .max(p.x_um - self.hi.x_um)
-            .max(self.lo.y_um - p.y_um)
-            .max(p.y_um - self.hi.y_um)
+        // Saturating: the finger's coordinates are any i32 the touch stage gives.
+        (self.lo.x_um.saturating_sub(p.x_um))
+            .max(p.x_um.saturating_sub(self.hi.x_um))
+            .max(self.lo.y_um.saturating_sub(p.y_um))
+            .max(p.y_um.saturating_sub(self.hi.y_um))
     }
 }
 
@@ -905,6 +906,21 @@ mod tests {
             "{fires} fires; {:.2} edges visited a sample",
             visits as f64 / samples as f64
         );
+    }
+
+    #[test]
+    fn a_finger_anywhere_answers_without_panicking() {
+        // Coordinates at i32's ends (a touch stage's garbage): no overflow, no pulse.
+        let (_, c) = scene();
+        let mut t = EdgeTracker::default();
+        for p in [
+            pt(i32::MIN, i32::MIN),
+            pt(i32::MAX, 0),
+            pt(20_000, 10_000),
+            pt(0, i32::MAX),
+        ] {
+            assert_eq!(t.update(&c, p, (1e9, -1e9)), None);
+        }
     }
 
     #[test]

@@ -50,20 +50,22 @@ pub struct SegmentUm {
     pub b: PointUm,
 }
 
-/// (a − o) × (b − o), exact for coordinates within ±[`MAX_COORD_UM`]: positive when o, a, b
-/// turn counter-clockwise.
+/// (a − o) × (b − o), exact while one of the two vectors is within a validated polygon's
+/// range (2·10⁶) and the other within i32 (products ≤ 8.6·10¹⁵): positive when o, a, b turn
+/// counter-clockwise. Wrapping, so a polygon nobody validated gives a wrong answer, not a
+/// panic.
 #[inline(always)]
 pub(crate) fn cross(o: PointUm, a: PointUm, b: PointUm) -> i64 {
     let (ax, ay) = (a.x_um as i64 - o.x_um as i64, a.y_um as i64 - o.y_um as i64);
     let (bx, by) = (b.x_um as i64 - o.x_um as i64, b.y_um as i64 - o.y_um as i64);
-    ax * by - ay * bx
+    ax.wrapping_mul(by).wrapping_sub(ay.wrapping_mul(bx))
 }
 
-/// (a − o) · (b − o), exact.
+/// (a − o) · (b − o), exact in range (wrapping, as [`cross`]).
 fn dot(o: PointUm, a: PointUm, b: PointUm) -> i64 {
     let (ax, ay) = (a.x_um as i64 - o.x_um as i64, a.y_um as i64 - o.y_um as i64);
     let (bx, by) = (b.x_um as i64 - o.x_um as i64, b.y_um as i64 - o.y_um as i64);
-    ax * bx + ay * by
+    ax.wrapping_mul(bx).wrapping_add(ay.wrapping_mul(by))
 }
 
 /// `p`, known collinear with `a`–`b`, lies on the closed segment.
@@ -595,6 +597,22 @@ mod tests {
         );
         assert!(s(GeometryError::SelfIntersecting { edge: 0, other: 2 })
             .starts_with("edges 0 and 2 meet"));
+    }
+
+    #[test]
+    fn any_input_answers_without_panicking() {
+        // An outline nobody validated, at i32's ends, and a finger there: an answer, no
+        // overflow panic (the tests build with overflow checks).
+        let m = i32::MAX;
+        let wild = Polygon {
+            vertices: Vec::from_slice(&[pt(-m, -m), pt(m, -m), pt(m, m), pt(-m, m)]).unwrap(),
+        };
+        let _ = wild.contains(pt(i32::MIN, 0));
+        let _ = wild.signed_distance_um(pt(0, i32::MIN));
+        let _ = wild.validate();
+        let l = ell();
+        assert!(!l.contains(pt(i32::MIN, i32::MAX)));
+        assert!(l.signed_distance_um(pt(i32::MAX, i32::MIN)) < -1e9);
     }
 
     #[test]

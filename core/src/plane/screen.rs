@@ -638,6 +638,26 @@ mod tests {
     }
 
     #[test]
+    fn a_finger_anywhere_answers_without_panicking() {
+        let s = screen(&[ell(), rect(30_000, 0, 40_000, 10_000)], 200);
+        let mut t = ScreenTracker::default();
+        for p in [
+            pt(i32::MIN, i32::MIN),
+            pt(5_000, 5_000),
+            pt(i32::MAX, 0),
+            pt(0, i32::MAX),
+        ] {
+            let _ = t.update(&s, p);
+        }
+        assert_eq!(t.update(&s, pt(i32::MIN, 0)), Place::Background);
+        assert_eq!(
+            s.texture(Place::Window(200)),
+            0,
+            "an unknown window reads as background"
+        );
+    }
+
+    #[test]
     fn refusals() {
         let ok = Screen {
             windows: [Window {
