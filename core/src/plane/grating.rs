@@ -240,42 +240,46 @@ mod tests {
 
     #[test]
     fn one_burst_per_ridge_crossed_along_n_in_eight_directions() {
-        // Ridges normal to x, to the diagonal and to (2, 1); strokes of 10 mm in 8 directions
+        // Position phase and the hybrid (its line fitted to the projections); ridges normal to
+        // x, to the diagonal and to (2, 1); strokes of 10 mm in 8 directions
         // at 20–200 mm/s with 2 LSB noise, starting and ending mid-cell (0.5 λ off a ridge
         // along n): the bursts equal the ridges crossed, counted from the true projections.
         let mut noise = Noise::new(5);
         let mut total = 0;
-        for normal in [(1, 0), (1, 1), (2, 1)] {
-            let len = ((normal.0 * normal.0 + normal.1 * normal.1) as f64).sqrt();
-            let n = (normal.0 as f64 / len, normal.1 as f64 / len);
-            for d in directions() {
-                let across = d.0 * n.0 + d.1 * n.1;
-                if across.abs() < 0.2 {
-                    continue; // (nearly) parallel: the next test's
-                }
-                for v_mm_s in [20.0, 50.0, 100.0, 200.0] {
-                    let mut g = oriented(normal, GratingRender::PositionPhase);
-                    // Start where the projection is mid-cell: p = 20.5 λ.
-                    let from = (20_500.0 * n.0, 20_500.0 * n.1);
-                    // End mid-cell too: a length whose travel along n is a whole number of λ.
-                    let length = (10_000.0 / across.abs()).round().max(1.0);
-                    let length = (length * across.abs() / 1_000.0).round() * 1_000.0 / across.abs();
-                    let (bursts, a, b) = stroke(&mut g, from, d, v_mm_s, length, &mut noise);
-                    let pa = a.0 * n.0 + a.1 * n.1;
-                    let pb = b.0 * n.0 + b.1 * n.1;
-                    let want = ridges_between(pa, pb, 1_000.0);
-                    assert!(want >= 9, "{want}");
-                    assert_eq!(
+        for render in [GratingRender::PositionPhase, GratingRender::Hybrid] {
+            for normal in [(1, 0), (1, 1), (2, 1)] {
+                let len = ((normal.0 * normal.0 + normal.1 * normal.1) as f64).sqrt();
+                let n = (normal.0 as f64 / len, normal.1 as f64 / len);
+                for d in directions() {
+                    let across = d.0 * n.0 + d.1 * n.1;
+                    if across.abs() < 0.2 {
+                        continue; // (nearly) parallel: the next test's
+                    }
+                    for v_mm_s in [20.0, 50.0, 100.0, 200.0] {
+                        let mut g = oriented(normal, render);
+                        // Start where the projection is mid-cell: p = 20.5 λ.
+                        let from = (20_500.0 * n.0, 20_500.0 * n.1);
+                        // End mid-cell too: a length whose travel along n is a whole number of λ.
+                        let length = (10_000.0 / across.abs()).round().max(1.0);
+                        let length =
+                            (length * across.abs() / 1_000.0).round() * 1_000.0 / across.abs();
+                        let (bursts, a, b) = stroke(&mut g, from, d, v_mm_s, length, &mut noise);
+                        let pa = a.0 * n.0 + a.1 * n.1;
+                        let pb = b.0 * n.0 + b.1 * n.1;
+                        let want = ridges_between(pa, pb, 1_000.0);
+                        assert!(want >= 9, "{want}");
+                        assert_eq!(
                         bursts as i64, want,
-                        "normal {normal:?} dir {d:?} {v_mm_s} mm/s: {pa:.0} → {pb:.0}"
+                        "{render:?} normal {normal:?} dir {d:?} {v_mm_s} mm/s: {pa:.0} → {pb:.0}"
                     );
-                    total += want;
+                        total += want;
+                    }
                 }
             }
         }
-        // 10 ridges a stroke × 4 speeds × the directions not within 0.2 of parallel: 6 for
-        // (1, 0) and (1, 1), all 8 for (2, 1).
-        assert_eq!(total, 10 * 4 * (6 + 6 + 8));
+        // Two renderers × 10 ridges a stroke × 4 speeds × the directions not within 0.2 of
+        // parallel: 6 for (1, 0) and (1, 1), all 8 for (2, 1).
+        assert_eq!(total, 2 * 10 * 4 * (6 + 6 + 8));
     }
 
     #[test]
