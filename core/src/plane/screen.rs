@@ -490,6 +490,57 @@ mod tests {
     }
 
     #[test]
+    fn across_a_shared_edge_with_noise_the_switch_is_direct_in_any_direction() {
+        // A (0) and B (1) share x = 10 mm. Strokes through (10, 5) mm in the 6 directions not
+        // parallel to it, 20–200 mm/s, 2 LSB: one switch each, straight from one window to the
+        // other (never through the background), within [h − E, h + E + vT] past the edge.
+        let s = screen(
+            &[rect(0, 0, 10_000, 10_000), rect(10_000, 0, 20_000, 10_000)],
+            200,
+        );
+        let mut noise = Noise::new(12);
+        let sigma = sigma_um(2.0);
+        let mut strokes = 0;
+        for (dx, dy) in directions() {
+            if dx.abs() < 0.5 {
+                continue;
+            }
+            for v_mm_s in [20.0, 50.0, 100.0, 200.0] {
+                let step = v_mm_s * 1000.0 * PERIOD_US as f64 / 1e6;
+                let (x0, y0) = (10_000.0 - 3_000.0 * dx, 5_000.0 - 3_000.0 * dy);
+                let mut t = ScreenTracker::default();
+                let (mut last, mut switches, mut e_max) = (None, StdVec::new(), 0.0f64);
+                for k in 0..=(6_000.0 / step) as usize {
+                    let (x, y) = (x0 + k as f64 * step * dx, y0 + k as f64 * step * dy);
+                    let (ex, ey) = (noise.gauss() * sigma, noise.gauss() * sigma);
+                    e_max = e_max.max((ex * ex + ey * ey).sqrt());
+                    let place = t.update(&s, pt((x + ex).round() as i32, (y + ey).round() as i32));
+                    if last.is_some_and(|l| l != place) {
+                        switches.push((place, (x - 10_000.0) * dx.signum()));
+                    }
+                    last = Some(place);
+                }
+                let e = e_max + 0.71;
+                assert_eq!(switches.len(), 1, "({dx}, {dy}) {v_mm_s}: {switches:?}");
+                let (place, past_um) = switches[0];
+                let want = if dx > 0.0 {
+                    Place::Window(1)
+                } else {
+                    Place::Window(0)
+                };
+                assert_eq!(place, want);
+                // Past the edge along x (the distance to it), E and one sample's travel.
+                assert!(
+                    past_um >= 100.0 - e && past_um <= 100.0 + e + step,
+                    "{past_um}"
+                );
+                strokes += 1;
+            }
+        }
+        assert_eq!(strokes, 6 * 4);
+    }
+
+    #[test]
     fn nested_windows_topmost_wins() {
         // A small window (0) declared before the big one (1) that holds it.
         let s = screen(
