@@ -32,6 +32,7 @@ mod fmt;
 pub mod burst;
 pub mod controller;
 pub mod gate;
+pub mod plane;
 pub mod position;
 pub mod region;
 pub mod sample;

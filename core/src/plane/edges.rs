@@ -1,0 +1,994 @@
+//! Tangible edges in the plane: crossing a segment (a window's outline or a free segment) fires
+//! one pulse, ahead of the edge by a lead the caller gives (velocity × latency, as the 1D lines
+//! do), with the 1D lines' envelopes.
+//!
+//! An edge is the 2D form of a 1D line: the finger's coordinate across it is the signed distance
+//! s = (p − a)·n to its line (n its unit normal). Per edge, as in `texture::lines`:
+//! - **armed** on a side once the finger is `rearm_um` clear of the line on that side;
+//! - **fires** when the finger plus the lead's component across the edge reaches the line from
+//!   the armed side, *and* the crossing point lies on the segment (not on its line's extension:
+//!   crossing the extension disarms without firing);
+//! - **disarmed** after, until the finger is `rearm_um` clear of both the line and where it
+//!   fired, on either side: noise on an edge never re-fires it.
+//! - **Vertices.** Two edges that share an end (a window's corner, concave or convex) are one
+//!   outline there: each counts crossings up to `rearm_um` past the shared end (so noise
+//!   cannot slip a crossing through the corner between them), and a crossing within
+//!   `rearm_um` of it fires one edge and disarms the other as if it had fired too (so a finger
+//!   through a corner fires once). A free end is exact.
+//!
+//! Per sample only the edges whose zone (bounding box grown by the re-arm distance, the
+//! longest lead and two samples of the fastest slider) holds the finger are visited; the
+//! others keep no state (an edge forgets on leaving its zone and re-arms by side on entering
+//! it, farther than the re-arm distance and the longest lead from its line). The zone scan
+//! itself is skipped while the finger stays closer to its last scan point than to any zone.
+
+use heapless::Vec;
+
+use super::geometry::{GeometryError, PointUm, Polygon, SegmentUm};
+use super::velocity::VelocityUmS;
+use crate::texture::grating::MAX_SLIDER_SPEED_UM_S;
+use crate::texture::lines::{Envelope, MAX_LINE_LEAD_UM};
+
+/// Most edges a screen may draw (window outlines and free segments together).
+pub const MAX_EDGES: usize = 32;
+/// Longest re-arm distance, µm (the 1D lines').
+pub const MAX_EDGE_REARM_UM: u32 = 5_000;
+
+/// The pulse every edge fires: the 1D lines' spec.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct EdgePulse {
+    /// Pulse length, µs.
+    pub pulse_us: u32,
+    /// Its envelope.
+    pub envelope: Envelope,
+    /// Peak amplitude, ‰.
+    pub amplitude_permille: u16,
+}
+
+impl Default for EdgePulse {
+    /// The 1D lines' default: 10 ms triangles at full drive.
+    fn default() -> Self {
+        Self {
+            pulse_us: 10_000,
+            envelope: Envelope::Triangular,
+            amplitude_permille: 1000,
+        }
+    }
+}
+
+/// A screen's edges as the scene states them.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct Edges {
+    /// The segments, µm.
+    pub segments: Vec<SegmentUm, MAX_EDGES>,
+    /// The pulse.
+    pub pulse: EdgePulse,
+    /// Distance the finger must move clear of an edge to re-arm it, µm (the screen's band/2 is
+    /// the natural choice: 100 µm by default).
+    pub rearm_um: u32,
+}
+
+impl Default for Edges {
+    fn default() -> Self {
+        Self {
+            segments: Vec::new(),
+            pulse: EdgePulse::default(),
+            rearm_um: 100,
+        }
+    }
+}
+
+/// Why edges were refused. Each variant carries the values its sentence (`Display`) names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub enum EdgeError {
+    /// More than [`MAX_EDGES`] edges.
+    TooMany {
+        /// Edges asked for.
+        edges: usize,
+    },
+    /// A segment of zero length or with an end beyond the plane.
+    Segment {
+        /// Its index.
+        edge: u8,
+        /// Why.
+        error: GeometryError,
+    },
+    /// The pulse is zero or longer than the on-time cap.
+    Pulse {
+        /// The pulse asked for, µs.
+        pulse_us: u32,
+        /// The on-time cap, µs.
+        max_on_time_us: u32,
+    },
+    /// An amplitude outside 1 ..= 1000 ‰.
+    Amplitude {
+        /// The amplitude asked for, ‰.
+        permille: u16,
+    },
+    /// A re-arm distance of zero or above [`MAX_EDGE_REARM_UM`].
+    Rearm {
+        /// The distance asked for, µm.
+        rearm_um: u32,
+    },
+}
+
+impl core::fmt::Display for EdgeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use crate::fmt::{Deci, Milli};
+        match *self {
+            EdgeError::TooMany { edges } => {
+                write!(
+                    f,
+                    "{edges} edges are more than the {MAX_EDGES} a screen may draw"
+                )
+            }
+            EdgeError::Segment { edge, error } => write!(f, "edge {edge}: {error}"),
+            EdgeError::Pulse {
+                pulse_us,
+                max_on_time_us,
+            } => write!(
+                f,
+                "edge pulse {} ms must be above 0 ms and at most the on-time cap of {} ms",
+                Milli(pulse_us as u64),
+                Milli(max_on_time_us as u64)
+            ),
+            EdgeError::Amplitude { permille } => write!(
+                f,
+                "edge amplitude {} % is outside 0.1 % to 100 %",
+                Deci(permille as u64)
+            ),
+            EdgeError::Rearm { rearm_um } => write!(
+                f,
+                "edge re-arm distance {} mm is outside 0.001 mm to {} mm",
+                Milli(rearm_um as u64),
+                Milli(MAX_EDGE_REARM_UM as u64)
+            ),
+        }
+    }
+}
+
+impl Edges {
+    /// Adds a window's outline, one edge per side (its corners then count as shared ends).
+    pub fn push_outline(&mut self, outline: &Polygon) -> Result<(), EdgeError> {
+        let edges = self.segments.len() + outline.vertices.len();
+        if edges > MAX_EDGES {
+            // Nothing added: all of the outline or none of it.
+            return Err(EdgeError::TooMany { edges });
+        }
+        for e in outline.edges() {
+            let _ = self.segments.push(e);
+        }
+        Ok(())
+    }
+
+    /// Validates against the on-time cap and prepares the edges for a stream sampled every
+    /// `sample_period_us`.
+    pub fn compile(
+        &self,
+        max_on_time_us: u32,
+        sample_period_us: u32,
+    ) -> Result<CompiledEdges, EdgeError> {
+        let p = self.pulse;
+        if p.pulse_us == 0 || p.pulse_us > max_on_time_us {
+            return Err(EdgeError::Pulse {
+                pulse_us: p.pulse_us,
+                max_on_time_us,
+            });
+        }
+        if p.amplitude_permille == 0 || p.amplitude_permille > 1000 {
+            return Err(EdgeError::Amplitude {
+                permille: p.amplitude_permille,
+            });
+        }
+        if self.rearm_um == 0 || self.rearm_um > MAX_EDGE_REARM_UM {
+            return Err(EdgeError::Rearm {
+                rearm_um: self.rearm_um,
+            });
+        }
+        // Two samples of the fastest slider: the zone is entered at least this far out.
+        let step_um = (2 * MAX_SLIDER_SPEED_UM_S as u64 * sample_period_us as u64 / 1_000_000)
+            .min(100_000) as i32;
+        let reach_um = self.rearm_um as i32 + MAX_LINE_LEAD_UM as i32 + step_um;
+        let mut geoms: Vec<Geom, MAX_EDGES> = Vec::new();
+        for (i, s) in self.segments.iter().enumerate() {
+            let edge = i as u8;
+            for end in [s.a, s.b] {
+                if !end.in_range() {
+                    return Err(EdgeError::Segment {
+                        edge,
+                        error: GeometryError::OutOfRange { vertex: 0, at: end },
+                    });
+                }
+            }
+            if s.a == s.b {
+                return Err(EdgeError::Segment {
+                    edge,
+                    error: GeometryError::ZeroLengthEdge { edge: 0, at: s.a },
+                });
+            }
+            let dx = (s.b.x_um - s.a.x_um) as f32;
+            let dy = (s.b.y_um - s.a.y_um) as f32;
+            let len_um = libm::sqrtf(dx * dx + dy * dy);
+            let _ = geoms.push(Geom {
+                ax: s.a.x_um as f32,
+                ay: s.a.y_um as f32,
+                ux: dx / len_um,
+                uy: dy / len_um,
+                len_um,
+                t_lo_um: 0.0,
+                t_hi_um: len_um,
+                lo: PointUm::new(
+                    s.a.x_um.min(s.b.x_um) - reach_um,
+                    s.a.y_um.min(s.b.y_um) - reach_um,
+                ),
+                hi: PointUm::new(
+                    s.a.x_um.max(s.b.x_um) + reach_um,
+                    s.a.y_um.max(s.b.y_um) + reach_um,
+                ),
+                at_a: 0,
+                at_b: 0,
+            });
+        }
+        // Shared ends, exactly equal.
+        let n = geoms.len();
+        for i in 0..n {
+            let (Some(si), mut at_a, mut at_b) = (self.segments.get(i), 0u32, 0u32) else {
+                continue;
+            };
+            for (j, sj) in self.segments.iter().enumerate() {
+                if j != i {
+                    if si.a == sj.a || si.a == sj.b {
+                        at_a |= 1 << j;
+                    }
+                    if si.b == sj.a || si.b == sj.b {
+                        at_b |= 1 << j;
+                    }
+                }
+            }
+            if let Some(g) = geoms.get_mut(i) {
+                (g.at_a, g.at_b) = (at_a, at_b);
+                let r = self.rearm_um as f32;
+                if at_a != 0 {
+                    g.t_lo_um = -r;
+                }
+                if at_b != 0 {
+                    g.t_hi_um = g.len_um + r;
+                }
+            }
+        }
+        let lead_us = match p.envelope {
+            // Half the pulse, so the peak (felt as the edge) falls on it, plus half a sample,
+            // so firing on the sample grid lands it within ± half a sample (lines.rs).
+            Envelope::Triangular => p.pulse_us / 2 + sample_period_us / 2,
+            Envelope::Rectangular => 0,
+        };
+        Ok(CompiledEdges {
+            geoms,
+            pulse: p,
+            rearm_um: self.rearm_um as f32,
+            lead_s: lead_us as f32 / 1e6,
+        })
+    }
+}
+
+/// One edge prepared: its start, unit direction u (the normal is n = (−u_y, u_x), so s > 0
+/// left of a → b), length, zone box and the edges sharing each end (bit masks).
+#[derive(Clone, Copy, Debug)]
+struct Geom {
+    ax: f32,
+    ay: f32,
+    ux: f32,
+    uy: f32,
+    len_um: f32,
+    /// The span along it where a crossing fires, µm: [0, len], stretched by the re-arm
+    /// distance past an end another edge shares (a corner has no gap that noise could slip a
+    /// crossing through; the corner rule makes the two edges fire once).
+    t_lo_um: f32,
+    t_hi_um: f32,
+    lo: PointUm,
+    hi: PointUm,
+    at_a: u32,
+    at_b: u32,
+}
+
+impl Geom {
+    /// (s, t): across (signed, left of a → b positive) and along, µm.
+    #[inline(always)]
+    fn coords(&self, p: PointUm) -> (f32, f32) {
+        let (px, py) = (p.x_um as f32 - self.ax, p.y_um as f32 - self.ay);
+        (py * self.ux - px * self.uy, px * self.ux + py * self.uy)
+    }
+
+    /// How far `p` is outside the zone, µm per axis (Chebyshev); ≤ 0 inside.
+    #[inline(always)]
+    fn zone_gap(&self, p: PointUm) -> i32 {
+        // Saturating: the finger's coordinates are any i32 the touch stage gives.
+        (self.lo.x_um.saturating_sub(p.x_um))
+            .max(p.x_um.saturating_sub(self.hi.x_um))
+            .max(self.lo.y_um.saturating_sub(p.y_um))
+            .max(p.y_um.saturating_sub(self.hi.y_um))
+    }
+}
+
+/// Edges, compiled.
+#[derive(Clone, Debug)]
+pub struct CompiledEdges {
+    geoms: Vec<Geom, MAX_EDGES>,
+    pulse: EdgePulse,
+    rearm_um: f32,
+    /// How far ahead a pulse fires, in s of travel (0 for rectangles).
+    lead_s: f32,
+}
+
+impl CompiledEdges {
+    /// The pulse to fire.
+    pub fn pulse(&self) -> EdgePulse {
+        self.pulse
+    }
+
+    /// Number of edges.
+    pub fn len(&self) -> usize {
+        self.geoms.len()
+    }
+
+    /// No edges.
+    pub fn is_empty(&self) -> bool {
+        self.geoms.is_empty()
+    }
+
+    /// The lead for a finger moving at `v`, µm (x, y): v × (half the triangle + half a
+    /// sample), at most [`MAX_LINE_LEAD_UM`] long (a glitch in the estimate must not fire an
+    /// edge millimetres early); none without a velocity.
+    pub fn lead_um(&self, v: Option<VelocityUmS>) -> (f32, f32) {
+        let Some(v) = v else { return (0.0, 0.0) };
+        let (x, y) = (
+            v.vx_um_s as f32 * self.lead_s,
+            v.vy_um_s as f32 * self.lead_s,
+        );
+        let len = libm::sqrtf(x * x + y * y);
+        let max = MAX_LINE_LEAD_UM as f32;
+        if len > max {
+            (x * max / len, y * max / len)
+        } else {
+            (x, y)
+        }
+    }
+}
+
+/// Which side of an edge the finger was last seen clear of.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Side {
+    /// s < 0: right of a → b.
+    Right,
+    /// s > 0: left of a → b.
+    Left,
+}
+
+/// Per-edge arming, carried from sample to sample.
+#[derive(Clone, Debug)]
+pub struct EdgeTracker {
+    armed: [Option<Side>; MAX_EDGES],
+    /// Where each edge last fired (or was disarmed by a corner), s µm; 0 once re-armed.
+    fired_s: [f32; MAX_EDGES],
+    /// Bit i: the finger is in edge i's zone.
+    in_zone: u32,
+    /// The last zone scan's point and the Chebyshev distance from it to the nearest zone that
+    /// did not hold it: no zone is entered before the finger moves that far.
+    settled: Option<(PointUm, i32)>,
+    /// The last sample's position (where a crossing passed between two samples is placed).
+    prev: Option<PointUm>,
+    /// Edges visited (tests: only a count tells the skipped visits from visits that change
+    /// nothing).
+    #[cfg(test)]
+    visits: u32,
+    /// Zone scans made (tests).
+    #[cfg(test)]
+    scans: u32,
+    /// Scan every zone on every sample (tests: the reference for the skip).
+    #[cfg(test)]
+    no_skip: bool,
+}
+
+impl Default for EdgeTracker {
+    fn default() -> Self {
+        Self {
+            armed: [None; MAX_EDGES],
+            fired_s: [0.0; MAX_EDGES],
+            in_zone: 0,
+            settled: None,
+            prev: None,
+            #[cfg(test)]
+            visits: 0,
+            #[cfg(test)]
+            scans: 0,
+            #[cfg(test)]
+            no_skip: false,
+        }
+    }
+}
+
+impl EdgeTracker {
+    /// Forgets every side (fault, scene load): the next samples arm edges by side.
+    pub fn reset(&mut self) {
+        *self = Self {
+            #[cfg(test)]
+            no_skip: self.no_skip,
+            ..Self::default()
+        };
+    }
+
+    /// One sample at `p` with the lead `lead_um` ([`CompiledEdges::lead_um`]): the edge to
+    /// fire, if any (at most one a sample; two crossed on the same sample are one pulse).
+    pub fn update(&mut self, edges: &CompiledEdges, p: PointUm, lead_um: (f32, f32)) -> Option<u8> {
+        let scan = match self.settled {
+            Some((at, gap)) => {
+                (p.x_um.abs_diff(at.x_um).max(p.y_um.abs_diff(at.y_um))) >= gap as u32
+            }
+            None => true,
+        };
+        #[cfg(test)]
+        let scan = scan || self.no_skip;
+        if scan {
+            #[cfg(test)]
+            {
+                self.scans += 1;
+            }
+            let (mut mask, mut gap) = (0u32, i32::MAX);
+            for (i, g) in edges.geoms.iter().enumerate() {
+                let d = g.zone_gap(p);
+                if d <= 0 {
+                    mask |= 1 << i;
+                } else {
+                    gap = gap.min(d);
+                }
+            }
+            self.forget(self.in_zone & !mask);
+            self.in_zone = mask;
+            self.settled = Some((p, gap));
+        }
+        let mut fired = None;
+        let mut todo = self.in_zone;
+        while todo != 0 {
+            let i = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let Some(g) = edges.geoms.get(i) else {
+                continue;
+            };
+            if !scan && g.zone_gap(p) > 0 {
+                // Left its zone between scans: forget it, and scan next time (the settled
+                // distance did not count this zone).
+                self.forget(1 << i);
+                self.in_zone &= !(1 << i);
+                self.settled = None;
+                continue;
+            }
+            #[cfg(test)]
+            {
+                self.visits += 1;
+            }
+            if let Some(t_um) = self.update_edge(i, g, p, lead_um, edges.rearm_um) {
+                if fired.is_none() {
+                    fired = Some(i as u8);
+                }
+                // A crossing near a shared end: the neighbours there count as crossed too.
+                let mut corner = 0;
+                if t_um <= edges.rearm_um {
+                    corner |= g.at_a;
+                }
+                if t_um >= g.len_um - edges.rearm_um {
+                    corner |= g.at_b;
+                }
+                self.disarm(edges, corner, p);
+            }
+        }
+        self.prev = Some(p);
+        fired
+    }
+
+    /// Edges visited so far (tests).
+    #[cfg(test)]
+    pub(crate) fn visits(&self) -> u32 {
+        self.visits
+    }
+
+    /// Zone scans so far (tests).
+    #[cfg(test)]
+    pub(crate) fn scans(&self) -> u32 {
+        self.scans
+    }
+
+    /// Forgets the edges of `mask`.
+    fn forget(&mut self, mut mask: u32) {
+        while mask != 0 {
+            let i = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            if let (Some(a), Some(f)) = (self.armed.get_mut(i), self.fired_s.get_mut(i)) {
+                (*a, *f) = (None, 0.0);
+            }
+        }
+    }
+
+    /// Disarms the edges of `mask` as if they had fired with the finger at `p`.
+    fn disarm(&mut self, edges: &CompiledEdges, mut mask: u32, p: PointUm) {
+        while mask != 0 {
+            let j = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            if let (Some(g), Some(a), Some(f)) = (
+                edges.geoms.get(j),
+                self.armed.get_mut(j),
+                self.fired_s.get_mut(j),
+            ) {
+                (*a, *f) = (None, g.coords(p).0);
+            }
+        }
+    }
+
+    /// One edge's update; Some(where along it it was crossed, µm) when it fires.
+    #[inline(always)]
+    fn update_edge(
+        &mut self,
+        i: usize,
+        g: &Geom,
+        p: PointUm,
+        lead_um: (f32, f32),
+        rearm_um: f32,
+    ) -> Option<f32> {
+        let prev = self.prev;
+        let (Some(armed), Some(fired_s)) = (self.armed.get_mut(i), self.fired_s.get_mut(i)) else {
+            return None;
+        };
+        let (s, t) = {
+            let (s, t) = g.coords(p);
+            (s, t)
+        };
+        // The lead across the edge; only a lead towards the line counts.
+        let lead_s = lead_um.1 * g.ux - lead_um.0 * g.uy;
+        let crossed = match *armed {
+            Some(Side::Right) => s + lead_s.max(0.0) >= 0.0,
+            Some(Side::Left) => s + lead_s.min(0.0) <= 0.0,
+            None => false,
+        };
+        let mut fire = None;
+        if crossed {
+            let before = match *armed {
+                Some(Side::Right) => s < 0.0,
+                _ => s > 0.0,
+            };
+            // Where the crossing is along the edge: ahead on the lead, or behind, between the
+            // last sample and this one.
+            let t_cross = if before && lead_s != 0.0 {
+                let lead_t = lead_um.0 * g.ux + lead_um.1 * g.uy;
+                t + lead_t * (-s / lead_s)
+            } else {
+                match prev.map(|q| g.coords(q)) {
+                    Some((sq, tq)) if sq != s => tq + (t - tq) * (sq / (sq - s)),
+                    _ => t,
+                }
+            };
+            *armed = None;
+            *fired_s = s;
+            if (g.t_lo_um..=g.t_hi_um).contains(&t_cross) {
+                fire = Some(t_cross);
+            }
+        }
+        if s < fired_s.min(0.0) - rearm_um {
+            (*armed, *fired_s) = (Some(Side::Right), 0.0);
+        } else if s > fired_s.max(0.0) + rearm_um {
+            (*armed, *fired_s) = (Some(Side::Left), 0.0);
+        }
+        fire
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::controller::WindowEstimator;
+    use crate::plane::testing::{directions, sigma_um, Noise, PERIOD_US};
+    use crate::plane::velocity::PlaneVelocity;
+    use crate::velocity::{LsqSlope, Median3};
+    use std::vec::Vec as StdVec;
+
+    fn pt(x: i32, y: i32) -> PointUm {
+        PointUm::new(x, y)
+    }
+
+    fn estimator() -> PlaneVelocity<WindowEstimator<32>> {
+        let one = || Median3::new(LsqSlope::<32>::new(PERIOD_US).unwrap(), PERIOD_US);
+        PlaneVelocity::new(one(), one())
+    }
+
+    fn seg(ax: i32, ay: i32, bx: i32, by: i32) -> SegmentUm {
+        SegmentUm {
+            a: pt(ax, ay),
+            b: pt(bx, by),
+        }
+    }
+
+    /// A 20 mm square window's outline at (10, 10) mm, a free diagonal segment and a free
+    /// horizontal one, triangles of 10 ms (lead 5.05 ms), re-arm 100 µm.
+    fn scene() -> (Edges, CompiledEdges) {
+        let mut e = Edges::default();
+        e.push_outline(&Polygon::rectangle(pt(10_000, 10_000), pt(30_000, 30_000)).unwrap())
+            .unwrap();
+        e.segments
+            .push(seg(40_000, 10_000, 50_000, 20_000))
+            .unwrap();
+        e.segments
+            .push(seg(40_000, 30_000, 55_000, 30_000))
+            .unwrap();
+        let c = e.compile(50_000, PERIOD_US).unwrap();
+        (e, c)
+    }
+
+    /// A stroke's samples: true points (f64) at `v_mm_s` from `from` in direction `d`, `n`
+    /// samples.
+    fn stroke(from: (f64, f64), d: (f64, f64), v_mm_s: f64, n: usize) -> StdVec<(f64, f64)> {
+        let step = v_mm_s * 1000.0 * PERIOD_US as f64 / 1e6;
+        (0..n)
+            .map(|k| {
+                (
+                    from.0 + k as f64 * step * d.0,
+                    from.1 + k as f64 * step * d.1,
+                )
+            })
+            .collect()
+    }
+
+    /// What one run of a stroke did: the fires (sample, edge), and the largest noise vector
+    /// and lead error seen, µm.
+    struct Run {
+        fires: StdVec<(usize, u8)>,
+        e_max: f64,
+        lead_err_max: f64,
+    }
+
+    /// Runs `path` through the edges with noise of `lsb` per axis and the lead from the 2D
+    /// estimator (what a controller would give), after 40 samples of warm-up along the same
+    /// line (so the estimator has its window when the stroke starts).
+    fn run(
+        c: &CompiledEdges,
+        path: &[(f64, f64)],
+        true_v: (f64, f64),
+        lsb: f64,
+        noise: &mut Noise,
+        t: &mut EdgeTracker,
+    ) -> Run {
+        let sigma = sigma_um(lsb);
+        let mut est = estimator();
+        let mut r = Run {
+            fires: StdVec::new(),
+            e_max: 0.0,
+            lead_err_max: 0.0,
+        };
+        let dt = PERIOD_US as f64 / 1e6;
+        let (x0, y0) = path[0];
+        let warm = 40;
+        for k in 0..warm + path.len() {
+            let (x, y) = if k < warm {
+                let back = (warm - k) as f64 * dt;
+                (x0 - true_v.0 * back, y0 - true_v.1 * back)
+            } else {
+                path[k - warm]
+            };
+            let (ex, ey) = (noise.gauss() * sigma, noise.gauss() * sigma);
+            let p = pt((x + ex).round() as i32, (y + ey).round() as i32);
+            let v = est.update(p, k as u32 * PERIOD_US);
+            if k < warm {
+                continue;
+            }
+            r.e_max = r.e_max.max((ex * ex + ey * ey).sqrt());
+            let lead = c.lead_um(v);
+            let (tx, ty) = (true_v.0 * c.lead_s as f64, true_v.1 * c.lead_s as f64);
+            r.lead_err_max = r
+                .lead_err_max
+                .max(((lead.0 as f64 - tx).powi(2) + (lead.1 as f64 - ty).powi(2)).sqrt());
+            if let Some(i) = t.update(c, p, lead) {
+                r.fires.push((k - warm, i));
+            }
+        }
+        r
+    }
+
+    /// s of a true point across segment `s` (f64, left of a → b positive).
+    fn s_of(s: &SegmentUm, x: f64, y: f64) -> f64 {
+        let (dx, dy) = ((s.b.x_um - s.a.x_um) as f64, (s.b.y_um - s.a.y_um) as f64);
+        let len = (dx * dx + dy * dy).sqrt();
+        ((y - s.a.y_um as f64) * dx - (x - s.a.x_um as f64) * dy) / len
+    }
+
+    /// The must-show: 8 directions (so both ways across every edge) × 20–200 mm/s × 2 LSB, lead
+    /// from the 2D estimator: exactly one pulse per crossing, on the edge crossed, fired where
+    /// the finger is the true lead short of the edge give or take
+    /// [−E − Λ, +E + Λ + v_n·T] (E: the largest noise vector, Λ: the largest lead error,
+    /// v_n·T: one sample's travel across the edge; derived in docs/plane.md).
+    #[test]
+    fn one_pulse_per_crossing_within_the_bound_in_eight_directions() {
+        let (e, c) = scene();
+        let mut noise = Noise::new(2026);
+        let targets: [(usize, (f64, f64)); 4] = [
+            (0, (20_000.0, 10_000.0)), // the window's bottom side
+            (1, (30_000.0, 17_000.0)), // its right side
+            (4, (45_000.0, 15_000.0)), // the free diagonal
+            (5, (47_500.0, 30_000.0)), // the free horizontal
+        ];
+        let (mut crossings, mut worst_early, mut worst_late) = (0, 0.0f64, 0.0f64);
+        for &(edge, (tx, ty)) in &targets {
+            let s = e.segments[edge];
+            for d in directions() {
+                let (ux, uy) = ((s.b.x_um - s.a.x_um) as f64, (s.b.y_um - s.a.y_um) as f64);
+                let len = (ux * ux + uy * uy).sqrt();
+                let across = (d.1 * ux - d.0 * uy) / len; // d · n
+                if across.abs() < 0.3 {
+                    continue; // along the edge: no crossing to speak of
+                }
+                for v_mm_s in [20.0, 50.0, 100.0, 200.0] {
+                    let v = v_mm_s * 1000.0;
+                    // From 4 mm before the target to 4 mm past it.
+                    let from = (tx - 4_000.0 * d.0, ty - 4_000.0 * d.1);
+                    let n = (8_000.0 / (v * PERIOD_US as f64 / 1e6)) as usize;
+                    let path = stroke(from, d, v_mm_s, n);
+                    let mut t = EdgeTracker::default();
+                    let r = run(&c, &path, (v * d.0, v * d.1), 2.0, &mut noise, &mut t);
+                    assert_eq!(
+                        r.fires.len(),
+                        1,
+                        "edge {edge} dir {d:?} {v_mm_s} mm/s: {:?}",
+                        r.fires
+                    );
+                    let (k, fired) = r.fires[0];
+                    assert_eq!(fired as usize, edge);
+                    crossings += 1;
+                    // Offset from the target (the true lead short of the line), + = late.
+                    let lead_n = v * across * c.lead_s as f64;
+                    let sign = across.signum();
+                    let (x, y) = path[k];
+                    let late = sign * s_of(&s, x, y) + lead_n.abs();
+                    let step_n = v * across.abs() * PERIOD_US as f64 / 1e6;
+                    let slack = r.e_max + r.lead_err_max + 1.0; // 1 µm: rounding to the grid
+                    assert!(
+                        late >= -slack && late <= slack + step_n,
+                        "edge {edge} dir {d:?} {v_mm_s}: {late:.1} µm late, bound \
+                         [-{slack:.1}, {:.1}]",
+                        slack + step_n
+                    );
+                    worst_early = worst_early.min(late);
+                    worst_late = worst_late.max(late);
+                }
+            }
+        }
+        // 4 edges × the 6 directions not parallel to each × 4 speeds.
+        assert_eq!(crossings, 96);
+        std::println!(
+            "{crossings} crossings: fired {worst_early:.1} to {worst_late:.1} µm from the target"
+        );
+    }
+
+    #[test]
+    fn none_in_ten_seconds_at_rest_on_an_edge_with_3_lsb() {
+        let (_, c) = scene();
+        let mut noise = Noise::new(3);
+        // On a side, on a corner of the window, on the free diagonal, and 150 µm off a side
+        // (armed: noise and the lead's noise must not reach the line).
+        for at in [
+            (20_000.0, 10_000.0),
+            (30_000.0, 30_000.0),
+            (45_000.0, 15_000.0),
+            (20_000.0, 9_850.0),
+        ] {
+            let path = std::vec![at; 100_000];
+            let mut t = EdgeTracker::default();
+            let r = run(&c, &path, (0.0, 0.0), 3.0, &mut noise, &mut t);
+            assert_eq!(r.fires, StdVec::new(), "at {at:?}");
+        }
+    }
+
+    #[test]
+    fn a_corner_crossed_fires_once_convex_or_concave() {
+        // Through the square's convex corner and an L's reflex corner along the diagonal, both
+        // ways, exactly and 50 µm either side, 2 LSB, 20–200 mm/s.
+        let mut e = Edges::default();
+        e.push_outline(&Polygon::rectangle(pt(10_000, 10_000), pt(30_000, 30_000)).unwrap())
+            .unwrap();
+        e.push_outline(
+            &Polygon::from_points(&[
+                pt(40_000, 0),
+                pt(60_000, 0),
+                pt(60_000, 10_000),
+                pt(50_000, 10_000),
+                pt(50_000, 20_000),
+                pt(40_000, 20_000),
+            ])
+            .unwrap(),
+        )
+        .unwrap();
+        let c = e.compile(50_000, PERIOD_US).unwrap();
+        let mut noise = Noise::new(9);
+        let r2 = core::f64::consts::FRAC_1_SQRT_2;
+        let mut strokes = 0;
+        for (cx, cy) in [(10_000.0, 10_000.0), (50_000.0, 10_000.0)] {
+            for d in [(r2, r2), (-r2, -r2)] {
+                for off in [-50.0, 0.0, 50.0] {
+                    for v_mm_s in [20.0, 50.0, 100.0, 200.0] {
+                        let v = v_mm_s * 1000.0;
+                        let from = (cx - 4_000.0 * d.0 + off * r2, cy - 4_000.0 * d.1 - off * r2);
+                        let n = (8_000.0 / (v * PERIOD_US as f64 / 1e6)) as usize;
+                        let path = stroke(from, d, v_mm_s, n);
+                        let mut t = EdgeTracker::default();
+                        let r = run(&c, &path, (v * d.0, v * d.1), 2.0, &mut noise, &mut t);
+                        assert_eq!(
+                            r.fires.len(),
+                            1,
+                            "corner ({cx},{cy}) {d:?} off {off} {v_mm_s}: {:?}",
+                            r.fires
+                        );
+                        strokes += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(strokes, 48);
+    }
+
+    #[test]
+    fn the_extension_of_an_edge_is_not_the_edge() {
+        // A free segment (0,0)–(10,0) mm. Up across its line 2 mm past its end (in its zone),
+        // then left over it, then down across it: one pulse, on the way down. Were the side
+        // not tracked off the segment, the finger would reach the segment's span from the
+        // wrong side and fire there.
+        let mut e = Edges::default();
+        e.segments.push(seg(0, 0, 10_000, 0)).unwrap();
+        let c = e.compile(50_000, PERIOD_US).unwrap();
+        let mut t = EdgeTracker::default();
+        let mut fires = StdVec::new();
+        let mut go = |t: &mut EdgeTracker, from: (i32, i32), to: (i32, i32)| {
+            for k in 0..=100 {
+                let p = pt(
+                    from.0 + (to.0 - from.0) * k / 100,
+                    from.1 + (to.1 - from.1) * k / 100,
+                );
+                if let Some(i) = t.update(&c, p, (0.0, 0.0)) {
+                    fires.push((p, i));
+                }
+            }
+        };
+        go(&mut t, (12_000, -3_000), (12_000, 300));
+        go(&mut t, (12_000, 300), (5_000, 300));
+        go(&mut t, (5_000, 300), (5_000, -3_000));
+        assert_eq!(fires.len(), 1, "{fires:?}");
+        assert!(fires[0].0.y_um <= 0 && fires[0].0.y_um > -70);
+    }
+
+    #[test]
+    fn the_zone_skip_changes_nothing_and_visits_only_near_edges() {
+        // Random walks over the scene: the tracker that skips the zone scan and visits only the
+        // edges near the finger fires exactly as one that scans every zone on every sample.
+        let (_, c) = scene();
+        let mut noise = Noise::new(11);
+        let (mut visits, mut samples, mut fires) = (0u32, 0u32, 0u32);
+        for _ in 0..10 {
+            let (mut a, mut b) = (EdgeTracker::default(), EdgeTracker::default());
+            b.no_skip = true;
+            let (mut x, mut y) = (noise.uniform() * 60_000.0, noise.uniform() * 40_000.0);
+            for _ in 0..20_000 {
+                if noise.uniform() < 0.001 {
+                    (x, y) = (noise.uniform() * 60_000.0, noise.uniform() * 40_000.0);
+                } else {
+                    x += noise.gauss() * 40.0;
+                    y += noise.gauss() * 40.0;
+                }
+                let p = pt(x as i32, y as i32);
+                let lead = (
+                    (noise.gauss() * 300.0) as f32,
+                    (noise.gauss() * 300.0) as f32,
+                );
+                let fa = a.update(&c, p, lead);
+                assert_eq!(fa, b.update(&c, p, lead), "{p:?}");
+                fires += fa.is_some() as u32;
+                samples += 1;
+            }
+            visits += a.visits;
+        }
+        assert!(fires > 50, "the walks crossed too few edges: {fires}");
+        // 6 edges: visiting all on every sample would be 6 a sample.
+        assert!(
+            (visits as f64) < 1.0 * samples as f64,
+            "{visits} visits in {samples} samples"
+        );
+        std::println!(
+            "{fires} fires; {:.2} edges visited a sample",
+            visits as f64 / samples as f64
+        );
+    }
+
+    #[test]
+    fn a_finger_anywhere_answers_without_panicking() {
+        // Coordinates at i32's ends (a touch stage's garbage): no overflow, no pulse.
+        let (_, c) = scene();
+        let mut t = EdgeTracker::default();
+        for p in [
+            pt(i32::MIN, i32::MIN),
+            pt(i32::MAX, 0),
+            pt(20_000, 10_000),
+            pt(0, i32::MAX),
+        ] {
+            assert_eq!(t.update(&c, p, (1e9, -1e9)), None);
+        }
+    }
+
+    #[test]
+    fn lead_is_velocity_times_half_the_triangle_and_half_a_sample_capped() {
+        let (_, c) = scene();
+        // 10 ms triangle at 100 µs: 5 ms + 50 µs = 5.05 ms; 200 mm/s along x: 1 010 µm.
+        let v = |x, y| {
+            Some(VelocityUmS {
+                vx_um_s: x,
+                vy_um_s: y,
+            })
+        };
+        let (x, y) = c.lead_um(v(200_000, 0));
+        assert!((x - 1_010.0).abs() < 0.01 && y == 0.0);
+        // 3-4-5 at 500 mm/s: 2 525 µm, capped to 2 000 along the same direction.
+        let (x, y) = c.lead_um(v(300_000, 400_000));
+        assert!(
+            (x - 1_200.0).abs() < 0.1 && (y - 1_600.0).abs() < 0.1,
+            "{x} {y}"
+        );
+        assert_eq!(c.lead_um(None), (0.0, 0.0));
+        let mut e = Edges::default();
+        e.pulse.envelope = Envelope::Rectangular;
+        assert_eq!(
+            e.compile(50_000, PERIOD_US).unwrap().lead_um(v(200_000, 0)),
+            (0.0, 0.0)
+        );
+    }
+
+    #[test]
+    fn refusals() {
+        let s = |r: Result<CompiledEdges, EdgeError>| std::format!("{}", r.err().unwrap());
+        let mut e = Edges::default();
+        e.segments.push(seg(0, 0, 0, 0)).unwrap();
+        assert_eq!(
+            s(e.compile(50_000, 100)),
+            "edge 0: edge 0 has zero length: its two vertices are both at (0 mm, 0 mm)"
+        );
+        let mut e = Edges::default();
+        e.pulse.pulse_us = 60_000;
+        assert_eq!(
+            s(e.compile(50_000, 100)),
+            "edge pulse 60 ms must be above 0 ms and at most the on-time cap of 50 ms"
+        );
+        let mut e = Edges::default();
+        e.pulse.amplitude_permille = 1001;
+        assert_eq!(
+            s(e.compile(50_000, 100)),
+            "edge amplitude 100.1 % is outside 0.1 % to 100 %"
+        );
+        let mut e = Edges::default();
+        e.rearm_um = 0;
+        assert_eq!(
+            s(e.compile(50_000, 100)),
+            "edge re-arm distance 0 mm is outside 0.001 mm to 5 mm"
+        );
+        let mut e = Edges::default();
+        for _ in 0..7 {
+            e.push_outline(&Polygon::rectangle(pt(0, 0), pt(10, 10)).unwrap())
+                .unwrap();
+        }
+        let star =
+            Polygon::from_points(&[pt(0, 0), pt(10, 0), pt(10, 10), pt(5, 20), pt(0, 10)]).unwrap();
+        let err = e.push_outline(&star).unwrap_err();
+        assert_eq!(
+            std::format!("{err}"),
+            "33 edges are more than the 32 a screen may draw"
+        );
+        assert_eq!(e.segments.len(), 28, "a refused outline adds nothing");
+    }
+}
