@@ -12,3 +12,4 @@
 //! same thing on both sensors. `docs/touch.md` has the figures and their sources.
 
 pub mod plates;
+pub mod pressure;
