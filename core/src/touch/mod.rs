@@ -11,5 +11,7 @@
 //! ([`crate::sample::CODE_FULL_SCALE`] = 65 536), so the rail margins and thresholds mean the
 //! same thing on both sensors. `docs/touch.md` has the figures and their sources.
 
+pub mod calibration;
+pub mod fault;
 pub mod plates;
 pub mod pressure;
