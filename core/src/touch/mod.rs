@@ -5,7 +5,8 @@
 //!   converted), each phase's settling time from the plates' RC, and the frame rate that results;
 //! - [`pressure`]: touch resistance from Z1/Z2, touch-down and lift-off with hysteresis;
 //! - [`calibration`]: three-point affine calibration, raw codes → µm;
-//! - [`fault`]: the per-axis rail checks, the 1D rule applied to each axis.
+//! - [`fault`]: the per-axis rail checks, the 1D rule applied to each axis;
+//! - [`frame`]: one frame of the four phases → lifted, landing, down at (x, y) µm, or a fault.
 //!
 //! Every code here is on the 1D stage's scale: the sum of 16 12-bit conversions
 //! ([`crate::sample::CODE_FULL_SCALE`] = 65 536), so the rail margins and thresholds mean the
@@ -13,5 +14,6 @@
 
 pub mod calibration;
 pub mod fault;
+pub mod frame;
 pub mod plates;
 pub mod pressure;
