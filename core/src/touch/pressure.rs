@@ -43,7 +43,12 @@ pub fn touch_resistance_ohm(
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct PressureConfig {
-    /// X plate resistance, X+ to X−, Ω ([`super::plates::PlateRc::r_x_plate_ohm`]).
+    /// X plate resistance as the formula needs it, Ω: the plate X+ to X−
+    /// ([`super::plates::PlateRc::r_x_plate_ohm`]) plus both drivers' output resistance. The
+    /// X reading spans the drivers' drops too (the code is (R_drive + R_x·x)/(R_x + 2·R_drive)
+    /// of full scale), and the Z1 leg holds R_drive + R_x·x, so R_x + 2·R_drive makes the
+    /// formula exact; the bare plate would read the contact low by R_x/(R_x + 2·R_drive), 14 %
+    /// with 50 Ω drivers on 600 Ω (the CP3BT26 data sheet §16.2.3 counts the same drops).
     pub r_x_plate_ohm: u32,
     /// A frame at or below this contact resistance counts toward touch-down, Ω.
     pub touch_ohm: u32,
@@ -57,12 +62,13 @@ pub struct PressureConfig {
 }
 
 impl PressureConfig {
-    /// Touch-down at 1.5 kΩ, lift-off above 3 kΩ, on the default 600 Ω X plate. Finger
+    /// Touch-down at 1.5 kΩ, lift-off above 3 kΩ, on the default 600 Ω X plate and 50 Ω
+    /// drivers (700 Ω, [`super::plates::PlateRc::DEFAULT`]). Finger
     /// contact on a 4-wire panel runs from a few hundred ohms (a firm press) to kilo-ohms (a
     /// light one); these are starting figures to set on the panel with `host-sim`'s model and
     /// then on a real finger (`docs/touch.md`).
     pub const DEFAULT: PressureConfig = PressureConfig {
-        r_x_plate_ohm: 600,
+        r_x_plate_ohm: 700,
         touch_ohm: 1_500,
         lift_ohm: 3_000,
         min_z1_code: DEFAULT_RAIL_MARGIN_CODE,
