@@ -3,6 +3,7 @@
 //!
 //! - [`trajectory`]: the finger's motion;
 //! - [`adc`]: the slide rheostat and the oversampling ADC, with noise and rail faults;
+//! - [`touch`]: the 4-wire touch overlay (issue #36): plates, settling, pressure, noise;
 //! - [`timer`]: the burst timer as an STM32 timer with (or without) preload, recording edges;
 //! - [`sim`]: the closed loop, trajectory → ADC → controller → timer;
 //! - [`metrics`]: f_b produced vs commanded, region switches, velocity error and delay;
@@ -29,4 +30,5 @@ pub mod serve;
 pub mod sim;
 pub mod soak;
 pub mod timer;
+pub mod touch;
 pub mod trajectory;
