@@ -534,6 +534,20 @@ mod tests {
         assert_eq!(s.settle_share_permille(), 440);
     }
 
+    /// G474 default sampling, (47.5 + 12.5) cycles at 37.5 MHz = 1 600 ns a conversion, 16
+    /// a phase: 25 600 ns; frame = 152 580 + 4 · 25 600 = 254 980 ns, 3 921 per second.
+    #[test]
+    fn g474_frame_by_hand() {
+        let adc = AdcTiming {
+            conversion_ns: 1_600,
+            conversions_position: 16,
+            conversions_pressure: 16,
+        };
+        let s = Schedule::new(&PlateRc::DEFAULT, &adc).unwrap();
+        assert_eq!(s.frame_ns(), 254_980);
+        assert_eq!(s.per_axis_rate_hz(), 3_921);
+    }
+
     /// No filter capacitor: C = 454 pF, τ_X = 2075 · 454 = 942 050 ps → 8 488.7… → 8 489 ns.
     #[test]
     fn settle_scales_with_the_capacitance() {
