@@ -244,8 +244,10 @@ impl PlateRc {
     }
 
     /// Time constant of `phase`'s sensed node, ps (Ω · pF = ps).
+    /// Saturates at `u64::MAX` (only figures far outside [`PlateRc::validate`]'s ranges get
+    /// near it).
     pub const fn tau_ps(&self, phase: Phase) -> u64 {
-        self.r_source_ohm(phase) * self.c_node_pf()
+        self.r_source_ohm(phase).saturating_mul(self.c_node_pf())
     }
 
     /// Settling time of `phase` to ½ LSB of 12 bits, ns: τ · ln 2^13, rounded up; 0 for a
@@ -256,8 +258,13 @@ impl PlateRc {
         }
         let (num, den) = LN_2_POW_13;
         // ps · ln → ns: divide by 1000 and by den, rounding up.
-        let scaled = self.tau_ps(phase) * num;
-        scaled.div_ceil(den * 1_000)
+        let scaled = self.tau_ps(phase) as u128 * num as u128;
+        let ns = scaled.div_ceil(den as u128 * 1_000);
+        if ns > u64::MAX as u128 {
+            u64::MAX
+        } else {
+            ns as u64
+        }
     }
 }
 
@@ -556,6 +563,30 @@ mod tests {
             ..PlateRc::DEFAULT
         };
         assert_eq!(rc.settle_ns(Phase::X), 8_489);
+    }
+
+    /// Figures no validation would pass still give an answer, not an overflow panic.
+    #[test]
+    fn absurd_figures_saturate() {
+        let rc = PlateRc {
+            r_x_plate_ohm: u32::MAX,
+            r_y_plate_ohm: u32::MAX,
+            r_drive_ohm: u32::MAX,
+            r_touch_max_ohm: u32::MAX,
+            c_interlayer_pf: u32::MAX,
+            c_filter_pf: u32::MAX,
+        };
+        for phase in SEQUENCE {
+            assert_eq!(rc.tau_ps(phase), u64::MAX, "{phase:?}");
+            // u64::MAX ps · 9.01 / 1000 = 1.66 · 10^17 ns.
+            let expected = if phase == Phase::Z2 {
+                0
+            } else {
+                166222024428206431
+            };
+            let got = rc.settle_ns(phase);
+            assert_eq!(got, expected, "{phase:?}");
+        }
     }
 
     #[test]

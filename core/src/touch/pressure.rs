@@ -31,10 +31,10 @@ pub fn touch_resistance_ohm(
     if z1_code <= min_z1_code || z1_code == 0 {
         return None;
     }
-    let diff = z2_code.saturating_sub(z1_code) as u64;
-    // ≤ 2^14 · 2^16 · 2^16 = 2^46 over ≤ 2^17 · 2^16: no overflow in u64.
-    let num = r_x_plate_ohm as u64 * x_code as u64 * diff;
-    let den = CODE_FULL_SCALE as u64 * z1_code as u64;
+    let diff = z2_code.saturating_sub(z1_code) as u128;
+    // ≤ 2^32 · 2^16 · 2^16 = 2^64 over ≤ 2^17 · 2^16: no overflow in u128, whatever R_x.
+    let num = r_x_plate_ohm as u128 * x_code as u128 * diff;
+    let den = CODE_FULL_SCALE as u128 * z1_code as u128;
     let r = (num + den / 2) / den;
     Some(u32::try_from(r).unwrap_or(u32::MAX))
 }
@@ -282,8 +282,12 @@ mod tests {
             touch_resistance_ohm(600, 30_000, 20_000, 19_990, 655),
             Some(0)
         );
-        // Extremes saturate rather than overflow.
-        assert!(touch_resistance_ohm(10_000, u16::MAX, 656, u16::MAX, 655).is_some());
+        // Extremes saturate rather than overflow: 2^32 Ω · 65 535/65 536 · 64 879/656 is far
+        // past u32.
+        assert_eq!(
+            touch_resistance_ohm(u32::MAX, u16::MAX, 656, u16::MAX, 655),
+            Some(u32::MAX)
+        );
     }
 
     fn tracker() -> ContactTracker {
