@@ -578,11 +578,11 @@ mod tests {
         };
         for phase in SEQUENCE {
             assert_eq!(rc.tau_ps(phase), u64::MAX, "{phase:?}");
-            // u64::MAX ps · 9.01 / 1000 = 1.66 · 10^17 ns.
+            // u64::MAX ps · 9 010 914 / 10^9, rounded up: 1.66 · 10^17 ns.
             let expected = if phase == Phase::Z2 {
                 0
             } else {
-                166222024428206431
+                166_222_024_428_206_431
             };
             let got = rc.settle_ns(phase);
             assert_eq!(got, expected, "{phase:?}");
