@@ -23,7 +23,6 @@ use crate::velocity::{LsqSlope, Median3, VelocityEstimator};
 /// Why the carrier is held off.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum TouchFault {
     /// A pressed reading with an axis on a rail (an open or shorted terminal).
     Rail(AxisFault),
@@ -611,5 +610,552 @@ pub fn apply2d<B: BurstOutput>(output: &Output2d, out: &mut B) {
     }
     if let Some(action) = output.action {
         out.apply(action);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::burst::{BurstError, TEST_TIMER};
+    use crate::plane::edges::EdgeError;
+    use crate::plane::geometry::{Polygon, SegmentUm};
+    use crate::plane::grating::OrientedGrating;
+    use crate::plane::scene::{Owner, PlaneTexture, Window2d};
+    use crate::plane::testing::{sigma_um, Noise, PERIOD_US};
+    use crate::position::SensorFault;
+    use crate::texture::{Grating, GratingRender, Material, Texture};
+    use crate::touch::fault::Axis;
+    use std::string::ToString;
+    use std::vec::Vec as StdVec;
+
+    fn rect(x0: i32, y0: i32, x1: i32, y1: i32) -> Polygon {
+        Polygon::rectangle(PointUm::new(x0, y0), PointUm::new(x1, y1)).unwrap()
+    }
+
+    fn window(outline: Polygon, texture: PlaneTexture, edge: bool) -> Window2d {
+        Window2d {
+            outline,
+            texture,
+            edge,
+        }
+    }
+
+    fn hz(hz: u32) -> PlaneTexture {
+        PlaneTexture::Plain(Texture::constant_hz(hz))
+    }
+
+    const OFF: PlaneTexture = PlaneTexture::Plain(Texture::Off);
+
+    fn config(windows: &[Window2d]) -> Config2d {
+        let mut c = Config2d::default();
+        for w in windows {
+            c.scene.windows.push(w.clone()).unwrap();
+        }
+        c
+    }
+
+    fn loaded(cfg: &Config2d) -> Controller2d {
+        let mut c = Controller2d::new(TEST_TIMER, PERIOD_US).unwrap();
+        c.load(cfg).unwrap();
+        c
+    }
+
+    fn down(p: PointUm) -> Reading {
+        Reading::Down {
+            x_um: p.x_um,
+            y_um: p.y_um,
+            r_touch_ohm: 500,
+        }
+    }
+
+    /// Feeds readings one period apart from `*t`; returns every output.
+    fn feed(
+        c: &mut Controller2d,
+        t: &mut u32,
+        readings: impl IntoIterator<Item = Reading>,
+    ) -> StdVec<Output2d> {
+        readings
+            .into_iter()
+            .map(|r| {
+                let out = c.on_reading(*t, r);
+                *t += PERIOD_US;
+                out
+            })
+            .collect()
+    }
+
+    fn at(p: PointUm, n: usize) -> impl Iterator<Item = Reading> {
+        core::iter::repeat_n(down(p), n)
+    }
+
+    /// A straight stroke from `a` to `b` at `v_mm_s` (one reading per period), with `sigma`
+    /// µm RMS of noise per axis.
+    fn stroke(
+        a: (f64, f64),
+        b: (f64, f64),
+        v_mm_s: f64,
+        sigma: f64,
+        noise: &mut Noise,
+    ) -> StdVec<Reading> {
+        let len = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
+        let step = v_mm_s * PERIOD_US as f64 / 1000.0;
+        let n = (len / step).ceil() as usize;
+        (0..=n)
+            .map(|k| {
+                let f = (k as f64 * step / len).min(1.0);
+                down(PointUm::new(
+                    (a.0 + f * (b.0 - a.0) + noise.gauss() * sigma).round() as i32,
+                    (a.1 + f * (b.1 - a.1) + noise.gauss() * sigma).round() as i32,
+                ))
+            })
+            .collect()
+    }
+
+    fn millihz(s: TimerSettings) -> u64 {
+        s.produced_millihz(TEST_TIMER.clock_hz)
+    }
+
+    fn pulses(outs: &[Output2d]) -> usize {
+        outs.iter()
+            .filter(|o| matches!(o.action, Some(GateAction::Pulse(_))))
+            .count()
+    }
+
+    /// Lift-off turns the carrier off on the very reading that says so, counts no fault, and
+    /// the next touch-down renders again. (Seen failing with the lift's `force_off` removed:
+    /// the reading carried no action and the 1 kHz burst ran on.)
+    #[test]
+    fn lift_off_turns_the_carrier_off_on_that_reading() {
+        let mut c = loaded(&config(&[window(
+            rect(0, 0, 20_000, 20_000),
+            hz(1_000),
+            false,
+        )]));
+        let mut t = 0;
+        let outs = feed(&mut c, &mut t, at(PointUm::new(10_000, 10_000), 50));
+        let Some(GateAction::Start(s)) = outs[0].action else {
+            panic!("{:?}", outs[0])
+        };
+        assert_eq!(millihz(s), 1_000_000);
+        let out = c.on_reading(t, Reading::Lifted);
+        assert_eq!(out.action, Some(GateAction::Off));
+        assert_eq!(out.fault, None);
+        assert_eq!((out.position, out.place), (None, None));
+        let tm = c.telemetry();
+        assert_eq!((tm.faults, tm.lifts), (0, 1));
+        // Still lifted: nothing more to do.
+        t += PERIOD_US;
+        assert_eq!(c.on_reading(t, Reading::Lifted).action, None);
+        // Landing is off too, with the position; the touch-down renders again.
+        t += PERIOD_US;
+        let out = c.on_reading(
+            t,
+            Reading::Landing {
+                x_um: 10_000,
+                y_um: 10_000,
+            },
+        );
+        assert_eq!(
+            (out.action, out.position),
+            (None, Some(PointUm::new(10_000, 10_000)))
+        );
+        t += PERIOD_US;
+        let out = c.on_reading(t, down(PointUm::new(10_000, 10_000)));
+        assert!(matches!(out.action, Some(GateAction::Start(_))), "{out:?}");
+        // A lift while a burst runs and a landing reading (pressure eased) both cut it.
+        t += PERIOD_US;
+        let out = c.on_reading(
+            t,
+            Reading::Landing {
+                x_um: 10_000,
+                y_um: 10_000,
+            },
+        );
+        assert_eq!(out.action, Some(GateAction::Off));
+        assert_eq!(c.telemetry().faults, 0);
+    }
+
+    /// Two windows sharing an edge, 20 Hz and 80 Hz: a stroke across at 100 mm/s switches
+    /// on the first reading band/2 past the edge, and that reading updates the burst to the
+    /// new window's 80 Hz (TEST_TIMER divides both exactly); back across, 20 Hz again.
+    #[test]
+    fn a_window_switch_brings_the_new_windows_burst_frequency() {
+        let mut c = loaded(&config(&[
+            window(rect(0, 0, 20_000, 20_000), hz(20), false),
+            window(rect(20_000, 0, 40_000, 20_000), hz(80), false),
+        ]));
+        let mut t = 0;
+        let outs = feed(&mut c, &mut t, at(PointUm::new(10_000, 10_000), 10));
+        assert!(matches!(outs[0].action, Some(GateAction::Start(s)) if millihz(s) == 20_000));
+        let mut noise = Noise::new(1);
+        for (from, to, want_place, want_mhz, past) in [
+            (10_000.0, 30_000.0, 1, 80_000, 1),
+            (30_000.0, 10_000.0, 0, 20_000, -1),
+        ] {
+            let outs = feed(
+                &mut c,
+                &mut t,
+                stroke((from, 10_000.0), (to, 10_000.0), 100.0, 0.0, &mut noise),
+            );
+            let k = outs
+                .iter()
+                .position(|o| o.place == Some(Place::Window(want_place)))
+                .unwrap();
+            // band/2 = 100 µm past the shared edge (leaving window 0: more than band/2 out;
+            // entering it from below: at least band/2 in), within one reading's 10 µm.
+            let x = outs[k].position.unwrap().x_um;
+            let beyond = (x - 20_000) * past;
+            assert!((100..=110).contains(&beyond), "switched at {x} um");
+            let Some(GateAction::Update(s)) = outs[k].action else {
+                panic!("{:?}", outs[k])
+            };
+            assert_eq!(millihz(s), want_mhz);
+            assert_eq!(c.gate.running().map(millihz), Some(want_mhz));
+        }
+        assert_eq!(c.telemetry().window_switches, 2);
+    }
+
+    /// Edge scene: off everywhere, a vertical free segment at x = 20 mm and an off window
+    /// whose outline pulses.
+    fn edge_scene() -> Config2d {
+        let mut cfg = config(&[window(rect(40_000, 0, 60_000, 20_000), OFF, true)]);
+        cfg.scene
+            .free_edges
+            .push(SegmentUm {
+                a: PointUm::new(20_000, 0),
+                b: PointUm::new(20_000, 40_000),
+            })
+            .unwrap();
+        cfg
+    }
+
+    /// A crossing fires exactly one pulse through the gate, ahead of the edge by the lead
+    /// (v × (5 ms + 50 µs) = 505 µm at 100 mm/s, so the triangle's peak lands on it), in
+    /// both directions, across the free segment and a window's outline (edge 0 is its first
+    /// side; the free segment comes after the outline's four). 2 LSB noise.
+    #[test]
+    fn an_edge_crossing_fires_exactly_one_pulse() {
+        let mut noise = Noise::new(7);
+        let sigma = sigma_um(2.0);
+        for (from, to, edge, line) in [
+            (15_000.0, 25_000.0, 4, 20_000.0),
+            (25_000.0, 15_000.0, 4, 20_000.0),
+            (35_000.0, 45_000.0, 3, 40_000.0),
+            (45_000.0, 35_000.0, 3, 40_000.0),
+        ] {
+            let mut c = loaded(&edge_scene());
+            let mut t = 0;
+            let outs = feed(
+                &mut c,
+                &mut t,
+                stroke((from, 10_000.0), (to, 10_000.0), 100.0, sigma, &mut noise),
+            );
+            assert_eq!(pulses(&outs), 1, "{from} → {to}");
+            let fired: StdVec<_> = outs.iter().filter(|o| o.edge.is_some()).collect();
+            assert_eq!(fired.len(), 1);
+            assert_eq!(fired[0].edge, Some(edge));
+            assert_eq!(fired[0].envelope, Some(Envelope::Triangular));
+            let x = fired[0].position.unwrap().x_um as f64;
+            let ahead = (line - x) * (to - from).signum();
+            assert!((400.0..620.0).contains(&ahead), "fired {ahead} um ahead");
+            assert_eq!(c.telemetry().edge_pulses, 1);
+        }
+    }
+
+    /// A finger resting on an edge with 3 LSB of noise (12 µm RMS per axis) for 10 s fires
+    /// nothing, whether it landed there or slid there (the slide's own crossing fires once).
+    /// (Seen failing with the edge tracker's re-arm distance cut to 10 µm: the noise fires it.)
+    #[test]
+    fn a_resting_finger_on_an_edge_fires_nothing() {
+        let sigma = sigma_um(3.0);
+        let mut noise = Noise::new(11);
+        let mut c = loaded(&edge_scene());
+        let mut t = 0;
+        let rest = |c: &mut Controller2d, t: &mut u32, noise: &mut Noise| {
+            let readings: StdVec<_> = (0..100_000)
+                .map(|_| {
+                    down(PointUm::new(
+                        (20_000.0 + noise.gauss() * sigma).round() as i32,
+                        (10_000.0 + noise.gauss() * sigma).round() as i32,
+                    ))
+                })
+                .collect();
+            pulses(&feed(c, t, readings))
+        };
+        assert_eq!(rest(&mut c, &mut t, &mut noise), 0, "landed on it");
+        // Lift, touch down 1 mm away, slide onto the edge at 50 mm/s and stay.
+        let _ = c.on_reading(t, Reading::Lifted);
+        let slide = stroke(
+            (19_000.0, 10_000.0),
+            (20_000.0, 10_000.0),
+            50.0,
+            sigma,
+            &mut noise,
+        );
+        assert_eq!(
+            pulses(&feed(&mut c, &mut t, slide)),
+            1,
+            "the slide's crossing"
+        );
+        assert_eq!(rest(&mut c, &mut t, &mut noise), 0, "slid onto it");
+    }
+
+    /// A refused scene changes nothing: the running burst goes on untouched (no action, and
+    /// no drive mode re-sent, which an install would send), whichever part refused it — the
+    /// first texture, a late part (the edges, after every texture compiled), the stale limit.
+    #[test]
+    fn a_bad_scene_is_refused_and_the_previous_kept() {
+        let good = config(&[window(rect(0, 0, 20_000, 20_000), hz(20), false)]);
+        let mut c = loaded(&good);
+        let mut t = 0;
+        let outs = feed(&mut c, &mut t, at(PointUm::new(10_000, 10_000), 3));
+        assert!(outs[0].drive.is_some());
+        assert!(matches!(outs[0].action, Some(GateAction::Start(s)) if millihz(s) == 20_000));
+        let mut grating = good.clone();
+        grating.scene.windows[0].texture =
+            PlaneTexture::Plain(Texture::Grating(Grating::new(1_000)));
+        let mut long_pulse = edge_scene();
+        long_pulse.scene.edge_pulse.pulse_us = 60_000;
+        let mut stale = good.clone();
+        stale.stale_after_us = 100;
+        let mut normal = good.clone();
+        normal.scene.background = PlaneTexture::Oriented(OrientedGrating {
+            grating: Grating::new(1_000),
+            normal: (0, 0),
+        });
+        let mut band = good.clone();
+        band.scene.band_um = 0;
+        for (bad, want, sentence) in [
+            (
+                grating,
+                Config2dError::GratingNeedsNormal {
+                    owner: Owner::Window(0),
+                },
+                "window 0: a position-phase or hybrid grating needs the ridges' normal in the \
+                 plane: give it as an oriented grating",
+            ),
+            (
+                long_pulse,
+                Config2dError::Edges(EdgeError::Pulse {
+                    pulse_us: 60_000,
+                    max_on_time_us: 50_000,
+                }),
+                "edge pulse 60 ms must be above 0 ms and at most the on-time cap of 50 ms",
+            ),
+            (
+                stale,
+                Config2dError::StaleLimit {
+                    stale_after_us: 100,
+                    min_us: 200,
+                },
+                "stale limit 0.1 ms must be at least two sample periods (0.2 ms) and at most \
+                 1000 ms",
+            ),
+            (
+                normal,
+                Config2dError::Oriented {
+                    owner: Owner::Background,
+                    error: OrientedError::Normal { x: 0, y: 0 },
+                },
+                "the background: grating normal (0, 0) must be non-zero with components within \
+                 ±1000000",
+            ),
+            (
+                band,
+                Config2dError::Screen(crate::plane::screen::ScreenError::Band { band_um: 0 }),
+                "band 0 mm is outside 0.001 mm to 10 mm",
+            ),
+        ] {
+            let e = c.load(&bad).unwrap_err();
+            assert_eq!(e, want);
+            assert_eq!(e.to_string(), sentence);
+            let outs = feed(&mut c, &mut t, at(PointUm::new(10_000, 10_000), 3));
+            assert!(
+                outs.iter().all(|o| o.action.is_none() && o.drive.is_none()),
+                "{want:?}: {outs:?}"
+            );
+            assert_eq!(c.gate.running().map(millihz), Some(20_000));
+        }
+        // The refusal's own burst error path names its owner too.
+        let mut fast = good.clone();
+        fast.scene.windows[0].texture = hz(6_000);
+        assert!(matches!(
+            c.load(&fast),
+            Err(Config2dError::Burst {
+                owner: Owner::Window(0),
+                error: BurstError::AboveBoardLimit { .. }
+            })
+        ));
+    }
+
+    use crate::plane::grating::OrientedError;
+
+    /// A rail fault: off on that reading and counted once; the carrier comes back after
+    /// RECOVERY_SAMPLES pressed fault-free readings in a row, and a lift in between starts
+    /// the run again. A stale sensor (no reading for the limit) is a fault too, from on_tick.
+    #[test]
+    fn faults_stop_the_carrier_and_recover_by_the_1d_rule() {
+        let mut c = loaded(&config(&[window(
+            rect(0, 0, 20_000, 20_000),
+            hz(1_000),
+            false,
+        )]));
+        let mut t = 0;
+        let p = PointUm::new(10_000, 10_000);
+        feed(&mut c, &mut t, at(p, 10));
+        let rail = TouchFault::Rail(AxisFault {
+            axis: Axis::X,
+            fault: SensorFault::RailLow,
+        });
+        let fault = Reading::Fault(AxisFault {
+            axis: Axis::X,
+            fault: SensorFault::RailLow,
+        });
+        let outs = feed(&mut c, &mut t, [fault, fault]);
+        assert_eq!(outs[0].action, Some(GateAction::Off));
+        assert_eq!((outs[0].fault, outs[1].fault), (Some(rail), Some(rail)));
+        assert_eq!(c.telemetry().faults, 1);
+        let n = RECOVERY_SAMPLES as usize;
+        let outs = feed(&mut c, &mut t, at(p, n - 1));
+        assert!(outs
+            .iter()
+            .all(|o| o.action.is_none() && o.fault == Some(rail)));
+        // A lift: the run starts over.
+        feed(&mut c, &mut t, [Reading::Lifted]);
+        let outs = feed(&mut c, &mut t, at(p, n));
+        assert!(outs[..n - 1].iter().all(|o| o.action.is_none()));
+        assert_eq!(outs[n - 1].fault, None);
+        assert!(matches!(outs[n - 1].action, Some(GateAction::Start(_))));
+        // Stale: quiet for the limit is fine, a µs more is not.
+        let last = t - PERIOD_US;
+        assert_eq!(c.on_tick(last + 5_000), None);
+        assert_eq!(c.on_tick(last + 5_001), Some(GateAction::Off));
+        assert_eq!(c.fault(), Some(TouchFault::Stale));
+        assert_eq!(c.on_tick(last + 9_000), None);
+        assert_eq!(c.telemetry().faults, 2);
+    }
+
+    /// Per kind: a velocity-synthesis grating given plain reads |V| (a diagonal stroke at
+    /// 100 mm/s over λ = 1 mm runs at 100 Hz, though each axis moves at 70.7 mm/s); an
+    /// oriented position-phase grating fires one pulse per ridge crossed along its normal and
+    /// none moving along its ridges.
+    #[test]
+    fn plain_kinds_read_the_speed_and_oriented_gratings_the_projection() {
+        let mut synth = Grating::new(1_000);
+        synth.render = GratingRender::VelocitySynthesis;
+        let mut c = loaded(&config(&[window(
+            rect(0, 0, 40_000, 40_000),
+            PlaneTexture::Plain(Texture::Grating(synth)),
+            false,
+        )]));
+        let mut t = 0;
+        let mut noise = Noise::new(3);
+        feed(
+            &mut c,
+            &mut t,
+            stroke(
+                (5_000.0, 5_000.0),
+                (25_000.0, 25_000.0),
+                100.0,
+                0.0,
+                &mut noise,
+            ),
+        );
+        let f = c.gate.running().map(millihz).unwrap() as f64;
+        assert!((f - 100_000.0).abs() < 2_000.0, "{f} mHz");
+
+        let oriented = PlaneTexture::Oriented(OrientedGrating {
+            grating: Grating::new(1_000),
+            normal: (1, 0),
+        });
+        let mut c = loaded(&config(&[window(
+            rect(0, 0, 40_000, 40_000),
+            oriented,
+            false,
+        )]));
+        let mut t = 0;
+        // Across the ridges: 10 mm, from 5.5 to 15.5 mm, ten ridges (6 … 15 mm).
+        let across = feed(
+            &mut c,
+            &mut t,
+            stroke(
+                (5_500.0, 5_000.0),
+                (15_500.0, 5_000.0),
+                50.0,
+                0.0,
+                &mut noise,
+            ),
+        );
+        assert_eq!(pulses(&across), 10);
+        // Along them: 10 mm of y at x = 15.5 mm, none.
+        let along = feed(
+            &mut c,
+            &mut t,
+            stroke(
+                (15_500.0, 5_000.0),
+                (15_500.0, 15_000.0),
+                50.0,
+                0.0,
+                &mut noise,
+            ),
+        );
+        assert_eq!(pulses(&along), 0);
+    }
+
+    /// Per reading only what the scene needs: the estimators rest in a constant window (no
+    /// velocity reported) and update in a material window; a scene with edges updates them
+    /// everywhere (the lead). Resting changes no burst.
+    #[test]
+    fn the_velocity_is_computed_only_where_the_scene_reads_it() {
+        let material = PlaneTexture::Plain(Texture::Material(Material::fig5(0.3)));
+        let windows = [
+            window(rect(0, 0, 20_000, 20_000), hz(80), false),
+            window(rect(20_000, 0, 40_000, 20_000), material, false),
+        ];
+        let mut noise = Noise::new(5);
+        let s = stroke(
+            (5_000.0, 10_000.0),
+            (35_000.0, 10_000.0),
+            100.0,
+            0.0,
+            &mut noise,
+        );
+        let mut c = loaded(&config(&windows));
+        let mut t = 0;
+        let outs = feed(&mut c, &mut t, s.iter().copied());
+        for o in &outs[40..] {
+            match o.place {
+                Some(Place::Window(0)) => assert_eq!(o.velocity, None),
+                Some(Place::Window(1)) => assert!(o.velocity.is_some(), "{o:?}"),
+                p => panic!("{p:?}"),
+            }
+        }
+        // The material window's first reading has its velocity at once (woken, not
+        // restarted), and it is the stroke's 100 mm/s.
+        let first = outs
+            .iter()
+            .find(|o| o.place == Some(Place::Window(1)))
+            .unwrap();
+        assert_eq!(
+            first.velocity.map(|v| v.vx_um_s / 1_000),
+            Some(100),
+            "{first:?}"
+        );
+        let mut with_edges = config(&windows);
+        with_edges
+            .scene
+            .free_edges
+            .push(SegmentUm {
+                a: PointUm::new(60_000, 0),
+                b: PointUm::new(60_000, 10_000),
+            })
+            .unwrap();
+        let mut e = loaded(&with_edges);
+        let mut t = 0;
+        let outs_e = feed(&mut e, &mut t, s.iter().copied());
+        assert!(outs_e[40..].iter().all(|o| o.velocity.is_some()));
+        // The same bursts either way.
+        let actions = |o: &[Output2d]| o.iter().map(|o| o.action).collect::<StdVec<_>>();
+        assert_eq!(actions(&outs), actions(&outs_e));
     }
 }
