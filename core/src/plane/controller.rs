@@ -1158,4 +1158,70 @@ mod tests {
         let actions = |o: &[Output2d]| o.iter().map(|o| o.action).collect::<StdVec<_>>();
         assert_eq!(actions(&outs), actions(&outs_e));
     }
+
+    /// With the touch sensor in front: after a rail fault the carrier comes back on the
+    /// sensor's own touch-down, the 16th pressed frame, not 16 readings after it (the
+    /// controller counts the landing run towards its recovery; seen failing when it did not:
+    /// the 16th frame still faulty). Frames are the hand-worked 1 000 Ω network of
+    /// touch::frame's tests.
+    #[test]
+    fn behind_the_touch_sensor_a_fault_recovers_on_its_touch_down() {
+        use crate::touch::calibration::{Affine, CalPoint};
+        use crate::touch::fault::RailBands;
+        use crate::touch::frame::{Frame, TouchSensor};
+        use crate::touch::pressure::PressureConfig;
+        let p = |x_code, y_code, x_um, y_um| CalPoint {
+            x_code,
+            y_code,
+            x_um,
+            y_um,
+        };
+        let map = Affine::from_points(
+            [
+                p(10_000, 10_000, 0, 0),
+                p(50_000, 10_000, 40_000, 0),
+                p(10_000, 50_000, 0, 40_000),
+            ],
+            &RailBands::default(),
+        )
+        .unwrap();
+        let pressure = PressureConfig {
+            r_x_plate_ohm: 600,
+            ..PressureConfig::DEFAULT
+        };
+        let mut sensor = TouchSensor::new(pressure, RailBands::default(), map).unwrap();
+        let pressed = Frame {
+            x_code: 16_384,
+            y_code: 30_000,
+            z1_code: 7_282,
+            z2_code: 55_826,
+            t_us: 0,
+        };
+        let rail = Frame {
+            y_code: 65_000,
+            ..pressed
+        };
+        // The finger lands at (6.384, 20) mm: inside a 1 kHz window.
+        let mut c = loaded(&config(&[window(
+            rect(0, 0, 40_000, 40_000),
+            hz(1_000),
+            false,
+        )]));
+        let mut t = 0;
+        let mut run = |c: &mut Controller2d, f: &Frame| {
+            t += PERIOD_US;
+            c.on_reading(t, sensor.on_frame(f))
+        };
+        let n = RECOVERY_SAMPLES as usize;
+        let first: StdVec<_> = (0..n).map(|_| run(&mut c, &pressed)).collect();
+        assert!(first[..n - 1].iter().all(|o| o.action.is_none()));
+        assert!(matches!(first[n - 1].action, Some(GateAction::Start(_))));
+        assert_eq!(run(&mut c, &rail).action, Some(GateAction::Off));
+        let again: StdVec<_> = (0..n).map(|_| run(&mut c, &pressed)).collect();
+        assert!(again[..n - 1]
+            .iter()
+            .all(|o| o.action.is_none() && o.fault.is_some()));
+        assert_eq!(again[n - 1].fault, None);
+        assert!(matches!(again[n - 1].action, Some(GateAction::Start(_))));
+    }
 }
