@@ -1224,4 +1224,43 @@ mod tests {
         assert_eq!(again[n - 1].fault, None);
         assert!(matches!(again[n - 1].action, Some(GateAction::Start(_))));
     }
+
+    /// A window's texture starts afresh on entry: an oriented grating (normal (1, 1), λ =
+    /// 1 mm) left at (20.1, 5) mm and entered again at (19.9, 15) mm, after a trip through
+    /// an off window, fires exactly one pulse per ridge crossed inside it after the entry
+    /// (r·n from 24.68 to 18.03 mm: the six ridges 24 … 19 mm), with no crossing skipped.
+    /// (Seen failing without the reset on a window change: 7 pulses, one for the 6.9 mm jump
+    /// of r·n between exit and entry, which no finger crossed inside the window.)
+    #[test]
+    fn a_window_change_resets_the_new_windows_texture() {
+        let oriented = PlaneTexture::Oriented(OrientedGrating {
+            grating: Grating::new(1_000),
+            normal: (1, 1),
+        });
+        let mut c = loaded(&config(&[
+            window(rect(0, 0, 20_000, 20_000), oriented, false),
+            window(rect(20_000, 0, 40_000, 20_000), OFF, false),
+        ]));
+        let mut t = 0;
+        let mut noise = Noise::new(2);
+        let mut go = |c: &mut Controller2d, a: (f64, f64), b: (f64, f64)| {
+            feed(c, &mut t, stroke(a, b, 50.0, 0.0, &mut noise))
+        };
+        go(&mut c, (10_000.0, 5_000.0), (30_000.0, 5_000.0));
+        go(&mut c, (30_000.0, 5_000.0), (30_000.0, 15_000.0));
+        let skipped = c.telemetry().ridges_skipped;
+        let back = go(&mut c, (30_000.0, 15_000.0), (10_500.0, 15_000.0));
+        let entry = back
+            .iter()
+            .position(|o| o.place == Some(Place::Window(0)))
+            .unwrap();
+        assert_eq!(back[entry].position, Some(PointUm::new(19_900, 15_000)));
+        assert_eq!(pulses(&back[..entry]), 0);
+        let n = core::f64::consts::FRAC_1_SQRT_2;
+        let (from, to) = ((19_900.0 + 15_000.0) * n, (10_500.0 + 15_000.0) * n);
+        let ridges = (from / 1_000.0).floor() as usize - (to / 1_000.0).floor() as usize;
+        assert_eq!(ridges, 6);
+        assert_eq!(pulses(&back[entry..]), ridges);
+        assert_eq!(c.telemetry().ridges_skipped, skipped);
+    }
 }
