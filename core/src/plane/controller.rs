@@ -88,8 +88,8 @@ pub struct Prepared2d {
     scene: CompiledScene2d,
     limits: SafetyLimits,
     stale_after_us: u32,
-    /// Bit i: texture i (window i; the background's is the last) reads the velocity, or the
-    /// scene has edges (whose lead is the velocity): the estimator updates there, else rests.
+    /// Bit i: texture i (window i; the background's is the last) reads the velocity: the
+    /// estimators update there, else rest (but near an edge, whose lead is the velocity).
     update_mask: u16,
 }
 
@@ -111,16 +111,12 @@ impl Prepared2d {
         let scene = config
             .scene
             .compile(timer, &config.limits, sample_period_us)?;
-        let update_mask = if scene.edges.is_some() {
-            u16::MAX
-        } else {
-            scene
-                .textures
-                .iter()
-                .enumerate()
-                .filter(|(_, t)| t.need() == Need::Velocity)
-                .fold(0u16, |m, (i, _)| m | 1 << i)
-        };
+        let update_mask = scene
+            .textures
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.need() == Need::Velocity)
+            .fold(0u16, |m, (i, _)| m | 1 << i);
         Ok(Prepared2d {
             scene,
             limits: config.limits,
@@ -139,7 +135,7 @@ pub struct Controller2d<E: VelocityEstimator = WindowEstimator<DEFAULT_WINDOW>> 
     velocity: PlaneVelocity<E>,
     /// The estimators were rested on the last reading: woken before the next update.
     resting: bool,
-    /// The texture in force reads the velocity (or the scene has edges): update, else rest.
+    /// The texture in force reads the velocity: update, else rest (but in an edge's zone).
     update_velocity: bool,
     gate: Gate,
     screen: ScreenTracker,
@@ -342,7 +338,9 @@ impl<E: VelocityEstimator> Controller2d<E> {
         if self.place != Some(place) {
             self.note_place_change(place);
         }
-        let velocity = if self.update_velocity {
+        // An edge reads the lead only in its zone, as the last reading found it: the
+        // reading that enters a zone is too far from its edge to fire, lead or none.
+        let velocity = if self.update_velocity || self.edges.in_zone() {
             if core::mem::take(&mut self.resting) {
                 self.velocity.wake();
             }
@@ -1103,8 +1101,10 @@ mod tests {
     }
 
     /// Per reading only what the scene needs: the estimators rest in a constant window (no
-    /// velocity reported) and update in a material window; a scene with edges updates them
-    /// everywhere (the lead). Resting changes no burst.
+    /// velocity reported) and update in a material window; an edge adds them only inside its
+    /// zone (the 2.5 mm its tracker grows it by: re-arm 100 µm + the 2 mm lead cap + two
+    /// readings at 2 m/s), from the reading after the one that entered it. Resting changes
+    /// no burst.
     #[test]
     fn the_velocity_is_computed_only_where_the_scene_reads_it() {
         let material = PlaneTexture::Plain(Texture::Material(Material::fig5(0.3)));
@@ -1141,22 +1141,34 @@ mod tests {
             Some(100),
             "{first:?}"
         );
-        let mut with_edges = config(&windows);
-        with_edges
+        // An edge across the constant window at x = 10 mm.
+        let mut with_edge = config(&windows);
+        with_edge
             .scene
             .free_edges
             .push(SegmentUm {
-                a: PointUm::new(60_000, 0),
-                b: PointUm::new(60_000, 10_000),
+                a: PointUm::new(10_000, 0),
+                b: PointUm::new(10_000, 20_000),
             })
             .unwrap();
-        let mut e = loaded(&with_edges);
+        let mut e = loaded(&with_edge);
         let mut t = 0;
         let outs_e = feed(&mut e, &mut t, s.iter().copied());
-        assert!(outs_e[40..].iter().all(|o| o.velocity.is_some()));
-        // The same bursts either way.
+        let mut near = 0;
+        for k in 40..outs_e.len() {
+            let o = &outs_e[k];
+            let prev_x = outs_e[k - 1].position.unwrap().x_um;
+            let in_zone = (prev_x - 10_000).abs() <= 2_500;
+            let reads = o.place == Some(Place::Window(1)) || in_zone;
+            assert_eq!(o.velocity.is_some(), reads, "reading {k}: {o:?}");
+            near += in_zone as u32;
+        }
+        // 5 mm of zone at 10 µm a reading.
+        assert_eq!(near, 501);
+        // The same bursts either way (the edge's pulse is skipped: the 80 Hz burst runs).
         let actions = |o: &[Output2d]| o.iter().map(|o| o.action).collect::<StdVec<_>>();
         assert_eq!(actions(&outs), actions(&outs_e));
+        assert_eq!(e.telemetry().edges_skipped, 1);
     }
 
     /// With the touch sensor in front: after a rail fault the carrier comes back on the
