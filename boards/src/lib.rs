@@ -13,6 +13,7 @@
 pub mod nucleo_f446re;
 pub mod nucleo_g474re;
 pub mod rf_level;
+pub mod touch;
 
 pub use nucleo_f446re::{NUCLEO_F446RE, NUCLEO_F446RE_DUAL, NUCLEO_F446RE_DUAL128};
 pub use nucleo_g474re::NUCLEO_G474RE;

@@ -40,6 +40,7 @@ pub mod scene;
 #[cfg(feature = "scene-file")]
 pub mod scene_file;
 pub mod texture;
+pub mod touch;
 pub mod velocity;
 
 pub use controller::{ConfigError, Controller, Output, Telemetry};

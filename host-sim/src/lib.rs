@@ -3,6 +3,7 @@
 //!
 //! - [`trajectory`]: the finger's motion; [`trajectory2d`]: on a 2D screen (issue #36);
 //! - [`adc`]: the slide rheostat and the oversampling ADC, with noise and rail faults;
+//! - [`touch`]: the 4-wire touch overlay (issue #36): plates, settling, pressure, noise;
 //! - [`timer`]: the burst timer as an STM32 timer with (or without) preload, recording edges;
 //! - [`sim`]: the closed loop, trajectory → ADC → controller → timer;
 //! - [`metrics`]: f_b produced vs commanded, region switches, velocity error and delay;
@@ -29,5 +30,6 @@ pub mod serve;
 pub mod sim;
 pub mod soak;
 pub mod timer;
+pub mod touch;
 pub mod trajectory;
 pub mod trajectory2d;

@@ -492,6 +492,14 @@ impl EdgeTracker {
         fired
     }
 
+    /// True when the finger was in some edge's zone at the last update: only there does an
+    /// edge read the lead (on entering a zone the finger is farther from the edge than the
+    /// re-arm distance and the longest lead, so that first sample needs none).
+    #[inline]
+    pub fn in_zone(&self) -> bool {
+        self.in_zone != 0
+    }
+
     /// Edges visited so far (tests).
     #[cfg(test)]
     pub(crate) fn visits(&self) -> u32 {

@@ -6,14 +6,18 @@ pub mod geometry;
 pub mod grating;
 
 pub use geometry::{GeometryError, PointUm, Polygon, SegmentUm, MAX_VERTICES};
+pub mod controller;
 pub mod edges;
+pub mod scene;
 pub mod screen;
 #[cfg(test)]
 mod testing;
 pub mod velocity;
 
+pub use controller::{apply2d, Controller2d, Output2d, Prepared2d, Telemetry2d, TouchFault};
 pub use edges::{CompiledEdges, EdgeError, EdgePulse, EdgeTracker, Edges, MAX_EDGES};
 pub use grating::{CompiledOriented, OrientedError, OrientedGrating};
+pub use scene::{Config2d, Config2dError, Owner, PlaneTexture, Scene2d, Window2d, PLANE_SPAN_UM};
 pub use screen::{CompiledScreen, Place, Screen, ScreenError, ScreenTracker, Window, MAX_WINDOWS};
 pub use velocity::{PlaneVelocity, VelocityUmS};
 

@@ -82,6 +82,12 @@ impl<E: VelocityEstimator> PlaneVelocity<E> {
         self.y.wake();
     }
 
+    /// True when resting costs less than updating (both axes are built alike): a controller
+    /// rests them where nothing reads the velocity.
+    pub fn rests(&self) -> bool {
+        self.x.rests() && self.y.rests()
+    }
+
     /// Group delay at constant speed, µs (both axes alike).
     pub fn group_delay_us(&self) -> u32 {
         self.x.group_delay_us().max(self.y.group_delay_us())

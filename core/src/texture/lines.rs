@@ -174,7 +174,7 @@ impl LinePulses {
 }
 
 /// Rest after a line pulse so that pulse / (pulse + rest) ≤ the duty cap.
-fn refractory_us(lines: &Lines, limits: &SafetyLimits) -> u32 {
+pub(crate) fn refractory_us(lines: &Lines, limits: &SafetyLimits) -> u32 {
     let cap = limits.max_duty_permille as u64;
     (lines.pulse_us as u64 * (1000 - cap)).div_ceil(cap) as u32
 }
