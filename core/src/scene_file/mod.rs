@@ -352,6 +352,43 @@ pub fn load_for_board(
     Ok(doc.config)
 }
 
+/// The sensor a scene file asks for: the 1D slide rheostat (every scene before issue #36) or
+/// the 2D 4-wire touch overlay (a file with `[sensor] kind = "4-wire"`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum SensorKind {
+    /// The slide rheostat: a 1D scene, [`load_for_board`].
+    Rheostat,
+    /// The 4-wire resistive overlay: a 2D scene, [`load_2d_for_board`].
+    FourWire,
+}
+
+/// Which sensor a scene file names (`[sensor] kind`); a file without `[sensor]` is 1D.
+pub fn sensor_of(file: &str, text: &str) -> Result<SensorKind, SceneFileError> {
+    // Placeholder until the 2D sections are read (issue #36): every file is 1D.
+    let _ = (file, text);
+    Ok(SensorKind::Rheostat)
+}
+
+/// Reads a 2D scene file (issue #36) and checks it against a board whose touch frames come
+/// every `frame_period_us`: the configuration, ready for [`crate::plane::Controller2d::load`].
+pub fn load_2d_for_board(
+    file: &str,
+    text: &str,
+    timer: BurstTimer,
+    frame_period_us: u32,
+) -> Result<crate::plane::Config2d, SceneFileError> {
+    // Placeholder until the 2D sections are read (issue #36).
+    let _ = (text, timer, frame_period_us);
+    Err(SceneFileError {
+        file: file.to_string(),
+        line: 1,
+        column: 1,
+        field: "sensor".to_string(),
+        message: "2D scene files are not read yet".to_string(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
