@@ -437,6 +437,13 @@ impl Ridges {
             }
             return self.request_of(want, None, 0);
         }
+        // The hybrid's line first: its sums are the step's largest piece, and made before the
+        // span test and the tracker they share no registers with those (M4F: the crossing and
+        // the span held across the fit spilled to the stack). Independent state: same result.
+        let line = match self.hybrid.as_mut().filter(|_| HYBRID) {
+            Some(h) => h.fit.push(position_um, t_us, h.sample_period_us),
+            None => None,
+        };
         if let Some((lo, hi)) = self.on_span_um {
             // Signed: a predicted pulse starts after the sample that fired it.
             let long_enough = self
@@ -457,7 +464,6 @@ impl Ridges {
         // sized (most samples fire nothing).
         let mut own: Option<(Line, f32)> = None;
         if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
-            let line = h.fit.push(position_um, t_us, h.sample_period_us);
             own = line.map(|l| (l, h.samples_per_s));
             // The last ridge fired re-arms once the finger is `rearm_um` clear of it.
             let here_um = line.map_or(position_um as f32, |l| l.end_um);

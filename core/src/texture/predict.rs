@@ -55,9 +55,13 @@ pub(crate) struct LineFit {
     ring: [i32; N],
     /// Index of the oldest sample in `ring` once full; the next write goes there.
     head: usize,
-    /// The sums over the whole window (its `count` is the window's fill).
+    /// Samples in the window, up to [`N`]: one count for both windows (the half holds the
+    /// newest `count.min(H)`), so a full window is one test (M4F: a load and a test fewer than a
+    /// count per window).
+    count: usize,
+    /// The sums over the whole window.
     full: Sums<N>,
-    /// The same two sums over the newest [`H`] samples (fewer while filling).
+    /// The same two sums over the newest [`H`] samples.
     half: Sums<H>,
     last_t_us: u32,
     /// Where the line said the next sample would be, µm; NaN for nowhere (no line): every
@@ -71,6 +75,7 @@ impl Default for LineFit {
         Self {
             ring: [0; N],
             head: 0,
+            count: 0,
             full: Sums::default(),
             half: Sums::default(),
             last_t_us: 0,
@@ -92,6 +97,7 @@ impl LineFit {
     /// Empties the window (a gap, a glitch, a region change, a fault).
     pub(crate) fn reset(&mut self) {
         self.head = 0;
+        self.count = 0;
         self.full = Sums::default();
         self.half = Sums::default();
         self.expected_um = f32::NAN;
@@ -108,32 +114,35 @@ impl LineFit {
         if !on_grid || off_line {
             self.reset();
         }
-        // The newer half slides by one once it holds H samples: its oldest (age H − 1, at ring
-        // position head + count − H: count − H while filling, head + H once full) leaves.
-        let count = self.full.count;
-        if self.half.count == H {
-            let at = (self.head + count).wrapping_sub(H) & (N - 1);
-            let oldest = self.ring.get(at).copied().unwrap_or(0);
-            self.half.slide(position_um, oldest);
-        } else {
-            self.half.fill(position_um);
-        }
-        if count < N {
-            // Filling: the new sample's index is `count`.
-            if let Some(slot) = self.ring.get_mut(count) {
-                *slot = position_um;
-            }
-            self.full.fill(position_um);
-            if count + 1 < N {
-                return None;
-            }
-        } else {
-            // Masked: `head` is below N, and the mask says so to the compiler (no bounds test).
+        let count = self.count;
+        if count == N {
+            // Full (most samples): the oldest leaves the window, and the sample H newer than
+            // it (age H − 1) the newer half. Masked: `head` is below N, and the mask says so to
+            // the compiler (no bounds test).
             let at = self.head & (N - 1);
             let oldest = self.ring[at];
+            let half_oldest = self.ring[(at + H) & (N - 1)];
             self.ring[at] = position_um;
             self.head = (at + 1) & (N - 1);
             self.full.slide(position_um, oldest);
+            self.half.slide(position_um, half_oldest);
+        } else {
+            // Filling: the new sample's index is `count`; the half slides once it holds H (its
+            // oldest, age H − 1, at index count − H).
+            if count >= H {
+                let oldest = self.ring.get(count - H).copied().unwrap_or(0);
+                self.half.slide(position_um, oldest);
+            } else {
+                self.half.fill(position_um, count);
+            }
+            if let Some(slot) = self.ring.get_mut(count) {
+                *slot = position_um;
+            }
+            self.full.fill(position_um, count);
+            self.count = count + 1;
+            if count + 1 < N {
+                return None;
+            }
         }
         let line = self.chosen();
         self.expected_um = line.end_um + line.slope_um;
@@ -155,7 +164,7 @@ impl LineFit {
     /// The line the last [`Self::push`] returned (None while the window fills), made again
     /// from the sums: O(1), for a velocity read at a stream's rate, not per sample.
     pub(crate) fn line(&self) -> Option<Line> {
-        (self.full.count == N).then(|| self.chosen())
+        (self.count == N).then(|| self.chosen())
     }
 
     /// The newest `k` samples of the window (fewer if it holds fewer), oldest first, with the
@@ -166,7 +175,7 @@ impl LineFit {
         k: usize,
         period_us: u32,
     ) -> impl Iterator<Item = (i32, u32)> + '_ {
-        let count = self.full.count;
+        let count = self.count;
         let k = k.min(count);
         // Oldest of the window at ring index `head` once full (0 while filling).
         let first = if count == N { self.head } else { 0 };
@@ -193,20 +202,18 @@ impl LineFit {
 /// does not depend on it).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 struct Sums<const W: usize> {
-    count: usize,
     sum_um: i32,
     moment_um: i32,
 }
 
 impl<const W: usize> Sums<W> {
-    /// Adds a sample to a window not yet full: its index is `count`.
+    /// Adds a sample to a window not yet full, at index `index` (the samples it holds).
     #[inline(always)]
-    fn fill(&mut self, position_um: i32) {
+    fn fill(&mut self, position_um: i32, index: usize) {
         self.moment_um = self
             .moment_um
-            .wrapping_add((self.count as i32).wrapping_mul(position_um));
+            .wrapping_add((index as i32).wrapping_mul(position_um));
         self.sum_um = self.sum_um.wrapping_add(position_um);
-        self.count += 1;
     }
 
     /// Slides a full window by one: every index drops by one, `oldest` leaves, the new
