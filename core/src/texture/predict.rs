@@ -44,6 +44,11 @@ pub const INNOVATION_GATE_UM: f32 = 72.0;
 /// on a 32-sample line).
 pub const DISAGREE_UM: f32 = 9.0;
 
+/// Distance, µm, between the full end and the half's quick end below which the full line is
+/// kept without the half's line: 1 µm inside [`DISAGREE_UM`], over twice the two ends' worst
+/// rounding apart (see `LineFit::chosen`).
+const AGREE_SURELY_UM: f32 = DISAGREE_UM - 1.0;
+
 const N: usize = FIT_SAMPLES;
 /// The newer half of the window.
 const H: usize = FIT_SAMPLES / 2;
@@ -150,9 +155,23 @@ impl LineFit {
     }
 
     /// The full window's line, or its newer half's where the two disagree (an acceleration).
+    ///
+    /// The half's line is made only near or past [`DISAGREE_UM`]: on a steady stroke (most
+    /// samples) its end is read from one division of the half's exact end numerator
+    /// ([`Sums::end_numerator`]) and the full line is kept when that is within
+    /// [`AGREE_SURELY_UM`] of the full end (M4F: ~7 instructions a sample fewer than the half's
+    /// line). The same line as the test on the half's own end: for positions within ±1 m
+    /// (`position::MAX_LENGTH_UM`) that end, as `line_of` makes it, lies within 0.35 µm of the
+    /// exact end (its slope term, up to 1.5·10^6 µm, rounded three times) and the quick one
+    /// within 0.2 µm (two roundings of at most 1.7·10^6 µm), so a quick distance ≤ 8 µm is a
+    /// distance to the half's own end under 8.6 µm, which the 9 µm test keeps too.
     #[inline(always)]
     fn chosen(&self) -> Line {
         let full = self.full.line();
+        let half_end_um = self.half.end_numerator() as f32 / Sums::<H>::END_DENOMINATOR;
+        if (full.end_um - half_end_um).abs() <= AGREE_SURELY_UM {
+            return full;
+        }
         let half = self.half.line();
         if (full.end_um - half.end_um).abs() <= DISAGREE_UM {
             full
@@ -231,6 +250,20 @@ impl<const W: usize> Sums<W> {
     #[inline(always)]
     fn line(&self) -> Line {
         line_of(self.sum_um, self.moment_um, W)
+    }
+
+    /// W(W + 1)/2: the line's end is [`Self::end_numerator`] over it.
+    const END_DENOMINATOR: f32 = (W * (W + 1) / 2) as f32;
+
+    /// 3·Σi·y − (W − 2)·Σy, exact: the line's end times W(W + 1)/2 (the end is Σy/W plus
+    /// (W − 1)/2 slopes, 12·Σi·y − 6(W − 1)·Σy over W(W² − 1) each). Wrapping like the sums,
+    /// and exact where the result fits i32: |end| ≤ 5/3 of the largest |position| (the end's
+    /// weights' absolute sum), 8.8·10^8 for W = 32 at 1 m.
+    #[inline(always)]
+    fn end_numerator(&self) -> i32 {
+        self.moment_um
+            .wrapping_mul(3)
+            .wrapping_sub(self.sum_um.wrapping_mul(W as i32 - 2))
     }
 }
 
@@ -358,6 +391,52 @@ mod tests {
                 line.end_um
             );
         }
+    }
+
+    /// The quick agreement test keeps the line the test on the half's own end picks: swept
+    /// through the acceleration where the two ends part by 9 µm (the bias difference is
+    /// a·(63·62 − 31·30)/12 = 248·a, so a ≈ 0.036 µm per sample²), both ways, slow and fast,
+    /// near 0 and near 1 m, every sample against the full and half lines chosen directly.
+    #[test]
+    fn the_quick_agreement_test_picks_the_line_the_ends_test_picks() {
+        let (mut full_kept, mut half_taken, mut near_limit) = (0, 0, 0);
+        for base in [1_000.0f64, 500_000.0, 930_000.0] {
+            for speed in [-400.0f64, -20.0, 3.0, 20.0, 400.0] {
+                for step in 0..120 {
+                    let a = 0.028 + step as f64 * 0.0001;
+                    let y = |k: i32| {
+                        let k = k as f64;
+                        let wobble = ((k * 7.0) % 5.0) - 2.0;
+                        (base + speed * k + a * k * k / 2.0 + wobble).round() as i32
+                    };
+                    let mut fit = LineFit::default();
+                    for k in 0..N as i32 + 40 {
+                        let Some(got) = fit.push(y(k), k as u32 * 100, 100) else {
+                            continue;
+                        };
+                        let (full, half) = (fit.full.line(), fit.half.line());
+                        let distance_um = (full.end_um - half.end_um).abs();
+                        let want = if distance_um <= DISAGREE_UM {
+                            full_kept += 1;
+                            full
+                        } else {
+                            half_taken += 1;
+                            half
+                        };
+                        if (distance_um - DISAGREE_UM).abs() < 1.0 {
+                            near_limit += 1;
+                        }
+                        assert_eq!(got, want, "base {base} speed {speed} a {a} k {k}");
+                    }
+                }
+            }
+        }
+        // The sweep crosses the limit: both lines are picked, many samples within 1 µm of it.
+        assert!(
+            full_kept > 1_000 && half_taken > 1_000,
+            "{full_kept} {half_taken}"
+        );
+        assert!(near_limit > 100, "{near_limit}");
     }
 
     /// The history an estimator is seeded from: the newest k positions, oldest first, stamped
