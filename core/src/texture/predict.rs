@@ -114,7 +114,8 @@ impl LineFit {
     pub(crate) fn push(&mut self, position_um: i32, t_us: u32, period_us: u32) -> Option<Line> {
         let step_us = t_us.wrapping_sub(self.last_t_us);
         self.last_t_us = t_us;
-        let on_grid = step_us.abs_diff(period_us) <= period_us / 2;
+        // Exactly one period on (the firmware stamps its samples so): one compare.
+        let on_grid = step_us == period_us || step_us.abs_diff(period_us) <= period_us / 2;
         let off_line = (position_um as f32 - self.expected_um).abs() > INNOVATION_GATE_UM;
         if !on_grid || off_line {
             self.reset();
