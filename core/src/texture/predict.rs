@@ -416,6 +416,13 @@ mod tests {
                             continue;
                         };
                         let (full, half) = (fit.full.line(), fit.half.line());
+                        // The quick end is the half's own, to within the two roundings (the
+                        // doc's bound is 0.55 µm; near 1 m one f32 ulp is 0.0625 µm).
+                        let quick_um = fit.half.end_numerator() as f32 / Sums::<H>::END_DENOMINATOR;
+                        assert!(
+                            (quick_um - half.end_um).abs() <= 0.55,
+                            "{quick_um} {half:?}"
+                        );
                         let distance_um = (full.end_um - half.end_um).abs();
                         let want = if distance_um <= DISAGREE_UM {
                             full_kept += 1;
