@@ -241,8 +241,12 @@ pub(crate) struct Ridges {
     /// Largest step between two samples the slider can make, µm; a larger one is a glitch
     /// until the next sample confirms it.
     max_step_um: i32,
-    /// The last position accepted, and a jump waiting for confirmation.
-    last_um: Option<i32>,
+    /// The last position accepted, and how far the next may step from it, µm: `max_step_um`,
+    /// or `u32::MAX` before any (a first position is always plausible). A reach, not an
+    /// Option: one load pair and one compare per sample.
+    last_um: i32,
+    last_reach_um: u32,
+    /// A jump waiting for confirmation.
     jump_um: Option<i32>,
     /// The hybrid renderer's prediction, when the grating is rendered that way.
     hybrid: Option<Predictor>,
@@ -264,8 +268,9 @@ struct Predictor {
     /// The ridge fired last (by prediction or by position), until the finger is `rearm_um`
     /// clear of it: neither path fires it again before.
     last_fired: Option<i32>,
-    /// The trusted line's end at the previous sample, µm: where this sample's window starts.
-    prev_end_um: Option<f32>,
+    /// The trusted line's end at the previous sample, µm: where this sample's window starts;
+    /// NaN for none (no trusted line then): a NaN test, not an Option's tag.
+    prev_end_um: f32,
 }
 
 /// The fastest the slider is taken to move, µm/s: a step between two samples that would need
@@ -311,7 +316,8 @@ impl Ridges {
             on_span_um: None,
             max_step_um: (4 * MAX_SLIDER_SPEED_UM_S as u64 * sample_period_us as u64 / 1_000_000)
                 .min(i32::MAX as u64) as i32,
-            last_um: None,
+            last_um: 0,
+            last_reach_um: u32::MAX,
             jump_um: None,
             hybrid: (g.render == GratingRender::Hybrid).then(|| Predictor {
                 fit: LineFit::default(),
@@ -325,7 +331,7 @@ impl Ridges {
                 samples_per_s: 1e6 / sample_period_us.max(1) as f32,
                 wavelength_um: g.wavelength_um as f32,
                 last_fired: None,
-                prev_end_um: None,
+                prev_end_um: f32::NAN,
             }),
         })
     }
@@ -335,10 +341,11 @@ impl Ridges {
     #[inline(always)]
     fn plausible(&mut self, position_um: i32) -> bool {
         let near = |a: i32, b: i32| a.abs_diff(b) <= self.max_step_um as u32;
-        let ok = self.last_um.is_none_or(|last| near(last, position_um))
+        let ok = self.last_um.abs_diff(position_um) <= self.last_reach_um
             || self.jump_um.is_some_and(|j| near(j, position_um));
         if ok {
-            self.last_um = Some(position_um);
+            self.last_um = position_um;
+            self.last_reach_um = self.max_step_um as u32;
             self.jump_um = None;
         } else {
             self.jump_um = Some(position_um);
@@ -437,6 +444,13 @@ impl Ridges {
             }
             return self.request_of(want, None, 0);
         }
+        // The hybrid's line first: its sums are the step's largest piece, and made before the
+        // span test and the tracker they share no registers with those (M4F: the crossing and
+        // the span held across the fit spilled to the stack). Independent state: same result.
+        let line = match self.hybrid.as_mut().filter(|_| HYBRID) {
+            Some(h) => h.fit.push(position_um, t_us, h.sample_period_us),
+            None => None,
+        };
         if let Some((lo, hi)) = self.on_span_um {
             // Signed: a predicted pulse starts after the sample that fired it.
             let long_enough = self
@@ -457,7 +471,6 @@ impl Ridges {
         // sized (most samples fire nothing).
         let mut own: Option<(Line, f32)> = None;
         if let Some(h) = self.hybrid.as_mut().filter(|_| HYBRID) {
-            let line = h.fit.push(position_um, t_us, h.sample_period_us);
             own = line.map(|l| (l, h.samples_per_s));
             // The last ridge fired re-arms once the finger is `rearm_um` clear of it.
             let here_um = line.map_or(position_um as f32, |l| l.end_um);
@@ -468,13 +481,13 @@ impl Ridges {
                 }
             }
             let trusted = line.filter(|l| l.slope_um.abs() >= h.trust_um);
-            let from_um = match (trusted, h.prev_end_um) {
+            let from_um = match trusted {
                 // The line's window joins the last one's: (previous end, end + slope].
-                (Some(_), Some(prev)) => prev,
-                (Some(l), None) => l.end_um - l.slope_um,
-                (None, _) => 0.0,
+                Some(l) if h.prev_end_um.is_nan() => l.end_um - l.slope_um,
+                Some(_) => h.prev_end_um,
+                None => 0.0,
             };
-            h.prev_end_um = trusted.map(|l| l.end_um);
+            h.prev_end_um = trusted.map_or(f32::NAN, |l| l.end_um);
             if let Some(line) = trusted {
                 // On a trusted line a raw crossing is only noise's opinion, unless it is of a
                 // ridge behind the line's window that nothing fired (the line was not yet
@@ -638,12 +651,12 @@ impl Render for Ridges {
     fn reset(&mut self) {
         self.tracker.reset();
         self.on_span_um = None;
-        self.last_um = None;
+        self.last_reach_um = u32::MAX;
         self.jump_um = None;
         if let Some(h) = self.hybrid.as_mut() {
             h.fit.reset();
             h.last_fired = None;
-            h.prev_end_um = None;
+            h.prev_end_um = f32::NAN;
         }
     }
 

@@ -44,6 +44,11 @@ pub const INNOVATION_GATE_UM: f32 = 72.0;
 /// on a 32-sample line).
 pub const DISAGREE_UM: f32 = 9.0;
 
+/// Distance, µm, between the full end and the half's quick end below which the full line is
+/// kept without the half's line: 1 µm inside [`DISAGREE_UM`], over twice the two ends' worst
+/// rounding apart (see `LineFit::chosen`).
+const AGREE_SURELY_UM: f32 = DISAGREE_UM - 1.0;
+
 const N: usize = FIT_SAMPLES;
 /// The newer half of the window.
 const H: usize = FIT_SAMPLES / 2;
@@ -55,9 +60,13 @@ pub(crate) struct LineFit {
     ring: [i32; N],
     /// Index of the oldest sample in `ring` once full; the next write goes there.
     head: usize,
-    /// The sums over the whole window (its `count` is the window's fill).
+    /// Samples in the window, up to [`N`]: one count for both windows (the half holds the
+    /// newest `count.min(H)`), so a full window is one test (M4F: a load and a test fewer than a
+    /// count per window).
+    count: usize,
+    /// The sums over the whole window.
     full: Sums<N>,
-    /// The same two sums over the newest [`H`] samples (fewer while filling).
+    /// The same two sums over the newest [`H`] samples.
     half: Sums<H>,
     last_t_us: u32,
     /// Where the line said the next sample would be, µm; NaN for nowhere (no line): every
@@ -71,6 +80,7 @@ impl Default for LineFit {
         Self {
             ring: [0; N],
             head: 0,
+            count: 0,
             full: Sums::default(),
             half: Sums::default(),
             last_t_us: 0,
@@ -92,6 +102,7 @@ impl LineFit {
     /// Empties the window (a gap, a glitch, a region change, a fault).
     pub(crate) fn reset(&mut self) {
         self.head = 0;
+        self.count = 0;
         self.full = Sums::default();
         self.half = Sums::default();
         self.expected_um = f32::NAN;
@@ -103,37 +114,41 @@ impl LineFit {
     pub(crate) fn push(&mut self, position_um: i32, t_us: u32, period_us: u32) -> Option<Line> {
         let step_us = t_us.wrapping_sub(self.last_t_us);
         self.last_t_us = t_us;
-        let on_grid = step_us.abs_diff(period_us) <= period_us / 2;
+        // Exactly one period on (the firmware stamps its samples so): one compare.
+        let on_grid = step_us == period_us || step_us.abs_diff(period_us) <= period_us / 2;
         let off_line = (position_um as f32 - self.expected_um).abs() > INNOVATION_GATE_UM;
         if !on_grid || off_line {
             self.reset();
         }
-        // The newer half slides by one once it holds H samples: its oldest (age H − 1, at ring
-        // position head + count − H: count − H while filling, head + H once full) leaves.
-        let count = self.full.count;
-        if self.half.count == H {
-            let at = (self.head + count).wrapping_sub(H) & (N - 1);
-            let oldest = self.ring.get(at).copied().unwrap_or(0);
-            self.half.slide(position_um, oldest);
-        } else {
-            self.half.fill(position_um);
-        }
-        if count < N {
-            // Filling: the new sample's index is `count`.
-            if let Some(slot) = self.ring.get_mut(count) {
-                *slot = position_um;
-            }
-            self.full.fill(position_um);
-            if count + 1 < N {
-                return None;
-            }
-        } else {
-            // Masked: `head` is below N, and the mask says so to the compiler (no bounds test).
+        let count = self.count;
+        if count == N {
+            // Full (most samples): the oldest leaves the window, and the sample H newer than
+            // it (age H − 1) the newer half. Masked: `head` is below N, and the mask says so to
+            // the compiler (no bounds test).
             let at = self.head & (N - 1);
             let oldest = self.ring[at];
+            let half_oldest = self.ring[(at + H) & (N - 1)];
             self.ring[at] = position_um;
             self.head = (at + 1) & (N - 1);
             self.full.slide(position_um, oldest);
+            self.half.slide(position_um, half_oldest);
+        } else {
+            // Filling: the new sample's index is `count`; the half slides once it holds H (its
+            // oldest, age H − 1, at index count − H).
+            if count >= H {
+                let oldest = self.ring.get(count - H).copied().unwrap_or(0);
+                self.half.slide(position_um, oldest);
+            } else {
+                self.half.fill(position_um, count);
+            }
+            if let Some(slot) = self.ring.get_mut(count) {
+                *slot = position_um;
+            }
+            self.full.fill(position_um, count);
+            self.count = count + 1;
+            if count + 1 < N {
+                return None;
+            }
         }
         let line = self.chosen();
         self.expected_um = line.end_um + line.slope_um;
@@ -141,9 +156,23 @@ impl LineFit {
     }
 
     /// The full window's line, or its newer half's where the two disagree (an acceleration).
+    ///
+    /// The half's line is made only near or past [`DISAGREE_UM`]: on a steady stroke (most
+    /// samples) its end is read from one division of the half's exact end numerator
+    /// ([`Sums::end_numerator`]) and the full line is kept when that is within
+    /// [`AGREE_SURELY_UM`] of the full end (M4F: ~7 instructions a sample fewer than the half's
+    /// line). The same line as the test on the half's own end: for positions within ±1 m
+    /// (`position::MAX_LENGTH_UM`) that end, as `line_of` makes it, lies within 0.35 µm of the
+    /// exact end (its slope term, up to 1.5·10^6 µm, rounded three times) and the quick one
+    /// within 0.2 µm (two roundings of at most 1.7·10^6 µm), so a quick distance ≤ 8 µm is a
+    /// distance to the half's own end under 8.6 µm, which the 9 µm test keeps too.
     #[inline(always)]
     fn chosen(&self) -> Line {
         let full = self.full.line();
+        let half_end_um = self.half.end_numerator() as f32 / Sums::<H>::END_DENOMINATOR;
+        if (full.end_um - half_end_um).abs() <= AGREE_SURELY_UM {
+            return full;
+        }
         let half = self.half.line();
         if (full.end_um - half.end_um).abs() <= DISAGREE_UM {
             full
@@ -155,7 +184,7 @@ impl LineFit {
     /// The line the last [`Self::push`] returned (None while the window fills), made again
     /// from the sums: O(1), for a velocity read at a stream's rate, not per sample.
     pub(crate) fn line(&self) -> Option<Line> {
-        (self.full.count == N).then(|| self.chosen())
+        (self.count == N).then(|| self.chosen())
     }
 
     /// The newest `k` samples of the window (fewer if it holds fewer), oldest first, with the
@@ -166,7 +195,7 @@ impl LineFit {
         k: usize,
         period_us: u32,
     ) -> impl Iterator<Item = (i32, u32)> + '_ {
-        let count = self.full.count;
+        let count = self.count;
         let k = k.min(count);
         // Oldest of the window at ring index `head` once full (0 while filling).
         let first = if count == N { self.head } else { 0 };
@@ -193,20 +222,18 @@ impl LineFit {
 /// does not depend on it).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 struct Sums<const W: usize> {
-    count: usize,
     sum_um: i32,
     moment_um: i32,
 }
 
 impl<const W: usize> Sums<W> {
-    /// Adds a sample to a window not yet full: its index is `count`.
+    /// Adds a sample to a window not yet full, at index `index` (the samples it holds).
     #[inline(always)]
-    fn fill(&mut self, position_um: i32) {
+    fn fill(&mut self, position_um: i32, index: usize) {
         self.moment_um = self
             .moment_um
-            .wrapping_add((self.count as i32).wrapping_mul(position_um));
+            .wrapping_add((index as i32).wrapping_mul(position_um));
         self.sum_um = self.sum_um.wrapping_add(position_um);
-        self.count += 1;
     }
 
     /// Slides a full window by one: every index drops by one, `oldest` leaves, the new
@@ -224,6 +251,20 @@ impl<const W: usize> Sums<W> {
     #[inline(always)]
     fn line(&self) -> Line {
         line_of(self.sum_um, self.moment_um, W)
+    }
+
+    /// W(W + 1)/2: the line's end is [`Self::end_numerator`] over it.
+    const END_DENOMINATOR: f32 = (W * (W + 1) / 2) as f32;
+
+    /// 3·Σi·y − (W − 2)·Σy, exact: the line's end times W(W + 1)/2 (the end is Σy/W plus
+    /// (W − 1)/2 slopes, 12·Σi·y − 6(W − 1)·Σy over W(W² − 1) each). Wrapping like the sums,
+    /// and exact where the result fits i32: |end| ≤ 5/3 of the largest |position| (the end's
+    /// weights' absolute sum), 8.8·10^8 for W = 32 at 1 m.
+    #[inline(always)]
+    fn end_numerator(&self) -> i32 {
+        self.moment_um
+            .wrapping_mul(3)
+            .wrapping_sub(self.sum_um.wrapping_mul(W as i32 - 2))
     }
 }
 
@@ -351,6 +392,59 @@ mod tests {
                 line.end_um
             );
         }
+    }
+
+    /// The quick agreement test keeps the line the test on the half's own end picks: swept
+    /// through the acceleration where the two ends part by 9 µm (the bias difference is
+    /// a·(63·62 − 31·30)/12 = 248·a, so a ≈ 0.036 µm per sample²), both ways, slow and fast,
+    /// near 0 and near 1 m, every sample against the full and half lines chosen directly.
+    #[test]
+    fn the_quick_agreement_test_picks_the_line_the_ends_test_picks() {
+        let (mut full_kept, mut half_taken, mut near_limit) = (0, 0, 0);
+        for base in [1_000.0f64, 500_000.0, 930_000.0] {
+            for speed in [-400.0f64, -20.0, 3.0, 20.0, 400.0] {
+                for step in 0..120 {
+                    let a = 0.028 + step as f64 * 0.0001;
+                    let y = |k: i32| {
+                        let k = k as f64;
+                        let wobble = ((k * 7.0) % 5.0) - 2.0;
+                        (base + speed * k + a * k * k / 2.0 + wobble).round() as i32
+                    };
+                    let mut fit = LineFit::default();
+                    for k in 0..N as i32 + 40 {
+                        let Some(got) = fit.push(y(k), k as u32 * 100, 100) else {
+                            continue;
+                        };
+                        let (full, half) = (fit.full.line(), fit.half.line());
+                        // The quick end is the half's own, to within the two roundings (the
+                        // doc's bound is 0.55 µm; near 1 m one f32 ulp is 0.0625 µm).
+                        let quick_um = fit.half.end_numerator() as f32 / Sums::<H>::END_DENOMINATOR;
+                        assert!(
+                            (quick_um - half.end_um).abs() <= 0.55,
+                            "{quick_um} {half:?}"
+                        );
+                        let distance_um = (full.end_um - half.end_um).abs();
+                        let want = if distance_um <= DISAGREE_UM {
+                            full_kept += 1;
+                            full
+                        } else {
+                            half_taken += 1;
+                            half
+                        };
+                        if (distance_um - DISAGREE_UM).abs() < 1.0 {
+                            near_limit += 1;
+                        }
+                        assert_eq!(got, want, "base {base} speed {speed} a {a} k {k}");
+                    }
+                }
+            }
+        }
+        // The sweep crosses the limit: both lines are picked, many samples within 1 µm of it.
+        assert!(
+            full_kept > 1_000 && half_taken > 1_000,
+            "{full_kept} {half_taken}"
+        );
+        assert!(near_limit > 100, "{near_limit}");
     }
 
     /// The history an estimator is seeded from: the newest k positions, oldest first, stamped
