@@ -9,7 +9,8 @@
 //!   (docs/estimators.md). A ridge that fired is disarmed until the finger is `rearm_um` clear
 //!   of it, so noise on a ridge fires nothing and a real back-and-forth fires once per crossing.
 //! - [`GratingRender::Hybrid`]: position phase, but on a steady stroke each crossing is
-//!   predicted inside the coming sample period from a line through the last 32 positions
+//!   predicted inside the coming sample period from a line through the last 64 positions
+//!   (checked against its newer 32-sample half, which takes over when the two disagree)
 //!   (texture::predict) and the burst is started there by a delayed one-pulse
 //!   ([`BurstTimer::delayed_pulse`]) instead of on the first sample past the ridge, which is up
 //!   to one sample of travel late (20 µm at 200 mm/s and 10 kHz). Below the trust speed, after
