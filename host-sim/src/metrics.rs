@@ -319,6 +319,10 @@ pub struct Online {
     ring: [Slot; RING],
     points: u64,
     run: u64,
+    /// The minute and region of the last points, and how many of them in a row (not yet in
+    /// the sums): one count a point instead of three sums in memory touched every point.
+    counting: (usize, Option<u8>),
+    counted: usize,
     /// What the next point needs of the one before it (None before the first): its region
     /// and whether a fault was in force. Kept instead of the whole point, which the metrics
     /// would copy on every sample.
@@ -399,6 +403,8 @@ impl Online {
             }; RING],
             points: 0,
             run: 0,
+            counting: (usize::MAX, None),
+            counted: 0,
             prev: None,
             pending: VecDeque::new(),
             open: None,
@@ -511,15 +517,13 @@ impl Online {
             run: self.run,
             true_vel_um_s: p.true_vel_um_s,
         };
-        if let Some(r) = p.region {
-            if let Some(s) = self.sums.get_mut(r as usize) {
-                s.samples += 1;
-            }
-        }
-        let minute = self.minute(p.t_us);
-        minute.samples += 1;
-        if let Some(s) = p.region.and_then(|r| minute.regions.get_mut(r as usize)) {
-            s.samples += 1;
+        let minute = self.minute_index(p.t_us);
+        if self.counting == (minute, p.region) {
+            self.counted += 1;
+        } else {
+            self.add_counted();
+            self.counting = (minute, p.region);
+            self.counted = 1;
         }
         if let Some(GateAction::Start(s) | GateAction::Update(s) | GateAction::Pulse(s)) = p.action
         {
@@ -749,6 +753,24 @@ impl Online {
         }
     }
 
+    /// Adds the points counted since the last change of minute or region to their sums.
+    fn add_counted(&mut self) {
+        let ((minute, region), n) = (self.counting, self.counted);
+        let Some(m) = self.minutes.get_mut(minute) else {
+            return;
+        };
+        m.samples += n;
+        if let Some(r) = region {
+            if let Some(s) = m.regions.get_mut(r as usize) {
+                s.samples += n;
+            }
+            if let Some(s) = self.sums.get_mut(r as usize) {
+                s.samples += n;
+            }
+        }
+        self.counted = 0;
+    }
+
     /// The stall figure's bookkeeping for one point (its rises already placed).
     fn stall_point(&mut self, p: &TracePoint, now: u64) {
         match p.action {
@@ -785,6 +807,7 @@ impl Online {
 
     /// The figures of everything fed.
     pub fn finish(mut self) -> Metrics {
+        self.add_counted();
         let latest = self.points.saturating_sub(1);
         while let Some(e) = self.pending.pop_front() {
             self.edge(e, latest);
