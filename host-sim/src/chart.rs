@@ -352,6 +352,9 @@ pub struct Recorder {
     last_region: Option<f64>,
     gate_high: bool,
     code: u16,
+    /// The RF level of a DAC code, 0 … 1, with the code it is for: the code changes seldom,
+    /// and the level takes a power (every edge asked for it).
+    level_of: Option<(u16, f64)>,
     drive_last: f64,
     /// The line pulse being drawn: (finger position at each step µm, drive) while the gate is
     /// high, with the rise's time.
@@ -404,6 +407,7 @@ impl Recorder {
             last_region: None,
             gate_high: false,
             code: 0,
+            level_of: None,
             drive_last: 0.0,
             pulse: None,
             opened: false,
@@ -490,7 +494,14 @@ impl Recorder {
     /// The curves' points at kernel-clock time `t`, after every change at `t`.
     fn at(&mut self, t: u64, was_high: bool, code_changed: bool) {
         let x = t as f64 / self.clock_hz;
-        let level = crate::rf::permille_at_code(self.code) / 1000.0;
+        let level = match self.level_of {
+            Some((code, level)) if code == self.code => level,
+            _ => {
+                let level = crate::rf::permille_at_code(self.code) / 1000.0;
+                self.level_of = Some((self.code, level));
+                level
+            }
+        };
         let y = if self.gate_high { level } else { 0.0 };
         if x >= self.data.t0 {
             self.open(was_high);

@@ -209,6 +209,12 @@ pub const VELOCITY_LAGS: usize = 101;
 const LAG_BLOCK: u32 = 256;
 /// Region switches listed one by one; beyond this they are counted and summarised only.
 pub const SWITCHES_LISTED: usize = 1_000;
+/// Estimates whose lag sums wait to be added together: each group of lags then stays in
+/// registers over the batch instead of being loaded and stored for every sample.
+const LAG_BATCH: usize = 16;
+/// True velocities the lag window slides over before it is moved back to the buffer's end
+/// (the windows of the batch must stay in place until it is added).
+const TRUE_BUFFER: usize = 1024 + VELOCITY_LAGS;
 /// Recent sample points the gate's edges are placed against (an edge is placed once the point
 /// covering it has arrived, so two or three are enough; eight leave room).
 const RING: usize = 8;
@@ -223,6 +229,14 @@ struct Slot {
     /// a run of its own).
     run: u64,
     true_vel_um_s: f64,
+}
+
+/// What the metrics remember of the point before the current one.
+#[derive(Clone, Copy, Debug)]
+struct Prev {
+    region: Option<u8>,
+    /// A fault was in force.
+    fault: bool,
 }
 
 /// A pulse as the metrics follow it: where its rise was placed.
@@ -305,12 +319,22 @@ pub struct Online {
     ring: [Slot; RING],
     points: u64,
     run: u64,
-    prev: Option<TracePoint>,
+    /// The minute and region of the last points, and how many of them in a row (not yet in
+    /// the sums): one count a point instead of three sums in memory touched every point.
+    counting: (usize, Option<u8>),
+    counted: usize,
+    /// What the next point needs of the one before it (None before the first): its region
+    /// and whether a fault was in force. Kept instead of the whole point, which the metrics
+    /// would copy on every sample.
+    prev: Option<Prev>,
     pending: VecDeque<Edge>,
     open: Option<Placed>,
     awaiting: Option<(Placed, u64)>,
     sums: Vec<RegionSums>,
     planned: HashSet<(u64, u64)>,
+    /// The (on, period) pair last put in `planned`: most actions repeat the settings before
+    /// them, and the set already holds those.
+    last_planned: Option<(u64, u64)>,
     pulses: usize,
     malformed: usize,
     // The stall figure (see [`Stall`]).
@@ -325,10 +349,13 @@ pub struct Online {
     switch_count: usize,
     switch_past_um: Option<(f64, f64)>,
     vel_n: usize,
-    /// The true velocity of the last [`VELOCITY_LAGS`] points, newest first, twice over so the
-    /// window for any point is one contiguous slice (mm/s).
-    true_ring: Vec<f32>,
-    ring_at: usize,
+    /// The true velocity of recent points, newest first from `true_at`, so the window of the
+    /// last [`VELOCITY_LAGS`] of any point since the last move is one contiguous slice (mm/s).
+    true_buf: Vec<f32>,
+    true_at: usize,
+    /// Estimates not yet added to the lag sums: (where their window starts in `true_buf`, the
+    /// estimate in mm/s), in order.
+    lag_pending: Vec<(usize, f32)>,
     /// Σ (estimate − true velocity `lag` points earlier)², per lag: this block's (f32) and the
     /// run's (f64), (mm/s)².
     lag_block: [f32; VELOCITY_LAGS],
@@ -376,6 +403,8 @@ impl Online {
             }; RING],
             points: 0,
             run: 0,
+            counting: (usize::MAX, None),
+            counted: 0,
             prev: None,
             pending: VecDeque::new(),
             open: None,
@@ -386,6 +415,7 @@ impl Online {
                 .flatten()
                 .map(|s| (s.on_clocks(), s.period_clocks()))
                 .collect(),
+            last_planned: None,
             pulses: 0,
             malformed: 0,
             last_rise_clk: None,
@@ -399,8 +429,9 @@ impl Online {
             switch_count: 0,
             switch_past_um: None,
             vel_n: 0,
-            true_ring: Vec::new(),
-            ring_at: 0,
+            true_buf: Vec::new(),
+            true_at: 0,
+            lag_pending: Vec::with_capacity(LAG_BATCH),
             lag_block: [0.0; VELOCITY_LAGS],
             lag_sums: [0.0; VELOCITY_LAGS],
             block_n: 0,
@@ -486,19 +517,21 @@ impl Online {
             run: self.run,
             true_vel_um_s: p.true_vel_um_s,
         };
-        if let Some(r) = p.region {
-            if let Some(s) = self.sums.get_mut(r as usize) {
-                s.samples += 1;
-            }
-        }
-        let minute = self.minute(p.t_us);
-        minute.samples += 1;
-        if let Some(s) = p.region.and_then(|r| minute.regions.get_mut(r as usize)) {
-            s.samples += 1;
+        let minute = self.minute_index(p.t_us);
+        if self.counting == (minute, p.region) {
+            self.counted += 1;
+        } else {
+            self.add_counted();
+            self.counting = (minute, p.region);
+            self.counted = 1;
         }
         if let Some(GateAction::Start(s) | GateAction::Update(s) | GateAction::Pulse(s)) = p.action
         {
-            self.planned.insert((s.on_clocks(), s.period_clocks()));
+            let planned = (s.on_clocks(), s.period_clocks());
+            if self.last_planned != Some(planned) {
+                self.last_planned = Some(planned);
+                self.planned.insert(planned);
+            }
         }
         if let Some(a) = p.action {
             let line = match a {
@@ -526,7 +559,7 @@ impl Online {
         self.stall_point(p, now);
         // Faults, travel, switches, velocity.
         if p.fault.is_some() {
-            let onset = self.prev.is_none_or(|q| q.fault.is_none());
+            let onset = self.prev.is_none_or(|q| !q.fault);
             self.fault_samples += 1;
             self.fault_onsets += usize::from(onset);
             let minute = self.minute(p.t_us);
@@ -539,7 +572,7 @@ impl Online {
         }
         if let Some(w) = self
             .prev
-            .and_then(|q| switch_between(&q, p, &self.boundaries_um))
+            .and_then(|q| switch_between(q.region, p, &self.boundaries_um))
         {
             self.switch_count += 1;
             self.switch_past_um = widen(self.switch_past_um, w.past_um);
@@ -551,20 +584,31 @@ impl Online {
             }
         }
         self.velocity_point(p);
-        self.prev = Some(*p);
+        self.prev = Some(Prev {
+            region: p.region,
+            fault: p.fault.is_some(),
+        });
     }
 
     /// The velocity figures' sums for one point: its true velocity enters the lag window, and
     /// its estimate (when it has one and no fault) is compared with every lag's.
     fn velocity_point(&mut self, p: &TracePoint) {
         let v = (p.true_vel_um_s * 1e-3) as f32;
-        if self.true_ring.is_empty() {
+        if self.true_buf.is_empty() {
             // Before the run the finger moved as at its start (the trajectory at t = 0).
-            self.true_ring = vec![v; 2 * VELOCITY_LAGS];
+            self.true_buf = vec![v; TRUE_BUFFER];
+            self.true_at = TRUE_BUFFER - (VELOCITY_LAGS - 1);
         }
-        self.ring_at = self.ring_at.checked_sub(1).unwrap_or(VELOCITY_LAGS - 1);
-        self.true_ring[self.ring_at] = v;
-        self.true_ring[self.ring_at + VELOCITY_LAGS] = v;
+        if self.true_at == 0 {
+            // The batch's windows are about to move: add them first, then carry the last
+            // points' velocities to the buffer's end.
+            self.add_pending_lags();
+            let keep = VELOCITY_LAGS - 1;
+            self.true_buf.copy_within(..keep, TRUE_BUFFER - keep);
+            self.true_at = TRUE_BUFFER - keep;
+        }
+        self.true_at -= 1;
+        self.true_buf[self.true_at] = v;
         let Some(est) = p.est_vel_um_s.filter(|_| p.fault.is_none()) else {
             return;
         };
@@ -575,13 +619,9 @@ impl Online {
             self.lag_minute = minute;
         }
         self.minutes[minute].vel_n += 1;
-        let e = est as f32 * 1e-3;
-        let window = &self.true_ring[self.ring_at..self.ring_at + VELOCITY_LAGS];
-        match () {
-            // SAFETY: `avx` is set only where the CPU has AVX (`Online::new`).
-            #[cfg(target_arch = "x86_64")]
-            () if self.avx => unsafe { add_lags_avx(&mut self.lag_block, window, e) },
-            () => add_lags(&mut self.lag_block, window, e),
+        self.lag_pending.push((self.true_at, est as f32 * 1e-3));
+        if self.lag_pending.len() == LAG_BATCH {
+            self.add_pending_lags();
         }
         self.vel_n += 1;
         self.block_n += 1;
@@ -590,7 +630,20 @@ impl Online {
         }
     }
 
+    /// Adds the waiting estimates to this block's lag sums, in their order.
+    fn add_pending_lags(&mut self) {
+        let (acc, buf, pending) = (&mut self.lag_block, &self.true_buf, &self.lag_pending);
+        match () {
+            // SAFETY: `avx` is set only where the CPU has AVX (`Online::new`).
+            #[cfg(target_arch = "x86_64")]
+            () if self.avx => unsafe { add_lags_avx(acc, buf, pending) },
+            () => add_lags(acc, buf, pending),
+        }
+        self.lag_pending.clear();
+    }
+
     fn flush_lags(&mut self) {
+        self.add_pending_lags();
         let minute = self.lag_minute as u64 * MINUTE_US;
         let block = self.lag_block;
         let sums = &mut self.minute(minute).lag_sums;
@@ -700,6 +753,24 @@ impl Online {
         }
     }
 
+    /// Adds the points counted since the last change of minute or region to their sums.
+    fn add_counted(&mut self) {
+        let ((minute, region), n) = (self.counting, self.counted);
+        let Some(m) = self.minutes.get_mut(minute) else {
+            return;
+        };
+        m.samples += n;
+        if let Some(r) = region {
+            if let Some(s) = m.regions.get_mut(r as usize) {
+                s.samples += n;
+            }
+            if let Some(s) = self.sums.get_mut(r as usize) {
+                s.samples += n;
+            }
+        }
+        self.counted = 0;
+    }
+
     /// The stall figure's bookkeeping for one point (its rises already placed).
     fn stall_point(&mut self, p: &TracePoint, now: u64) {
         match p.action {
@@ -736,6 +807,7 @@ impl Online {
 
     /// The figures of everything fed.
     pub fn finish(mut self) -> Metrics {
+        self.add_counted();
         let latest = self.points.saturating_sub(1);
         while let Some(e) = self.pending.pop_front() {
             self.edge(e, latest);
@@ -868,22 +940,45 @@ impl Online {
     }
 }
 
-/// Adds (`e` − t)² to each lag's sum in `acc`, t the true velocity that lag back in `window`:
-/// the velocity figures' per-sample work (101 lags).
+/// Adds, for each `(at, e)` of `pending` in order, (`e` − t)² to each lag's sum in `acc`, t
+/// the true velocity that lag back (`window[at + lag]`): the velocity figures' per-sample work
+/// (101 lags). Each lag's sum takes the same IEEE operations in the same order as one sample
+/// at a time would; [`LAG_GROUP`] lags at once stay in registers over the batch.
 #[inline(always)]
-fn add_lags(acc: &mut [f32; VELOCITY_LAGS], window: &[f32], e: f32) {
-    for (acc, &t) in acc.iter_mut().zip(window) {
-        *acc += (e - t) * (e - t);
+fn add_lags(acc: &mut [f32; VELOCITY_LAGS], window: &[f32], pending: &[(usize, f32)]) {
+    let mut lags = acc.chunks_exact_mut(LAG_GROUP);
+    let mut lag0 = 0;
+    for group in &mut lags {
+        let mut a = [0f32; LAG_GROUP];
+        a.copy_from_slice(group);
+        for &(at, e) in pending {
+            let w = &window[at + lag0..at + lag0 + LAG_GROUP];
+            for (a, &t) in a.iter_mut().zip(w) {
+                *a += (e - t) * (e - t);
+            }
+        }
+        group.copy_from_slice(&a);
+        lag0 += LAG_GROUP;
+    }
+    let rest = lags.into_remainder();
+    for &(at, e) in pending {
+        for (a, &t) in rest.iter_mut().zip(&window[at + lag0..]) {
+            *a += (e - t) * (e - t);
+        }
     }
 }
+
+/// Lags [`add_lags`] keeps in registers at once: four AVX registers, four independent sums
+/// in flight.
+const LAG_GROUP: usize = 32;
 
 /// [`add_lags`] compiled for AVX: eight lags an instruction instead of SSE2's four. Each lag
 /// gets the same IEEE subtraction, product and sum in the same order (Rust fuses no
 /// multiply-add and reorders no float arithmetic), so the sums are bit for bit the same.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
-fn add_lags_avx(acc: &mut [f32; VELOCITY_LAGS], window: &[f32], e: f32) {
-    add_lags(acc, window, e)
+fn add_lags_avx(acc: &mut [f32; VELOCITY_LAGS], window: &[f32], pending: &[(usize, f32)]) {
+    add_lags(acc, window, pending)
 }
 
 /// Computes the metrics of a recorded run (through [`Online`], as a streamed run does).
@@ -916,9 +1011,10 @@ fn pulse_matches(on: u64, period: Option<u64>, planned: &HashSet<(u64, u64)>) ->
     })
 }
 
-/// The switch between consecutive points `a` and `b`, if their regions differ (both present).
-fn switch_between(a: &TracePoint, b: &TracePoint, boundaries_um: &[f64]) -> Option<Switch> {
-    let (Some(from), Some(to)) = (a.region, b.region) else {
+/// The switch between consecutive points, the first in region `from` and `b`, if their regions
+/// differ (both present).
+fn switch_between(from: Option<u8>, b: &TracePoint, boundaries_um: &[f64]) -> Option<Switch> {
+    let (Some(from), Some(to)) = (from, b.region) else {
         return None;
     };
     if from == to {
@@ -957,7 +1053,7 @@ pub fn switches(r: &SimResult) -> Vec<Switch> {
         .collect();
     r.trace
         .windows(2)
-        .filter_map(|w| switch_between(&w[0], &w[1], &boundaries))
+        .filter_map(|w| switch_between(w[0].region, &w[1], &boundaries))
         .collect()
 }
 
@@ -1020,11 +1116,12 @@ mod expected_tests {
     /// (Δμ 0.3) at 40 mm/s is 28.811 Hz (worked in the core's controller tests); draws uniform
     /// on 40 Hz ± 30 % come at 40 · 0.6 / ln(13/7) = 24 / (2.564949 − 1.945910) = 38.770 Hz; a constant texture and a
     /// finger at rest have none.
-    /// The AVX lag sums are the portable loop's, bit for bit, over sums grown from zero with
-    /// estimates and true velocities that differ in sign, size and by nothing at all.
+    /// The batched lag sums, AVX and portable, are those of one estimate at a time, bit for
+    /// bit, over sums grown from zero with estimates and true velocities that differ in sign,
+    /// size and by nothing at all.
     #[cfg(target_arch = "x86_64")]
     #[test]
-    fn avx_lag_sums_are_the_portable_ones() {
+    fn batched_lag_sums_are_those_of_one_estimate_at_a_time() {
         if !std::arch::is_x86_feature_detected!("avx") {
             return;
         }
@@ -1035,14 +1132,39 @@ mod expected_tests {
             x ^= x << 17;
             ((x >> 11) as f64 / (1u64 << 53) as f64 * 600.0 - 300.0) as f32
         };
-        let (mut a, mut b) = ([0f32; VELOCITY_LAGS], [0f32; VELOCITY_LAGS]);
+        // One buffer of true velocities; batches of 1 … 16 estimates whose windows start at
+        // overlapping places, as the metrics' sliding buffer gives them.
+        let buf: Vec<f32> = (0..4 * VELOCITY_LAGS).map(|_| next()).collect();
+        let (mut a, mut b, mut one) = (
+            [0f32; VELOCITY_LAGS],
+            [0f32; VELOCITY_LAGS],
+            [0f32; VELOCITY_LAGS],
+        );
+        let mut at = 3 * VELOCITY_LAGS;
         for i in 0..2_000 {
-            let window: Vec<f32> = (0..VELOCITY_LAGS).map(|_| next()).collect();
-            let e = if i % 7 == 0 { window[3] } else { next() };
-            add_lags(&mut a, &window, e);
+            let batch: Vec<(usize, f32)> = (0..1 + i % LAG_BATCH)
+                .map(|j| {
+                    at = if at == 0 { 3 * VELOCITY_LAGS } else { at - 1 };
+                    let e = if (i + j) % 7 == 0 {
+                        buf[at + 3]
+                    } else {
+                        next()
+                    };
+                    (at, e)
+                })
+                .collect();
+            add_lags(&mut a, &buf, &batch);
             // SAFETY: AVX was detected above.
-            unsafe { add_lags_avx(&mut b, &window, e) };
+            unsafe { add_lags_avx(&mut b, &buf, &batch) };
+            // The reference: one estimate at a time, lag by lag.
+            for &(at, e) in &batch {
+                for (lag, sum) in one.iter_mut().enumerate() {
+                    let t = buf[at + lag];
+                    *sum += (e - t) * (e - t);
+                }
+            }
         }
+        assert_eq!(a.map(f32::to_bits), one.map(f32::to_bits));
         assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits));
         assert!(a.iter().all(|s| *s > 0.0));
     }

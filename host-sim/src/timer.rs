@@ -266,6 +266,11 @@ pub struct TimerModel {
     high: bool,
     /// Time up to which the waveform has been generated.
     now: u64,
+    /// The earliest time anything can happen on its own (an edge, an update event, an envelope
+    /// step) in the state after the last [`TimerModel::advance_to`]; 0 after an action, which
+    /// may change it. Most periods of a run end before it, and advancing to them only moves
+    /// `now`.
+    quiet_until: u64,
     edges: Vec<Edge>,
     /// Actions that made no sense in the state they arrived in (Update while off).
     pub protocol_errors: u32,
@@ -287,6 +292,7 @@ impl TimerModel {
             running: None,
             high: false,
             now: 0,
+            quiet_until: 0,
             edges: Vec::new(),
             protocol_errors: 0,
             actions: Vec::new(),
@@ -386,8 +392,18 @@ impl TimerModel {
     }
 
     /// Generates the waveform up to time `t` (events at exactly `t` included).
+    #[inline]
     pub fn advance_to(&mut self, t: u64) {
         assert!(t >= self.now, "time runs backwards: {t} < {}", self.now);
+        if t < self.quiet_until {
+            self.now = t;
+        } else {
+            self.advance_events(t);
+        }
+    }
+
+    /// [`Self::advance_to`] where something may happen by `t`.
+    fn advance_events(&mut self, t: u64) {
         while let Some(mut r) = self.running {
             let tick = r.psc as u64 + 1;
             let end = r.t0 + r.end_ticks * tick;
@@ -434,6 +450,35 @@ impl TimerModel {
             self.latch(end, held);
         }
         self.now = t;
+        self.quiet_until = self.next_event();
+    }
+
+    /// The earliest time `advance_events` would act at in the present state: the next envelope
+    /// step, a one-pulse's rise, a period's fall or its update event (never, stopped).
+    fn next_event(&self) -> u64 {
+        let Some(r) = self.running else {
+            return u64::MAX;
+        };
+        let tick = r.psc as u64 + 1;
+        let end = r.t0 + r.end_ticks * tick;
+        let mut next = end;
+        if let Some(p) = &self.level.playing {
+            if p.next < p.codes.len() {
+                next = next.min(p.start + ((p.next + 1) as f64 * p.step).round() as u64);
+            }
+        }
+        if r.one_pulse {
+            let rise = r.t0 + r.rise_ticks() * tick;
+            if !r.risen && r.ccr > 0 && rise < end {
+                next = next.min(rise);
+            }
+        } else {
+            let fall = r.t0 + r.ccr as u64 * tick;
+            if self.high && fall < end {
+                next = next.min(fall);
+            }
+        }
+        next
     }
 
     /// Latches `s` and counts from 0 at `t` (UG + CEN); `one_pulse` stops at the update event.
@@ -486,6 +531,8 @@ impl TimerModel {
     /// Applies `action` at kernel-clock time `t`.
     pub fn apply(&mut self, t: u64, action: GateAction) {
         self.advance_to(t);
+        // The action may start, stop or reshape the period: the next advance looks again.
+        self.quiet_until = 0;
         self.actions.push((t, action));
         #[allow(unreachable_patterns)]
         match action {
@@ -550,6 +597,13 @@ impl TimerModel {
     /// between steps, when every later action comes after the model's time, so no recorded
     /// edge can still be cancelled by one at the same instant.
     pub fn take_settled(&mut self, edges: &mut Vec<Edge>, levels: &mut Vec<LevelEdge>) {
+        if self.edges.is_empty() && self.levels.is_empty() {
+            // Most periods settle nothing.
+            edges.clear();
+            levels.clear();
+            self.actions.clear();
+            return;
+        }
         if let Some(l) = self.levels.last() {
             self.drained_code = Some(l.code);
         }
@@ -656,6 +710,60 @@ mod tests {
         let p = w.pulses();
         assert_eq!((p[0].on(), p[0].period()), (40, Some(60)));
         assert_eq!(p[1].on(), 20);
+    }
+
+    /// Advancing in many small steps, most inside a quiet stretch that only moves the clock,
+    /// gives the waveform and DAC codes of advancing straight from action to action, and the
+    /// line and code after every step are the waveform's there: periodic bursts, an update
+    /// with and without preload, one-pulses with a triangular envelope, an off.
+    #[test]
+    fn small_steps_give_the_waveform_of_large_ones() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut next = |below: u64| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x % below
+        };
+        let mut p = s(1_799, 900);
+        p.psc = 1;
+        let actions = [
+            (1_000, GateAction::Start(s(8_999, 3_600))),
+            (40_000, GateAction::Update(s(4_499, 1_800))),
+            (90_000, GateAction::Update(p)),
+            (150_000, GateAction::Off),
+            (160_000, GateAction::Pulse(s(2_000, 2_000))),
+            (175_000, GateAction::Pulse(s(3_000, 1_000))),
+            (190_000, GateAction::Start(s(999, 0))),
+            (200_000, GateAction::Off),
+        ];
+        for preload in [true, false] {
+            let model = || {
+                let mut t = TimerModel::new(90_000_000, 32, preload);
+                t.set_envelope(Envelope::Triangular);
+                t
+            };
+            let (mut small, mut large) = (model(), model());
+            let mut seen = Vec::new();
+            for &(at, a) in &actions {
+                while small.now() + 1 < at {
+                    let t = (small.now() + 1 + next(700)).min(at - 1);
+                    small.advance_to(t);
+                    seen.push((t, small.is_high(), small.level_code()));
+                }
+                small.apply(at, a);
+                large.apply(at, a);
+            }
+            let (small, large) = (small.finish(230_000), large.finish(230_000));
+            assert_eq!(small.edges, large.edges, "preload {preload}");
+            assert_eq!(small.levels, large.levels, "preload {preload}");
+            assert!(large.edges.len() > 20, "{}", large.edges.len());
+            assert!(large.levels.len() > 5, "{}", large.levels.len());
+            for (t, high, code) in seen {
+                assert_eq!(high, large.level_at(t), "preload {preload}, t {t}");
+                assert_eq!(code, large.code_at(t), "preload {preload}, t {t}");
+            }
+        }
     }
 
     #[test]
