@@ -175,6 +175,11 @@ pub struct Plan2d {
 
 /// The 2D run the flags describe (`Ok(None)`: a 1D run; [`crate::cli::plan`] takes it).
 pub fn plan(args: &Args, m: &ArgMatches) -> Result<Option<Plan2d>, Refusal> {
+    // A scenario sets the scene itself: `cli::plan` refuses what goes with it, before any
+    // file is read.
+    if args.scenario.is_some() {
+        return Ok(None);
+    }
     let board = args.board;
     let frame_us = sim2d::board_frame_period_us(board).ok_or_else(|| {
         Refusal::Run(
