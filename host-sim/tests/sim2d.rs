@@ -325,3 +325,88 @@ fn bad_flags_are_refused_with_one_line_naming_the_flag() {
         );
     }
 }
+
+/// Every crossing of an edge fires one pulse on that edge, ahead of it: a spiral over the
+/// demo screen (F446, 120 mm/s, 4 turns out to 25 mm) and a raster over both buttons (G474,
+/// 150 mm/s, 6 rows). Crossings are counted here from the true path (frame by frame, the point
+/// where the side's signed distance changes sign, kept if it lies on the segment); each pulse
+/// must come on the crossed edge within one pulse length (10 ms) before its crossing.
+#[test]
+fn every_edge_crossing_on_a_spiral_and_a_raster_fires_one_pulse_on_that_edge() {
+    let spiral = Trajectory2d::spiral(
+        PointUm::new(47_500.0, 27_000.0),
+        0.0,
+        25_000.0,
+        4.0,
+        120_000.0,
+    )
+    .unwrap();
+    let raster = Trajectory2d::raster(
+        PointUm::new(45_000.0, 5_000.0),
+        PointUm::new(71_000.0, 49_000.0),
+        6,
+        150_000.0,
+    )
+    .unwrap();
+    for (board, t, want) in [(F446, spiral, 17), (&saw_boards::NUCLEO_G474RE, raster, 8)] {
+        let d = t.duration_s().unwrap();
+        let p = Params2d::new(board, t, d + 0.05, sim2d::demo_config());
+        let r = sim2d::run(&p).unwrap();
+        // The demo's edges, from its rectangles (sides from the lower-left corner: bottom,
+        // right, top, left) and its free segment.
+        let mut segs: Vec<((f64, f64), (f64, f64))> = Vec::new();
+        for [x0, y0, x1, y1] in [[48.0, 8.0, 68.0, 24.0], [48.0, 30.0, 68.0, 46.0]] {
+            segs.extend([
+                ((x0, y0), (x1, y0)),
+                ((x1, y0), (x1, y1)),
+                ((x1, y1), (x0, y1)),
+                ((x0, y1), (x0, y0)),
+            ]);
+        }
+        segs.push(((46.0, 27.0), (70.0, 27.0)));
+        let mut crossings = 0;
+        for (i, (a, b)) in segs.iter().enumerate() {
+            let side = |p: (f64, f64)| (b.0 - a.0) * (p.1 - a.1) - (b.1 - a.1) * (p.0 - a.0);
+            let mut times = Vec::new();
+            for w in r.trace.windows(2) {
+                let (p, q) = ((w[0].x_mm, w[0].y_mm), (w[1].x_mm, w[1].y_mm));
+                let (sp, sq) = (side(p), side(q));
+                if (sp < 0.0) != (sq < 0.0) {
+                    let u = sp / (sp - sq);
+                    let c = (p.0 + u * (q.0 - p.0), p.1 + u * (q.1 - p.1));
+                    let on = (c.0 - a.0.min(b.0)) >= -1e-9
+                        && (a.0.max(b.0) - c.0) >= -1e-9
+                        && (c.1 - a.1.min(b.1)) >= -1e-9
+                        && (a.1.max(b.1) - c.1) >= -1e-9;
+                    if on {
+                        times.push(w[0].t_s + u * (w[1].t_s - w[0].t_s));
+                    }
+                }
+            }
+            let fired: Vec<f64> = r
+                .edge_pulses
+                .iter()
+                .filter(|p| p.edge as usize == i)
+                .map(|p| p.t_s)
+                .collect();
+            assert_eq!(
+                fired.len(),
+                times.len(),
+                "{}: edge {i}: crossed at {times:?}, fired at {fired:?}",
+                board.name
+            );
+            for (t_fire, t_cross) in fired.iter().zip(&times) {
+                let ahead = t_cross - t_fire;
+                assert!(
+                    (0.0..=0.010).contains(&ahead),
+                    "{}: edge {i} fired {ahead} s ahead",
+                    board.name
+                );
+            }
+            crossings += times.len();
+        }
+        assert_eq!(crossings, want, "{}", board.name);
+        assert_eq!(r.edge_pulses.len(), want);
+        assert_eq!(r.telemetry.edges_skipped, 0);
+    }
+}
