@@ -1,7 +1,7 @@
 //! The 2D run's chart (issue #36): the scene as a map (windows filled and numbered, edges drawn
 //! thick), the true finger's path coloured by the burst frequency f_b playing there (grey where
 //! the carrier is off or pulsing), each edge pulse marked where it fired and each window switch
-//! where it happened.
+//! where it happened, each ridge pulse of a grating a small triangle.
 
 use std::path::Path;
 
@@ -141,6 +141,13 @@ pub fn write_png(
             style,
         )))?;
     }
+    let ridge = RGBColor(120, 0, 160);
+    chart.draw_series(
+        run.trace
+            .iter()
+            .filter(|p| p.ridge_pulse)
+            .map(|p| TriangleMarker::new((p.x_mm, p.y_mm), 5, ridge.filled())),
+    )?;
     chart.draw_series(
         run.window_switches
             .iter()
@@ -188,6 +195,15 @@ pub fn write_png(
     legend.draw(&Text::new(
         format!("window switch ({})", run.window_switches.len()),
         (60, 502),
+        font.clone(),
+    ))?;
+    legend.draw(&TriangleMarker::new((35, 590), 5, ridge.filled()))?;
+    legend.draw(&Text::new(
+        format!(
+            "ridge pulse ({})",
+            run.trace.iter().filter(|p| p.ridge_pulse).count()
+        ),
+        (60, 582),
         font.clone(),
     ))?;
     legend.draw(&PathElement::new(

@@ -210,6 +210,8 @@ pub struct TracePoint2d {
     pub touching: bool,
     /// The periodic burst running after this frame, Hz (None: off or a one-pulse).
     pub fb_hz: Option<f64>,
+    /// A one-pulse that is not an edge's started on this frame (a ridge of a grating).
+    pub ridge_pulse: bool,
 }
 
 /// What a 2D run produced.
@@ -633,6 +635,7 @@ pub fn run(params: &Params2d) -> Result<Run2d, Sim2dError> {
             y_mm: p.1,
             touching: finger.is_some(),
             fb_hz: periodic.filter(|_| tm.is_running()),
+            ridge_pulse: out.edge.is_none() && matches!(out.action, Some(GateAction::Pulse(_))),
         });
     }
     let end = clk(frames * frame_us as u64 + frame_us as u64);
