@@ -410,3 +410,50 @@ fn every_edge_crossing_on_a_spiral_and_a_raster_fires_one_pulse_on_that_edge() {
         assert_eq!(r.telemetry.edges_skipped, 0);
     }
 }
+
+/// Without `--json`: the summary and the chart at `-o`. A `--trajectory path` from a CSV file
+/// (t_s,x_mm,y_mm) across button 3 and back: four switches and four pulses; the summary's
+/// counts are the run's. `--speed` with a path (which has its own times) is refused.
+#[test]
+fn a_path_file_runs_with_its_summary_and_chart() {
+    let dir = std::env::temp_dir().join("host-sim-sim2d-tests");
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("across.csv");
+    // Along y = 38 mm through button 3 (48–68 mm in x) and back, 100 mm/s each way.
+    std::fs::write(&csv, "t_s,x_mm,y_mm\n0,44,38\n0.28,72,38\n0.56,44,38\n").unwrap();
+    let png = dir.join("across.png");
+    let _ = std::fs::remove_file(&png);
+    let out = Command::new(EXE)
+        .args(["--trajectory", "path", "--path"])
+        .arg(&csv)
+        .arg("-o")
+        .arg(&png)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("window switches: 4\n"), "{text}");
+    assert!(
+        text.contains("edge pulses: 4 (skipped to keep the duty cap: 0)\n"),
+        "{text}"
+    );
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[1..4], b"PNG");
+    let out = Command::new(EXE)
+        .args(["--trajectory", "path", "--speed", "50", "--path"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        err.starts_with(
+            "error: --speed 50 does not shape --trajectory path, which would ignore it\n"
+        ),
+        "{err}"
+    );
+}
