@@ -648,3 +648,64 @@ pub fn run(params: &Params2d) -> Result<Run2d, Sim2dError> {
     run.telemetry = ctrl.telemetry();
     Ok(run)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn poly(points: &[(i32, i32)]) -> Polygon {
+        let pts: Vec<CorePoint> = points
+            .iter()
+            .map(|&(x, y)| CorePoint::new(x * 1_000, y * 1_000))
+            .collect();
+        Polygon::from_points(&pts).unwrap()
+    }
+
+    /// An L (concave; 0,0 – 20,0 – 20,10 – 10,10 – 10,20 – 0,20) given clockwise and
+    /// counter-clockwise: the outline distance is positive inside and negative outside (to a
+    /// side, or to a corner's vertex beyond it), with the values worked by hand, and every side's normal points inside (a point just inside
+    /// each side's midpoint reads +0.5 mm from it) whichever way the outline runs.
+    #[test]
+    fn outline_distances_and_inward_normals_either_way_round() {
+        let ccw = [(0, 0), (20, 0), (20, 10), (10, 10), (10, 20), (0, 20)];
+        let mut cw = ccw;
+        cw.reverse();
+        for pts in [ccw, cw] {
+            let p = poly(&pts);
+            // Inside the foot, 3 mm from the bottom (nearest side).
+            assert!((outline_distance_mm(&p, (15.0, 3.0)) - 3.0).abs() < 1e-12);
+            // In the notch at (15, 15): 5 mm from the sides x = 10 and y = 10, outside.
+            assert!((outline_distance_mm(&p, (15.0, 15.0)) + 5.0).abs() < 1e-12);
+            // Beyond the convex corner (20, 10): √8 from it, outside.
+            let d = outline_distance_mm(&p, (22.0, 12.0));
+            assert!((d + 8f64.sqrt()).abs() < 1e-12, "{d}");
+            let mut scene = Scene2d::default();
+            let _ = scene.windows.push(Window2d {
+                outline: p.clone(),
+                texture: PlaneTexture::default(),
+                edge: true,
+            });
+            let edges = scene_edges(&scene);
+            assert_eq!(edges.len(), 6);
+            for (i, e) in edges.iter().enumerate() {
+                assert_eq!((e.a, e.b), (pts[i].map_f(), pts[(i + 1) % 6].map_f()));
+                let mid = ((e.a.0 + e.b.0) / 2.0, (e.a.1 + e.b.1) / 2.0);
+                let inside = (mid.0 + 0.5 * e.n.0, mid.1 + 0.5 * e.n.1);
+                assert!(
+                    (outline_distance_mm(&p, inside) - 0.5).abs() < 1e-9,
+                    "side {i}"
+                );
+                assert!((e.signed_distance_mm(inside) - 0.5).abs() < 1e-12);
+            }
+        }
+    }
+
+    trait MapF {
+        fn map_f(self) -> (f64, f64);
+    }
+    impl MapF for (i32, i32) {
+        fn map_f(self) -> (f64, f64) {
+            (self.0 as f64, self.1 as f64)
+        }
+    }
+}
