@@ -61,9 +61,27 @@ pub enum Kind {
     /// From rest at --from, accelerating at --accel up to --speed towards --to (and beyond if
     /// --duration outlasts the trip).
     Ramp,
+    /// 2D: a straight stroke from --from-xy to --to-xy, then rest.
+    Line,
+    /// 2D: round a circle of --radius about --center-xy.
+    Circle,
+    /// 2D: a spiral about --center-xy from --r0 out to --radius in --turns turns.
+    Spiral,
+    /// 2D: a raster of --rows rows over the rectangle from --from-xy to --to-xy.
+    Raster,
+    /// 2D: straight lines between the timed points of --path FILE (CSV t_s,x_mm,y_mm).
+    Path,
 }
 
 impl Kind {
+    /// A finger path on a 2D screen (run by [`crate::cli2d`], refused with a 1D scene).
+    pub fn is_2d(self) -> bool {
+        matches!(
+            self,
+            Kind::Line | Kind::Circle | Kind::Spiral | Kind::Raster | Kind::Path
+        )
+    }
+
     /// The name the command line uses (`back-and-forth`).
     pub fn name(self) -> String {
         self.to_possible_value()
@@ -214,6 +232,9 @@ pub struct Args {
     /// Log level of the core's log lines (error, warn, info, debug, trace, off).
     #[arg(long, default_value = "warn", value_parser = parse_level)]
     pub log: log::LevelFilter,
+    /// The 2D run's flags (a 4-wire scene, issue #36).
+    #[command(flatten)]
+    pub two_d: crate::cli2d::Flags2d,
 }
 
 /// Parses a command line (`argv[0]` first); clap's error on a refused value.
@@ -257,7 +278,10 @@ impl Motion {
                 b_um: b,
                 period_s: std::f64::consts::PI * (b - a).abs() / v,
             },
-            Kind::Rest => Trajectory::Rest { at_um: a },
+            // 2D kinds never get here: `plan` refuses them with a 1D scene.
+            Kind::Rest | Kind::Line | Kind::Circle | Kind::Spiral | Kind::Raster | Kind::Path => {
+                Trajectory::Rest { at_um: a }
+            }
             Kind::Constant => Trajectory::Constant {
                 from_um: a,
                 speed_um_s: v * (b - a).signum(),
@@ -283,6 +307,7 @@ impl Motion {
         let v = self.speed_mm_s;
         match self.kind {
             Kind::BackAndForth | Kind::Sine | Kind::Rest => None,
+            Kind::Line | Kind::Circle | Kind::Spiral | Kind::Raster | Kind::Path => None,
             Kind::Constant => Some(d / v),
             Kind::Reversal => Some(2.0 * d / v),
             Kind::Ramp => {
@@ -337,7 +362,7 @@ impl Refusal {
 }
 
 /// What the user typed for flag `id` (None when it came from a default).
-fn raw(m: &ArgMatches, id: &str) -> Option<String> {
+pub(crate) fn raw(m: &ArgMatches, id: &str) -> Option<String> {
     if m.value_source(id) != Some(ValueSource::CommandLine) {
         return None;
     }
@@ -348,7 +373,7 @@ fn raw(m: &ArgMatches, id: &str) -> Option<String> {
 
 /// `--flag V` as typed (`--flag` alone for a switch), for the sentences of refused combinations;
 /// None when the flag was not given.
-fn given(m: &ArgMatches, id: &str) -> Option<String> {
+pub(crate) fn given(m: &ArgMatches, id: &str) -> Option<String> {
     let flag = format!("--{}", id.replace('_', "-"));
     let v = raw(m, id)?;
     Some(if SWITCHES.contains(&id) {
@@ -359,7 +384,7 @@ fn given(m: &ArgMatches, id: &str) -> Option<String> {
 }
 
 /// The flags without a value.
-const SWITCHES: [&str; 2] = ["no_preload", "per_conversion"];
+const SWITCHES: [&str; 3] = ["no_preload", "per_conversion", "json"];
 
 /// A run the flags describe: its parameters, and the scenario it checks (if `--scenario`).
 #[derive(Debug)]
@@ -421,6 +446,8 @@ const SCENARIO_SETS: [&str; 13] = [
 
 /// The run the flags describe, or why there is none.
 pub fn plan(args: &Args, m: &ArgMatches) -> Result<Plan, Refusal> {
+    // A 2D kind or flag has no 1D meaning (main runs a 2D scene before coming here).
+    crate::cli2d::refuse_in_1d(args, m)?;
     if let Some(path) = &args.scenario {
         let ignored: Vec<String> = SCENARIO_SETS.iter().filter_map(|id| given(m, id)).collect();
         if !ignored.is_empty() {

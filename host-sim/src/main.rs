@@ -62,16 +62,31 @@ fn main() -> ExitCode {
     };
     let _ = log::set_logger(&StderrLog);
     log::set_max_level(args.log);
+    let refused = |r: Refusal| {
+        match &r {
+            Refusal::Door(e) => eprintln!("error: {e}\n\nFor more information, try '--help'."),
+            Refusal::Scene(e) => eprintln!("error: {e}"),
+            Refusal::Run(e) => eprintln!("error: {e}"),
+        }
+        ExitCode::from(r.exit_code())
+    };
+    // A 4-wire scene, or a 2D trajectory on the demo screen (issue #36).
+    match host_sim::cli2d::plan(&args, &matches) {
+        Ok(Some(plan2d)) => {
+            return match host_sim::cli2d::run(&args, &plan2d) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Ok(None) => {}
+        Err(r) => return refused(r),
+    }
     let plan = match cli::plan(&args, &matches) {
         Ok(p) => p,
-        Err(r) => {
-            match &r {
-                Refusal::Door(e) => eprintln!("error: {e}\n\nFor more information, try '--help'."),
-                Refusal::Scene(e) => eprintln!("error: {e}"),
-                Refusal::Run(e) => eprintln!("error: {e}"),
-            }
-            return ExitCode::from(r.exit_code());
-        }
+        Err(r) => return refused(r),
     };
     match run(&args, plan) {
         Ok(code) => code,
