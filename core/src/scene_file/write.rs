@@ -248,6 +248,11 @@ mod tests {
                     std::fs::read_to_string(&p).unwrap(),
                 )
             })
+            // This writer is 1D's: 2D scenes (issue #36) are not written back yet.
+            .filter(|(name, text)| {
+                crate::scene_file::sensor_of(name, text)
+                    == Ok(crate::scene_file::SensorKind::Rheostat)
+            })
             .collect();
         v.sort();
         v
