@@ -1130,4 +1130,112 @@ mod tests {
         // point, which opens at column 33.
         assert_eq!((e.line, e.column), (7, 33), "{e}");
     }
+
+    /// docs/scenes.md's 2D tables list exactly the keys the parser's 2D structs take (read from
+    /// the structs, `keys`), a window and the background besides taking every region key but
+    /// `until_mm`. Fails on a key added to a struct and not to the doc, or the other way.
+    #[test]
+    fn the_2d_reference_lists_the_parsers_keys() {
+        use std::collections::BTreeSet;
+        const DOC: &str = include_str!("../../../docs/scenes.md");
+        let doc_keys = |name: &str| -> BTreeSet<String> {
+            let marker = format!("<!-- keys: {name} -->");
+            let start = DOC.find(&marker).unwrap_or_else(|| panic!("no `{marker}`"));
+            DOC[start + marker.len()..]
+                .lines()
+                .skip(1)
+                .take_while(|l| l.starts_with('|'))
+                .filter_map(|l| {
+                    let cell = l.trim_start_matches('|').split('|').next()?.trim();
+                    cell.strip_prefix('`')?
+                        .strip_suffix('`')
+                        .map(str::to_string)
+                })
+                .collect()
+        };
+        let parser = |name: &str| -> BTreeSet<String> {
+            super::super::keys(name)
+                .unwrap()
+                .iter()
+                .map(|k| k.to_string())
+                .collect()
+        };
+        let texture: BTreeSet<String> = parser("region")
+            .into_iter()
+            .filter(|k| k != "until_mm")
+            .collect();
+        for name in super::super::TABLES_2D {
+            let mut doc = doc_keys(name);
+            if name == "2d.window" || name == "2d.background" {
+                doc.extend(texture.iter().cloned());
+            }
+            assert_eq!(
+                doc,
+                parser(name),
+                "docs/scenes.md `{name}` (left) vs the parser"
+            );
+        }
+    }
+
+    /// The documented ranges of the 2D keys: both ends accepted, just outside refused at the
+    /// field (the docs' numbers, typed here from docs/scenes.md).
+    #[test]
+    fn documented_2d_ranges_hold_at_their_ends() {
+        let win = "[[window]]\nrect_mm = [5, 5, 30, 30]\nkind = \"grating\"\nwavelength_mm = 1\n";
+        let cases: &[(&str, &str, f64, f64)] = &[
+            ("screen.band_mm", "band_mm = {}\n", 0.001, 10.0),
+            (
+                "window[0].ridge_angle_deg",
+                "ridge_angle_deg = {}\n",
+                -360.0,
+                360.0,
+            ),
+            ("edges.pulse_ms", "[edges]\npulse_ms = {}\n", 0.001, 1000.0),
+            (
+                "edges.amplitude_percent",
+                "[edges]\namplitude_percent = {}\n",
+                0.1,
+                100.0,
+            ),
+            ("edges.rearm_mm", "[edges]\nrearm_mm = {}\n", 0.001, 5.0),
+        ];
+        for &(field, line, lo, hi) in cases {
+            let text = |v: f64| {
+                let line = line.replace("{}", &format!("{v:?}"));
+                // The window after `[screen]`'s keys, `[edges]` after the window; the on-time
+                // cap raised so the pulse's range is the reader's own.
+                let limits = "[limits]\nmax_on_time_ms = 1000\n";
+                match field {
+                    "screen.band_mm" => format!("{limits}{HEAD}{line}{win}ridge_angle_deg = 0\n"),
+                    "window[0].ridge_angle_deg" => format!("{limits}{HEAD}{win}{line}"),
+                    _ => format!("{limits}{HEAD}{win}ridge_angle_deg = 0\noutline = true\n{line}"),
+                }
+            };
+            for v in [lo, hi] {
+                assert!(
+                    load(&text(v)).is_ok(),
+                    "{field} = {v}: {:?}",
+                    load(&text(v))
+                );
+            }
+            let step = |x: f64| if x.abs() >= 1.0 { x.abs() * 1e-3 } else { 1e-4 };
+            for v in [lo - step(lo).min(lo.abs() / 2.0).max(1e-4), hi + step(hi)] {
+                let e = load(&text(v)).unwrap_err();
+                assert_eq!(e.field, field, "{field} = {v}: {e}");
+            }
+        }
+        // `size_mm`: 1 to 1000 mm each side.
+        for (size, ok) in [
+            ("[1, 1000]", true),
+            ("[0.999, 54]", false),
+            ("[95, 1000.1]", false),
+        ] {
+            let text = format!("[sensor]\nkind = \"4-wire\"\n[screen]\nsize_mm = {size}\n");
+            let r = load(&text);
+            assert_eq!(r.is_ok(), ok, "{size}: {r:?}");
+            if let Err(e) = r {
+                assert_eq!(e.field, "screen.size_mm", "{e}");
+            }
+        }
+    }
 }
