@@ -29,9 +29,11 @@ mod sections;
 mod spec;
 mod spec2d;
 mod write;
+mod write2d;
 
 pub use keys::{keys, TABLES, TABLES_2D};
 pub use write::to_scene_file;
+pub use write2d::to_scene_file_2d;
 
 use core::fmt;
 use core::ops::Range;
@@ -399,6 +401,13 @@ pub fn load_2d_for_board(
     frame_period_us: u32,
 ) -> Result<crate::plane::Config2d, SceneFileError> {
     plane2d::load(&Ctx { file, text }, timer, frame_period_us)
+}
+
+/// The plate a 2D scene file declares (`[screen] size_mm`), µm (width, height): the area its
+/// coordinates lie on, which [`crate::plane::Config2d`] does not hold (for a simulated finger's
+/// travel, or [`to_scene_file_2d`]). The file is read and range-checked, not dry-run.
+pub fn plate_um_of(file: &str, text: &str) -> Result<(u32, u32), SceneFileError> {
+    plane2d::plate_um(&Ctx { file, text })
 }
 
 #[cfg(test)]

@@ -73,6 +73,8 @@ struct Doc2d {
     /// The windows whose outline pulses, in order, with their vertex count: the scene's first
     /// edges are their sides (`Config2dError`'s edge indices count them first).
     outlines: StdVec<(usize, usize)>,
+    /// `[screen] size_mm`, µm (width, height): what a written file needs besides the config.
+    plate_um: (u32, u32),
     config: Config2d,
 }
 
@@ -87,6 +89,12 @@ pub(super) fn load(
     let mut dry = Controller2d::new(timer, frame_period_us).map_err(locate)?;
     dry.load(&doc.config).map_err(locate)?;
     Ok(doc.config)
+}
+
+/// A 2D file's `[screen] size_mm`, µm (width, height), the file read and checked as far as
+/// [`load`] reads it before the dry run.
+pub(super) fn plate_um(cx: &Ctx<'_>) -> Result<(u32, u32), SceneFileError> {
+    parse(cx).map(|doc| doc.plate_um)
 }
 
 /// The plate's touch area, mm: x from 0 to `w`, y from 0 to `h`.
@@ -261,6 +269,7 @@ fn parse(cx: &Ctx<'_>) -> Result<Doc2d, SceneFileError> {
     Ok(Doc2d {
         spans,
         outlines,
+        plate_um: (milli(plate.w), milli(plate.h)),
         config,
     })
 }
