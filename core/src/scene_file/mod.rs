@@ -12,7 +12,12 @@
 //! - `regions.rs`: the `[[region]]` tables, one function per texture kind;
 //! - `ctx.rs`: errors located in the file, and the range checks that raise them;
 //! - `keys.rs`: the keys each table takes, and the sentence for one it does not ("did you
-//!   mean").
+//!   mean");
+//! - `write.rs`: a configuration written back as a scene file;
+//! - 2D scenes (issue #36, a file with `[sensor] kind = "4-wire"`): `spec2d.rs` their shape,
+//!   `plane2d.rs` [`sensor_of`]'s reading and the conversion to a [`crate::plane::Config2d`]
+//!   (dry-run through a [`crate::plane::Controller2d`], its refusals located), `write2d.rs`
+//!   the writer. The 1D reader refuses a 2D file at its `[sensor]`, the 2D reader a 1D file.
 //!
 //! Every refusal points at `file:line:col` of the value at fault (an unknown key: the key), the
 //! board's checks included (an f_b above the board's limit at its `f_b_hz`, a boundary before
