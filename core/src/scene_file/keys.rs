@@ -12,11 +12,26 @@ use std::vec::Vec as StdVec;
 use serde::de::{self, Deserialize, Deserializer, Visitor};
 
 use super::spec::{self, File, Limits, LinesSpec, RegionSpec, Substrate};
+use super::spec2d::{
+    BackgroundSpec, EdgeSpec, EdgesSpec, File2d, ScreenSpec, SensorSpec, WindowSpec,
+};
 
 /// The tables a scene file has, by the names docs/scenes.md gives them.
 pub const TABLES: [&str; 5] = ["top", "substrate", "limits", "region", "lines"];
 
-/// The keys table `table` takes (one of [`TABLES`]), as the parser's struct declares them; None
+/// The tables of a 2D scene file (issue #36) besides `limits`, which it shares with 1D files,
+/// by the names docs/scenes.md gives them.
+pub const TABLES_2D: [&str; 7] = [
+    "2d.top",
+    "2d.sensor",
+    "2d.screen",
+    "2d.background",
+    "2d.window",
+    "2d.edge",
+    "2d.edges",
+];
+
+/// The keys table `table` takes (one of [`TABLES`] or [`TABLES_2D`]), as the parser's struct declares them; None
 /// for a name that is no table.
 pub fn keys(table: &str) -> Option<&'static [&'static str]> {
     Some(match table {
@@ -25,6 +40,13 @@ pub fn keys(table: &str) -> Option<&'static [&'static str]> {
         "limits" => fields_of::<Limits>(),
         "region" => fields_of::<RegionSpec>(),
         "lines" => fields_of::<LinesSpec>(),
+        "2d.top" => fields_of::<File2d>(),
+        "2d.sensor" => fields_of::<SensorSpec>(),
+        "2d.screen" => fields_of::<ScreenSpec>(),
+        "2d.background" => fields_of::<BackgroundSpec>(),
+        "2d.window" => fields_of::<WindowSpec>(),
+        "2d.edge" => fields_of::<EdgeSpec>(),
+        "2d.edges" => fields_of::<EdgesSpec>(),
         _ => return None,
     })
 }
@@ -151,6 +173,7 @@ pub(super) fn unknown(message: &str, region_kind: Option<&str>) -> Option<String
     }
     let table = TABLES
         .iter()
+        .chain(TABLES_2D.iter())
         .find(|t| keys(t).is_some_and(|k| k == expected.as_slice()));
     Some(match (table, kind_keys) {
         (_, Some((kind, f))) => {
@@ -175,7 +198,29 @@ pub(super) fn unknown(message: &str, region_kind: Option<&str>) -> Option<String
             "unknown key `{typed}`: the top level takes {}",
             listed(&expected)
         ),
-        (Some(t), _) => format!("unknown key `{typed}`: [{t}] takes {}", listed(&expected)),
+        (Some(&"2d.top"), _) => format!(
+            "unknown key `{typed}`: the top level of a 2D scene takes {}",
+            listed(&expected)
+        ),
+        // A texture table: the 25 keys are too many to list; the kinds' are in the docs.
+        (Some(&"2d.window"), _) => format!(
+            "unknown key `{typed}`: a window takes `rect_mm` or `polygon_mm`, `outline`, \
+             `kind`, its kind's keys as a region's and, for a grating, `ridge_angle_deg` \
+             (docs/scenes.md)"
+        ),
+        (Some(&"2d.background"), _) => format!(
+            "unknown key `{typed}`: the background takes `kind`, its kind's keys as a \
+             region's and, for a grating, `ridge_angle_deg` (docs/scenes.md)"
+        ),
+        (Some(&"2d.edge"), _) => format!(
+            "unknown key `{typed}`: [[edge]] takes {}",
+            listed(&expected)
+        ),
+        (Some(t), _) => format!(
+            "unknown key `{typed}`: [{}] takes {}",
+            t.trim_start_matches("2d."),
+            listed(&expected)
+        ),
         (None, _) => format!("unknown key `{typed}`: expected {}", listed(&expected)),
     })
 }

@@ -12,7 +12,12 @@
 //! - `regions.rs`: the `[[region]]` tables, one function per texture kind;
 //! - `ctx.rs`: errors located in the file, and the range checks that raise them;
 //! - `keys.rs`: the keys each table takes, and the sentence for one it does not ("did you
-//!   mean").
+//!   mean");
+//! - `write.rs`: a configuration written back as a scene file;
+//! - 2D scenes (issue #36, a file with `[sensor] kind = "4-wire"`): `spec2d.rs` their shape,
+//!   `plane2d.rs` [`sensor_of`]'s reading and the conversion to a [`crate::plane::Config2d`]
+//!   (dry-run through a [`crate::plane::Controller2d`], its refusals located), `write2d.rs`
+//!   the writer. The 1D reader refuses a 2D file at its `[sensor]`, the 2D reader a 1D file.
 //!
 //! Every refusal points at `file:line:col` of the value at fault (an unknown key: the key), the
 //! board's checks included (an f_b above the board's limit at its `f_b_hz`, a boundary before
@@ -23,13 +28,17 @@ extern crate std;
 
 mod ctx;
 mod keys;
+mod plane2d;
 mod regions;
 mod sections;
 mod spec;
+mod spec2d;
 mod write;
+mod write2d;
 
-pub use keys::{keys, TABLES};
+pub use keys::{keys, TABLES, TABLES_2D};
 pub use write::to_scene_file;
+pub use write2d::to_scene_file_2d;
 
 use core::fmt;
 use core::ops::Range;
@@ -95,20 +104,6 @@ impl Spans {
                 put("substrate.rail_margin_code".into(), m.span());
             }
         }
-        if let Some(t) = &doc.limits {
-            put("limits".into(), t.span());
-            let l = t.get_ref();
-            for (name, v) in [
-                ("max_duty_percent", &l.max_duty_percent),
-                ("max_level_percent", &l.max_level_percent),
-                ("max_on_time_ms", &l.max_on_time_ms),
-                ("stale_after_ms", &l.stale_after_ms),
-            ] {
-                if let Some(v) = v {
-                    put(std::format!("limits.{name}"), v.span());
-                }
-            }
-        }
         for (i, r) in doc.region.iter().enumerate() {
             put(std::format!("region[{i}]"), r.span());
             let spec = r.get_ref();
@@ -136,7 +131,26 @@ impl Spans {
                 }
             }
         }
-        Spans(m)
+        let mut spans = Spans(m);
+        spans.put_limits(doc.limits.as_ref());
+        spans
+    }
+
+    /// `[limits]` and each key it writes (1D and 2D files share the table).
+    fn put_limits(&mut self, limits: Option<&toml::Spanned<spec::Limits>>) {
+        let Some(t) = limits else { return };
+        self.0.insert("limits".into(), t.span());
+        let l = t.get_ref();
+        for (name, v) in [
+            ("max_duty_percent", &l.max_duty_percent),
+            ("max_level_percent", &l.max_level_percent),
+            ("max_on_time_ms", &l.max_on_time_ms),
+            ("stale_after_ms", &l.stale_after_ms),
+        ] {
+            if let Some(v) = v {
+                self.0.insert(std::format!("limits.{name}"), v.span());
+            }
+        }
     }
 
     /// The first of `names` the file writes, with its span; else `table` (the key was left to
@@ -167,6 +181,10 @@ pub struct SceneDoc {
 /// the first bad value met is the one refused.
 pub fn parse(file: &str, text: &str) -> Result<SceneDoc, SceneFileError> {
     let cx = Ctx { file, text };
+    // A 2D file is refused at its sensor, before its tables read as unknown 1D keys.
+    if let (SensorKind::FourWire, Some(kind)) = plane2d::sensor(&cx)? {
+        return Err(plane2d::refuse_in_1d(&cx, kind));
+    }
     let doc = spec::read(&cx)?;
 
     let calibration = sections::calibration(&cx, doc.substrate.as_ref())?;
@@ -240,7 +258,7 @@ fn fault_keys(
     use crate::burst::BurstError as B;
     use crate::position::CalibrationError as C;
     use crate::region::RegionError as R;
-    use crate::texture::{LineFault as L, MaterialParam as M, SpreadParam as S, TextureError as T};
+    use crate::texture::{LineFault as L, TextureError as T};
     let one = |k: &str| std::vec![k.to_string()];
     let region = |i: u8, keys: &[&str]| {
         (
@@ -288,38 +306,8 @@ fn fault_keys(
             R::HysteresisTooLarge { .. } => (one("hysteresis_mm"), "hysteresis_mm".into()),
             _ => (std::vec![], "region[0]".into()),
         },
-        ConfigError::Texture { region: i, error } => match error {
-            B::ZeroFrequency | B::AboveBoardLimit { .. } | B::BelowTimerRange { .. } => {
-                region(i, &["f_b_hz"])
-            }
-            B::BadDuty { .. } | B::DutyAboveCap { .. } => region(i, &["duty_percent"]),
-            B::NoOnTime { .. } => region(i, &["duty_percent", "f_b_hz"]),
-            _ => region(i, &[]),
-        },
-        ConfigError::TextureParams { region: i, error } => match error {
-            T::BadWavelength { .. } => region(i, &["wavelength_mm", "ridge_mm"]),
-            T::BadSpeedThreshold { .. } => region(i, &["min_speed_mm_s"]),
-            T::BadMaterial { param, .. } => region(
-                i,
-                &[match param {
-                    M::DeltaMu => "delta_mu",
-                    M::NormalForce => "normal_force_n",
-                    M::Mass => "mass_g",
-                    M::Stiffness => "stiffness_n_per_m",
-                }],
-            ),
-            T::BadSpread { param, .. } => region(
-                i,
-                &[match param {
-                    S::Spread => "spread_percent",
-                    S::Amplitude => "amplitude_percent",
-                    S::AmplitudeSpread => "amplitude_spread_percent",
-                }],
-            ),
-            T::LevelAboveCap { .. } => region(i, &["amplitude_percent"]),
-            T::BadRearm { .. } => region(i, &["rearm_mm"]),
-            _ => region(i, &[]),
-        },
+        ConfigError::Texture { region: i, error } => region(i, burst_keys(&error)),
+        ConfigError::TextureParams { region: i, error } => region(i, texture_keys(&error)),
         ConfigError::Lines(t) => {
             let keys = match t {
                 T::BadLines(L::OutOfRange { index, .. } | L::Unsorted { index, .. }) => {
@@ -336,6 +324,40 @@ fn fault_keys(
         }
         ConfigError::LinePulse(_) => (one("lines.pulse_ms"), "lines".into()),
         _ => (std::vec![], "(file)".into()),
+    }
+}
+
+/// The keys of a texture's table a burst refusal is about, most telling first (none: the table).
+fn burst_keys(e: &crate::burst::BurstError) -> &'static [&'static str] {
+    use crate::burst::BurstError as B;
+    match e {
+        B::ZeroFrequency | B::AboveBoardLimit { .. } | B::BelowTimerRange { .. } => &["f_b_hz"],
+        B::BadDuty { .. } | B::DutyAboveCap { .. } => &["duty_percent"],
+        B::NoOnTime { .. } => &["duty_percent", "f_b_hz"],
+        _ => &[],
+    }
+}
+
+/// The keys of a texture's table a parameter refusal is about (none: the table).
+fn texture_keys(e: &crate::texture::TextureError) -> &'static [&'static str] {
+    use crate::texture::{MaterialParam as M, SpreadParam as S, TextureError as T};
+    match e {
+        T::BadWavelength { .. } => &["wavelength_mm", "ridge_mm"],
+        T::BadSpeedThreshold { .. } => &["min_speed_mm_s"],
+        T::BadMaterial { param, .. } => match param {
+            M::DeltaMu => &["delta_mu"],
+            M::NormalForce => &["normal_force_n"],
+            M::Mass => &["mass_g"],
+            M::Stiffness => &["stiffness_n_per_m"],
+        },
+        T::BadSpread { param, .. } => match param {
+            S::Spread => &["spread_percent"],
+            S::Amplitude => &["amplitude_percent"],
+            S::AmplitudeSpread => &["amplitude_spread_percent"],
+        },
+        T::LevelAboveCap { .. } => &["amplitude_percent"],
+        T::BadRearm { .. } => &["rearm_mm"],
+        _ => &[],
     }
 }
 
@@ -363,30 +385,34 @@ pub enum SensorKind {
     FourWire,
 }
 
-/// Which sensor a scene file names (`[sensor] kind`); a file without `[sensor]` is 1D.
+/// Which sensor a scene file names (`[sensor] kind`); a file without `[sensor]` is 1D. Only
+/// `[sensor]` is read (and the file's TOML syntax): a 1D file with a bad value elsewhere is
+/// still `Rheostat`, for [`load_for_board`] to refuse with its sentence. A `kind` other than
+/// `"4-wire"` is refused at its value, naming the one allowed.
 pub fn sensor_of(file: &str, text: &str) -> Result<SensorKind, SceneFileError> {
-    // Placeholder until the 2D sections are read (issue #36): every file is 1D.
-    let _ = (file, text);
-    Ok(SensorKind::Rheostat)
+    plane2d::sensor(&Ctx { file, text }).map(|(kind, _)| kind)
 }
 
 /// Reads a 2D scene file (issue #36) and checks it against a board whose touch frames come
 /// every `frame_period_us`: the configuration, ready for [`crate::plane::Controller2d::load`].
+///
+/// As [`load_for_board`]: parsed, every value converted and range-checked, then dry-run through
+/// a [`crate::plane::Controller2d`] for the board; every refusal at `file:line:col` of the
+/// value at fault. A 1D file (no `[sensor]`) is refused with a sentence saying so.
 pub fn load_2d_for_board(
     file: &str,
     text: &str,
     timer: BurstTimer,
     frame_period_us: u32,
 ) -> Result<crate::plane::Config2d, SceneFileError> {
-    // Placeholder until the 2D sections are read (issue #36).
-    let _ = (text, timer, frame_period_us);
-    Err(SceneFileError {
-        file: file.to_string(),
-        line: 1,
-        column: 1,
-        field: "sensor".to_string(),
-        message: "2D scene files are not read yet".to_string(),
-    })
+    plane2d::load(&Ctx { file, text }, timer, frame_period_us)
+}
+
+/// The plate a 2D scene file declares (`[screen] size_mm`), µm (width, height): the area its
+/// coordinates lie on, which [`crate::plane::Config2d`] does not hold (for a simulated finger's
+/// travel, or [`to_scene_file_2d`]). The file is read and range-checked, not dry-run.
+pub fn plate_um_of(file: &str, text: &str) -> Result<(u32, u32), SceneFileError> {
+    plane2d::plate_um(&Ctx { file, text })
 }
 
 #[cfg(test)]
@@ -926,26 +952,39 @@ mod tests {
         assert_eq!(doc.locate(&tex(0, f_b)).column, 10);
     }
 
+    /// Every shipped scene loads on a 16-bit and a 32-bit burst timer, each by the loader of
+    /// the sensor it names: 1D scenes at the rheostat's 100 µs, 2D scenes at the F446's touch
+    /// frame period (2 889 Hz, docs/touch.md) and the G474's (3 921 Hz).
     #[test]
     fn shipped_scenes_load() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-        let mut n = 0;
+        let (mut n1, mut n2) = (0, 0);
         for entry in std::fs::read_dir(&dir).unwrap() {
             let path = entry.unwrap().path();
             if path.extension().is_some_and(|e| e == "toml") {
                 let text = std::fs::read_to_string(&path).unwrap();
+                let name = path.display().to_string();
                 let t16 = BurstTimer {
                     clock_hz: 150_000_000,
                     counter_bits: 16,
                     max_burst_hz: 5_000,
                 };
+                let sensor = sensor_of(&name, &text).unwrap_or_else(|e| panic!("{e}"));
                 for timer in [TIMER, t16] {
-                    load_for_board(&path.display().to_string(), &text, timer, 100)
-                        .unwrap_or_else(|e| panic!("{e}"));
+                    match sensor {
+                        SensorKind::Rheostat => load_for_board(&name, &text, timer, 100).map(drop),
+                        _ => [346, 255].into_iter().try_for_each(|frame_us| {
+                            load_2d_for_board(&name, &text, timer, frame_us).map(drop)
+                        }),
+                    }
+                    .unwrap_or_else(|e| panic!("{e}"));
                 }
-                n += 1;
+                match sensor {
+                    SensorKind::Rheostat => n1 += 1,
+                    _ => n2 += 1,
+                }
             }
         }
-        assert!(n >= 5, "{n} scenes");
+        assert!(n1 >= 5 && n2 >= 2, "{n1} 1D and {n2} 2D scenes");
     }
 }

@@ -38,11 +38,12 @@ pub(super) fn regions(
     let mut textures = Textures::new();
     for (i, r) in specs.iter().enumerate() {
         let spec = r.get_ref();
+        let prefix = std::format!("region[{i}]");
         let region = Region {
             cx,
-            i,
+            kind: spec.check_fields(cx, &prefix)?,
+            prefix,
             span: r.span(),
-            kind: spec.check_fields(cx, i)?,
             spec,
             length_mm,
             duty_cap_percent,
@@ -50,24 +51,41 @@ pub(super) fn regions(
         if let Some(um) = region.end_um(i + 1 == specs.len())? {
             boundaries_um.push(um).map_err(|_| region.too_many())?;
         }
-        let texture = match region.kind {
-            "constant" => region.constant()?,
-            "grating" => region.grating()?,
-            "material" => region.material()?,
-            "random" => region.random()?,
-            // `off`, the one other kind `check_fields` lets through: it takes no fields.
-            _ => Texture::Off,
-        };
+        let texture = region.texture()?;
         textures.push(texture).map_err(|_| region.too_many())?;
     }
     Ok((boundaries_um, textures))
 }
 
+/// One texture as a region's keys state it, outside a `[[region]]` (a 2D window or the
+/// background): `prefix` names its fields in errors (`window[1]` → `window[1].f_b_hz`), `span`
+/// is its table (a missing key is refused there), `extent_mm` bounds a grating's period.
+/// `until_mm` is not read: the caller refuses it.
+pub(super) fn texture(
+    cx: &Ctx<'_>,
+    prefix: &str,
+    span: Range<usize>,
+    spec: &RegionSpec,
+    extent_mm: f64,
+    duty_cap_percent: f64,
+) -> Result<Texture, SceneFileError> {
+    Region {
+        cx,
+        kind: spec.check_fields(cx, prefix)?,
+        prefix: prefix.into(),
+        span,
+        spec,
+        length_mm: extent_mm,
+        duty_cap_percent,
+    }
+    .texture()
+}
+
 /// One `[[region]]` being read: where it stands in the file and what bounds its values.
 struct Region<'a> {
     cx: &'a Ctx<'a>,
-    /// Its index, as errors name it (`region[i].field`).
-    i: usize,
+    /// How errors name it: `region[i]` (then `region[i].field`).
+    prefix: String,
     /// The whole table: errors about a missing field point here.
     span: Range<usize>,
     /// Its kind, checked, with no field of another kind.
@@ -82,7 +100,19 @@ struct Region<'a> {
 impl Region<'_> {
     /// `region[i].name`, as errors name a field.
     fn field(&self, name: &str) -> String {
-        std::format!("region[{}].{name}", self.i)
+        std::format!("{}.{name}", self.prefix)
+    }
+
+    /// The texture its kind and keys describe.
+    fn texture(&self) -> Result<Texture, SceneFileError> {
+        Ok(match self.kind {
+            "constant" => self.constant()?,
+            "grating" => self.grating()?,
+            "material" => self.material()?,
+            "random" => self.random()?,
+            // `off`, the one other kind `check_fields` lets through: it takes no fields.
+            _ => Texture::Off,
+        })
     }
 
     /// Refused when this region would be one more than a scene holds ([`MAX_REGIONS`]).

@@ -31,6 +31,12 @@ pub(super) struct File {
 /// located where the `toml` crate points; an unknown key or value is named with the nearest
 /// one the table takes, or a short list of them ([`super::keys::unknown`]).
 pub(super) fn read(cx: &Ctx<'_>) -> Result<File, SceneFileError> {
+    read_as(cx)
+}
+
+/// Reads the TOML into any of the reader's file shapes (1D [`File`], 2D `spec2d::File2d`),
+/// with [`read`]'s located errors and sentences.
+pub(super) fn read_as<T: serde::de::DeserializeOwned>(cx: &Ctx<'_>) -> Result<T, SceneFileError> {
     let text = cx.text;
     toml::from_str(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
@@ -236,17 +242,18 @@ impl RegionSpec {
     }
 
     /// The kind, checked, with a field that does not belong to it refused at its span.
+    /// `prefix` names the table in errors (`region[1]`, `window[0]`).
     pub(super) fn check_fields(
         &self,
         cx: &Ctx<'_>,
-        i: usize,
+        prefix: &str,
     ) -> Result<&'static str, SceneFileError> {
         let kind = self.kind.get_ref().as_str();
         let Some((name, allowed)) = KINDS.iter().find(|(k, _)| *k == kind) else {
             let names: StdVec<&str> = KINDS.iter().map(|(k, _)| *k).collect();
             return Err(cx.err(
                 self.kind.span(),
-                &std::format!("region[{i}].kind"),
+                &std::format!("{prefix}.kind"),
                 format_args!(
                     "unknown kind `{kind}`, expected one of {}",
                     names.join(", ")
@@ -257,7 +264,7 @@ impl RegionSpec {
             if !allowed.contains(&field) {
                 return Err(cx.err(
                     span,
-                    &std::format!("region[{i}].{field}"),
+                    &std::format!("{prefix}.{field}"),
                     format_args!("`{field}` is not a field of kind `{kind}`"),
                 ));
             }

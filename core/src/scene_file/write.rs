@@ -15,7 +15,7 @@ use crate::texture::lines::Envelope;
 use crate::texture::Texture;
 
 /// `v` thousandths as a decimal: 18963 → "18.963", 20000 → "20".
-fn thousandths(v: u64) -> String {
+pub(super) fn thousandths(v: u64) -> String {
     let (whole, frac) = (v / 1000, v % 1000);
     if frac == 0 {
         std::format!("{whole}")
@@ -26,7 +26,7 @@ fn thousandths(v: u64) -> String {
 }
 
 /// `v` tenths as a decimal: 400 ‰ → "40", 125 → "12.5".
-fn tenths(v: u16) -> String {
+pub(super) fn tenths(v: u16) -> String {
     if v.is_multiple_of(10) {
         std::format!("{}", v / 10)
     } else {
@@ -101,94 +101,11 @@ pub fn to_scene_file(config: &Config, title: &str) -> String {
     for (i, t) in sc.textures.iter().enumerate() {
         line(String::new());
         line("[[region]]".into());
-        let kind = match t {
-            Texture::Off => "off",
-            Texture::Constant(_) => "constant",
-            Texture::Grating(_) => "grating",
-            Texture::Material(_) => "material",
-            Texture::Random(_) => "random",
-        };
-        line(std::format!("kind = \"{kind}\""));
+        line(std::format!("kind = \"{}\"", kind_of(t)));
         if let Some(b) = sc.boundaries_um.get(i) {
             line(std::format!("until_mm = {}", thousandths((*b).into())));
         }
-        match t {
-            Texture::Off => {}
-            Texture::Constant(b) => {
-                line(std::format!(
-                    "f_b_hz = {}",
-                    thousandths(b.burst_millihz.into())
-                ));
-                line(std::format!("duty_percent = {}", tenths(b.duty_permille)));
-            }
-            Texture::Grating(g) => {
-                line(std::format!(
-                    "wavelength_mm = {}",
-                    thousandths(g.wavelength_um.into())
-                ));
-                line(std::format!("duty_percent = {}", tenths(g.duty_permille)));
-                line(std::format!(
-                    "min_speed_mm_s = {}",
-                    thousandths(g.min_speed_um_s.into())
-                ));
-                line(std::format!(
-                    "amplitude_percent = {}",
-                    tenths(g.amplitude_permille)
-                ));
-                line(std::format!(
-                    "render = \"{}\"",
-                    match g.render {
-                        GratingRender::PositionPhase => "position",
-                        GratingRender::VelocitySynthesis => "velocity",
-                        GratingRender::Hybrid => "hybrid",
-                    }
-                ));
-                line(std::format!(
-                    "rearm_mm = {}",
-                    thousandths(g.rearm_um.into())
-                ));
-            }
-            Texture::Material(m) => {
-                // f64's shortest form of each f32, and the shortest gram value that reads back
-                // as the same kg: the reader's f64 arithmetic and its cast to f32 land on the
-                // same f32.
-                line(std::format!("delta_mu = {:?}", f64::from(m.delta_mu)));
-                line(std::format!(
-                    "normal_force_n = {:?}",
-                    f64::from(m.normal_force_n)
-                ));
-                line(std::format!("mass_g = {}", grams(m.mass_kg)));
-                line(std::format!(
-                    "stiffness_n_per_m = {:?}",
-                    f64::from(m.stiffness_n_per_m)
-                ));
-                line(std::format!("duty_percent = {}", tenths(m.duty_permille)));
-                line(std::format!(
-                    "min_speed_mm_s = {}",
-                    thousandths(m.min_speed_um_s.into())
-                ));
-            }
-            Texture::Random(r) => {
-                line(std::format!(
-                    "f_b_hz = {}",
-                    thousandths(r.center_millihz.into())
-                ));
-                line(std::format!(
-                    "spread_percent = {}",
-                    tenths(r.spread_permille)
-                ));
-                line(std::format!(
-                    "amplitude_percent = {}",
-                    tenths(r.amplitude_permille)
-                ));
-                line(std::format!(
-                    "amplitude_spread_percent = {}",
-                    tenths(r.amplitude_spread_permille)
-                ));
-                line(std::format!("duty_percent = {}", tenths(r.duty_permille)));
-                line(std::format!("seed = {}", r.seed));
-            }
-        }
+        texture_keys(t, &mut line);
     }
     let lines = &sc.lines;
     // Without positions the other keys change nothing a finger feels, but they are part of the
@@ -230,6 +147,99 @@ pub fn to_scene_file(config: &Config, title: &str) -> String {
     s
 }
 
+/// A texture's `kind` value.
+pub(super) fn kind_of(t: &Texture) -> &'static str {
+    match t {
+        Texture::Off => "off",
+        Texture::Constant(_) => "constant",
+        Texture::Grating(_) => "grating",
+        Texture::Material(_) => "material",
+        Texture::Random(_) => "random",
+    }
+}
+
+/// A texture's keys but `kind`, one `line` each, every value explicit: a region's, a 2D
+/// window's or the background's.
+pub(super) fn texture_keys(t: &Texture, line: &mut impl FnMut(String)) {
+    match t {
+        Texture::Off => {}
+        Texture::Constant(b) => {
+            line(std::format!(
+                "f_b_hz = {}",
+                thousandths(b.burst_millihz.into())
+            ));
+            line(std::format!("duty_percent = {}", tenths(b.duty_permille)));
+        }
+        Texture::Grating(g) => {
+            line(std::format!(
+                "wavelength_mm = {}",
+                thousandths(g.wavelength_um.into())
+            ));
+            line(std::format!("duty_percent = {}", tenths(g.duty_permille)));
+            line(std::format!(
+                "min_speed_mm_s = {}",
+                thousandths(g.min_speed_um_s.into())
+            ));
+            line(std::format!(
+                "amplitude_percent = {}",
+                tenths(g.amplitude_permille)
+            ));
+            line(std::format!(
+                "render = \"{}\"",
+                match g.render {
+                    GratingRender::PositionPhase => "position",
+                    GratingRender::VelocitySynthesis => "velocity",
+                    GratingRender::Hybrid => "hybrid",
+                }
+            ));
+            line(std::format!(
+                "rearm_mm = {}",
+                thousandths(g.rearm_um.into())
+            ));
+        }
+        Texture::Material(m) => {
+            // f64's shortest form of each f32, and the shortest gram value that reads back
+            // as the same kg: the reader's f64 arithmetic and its cast to f32 land on the
+            // same f32.
+            line(std::format!("delta_mu = {:?}", f64::from(m.delta_mu)));
+            line(std::format!(
+                "normal_force_n = {:?}",
+                f64::from(m.normal_force_n)
+            ));
+            line(std::format!("mass_g = {}", grams(m.mass_kg)));
+            line(std::format!(
+                "stiffness_n_per_m = {:?}",
+                f64::from(m.stiffness_n_per_m)
+            ));
+            line(std::format!("duty_percent = {}", tenths(m.duty_permille)));
+            line(std::format!(
+                "min_speed_mm_s = {}",
+                thousandths(m.min_speed_um_s.into())
+            ));
+        }
+        Texture::Random(r) => {
+            line(std::format!(
+                "f_b_hz = {}",
+                thousandths(r.center_millihz.into())
+            ));
+            line(std::format!(
+                "spread_percent = {}",
+                tenths(r.spread_permille)
+            ));
+            line(std::format!(
+                "amplitude_percent = {}",
+                tenths(r.amplitude_permille)
+            ));
+            line(std::format!(
+                "amplitude_spread_percent = {}",
+                tenths(r.amplitude_spread_permille)
+            ));
+            line(std::format!("duty_percent = {}", tenths(r.duty_permille)));
+            line(std::format!("seed = {}", r.seed));
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -247,6 +257,11 @@ mod tests {
                     p.display().to_string(),
                     std::fs::read_to_string(&p).unwrap(),
                 )
+            })
+            // This writer is 1D's: 2D scenes (issue #36) are not written back yet.
+            .filter(|(name, text)| {
+                crate::scene_file::sensor_of(name, text)
+                    == Ok(crate::scene_file::SensorKind::Rheostat)
             })
             .collect();
         v.sort();
