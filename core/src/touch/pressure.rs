@@ -400,5 +400,16 @@ mod tests {
             let e = ContactTracker::new(cfg).unwrap_err();
             assert_eq!(std::format!("{e}"), sentence);
         }
+        // Each limit from both sides (cargo-mutants' `>` → `>=` / `==` on lift_ohm's and
+        // `/ 4` → `* 4` on min_z1_code's survived the cases above).
+        let with = |lift_ohm, min_z1_code| PressureConfig {
+            lift_ohm,
+            min_z1_code,
+            ..PressureConfig::DEFAULT
+        };
+        assert!(with(1_000_000, 655).validate().is_ok());
+        assert!(with(1_000_001, 655).validate().is_err());
+        assert!(with(3_000, 16_383).validate().is_ok());
+        assert!(with(3_000, 16_384).validate().is_err());
     }
 }
