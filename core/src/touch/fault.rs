@@ -155,6 +155,10 @@ mod tests {
         assert_eq!(b.check_frame(0, 65_535), Err(low(Axis::X)));
         assert_eq!(b.check_frame(30_000, 65_535), Err(high(Axis::Y)));
         assert_eq!(b.check_frame(30_000, 20_000), Ok((30_000, 20_000)));
+        // `inside` (the calibration's test) draws the same edges. (cargo-mutants' `>` → `>=`
+        // and `<` → `<=` there survived the tests above.)
+        assert!(!b.inside(655) && b.inside(656));
+        assert!(b.inside(64_879) && !b.inside(64_880));
     }
 
     #[test]

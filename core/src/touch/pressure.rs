@@ -272,6 +272,15 @@ mod tests {
         assert!((199..=201).contains(&r), "{r}");
     }
 
+    /// Rounded to the nearest ohm, halves up, by hand: R_x = 3 Ω at x = ½ with Z2/Z1 = 2 is
+    /// 3 · ½ · 1 = 1.5 → 2 Ω; with Z2/Z1 = 1.8, 1.2 → 1 Ω. (Seen failing with the rounding
+    /// term dropped, cargo-mutants' `den / 2` → `den % 2`: 1.5 floored to 1.)
+    #[test]
+    fn rounds_to_the_nearest_ohm() {
+        assert_eq!(touch_resistance_ohm(3, 32_768, 1_000, 2_000, 655), Some(2));
+        assert_eq!(touch_resistance_ohm(3, 32_768, 1_000, 1_800, 655), Some(1));
+    }
+
     #[test]
     fn no_current_through_x_plus_is_no_contact() {
         assert_eq!(touch_resistance_ohm(600, 30_000, 0, 65_520, 655), None);
@@ -391,5 +400,16 @@ mod tests {
             let e = ContactTracker::new(cfg).unwrap_err();
             assert_eq!(std::format!("{e}"), sentence);
         }
+        // Each limit from both sides (cargo-mutants' `>` → `>=` / `==` on lift_ohm's and
+        // `/ 4` → `* 4` on min_z1_code's survived the cases above).
+        let with = |lift_ohm, min_z1_code| PressureConfig {
+            lift_ohm,
+            min_z1_code,
+            ..PressureConfig::DEFAULT
+        };
+        assert!(with(1_000_000, 655).validate().is_ok());
+        assert!(with(1_000_001, 655).validate().is_err());
+        assert!(with(3_000, 16_383).validate().is_ok());
+        assert!(with(3_000, 16_384).validate().is_err());
     }
 }
