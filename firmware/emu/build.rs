@@ -12,4 +12,5 @@ fn main() {
     let golden = env::var("GOLDEN_DIR")
         .expect("set GOLDEN_DIR to the directory holding golden.bin (scripts/emu.sh does)");
     println!("cargo:rerun-if-changed={golden}/golden.bin");
+    println!("cargo:rerun-if-changed={golden}/golden2d.bin");
 }

@@ -16,6 +16,8 @@
 
 #[allow(dead_code)]
 mod format;
+#[allow(dead_code)]
+mod plane2d;
 
 use core::hint::black_box;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -26,10 +28,12 @@ use cortex_m_semihosting::debug;
 use defmt_semihosting as _;
 use format::{Buf, Reader};
 use saw_core::burst::{BurstTimer, FastPlanner};
+use saw_core::plane::{Controller2d, Output2d};
 use saw_core::position::PositionMapper;
 use saw_core::region::RegionMap;
 use saw_core::sample::Sample;
 use saw_core::texture::{Grating, GratingRender, Material, RandomBurst, Texture};
+use saw_core::touch::frame::{Frame, Reading};
 use saw_core::velocity::{
     AlphaBeta, AlphaBetaFixed, BackwardDifference, Foaw, FoawFit, InnovationGate, LsqSlope,
     Median3, OneSampleDifference, StepClamp, SuperTwisting, VelocityEstimator,
@@ -37,6 +41,7 @@ use saw_core::velocity::{
 use saw_core::{Config, Controller, Output};
 
 static GOLDEN: &[u8] = include_bytes!(concat!(env!("GOLDEN_DIR"), "/golden.bin"));
+static GOLDEN2D: &[u8] = include_bytes!(concat!(env!("GOLDEN_DIR"), "/golden2d.bin"));
 
 /// Instructions per SysTick tick: 25 MHz SysTick, 1 GHz virtual instruction clock.
 const INSTR_PER_TICK: u64 = 40;
@@ -579,11 +584,301 @@ fn stage_costs(n: usize) {
     );
 }
 
+/// Longest 2D vector, readings.
+const MAX_READINGS: usize = 10_000;
+const NO_OUTPUT2D: Output2d = Output2d {
+    position: None,
+    velocity: None,
+    place: None,
+    action: None,
+    amplitude_permille: None,
+    envelope: None,
+    drive: None,
+    edge: None,
+    fault: None,
+};
+static mut FRAMES: [Frame; MAX_READINGS] = [Frame {
+    x_code: 0,
+    y_code: 0,
+    z1_code: 0,
+    z2_code: 0,
+    t_us: 0,
+}; MAX_READINGS];
+static mut READINGS: [Reading; MAX_READINGS] = [Reading::Lifted; MAX_READINGS];
+static mut OUTPUTS2D: [Output2d; MAX_READINGS] = [NO_OUTPUT2D; MAX_READINGS];
+
+/// The 2D vectors' header.
+struct Golden2d {
+    timer: BurstTimer,
+    period_us: u32,
+    cal: [saw_core::touch::calibration::CalPoint; 3],
+    host_config_crc: u32,
+    /// Offset of the vector count.
+    vectors: usize,
+}
+
+fn parse_golden2d() -> Golden2d {
+    let mut r = plane2d::In::new(GOLDEN2D);
+    if r.take(4) != plane2d::MAGIC || r.u32() != plane2d::VERSION {
+        defmt::error!("golden2d.bin: bad magic or version");
+        fail();
+    }
+    let timer = BurstTimer {
+        clock_hz: r.u32(),
+        counter_bits: r.u8(),
+        max_burst_hz: r.u32(),
+    };
+    let period_us = r.u32();
+    let host_config_crc = r.u32();
+    let cal = [
+        plane2d::decode_cal(&mut r),
+        plane2d::decode_cal(&mut r),
+        plane2d::decode_cal(&mut r),
+    ];
+    Golden2d {
+        timer,
+        period_us,
+        cal,
+        host_config_crc,
+        vectors: r.pos,
+    }
+}
+
+/// Loads a 2D vector's frames and readings; returns (name, n, expected outputs, crc).
+fn read_vector2d(r: &mut plane2d::In<'static>) -> (&'static str, usize, &'static [u8], u32) {
+    let name = r.name();
+    let n = r.u32() as usize;
+    if n > MAX_READINGS {
+        defmt::error!("2d vector {=str}: {} readings > {}", name, n, MAX_READINGS);
+        fail();
+    }
+    // SAFETY: single-threaded; no other reference to FRAMES or READINGS is alive.
+    let frames = unsafe { &mut *core::ptr::addr_of_mut!(FRAMES) };
+    let readings = unsafe { &mut *core::ptr::addr_of_mut!(READINGS) };
+    for (f, rd) in frames.iter_mut().zip(readings.iter_mut()).take(n) {
+        *f = plane2d::decode_frame(r);
+        *rd = plane2d::decode_reading(r);
+    }
+    let len = r.u32() as usize;
+    let expected = r.take(len);
+    let crc = r.u32();
+    (name, n, expected, crc)
+}
+
+fn new_controller2d(g: &Golden2d, cfg: &saw_core::plane::Config2d) -> Controller2d {
+    let mut ctl = Controller2d::new(g.timer, g.period_us).unwrap_or_else(|_| fail());
+    if ctl.load(cfg).is_err() {
+        defmt::error!("2d scene rejected on target");
+        fail();
+    }
+    ctl
+}
+
+/// The harness loop alone over 2D readings (read a frame and a reading, store an output).
+fn loop_overhead2d(n: usize) -> u64 {
+    let frames = unsafe { &*core::ptr::addr_of!(FRAMES) };
+    let readings = unsafe { &*core::ptr::addr_of!(READINGS) };
+    let outputs = unsafe { &mut *core::ptr::addr_of_mut!(OUTPUTS2D) };
+    measure(|| {
+        for ((f, r), o) in frames[..n]
+            .iter()
+            .zip(&readings[..n])
+            .zip(outputs[..n].iter_mut())
+        {
+            black_box((f.t_us, r));
+            *o = black_box(Output2d::default());
+        }
+    })
+}
+
+/// The readings through `ctl` alone (the caller ran the sensor); returns the instructions.
+fn replay_readings(ctl: &mut Controller2d, n: usize) -> u64 {
+    let frames = unsafe { &*core::ptr::addr_of!(FRAMES) };
+    let readings = unsafe { &*core::ptr::addr_of!(READINGS) };
+    let outputs = unsafe { &mut *core::ptr::addr_of_mut!(OUTPUTS2D) };
+    measure(|| {
+        for ((f, r), o) in frames[..n]
+            .iter()
+            .zip(&readings[..n])
+            .zip(outputs[..n].iter_mut())
+        {
+            *o = ctl.on_reading(black_box(f).t_us, *black_box(r));
+        }
+    })
+}
+
+/// The frames through the sensor and `ctl`; returns the instructions.
+fn replay_frames(
+    sensor: &mut saw_core::touch::frame::TouchSensor,
+    ctl: &mut Controller2d,
+    n: usize,
+) -> u64 {
+    let frames = unsafe { &*core::ptr::addr_of!(FRAMES) };
+    let outputs = unsafe { &mut *core::ptr::addr_of_mut!(OUTPUTS2D) };
+    measure(|| {
+        for (f, o) in frames[..n].iter().zip(outputs[..n].iter_mut()) {
+            let f = black_box(f);
+            *o = ctl.on_reading(f.t_us, sensor.on_frame(f));
+        }
+    })
+}
+
+/// Compares OUTPUTS2D with the expected records; returns (crc, differing records).
+fn compare2d(name: &str, n: usize, expected: &[u8]) -> (u32, u32) {
+    let outputs = unsafe { &*core::ptr::addr_of!(OUTPUTS2D) };
+    let mut r = plane2d::In::new(expected);
+    let (mut crc, mut diff) = (0u32, 0u32);
+    for (i, o) in outputs[..n].iter().enumerate() {
+        let mut b = plane2d::Rec::new();
+        plane2d::encode_output2d(&mut b, o);
+        crc = plane2d::crc32_update(crc, b.as_slice());
+        let start = r.pos;
+        let want = plane2d::decode_output2d(&mut r);
+        if &r.data[start..r.pos] != b.as_slice() {
+            diff += 1;
+            if diff <= 3 {
+                defmt::println!(
+                    "DIFF vector={=str} sample={=u32} within_tol=false\n  target: {}\n  host:   {}",
+                    name,
+                    i as u32,
+                    o,
+                    want
+                );
+            }
+        }
+    }
+    (crc, diff)
+}
+
+fn equiv2d(name: &str, n: usize, expected: &[u8], host_crc: u32) -> bool {
+    let (crc, diff) = compare2d(name, n, expected);
+    defmt::println!(
+        "EQUIV vector={=str} n={=u32} crc={=u32:08x} host_crc={=u32:08x} diff={=u32} beyond_tol={=u32}",
+        name,
+        n as u32,
+        crc,
+        host_crc,
+        diff,
+        diff
+    );
+    diff == 0 && crc == host_crc
+}
+
+/// The 2D vectors (issue #36): each replayed as readings into `Controller2d::on_reading`, and
+/// as frames through `TouchSensor::on_frame` and the controller; both compared with the host's
+/// outputs record by record, and counted per reading (`COST-2D`), with the sensor alone and the
+/// costliest single reading (`COST-WORST-2D`).
+fn plane_vectors() -> bool {
+    let g = parse_golden2d();
+    let cfg = plane2d::config();
+    let crc = plane2d::config_crc(&cfg);
+    if crc != g.host_config_crc {
+        defmt::error!(
+            "2d scene: target built {=u32:08x}, host {=u32:08x} (not the same Config2d)",
+            crc,
+            g.host_config_crc
+        );
+        return false;
+    }
+    let mut r = plane2d::In::new(GOLDEN2D);
+    r.pos = g.vectors;
+    let mut ok = true;
+    for _ in 0..r.u8() {
+        let (name, n, expected, host_crc) = read_vector2d(&mut r);
+        let mut buf = [0u8; 48];
+        let overhead = loop_overhead2d(n);
+        // The controller alone, on the host sensor's readings.
+        let case = join(&mut buf, "plane", name);
+        let mut ctl = new_controller2d(&g, &cfg);
+        let cost = replay_readings(&mut ctl, n);
+        ok &= equiv2d(case, n, expected, host_crc);
+        report("COST-2D", case, n, per_sample_x10(cost, overhead, n));
+        // The sensor and the controller, on the frames.
+        let mut buf2 = [0u8; 48];
+        let case2 = join(&mut buf2, "plane+sensor", name);
+        let mut sensor = plane2d::sensor(g.cal).unwrap_or_else(|| fail());
+        let mut ctl = new_controller2d(&g, &cfg);
+        let cost = replay_frames(&mut sensor, &mut ctl, n);
+        ok &= equiv2d(case2, n, expected, host_crc);
+        report("COST-2D", case2, n, per_sample_x10(cost, overhead, n));
+        // The sensor alone.
+        let frames = unsafe { &*core::ptr::addr_of!(FRAMES) };
+        let mut sensor = plane2d::sensor(g.cal).unwrap_or_else(|| fail());
+        let base = measure(|| {
+            for f in &frames[..n] {
+                black_box(black_box(f).t_us);
+            }
+        });
+        let cost = measure(|| {
+            for f in &frames[..n] {
+                black_box(sensor.on_frame(black_box(f)));
+            }
+        });
+        let mut buf3 = [0u8; 48];
+        let case3 = join(&mut buf3, "sensor", name);
+        report("COST-2D", case3, n, per_sample_x10(cost, base, n));
+        // Each reading timed alone: the costliest.
+        let readings = unsafe { &*core::ptr::addr_of!(READINGS) };
+        let outputs = unsafe { &mut *core::ptr::addr_of_mut!(OUTPUTS2D) };
+        let mut ctl = new_controller2d(&g, &cfg);
+        let empty = measure(|| {});
+        let (mut worst, mut steady) = ((0, 0), (0, 0));
+        for (i, ((f, rd), o)) in frames[..n]
+            .iter()
+            .zip(&readings[..n])
+            .zip(outputs[..n].iter_mut())
+            .enumerate()
+        {
+            let c = measure(|| *o = ctl.on_reading(black_box(f).t_us, *black_box(rd)))
+                .saturating_sub(empty);
+            if c > worst.0 {
+                worst = (c, i);
+            }
+            if i >= WORST_FROM && c > steady.0 {
+                steady = (c, i);
+            }
+        }
+        defmt::println!(
+            "COST-WORST-2D case={=str} n={=u32} worst={=u64} at={=u32} steady={=u64} steady_at={=u32}",
+            case,
+            n as u32,
+            worst.0,
+            worst.1 as u32,
+            steady.0,
+            steady.1 as u32
+        );
+    }
+    ok
+}
+
+/// Profiling build for a 2D vector (`EMU_PROFILE=plane/<trajectory>`): its readings through the
+/// controller alone.
+fn profile2d(traj: &str) -> ! {
+    let g = parse_golden2d();
+    let cfg = plane2d::config();
+    let mut r = plane2d::In::new(GOLDEN2D);
+    r.pos = g.vectors;
+    for _ in 0..r.u8() {
+        let (name, n, _, _) = read_vector2d(&mut r);
+        if name == traj {
+            let mut ctl = new_controller2d(&g, &cfg);
+            let cost = replay_readings(&mut ctl, n);
+            report("PROFILE", name, n, per_sample_x10(cost, 0, n));
+            debug::exit(debug::EXIT_SUCCESS);
+        }
+    }
+    defmt::error!("EMU_PROFILE: no 2d vector {=str}", traj);
+    fail()
+}
+
 /// Profiling build (`EMU_PROFILE=<kind>/<trajectory>` at build time, scripts/emu-profile.sh):
 /// replays only that one-region scene over the default scene's vector of that trajectory, so
 /// QEMU's per-instruction trace holds one case.
 fn profile(g: &Golden, case: &str) -> ! {
     let (kind, traj) = case.split_once('/').unwrap_or((case, "back-and-forth"));
+    if kind == "plane" {
+        profile2d(traj);
+    }
     let mut want = [0u8; 48];
     let want = join(&mut want, "default", traj);
     let n = load_bench_inputs(g, want);
@@ -626,6 +921,7 @@ fn main() -> ! {
         profile(&g, case);
     }
     let ok = equivalence_and_scene_costs(&g);
+    let ok = plane_vectors() && ok;
     for traj in ["back-and-forth", "rest"] {
         let mut want = [0u8; 48];
         let want = join(&mut want, "default", traj);

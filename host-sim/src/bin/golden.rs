@@ -20,10 +20,19 @@
 //! `COST-TEXTURE` row; the worst single sample, `COST-WORST`, is reported, not bounded), except
 //! the kinds [`OVER_BUDGET`] names, which must stay under their ceilings. It writes the cost
 //! table (markdown) to `<cost.md>`.
+//!
+//! 2D (issue #36): `gen` also writes `golden2d.bin` (format in `firmware/emu/src/plane2d.rs`):
+//! the 8-window, 16-edge scene, three trajectories' touch frames from host-sim's overlay model,
+//! the host sensor's readings and the host `Controller2d`'s outputs; the image replays them as
+//! readings (`plane/…`) and as frames through its own sensor (`plane+sensor/…`), and `check`
+//! holds both bit-exact and the controller's rows under [`OVER_BUDGET_2D`].
 
 #[path = "../../../firmware/emu/src/format.rs"]
 #[allow(dead_code)]
 mod format;
+#[path = "../../../firmware/emu/src/plane2d.rs"]
+#[allow(dead_code)]
+mod plane2d;
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -36,6 +45,11 @@ use host_sim::trajectory::Trajectory;
 use saw_core::burst::BurstTimer;
 use saw_core::texture::{Grating, Texture};
 use saw_core::{Config, Controller};
+
+use host_sim::touch::{Finger, Overlay, TouchModel};
+use saw_core::plane::{Controller2d, Place};
+use saw_core::touch::calibration::CalPoint;
+use saw_core::touch::plates::{AdcTiming, PlateRc, Schedule};
 
 /// Samples per vector: 0.5 s at 10 kHz.
 const SAMPLES: u64 = 5_000;
@@ -197,6 +211,7 @@ fn gen(dir: &Path) -> Result<(), String> {
             .unwrap();
         }
     }
+    gen2d(dir, timer, period, &mut manifest)?;
     std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
     std::fs::write(dir.join("golden.bin"), &s.0).map_err(|e| e.to_string())?;
     std::fs::write(dir.join("manifest.txt"), &manifest).map_err(|e| e.to_string())?;
@@ -207,6 +222,174 @@ fn gen(dir: &Path) -> Result<(), String> {
         s.0.len(),
         dir.join("golden.bin").display()
     );
+    Ok(())
+}
+
+/// Issue #36 not met: the 2D controller's rows (`COST-2D case=plane/…`, `Controller2d::on_reading`
+/// alone, mean over the vector) are over [`BUDGET`]: 853.4–862.8 measured on the 8-window,
+/// 16-edge scene (docs/target-cost.md, "Issue #36"). They fail only above this ceiling, about
+/// 3 % over the worst row, so a regression still fails; lower it as the cost comes down, and
+/// remove it once every row is under the budget. The sensor's rows (`sensor/…`,
+/// `plane+sensor/…`) are reported, not bounded: frames come at ~2.9 kHz, not 10.
+const OVER_BUDGET_2D: f64 = 889.0;
+
+/// The 2D vectors' touch plate: the 4.3-inch panel of host-sim's overlay model (95 × 54 mm;
+/// finger fractions map to µm by these), read with the F446's default acquisition.
+const PLATE_UM: (f64, f64) = (95_000.0, 54_000.0);
+const F446_TOUCH: AdcTiming = AdcTiming {
+    conversion_ns: 3_023,
+    conversions_position: 16,
+    conversions_pressure: 16,
+};
+
+/// The finger of a 2D vector at `t_s`: where it is (µm), or None when lifted.
+type Path2d = fn(f64) -> Option<(f64, f64)>;
+
+/// The 2D trajectories: (name, readings at the controller's 10 kHz, finger).
+fn trajectories2d() -> Vec<(&'static str, u32, Path2d)> {
+    // 100 mm/s along y = 12 mm through windows 0–3 (window 0's two sides, the free segments),
+    // then back on a diagonal up to (30, 27) mm through windows 7 and 6; the first 16 frames
+    // are the sensor's landing run.
+    fn stroke(t: f64) -> Option<(f64, f64)> {
+        let pts = [
+            (1_000.0, 12_000.0),
+            (60_000.0, 12_000.0),
+            (30_000.0, 27_000.0),
+        ];
+        let mut d = t * 100_000.0;
+        for w in pts.windows(2) {
+            let (a, b): ((f64, f64), (f64, f64)) = (w[0], w[1]);
+            let len = (b.0 - a.0).hypot(b.1 - a.1);
+            if d <= len {
+                let s = d / len;
+                return Some((a.0 + s * (b.0 - a.0), a.1 + s * (b.1 - a.1)));
+            }
+            d -= len;
+        }
+        Some(pts[2])
+    }
+    // At rest on window 0's right side (an edge), 2 LSB a conversion.
+    fn rest_on_edge(_t: f64) -> Option<(f64, f64)> {
+        Some((14_000.0, 10_000.0))
+    }
+    // 100 mm/s along y = 25 mm from inside window 5 (off, outline flagged) across its side,
+    // into window 6 (oriented grating), lifted from 150 to 170 ms while the hand moves on,
+    // landing (16 frames) and on through a free segment and window 7.
+    fn lift_landing(t: f64) -> Option<(f64, f64)> {
+        let p = (18_000.0 + 100_000.0 * t, 25_000.0);
+        (!(0.150..0.170).contains(&t)).then_some(p)
+    }
+    vec![
+        ("stroke", 9_500, stroke),
+        ("rest-on-edge", 5_000, rest_on_edge),
+        ("lift-landing", 3_500, lift_landing),
+    ]
+}
+
+/// 2D golden vectors (issue #36): the 8-window, 16-edge scene of `plane2d::config`, each
+/// trajectory's frames from host-sim's overlay model (2 LSB a conversion), the readings the
+/// host's `TouchSensor` made of them and the host's `Controller2d` outputs. Writes
+/// `golden2d.bin` and appends `plane/<name>` and `plane+sensor/<name>` (same outputs) to the
+/// manifest.
+fn gen2d(dir: &Path, timer: BurstTimer, period: u32, manifest: &mut String) -> Result<(), String> {
+    let cfg = plane2d::config();
+    let schedule = Schedule::new(&PlateRc::DEFAULT, &F446_TOUCH).map_err(|e| format!("{e:?}"))?;
+    // Calibrate on a noiseless model: three targets, as a user touches them.
+    let mut quiet = TouchModel::new(
+        Overlay {
+            noise_lsb: 0.0,
+            ..Overlay::default()
+        },
+        1,
+    );
+    let cal = [(0.1, 0.1), (0.9, 0.5), (0.5, 0.9)].map(|(x, y)| {
+        let f = Finger { x, y, force_n: 1.0 };
+        quiet.frame(&schedule, &F446_TOUCH, Some(&f), 0);
+        let fr = quiet.frame(&schedule, &F446_TOUCH, Some(&f), 0);
+        CalPoint {
+            x_code: fr.x_code,
+            y_code: fr.y_code,
+            x_um: (x * PLATE_UM.0) as i32,
+            y_um: (y * PLATE_UM.1) as i32,
+        }
+    });
+    let mut s = VecSink(Vec::new());
+    s.put(plane2d::MAGIC);
+    s.u32(plane2d::VERSION);
+    encode_timer(&mut s, &timer, period);
+    s.u32(plane2d::config_crc(&cfg));
+    let mut c = plane2d::Rec::new();
+    for p in &cal {
+        c.len = 0;
+        plane2d::encode_cal(&mut c, p);
+        s.put(c.as_slice());
+    }
+    let trajs = trajectories2d();
+    s.u8(trajs.len() as u8);
+    for (vi, (name, n, path)) in trajs.iter().enumerate() {
+        let mut model = TouchModel::new(Overlay::default(), 11 + vi as u64);
+        let mut sensor = plane2d::sensor(cal).ok_or("2d: the calibration is refused")?;
+        let mut ctl = Controller2d::new(timer, period).map_err(|e| format!("{e:?}"))?;
+        ctl.load(&cfg).map_err(|e| format!("{e:?}"))?;
+        let (mut inputs, mut outputs) = (VecSink(Vec::new()), VecSink(Vec::new()));
+        let mut windows = std::collections::BTreeSet::new();
+        for k in 0..*n {
+            let t_us = T0_US.wrapping_add(k * period);
+            let finger = path(k as f64 * period as f64 * 1e-6).map(|(x, y)| Finger {
+                x: x / PLATE_UM.0,
+                y: y / PLATE_UM.1,
+                force_n: 1.0,
+            });
+            let frame = model.frame(&schedule, &F446_TOUCH, finger.as_ref(), t_us);
+            let reading = sensor.on_frame(&frame);
+            let out = ctl.on_reading(t_us, reading);
+            if let Some(Place::Window(w)) = out.place {
+                windows.insert(w);
+            }
+            let mut r = plane2d::Rec::new();
+            plane2d::encode_frame(&mut r, &frame);
+            plane2d::encode_reading(&mut r, &reading);
+            inputs.put(r.as_slice());
+            r.len = 0;
+            plane2d::encode_output2d(&mut r, &out);
+            let back = plane2d::decode_output2d(&mut plane2d::In::new(r.as_slice()));
+            if back != out {
+                return Err(format!(
+                    "2d {name}: output record does not survive the round trip"
+                ));
+            }
+            outputs.put(r.as_slice());
+        }
+        let crc = format::crc32_update(0, &outputs.0);
+        s.name(name);
+        s.u32(*n);
+        s.put(&inputs.0);
+        s.u32(outputs.0.len() as u32);
+        s.put(&outputs.0);
+        s.u32(crc);
+        let tel = ctl.telemetry();
+        for case in ["plane", "plane+sensor"] {
+            writeln!(
+                manifest,
+                "{case}/{name} n={n} crc={crc:08x} bytes={}",
+                outputs.0.len()
+            )
+            .unwrap();
+        }
+        println!(
+            "golden 2d {name}: {n} readings, windows entered {windows:?}, {} switches, {} edge \
+             pulses ({} skipped), {} ridge pulses ({} skipped), {} lifts, {} gate actions",
+            tel.window_switches,
+            tel.edge_pulses,
+            tel.edges_skipped,
+            tel.ridge_pulses,
+            tel.ridges_skipped,
+            tel.lifts,
+            tel.gate_actions
+        );
+    }
+    std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
+    std::fs::write(dir.join("golden2d.bin"), &s.0).map_err(|e| e.to_string())?;
     Ok(())
 }
 
@@ -289,6 +472,8 @@ fn check(dir: &Path, log: &Path, cost_md: &Path) -> Result<(), String> {
         ("COST-ESTIMATOR", "Velocity estimators: `update` alone, and whole `on_sample` on the default scene (back-and-forth)"),
         ("COST-STAGE", "Stages alone (default scene, back-and-forth inputs)"),
         ("COST-WORST", "Costliest single sample, one-region scene per texture kind (each sample timed alone: ±40; sample 0 announces the scene, the estimator's window fills by sample 34)"),
+        ("COST-2D", "2D scene, 8 windows and 16 edges (issue #36): per reading, `Controller2d::on_reading` alone (plane/), `TouchSensor::on_frame` alone (sensor/), both (plane+sensor/)"),
+        ("COST-WORST-2D", "2D scene: costliest single reading, `Controller2d::on_reading` (each timed alone: ±40)"),
     ];
     let mut over_budget = Vec::new();
     let mut known_over = Vec::new();
@@ -309,7 +494,7 @@ fn check(dir: &Path, log: &Path, cost_md: &Path) -> Result<(), String> {
             )
             .unwrap();
             writeln!(md, "|---|---:|---:|").unwrap();
-        } else if tag == "COST-WORST" {
+        } else if tag == "COST-WORST" || tag == "COST-WORST-2D" {
             writeln!(
                 md,
                 "| case | worst sample, instr | at sample | worst from sample 64, instr | at sample |"
@@ -327,7 +512,7 @@ fn check(dir: &Path, log: &Path, cost_md: &Path) -> Result<(), String> {
                 writeln!(md, "| {name} | {} | {} |", f["update"], f["on_sample"]).unwrap();
                 continue;
             }
-            if tag == "COST-WORST" {
+            if tag == "COST-WORST" || tag == "COST-WORST-2D" {
                 let g = |k| f.get(k).copied().unwrap_or("?");
                 writeln!(
                     md,
@@ -357,6 +542,14 @@ fn check(dir: &Path, log: &Path, cost_md: &Path) -> Result<(), String> {
                     _ => {}
                 }
             }
+            if tag == "COST-2D" && name.starts_with("plane/") {
+                let v: f64 = per.parse().unwrap_or(f64::MAX);
+                if v > OVER_BUDGET_2D {
+                    over_budget.push(format!("{name} {per} (ceiling {OVER_BUDGET_2D})"));
+                } else if v > BUDGET as f64 {
+                    known_over.push(format!("{name} {per} (ceiling {OVER_BUDGET_2D})"));
+                }
+            }
             if tag == "COST-SCENE" {
                 let v: f64 = per.parse().unwrap_or(f64::MAX);
                 if name == "default/back-and-forth" {
@@ -372,7 +565,7 @@ fn check(dir: &Path, log: &Path, cost_md: &Path) -> Result<(), String> {
     print!("{md}");
     if !known_over.is_empty() {
         println!(
-            "\nOVER BUDGET (issue #17 not met, under their ceilings): {}",
+            "\nOVER BUDGET (issues #17, #36 not met, under their ceilings): {}",
             known_over.join(", ")
         );
     }
