@@ -56,19 +56,23 @@ pub trait Sink {
     }
 }
 
-/// A fixed buffer sink (one output record).
-pub struct Buf {
+/// A fixed buffer sink of `N` bytes (one output record; the 2D records are longer, see
+/// `plane2d::Rec`).
+pub struct Record<const N: usize> {
     /// Bytes.
-    pub bytes: [u8; MAX_RECORD],
+    pub bytes: [u8; N],
     /// Used length.
     pub len: usize,
 }
 
-impl Buf {
+/// A 1D output record's buffer.
+pub type Buf = Record<MAX_RECORD>;
+
+impl<const N: usize> Record<N> {
     /// Empty.
     pub const fn new() -> Self {
         Self {
-            bytes: [0; MAX_RECORD],
+            bytes: [0; N],
             len: 0,
         }
     }
@@ -78,7 +82,7 @@ impl Buf {
     }
 }
 
-impl Sink for Buf {
+impl<const N: usize> Sink for Record<N> {
     fn put(&mut self, b: &[u8]) {
         self.bytes[self.len..self.len + b.len()].copy_from_slice(b);
         self.len += b.len();

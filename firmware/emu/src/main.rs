@@ -618,7 +618,7 @@ struct Golden2d {
 }
 
 fn parse_golden2d() -> Golden2d {
-    let mut r = plane2d::In::new(GOLDEN2D);
+    let mut r = format::Reader::new(GOLDEN2D);
     if r.take(4) != plane2d::MAGIC || r.u32() != plane2d::VERSION {
         defmt::error!("golden2d.bin: bad magic or version");
         fail();
@@ -645,7 +645,7 @@ fn parse_golden2d() -> Golden2d {
 }
 
 /// Loads a 2D vector's frames and readings; returns (name, n, expected outputs, crc).
-fn read_vector2d(r: &mut plane2d::In<'static>) -> (&'static str, usize, &'static [u8], u32) {
+fn read_vector2d(r: &mut format::Reader<'static>) -> (&'static str, usize, &'static [u8], u32) {
     let name = r.name();
     let n = r.u32() as usize;
     if n > MAX_READINGS {
@@ -726,12 +726,12 @@ fn replay_frames(
 /// Compares OUTPUTS2D with the expected records; returns (crc, differing records).
 fn compare2d(name: &str, n: usize, expected: &[u8]) -> (u32, u32) {
     let outputs = unsafe { &*core::ptr::addr_of!(OUTPUTS2D) };
-    let mut r = plane2d::In::new(expected);
+    let mut r = format::Reader::new(expected);
     let (mut crc, mut diff) = (0u32, 0u32);
     for (i, o) in outputs[..n].iter().enumerate() {
         let mut b = plane2d::Rec::new();
         plane2d::encode_output2d(&mut b, o);
-        crc = plane2d::crc32_update(crc, b.as_slice());
+        crc = format::crc32_update(crc, b.as_slice());
         let start = r.pos;
         let want = plane2d::decode_output2d(&mut r);
         if &r.data[start..r.pos] != b.as_slice() {
@@ -780,7 +780,7 @@ fn plane_vectors() -> bool {
         );
         return false;
     }
-    let mut r = plane2d::In::new(GOLDEN2D);
+    let mut r = format::Reader::new(GOLDEN2D);
     r.pos = g.vectors;
     let mut ok = true;
     for _ in 0..r.u8() {
@@ -856,7 +856,7 @@ fn plane_vectors() -> bool {
 fn profile2d(traj: &str) -> ! {
     let g = parse_golden2d();
     let cfg = plane2d::config();
-    let mut r = plane2d::In::new(GOLDEN2D);
+    let mut r = format::Reader::new(GOLDEN2D);
     r.pos = g.vectors;
     for _ in 0..r.u8() {
         let (name, n, _, _) = read_vector2d(&mut r);

@@ -24,6 +24,8 @@
 
 use core::fmt::Write as _;
 
+use super::format::{Reader, Record, Sink};
+
 use saw_core::burst::TimerSettings;
 use saw_core::gate::{DriveMode, Envelope, GateAction};
 use saw_core::plane::{
@@ -137,7 +139,7 @@ pub fn config_crc(c: &Config2d) -> u32 {
     struct Crc(u32);
     impl core::fmt::Write for Crc {
         fn write_str(&mut self, s: &str) -> core::fmt::Result {
-            self.0 = crc32_update(self.0, s.as_bytes());
+            self.0 = super::format::crc32_update(self.0, s.as_bytes());
             Ok(())
         }
     }
@@ -146,111 +148,11 @@ pub fn config_crc(c: &Config2d) -> u32 {
     w.0
 }
 
-/// CRC-32 (IEEE 802.3, reflected), bitwise (format.rs's, repeated so this file stands alone).
-pub fn crc32_update(mut crc: u32, data: &[u8]) -> u32 {
-    crc = !crc;
-    for &b in data {
-        crc ^= b as u32;
-        for _ in 0..8 {
-            crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
-        }
-    }
-    !crc
-}
-
-/// Where encoded bytes go.
-pub trait Out {
-    /// Appends bytes.
-    fn put(&mut self, b: &[u8]);
-    /// Appends a u8.
-    fn u8(&mut self, v: u8) {
-        self.put(&[v])
-    }
-    /// Appends a u16.
-    fn u16(&mut self, v: u16) {
-        self.put(&v.to_le_bytes())
-    }
-    /// Appends a u32.
-    fn u32(&mut self, v: u32) {
-        self.put(&v.to_le_bytes())
-    }
-}
-
-/// One record's bytes.
-pub struct Rec {
-    /// Bytes.
-    pub bytes: [u8; MAX_RECORD],
-    /// Used length.
-    pub len: usize,
-}
-
-impl Rec {
-    /// Empty.
-    pub const fn new() -> Self {
-        Self {
-            bytes: [0; MAX_RECORD],
-            len: 0,
-        }
-    }
-    /// The used bytes.
-    pub fn as_slice(&self) -> &[u8] {
-        &self.bytes[..self.len]
-    }
-}
-
-impl Out for Rec {
-    fn put(&mut self, b: &[u8]) {
-        self.bytes[self.len..self.len + b.len()].copy_from_slice(b);
-        self.len += b.len();
-    }
-}
-
-/// A cursor (panics on truncated input: a broken build, not a runtime case).
-pub struct In<'a> {
-    /// The bytes.
-    pub data: &'a [u8],
-    /// Position.
-    pub pos: usize,
-}
-
-impl<'a> In<'a> {
-    /// At the start of `data`.
-    pub const fn new(data: &'a [u8]) -> Self {
-        Self { data, pos: 0 }
-    }
-    /// Takes `n` bytes.
-    pub fn take(&mut self, n: usize) -> &'a [u8] {
-        let s = &self.data[self.pos..self.pos + n];
-        self.pos += n;
-        s
-    }
-    /// A u8.
-    pub fn u8(&mut self) -> u8 {
-        self.take(1)[0]
-    }
-    /// A u16.
-    pub fn u16(&mut self) -> u16 {
-        let b = self.take(2);
-        u16::from_le_bytes([b[0], b[1]])
-    }
-    /// A u32.
-    pub fn u32(&mut self) -> u32 {
-        let b = self.take(4);
-        u32::from_le_bytes([b[0], b[1], b[2], b[3]])
-    }
-    /// An i32.
-    pub fn i32(&mut self) -> i32 {
-        self.u32() as i32
-    }
-    /// A name (u8 length + bytes).
-    pub fn name(&mut self) -> &'a str {
-        let n = self.u8() as usize;
-        core::str::from_utf8(self.take(n)).unwrap_or("?")
-    }
-}
+/// One 2D output record's buffer.
+pub type Rec = Record<MAX_RECORD>;
 
 /// Encodes a calibration pair.
-pub fn encode_cal<O: Out>(o: &mut O, c: &CalPoint) {
+pub fn encode_cal<O: Sink>(o: &mut O, c: &CalPoint) {
     o.u16(c.x_code);
     o.u16(c.y_code);
     o.u32(c.x_um as u32);
@@ -258,7 +160,7 @@ pub fn encode_cal<O: Out>(o: &mut O, c: &CalPoint) {
 }
 
 /// Decodes [`encode_cal`].
-pub fn decode_cal(r: &mut In) -> CalPoint {
+pub fn decode_cal(r: &mut Reader) -> CalPoint {
     CalPoint {
         x_code: r.u16(),
         y_code: r.u16(),
@@ -268,7 +170,7 @@ pub fn decode_cal(r: &mut In) -> CalPoint {
 }
 
 /// Encodes a frame.
-pub fn encode_frame<O: Out>(o: &mut O, f: &Frame) {
+pub fn encode_frame<O: Sink>(o: &mut O, f: &Frame) {
     o.u16(f.x_code);
     o.u16(f.y_code);
     o.u16(f.z1_code);
@@ -277,7 +179,7 @@ pub fn encode_frame<O: Out>(o: &mut O, f: &Frame) {
 }
 
 /// Decodes [`encode_frame`].
-pub fn decode_frame(r: &mut In) -> Frame {
+pub fn decode_frame(r: &mut Reader) -> Frame {
     Frame {
         x_code: r.u16(),
         y_code: r.u16(),
@@ -287,7 +189,7 @@ pub fn decode_frame(r: &mut In) -> Frame {
     }
 }
 
-fn encode_axis_fault<O: Out>(o: &mut O, f: &AxisFault) {
+fn encode_axis_fault<O: Sink>(o: &mut O, f: &AxisFault) {
     let axis = match f.axis {
         Axis::X => 0,
         Axis::Y => 1,
@@ -300,7 +202,7 @@ fn encode_axis_fault<O: Out>(o: &mut O, f: &AxisFault) {
     o.u8(axis << 4 | rail);
 }
 
-fn decode_axis_fault(r: &mut In) -> AxisFault {
+fn decode_axis_fault(r: &mut Reader) -> AxisFault {
     let b = r.u8();
     AxisFault {
         axis: if b >> 4 == 0 { Axis::X } else { Axis::Y },
@@ -313,7 +215,7 @@ fn decode_axis_fault(r: &mut In) -> AxisFault {
 }
 
 /// Encodes a reading: a tag, then its fields.
-pub fn encode_reading<O: Out>(o: &mut O, r: &Reading) {
+pub fn encode_reading<O: Sink>(o: &mut O, r: &Reading) {
     match *r {
         Reading::Lifted => o.u8(0),
         Reading::Landing { x_um, y_um } => {
@@ -339,7 +241,7 @@ pub fn encode_reading<O: Out>(o: &mut O, r: &Reading) {
 }
 
 /// Decodes [`encode_reading`].
-pub fn decode_reading(r: &mut In) -> Reading {
+pub fn decode_reading(r: &mut Reader) -> Reading {
     match r.u8() {
         0 => Reading::Lifted,
         1 => Reading::Landing {
@@ -366,7 +268,7 @@ const F_EDGE: u16 = 128;
 const F_FAULT: u16 = 256;
 
 /// Encodes every field of one output: a flag word, then the fields present.
-pub fn encode_output2d<O: Out>(o: &mut O, out: &Output2d) {
+pub fn encode_output2d<O: Sink>(o: &mut O, out: &Output2d) {
     let flags = (out.position.is_some() as u16 * F_POS)
         | (out.velocity.is_some() as u16 * F_VEL)
         | (out.place.is_some() as u16 * F_PLACE)
@@ -432,7 +334,7 @@ pub fn encode_output2d<O: Out>(o: &mut O, out: &Output2d) {
 }
 
 /// Decodes [`encode_output2d`].
-pub fn decode_output2d(r: &mut In) -> Output2d {
+pub fn decode_output2d(r: &mut Reader) -> Output2d {
     let flags = r.u16();
     let mut o = Output2d::default();
     if flags & F_POS != 0 {
@@ -452,7 +354,7 @@ pub fn decode_output2d(r: &mut In) -> Output2d {
     }
     if flags & F_ACTION != 0 {
         let kind = r.u8();
-        let ts = |r: &mut In| TimerSettings {
+        let ts = |r: &mut Reader| TimerSettings {
             psc: r.u16(),
             arr: r.u32(),
             ccr: r.u32(),

@@ -352,7 +352,7 @@ fn gen2d(dir: &Path, timer: BurstTimer, period: u32, manifest: &mut String) -> R
             inputs.put(r.as_slice());
             r.len = 0;
             plane2d::encode_output2d(&mut r, &out);
-            let back = plane2d::decode_output2d(&mut plane2d::In::new(r.as_slice()));
+            let back = plane2d::decode_output2d(&mut Reader::new(r.as_slice()));
             if back != out {
                 return Err(format!(
                     "2d {name}: output record does not survive the round trip"
