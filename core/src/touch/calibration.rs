@@ -531,6 +531,15 @@ mod tests {
         );
     }
 
+    /// Out-of-range results saturate to the side they overflow (cargo-mutants' `<` → `>` /
+    /// `==` in `saturate` survived the map tests, which stay in range).
+    #[test]
+    fn saturate_keeps_the_sign() {
+        assert_eq!(saturate(-(1 << 40)), i32::MIN);
+        assert_eq!(saturate(1 << 40), i32::MAX);
+        assert_eq!(saturate(-5), -5);
+    }
+
     #[test]
     fn isqrt_floors() {
         for n in 0..2_000i128 {
