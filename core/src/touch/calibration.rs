@@ -305,7 +305,9 @@ fn div_round(n: i64, d: i64) -> i64 {
 }
 
 fn saturate(v: i64) -> i32 {
-    i32::try_from(v).unwrap_or(if v < 0 { i32::MIN } else { i32::MAX })
+    // A clamp, not a try_from with a sign test: the same values, and no `<` whose `<=`
+    // twin (equal only at 0, which fits) would be an equivalent mutant.
+    v.clamp(i32::MIN as i64, i32::MAX as i64) as i32
 }
 
 #[cfg(test)]
