@@ -63,6 +63,30 @@ pub trait BurstOutput {
     /// Selects the IDTs to drive. The default ignores it: a board with one enable output is
     /// always progressive.
     fn set_drive(&mut self, _mode: DriveMode) {}
+
+    /// Sends one sample's changes in the order the port needs them: the drive mode first,
+    /// then the amplitude and the envelope (which the next start or pulse takes), then the
+    /// line. What the 1D and the 2D controllers' outputs both come down to.
+    fn send(
+        &mut self,
+        drive: Option<DriveMode>,
+        amplitude_permille: Option<u16>,
+        envelope: Option<Envelope>,
+        action: Option<GateAction>,
+    ) {
+        if let Some(mode) = drive {
+            self.set_drive(mode);
+        }
+        if let Some(a) = amplitude_permille {
+            self.set_amplitude(a);
+        }
+        if let Some(e) = envelope {
+            self.set_envelope(e);
+        }
+        if let Some(action) = action {
+            self.apply(action);
+        }
+    }
 }
 
 /// Length of the sliding window over which the duty cap holds, µs: in every window of this

@@ -842,18 +842,12 @@ impl<E: VelocityEstimator> Controller<E> {
 /// Sends one output's changes to a burst port: drive mode first, then amplitude and envelope,
 /// then the line.
 pub fn apply<B: BurstOutput>(output: &Output, out: &mut B) {
-    if let Some(mode) = output.drive {
-        out.set_drive(mode);
-    }
-    if let Some(a) = output.amplitude_permille {
-        out.set_amplitude(a);
-    }
-    if let Some(e) = output.envelope {
-        out.set_envelope(e);
-    }
-    if let Some(action) = output.action {
-        out.apply(action);
-    }
+    out.send(
+        output.drive,
+        output.amplitude_permille,
+        output.envelope,
+        output.action,
+    );
 }
 
 #[cfg(test)]
