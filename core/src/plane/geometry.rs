@@ -335,8 +335,10 @@ pub struct Seg {
 impl Seg {
     /// Prepares `s` (of non-zero length; a zero-length one measures to `s.a`).
     pub fn new(s: SegmentUm) -> Self {
-        let dx = (s.b.x_um as i64 - s.a.x_um as i64) as f32;
-        let dy = (s.b.y_um as i64 - s.a.y_um as i64) as f32;
+        // Exact for coordinates within ±MAX_COORD_UM (< 2^24), as the i64 difference was,
+        // without the M4's i64 → f32 library call.
+        let dx = s.b.x_um as f32 - s.a.x_um as f32;
+        let dy = s.b.y_um as f32 - s.a.y_um as f32;
         let len2 = dx * dx + dy * dy;
         Self {
             ax: s.a.x_um as f32,

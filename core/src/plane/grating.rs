@@ -97,7 +97,8 @@ impl OrientedGrating {
         {
             return Err(OrientedError::Normal { x, y });
         }
-        let len = libm::sqrt((x as f64) * (x as f64) + (y as f64) * (y as f64));
+        let (xf, yf) = (x as f32, y as f32);
+        let len = libm::sqrtf(xf * xf + yf * yf);
         let (inner, _) = Compiled::compile(
             &Texture::Grating(self.grating),
             timer,
@@ -106,8 +107,8 @@ impl OrientedGrating {
             sample_period_us,
         )?;
         Ok(CompiledOriented {
-            nx: (x as f64 / len) as f32,
-            ny: (y as f64 / len) as f32,
+            nx: xf / len,
+            ny: yf / len,
             inner,
         })
     }
