@@ -1436,8 +1436,8 @@ mod tests {
     /// bound of its target (the lead v × 5.05 ms ahead of the side): late by f ∈ [−E − Λ − 1,
     /// E + Λ + v·T + 1] µm, E the stroke's largest noise across the side, Λ the lead's error
     /// on the two readings before the pulse, now over 5.15 ms (the lead plus the stop's
-    /// reading). Measured: −25.5 to +24.0 µm (noiseless: 0.1·v·T to 0.9·v·T, the target
-    /// aimed at mid-reading). Seen failing (2026-11-29) without the extra reading's travel in
+    /// reading). Measured: −25.5 to +24.0 µm (noiseless 1.0 to 18.0 µm: 0.2 to 0.9 v·T above
+    /// 20 mm/s, the target aimed at mid-reading). Seen failing (2026-11-29) without the extra reading's travel in
     /// the lead: every pulse one reading later, 81 of 192 out of the bound (noiseless at
     /// 200 mm/s 24–38 µm late against 21 µm; −25.5 to +44.0 µm in all); and, with the pulse
     /// asked at once instead of after a stop (`Gate::pulse` refuses while a burst runs), no
