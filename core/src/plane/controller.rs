@@ -417,9 +417,10 @@ impl<E: VelocityEstimator> Controller2d<E> {
             return false;
         };
         let (fire, limits) = (*fire, active.limits);
-        let busy = self.gate_busy(t_us);
         let lead_um = edges.lead_um(velocity);
-        let lead_um = if busy {
+        // Only an edge in its zone reads the lead (the reading that enters a zone is farther
+        // from its edge than the longest lead): out of every zone this costs one test.
+        let lead_um = if self.edges.in_zone() && self.gate_busy(t_us) {
             preempt_lead_um(lead_um, velocity, self.sample_period_us)
         } else {
             lead_um
