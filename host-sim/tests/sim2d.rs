@@ -457,3 +457,95 @@ fn a_path_file_runs_with_its_summary_and_chart() {
         "{err}"
     );
 }
+
+/// The shipped fig. 12 screen (scenes/2d-fig12.toml, loaded as the CLI loads it, through
+/// `load_2d_for_board` for the F446): a stroke along y = 20 mm from (5, 20) to (75, 20) at
+/// 100 mm/s, three seeds. Every window there runs a burst (20 Hz, 80 Hz, ridges) over a 1 kHz
+/// background, so each of the four outline sides crossed (x = 30, 35, 60, 65 mm: window 0's
+/// right side, edge 1; window 1's left, 7, and right, 5; window 2's left, 11) must stop the
+/// burst under the finger and pulse: four pulses, none skipped, each after an `Off` on the
+/// frame before it with the burst running up to there, no pulse over a running burst, and
+/// each placed as over an off window — fired before its side by the lead less a frame's
+/// travel, within E + Λ + v·F of it, Λ now over the lead's time plus the stop's frame.
+///
+/// Before edges preempted bursts (main's release binary at 16:02, the same stroke through the
+/// CLI: `edge_pulses` 0, `edges_skipped` 4) its first assertion fails.
+#[test]
+fn the_fig12_screen_fires_every_outline_it_crosses_over_running_bursts() {
+    let file = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/2d-fig12.toml");
+    let text = std::fs::read_to_string(file).unwrap();
+    let frame_us = sim2d::board_frame_period_us(F446).unwrap();
+    let config = saw_core::scene_file::load_2d_for_board(
+        "2d-fig12.toml",
+        &text,
+        host_sim::sim::burst_timer(F446),
+        frame_us,
+    )
+    .unwrap();
+    let (speed, pulse_s) = (100.0, 0.010);
+    let e_mm = noise_e_um() / 1e3;
+    for seed in 1..=3 {
+        let t = Trajectory2d::line(
+            PointUm::new(5_000.0, 20_000.0),
+            PointUm::new(75_000.0, 20_000.0),
+            speed * 1e3,
+        )
+        .unwrap();
+        let mut p = Params2d::new(F446, t, 70.0 / speed + 0.05, config.clone());
+        p.seed = seed;
+        let r = sim2d::run(&p).unwrap();
+        let f_s = r.frame_period_us as f64 * 1e-6;
+        let ctx = format!("seed {seed}");
+        assert_eq!(r.telemetry.edges_skipped, 0, "{ctx}");
+        let sides = [(1u8, 30.0), (7, 35.0), (5, 60.0), (11, 65.0)];
+        assert_eq!(
+            r.edge_pulses.len(),
+            sides.len(),
+            "{ctx}: {:?}",
+            r.edge_pulses
+        );
+        let lead = speed * (pulse_s / 2.0 + f_s / 2.0);
+        let lam = 10.0 * (pulse_s / 2.0 + 3.0 * f_s / 2.0);
+        for (ev, (edge, side_x)) in r.edge_pulses.iter().zip(sides) {
+            assert_eq!(ev.edge, edge, "{ctx}");
+            let before = side_x - ev.x_mm;
+            let target = lead - speed * f_s;
+            let slack = e_mm + lam + speed * f_s + 0.001;
+            assert!(
+                (before - target).abs() <= slack,
+                "{ctx}: edge {edge} fired {before:.4} mm before it, target {target:.4} ± {slack:.4}"
+            );
+            // The burst under the finger stopped on the frame before, running up to there.
+            let k = r
+                .actions
+                .iter()
+                .position(|(t, a)| *t == ev.t_s && matches!(a, GateAction::Pulse(_)))
+                .unwrap();
+            assert!(k >= 2, "{ctx}");
+            let (t_off, off) = r.actions[k - 1];
+            assert_eq!(off, GateAction::Off, "{ctx}");
+            assert!(
+                (ev.t_s - t_off - f_s).abs() < 1e-9,
+                "{ctx}: stopped at {t_off}"
+            );
+            assert!(
+                matches!(
+                    r.actions[k - 2].1,
+                    GateAction::Start(_) | GateAction::Update(_) | GateAction::Pulse(_)
+                ),
+                "{ctx}: {:?}",
+                r.actions[k - 2]
+            );
+        }
+        // No pulse ever reached the port over a running burst.
+        let mut running = false;
+        for (t, a) in &r.actions {
+            match a {
+                GateAction::Start(_) => running = true,
+                GateAction::Off => running = false,
+                GateAction::Pulse(_) => assert!(!running, "{ctx}: pulse over a burst at {t}"),
+                GateAction::Update(_) => {}
+            }
+        }
+    }
+}

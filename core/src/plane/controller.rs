@@ -16,6 +16,7 @@ use crate::burst::{BurstTimer, SafetyLimits, TimerSettings};
 use crate::controller::{WindowEstimator, DEFAULT_WINDOW, RECOVERY_SAMPLES};
 use crate::gate::{BurstOutput, DriveMode, Envelope, Gate, GateAction};
 use crate::texture::compiled::{Moment, Need, Render, Request, Want};
+use crate::texture::lines::MAX_LINE_LEAD_UM;
 use crate::touch::fault::AxisFault;
 use crate::touch::frame::Reading;
 use crate::velocity::{LsqSlope, Median3, VelocityEstimator};
@@ -149,6 +150,8 @@ pub struct Controller2d<E: VelocityEstimator = WindowEstimator<DEFAULT_WINDOW>> 
     last_reading_us: Option<u32>,
     /// Start of the running edge pulse while in its pulse + rest window.
     edge_pulse_us: Option<u32>,
+    /// A crossing whose texture's burst was stopped: its pulse goes out on the next reading.
+    edge_pending: Option<PendingEdge>,
     amplitude: Option<u16>,
     /// The permille last asked (u16::MAX: none since the cap changed).
     amplitude_asked: u16,
@@ -200,6 +203,7 @@ impl<E: VelocityEstimator> Controller2d<E> {
             good_run: 0,
             last_reading_us: None,
             edge_pulse_us: None,
+            edge_pending: None,
             amplitude: None,
             amplitude_asked: u16::MAX,
             drive_pending: false,
@@ -389,6 +393,16 @@ impl<E: VelocityEstimator> Controller2d<E> {
 
     /// Edges: fires a pulse on a crossing and owns the gate during the pulse and its rest.
     /// True while they own it (the window's texture is not asked).
+    ///
+    /// A crossing preempts the window's texture: a running burst (or a ridge's pulse) is
+    /// stopped through the gate on the reading that finds the crossing, and the edge's pulse
+    /// goes out on the next reading ([`PendingEdge`]), the line low in between. The gate takes
+    /// one action a reading and a `Pulse` only from off, so the stop costs one reading; the
+    /// crossing is therefore looked for one reading's travel further ahead while the gate is
+    /// busy ([`preempt_lead_um`]), and the pulse lands where it would over an off window.
+    /// Skipped and counted (`edges_skipped`): a crossing inside an edge's pulse + rest, one
+    /// whose next reading comes more than [`PENDING_READINGS`] periods after the stop, and a
+    /// pulse the duty cap has no room for.
     fn edges_step(
         &mut self,
         p: PointUm,
@@ -403,24 +417,69 @@ impl<E: VelocityEstimator> Controller2d<E> {
             return false;
         };
         let (fire, limits) = (*fire, active.limits);
-        let fired = self.edges.update(edges, p, edges.lead_um(velocity));
+        let lead_um = edges.lead_um(velocity);
+        // Only an edge in its zone reads the lead (the reading that enters a zone is farther
+        // from its edge than the longest lead): out of every zone this costs one test.
+        let lead_um = if self.edges.in_zone() && self.gate_busy(t_us) {
+            preempt_lead_um(lead_um, velocity, self.sample_period_us)
+        } else {
+            lead_um
+        };
+        let fired = self.edges.update(edges, p, lead_um);
         if let Some(start) = self.edge_pulse_us {
             if t_us.wrapping_sub(start) < fire.window_us {
                 if fired.is_some() {
-                    self.telemetry.edges_skipped = self.telemetry.edges_skipped.wrapping_add(1);
+                    self.count_edge_skipped();
                 }
                 return true;
             }
             self.edge_pulse_us = None;
         }
-        let Some(edge) = fired else {
-            return false;
+        let edge = match (self.edge_pending.take(), fired) {
+            (Some(pending), fired) => {
+                let waited_us = t_us.wrapping_sub(pending.stopped_us);
+                if waited_us > self.sample_period_us.saturating_mul(PENDING_READINGS) {
+                    // A reading lost after the stop: the pulse would land that much late.
+                    self.count_edge_skipped();
+                    match fired {
+                        Some(e) => e,
+                        None => return false,
+                    }
+                } else {
+                    if fired.is_some() {
+                        // Another edge on the very next reading: one pulse for both.
+                        self.count_edge_skipped();
+                    }
+                    pending.edge
+                }
+            }
+            (None, Some(e)) => e,
+            (None, None) => return false,
         };
+        if self.gate_busy(t_us) {
+            // Stop the texture's burst (or ridge pulse) now: the gate records its on-time and
+            // the line goes low at once (`GateAction::Off`); the pulse goes out next reading.
+            let action = if self.gate.running().is_some() {
+                self.gate.request(None, t_us, &self.timer, &limits)
+            } else {
+                self.gate.end_pulse(t_us, &limits)
+            };
+            self.count_action(action);
+            if action.is_some() {
+                self.edge_pending = Some(PendingEdge {
+                    edge,
+                    stopped_us: t_us,
+                });
+                out.action = action;
+                return true;
+            }
+            // Nothing to stop after all (cannot happen: busy means running or a pulse on).
+        }
         let action = self.gate.pulse(fire.pulse, t_us, &self.timer, &limits);
         self.count_action(action);
         if !matches!(action, Some(GateAction::Pulse(_))) {
-            // A burst runs, or the duty cap has no room: a pulse now would break it.
-            self.telemetry.edges_skipped = self.telemetry.edges_skipped.wrapping_add(1);
+            // The duty cap has no room: a pulse now would break it. The texture takes over.
+            self.count_edge_skipped();
             return false;
         }
         self.edge_pulse_us = Some(t_us);
@@ -430,6 +489,16 @@ impl<E: VelocityEstimator> Controller2d<E> {
         out.envelope = Some(fire.envelope);
         out.amplitude_permille = self.set_amplitude(fire.amplitude_permille);
         true
+    }
+
+    /// True when the line is busy with a texture: a periodic burst, or a one-pulse still on
+    /// (an ended one is caught up by the next gate call: not busy).
+    fn gate_busy(&self, t_us: u32) -> bool {
+        self.gate.running().is_some() || (!self.gate.steady(None) && self.gate.quiet(None, t_us))
+    }
+
+    fn count_edge_skipped(&mut self) {
+        self.telemetry.edges_skipped = self.telemetry.edges_skipped.wrapping_add(1);
     }
 
     /// The window's texture asks; the gate answers within the caps.
@@ -568,6 +637,7 @@ impl<E: VelocityEstimator> Controller2d<E> {
         self.place = None;
         self.screen.reset();
         self.edges.reset();
+        self.edge_pending = None;
         if let Some(a) = self.active.as_mut() {
             a.scene.textures.iter_mut().for_each(PlaneCompiled::reset);
         }
@@ -591,6 +661,42 @@ impl<E: VelocityEstimator> Controller2d<E> {
         if action.is_some() {
             self.telemetry.gate_actions = self.telemetry.gate_actions.wrapping_add(1);
         }
+    }
+}
+
+/// An edge crossing waiting for its pulse: the texture's burst was stopped at `stopped_us`.
+#[derive(Clone, Copy, Debug)]
+struct PendingEdge {
+    edge: u8,
+    stopped_us: u32,
+}
+
+/// A pending crossing fires on the next reading if it comes within this many sample periods of
+/// the stop, else it is skipped: each period later puts the pulse one more period's travel
+/// past its target (the bound docs/plane.md states allows one).
+const PENDING_READINGS: u32 = 2;
+
+/// The lead while a burst must first be stopped: one more sample period's travel (the stop's
+/// reading), at most [`MAX_LINE_LEAD_UM`] long, as every lead.
+fn preempt_lead_um(
+    lead_um: (f32, f32),
+    velocity: Option<VelocityUmS>,
+    sample_period_us: u32,
+) -> (f32, f32) {
+    let Some(v) = velocity else {
+        return lead_um;
+    };
+    let period_s = sample_period_us as f32 * 1e-6;
+    let (x, y) = (
+        lead_um.0 + v.vx_um_s as f32 * period_s,
+        lead_um.1 + v.vy_um_s as f32 * period_s,
+    );
+    let len = libm::sqrtf(x * x + y * y);
+    let max = MAX_LINE_LEAD_UM as f32;
+    if len > max {
+        (x * max / len, y * max / len)
+    } else {
+        (x, y)
     }
 }
 
@@ -1159,10 +1265,21 @@ mod tests {
         }
         // 5 mm of zone at 10 µm a reading.
         assert_eq!(near, 501);
-        // The same bursts either way (the edge's pulse is skipped: the 80 Hz burst runs).
+        // The same bursts either way, but for the edge's preemption: the 80 Hz burst stopped,
+        // the edge's pulse on the next reading, the same burst started again after its rest.
         let actions = |o: &[Output2d]| o.iter().map(|o| o.action).collect::<StdVec<_>>();
-        assert_eq!(actions(&outs), actions(&outs_e));
-        assert_eq!(e.telemetry().edges_skipped, 1);
+        let (plain, mut edged) = (actions(&outs), actions(&outs_e));
+        let stop = edged
+            .iter()
+            .position(|a| *a == Some(GateAction::Off))
+            .unwrap();
+        assert!(matches!(edged[stop + 1], Some(GateAction::Pulse(_))));
+        let restart = stop + 2 + edged[stop + 2..].iter().position(Option::is_some).unwrap();
+        assert_eq!(edged[restart], plain[0]);
+        edged[stop..=restart].fill(None);
+        assert_eq!(plain, edged);
+        let tm = e.telemetry();
+        assert_eq!((tm.edge_pulses, tm.edges_skipped), (1, 0));
     }
 
     /// With the touch sensor in front: after a rail fault the carrier comes back on the
@@ -1268,5 +1385,255 @@ mod tests {
         assert_eq!(ridges, 6);
         assert_eq!(pulses(&back[entry..]), ridges);
         assert_eq!(c.telemetry().ridges_skipped, skipped);
+    }
+
+    /// Preemption scene: a constant 80 Hz window, (40, 20)–(60, 40) mm, whose outline pulses
+    /// (sides from the lower-left corner: bottom 0, right 1, top 2, left 3), over a constant
+    /// 1 kHz background: a burst runs on both sides of every side.
+    fn textured_edge_scene() -> Config2d {
+        let mut cfg = config(&[window(rect(40_000, 20_000, 60_000, 40_000), hz(80), true)]);
+        cfg.scene.background = hz(1_000);
+        cfg
+    }
+
+    /// A straight stroke as [`stroke`], with each reading's true position and its noise, µm.
+    fn stroke_truth(
+        a: (f64, f64),
+        b: (f64, f64),
+        v_mm_s: f64,
+        sigma: f64,
+        noise: &mut Noise,
+    ) -> StdVec<(Reading, (f64, f64), (f64, f64))> {
+        let len = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
+        let step = v_mm_s * PERIOD_US as f64 / 1000.0;
+        let n = (len / step).ceil() as usize;
+        (0..=n)
+            .map(|k| {
+                let f = (k as f64 * step / len).min(1.0);
+                let truth = (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1));
+                let e = (noise.gauss() * sigma, noise.gauss() * sigma);
+                let r = down(PointUm::new(
+                    (truth.0 + e.0).round() as i32,
+                    (truth.1 + e.1).round() as i32,
+                ));
+                (r, truth, e)
+            })
+            .collect()
+    }
+
+    /// Over running bursts (1 kHz outside, 80 Hz inside), a stroke in and out of an outlined
+    /// window fires one pulse at each side, on the side crossed: the burst is stopped (an
+    /// `Off`) on the reading before the pulse and is not restarted until the pulse's rest has
+    /// passed, when the texture of the place then starts again; nothing skipped. Four
+    /// directions × 20/50/100/200 mm/s, noiseless (3 phases) and at 2 LSB (3 seeds).
+    ///
+    /// Placement: the true finger at the pulse's reading lies within docs/plane.md's fire
+    /// bound of its target (the lead v × 5.05 ms ahead of the side): late by f ∈ [−E − Λ − 1,
+    /// E + Λ + v·T + 1] µm, E the stroke's largest noise across the side, Λ the lead's error
+    /// on the two readings before the pulse, now over 5.15 ms (the lead plus the stop's
+    /// reading). Measured: −25.5 to +24.0 µm (noiseless 1.0 to 18.0 µm: 0.2 to 0.9 v·T above
+    /// 20 mm/s, the target aimed at mid-reading). Seen failing (2026-11-29) without the extra reading's travel in
+    /// the lead: every pulse one reading later, 81 of 192 out of the bound (noiseless at
+    /// 200 mm/s 24–38 µm late against 21 µm; −25.5 to +44.0 µm in all); and, with the pulse
+    /// asked at once instead of after a stop (`Gate::pulse` refuses while a burst runs), no
+    /// pulse at all.
+    #[test]
+    fn an_edge_over_a_running_burst_stops_it_and_pulses_once_each_way() {
+        use std::format;
+        let (lead_s, ext_s) = (5_050e-6, 5_150e-6);
+        let (mut lo, mut hi) = (f64::MAX, f64::MIN);
+        let mut fired_total = 0;
+        // (from, to) mm, the sides crossed in order with their coordinate along the stroke.
+        let strokes: [((f64, f64), (f64, f64), [(u8, f64); 2]); 4] = [
+            ((30.0, 30.0), (70.0, 30.0), [(3, 40.0), (1, 60.0)]),
+            ((70.0, 30.0), (30.0, 30.0), [(1, 60.0), (3, 40.0)]),
+            ((50.0, 10.0), (50.0, 50.0), [(0, 20.0), (2, 40.0)]),
+            ((50.0, 50.0), (50.0, 10.0), [(2, 40.0), (0, 20.0)]),
+        ];
+        for (from, to, sides) in strokes {
+            let along_x = from.1 == to.1;
+            let dir = if along_x {
+                to.0 - from.0
+            } else {
+                to.1 - from.1
+            }
+            .signum();
+            let coord = |q: (f64, f64)| if along_x { q.0 } else { q.1 };
+            for v in [20.0, 50.0, 100.0, 200.0] {
+                for (lsb, seed) in [(0.0, 0), (0.0, 1), (0.0, 2), (2.0, 1), (2.0, 2), (2.0, 3)] {
+                    let ctx = format!("{from:?} → {to:?} at {v} mm/s, {lsb} LSB seed {seed}");
+                    let mut noise = Noise::new(seed);
+                    // Each seed starts 0.3 of a reading's travel further back: the readings
+                    // fall at other phases against the side.
+                    let back_mm = seed as f64 * 0.3 * v * PERIOD_US as f64 * 1e-6;
+                    let from = if along_x {
+                        (from.0 - dir * back_mm, from.1)
+                    } else {
+                        (from.0, from.1 - dir * back_mm)
+                    };
+                    let s = stroke_truth(
+                        (from.0 * 1e3, from.1 * 1e3),
+                        (to.0 * 1e3, to.1 * 1e3),
+                        v,
+                        sigma_um(lsb),
+                        &mut noise,
+                    );
+                    let e_um = s
+                        .iter()
+                        .map(|(_, _, e)| coord(*e).abs())
+                        .fold(0.0, f64::max);
+                    let mut c = loaded(&textured_edge_scene());
+                    let mut t = 0;
+                    let outs = feed(&mut c, &mut t, s.iter().map(|(r, _, _)| *r));
+                    let fired: StdVec<usize> = (0..outs.len())
+                        .filter(|&k| matches!(outs[k].action, Some(GateAction::Pulse(_))))
+                        .collect();
+                    assert_eq!(fired.len(), 2, "{ctx}");
+                    // The line's protocol: a Pulse only from off; a burst never restarted
+                    // inside an edge's pulse + rest (20 ms).
+                    let mut running = false;
+                    let mut last_pulse: Option<usize> = None;
+                    for (k, o) in outs.iter().enumerate() {
+                        match o.action {
+                            Some(GateAction::Start(_)) => {
+                                running = true;
+                                if let Some(j) = last_pulse {
+                                    assert!((k - j) as u32 * PERIOD_US >= 20_000, "{ctx}");
+                                }
+                            }
+                            Some(GateAction::Off) => running = false,
+                            Some(GateAction::Pulse(_)) => {
+                                assert!(!running, "{ctx}: a pulse over a running burst");
+                                last_pulse = Some(k);
+                            }
+                            Some(GateAction::Update(_)) => assert!(running, "{ctx}"),
+                            None => {}
+                        }
+                    }
+                    for (&k, &(side, line_mm)) in fired.iter().zip(&sides) {
+                        assert_eq!(outs[k].edge, Some(side), "{ctx}");
+                        assert_eq!(outs[k].envelope, Some(Envelope::Triangular), "{ctx}");
+                        // Stopped on the reading before; the burst ran up to there.
+                        assert_eq!(outs[k - 1].action, Some(GateAction::Off), "{ctx}");
+                        assert!(
+                            outs[..k - 1]
+                                .iter()
+                                .rev()
+                                .find_map(|o| o.action)
+                                .is_some_and(|a| matches!(
+                                    a,
+                                    GateAction::Start(_) | GateAction::Update(_)
+                                )),
+                            "{ctx}: no burst ran before the stop"
+                        );
+                        // The texture of the place after the rest starts again.
+                        let restart = outs[k + 1..]
+                            .iter()
+                            .find(|o| o.action.is_some())
+                            .unwrap_or_else(|| panic!("{ctx}: nothing after the pulse"));
+                        let Some(GateAction::Start(b)) = restart.action else {
+                            panic!("{ctx}: {restart:?}");
+                        };
+                        let inside = restart.place == Some(Place::Window(0));
+                        assert_eq!(millihz(b), if inside { 80_000 } else { 1_000_000 });
+                        // Placement against the target, µm late.
+                        let ahead = (line_mm * 1e3 - coord(s[k].1)) * dir;
+                        let late = v * 1e3 * lead_s - ahead;
+                        let lam = [k - 2, k - 1]
+                            .iter()
+                            .map(|&j| {
+                                let w = outs[j].velocity.expect("a velocity near the side");
+                                let vn = if along_x { w.vx_um_s } else { w.vy_um_s } as f64 * dir;
+                                (vn - v * 1e3).abs() * ext_s
+                            })
+                            .fold(0.0, f64::max);
+                        let v_t = v * 1e3 * PERIOD_US as f64 * 1e-6;
+                        let (b_lo, b_hi) = (-e_um - lam - 1.0, e_um + lam + v_t + 1.0);
+                        assert!(
+                            late >= b_lo && late <= b_hi,
+                            "{ctx}: side {side} fired {late:.1} um late, bound [{b_lo:.1}, {b_hi:.1}]"
+                        );
+                        (lo, hi) = (lo.min(late), hi.max(late));
+                        fired_total += 1;
+                    }
+                    let tm = c.telemetry();
+                    assert_eq!((tm.edge_pulses, tm.edges_skipped), (2, 0), "{ctx}");
+                }
+            }
+        }
+        assert_eq!(fired_total, 192);
+        std::println!("192 pulses over running bursts: {lo:.1} to {hi:.1} um late of the target");
+    }
+
+    /// With no room in the duty window (bursts at 40 % under a 40 % cap for over a window),
+    /// the burst is stopped, the crossing's pulse refused by the gate, skipped and counted, and
+    /// the texture takes the line back. (Seen failing with the refusal not counted.)
+    #[test]
+    fn an_edge_the_duty_cap_has_no_room_for_is_skipped_and_counted() {
+        let mut cfg = textured_edge_scene();
+        cfg.limits.max_duty_permille = 400;
+        let mut c = loaded(&cfg);
+        let mut t = 0;
+        let mut noise = Noise::new(5);
+        let outs = feed(
+            &mut c,
+            &mut t,
+            stroke(
+                (20_000.0, 30_000.0),
+                (80_000.0, 30_000.0),
+                50.0,
+                0.0,
+                &mut noise,
+            ),
+        );
+        assert_eq!(pulses(&outs), 0);
+        let tm = c.telemetry();
+        assert_eq!((tm.edge_pulses, tm.edges_skipped), (0, 2));
+        // Each stop is followed, later, by the texture's burst again.
+        let stops: StdVec<usize> = (0..outs.len())
+            .filter(|&k| outs[k].action == Some(GateAction::Off))
+            .collect();
+        assert_eq!(stops.len(), 2, "{stops:?}");
+        for k in stops {
+            assert!(outs[k + 1..]
+                .iter()
+                .any(|o| matches!(o.action, Some(GateAction::Start(_)))));
+        }
+    }
+
+    /// A crossing whose burst was stopped waits for the next reading only if it comes within
+    /// two sample periods: after a gap of three, it is skipped and counted, and the texture
+    /// restarts on that reading. (Seen failing with no bound on the wait: the pulse fired
+    /// 200 µs late, 40 µm past its target at 200 mm/s.)
+    #[test]
+    fn a_pending_edge_is_skipped_after_a_lost_reading() {
+        let mut c = loaded(&textured_edge_scene());
+        let mut noise = Noise::new(3);
+        let s = stroke(
+            (30_000.0, 30_000.0),
+            (50_000.0, 30_000.0),
+            200.0,
+            0.0,
+            &mut noise,
+        );
+        let mut t = 0;
+        let mut stopped = false;
+        for r in s {
+            let out = c.on_reading(t, r);
+            t += PERIOD_US;
+            assert!(!matches!(out.action, Some(GateAction::Pulse(_))));
+            if stopped {
+                assert!(matches!(out.action, Some(GateAction::Start(_))), "{out:?}");
+                break;
+            }
+            if out.action == Some(GateAction::Off) {
+                stopped = true;
+                // Two readings lost.
+                t += 2 * PERIOD_US;
+            }
+        }
+        assert!(stopped);
+        let tm = c.telemetry();
+        assert_eq!((tm.edge_pulses, tm.edges_skipped), (0, 1));
     }
 }
