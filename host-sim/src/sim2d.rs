@@ -400,7 +400,7 @@ pub const DEMO_FREE_EDGE: [i32; 4] = [46, 27, 70, 27];
 /// bursts at 220 and 90 Hz), two off buttons whose outlines pulse when crossed, a window of
 /// position-phase ridges along y (normal (1, 0), λ 2 mm), a free edge between the buttons, the
 /// background off, the default band (200 µm), pulse (10 ms triangle) and re-arm (100 µm).
-/// Edges sit over off areas: over a running burst an edge's pulse is skipped (docs/plane.md).
+/// An edge crossed over a running burst stops it and pulses on the next reading (docs/plane.md).
 pub fn demo_config() -> Config2d {
     let constant = |hz: u32| {
         PlaneTexture::Plain(Texture::Constant(BurstCommand {

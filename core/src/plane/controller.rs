@@ -75,7 +75,8 @@ pub struct Telemetry2d {
     pub clamped: u32,
     /// Edge pulses fired.
     pub edge_pulses: u32,
-    /// Edge crossings without a pulse, to keep the duty cap (a pulse's rest, a burst running).
+    /// Edge crossings without a pulse: inside an edge's pulse and rest, a reading too late
+    /// after the burst it stopped, or no room under the duty cap.
     pub edges_skipped: u32,
     /// Oriented-grating ridge pulses fired.
     pub ridge_pulses: u32,

@@ -69,8 +69,9 @@ fn outline(k: i32) -> Polygon {
     p.unwrap_or_else(|_| unreachable!("the grid's outlines are valid"))
 }
 
-/// The windows' textures, window 0 first: off under both flagged outlines (an edge over a
-/// running burst is skipped, docs/plane.md), then every kind a window may hold.
+/// The windows' textures, window 0 first: off under both flagged outlines, then every kind a
+/// window may hold (an edge crossed over a running burst stops it and pulses on the next
+/// reading, docs/plane.md).
 fn texture(k: i32) -> PlaneTexture {
     let oriented = |normal, render| {
         PlaneTexture::Oriented(OrientedGrating {
