@@ -618,7 +618,6 @@ impl Online {
             self.flush_lags();
             self.lag_minute = minute;
         }
-        self.minutes[minute].vel_n += 1;
         self.lag_pending.push((self.true_at, est as f32 * 1e-3));
         if self.lag_pending.len() == LAG_BATCH {
             self.add_pending_lags();
@@ -642,11 +641,16 @@ impl Online {
         self.lag_pending.clear();
     }
 
+    /// Adds this block's lag sums, and its estimates' count, to its minute's and the run's.
+    /// (The block's estimates are all of its minute, so the minute counts them here, not one
+    /// by one.)
     fn flush_lags(&mut self) {
         self.add_pending_lags();
         let minute = self.lag_minute as u64 * MINUTE_US;
-        let block = self.lag_block;
-        let sums = &mut self.minute(minute).lag_sums;
+        let (block, block_n) = (self.lag_block, self.block_n);
+        let minute = self.minute(minute);
+        minute.vel_n += block_n as usize;
+        let sums = &mut minute.lag_sums;
         for (sum, acc) in sums.iter_mut().zip(&block) {
             *sum += *acc as f64;
         }

@@ -430,13 +430,24 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
     /// [`AdcModel::samples_into`], for a block of periods: the samples do not depend on the
     /// loop, so they can be drawn ahead).
     pub fn step_sampled(&mut self, k: u64, state: State, sample: Option<Sample>) -> TracePoint {
+        let mut point = BLANK_POINT;
+        self.step_into(k, state, sample, &mut point);
+        point
+    }
+
+    /// [`Self::step_sampled`] writing its trace point into `point` (every field), so a
+    /// pipelined run builds it in its chunk's slot instead of copying it there: the copy
+    /// loaded the point's fields right after their one-by-one stores, which the CPU cannot
+    /// forward to wider loads, and waited for them.
+    #[inline(always)]
+    fn step_into(&mut self, k: u64, state: State, sample: Option<Sample>, point: &mut TracePoint) {
         let t_us = k * self.period_us as u64;
         let latency = self.action_latency_us as u64;
         let State {
             position_um,
             velocity_um_s,
         } = state;
-        let mut point = TracePoint {
+        *point = TracePoint {
             t_us,
             true_um: position_um,
             true_vel_um_s: velocity_um_s,
@@ -463,8 +474,16 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
                 self.tm.apply(self.clk(t_us + latency), a);
                 point.action = Some(a);
             }
-            point.meas_um = out.position_um;
-            point.est_vel_um_s = out.velocity_um_s;
+            // The core stores each half of these options (tag, value) on its own. Copied
+            // whole, the two were one 16-byte load, which cannot take its bytes from those
+            // stores and waits for them to reach the cache; taken apart (the point's already
+            // hold None), each load reads one store.
+            if let Some(m) = out.position_um {
+                point.meas_um = Some(m);
+            }
+            if let Some(v) = out.velocity_um_s {
+                point.est_vel_um_s = Some(v);
+            }
             point.region = out.region;
             point.line = out.line;
             self.fault = out.fault;
@@ -488,9 +507,24 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
             point.gate = self.tm.is_high();
         }
         point.fault = self.fault;
-        point
     }
 }
+
+/// A trace point's every field empty, for slots [`ClosedLoop::step_into`] fills.
+const BLANK_POINT: TracePoint = TracePoint {
+    t_us: 0,
+    true_um: 0.0,
+    true_vel_um_s: 0.0,
+    sampled: false,
+    code: None,
+    meas_um: None,
+    est_vel_um_s: None,
+    region: None,
+    gate: false,
+    fault: None,
+    action: None,
+    line: None,
+};
 
 /// The settings the planner gives each region's texture (None where they depend on the motion,
 /// or for off).
@@ -696,17 +730,19 @@ pub fn stream_on(
                 }
             });
             for mut c in from_feeder {
-                c.points.clear();
+                // Each point is written in its slot (a chunk's slots are reused as they are;
+                // every field is written).
+                c.points.resize(c.states.len(), BLANK_POINT);
                 c.edges.clear();
                 c.ends.clear();
-                for (i, (&state, &sample)) in c.states.iter().zip(&c.samples).enumerate() {
+                let periods = c.states.iter().zip(&c.samples).zip(&mut c.points);
+                for (i, ((&state, &sample), point)) in periods.enumerate() {
                     let k = c.k0 + i as u64;
-                    let point = lp.step_sampled(k, state, sample);
+                    lp.step_into(k, state, sample, point);
                     lp.tm.take_settled(&mut edges, &mut levels);
                     if let Some(r) = &mut recorder {
-                        record(r, &point, &edges, &levels);
+                        record(r, point, &edges, &levels);
                     }
-                    c.points.push(point);
                     c.edges.extend_from_slice(&edges);
                     c.ends.push(c.edges.len() as u32);
                     at_sample(k);

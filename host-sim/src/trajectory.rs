@@ -82,19 +82,51 @@ pub struct Piece {
 /// [`Trajectory::states_into`] share it, so a block gives the very same values.
 #[inline(always)]
 fn triangle_at(a_um: f64, b_um: f64, speed_um_s: f64, t: f64) -> (f64, f64) {
+    match triangle_legs(a_um, b_um, speed_um_s) {
+        None => (a_um, 0.0),
+        Some((dir, leg_s)) => {
+            let phase = triangle_phase(t, leg_s);
+            triangle_in_phase(a_um, b_um, speed_um_s, dir, leg_s, phase, t)
+        }
+    }
+}
+
+/// A moving triangle's direction from `a_um` to `b_um` (±1) and the time one leg takes, s
+/// (None when it stands still).
+#[inline(always)]
+fn triangle_legs(a_um: f64, b_um: f64, speed_um_s: f64) -> Option<(f64, f64)> {
     let span = (b_um - a_um).abs();
     if span == 0.0 || speed_um_s <= 0.0 {
-        (a_um, 0.0)
+        None
     } else {
-        let dir = (b_um - a_um).signum();
-        let leg = span / speed_um_s;
-        let phase = (t / leg) as u64;
-        let within = t - phase as f64 * leg;
-        if phase.is_multiple_of(2) {
-            (a_um + dir * speed_um_s * within, dir * speed_um_s)
-        } else {
-            (b_um - dir * speed_um_s * within, -dir * speed_um_s)
-        }
+        Some(((b_um - a_um).signum(), span / speed_um_s))
+    }
+}
+
+/// The leg (0, 1, …) `t` ≥ 0 s falls in: rounded `t / leg_s`, truncated. It never decreases as
+/// `t` grows (the division is correctly rounded), so two times in the same leg have every time
+/// between them in it too.
+#[inline(always)]
+fn triangle_phase(t: f64, leg_s: f64) -> u64 {
+    (t / leg_s) as u64
+}
+
+/// A triangle's (position µm, velocity µm/s) at `t` s in leg `phase` ([`triangle_phase`]).
+#[inline(always)]
+fn triangle_in_phase(
+    a_um: f64,
+    b_um: f64,
+    speed_um_s: f64,
+    dir: f64,
+    leg_s: f64,
+    phase: u64,
+    t: f64,
+) -> (f64, f64) {
+    let within = t - phase as f64 * leg_s;
+    if phase.is_multiple_of(2) {
+        (a_um + dir * speed_um_s * within, dir * speed_um_s)
+    } else {
+        (b_um - dir * speed_um_s * within, -dir * speed_um_s)
     }
 }
 
@@ -194,14 +226,37 @@ impl Trajectory {
                 a_um,
                 b_um,
                 speed_um_s,
-            } => out.extend((0..n).map(|i| {
-                let (position_um, velocity_um_s) =
-                    triangle_at(*a_um, *b_um, *speed_um_s, t_s(i).max(0.0));
-                State {
-                    position_um,
-                    velocity_um_s,
+            } => {
+                let (a_um, b_um, speed_um_s) = (*a_um, *b_um, *speed_um_s);
+                let legs = triangle_legs(a_um, b_um, speed_um_s);
+                let phases = legs.filter(|_| n > 0).map(|(_, leg_s)| {
+                    let phase = |i| triangle_phase(t_s(i).max(0.0), leg_s);
+                    (phase(0), phase(n - 1))
+                });
+                match (legs, phases) {
+                    // The whole block in one leg (the phase never decreases): no division a
+                    // sample, the same values.
+                    (Some((dir, leg_s)), Some((first, last))) if first == last => {
+                        out.extend((0..n).map(|i| {
+                            let t = t_s(i).max(0.0);
+                            let (position_um, velocity_um_s) =
+                                triangle_in_phase(a_um, b_um, speed_um_s, dir, leg_s, first, t);
+                            State {
+                                position_um,
+                                velocity_um_s,
+                            }
+                        }))
+                    }
+                    _ => out.extend((0..n).map(|i| {
+                        let (position_um, velocity_um_s) =
+                            triangle_at(a_um, b_um, speed_um_s, t_s(i).max(0.0));
+                        State {
+                            position_um,
+                            velocity_um_s,
+                        }
+                    })),
                 }
-            })),
+            }
             _ => out.extend((0..n).map(|i| self.state(t_s(i)))),
         }
     }
@@ -320,6 +375,50 @@ mod tests {
                     assert_eq!(s.velocity_um_s.to_bits(), want.velocity_um_s.to_bits());
                 }
             }
+        }
+    }
+
+    /// Blocks short enough that most lie in one leg (which skip the per-sample division)
+    /// and some straddle a turn give the state at each time, bit for bit: legs that end on a
+    /// sample time and between two.
+    #[test]
+    fn blocks_within_a_leg_are_the_state_at_each_time() {
+        let kinds = [
+            // A leg of 1 s: turns on sample times.
+            Trajectory::Triangle {
+                a_um: 1_500.0,
+                b_um: 61_500.0,
+                speed_um_s: 60_000.0,
+            },
+            // A leg of 0.090000009 s: turns between samples.
+            Trajectory::Triangle {
+                a_um: 40_000.0,
+                b_um: 10_000.0,
+                speed_um_s: 333_333.3,
+            },
+        ];
+        let mut out = Vec::new();
+        for tr in &kinds {
+            let (mut k0, mut turns) = (0u64, 0);
+            for n in (0..4_000).map(|b| 17 + (b * 7) % 50) {
+                tr.states_into(k0, 100, n, &mut out);
+                assert_eq!(out.len(), n);
+                for (i, s) in out.iter().enumerate() {
+                    let t_s = ((k0 + i as u64) * 100) as f64 * 1e-6;
+                    let want = tr.state(t_s);
+                    assert_eq!(
+                        s.position_um.to_bits(),
+                        want.position_um.to_bits(),
+                        "{tr:?} at {t_s} s"
+                    );
+                    assert_eq!(s.velocity_um_s.to_bits(), want.velocity_um_s.to_bits());
+                }
+                let first = out.first().map(|s| s.velocity_um_s);
+                turns += usize::from(out.last().map(|s| s.velocity_um_s) != first);
+                k0 += n as u64;
+            }
+            // The blocks cover 16 s: turns inside blocks were checked.
+            assert!(turns > 10, "{turns} blocks straddle a turn");
         }
     }
 
