@@ -215,7 +215,7 @@ impl Edges {
             }
             let dx = (s.b.x_um - s.a.x_um) as f32;
             let dy = (s.b.y_um - s.a.y_um) as f32;
-            let len_um = libm::sqrtf(dx * dx + dy * dy);
+            let len_um = super::geometry::sqrt_f32(dx * dx + dy * dy);
             let _ = geoms.push(Geom {
                 ax: s.a.x_um as f32,
                 ay: s.a.y_um as f32,
@@ -352,7 +352,7 @@ impl CompiledEdges {
             v.vx_um_s as f32 * self.lead_s,
             v.vy_um_s as f32 * self.lead_s,
         );
-        let len = libm::sqrtf(x * x + y * y);
+        let len = super::geometry::sqrt_f32(x * x + y * y);
         let max = MAX_LINE_LEAD_UM as f32;
         if len > max {
             (x * max / len, y * max / len)
