@@ -316,7 +316,20 @@ impl<E: VelocityEstimator> Controller2d<E> {
 
     /// Counts a pressed, fault-free reading towards leaving a fault; true when none is in
     /// force (the 1D rule: [`RECOVERY_SAMPLES`] in a row).
+    ///
+    /// Inlined: every reading asks, and without a fault the answer is one compare; as a call it
+    /// cost about 15 instructions a reading on the M4F (issue #36's profile).
+    #[inline(always)]
     fn recover(&mut self, p: PointUm) -> bool {
+        if self.fault.is_none() {
+            return true;
+        }
+        self.count_recovery(p)
+    }
+
+    /// [`Self::recover`] under a fault: out of line, as faults are rare.
+    #[cold]
+    fn count_recovery(&mut self, p: PointUm) -> bool {
         let Some(fault) = self.fault else {
             return true;
         };
@@ -333,6 +346,10 @@ impl<E: VelocityEstimator> Controller2d<E> {
     }
 
     /// A finger down at `p`, no fault: window, velocity, edges, else texture.
+    ///
+    /// Inlined into [`Self::on_reading`], so the `Output2d` is built where the caller wants it
+    /// rather than returned through one more frame and copied (issue #36's profile).
+    #[inline(always)]
     fn render(&mut self, p: PointUm, t_us: u32) -> Output2d {
         let Some(active) = self.active.as_ref() else {
             return Output2d::default();

@@ -215,7 +215,7 @@ impl Edges {
             }
             let dx = (s.b.x_um - s.a.x_um) as f32;
             let dy = (s.b.y_um - s.a.y_um) as f32;
-            let len_um = libm::sqrtf(dx * dx + dy * dy);
+            let len_um = super::geometry::sqrt_f32(dx * dx + dy * dy);
             let _ = geoms.push(Geom {
                 ax: s.a.x_um as f32,
                 ay: s.a.y_um as f32,
@@ -352,8 +352,15 @@ impl CompiledEdges {
             v.vx_um_s as f32 * self.lead_s,
             v.vy_um_s as f32 * self.lead_s,
         );
-        let len = libm::sqrtf(x * x + y * y);
+        let len2 = x * x + y * y;
         let max = MAX_LINE_LEAD_UM as f32;
+        // Most leads are short: the square is compared first (max² = 4·10⁶ is exact in f32,
+        // and a correctly rounded root of len2 ≤ max² is ≤ max), so the root, and the same
+        // `len > max` test as before, come only for a long one: the result is unchanged.
+        if len2 <= max * max {
+            return (x, y);
+        }
+        let len = super::geometry::sqrt_f32(len2);
         if len > max {
             (x * max / len, y * max / len)
         } else {

@@ -50,6 +50,40 @@ pub struct SegmentUm {
     pub b: PointUm,
 }
 
+/// The square root of an f32, correctly rounded (IEEE 754), bit-identical on every target.
+///
+/// On a hard-float Arm target (the M4F) this is the FPU's `vsqrt.f32`, one instruction, where
+/// `libm::sqrtf` is a software routine of about 76 instructions (issue #36's profile: 1.55
+/// calls a reading). Both are correctly rounded, so the result is the same bits as the host's
+/// `libm::sqrtf` and the golden vectors stay bit-exact. The callers pass sums of squares, never
+/// a negative number, so the NaNs' payloads (which could differ) do not arise.
+#[inline(always)]
+pub(crate) fn sqrt_f32(x: f32) -> f32 {
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    {
+        let mut bits = x.to_bits();
+        // SAFETY: moves the bits into s15, takes the root there and moves it back; s15 is
+        // declared clobbered and nothing else (memory, stack, flags) is touched. Through a core
+        // register because this toolchain's rustc does not report the `vfp2` feature that the
+        // `sreg` operand class needs, although the target (`+vfp4d16sp`) has the FPU.
+        unsafe {
+            core::arch::asm!(
+                "vmov s15, {0}",
+                "vsqrt.f32 s15, s15",
+                "vmov {0}, s15",
+                inout(reg) bits,
+                out("s15") _,
+                options(pure, nomem, nostack, preserves_flags)
+            );
+        }
+        f32::from_bits(bits)
+    }
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    {
+        libm::sqrtf(x)
+    }
+}
+
 /// (a − o) × (b − o), exact while one of the two vectors is within a validated polygon's
 /// range (2·10⁶) and the other within i32 (products ≤ 8.6·10¹⁵): positive when o, a, b turn
 /// counter-clockwise. Wrapping, so a polygon nobody validated gives a wrong answer, not a
@@ -277,7 +311,7 @@ impl Polygon {
             .edges()
             .map(|e| Seg::new(e).distance2_um2(p))
             .fold(f32::INFINITY, f32::min);
-        let d = libm::sqrtf(d2);
+        let d = sqrt_f32(d2);
         if self.contains(p) {
             d
         } else {

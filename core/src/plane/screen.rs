@@ -164,7 +164,7 @@ impl Compiled {
             .iter()
             .map(|s| s.distance2_um2(p))
             .fold(f32::INFINITY, f32::min);
-        libm::sqrtf(d2)
+        super::geometry::sqrt_f32(d2)
     }
 
     /// How far `p` lies outside the bounding box grown by `grow` µm (Chebyshev: a lower bound

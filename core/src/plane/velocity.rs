@@ -24,7 +24,7 @@ impl VelocityUmS {
     /// The speed |V|, µm/s (f32: exact to 0.1 µm/s below 2 m/s).
     pub fn speed_um_s(&self) -> f32 {
         let (x, y) = (self.vx_um_s as f32, self.vy_um_s as f32);
-        libm::sqrtf(x * x + y * y)
+        super::geometry::sqrt_f32(x * x + y * y)
     }
 
     /// The direction of motion as a unit vector (x, y); None at zero speed.
