@@ -8,6 +8,7 @@ extern crate std;
 use core::fmt::Write;
 use std::string::String;
 
+use crate::burst::SafetyLimits;
 use crate::gate::DriveMode;
 use crate::scene::Config;
 use crate::texture::grating::GratingRender;
@@ -79,25 +80,7 @@ pub fn to_scene_file(config: &Config, title: &str) -> String {
     line(std::format!("code_at_start = {}", c.code_at_start));
     line(std::format!("code_at_end = {}", c.code_at_end));
     line(std::format!("rail_margin_code = {}", c.rail_margin_code));
-    let l = &config.limits;
-    line(String::new());
-    line("[limits]".into());
-    line(std::format!(
-        "max_duty_percent = {}",
-        tenths(l.max_duty_permille)
-    ));
-    line(std::format!(
-        "max_on_time_ms = {}",
-        thousandths(l.max_on_time_us.into())
-    ));
-    line(std::format!(
-        "max_level_percent = {}",
-        tenths(l.max_level_permille)
-    ));
-    line(std::format!(
-        "stale_after_ms = {}",
-        thousandths(config.stale_after_us.into())
-    ));
+    limits_table(&config.limits, config.stale_after_us, &mut line);
     for (i, t) in sc.textures.iter().enumerate() {
         line(String::new());
         line("[[region]]".into());
@@ -145,6 +128,28 @@ pub fn to_scene_file(config: &Config, title: &str) -> String {
         ));
     }
     s
+}
+/// The `[limits]` table (after a blank line) of the caps and the stale time, as both the 1D and
+/// the 2D files write it.
+pub(super) fn limits_table(l: &SafetyLimits, stale_after_us: u32, line: &mut impl FnMut(String)) {
+    line(String::new());
+    line("[limits]".into());
+    line(std::format!(
+        "max_duty_percent = {}",
+        tenths(l.max_duty_permille)
+    ));
+    line(std::format!(
+        "max_on_time_ms = {}",
+        thousandths(l.max_on_time_us.into())
+    ));
+    line(std::format!(
+        "max_level_percent = {}",
+        tenths(l.max_level_permille)
+    ));
+    line(std::format!(
+        "stale_after_ms = {}",
+        thousandths(stale_after_us.into())
+    ));
 }
 
 /// A texture's `kind` value.

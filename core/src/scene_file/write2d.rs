@@ -15,7 +15,7 @@ use crate::plane::{Config2d, PlaneTexture, PointUm};
 use crate::texture::{Envelope, Texture};
 
 use super::plane2d::FOUR_WIRE;
-use super::write::{kind_of, tenths, texture_keys, thousandths};
+use super::write::{kind_of, limits_table, tenths, texture_keys, thousandths};
 
 /// A signed µm count as mm: -1500 → "-1.5".
 fn mm(um: i32) -> String {
@@ -67,25 +67,7 @@ pub fn to_scene_file_2d(config: &Config2d, plate_um: (u32, u32), title: &str) ->
     line(String::new());
     line("[sensor]".into());
     line(std::format!("kind = \"{FOUR_WIRE}\""));
-    let l = &config.limits;
-    line(String::new());
-    line("[limits]".into());
-    line(std::format!(
-        "max_duty_percent = {}",
-        tenths(l.max_duty_permille)
-    ));
-    line(std::format!(
-        "max_on_time_ms = {}",
-        thousandths(l.max_on_time_us.into())
-    ));
-    line(std::format!(
-        "max_level_percent = {}",
-        tenths(l.max_level_permille)
-    ));
-    line(std::format!(
-        "stale_after_ms = {}",
-        thousandths(config.stale_after_us.into())
-    ));
+    limits_table(&config.limits, config.stale_after_us, &mut line);
     line(String::new());
     line("[screen]".into());
     line(std::format!(
