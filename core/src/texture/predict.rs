@@ -124,11 +124,13 @@ impl LineFit {
         if count == N {
             // Full (most samples): the oldest leaves the window, and the sample H newer than
             // it (age H − 1) the newer half. Masked: `head` is below N, and the mask says so to
-            // the compiler (no bounds test).
+            // the compiler, which drops the bounds tests (and with them the `get`s' None arms).
             let at = self.head & (N - 1);
-            let oldest = self.ring[at];
-            let half_oldest = self.ring[(at + H) & (N - 1)];
-            self.ring[at] = position_um;
+            let oldest = self.ring.get(at).copied().unwrap_or(0);
+            let half_oldest = self.ring.get((at + H) & (N - 1)).copied().unwrap_or(0);
+            if let Some(slot) = self.ring.get_mut(at) {
+                *slot = position_um;
+            }
             self.head = (at + 1) & (N - 1);
             self.full.slide(position_um, oldest);
             self.half.slide(position_um, half_oldest);
