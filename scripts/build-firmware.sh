@@ -58,6 +58,14 @@ case "${DUAL_ADC:-0}" in
     128) PLANT+=(--features dual-adc-128); SUFFIX="$SUFFIX-dual128" ;;
     *) echo "build-firmware: DUAL_ADC is 0, 1 or 128, not '$DUAL_ADC'" >&2; exit 2 ;;
 esac
+# TOUCH_2D=1 builds the 2D image (feature `touch-2d`: the 4-wire overlay, Controller2d, the 2D
+# scene SAW_SCENE_2D or scenes/2d-fig12.toml built in; issue #36) and leaves
+# firmware/target/<board>-2d.elf.
+case "${TOUCH_2D:-0}" in
+    0) ;;
+    1) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d" ;;
+    *) echo "build-firmware: TOUCH_2D is 0 or 1, not '$TOUCH_2D'" >&2; exit 2 ;;
+esac
 case "${SELFTEST:-0}" in
     0) ;;
     1) PLANT+=(--features selftest-delayed-pulse); SUFFIX="$SUFFIX-selftest" ;;
