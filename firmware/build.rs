@@ -57,8 +57,9 @@ fn touch_plan(board: &str, manifest: &std::path::Path, out: &std::path::Path) {
         fail("the trigger timer's clock is not a whole number of MHz");
     }
     let tick = |ns: u64| (ns * f_hz).div_ceil(1_000_000_000);
-    // Events: (tick, kind, phase): kind 0 = switch the pins (and the channel), 1 = start the
-    // conversions, 2 = both (Z2: same drive as Z1, so no settling).
+    // Events: (tick, kind, phase): kind 0 = switch the pins (and the channel) at that tick of
+    // the frame, 1 = start the conversions that many ticks after the switch's pin writes, 2 =
+    // both (Z2: same drive as Z1, so no settling).
     let mut events: Vec<(u64, u8, u8)> = Vec::new();
     let mut t_ns = MARGIN_NS;
     for (k, slot) in sched.slots.iter().enumerate() {
@@ -66,7 +67,9 @@ fn touch_plan(board: &str, manifest: &std::path::Path, out: &std::path::Path) {
             events.push((tick(t_ns), 2, k as u8));
         } else {
             events.push((tick(t_ns), 0, k as u8));
-            events.push((tick(t_ns + slot.settle_ns), 1, k as u8));
+            // A start's tick is counted from the switch as it happened (the interrupt reads CNT
+            // after the pin writes): the settling is a floor whatever the switch's latency.
+            events.push((tick(slot.settle_ns) + 1, 1, k as u8));
         }
         t_ns += slot.settle_ns + slot.convert_ns + MARGIN_NS;
     }

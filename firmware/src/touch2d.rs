@@ -47,8 +47,10 @@ use crate::board::{self, BOARD};
 use crate::rf::{BurstGate, Carrier};
 use crate::{fault, level, EXECUTOR_HIGH, SAMPLE_PATH_PRIORITY};
 
-/// One event of the frame: at `tick` of TIM3, `kind` 0 switches the pins and the channel to
-/// slot `slot`'s phase, 1 starts its conversions, 2 does both (Z2: Z1's drive, no settling).
+/// One event of the frame: `kind` 0 switches the pins and the channel to slot `slot`'s phase
+/// at `tick` of TIM3; 1 starts its conversions `tick` ticks after the switch's pin writes
+/// (CNT read back after them: the settling counts from the switch as it happened, whatever the
+/// interrupt's latency); 2 does both (Z2: Z1's drive, no settling) at `tick`.
 #[derive(Clone, Copy)]
 pub struct Event {
     pub tick: u32,
@@ -137,8 +139,21 @@ const ALL_ANALOG: Drive = {
     d
 };
 
+/// Releases first, then drives: the pins that float in the new phase go analog on both ports,
+/// then each port's driven pins take their level (BSRR) and become outputs (MODER). So no two
+/// terminals of different plates are ever driven at once (but Z's Y+ and X−, through the
+/// contact), which a port-by-port switch would do for a few bus cycles.
 fn write_drive(d: &Drive) {
-    for (port, (mask, mode, bsrr)) in [(pac::GPIOB, d.b), (pac::GPIOC, d.c)] {
+    let ports = [(pac::GPIOB, d.b), (pac::GPIOC, d.c)];
+    for (port, (mask, mode, _)) in ports {
+        // Analog is 11: OR in the bits of the pins whose new mode is analog.
+        let analog = mask & mode & (mode >> 1) & 0x5555_5555;
+        let analog = analog | analog << 1;
+        if analog != 0 {
+            port.moder().modify(|w| w.0 |= analog);
+        }
+    }
+    for (port, (mask, mode, bsrr)) in ports {
         if mask == 0 {
             continue;
         }
@@ -434,20 +449,26 @@ pub fn on_event() {
     r.sr().write_value(pac::timer::regs::SrGp16(!(1 << 1)));
     let i = NEXT.load(Ordering::Relaxed) as usize % EVENTS.len();
     let ev = EVENTS[i];
-    if i == 0 {
-        deliver();
-    }
     let slot = ev.slot as usize % 4;
+    // The pins first (their time is the design's), then the frame boundary's work.
+    let mut switched = 0;
     if ev.kind != 1 {
         write_drive(&DRIVES[slot]);
+        switched = r.cnt().read().cnt() as u32;
         chip::set_channel(CHANNELS[slot]);
     }
     if ev.kind != 0 {
         chip::start();
     }
+    if i == 0 {
+        deliver();
+    }
     let n = (i + 1) % EVENTS.len();
     NEXT.store(n as u32, Ordering::Relaxed);
-    let next = EVENTS[n].tick;
+    let next = match EVENTS[n].kind {
+        1 => switched + EVENTS[n].tick,
+        _ => EVENTS[n].tick,
+    };
     r.ccr(0).write(|w| w.set_ccr(next as u16));
     if n != 0 && r.cnt().read().cnt() as u32 >= next {
         LATE.fetch_add(1, Ordering::Relaxed);

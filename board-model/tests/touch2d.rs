@@ -1,0 +1,286 @@
+//! The 2D images (`TOUCH_2D=1 scripts/build-firmware.sh`, feature `touch-2d`, issue #36) on the
+//! board model with the 4-wire overlay (`src/touch.rs`: host-sim's plates, contact and RC, in
+//! continuous virtual time, fed the GPIO modes the firmware writes) and a finger script.
+//!
+//! What each check expects is worked out here from the core's plate schedule
+//! (`saw_core::touch::plates::Schedule` on the default plates and each board's conversion time)
+//! and the firmware's documented margins (`docs/touch.md`, "Firmware"), not read from the image.
+//!
+//! Needs `$SAW_FIRMWARE_DIR/<board>-2d.elf` (default `../firmware/target`).
+
+use host_sim::touch::{Finger, Overlay, TouchModel};
+use saw_board_model::board::{BoardKind, PIN_BURST_A};
+use saw_board_model::periph::{Time, TICKS_PER_S};
+use saw_board_model::run::{self, Options, Outcome, TouchScript};
+use saw_board_model::touch::{Drive, Trace};
+use saw_core::touch::plates::{AdcTiming, Phase, PlateRc, Schedule, Terminal};
+use std::path::PathBuf;
+use std::rc::Rc;
+
+const BOARDS: [BoardKind; 2] = [BoardKind::F446, BoardKind::G474];
+const US: Time = TICKS_PER_S / 1_000_000;
+/// The firmware's margin after each phase's conversions (docs/touch.md, "Firmware").
+const MARGIN_NS: u64 = 2_000;
+/// The plate's touch area (scenes/2d-fig12.toml), mm.
+const PLATE_MM: (f64, f64) = (95.0, 54.0);
+
+fn elf(board: BoardKind) -> PathBuf {
+    let dir = std::env::var("SAW_FIRMWARE_DIR")
+        .unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/../firmware/target").into());
+    let p = PathBuf::from(dir).join(format!("{}-2d.elf", board.name()));
+    assert!(
+        p.exists(),
+        "{} is missing: run TOUCH_2D=1 scripts/build-firmware.sh first",
+        p.display()
+    );
+    p
+}
+
+fn run2d(board: BoardKind, secs: f64, finger: impl Fn(f64) -> Option<Finger> + 'static) -> Outcome {
+    let mut o = Options::new(board, &elf(board), secs);
+    o.touch = Some(TouchScript {
+        overlay: Overlay::default(),
+        seed: 7,
+        finger: Rc::new(finger),
+    });
+    let (out, _m) = run::run(&o).unwrap();
+    assert!(out.stop.is_none(), "{board:?}: {:?}", out.stop);
+    out
+}
+
+fn at(mm: (f64, f64)) -> Option<Finger> {
+    Some(Finger {
+        x: mm.0 / PLATE_MM.0,
+        y: mm.1 / PLATE_MM.1,
+        force_n: 1.0,
+    })
+}
+
+/// Lift-off time of the script, s.
+const LIFT_S: f64 = 0.060;
+/// The stroke: from (2, 27) mm at 0.080 s along +x at 100 mm/s: it crosses window 0's outline
+/// at x = 5 mm (0.110 s) and 30 mm (0.360 s), window 1's at 35 mm (0.410 s).
+const STROKE_S: f64 = 0.080;
+
+/// Pressed on the background (47.5, 51.6) mm — the 1 kHz constant texture — from 10 ms, lifted
+/// at 60 ms, then the stroke.
+fn script(t: f64) -> Option<Finger> {
+    if t < 0.010 {
+        None
+    } else if t < LIFT_S {
+        at((47.5, 51.6))
+    } else if t < STROKE_S {
+        None
+    } else {
+        at((2.0 + 100.0 * (t - STROKE_S), 27.0))
+    }
+}
+
+/// The method's phase of a drive pattern (Z1 for Z1 and Z2), or None.
+fn phase_of(d: &[Drive; 4]) -> Option<Phase> {
+    use Drive::*;
+    match d {
+        [High, Low, Float, Float] => Some(Phase::X),
+        [Float, Float, High, Low] => Some(Phase::Y),
+        [Float, Low, High, Float] => Some(Phase::Z1),
+        _ => None,
+    }
+}
+
+/// The drive's switches: the changes one interrupt makes (within 1 µs of each other) as one,
+/// at its first write, with the pattern it leaves.
+fn switches(tr: &Trace) -> Vec<(Time, [Drive; 4])> {
+    let mut out: Vec<(Time, [Drive; 4])> = Vec::new();
+    for c in &tr.drives {
+        match out.last_mut() {
+            Some((t0, d)) if c.at - *t0 <= US => *d = c.drive,
+            _ => out.push((c.at, c.drive)),
+        }
+    }
+    out
+}
+
+/// The designed frame: the switch times of Y and Z from X's, the settling before each trigger
+/// and the frame period, ns: each phase's settling and conversions from the core's schedule,
+/// then the margin; the frame rounded up to whole µs.
+struct Design {
+    sched: Schedule,
+    /// Y's and Z1's switch after X's, ns.
+    y_ns: u64,
+    z_ns: u64,
+    frame_ns: u64,
+    /// One conversion's sampling time, ticks.
+    sampling: Time,
+}
+
+fn design(board: BoardKind) -> Design {
+    let def = board.def();
+    let adc = AdcTiming {
+        conversion_ns: saw_boards::touch::conversion_ns(def),
+        conversions_position: 16,
+        conversions_pressure: 16,
+    };
+    let sched = Schedule::new(&PlateRc::DEFAULT, &adc).unwrap();
+    let s = &sched.slots;
+    let y_ns = s[0].settle_ns + s[0].convert_ns + MARGIN_NS;
+    let z_ns = y_ns + s[1].settle_ns + s[1].convert_ns + MARGIN_NS;
+    let frame_ns = (sched.frame_ns() + 4 * MARGIN_NS).div_ceil(1_000) * 1_000;
+    let sampling = def.adc.sample_half_cycles as u64 * TICKS_PER_S / (2 * def.adc.clk_hz as u64);
+    Design {
+        sched,
+        y_ns,
+        z_ns,
+        frame_ns,
+        sampling,
+    }
+}
+
+fn ns(t: Time) -> f64 {
+    t as f64 * 1e9 / TICKS_PER_S as f64
+}
+
+/// Plate switching at its designed times, and every conversion settled: after the first
+/// switch, the drive runs X, Y, Z, X, … (no other pattern lasts; two plates are never driven
+/// at once but through the contact in Z); every X switch one frame after the last, and Y and Z
+/// at their designed offsets from it, within 1 µs (the interrupt's entry; never before); each
+/// phase converts its sensed terminal 16 times (Z 32: Z1 on X+, Z2 on Y−), the first sampling
+/// no earlier than its settling after the switch and the last held before the next switch; and
+/// every pressed conversion within ½ LSB of the node's settled voltage.
+#[test]
+fn plate_switching_at_its_designed_times() {
+    for board in BOARDS {
+        let d = design(board);
+        let o = run2d(board, 0.06, script);
+        let tr = o.touch.as_ref().unwrap();
+        let sw = switches(tr);
+        assert!(sw.len() > 100, "{board:?}: {} switches", sw.len());
+        for (t, p) in &sw {
+            let driven_x = p[0] != Drive::Float || p[1] != Drive::Float;
+            let driven_y = p[2] != Drive::Float || p[3] != Drive::Float;
+            assert!(
+                !(driven_x && driven_y) || phase_of(p) == Some(Phase::Z1),
+                "{board:?}: both plates driven at {:.3} µs: {p:?}",
+                ns(*t) / 1e3
+            );
+        }
+        let first_x = sw
+            .iter()
+            .position(|(_, p)| phase_of(p) == Some(Phase::X))
+            .unwrap();
+        let sw = &sw[first_x..];
+        let want = [Phase::X, Phase::Y, Phase::Z1];
+        for (k, (t, p)) in sw.iter().enumerate() {
+            assert_eq!(
+                phase_of(p),
+                Some(want[k % 3]),
+                "{board:?}: switch {k} at {:.3} µs: {p:?}",
+                ns(*t) / 1e3
+            );
+        }
+        // The frame grid: frame k's X switch is designed at origin + k · frame, its Y and Z
+        // switches at their offsets from it; the origin is the earliest X switch against the
+        // grid (the interrupt's least latency), so every switch is at or after its design.
+        let frames = sw.len() / 3;
+        let origin = (0..frames)
+            .map(|k| ns(sw[3 * k].0) - (k as u64 * d.frame_ns) as f64)
+            .fold(f64::MAX, f64::min);
+        let (mut worst_late, mut worst_early) = (0f64, 0f64);
+        for (k, (t, _)) in sw.iter().enumerate() {
+            let base = origin + ((k / 3) as u64 * d.frame_ns) as f64;
+            let designed = base + [0, d.y_ns, d.z_ns][k % 3] as f64;
+            let off = ns(*t) - designed;
+            if off > MARGIN_NS as f64 {
+                eprintln!(
+                    "{board:?}: switch {k} ({:?}) at {:.3} µs is {off:.0} ns late",
+                    want[k % 3],
+                    ns(*t) / 1e3
+                );
+            }
+            worst_late = worst_late.max(off);
+            worst_early = worst_early.min(off);
+        }
+        assert!(
+            worst_late <= MARGIN_NS as f64 && worst_early >= -20.0,
+            "{board:?}: switches {worst_early:.0} to +{worst_late:.0} ns off the design"
+        );
+        // Conversions by phase: between one switch and the next.
+        let mut model = TouchModel::new(
+            Overlay {
+                noise_lsb: 0.0,
+                ..Overlay::default()
+            },
+            0,
+        );
+        let (mut worst_lsb, mut min_settle_ns, mut min_gap_ns) = (0f64, f64::MAX, f64::MAX);
+        let mut pressed = 0;
+        for (k, w) in sw.windows(2).enumerate() {
+            let (t0, t1) = (w[0].0, w[1].0);
+            let phase = want[k % 3];
+            let convs: Vec<_> = tr
+                .conversions
+                .iter()
+                .filter(|c| c.at > t0 && c.at < t1)
+                .collect();
+            let (sensed, n): (&[Terminal], usize) = match phase {
+                Phase::X => (&[Terminal::YPlus], 16),
+                Phase::Y => (&[Terminal::XPlus], 16),
+                _ => (&[Terminal::XPlus, Terminal::YMinus], 32),
+            };
+            assert_eq!(
+                convs.len(),
+                n,
+                "{board:?}: {phase:?} phase at {:.1} µs",
+                ns(t0) / 1e3
+            );
+            for (i, c) in convs.iter().enumerate() {
+                let want_t = if n == 32 { sensed[i / 16] } else { sensed[0] };
+                assert_eq!(c.terminal, want_t, "{board:?}: {phase:?} conversion {i}");
+            }
+            let settle = d.sched.slots[k % 3].settle_ns as f64;
+            let first = ns(convs[0].at - d.sampling - t0);
+            min_settle_ns = min_settle_ns.min(first - settle);
+            min_gap_ns = min_gap_ns.min(ns(t1 - convs[n - 1].at));
+            // Settled: the finger's node at its DC value (pressed frames only).
+            let t_s = convs[0].at as f64 / TICKS_PER_S as f64;
+            if let Some(f) = script(t_s)
+                .filter(|_| script(ns(t1) / 1e9).is_some() && script(ns(t0) / 1e9).is_some())
+            {
+                let targets = model.targets(phase, Some(&f));
+                for c in &convs {
+                    let idx = match c.terminal {
+                        Terminal::XPlus => 0,
+                        Terminal::XMinus => 1,
+                        Terminal::YPlus => 2,
+                        Terminal::YMinus => 3,
+                    };
+                    worst_lsb = worst_lsb.max((c.v - targets[idx].0).abs() * 4096.0);
+                    pressed += 1;
+                }
+            }
+            let _ = &mut model;
+        }
+        eprintln!(
+            "{board:?}: {frames} frames of {} µs; switches {worst_early:.0}..+{worst_late:.0} ns off the design; first sampling {min_settle_ns:.0} ns after the settling; last sample {min_gap_ns:.0} ns before the next switch; {pressed} pressed conversions within {worst_lsb:.4} LSB of settled",
+            d.frame_ns / 1000
+        );
+        assert!(
+            min_settle_ns >= 0.0,
+            "{board:?}: a conversion sampled {min_settle_ns:.0} ns before its phase settled"
+        );
+        assert!(
+            min_gap_ns > 0.0,
+            "{board:?}: a phase's last sample after the next switch"
+        );
+        assert!(pressed > 1000, "{board:?}: {pressed} pressed conversions");
+        assert!(
+            worst_lsb <= 0.5,
+            "{board:?}: a pressed conversion {worst_lsb:.3} LSB from settled"
+        );
+        assert!(
+            tr.odd.is_empty(),
+            "{board:?}: odd drives {:?}",
+            &tr.odd[..tr.odd.len().min(4)]
+        );
+        let _ = PIN_BURST_A;
+    }
+}
