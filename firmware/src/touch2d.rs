@@ -35,7 +35,7 @@ use embassy_sync::channel::Channel;
 use embassy_time::{Duration, Instant, Ticker};
 use saw_boards::touch::TouchPins;
 use saw_core::burst::BurstTimer;
-use saw_core::gate::BurstOutput;
+use saw_core::gate::{BurstOutput, Envelope};
 use saw_core::plane::{apply2d, Config2d, Controller2d, Prepared2d};
 use saw_core::touch::calibration::{Affine, CalPoint};
 use saw_core::touch::fault::RailBands;
@@ -595,7 +595,7 @@ async fn main(_spawner: embassy_executor::Spawner) {
         parts.dac_pin,
         parts.envelope_dma,
     );
-    let burst = BurstGate::new(
+    let mut burst = BurstGate::new(
         parts.burst_tim,
         parts.burst_pin,
         parts.burst_b_pin,
@@ -622,6 +622,16 @@ async fn main(_spawner: embassy_executor::Spawner) {
             Ok(p) => {
                 ctrl.install(p);
                 info!("boot: the 2D scene built in ({})", SCENE_2D_FILE);
+                // The edge pulse's triangle table now, not on the first edge's sample path.
+                let e = c.scene.edge_pulse;
+                let clocks = e.pulse_us as u64 * timer.clock_hz as u64 / 1_000_000;
+                if let (Envelope::Triangular, Ok(s)) = (e.envelope, timer.one_pulse(clocks)) {
+                    let us = burst.prebuild_triangle(&s, e.amplitude_permille);
+                    info!(
+                        "rf level: the edge pulse's triangle built at boot in {} us",
+                        us
+                    );
+                }
             }
             Err(e) => warn!(
                 "boot: the 2D scene is refused ({}); no scene, RF stays off",
