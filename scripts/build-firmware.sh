@@ -60,11 +60,15 @@ case "${DUAL_ADC:-0}" in
 esac
 # TOUCH_2D=1 builds the 2D image (feature `touch-2d`: the 4-wire overlay, Controller2d, the 2D
 # scene SAW_SCENE_2D or scenes/2d-fig12.toml built in; issue #36) and leaves
-# firmware/target/<board>-2d.elf.
+# firmware/target/<board>-2d.elf. TOUCH_2D=largest builds it with the largest 2D scene
+# (board-model/scenes/2d-largest.toml: 8 windows of 16 vertices, 32 edges) into
+# <board>-2d-largest.elf, for the board model's stack check.
 case "${TOUCH_2D:-0}" in
     0) ;;
     1) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d" ;;
-    *) echo "build-firmware: TOUCH_2D is 0 or 1, not '$TOUCH_2D'" >&2; exit 2 ;;
+    largest) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d-largest"
+        export SAW_SCENE_2D=board-model/scenes/2d-largest.toml ;;
+    *) echo "build-firmware: TOUCH_2D is 0, 1 or largest, not '$TOUCH_2D'" >&2; exit 2 ;;
 esac
 case "${SELFTEST:-0}" in
     0) ;;

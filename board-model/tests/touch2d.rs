@@ -457,3 +457,67 @@ fn sensor_to_gate_latency_and_edge_pulses() {
         }
     }
 }
+
+/// Stack: the deepest stack over a run of the image with the largest 2D scene
+/// (`TOUCH_2D=largest scripts/build-firmware.sh`: board-model/scenes/2d-largest.toml, 8 windows
+/// of 16 vertices, every texture kind, 32 outline edges) keeps ≥ 16 KiB of headroom below it
+/// (the region flip-link leaves the stack, painted at reset; docs/stack.md). The finger lands,
+/// strokes through the four windows of each row at 200 mm/s (crossing both outlined windows'
+/// edges), lifts between the rows.
+#[test]
+fn largest_scene_keeps_16_kib_of_stack_headroom() {
+    for board in BOARDS {
+        let dir = std::env::var("SAW_FIRMWARE_DIR")
+            .unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/../firmware/target").into());
+        let elf = PathBuf::from(dir).join(format!("{}-2d-largest.elf", board.name()));
+        assert!(
+            elf.exists(),
+            "{} is missing: run TOUCH_2D=largest scripts/build-firmware.sh",
+            elf.display()
+        );
+        let mut o = Options::new(board, &elf, 1.05);
+        o.touch = Some(TouchScript {
+            overlay: Overlay::default(),
+            seed: 3,
+            finger: Rc::new(|t: f64| {
+                let row = |t0: f64, y: f64| at((1.0 + 200.0 * (t - t0), y));
+                if (0.01..0.48).contains(&t) {
+                    row(0.01, 14.0)
+                } else if (0.52..1.0).contains(&t) {
+                    row(0.52, 40.0)
+                } else {
+                    None
+                }
+            }),
+        });
+        let (out, _m) = run::run(&o).unwrap();
+        assert!(out.stop.is_none(), "{board:?}: {:?}", out.stop);
+        let telemetry = out
+            .log
+            .iter()
+            .rev()
+            .find(|l| l.text.starts_with("telemetry2d"))
+            .map(|l| l.text.clone());
+        let pulses = tim2(&out)
+            .iter()
+            .filter(|(_, off, v)| *off == 0 && v & 0b1001 == 0b1001)
+            .count();
+        let s = out.stack.expect("the image's stack region");
+        eprintln!(
+            "{board:?}: deepest stack {} B of {} B reserved, headroom {} B; {pulses} one-pulses; {}",
+            s.deepest(),
+            s.region.reserved(),
+            s.headroom(),
+            telemetry.unwrap_or_default()
+        );
+        assert!(
+            pulses >= 4,
+            "{board:?}: {pulses} edge pulses: the outlines were not crossed"
+        );
+        assert!(
+            s.headroom() >= 16 * 1024,
+            "{board:?}: stack headroom {} B < 16 KiB",
+            s.headroom()
+        );
+    }
+}

@@ -36,7 +36,7 @@ use embassy_time::{Duration, Instant, Ticker};
 use saw_boards::touch::TouchPins;
 use saw_core::burst::BurstTimer;
 use saw_core::gate::{BurstOutput, Envelope};
-use saw_core::plane::{apply2d, Config2d, Controller2d, Prepared2d};
+use saw_core::plane::{apply2d, Config2d, Controller2d};
 use saw_core::touch::calibration::{Affine, CalPoint};
 use saw_core::touch::fault::RailBands;
 use saw_core::touch::frame::{Frame, TouchSensor};
@@ -509,6 +509,44 @@ fn queue_frame(frame: Frame) -> bool {
 /// The 2D controller with the default velocity estimator (host-sim's).
 pub type Controller = Controller2d;
 
+static CONTROLLER: static_cell::StaticCell<Option<Controller>> = static_cell::StaticCell::new();
+
+/// The controller, in its static (not main's frame).
+#[inline(never)]
+fn new_controller(timer: BurstTimer) -> &'static mut Controller {
+    let ctrl = CONTROLLER.init_with(|| Controller::new(timer, FRAME_US).ok());
+    let Some(ctrl) = ctrl.as_mut() else {
+        defmt::panic!("touch: the 2D controller is refused")
+    };
+    ctrl
+}
+
+/// The built-in 2D scene decoded, compiled and installed (`Controller2d::load`: compiled in its
+/// frame, moved into the controller), and its edge pulse's triangle table built. Out of main's
+/// frame, so the compile's stack is not stacked on main's.
+#[inline(never)]
+fn load_scene(ctrl: &mut Controller, timer: &BurstTimer, burst: &mut BurstGate) {
+    let Ok(c) = postcard::from_bytes::<Config2d>(SCENE_2D) else {
+        warn!("boot: the 2D scene does not decode; no scene, RF stays off");
+        return;
+    };
+    if ctrl.load(&c).is_err() {
+        warn!("boot: the 2D scene is refused; no scene, RF stays off");
+        return;
+    }
+    info!("boot: the 2D scene built in ({})", SCENE_2D_FILE);
+    // The edge pulse's triangle table now, not on the first edge's sample path.
+    let e = c.scene.edge_pulse;
+    let clocks = e.pulse_us as u64 * timer.clock_hz as u64 / 1_000_000;
+    if let (Envelope::Triangular, Ok(s)) = (e.envelope, timer.one_pulse(clocks)) {
+        let us = burst.prebuild_triangle(&s, e.amplitude_permille);
+        info!(
+            "rf level: the edge pulse's triangle built at boot in {} us",
+            us
+        );
+    }
+}
+
 /// One frame through the sensor and the controller onto the burst gate. Never inlined: a root
 /// of the panic check.
 #[inline(never)]
@@ -536,7 +574,7 @@ const TELEMETRY_PERIOD_US: u64 = 1_000_000;
 
 #[embassy_executor::task]
 async fn control2d(
-    mut ctrl: Controller,
+    ctrl: &'static mut Controller,
     mut sensor: TouchSensor,
     mut burst: BurstGate,
     _rf_arm: Output<'static>,
@@ -548,10 +586,8 @@ async fn control2d(
     start_timer();
     loop {
         match select(FRAMES.receive(), watchdog.next()).await {
-            Either::First(frame) => frame_step(&mut sensor, &mut ctrl, &mut burst, &frame),
-            Either::Second(()) => {
-                tick_step2d(&mut ctrl, &mut burst, Instant::now().as_micros() as u32)
-            }
+            Either::First(frame) => frame_step(&mut sensor, ctrl, &mut burst, &frame),
+            Either::Second(()) => tick_step2d(ctrl, &mut burst, Instant::now().as_micros() as u32),
         }
         wdg.pet();
         let now = Instant::now().as_micros();
@@ -616,30 +652,13 @@ async fn main(_spawner: embassy_executor::Spawner) {
         counter_bits: BOARD.burst_timer_bits,
         max_burst_hz: BOARD.max_burst_hz,
     };
-    let mut ctrl = unwrap!(Controller::new(timer, FRAME_US));
-    match postcard::from_bytes::<Config2d>(SCENE_2D) {
-        Ok(c) => match Prepared2d::compile(&timer, FRAME_US, &c) {
-            Ok(p) => {
-                ctrl.install(p);
-                info!("boot: the 2D scene built in ({})", SCENE_2D_FILE);
-                // The edge pulse's triangle table now, not on the first edge's sample path.
-                let e = c.scene.edge_pulse;
-                let clocks = e.pulse_us as u64 * timer.clock_hz as u64 / 1_000_000;
-                if let (Envelope::Triangular, Ok(s)) = (e.envelope, timer.one_pulse(clocks)) {
-                    let us = burst.prebuild_triangle(&s, e.amplitude_permille);
-                    info!(
-                        "rf level: the edge pulse's triangle built at boot in {} us",
-                        us
-                    );
-                }
-            }
-            Err(e) => warn!(
-                "boot: the 2D scene is refused ({}); no scene, RF stays off",
-                e
-            ),
-        },
-        Err(_) => warn!("boot: the 2D scene does not decode; no scene, RF stays off"),
-    }
+    // The controller (~10 KB) is built in its static, and the scene compiled by
+    // `Controller2d::load` in a function of its own: with the controller, the compiled scene and
+    // their copies in main's frame, the boot stack (main's frame + Prepared2d::compile's own
+    // 34 KB) reached 72.9 KB, 696 B short of the G474's stack region with the largest 2D scene
+    // (board model: stack check).
+    let ctrl = new_controller(timer);
+    load_scene(ctrl, &timer, &mut burst);
     let Ok(map) = Affine::from_points(CAL, &RailBands::default()) else {
         defmt::panic!("touch: the built-in calibration is refused")
     };
