@@ -61,6 +61,7 @@ const LIFT_S: f64 = 0.060;
 /// The stroke: from (2, 27) mm at 0.080 s along +x at 100 mm/s: it crosses window 0's outline
 /// at x = 5 mm (0.110 s) and 30 mm (0.360 s), window 1's at 35 mm (0.410 s).
 const STROKE_S: f64 = 0.080;
+const RUN_S: f64 = 0.45;
 
 /// Pressed on the background (47.5, 51.6) mm — the 1 kHz constant texture — from 10 ms, lifted
 /// at 60 ms, then the stroke.
@@ -368,7 +369,7 @@ fn lift_off_turns_the_carrier_off_within_one_frame() {
 
 /// The whole script: landing, lift, the stroke across three outlines.
 fn stroke(board: BoardKind) -> Outcome {
-    run2d(board, 0.45, script)
+    run2d(board, RUN_S, script)
 }
 
 /// Sensor-to-gate latency ≤ 100 µs: from a frame's last sample (Z2's 16th conversion, the end
@@ -519,5 +520,102 @@ fn largest_scene_keeps_16_kib_of_stack_headroom() {
             "{board:?}: stack headroom {} B < 16 KiB",
             s.headroom()
         );
+    }
+}
+
+/// The 2D closed loop against host-sim: the stroke (from (2, 27) mm along +x at 100 mm/s over
+/// scenes/2d-fig12.toml) run by host-sim's 2D loop (`host_sim::sim2d::run`: the same overlay
+/// model read frame by frame at the core's schedule, the same TouchSensor calibration points,
+/// Controller2d, a timer model) and by the board: the edge pulses fire at the same finger
+/// positions (within 0.1 mm: the frames differ by the firmware's margins, 8–9 µs, 1 µm of travel
+/// at this speed) and the burst line rises as often between them (within 2: where a stretch
+/// starts and ends differs by up to a frame).
+#[test]
+fn the_2d_closed_loop_matches_host_sim() {
+    use host_sim::sim2d::{self, Params2d};
+    use host_sim::trajectory2d::PointUm;
+    use host_sim::trajectory2d::Trajectory2d;
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../scenes/2d-fig12.toml"
+    ))
+    .unwrap();
+    for board in BOARDS {
+        let def = board.def();
+        let frame_us = sim2d::board_frame_period_us(def).unwrap();
+        let timer = saw_core::burst::BurstTimer {
+            clock_hz: def.burst_timer_clk_hz,
+            counter_bits: def.burst_timer_bits,
+            max_burst_hz: def.max_burst_hz,
+        };
+        let config =
+            saw_core::scene_file::load_2d_for_board("2d-fig12.toml", &text, timer, frame_us)
+                .unwrap();
+        let dur = RUN_S - STROKE_S;
+        let traj = Trajectory2d::line(
+            PointUm::new(2_000.0, 27_000.0),
+            PointUm::new((2.0 + 100.0 * dur) * 1_000.0, 27_000.0),
+            100_000.0,
+        )
+        .unwrap();
+        let host = sim2d::run(&Params2d::new(def, traj, dur, config)).unwrap();
+        let o = run2d(board, RUN_S, script);
+        let w = tim2(&o);
+        let x_at = |t_s: f64| 2.0 + 100.0 * (t_s - STROKE_S);
+        let board_pulses: Vec<f64> = w
+            .iter()
+            .filter(|(_, off, v)| *off == 0 && v & 0b1001 == 0b1001)
+            .map(|x| x_at(x.0 as f64 / TICKS_PER_S as f64))
+            .collect();
+        let host_pulses: Vec<f64> = host.edge_pulses.iter().map(|e| e.x_mm).collect();
+        // Rising edges of the line in each stretch between pulses (and before the first, after
+        // the last), board (PA0) and host (its timer model's line).
+        let bounds: Vec<f64> = std::iter::once(0.0)
+            .chain(host_pulses.iter().map(|x| (x - 2.0) / 100.0))
+            .chain([dur])
+            .collect();
+        let board_rises: Vec<usize> = bounds
+            .windows(2)
+            .map(|b| {
+                o.pins[PIN_BURST_A]
+                    .iter()
+                    .filter(|e| {
+                        e.high && {
+                            let t = e.at as f64 / TICKS_PER_S as f64 - STROKE_S;
+                            t >= b[0] && t < b[1]
+                        }
+                    })
+                    .count()
+            })
+            .collect();
+        let host_rises: Vec<usize> = bounds
+            .windows(2)
+            .map(|b| {
+                host.line
+                    .windows(2)
+                    .filter(|l| !l[0].1 && l[1].1 && l[1].0 >= b[0] && l[1].0 < b[1])
+                    .count()
+            })
+            .collect();
+        eprintln!(
+            "{board:?}: edge pulses at x = board {board_pulses:.2?}, host-sim {host_pulses:.2?} mm; bursts per stretch board {board_rises:?}, host-sim {host_rises:?}"
+        );
+        assert_eq!(
+            board_pulses.len(),
+            host_pulses.len(),
+            "{board:?}: edge pulses"
+        );
+        for (b, h) in board_pulses.iter().zip(&host_pulses) {
+            assert!(
+                (b - h).abs() <= 0.1,
+                "{board:?}: pulse at {b:.2} mm on the board, {h:.2} in host-sim"
+            );
+        }
+        for (b, h) in board_rises.iter().zip(&host_rises) {
+            assert!(
+                b.abs_diff(*h) <= 2,
+                "{board:?}: bursts per stretch {board_rises:?} vs {host_rises:?}"
+            );
+        }
     }
 }
