@@ -69,7 +69,10 @@ fn touch_plan(board: &str, manifest: &std::path::Path, out: &std::path::Path) {
             events.push((tick(t_ns), 0, k as u8));
             // A start's tick is counted from the switch as it happened (the interrupt reads CNT
             // after the pin writes): the settling is a floor whatever the switch's latency.
-            events.push((tick(slot.settle_ns) + 1, 1, k as u8));
+            // The planted defect `plant-touch-no-settle` (never in a real image): the start after
+            // a quarter of the settling; the board model's plate-timing check must fail on it.
+            let settle = if env::var_os("CARGO_FEATURE_PLANT_TOUCH_NO_SETTLE").is_some() { slot.settle_ns / 4 } else { slot.settle_ns };
+            events.push((tick(settle) + 1, 1, k as u8));
         }
         t_ns += slot.settle_ns + slot.convert_ns + MARGIN_NS;
     }
