@@ -27,6 +27,11 @@
 #    128 KiB sector — with a power cycle into it, a 1 kHz stream) and the panel's save on the
 #    F446 image (saw/tests/ui.rs); builds the debug `saw`;
 # 5. a summary per board: flash, static RAM, stack reserved, deepest, headroom.
+# The tests of step 1 include tests/touch2d.rs, issue #36's 2D images (firmware/target/
+# <board>-2d.elf and <board>-2d-largest.elf, both boards): plate switching at the designed times,
+# lift-off, sensor-to-gate latency, edge pulses, the closed loop against host-sim, the stack with
+# the largest 2D scene (docs/board-model.md, "The 2D image"); this script builds those images
+# first when they are missing (TOUCH_2D=1 / TOUCH_2D=largest scripts/build-firmware.sh).
 # Needs firmware/target/<board>.elf (scripts/build-firmware.sh) and defmt-print (scripts/setup.sh).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -41,6 +46,16 @@ done
 # The model shares the host workspace's target directory (host-sim and its dependencies are
 # built once), unless CARGO_TARGET_DIR names another.
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$ROOT/target}"
+for kind in 1 largest; do
+    suffix=-2d; [ "$kind" = largest ] && suffix=-2d-largest
+    for b in nucleo-f446re nucleo-g474re; do
+        if [ ! -f "$SAW_FIRMWARE_DIR/$b$suffix.elf" ]; then
+            echo "== board model: building the 2D image $b$suffix.elf (TOUCH_2D=$kind)"
+            TOUCH_2D=$kind CARGO_TARGET_DIR="$ROOT/firmware/target" "$ROOT/scripts/build-firmware.sh" "$b" >/dev/null
+            [ "$SAW_FIRMWARE_DIR" = "$ROOT/firmware/target" ] || cp "$ROOT/firmware/target/$b$suffix.elf" "$SAW_FIRMWARE_DIR/"
+        fi
+    done
+done
 cd "$ROOT/board-model"
 echo "== board model: tests"
 cargo test --release

@@ -32,6 +32,20 @@ BOARDS=("$@")
 FW_DIR="${SAW_FIRMWARE_DIR:-$ROOT/firmware/target}"
 ALLOW="$ROOT/scripts/panic-check.allow"
 ROOTS=(--root saw_firmware::sample_step --root saw_firmware::tick_step --root saw_firmware::deliver)
+# TOUCH_2D=1: the 2D images (<board>-2d.elf, TOUCH_2D=1 scripts/build-firmware.sh) and their
+# per-frame path (firmware/src/touch2d.rs):
+#   touch2d::on_event     the TIM3 CC1 interrupt: the plate pins, the ADC channel and start,
+#                         at the frame boundary the DMA re-armed and the frame queued;
+#   touch2d::frame_step   a frame through TouchSensor and Controller2d onto the burst gate;
+#   touch2d::tick_step2d  the stale watchdog (Controller2d::on_tick) onto the gate.
+# Without TOUCH_2D the 2D images are checked too when they are there (SKIPPED, saying so, when
+# not); TOUCH_2D=1 checks only them and needs them.
+SUFFIX=""
+ROOTS_2D=(--root saw_firmware::touch2d::on_event --root saw_firmware::touch2d::frame_step --root saw_firmware::touch2d::tick_step2d)
+if [ "${TOUCH_2D:-0}" = 1 ]; then
+    SUFFIX="-2d"
+    ROOTS=("${ROOTS_2D[@]}")
+fi
 
 # The model builds into the host workspace's target directory, as scripts/board-model.sh does;
 # the planted firmware into firmware/target (build-firmware.sh's own default), never there.
@@ -42,10 +56,19 @@ BM="$BM_TARGET/release/board-model"
 
 fail=0
 for b in "${BOARDS[@]}"; do
-    elf="$FW_DIR/$b.elf"
+    elf="$FW_DIR/$b$SUFFIX.elf"
     [ -f "$elf" ] || { echo "panic-check: $elf is missing: run scripts/build-firmware.sh first" >&2; exit 1; }
     echo "== panic check: $b"
     "$BM" panic-check --elf "$elf" "${ROOTS[@]}" --allow-file "$ALLOW" || fail=1
+    if [ "${TOUCH_2D:-0}" != 1 ]; then
+        elf2="$FW_DIR/$b-2d.elf"
+        if [ -f "$elf2" ]; then
+            echo "== panic check: $b, the 2D image"
+            "$BM" panic-check --elf "$elf2" "${ROOTS_2D[@]}" --allow-file "$ALLOW" || fail=1
+        else
+            echo "panic check: $b: the 2D image SKIPPED: no $elf2 (TOUCH_2D=1 scripts/build-firmware.sh)"
+        fi
+    fi
 done
 
 if [ "${PANIC_CHECK_PLANT:-0}" = 1 ]; then

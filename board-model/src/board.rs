@@ -8,7 +8,9 @@ use crate::periph::{
     self, adc_f4, adc_g4, dac, dma_f4, dma_g4, gpio, iwdg, lpuart_g4, misc, rcc_f4, rcc_g4, tim,
     usart_f4, ClockDomain, Peripheral, ResetCause, Time,
 };
+use std::cell::RefCell;
 use std::path::Path;
+use std::rc::Rc;
 
 /// Which board.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -170,7 +172,18 @@ fn index(periphs: &[Mapped], base: u32) -> usize {
 }
 
 /// Builds the machine for `kind` running `elf`, the wiper read through `wiper`.
-pub fn build(kind: BoardKind, elf: &Path, mut wiper: Wiper) -> Result<Machine, String> {
+pub fn build(kind: BoardKind, elf: &Path, wiper: Wiper) -> Result<Machine, String> {
+    build_with(kind, elf, wiper, None)
+}
+
+/// As [`build`], with the 4-wire overlay (`crate::touch`) on the 2D image's four pins: its
+/// channels convert the overlay's nodes, every write to their ports tells it the pins' modes.
+pub fn build_with(
+    kind: BoardKind,
+    elf: &Path,
+    mut wiper: Wiper,
+    touch: Option<Rc<RefCell<crate::touch::Panel>>>,
+) -> Result<Machine, String> {
     let image = crate::elf::Image::load(elf).map_err(|e| format!("--elf {e}"))?;
     // The image must be this board's and carry what the model reads: the defmt table and the
     // RTT control block (a stripped image has neither).
@@ -193,7 +206,11 @@ pub fn build(kind: BoardKind, elf: &Path, mut wiper: Wiper) -> Result<Machine, S
         ));
     }
     let wiper_channel = kind.def().adc.channel;
+    let panel = touch.clone();
     let input = Box::new(move |t: Time, ch: u8| {
+        if let Some(code) = panel.as_ref().and_then(|p| p.borrow_mut().convert(t, ch)) {
+            return Some(code);
+        }
         if ch == wiper_channel {
             Some(wiper(t))
         } else {
@@ -205,6 +222,17 @@ pub fn build(kind: BoardKind, elf: &Path, mut wiper: Wiper) -> Result<Machine, S
         BoardKind::G474 => g474(input),
     };
     let mut m = Machine::new(spec, periphs, image, true)?;
+    if let Some(panel) = touch {
+        // GPIOB and GPIOC (RM0390 §2.2.2 table 1; RM0440 §2.2.2 table 4).
+        let (b, c) = match kind {
+            BoardKind::F446 => (0x4002_0400, 0x4002_0800),
+            BoardKind::G474 => (0x4800_0400, 0x4800_0800),
+        };
+        let (ib, ic) = (index(&m.sim().periphs, b), index(&m.sim().periphs, c));
+        let pins = crate::touch::Panel::pins(kind.def())
+            .map(|(port, pin)| (if port == 'B' { ib } else { ic }, pin));
+        m.sim_mut().touch = Some((panel, pins));
+    }
     // Keep every write to the burst timer (latency, update sequences) and to TIM3 (trigger).
     m.sim_mut().watch = vec![(0x4000_0000, 0x400), (0x4000_0400, 0x400)];
     // Planted defects, to show the RF level checks fail (comma-separated): `dac-ignore-ten`

@@ -14,3 +14,4 @@ pub mod scs;
 pub mod serve;
 pub mod stack;
 pub mod store_image;
+pub mod touch;

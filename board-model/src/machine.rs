@@ -156,6 +156,12 @@ pub struct Sim {
     /// The RTT host as `probe-rs run` is: it sets the up channel to block-when-full
     /// (SEGGER_RTT_MODE_BLOCK_IF_FIFO_FULL = 2 in the descriptor's flags) each time it reads.
     pub rtt_host_blocking: bool,
+    /// The 4-wire overlay (the 2D image) and its pins X+, X−, Y+, Y− as (GPIO port index in
+    /// `periphs`, pin): told the pins' modes after every write to those ports.
+    pub touch: Option<(
+        std::rc::Rc<std::cell::RefCell<crate::touch::Panel>>,
+        [(usize, u8); 4],
+    )>,
     /// The RTT host stopped reading (a stalled or killed `probe-rs`): nothing is drained.
     pub rtt_host_stalled: bool,
     /// IRQ lines held high by a fault injection (an interrupt storm).
@@ -540,6 +546,13 @@ impl Sim {
         if self.chip.pins.iter().any(|p| p.port == i) {
             self.update_pins(now);
         }
+        if let Some((panel, pins)) = &self.touch {
+            if pins.iter().any(|(port, _)| *port == i) {
+                let modes =
+                    pins.map(|(port, pin)| (self.chip.pin_mode)(&*self.periphs[port].p, pin));
+                panel.borrow_mut().set_pins(now, modes);
+            }
+        }
         self.settle_local();
         Ok(())
     }
@@ -752,6 +765,7 @@ impl Machine {
             sleeping_ticks: 0,
             rtt_pending: 0,
             rtt_host_blocking: false,
+            touch: None,
             rtt_host_stalled: false,
             stuck_irqs: Vec::new(),
             dma_reads: Vec::new(),
@@ -783,7 +797,8 @@ impl Machine {
         // flash in KiB. Its 4 KiB page is mapped read-only and holds nothing else the model
         // knows (reads of the rest return 0).
         let fs_page = chip_flash_size_reg & !0xFFF;
-        uc.mem_map(fs_page as u64, 0x1000, Prot::READ).map_err(uc_err)?;
+        uc.mem_map(fs_page as u64, 0x1000, Prot::READ)
+            .map_err(uc_err)?;
         uc.mem_write(
             chip_flash_size_reg as u64,
             &((flash_size / 1024) as u16).to_le_bytes(),

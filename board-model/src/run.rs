@@ -62,6 +62,26 @@ pub struct Options {
     /// Note the instructions executed so far in this exception at every ADC trigger (TIM3
     /// TRGO): `Outcome::per_trigger_counts`.
     pub count_per_trigger: Option<usize>,
+    /// The 4-wire overlay on the 2D image's pins and the finger on it (`crate::touch`).
+    pub touch: Option<TouchScript>,
+}
+
+/// The overlay and where the finger is at each virtual time (s since reset).
+#[derive(Clone)]
+pub struct TouchScript {
+    pub overlay: host_sim::touch::Overlay,
+    pub seed: u64,
+    pub finger: crate::touch::FingerAt,
+}
+
+impl std::fmt::Debug for TouchScript {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "TouchScript {{ overlay: {:?}, seed: {} }}",
+            self.overlay, self.seed
+        )
+    }
 }
 
 impl Options {
@@ -93,6 +113,7 @@ impl Options {
             flash_preload: Vec::new(),
             count_at_s: Vec::new(),
             count_per_trigger: None,
+            touch: None,
         }
     }
 }
@@ -146,6 +167,8 @@ pub struct Outcome {
     pub dac: Vec<crate::periph::dac::DacSample>,
     /// TRGO pulses of TIM2 (the burst timer) and TIM8 (the DAC's trigger): (time, timer).
     pub trgo: Vec<(Time, u8)>,
+    /// What the overlay saw (with `Options::touch`).
+    pub touch: Option<crate::touch::Trace>,
 }
 
 /// Runs `opts`.
@@ -178,7 +201,15 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
             _ => adc.convert(traj.state(seconds(rel)).position_um) as u16,
         }
     });
-    let mut m = board::build(opts.board, &opts.elf, wiper)?;
+    let panel = opts.touch.as_ref().map(|t| {
+        Rc::new(std::cell::RefCell::new(crate::touch::Panel::new(
+            def,
+            t.overlay,
+            t.seed,
+            t.finger.clone(),
+        )))
+    });
+    let mut m = board::build_with(opts.board, &opts.elf, wiper, panel.clone())?;
     for (addr, bytes) in &opts.flash_preload {
         m.preload_flash(*addr, bytes)?;
     }
@@ -332,6 +363,7 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
                 _ => None,
             })
             .collect(),
+        touch: panel.map(|p| p.borrow().trace.clone()),
         dac: s
             .periphs
             .iter()

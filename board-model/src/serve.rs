@@ -338,4 +338,3 @@ fn our_stderr() -> Stdio {
         Err(_) => Stdio::inherit(),
     }
 }
-

@@ -91,7 +91,12 @@ fn rf_off_within_10_us_then_reset(board: BoardKind, opts: &Options, cause: &str)
         .iter()
         .find(|r| r.0 >= t_fault)
         .copied()
-        .unwrap_or_else(|| panic!("{board:?} {cause}: no reset after the fault: {:?}", o.resets));
+        .unwrap_or_else(|| {
+            panic!(
+                "{board:?} {cause}: no reset after the fault: {:?}",
+                o.resets
+            )
+        });
     assert_eq!(
         reset.1,
         ResetCause::Software,
@@ -112,11 +117,17 @@ fn rf_off_within_10_us_then_reset(board: BoardKind, opts: &Options, cause: &str)
             "{board:?} {cause}: pin {pin} still high 10 µs after the fault"
         );
         assert!(
-            !e.iter().any(|x| x.high && x.at > deadline && x.at < reset.0),
+            !e.iter()
+                .any(|x| x.high && x.at > deadline && x.at < reset.0),
             "{board:?} {cause}: pin {pin} rose again before the reset"
         );
     }
-    let level = o.dac.iter().take_while(|d| d.at <= deadline).last().unwrap();
+    let level = o
+        .dac
+        .iter()
+        .take_while(|d| d.at <= deadline)
+        .last()
+        .unwrap();
     assert!(
         !level.driven || level.code == 0,
         "{board:?} {cause}: RF level code {} 10 µs after the fault",
@@ -135,9 +146,9 @@ fn rf_off_within_10_us_then_reset(board: BoardKind, opts: &Options, cause: &str)
         .collect();
     assert_eq!(booted.len(), 2, "{board:?} {cause}: no second boot");
     assert!(
-        o.log.iter().any(|l| l
-            .text
-            .contains(&format!("the previous run ended in the fault path ({cause}"))),
+        o.log.iter().any(|l| l.text.contains(&format!(
+            "the previous run ended in the fault path ({cause}"
+        ))),
         "{board:?} {cause}: the second boot does not say why: {:?}",
         o.log
     );
@@ -260,7 +271,10 @@ fn g474_no_late_conversion_reaches_the_samples() {
     let (o, m) = run::run(&opts).unwrap();
     assert!(o.stop.is_none(), "{:?}", o.stop);
     assert_eq!(
-        o.log.iter().filter(|l| l.text.contains("acquisition restarted")).count(),
+        o.log
+            .iter()
+            .filter(|l| l.text.contains("acquisition restarted"))
+            .count(),
         1,
         "the storm must restart the acquisition once"
     );
@@ -294,14 +308,16 @@ fn a_part_with_less_flash_runs_without_a_store() {
         assert!(o.stop.is_none(), "{board:?}: {:?}", o.stop);
         assert!(o.resets.is_empty(), "{board:?}: reset {:?}", o.resets);
         assert!(
-            o.log
-                .iter()
-                .any(|l| l.text.contains("this part has 256 KiB of flash (FLASHSIZE)")),
+            o.log.iter().any(|l| l
+                .text
+                .contains("this part has 256 KiB of flash (FLASHSIZE)")),
             "{board:?}: no flash-size line in {:?}",
             o.log
         );
         assert!(
-            o.log.iter().any(|l| l.text == "boot: no scene store on this board"),
+            o.log
+                .iter()
+                .any(|l| l.text == "boot: no scene store on this board"),
             "{board:?}: {:?}",
             o.log
         );
@@ -330,7 +346,11 @@ fn g474_clock_switch_takes_the_intermediate_step() {
         .iter()
         .find_map(|p| p.p.as_any().downcast_ref::<RccG4>())
         .expect("the G474 model has an RCC");
-    assert!(rcc.hclk_step_violations.is_empty(), "{:?}", rcc.hclk_step_violations);
+    assert!(
+        rcc.hclk_step_violations.is_empty(),
+        "{:?}",
+        rcc.hclk_step_violations
+    );
 }
 
 /// The same panic with a debugger attached (DHCSR.C_DEBUGEN = 1): the core halts at the HardFault

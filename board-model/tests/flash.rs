@@ -38,7 +38,6 @@ fn elf(board: BoardKind) -> PathBuf {
     p
 }
 
-
 /// The board's replies: (time its last byte left, sequence number, reply).
 fn replies(bytes: &[(Time, u8)]) -> Vec<(Time, u32, Reply)> {
     use saw_link::frame::{message, Receiver, MAX_ENCODED};
@@ -114,7 +113,10 @@ fn save_that_erases(board: BoardKind, duration_s: f64) -> (run::Outcome, Machine
                 },
             ),
         ),
-        (0.30, saw_board_model::check::request_frame(2, &Request::Save)),
+        (
+            0.30,
+            saw_board_model::check::request_frame(2, &Request::Save),
+        ),
     ];
     let (o, m) = run::run(&opts).expect("the run starts");
     assert!(

@@ -232,7 +232,9 @@ fn hello_push_and_refuse(kind: BoardKind) {
                 let g = saw_json(&s.port, &["get"]);
                 // `get --json` speaks the scene file's keys: as TOML it reads back as the scene.
                 let toml_text = toml::to_string(&g["result"]["scene"]).unwrap();
-                let back = saw_core::scene_file::parse("get", &toml_text).unwrap().config;
+                let back = saw_core::scene_file::parse("get", &toml_text)
+                    .unwrap()
+                    .config;
                 assert_eq!(back, doc.config, "{name}");
             }
             Err(e) => {
@@ -292,13 +294,22 @@ fn stream(kind: BoardKind) {
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let (time, pos, region, scene) = (col("time_us"), col("position_um"), col("region"), col("scene_id"));
+    let (time, pos, region, scene) = (
+        col("time_us"),
+        col("position_um"),
+        col("region"),
+        col("scene_id"),
+    );
     let rows: Vec<Vec<String>> = lines
         .map(|l| l.split(',').map(str::to_string).collect())
         .collect();
     // Every record carries the scene in force: the image's default scene.
     let want_id = format!("{:#010x}", saw_link::scene_id(&saw_core::default_config()));
-    assert!(rows.iter().all(|r| r[scene] == want_id), "{:?}", rows.first());
+    assert!(
+        rows.iter().all(|r| r[scene] == want_id),
+        "{:?}",
+        rows.first()
+    );
     // How many depends on the model's speed (2 s of wall time); the gaps and regions do not.
     assert!(rows.len() >= 2, "{} records: {r}", rows.len());
     let t: Vec<u64> = rows.iter().map(|r| r[time].parse().unwrap()).collect();
@@ -339,7 +350,11 @@ fn save_and_power_cycle(kind: BoardKind) {
     std::fs::write(&flash, &image).unwrap();
     let s = Served::start(kind, &dir.0, Some(&flash));
     let h = saw_json(&s.port, &["hello"]);
-    assert_eq!(h["result"]["hello"]["scene_id"], format!("{:#010x}", last.scene_id), "{h}");
+    assert_eq!(
+        h["result"]["hello"]["scene_id"],
+        format!("{:#010x}", last.scene_id),
+        "{h}"
+    );
     assert_eq!(h["result"]["hello"]["scene_source"], "saved", "{h}");
     let moved = saw_json(&s.port, &["boundary", "0", "30"]);
     let id = moved["result"]["applied"].clone();

@@ -201,6 +201,36 @@ impl RfLevel {
         self.mode = Mode::Periodic;
     }
 
+    /// The table for a triangle peaking at `peak_permille` over `pulse_clocks`, built unless it
+    /// is the one already there; how long the build took, µs.
+    fn build_table(&mut self, peak_permille: u16, pulse_clocks: u64) -> Option<u32> {
+        if self.key == Some((peak_permille, pulse_clocks)) {
+            return None;
+        }
+        let t0 = embassy_time::Instant::now();
+        // Pulses longer than 128 steps of 2^16 clocks (46.6 ms at 180 MHz, 55.9 ms at
+        // 150 MHz) count prescaled clocks, so the whole pulse still gets its triangle.
+        let psc = ((pulse_clocks.saturating_sub(1)) / (MAX_ENVELOPE_ENTRIES as u64 * MAX_STEP_CLOCKS))
+            .min(u16::MAX as u64) as u16;
+        let div = psc as u64 + 1;
+        let plan = triangle_plan(pulse_clocks / div, BOARD.rf_level.envelope_timer_clk_hz / div as u32);
+        triangle(&BOARD.rf_level.table, peak_permille, &plan, &mut self.table[..]);
+        self.plan = plan;
+        self.psc = psc;
+        self.key = Some((peak_permille, pulse_clocks));
+        // Saturating: Instant − Instant panics if the clock went backwards (it cannot, but
+        // this runs on the sample path: scripts/panic-check.sh).
+        Some(embassy_time::Instant::now().saturating_duration_since(t0).as_micros() as u32)
+    }
+
+    /// Builds the table a pulse of `pulse_clocks` at `peak_permille` will play, without arming
+    /// anything: the first such pulse finds it. The 2D image does this at boot for its scene's
+    /// edge pulse, whose first build (~80 µs on the G474) would otherwise land on the sample path
+    /// of the first edge crossed (board model: sensor-to-gate latency).
+    pub fn prebuild_triangle(&mut self, peak_permille: u16, pulse_clocks: u64) -> Option<u32> {
+        self.build_table(peak_permille, pulse_clocks)
+    }
+
     /// Arms a triangle peaking at `peak_code_permille` over a one-pulse of `pulse_clocks` TIM8
     /// clocks. Call with TIM2 stopped; TIM2's TRGO must then be its enable (MMS = 001), so TIM8
     /// counts exactly while the one-pulse runs (RM0390 §16.3 "TIMx and external trigger
@@ -208,24 +238,7 @@ impl RfLevel {
     /// update (a whole step) is TRGO and latches it.
     pub fn triangle(&mut self, peak_permille: u16, pulse_clocks: u64) -> Armed {
         self.stop_envelope();
-        let rebuilt_us = if self.key != Some((peak_permille, pulse_clocks)) {
-            let t0 = embassy_time::Instant::now();
-            // Pulses longer than 128 steps of 2^16 clocks (46.6 ms at 180 MHz, 55.9 ms at
-            // 150 MHz) count prescaled clocks, so the whole pulse still gets its triangle.
-            let psc = ((pulse_clocks.saturating_sub(1)) / (MAX_ENVELOPE_ENTRIES as u64 * MAX_STEP_CLOCKS))
-                .min(u16::MAX as u64) as u16;
-            let div = psc as u64 + 1;
-            let plan = triangle_plan(pulse_clocks / div, BOARD.rf_level.envelope_timer_clk_hz / div as u32);
-            triangle(&BOARD.rf_level.table, peak_permille, &plan, &mut self.table[..]);
-            self.plan = plan;
-            self.psc = psc;
-            self.key = Some((peak_permille, pulse_clocks));
-            // Saturating: Instant − Instant panics if the clock went backwards (it cannot, but
-            // this runs on the sample path: scripts/panic-check.sh).
-            Some(embassy_time::Instant::now().saturating_duration_since(t0).as_micros() as u32)
-        } else {
-            None
-        };
+        let rebuilt_us = self.build_table(peak_permille, pulse_clocks);
         let (n, step) = (self.plan.entries, self.plan.step_clocks);
         let t = pac::TIM8;
         t.smcr().modify(|w| w.set_sms(Sms::GATED_MODE));

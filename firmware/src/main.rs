@@ -12,6 +12,8 @@
 //!   ST-LINK virtual COM port, scenes compiled here and only swapped in by `control`.
 #![no_std]
 #![no_main]
+// The 2D image leaves the 1D sample path (and the link, which serves it) unused.
+#![cfg_attr(feature = "touch-2d", allow(dead_code, unused_imports))]
 
 mod board;
 mod fault;
@@ -22,6 +24,8 @@ mod rf;
 #[cfg(feature = "selftest-delayed-pulse")]
 mod selftest;
 mod store;
+#[cfg(feature = "touch-2d")]
+mod touch2d;
 
 use defmt::{info, unwrap, warn};
 use defmt_rtt as _;
@@ -120,6 +124,8 @@ static SAMPLES: Channel<CriticalSectionRawMutex, Sample, 64> = Channel::new();
 /// burst 99.5 µs after its trigger (board-model check, sensor-to-gate latency, limit 100 µs).
 static CONTROL_READY: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
+// The 2D image's `main` is `touch2d::main`.
+#[cfg(not(feature = "touch-2d"))]
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     let Some(p) = board::init() else {

@@ -281,6 +281,13 @@ impl BurstGate {
         self.line = Line::Off;
     }
 
+    /// The triangle table of a one-pulse `s` at `peak_permille`, built now (not played): see
+    /// `RfLevel::prebuild_triangle`. The 2D image, at boot, for its scene's edge pulse.
+    #[cfg(feature = "touch-2d")]
+    pub fn prebuild_triangle(&mut self, s: &TimerSettings, peak_permille: u16) -> Option<u32> {
+        self.level.prebuild_triangle(peak_permille, crate::level::pulse_tim8_clocks(s))
+    }
+
     /// See `RfLevel::time_worst_rebuild_us`.
     pub fn time_worst_rebuild_us(&mut self) -> u32 {
         self.level.time_worst_rebuild_us()

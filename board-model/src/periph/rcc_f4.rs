@@ -1386,7 +1386,9 @@ mod tests {
             &mut Signals::default(),
         )
         .expect("HSEON is taken without an input");
-        let cr = g.read(TICKS_PER_S, OFF_CR, &mut Signals::default()).unwrap();
+        let cr = g
+            .read(TICKS_PER_S, OFF_CR, &mut Signals::default())
+            .unwrap();
         assert_eq!(cr & CR_HSEON, CR_HSEON);
         assert_eq!(cr & CR_HSERDY, 0, "HSERDY set with nothing on OSC_IN");
     }

@@ -1089,8 +1089,15 @@ mod tests {
     fn hclk_may_not_step_past_80_mhz_in_one_go() {
         let mut chip = Chip::new();
         chip.embassy_init();
-        assert_eq!(chip.rcc.hclk_step_violations.len(), 1, "{:?}", chip.rcc.hclk_step_violations);
-        assert!(chip.rcc.hclk_step_violations[0].1.contains("HCLK 16000000 -> 150000000 Hz"));
+        assert_eq!(
+            chip.rcc.hclk_step_violations.len(),
+            1,
+            "{:?}",
+            chip.rcc.hclk_step_violations
+        );
+        assert!(chip.rcc.hclk_step_violations[0]
+            .1
+            .contains("HCLK 16000000 -> 150000000 Hz"));
 
         for (wait_ticks, violations) in [(3_600, 0), (3_599, 1)] {
             let mut chip = Chip::new();

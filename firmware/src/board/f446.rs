@@ -41,6 +41,8 @@ pub const BOARD: &BoardDef = &saw_boards::NUCLEO_F446RE_DUAL128;
 
 // The dual interleaved acquisition replaces the single-ADC one below (every item of which is
 // `cfg(not(feature = "dual-adc"))`).
+#[cfg(all(feature = "dual-adc", feature = "touch-2d"))]
+compile_error!("touch-2d replaces the wiper's acquisition: not with dual-adc");
 #[cfg(feature = "dual-adc")]
 #[path = "f446_dual.rs"]
 mod dual;
@@ -176,7 +178,11 @@ pub struct Parts {
     pub burst_pin: PwmPin<'static, TIM2, Ch1>,
     pub burst_b_pin: PwmPin<'static, TIM2, Ch3>,
     pub rf_arm: Output<'static>,
+    #[cfg(not(feature = "touch-2d"))]
     pub sampler: Sampler,
+    /// The 4-wire overlay's ADC, DMA, timer and pins (the 2D image).
+    #[cfg(feature = "touch-2d")]
+    pub touch: crate::touch2d::Acquisition,
     pub iwdg: Peri<'static, peripherals::IWDG>,
     /// The saved scene's flash (None: this board has no usable store).
     pub store: Option<StoreFlash>,
@@ -201,8 +207,15 @@ pub fn split(p: Peripherals) -> Parts {
     let carrier_pin = PwmPin::new(p.PA8, OutputType::PushPull);
     // PB10: TIM2_CH3 AF1 (second RF enable, IDT B).
     let burst_b_pin = PwmPin::new(p.PB10, OutputType::PushPull);
-    #[cfg(not(feature = "dual-adc"))]
+    #[cfg(not(any(feature = "dual-adc", feature = "touch-2d")))]
     let sampler = Sampler::new(p.ADC1, p.PA1, p.DMA2_CH0, p.TIM3);
+    #[cfg(feature = "touch-2d")]
+    let touch = crate::touch2d::Acquisition {
+        adc: p.ADC1,
+        dma: p.DMA2_CH0,
+        tim: p.TIM3,
+        pins: [p.PC2.into(), p.PC3.into(), p.PB0.into(), p.PB1.into()],
+    };
     #[cfg(feature = "dual-adc")]
     let sampler = Sampler::new(p.ADC1, p.ADC2, p.PA1, p.DMA2_CH0, p.TIM3);
     // The link: USART2 on PA2 (TX) / PA3 (RX), AF7, wired to the ST-LINK/V2-1's virtual COM port
@@ -220,7 +233,10 @@ pub fn split(p: Peripherals) -> Parts {
         burst_pin,
         burst_b_pin,
         rf_arm,
+        #[cfg(not(feature = "touch-2d"))]
         sampler,
+        #[cfg(feature = "touch-2d")]
+        touch,
         iwdg: p.IWDG,
         store: store_flash(p.FLASH),
         link_tx,

@@ -147,7 +147,11 @@ pub struct Parts {
     pub burst_pin: PwmPin<'static, TIM2, Ch1>,
     pub burst_b_pin: PwmPin<'static, TIM2, Ch3>,
     pub rf_arm: Output<'static>,
+    #[cfg(not(feature = "touch-2d"))]
     pub sampler: Sampler,
+    /// The 4-wire overlay's ADC, DMA, timer and pins (the 2D image).
+    #[cfg(feature = "touch-2d")]
+    pub touch: crate::touch2d::Acquisition,
     pub iwdg: Peri<'static, peripherals::IWDG>,
     /// The saved scene's flash (None: this board has no usable store).
     pub store: Option<StoreFlash>,
@@ -170,7 +174,15 @@ pub fn split(p: Peripherals) -> Parts {
     let carrier_pin = PwmPin::new(p.PA8, OutputType::PushPull);
     // PB10: TIM2_CH3 AF1 (second RF enable, IDT B).
     let burst_b_pin = PwmPin::new(p.PB10, OutputType::PushPull);
+    #[cfg(not(feature = "touch-2d"))]
     let sampler = Sampler::new(p.ADC1, p.PA1, p.DMA1_CH1, p.TIM3);
+    #[cfg(feature = "touch-2d")]
+    let touch = crate::touch2d::Acquisition {
+        adc: p.ADC1,
+        dma: p.DMA1_CH1,
+        tim: p.TIM3,
+        pins: [p.PC2.into(), p.PC3.into(), p.PB0.into(), p.PB1.into()],
+    };
     let store = store_flash(p.FLASH);
     // The link: LPUART1 on PA2 (TX) / PA3 (RX), AF12, wired to the STLINK-V3E's virtual COM port
     // (UM2505 §7.9 "Virtual COM port (VCP)"). DMA1 channels 3 (TX) and 2 (RX) through the DMAMUX
@@ -187,7 +199,10 @@ pub fn split(p: Peripherals) -> Parts {
         burst_pin,
         burst_b_pin,
         rf_arm,
+        #[cfg(not(feature = "touch-2d"))]
         sampler,
+        #[cfg(feature = "touch-2d")]
+        touch,
         iwdg: p.IWDG,
         store,
         link_tx,

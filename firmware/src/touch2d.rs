@@ -1,0 +1,686 @@
+//! The 2D image (feature `touch-2d`, issue #36): the 4-wire overlay read on the plate schedule,
+//! each frame through `saw_core::touch::frame::TouchSensor` and `saw_core::plane::Controller2d`
+//! onto the same burst gate as the 1D image.
+//!
+//! Acquisition (`docs/touch.md`, "Firmware"): TIM3 counts one frame (`FRAME_TICKS` at its
+//! kernel clock, auto-reload) and its CC1 interrupt walks the frame's events (`EVENTS`, from
+//! the core's `Schedule` by build.rs): at a phase's start it writes the four plate pins (BSRR
+//! then MODER: RM0390 §7.4.1/§7.4.7, RM0440 §9.4.1/§9.4.7 — the output level is in ODR before
+//! the pin becomes an output) and the ADC's sequence to the phase's channel; at its trigger (its
+//! settling time later) it starts the conversions by software (F446 ADC_CR2.SWSTART, RM0390
+//! §13.13.3, a 16-rank scan of the one channel; G474 ADC_CR.ADSTART with EXTEN = 0, RM0440
+//! §21.4.15, 16 conversions summed by the oversampler, OVSR = 16×, OVSS = 0, §21.4.30), and CCR1
+//! is loaded with the next event's tick (output compare frozen mode: the match only sets CC1IF,
+//! RM0390 §17.3.8, RM0440 §29.3.9). DMA takes the codes (normal mode, re-armed at each frame's
+//! start); the frame's first event hands the previous frame to the control task, which runs it
+//! on the sample path's interrupt executor. A software start is late by the interrupt's latency,
+//! never early: the settling is a floor. `MARGIN_NS` after each phase's conversions keeps a late
+//! phase's last conversion before the next switch.
+//!
+//! Not in this image: the host link and the scene store (the 1D image's); the 2D scene is the one
+//! built in (`SAW_SCENE_2D`, default `scenes/2d-fig12.toml`).
+
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+
+use defmt::{info, unwrap, warn};
+use embassy_futures::select::{select, Either};
+use embassy_stm32::gpio::Output;
+use embassy_stm32::interrupt;
+use embassy_stm32::interrupt::{InterruptExt, Priority};
+use embassy_stm32::pac;
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::Peri;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_time::{Duration, Instant, Ticker};
+use saw_boards::touch::TouchPins;
+use saw_core::burst::BurstTimer;
+use saw_core::gate::{BurstOutput, Envelope};
+use saw_core::plane::{apply2d, Config2d, Controller2d};
+use saw_core::touch::calibration::{Affine, CalPoint};
+use saw_core::touch::fault::RailBands;
+use saw_core::touch::frame::{Frame, TouchSensor};
+use saw_core::touch::plates::{Phase, PinRole, Terminal, SEQUENCE};
+use saw_core::touch::pressure::PressureConfig;
+
+use crate::board::{self, BOARD};
+use crate::rf::{BurstGate, Carrier};
+use crate::{fault, level, EXECUTOR_HIGH, SAMPLE_PATH_PRIORITY};
+
+/// One event of the frame: `kind` 0 switches the pins and the channel to slot `slot`'s phase
+/// at `tick` of TIM3; 1 starts its conversions `tick` ticks after the switch's pin writes
+/// (CNT read back after them: the settling counts from the switch as it happened, whatever the
+/// interrupt's latency); 2 does both (Z2: Z1's drive, no settling) at `tick`.
+#[derive(Clone, Copy)]
+pub struct Event {
+    pub tick: u32,
+    pub kind: u8,
+    pub slot: u8,
+}
+
+// TICKS_PER_US, FRAME_US, FRAME_TICKS, MARGIN_NS, EVENTS, CHANNELS, CAL, SCENE_2D,
+// SCENE_2D_FILE: written by build.rs.
+include!(concat!(env!("OUT_DIR"), "/touch2d.rs"));
+
+const _: () = assert!(FRAME_TICKS >= 2 && FRAME_TICKS <= 65_536);
+const _: () = assert!(TICKS_PER_US * 1_000_000 == BOARD.adc.trigger_timer_clk_hz);
+
+#[cfg(feature = "nucleo-f446re")]
+const PINS: TouchPins = saw_boards::touch::NUCLEO_F446RE_TOUCH;
+#[cfg(all(feature = "nucleo-g474re", not(feature = "nucleo-f446re")))]
+const PINS: TouchPins = saw_boards::touch::NUCLEO_G474RE_TOUCH;
+
+/// The two ports' writes for one phase: for port B and port C, the MODER bits of the overlay's
+/// pins (mask, value) and the BSRR word.
+#[derive(Clone, Copy)]
+struct Drive {
+    b: (u32, u32, u32),
+    c: (u32, u32, u32),
+}
+
+const fn terminal_pin(t: Terminal) -> (char, u8) {
+    let p = match t {
+        Terminal::XPlus => PINS.x_plus.pin,
+        Terminal::XMinus => PINS.x_minus.pin,
+        Terminal::YPlus => PINS.y_plus.pin,
+        Terminal::YMinus => PINS.y_minus.pin,
+    };
+    (p.port, p.pin)
+}
+
+/// Output high / low: MODER 01 with ODR set / reset; converted or floating: analog (MODER 11,
+/// the Schmitt trigger off; RM0390 §7.3.12, RM0440 §9.3.12).
+const fn drive(phase: Phase) -> Drive {
+    let mut d = Drive {
+        b: (0, 0, 0),
+        c: (0, 0, 0),
+    };
+    let ts = [
+        Terminal::XPlus,
+        Terminal::XMinus,
+        Terminal::YPlus,
+        Terminal::YMinus,
+    ];
+    let mut i = 0;
+    while i < 4 {
+        let (port, pin) = terminal_pin(ts[i]);
+        let n = pin as u32;
+        let (mode, bsrr) = match phase.role(ts[i]) {
+            PinRole::High => (0b01, 1 << n),
+            PinRole::Low => (0b01, 1 << (n + 16)),
+            PinRole::Sensed | PinRole::Floating => (0b11, 0),
+        };
+        let w = match port {
+            'B' => &mut d.b,
+            'C' => &mut d.c,
+            _ => panic!("touch pins: ports B and C only"),
+        };
+        w.0 |= 0b11 << (2 * n);
+        w.1 |= mode << (2 * n);
+        w.2 |= bsrr;
+        i += 1;
+    }
+    d
+}
+
+const DRIVES: [Drive; 4] = [
+    drive(SEQUENCE[0]),
+    drive(SEQUENCE[1]),
+    drive(SEQUENCE[2]),
+    drive(SEQUENCE[3]),
+];
+/// Every pin analog: before the acquisition starts.
+const ALL_ANALOG: Drive = {
+    let mut d = DRIVES[0];
+    d.b.1 = d.b.0;
+    d.b.2 = 0;
+    d.c.1 = d.c.0;
+    d.c.2 = 0;
+    d
+};
+
+/// Releases first, then drives: the pins that float in the new phase go analog on both ports,
+/// then each port's driven pins take their level (BSRR) and become outputs (MODER). So no two
+/// terminals of different plates are ever driven at once (but Z's Y+ and X−, through the
+/// contact), which a port-by-port switch would do for a few bus cycles.
+fn write_drive(d: &Drive) {
+    let ports = [(pac::GPIOB, d.b), (pac::GPIOC, d.c)];
+    for (port, (mask, mode, _)) in ports {
+        // Analog is 11: OR in the bits of the pins whose new mode is analog.
+        let analog = mask & mode & (mode >> 1) & 0x5555_5555;
+        let analog = analog | analog << 1;
+        if analog != 0 {
+            port.moder().modify(|w| w.0 |= analog);
+        }
+    }
+    for (port, (mask, mode, bsrr)) in ports {
+        if mask == 0 {
+            continue;
+        }
+        port.bsrr().write_value(pac::gpio::regs::Bsrr(bsrr));
+        port.moder().modify(|w| w.0 = (w.0 & !mask) | mode);
+    }
+}
+
+/// Frames from the TIM3 interrupt to the control task.
+static FRAMES: Channel<CriticalSectionRawMutex, Frame, 4> = Channel::new();
+/// The next event's index in `EVENTS`.
+static NEXT: AtomicU32 = AtomicU32::new(0);
+/// Events whose tick had passed when CCR1 was loaded (each delays the rest of the frame a frame).
+pub static LATE: AtomicU32 = AtomicU32::new(0);
+/// Frames whose DMA had not moved every code by the frame's end (not delivered).
+pub static INCOMPLETE: AtomicU32 = AtomicU32::new(0);
+/// Frames the control task had no room for.
+pub static DROPPED: AtomicU32 = AtomicU32::new(0);
+/// Frames delivered.
+pub static DELIVERED: AtomicU32 = AtomicU32::new(0);
+/// The first frame boundary has passed (nothing was converted before it).
+static RUNNING: AtomicBool = AtomicBool::new(false);
+
+// ---- ADC and DMA, per chip ------------------------------------------------------------------
+
+#[cfg(feature = "nucleo-f446re")]
+mod chip {
+    //! F446: ADC1 scan of 16 ranks of the phase's channel, 56-cycle sampling (the 1D plan's),
+    //! DMA2 stream 0 channel 0 (RM0390 §9.3.3 table 29), 64 half-words a frame.
+    use super::*;
+    use embassy_stm32::adc::{Adc, SampleTime};
+    use embassy_stm32::pac::dma::vals;
+    use embassy_stm32::peripherals::{ADC1, DMA2_CH0};
+
+    pub const WORDS_PER_SLOT: usize = 16;
+    pub const WORDS: usize = 4 * WORDS_PER_SLOT;
+    const STREAM: usize = 0;
+    pub static mut BUF: [u16; WORDS] = [0; WORDS];
+
+    pub fn init(adc: Peri<'static, ADC1>, _dma: Peri<'static, DMA2_CH0>) {
+        // Clock, ADCPRE (PCLK2 / 4 = 22.5 MHz) and ADON by embassy; kept on for good.
+        core::mem::forget(Adc::new(adc));
+        let r = pac::ADC1;
+        // SCAN: the 16 ranks in one start (RM0390 §13.3.5); 12 bits.
+        r.cr1().modify(|w| w.set_scan(true));
+        // DMA with DDS = 1: a request per conversion for as long as the stream runs (§13.8.1);
+        // single (not continuous) mode; no external trigger: SWSTART starts it (§13.3.4).
+        r.cr2().modify(|w| {
+            w.set_dma(true);
+            w.set_dds(embassy_stm32::pac::adc::vals::Dds::CONTINUOUS);
+            w.set_cont(false);
+            w.set_exten(embassy_stm32::adc::Exten::DISABLED);
+        });
+        for ch in CHANNELS {
+            if ch < 10 {
+                r.smpr2()
+                    .modify(|w| w.set_smp(ch as usize, SampleTime::CYCLES56));
+            } else {
+                r.smpr1()
+                    .modify(|w| w.set_smp(ch as usize - 10, SampleTime::CYCLES56));
+            }
+        }
+        set_channel(CHANNELS[0]);
+        pac::RCC.ahb1enr().modify(|w| w.set_dma2en(true));
+        let s = pac::DMA2.st(STREAM);
+        s.cr().modify(|w| w.set_en(false));
+        while s.cr().read().en() {}
+        s.par().write_value(r.dr().as_ptr() as u32);
+        s.m0ar().write_value(core::ptr::addr_of!(BUF) as u32);
+        s.fcr().write(|w| w.set_dmdis(vals::Dmdis::ENABLED));
+        s.cr().write(|w| {
+            w.set_chsel(0);
+            w.set_dir(vals::Dir::PERIPHERAL_TO_MEMORY);
+            w.set_msize(vals::Size::BITS16);
+            w.set_psize(vals::Size::BITS16);
+            w.set_minc(true);
+            w.set_pinc(false);
+            w.set_circ(false);
+            w.set_pl(vals::Pl::VERY_HIGH);
+        });
+        rearm();
+    }
+
+    /// All 16 ranks to `ch` (SQR1 L = 15).
+    pub fn set_channel(ch: u8) {
+        let r = pac::ADC1;
+        r.sqr3().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
+        r.sqr2().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
+        r.sqr1().write(|w| {
+            (0..4).for_each(|i| w.set_sq(i, ch));
+            w.set_l(15);
+        });
+    }
+
+    pub fn start() {
+        pac::ADC1.cr2().modify(|w| w.set_swstart(true));
+    }
+
+    /// Whether the stream moved every word of the frame (normal mode: NDTR counts to 0 and the
+    /// stream disables itself, RM0390 §9.3.10), then re-armed for the next frame: EN = 0 read
+    /// back, flags cleared, NDTR reloaded, EN = 1 (§9.3.17). An overrun (OVR, which with DMA
+    /// stops the requests, §13.8.1) is cleared with the DMA bit toggled.
+    pub fn rearm() -> bool {
+        let s = pac::DMA2.st(STREAM);
+        let complete = s.ndtr().read().ndt() == 0;
+        s.cr().modify(|w| w.set_en(false));
+        while s.cr().read().en() {}
+        pac::DMA2.ifcr(0).write(|w| {
+            w.set_tcif(STREAM, true);
+            w.set_htif(STREAM, true);
+            w.set_teif(STREAM, true);
+            w.set_dmeif(STREAM, true);
+            w.set_feif(STREAM, true);
+        });
+        let r = pac::ADC1;
+        if r.sr().read().ovr() {
+            r.sr().modify(|w| w.set_ovr(false));
+            r.cr2().modify(|w| w.set_dma(false));
+            r.cr2().modify(|w| w.set_dma(true));
+        }
+        s.ndtr().write(|w| w.set_ndt(WORDS as u16));
+        s.cr().modify(|w| w.set_en(true));
+        complete
+    }
+
+    /// Slot `k`'s code: its 16 conversions summed.
+    pub fn code(k: usize) -> u16 {
+        let mut sum = 0u32;
+        let base = core::ptr::addr_of!(BUF) as *const u16;
+        for i in 0..WORDS_PER_SLOT {
+            let j = (k * WORDS_PER_SLOT + i) % WORDS;
+            // SAFETY: j < WORDS; the DMA has stopped writing (the frame is complete).
+            sum += unsafe { core::ptr::read_volatile(base.add(j)) } as u32;
+        }
+        sum.min(u16::MAX as u32) as u16
+    }
+}
+
+#[cfg(all(feature = "nucleo-g474re", not(feature = "nucleo-f446re")))]
+mod chip {
+    //! G474: ADC1, one regular rank of the phase's channel, the oversampler summing 16
+    //! conversions (OVSR 011 = 16×, OVSS 0: the sum of 16, ≤ 65 520, in the 16-bit DR; RM0440
+    //! §21.4.30), 47.5-cycle sampling (the 1D plan's); DMA1 channel 1 through DMAMUX1 channel 0,
+    //! request 5 = ADC1 (RM0440 §13.3.2 table 91), 4 half-words a frame.
+    use super::*;
+    use embassy_stm32::adc::{vals, Adc, AdcConfig, SampleTime};
+    use embassy_stm32::peripherals::{ADC1, DMA1_CH1};
+
+    pub const WORDS: usize = 4;
+    const CH: usize = 0;
+    pub static mut BUF: [u16; WORDS] = [0; WORDS];
+
+    pub fn init(adc: Peri<'static, ADC1>, _dma: Peri<'static, DMA1_CH1>) {
+        let mut cfg = AdcConfig::default();
+        cfg.oversampling_ratio = Some(3);
+        cfg.oversampling_shift = Some(0);
+        cfg.oversampling_mode = Some((vals::Rovsm::CONTINUED, vals::Trovs::AUTOMATIC, true));
+        // Calibration, ADEN, the oversampler (embassy); kept on for good.
+        core::mem::forget(Adc::new(adc, cfg));
+        let r = pac::ADC1;
+        // DMA circular on the ADC side (DMACFG = 1: a request per result for as long as DMAEN,
+        // §21.4.29), single mode, software start (EXTEN = 0). CFGR only while ADSTART = 0.
+        r.cfgr().modify(|w| {
+            w.set_dmaen(vals::Dmaen::ENABLE);
+            w.set_dmacfg(vals::Dmacfg::CIRCULAR);
+            w.set_cont(false);
+            w.set_exten(vals::Exten::DISABLED);
+        });
+        for ch in CHANNELS {
+            if ch < 10 {
+                r.smpr()
+                    .modify(|w| w.set_smp(ch as usize, SampleTime::CYCLES47_5));
+            } else {
+                r.smpr2()
+                    .modify(|w| w.set_smp(ch as usize - 10, SampleTime::CYCLES47_5));
+            }
+        }
+        set_channel(CHANNELS[0]);
+        pac::RCC.ahb1enr().modify(|w| {
+            w.set_dma1en(true);
+            w.set_dmamux1en(true);
+        });
+        pac::DMAMUX1.ccr(CH).write(|w| w.set_dmareq_id(5));
+        let c = pac::DMA1.ch(CH);
+        c.cr().modify(|w| w.set_en(false));
+        c.par().write_value(r.dr().as_ptr() as u32);
+        c.mar().write_value(core::ptr::addr_of!(BUF) as u32);
+        c.cr().write(|w| {
+            w.set_dir(embassy_stm32::pac::bdma::vals::Dir::FROM_PERIPHERAL);
+            w.set_msize(embassy_stm32::pac::bdma::vals::Size::BITS16);
+            w.set_psize(embassy_stm32::pac::bdma::vals::Size::BITS16);
+            w.set_minc(true);
+            w.set_pinc(false);
+            w.set_circ(false);
+            w.set_pl(embassy_stm32::pac::bdma::vals::Pl::VERY_HIGH);
+        });
+        rearm();
+    }
+
+    /// SQR1: L = 0 (one rank), SQ1 = `ch`; written only between conversions (ADSTART = 0,
+    /// RM0440 §21.7.11: the margin after each phase's conversions).
+    pub fn set_channel(ch: u8) {
+        pac::ADC1.sqr1().write(|w| {
+            w.set_l(0);
+            w.set_sq(0, ch);
+        });
+    }
+
+    pub fn start() {
+        pac::ADC1.cr().modify(|w| w.set_adstart(true));
+    }
+
+    /// Whether the channel moved every word of the frame (CNDTR at 0, RM0440 §12.4.4), then
+    /// re-armed: EN = 0, flags cleared, CNDTR reloaded (writable only while EN = 0), EN = 1. An
+    /// overrun (OVR) is cleared (ISR bits are rc_w1).
+    pub fn rearm() -> bool {
+        let c = pac::DMA1.ch(CH);
+        let complete = c.ndtr().read().ndt() == 0;
+        c.cr().modify(|w| w.set_en(false));
+        pac::DMA1.ifcr().write(|w| w.set_gif(CH, true));
+        let r = pac::ADC1;
+        if r.isr().read().ovr() {
+            r.isr().write(|w| w.set_ovr(true));
+        }
+        c.ndtr().write(|w| w.set_ndt(WORDS as u16));
+        c.cr().modify(|w| w.set_en(true));
+        complete
+    }
+
+    /// Slot `k`'s code: the oversampler's sum of 16.
+    pub fn code(k: usize) -> u16 {
+        let base = core::ptr::addr_of!(BUF) as *const u16;
+        // SAFETY: k % WORDS < WORDS; the channel has stopped writing (the frame is complete).
+        unsafe { core::ptr::read_volatile(base.add(k % WORDS)) }
+    }
+}
+
+#[cfg(feature = "nucleo-f446re")]
+pub type AdcDma = embassy_stm32::peripherals::DMA2_CH0;
+#[cfg(all(feature = "nucleo-g474re", not(feature = "nucleo-f446re")))]
+pub type AdcDma = embassy_stm32::peripherals::DMA1_CH1;
+
+/// The overlay's peripherals, claimed by `board::split`.
+pub struct Acquisition {
+    pub adc: Peri<'static, embassy_stm32::peripherals::ADC1>,
+    pub dma: Peri<'static, AdcDma>,
+    pub tim: Peri<'static, embassy_stm32::peripherals::TIM3>,
+    pub pins: [Peri<'static, embassy_stm32::gpio::AnyPin>; 4],
+}
+
+impl Acquisition {
+    /// Pins analog, ADC and DMA configured, TIM3 loaded and stopped.
+    fn configure(self) {
+        write_drive(&ALL_ANALOG);
+        // The pins stay claimed (and analog) for good.
+        core::mem::forget(self.pins);
+        chip::init(self.adc, self.dma);
+        let t = embassy_stm32::timer::low_level::Timer::new(self.tim);
+        defmt::assert_eq!(t.get_clock_frequency().0, BOARD.adc.trigger_timer_clk_hz);
+        core::mem::forget(t);
+        let r = pac::TIM3;
+        r.cr1().modify(|w| w.set_cen(false));
+        r.psc().write_value(0);
+        r.arr().write(|w| w.set_arr((FRAME_TICKS - 1) as u16));
+        // CC1 output compare, frozen (CCMR1 reset value): the match sets CC1IF only.
+        r.ccr(0).write(|w| w.set_ccr(EVENTS[0].tick as u16));
+        // UG: PSC and ARR loaded, CNT = 0; cleared before the interrupt is enabled.
+        r.egr().write(|w| w.set_ug(true));
+        r.sr().write_value(pac::timer::regs::SrGp16(0));
+        r.dier().write(|w| w.set_ccie(0, true));
+        NEXT.store(0, Ordering::Relaxed);
+    }
+}
+
+fn start_timer() {
+    // Above the sample path's executor, beside embassy's DMA and timer interrupts.
+    interrupt::TIM3.set_priority(Priority::P0);
+    // SAFETY: its handler is `TIM3` below.
+    unsafe { interrupt::TIM3.enable() };
+    pac::TIM3.cr1().modify(|w| w.set_cen(true));
+}
+
+#[interrupt]
+fn TIM3() {
+    on_event();
+}
+
+/// One event of the frame (the TIM3 CC1 interrupt). Never inlined: a root of the panic check.
+#[inline(never)]
+pub fn on_event() {
+    let r = pac::TIM3;
+    // CC1IF is rc_w0: written 0, every other flag written 1 (unchanged).
+    r.sr().write_value(pac::timer::regs::SrGp16(!(1 << 1)));
+    let i = NEXT.load(Ordering::Relaxed) as usize % EVENTS.len();
+    let ev = EVENTS[i];
+    let slot = ev.slot as usize % 4;
+    // The pins first (their time is the design's), then the frame boundary's work.
+    let mut switched = 0;
+    if ev.kind != 1 {
+        write_drive(&DRIVES[slot]);
+        switched = r.cnt().read().cnt() as u32;
+        chip::set_channel(CHANNELS[slot]);
+    }
+    if ev.kind != 0 {
+        chip::start();
+    }
+    if i == 0 {
+        deliver();
+    }
+    let n = (i + 1) % EVENTS.len();
+    NEXT.store(n as u32, Ordering::Relaxed);
+    let next = match EVENTS[n].kind {
+        1 => switched + EVENTS[n].tick,
+        _ => EVENTS[n].tick,
+    };
+    r.ccr(0).write(|w| w.set_ccr(next as u16));
+    if n != 0 && r.cnt().read().cnt() as u32 >= next {
+        LATE.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// The frame boundary: the last frame's codes, if the DMA moved them all, to the control task.
+fn deliver() {
+    let complete = chip::rearm();
+    if !RUNNING.swap(true, Ordering::Relaxed) {
+        return;
+    }
+    if !complete {
+        INCOMPLETE.fetch_add(1, Ordering::Relaxed);
+        return;
+    }
+    let frame = Frame {
+        x_code: chip::code(0),
+        y_code: chip::code(1),
+        z1_code: chip::code(2),
+        z2_code: chip::code(3),
+        t_us: Instant::now().as_micros() as u32,
+    };
+    if queue_frame(frame) {
+        DELIVERED.fetch_add(1, Ordering::Relaxed);
+    } else {
+        DROPPED.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// Queues a frame for the control task; false if full. Never inlined: the panic check's allow
+/// list names it for the channel's RefCell borrow, which cannot fail.
+#[inline(never)]
+fn queue_frame(frame: Frame) -> bool {
+    FRAMES.try_send(frame).is_ok()
+}
+
+/// The 2D controller with the default velocity estimator (host-sim's).
+pub type Controller = Controller2d;
+
+static CONTROLLER: static_cell::StaticCell<Option<Controller>> = static_cell::StaticCell::new();
+
+/// The controller, in its static (not main's frame).
+#[inline(never)]
+fn new_controller(timer: BurstTimer) -> &'static mut Controller {
+    let ctrl = CONTROLLER.init_with(|| Controller::new(timer, FRAME_US).ok());
+    let Some(ctrl) = ctrl.as_mut() else {
+        defmt::panic!("touch: the 2D controller is refused")
+    };
+    ctrl
+}
+
+/// The built-in 2D scene decoded, compiled and installed (`Controller2d::load`: compiled in its
+/// frame, moved into the controller), and its edge pulse's triangle table built. Out of main's
+/// frame, so the compile's stack is not stacked on main's.
+#[inline(never)]
+fn load_scene(ctrl: &mut Controller, timer: &BurstTimer, burst: &mut BurstGate) {
+    let Ok(c) = postcard::from_bytes::<Config2d>(SCENE_2D) else {
+        warn!("boot: the 2D scene does not decode; no scene, RF stays off");
+        return;
+    };
+    if ctrl.load(&c).is_err() {
+        warn!("boot: the 2D scene is refused; no scene, RF stays off");
+        return;
+    }
+    info!("boot: the 2D scene built in ({})", SCENE_2D_FILE);
+    // The edge pulse's triangle table now, not on the first edge's sample path.
+    let e = c.scene.edge_pulse;
+    let clocks = e.pulse_us as u64 * timer.clock_hz as u64 / 1_000_000;
+    if let (Envelope::Triangular, Ok(s)) = (e.envelope, timer.one_pulse(clocks)) {
+        let us = burst.prebuild_triangle(&s, e.amplitude_permille);
+        info!(
+            "rf level: the edge pulse's triangle built at boot in {} us",
+            us
+        );
+    }
+}
+
+/// One frame through the sensor and the controller onto the burst gate. Never inlined: a root
+/// of the panic check.
+#[inline(never)]
+pub fn frame_step(
+    sensor: &mut TouchSensor,
+    ctrl: &mut Controller,
+    burst: &mut BurstGate,
+    frame: &Frame,
+) {
+    let reading = sensor.on_frame(frame);
+    let out = ctrl.on_reading(frame.t_us, reading);
+    apply2d(&out, burst);
+}
+
+/// The stale watchdog's tick. Never inlined: a root of the panic check.
+#[inline(never)]
+pub fn tick_step2d(ctrl: &mut Controller, burst: &mut BurstGate, now_us: u32) {
+    if let Some(a) = ctrl.on_tick(now_us) {
+        burst.apply(a);
+    }
+}
+
+const WATCHDOG_PERIOD: Duration = Duration::from_millis(1);
+const TELEMETRY_PERIOD_US: u64 = 1_000_000;
+
+#[embassy_executor::task]
+async fn control2d(
+    ctrl: &'static mut Controller,
+    mut sensor: TouchSensor,
+    mut burst: BurstGate,
+    _rf_arm: Output<'static>,
+    mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+) {
+    let mut watchdog = Ticker::every(WATCHDOG_PERIOD);
+    let mut next_log = Instant::now().as_micros() + TELEMETRY_PERIOD_US;
+    // The task's state is in place: the acquisition may start.
+    start_timer();
+    loop {
+        match select(FRAMES.receive(), watchdog.next()).await {
+            Either::First(frame) => frame_step(&mut sensor, ctrl, &mut burst, &frame),
+            Either::Second(()) => tick_step2d(ctrl, &mut burst, Instant::now().as_micros() as u32),
+        }
+        wdg.pet();
+        let now = Instant::now().as_micros();
+        if now >= next_log {
+            next_log = now + TELEMETRY_PERIOD_US;
+            info!(
+                "telemetry2d frames {=u32} late {=u32} incomplete {=u32} dropped {=u32} {} burst {} line {}",
+                DELIVERED.load(Ordering::Relaxed),
+                LATE.load(Ordering::Relaxed),
+                INCOMPLETE.load(Ordering::Relaxed),
+                DROPPED.load(Ordering::Relaxed),
+                ctrl.telemetry(),
+                burst.stats,
+                burst.line()
+            );
+        }
+    }
+}
+
+const IWDG_TIMEOUT_US: u32 = 50_000;
+
+#[embassy_executor::main]
+async fn main(_spawner: embassy_executor::Spawner) {
+    let Some(p) = board::init() else {
+        fault::halt_without_clock(board::HSE_SOURCE, board::HSE_TIMEOUT_MS)
+    };
+    info!(
+        "saw-firmware v{} on {} ({}), 2D image (touch-2d)",
+        crate::VERSION,
+        BOARD.name,
+        BOARD.probe_rs_chip
+    );
+    if let Some((cause, irqn)) = fault::take_last() {
+        warn!("boot: the previous run ended in the fault path ({}, exception {}): RF was turned off, then the chip reset", cause, irqn);
+    }
+    let parts = board::split(p);
+    let mut rf_arm: Output<'static> = parts.rf_arm;
+    let level = level::RfLevel::new(
+        parts.envelope_tim,
+        parts.dac,
+        parts.dac_pin,
+        parts.envelope_dma,
+    );
+    let mut burst = BurstGate::new(
+        parts.burst_tim,
+        parts.burst_pin,
+        parts.burst_b_pin,
+        level,
+        BOARD,
+    );
+    let carrier = Carrier::start(parts.carrier_tim, parts.carrier_pin, BOARD);
+    info!(
+        "carrier: {} Hz (registers give {} Hz)",
+        BOARD.carrier_hz(),
+        carrier.frequency_hz()
+    );
+    defmt::assert_eq!(carrier.frequency_hz(), saw_boards::CARRIER_HZ);
+    core::mem::forget(carrier);
+
+    let timer = BurstTimer {
+        clock_hz: BOARD.burst_timer_clk_hz,
+        counter_bits: BOARD.burst_timer_bits,
+        max_burst_hz: BOARD.max_burst_hz,
+    };
+    // The controller (~10 KB) is built in its static, and the scene compiled by
+    // `Controller2d::load` in a function of its own: with the controller, the compiled scene and
+    // their copies in main's frame, the boot stack (main's frame + Prepared2d::compile's own
+    // 34 KB) reached 72.9 KB, 696 B short of the G474's stack region with the largest 2D scene
+    // (board model: stack check).
+    let ctrl = new_controller(timer);
+    load_scene(ctrl, &timer, &mut burst);
+    let Ok(map) = Affine::from_points(CAL, &RailBands::default()) else {
+        defmt::panic!("touch: the built-in calibration is refused")
+    };
+    let Ok(sensor) = TouchSensor::new(PressureConfig::DEFAULT, RailBands::default(), map) else {
+        defmt::panic!("touch: the default pressure thresholds are refused")
+    };
+    parts.touch.configure();
+    info!(
+        "touch: frame {=u32} us ({=u32} TIM3 ticks), {=usize} events, channels X {=u8} Y {=u8} Z1 {=u8} Z2 {=u8}, margin {=u32} ns",
+        FRAME_US,
+        FRAME_TICKS,
+        EVENTS.len(),
+        CHANNELS[0],
+        CHANNELS[1],
+        CHANNELS[2],
+        CHANNELS[3],
+        MARGIN_NS
+    );
+    rf_arm.set_high();
+    let mut wdg = IndependentWatchdog::new(parts.iwdg, IWDG_TIMEOUT_US);
+    wdg.unleash();
+    interrupt::UART4.set_priority(SAMPLE_PATH_PRIORITY);
+    let high = EXECUTOR_HIGH.start(interrupt::UART4);
+    high.spawn(unwrap!(control2d(ctrl, sensor, burst, rf_arm, wdg)));
+}
