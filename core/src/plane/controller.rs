@@ -550,7 +550,7 @@ impl<E: VelocityEstimator> Controller2d<E> {
             Some(PlaneCompiled::Plain(c)) => {
                 // The kinds a plain texture may be read only the speed (material, velocity
                 // synthesis) or nothing (off, constant, random); never a position.
-                let speed = velocity.map(|v| libm::roundf(v.speed_um_s()) as i32);
+                let speed = velocity.map(|v| super::geometry::round_to_i32(v.speed_um_s()));
                 c.request(&Moment {
                     position_um: 0,
                     velocity_um_s: speed,
@@ -719,7 +719,8 @@ fn preempt_lead_um(
         lead_um.0 + v.vx_um_s as f32 * period_s,
         lead_um.1 + v.vy_um_s as f32 * period_s,
     );
-    let len = libm::sqrtf(x * x + y * y);
+    // The FPU's root (correctly rounded: libm's bits).
+    let len = super::geometry::sqrt_f32(x * x + y * y);
     let max = MAX_LINE_LEAD_UM as f32;
     if len > max {
         (x * max / len, y * max / len)
