@@ -442,7 +442,9 @@ impl<E: VelocityEstimator> Controller2d<E> {
         let Some((edges, fire)) = active.scene.edges.as_ref() else {
             return false;
         };
-        let (fire, limits) = (*fire, active.limits);
+        // The pulse's settings and the caps are copied out only for a pulse or a stop (most
+        // readings have neither).
+        let window_us = fire.window_us;
         let fired = if lead_read {
             let lead_um = edges.lead_um(velocity);
             let lead_um = if self.gate_busy(t_us) {
@@ -455,7 +457,7 @@ impl<E: VelocityEstimator> Controller2d<E> {
             None
         };
         if let Some(start) = self.edge_pulse_us {
-            if t_us.wrapping_sub(start) < fire.window_us {
+            if t_us.wrapping_sub(start) < window_us {
                 if fired.is_some() {
                     self.count_edge_skipped();
                 }
@@ -483,6 +485,13 @@ impl<E: VelocityEstimator> Controller2d<E> {
             }
             (None, Some(e)) => e,
             (None, None) => return false,
+        };
+        let Some((fire, limits)) = self
+            .active
+            .as_ref()
+            .and_then(|a| Some((a.scene.edges.as_ref()?.1, a.limits)))
+        else {
+            return false;
         };
         if self.gate_busy(t_us) {
             // Stop the texture's burst (or ridge pulse) now: the gate records its on-time and
