@@ -473,18 +473,23 @@ impl EdgeTracker {
             {
                 self.scans += 1;
             }
-            let (mut mask, mut gap) = (0u32, i32::MAX);
+            // The settled distance: no zone is entered before the finger moves as far as the
+            // nearest zone not holding it (Chebyshev), and none is left before it moves one
+            // µm more than the nearest side of a zone holding it. Within it no zone changes,
+            // so the edges visited need no zone test of their own.
+            let (mut mask, mut settle) = (0u32, i32::MAX);
             for (i, g) in edges.geoms.iter().enumerate() {
                 let d = g.zone_gap(p);
                 if d <= 0 {
                     mask |= 1 << i;
+                    settle = settle.min(1i32.saturating_sub(d));
                 } else {
-                    gap = gap.min(d);
+                    settle = settle.min(d);
                 }
             }
             self.forget(self.in_zone & !mask);
             self.in_zone = mask;
-            self.settled = Some((p, gap));
+            self.settled = Some((p, settle));
         }
         let (mut reach, mut todo) = (0u32, self.in_zone);
         while todo != 0 {
@@ -497,30 +502,27 @@ impl EdgeTracker {
             ) else {
                 continue;
             };
-            if !scan && g.zone_gap(p) > 0 {
-                // Left its zone between scans: forget it, and scan next time (the settled
-                // distance did not count this zone).
-                (*armed, *fired_s) = (None, 0.0);
-                self.in_zone &= !(1 << i);
-                self.settled = None;
-                continue;
-            }
             #[cfg(test)]
             {
                 self.visits += 1;
             }
             let s = g.across(p);
             // An armed edge fires when s plus the lead's part across it (towards the line)
-            // reaches the line: never from farther than the longest lead.
-            let within = match *armed {
-                Some(Side::Right) => s >= -LEAD_REACH_UM,
-                Some(Side::Left) => s <= LEAD_REACH_UM,
-                None => false,
-            };
-            if within {
-                reach |= 1 << i;
-            } else {
-                rearm(armed, fired_s, s, edges.rearm_um);
+            // reaches the line: never from farther than the longest lead. Armed and out of
+            // reach, re-arming would change nothing (an armed edge's fired_s is 0 and it is
+            // beyond the line on its side), so only an unarmed edge is re-armed here.
+            match *armed {
+                Some(Side::Right) => {
+                    if s >= -LEAD_REACH_UM {
+                        reach |= 1 << i;
+                    }
+                }
+                Some(Side::Left) => {
+                    if s <= LEAD_REACH_UM {
+                        reach |= 1 << i;
+                    }
+                }
+                None => rearm(armed, fired_s, s, edges.rearm_um),
             }
         }
         self.reach = reach;
