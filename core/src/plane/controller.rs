@@ -360,9 +360,13 @@ impl<E: VelocityEstimator> Controller2d<E> {
         if self.place != Some(place) {
             self.note_place_change(place);
         }
-        // An edge reads the lead only in its zone, as the last reading found it: the
-        // reading that enters a zone is too far from its edge to fire, lead or none.
-        let velocity = if self.update_velocity || self.edges.in_zone() {
+        // The edges' position half first: the lead (the velocity) is read only when an armed
+        // edge is within the longest lead of its line, where it could fire on this reading.
+        let lead_read = match self.active.as_ref().and_then(|a| a.scene.edges.as_ref()) {
+            Some((edges, _)) => self.edges.locate(edges, p),
+            None => false,
+        };
+        let velocity = if self.update_velocity || lead_read {
             if core::mem::take(&mut self.resting) {
                 self.velocity.wake();
             }
@@ -379,7 +383,7 @@ impl<E: VelocityEstimator> Controller2d<E> {
             drive,
             ..Output2d::default()
         };
-        if !self.edges_step(p, velocity, t_us, &mut out) {
+        if !self.edges_step(p, velocity, lead_read, t_us, &mut out) {
             self.texture_step(place, p, velocity, t_us, &mut out);
         }
         out
@@ -421,10 +425,14 @@ impl<E: VelocityEstimator> Controller2d<E> {
     /// Skipped and counted (`edges_skipped`): a crossing inside an edge's pulse + rest, one
     /// whose next reading comes more than [`PENDING_READINGS`] periods after the stop, and a
     /// pulse the duty cap has no room for.
+    ///
+    /// `lead_read`: [`EdgeTracker::locate`] found an armed edge within the longest lead of its
+    /// line on this reading; only then is the lead made and the crossing tested.
     fn edges_step(
         &mut self,
         p: PointUm,
         velocity: Option<VelocityUmS>,
+        lead_read: bool,
         t_us: u32,
         out: &mut Output2d,
     ) -> bool {
@@ -434,18 +442,22 @@ impl<E: VelocityEstimator> Controller2d<E> {
         let Some((edges, fire)) = active.scene.edges.as_ref() else {
             return false;
         };
-        let (fire, limits) = (*fire, active.limits);
-        let lead_um = edges.lead_um(velocity);
-        // Only an edge in its zone reads the lead (the reading that enters a zone is farther
-        // from its edge than the longest lead): out of every zone this costs one test.
-        let lead_um = if self.edges.in_zone() && self.gate_busy(t_us) {
-            preempt_lead_um(lead_um, velocity, self.sample_period_us)
+        // The pulse's settings and the caps are copied out only for a pulse or a stop (most
+        // readings have neither).
+        let window_us = fire.window_us;
+        let fired = if lead_read {
+            let lead_um = edges.lead_um(velocity);
+            let lead_um = if self.gate_busy(t_us) {
+                preempt_lead_um(lead_um, velocity, self.sample_period_us)
+            } else {
+                lead_um
+            };
+            self.edges.fire(edges, p, lead_um)
         } else {
-            lead_um
+            None
         };
-        let fired = self.edges.update(edges, p, lead_um);
         if let Some(start) = self.edge_pulse_us {
-            if t_us.wrapping_sub(start) < fire.window_us {
+            if t_us.wrapping_sub(start) < window_us {
                 if fired.is_some() {
                     self.count_edge_skipped();
                 }
@@ -473,6 +485,13 @@ impl<E: VelocityEstimator> Controller2d<E> {
             }
             (None, Some(e)) => e,
             (None, None) => return false,
+        };
+        let Some((fire, limits)) = self
+            .active
+            .as_ref()
+            .and_then(|a| Some((a.scene.edges.as_ref()?.1, a.limits)))
+        else {
+            return false;
         };
         if self.gate_busy(t_us) {
             // Stop the texture's burst (or ridge pulse) now: the gate records its on-time and
@@ -540,7 +559,7 @@ impl<E: VelocityEstimator> Controller2d<E> {
             Some(PlaneCompiled::Plain(c)) => {
                 // The kinds a plain texture may be read only the speed (material, velocity
                 // synthesis) or nothing (off, constant, random); never a position.
-                let speed = velocity.map(|v| libm::roundf(v.speed_um_s()) as i32);
+                let speed = velocity.map(|v| super::geometry::round_to_i32(v.speed_um_s()));
                 c.request(&Moment {
                     position_um: 0,
                     velocity_um_s: speed,
@@ -709,7 +728,8 @@ fn preempt_lead_um(
         lead_um.0 + v.vx_um_s as f32 * period_s,
         lead_um.1 + v.vy_um_s as f32 * period_s,
     );
-    let len = libm::sqrtf(x * x + y * y);
+    // The FPU's root (correctly rounded: libm's bits).
+    let len = super::geometry::sqrt_f32(x * x + y * y);
     let max = MAX_LINE_LEAD_UM as f32;
     if len > max {
         (x * max / len, y * max / len)
@@ -1219,10 +1239,9 @@ mod tests {
     }
 
     /// Per reading only what the scene needs: the estimators rest in a constant window (no
-    /// velocity reported) and update in a material window; an edge adds them only inside its
-    /// zone (the 2.5 mm its tracker grows it by: re-arm 100 µm + the 2 mm lead cap + two
-    /// readings at 2 m/s), from the reading after the one that entered it. Resting changes
-    /// no burst.
+    /// velocity reported) and update in a material window; an edge adds them only where it
+    /// could fire on that reading (armed, within the 2 mm lead cap of its line). Resting
+    /// changes no burst.
     #[test]
     fn the_velocity_is_computed_only_where_the_scene_reads_it() {
         let material = PlaneTexture::Plain(Texture::Material(Material::fig5(0.3)));
@@ -1272,17 +1291,43 @@ mod tests {
         let mut e = loaded(&with_edge);
         let mut t = 0;
         let outs_e = feed(&mut e, &mut t, s.iter().copied());
-        let mut near = 0;
+        // The edge reads the lead (the velocity) only where it could fire: armed, and within
+        // the longest lead (2 mm) of its line. Coming from the left it is armed on its left
+        // from the start; it fires (the burst is stopped) 0.5 mm short of the line and is
+        // disarmed; past the line it re-arms once 100 µm clear on the right. So in the
+        // constant window the velocity is there on two runs of readings: from x = 8 mm (2 mm
+        // and the 1 µm of rounding allowed) to the reading that finds the crossing, and from
+        // the reading after the re-arm (10.1 mm) to 12 mm; nowhere else.
+        let x = |k: usize| outs_e[k].position.unwrap().x_um;
+        let mut runs: StdVec<(usize, usize)> = StdVec::new();
         for k in 40..outs_e.len() {
             let o = &outs_e[k];
-            let prev_x = outs_e[k - 1].position.unwrap().x_um;
-            let in_zone = (prev_x - 10_000).abs() <= 2_500;
-            let reads = o.place == Some(Place::Window(1)) || in_zone;
-            assert_eq!(o.velocity.is_some(), reads, "reading {k}: {o:?}");
-            near += in_zone as u32;
+            if o.place == Some(Place::Window(1)) {
+                assert!(o.velocity.is_some(), "reading {k}: {o:?}");
+                continue;
+            }
+            if o.velocity.is_some() {
+                match runs.last_mut() {
+                    Some(r) if r.1 + 1 == k => r.1 = k,
+                    _ => runs.push((k, k)),
+                }
+            }
         }
-        // 5 mm of zone at 10 µm a reading.
-        assert_eq!(near, 501);
+        assert_eq!(runs.len(), 2, "{runs:?}");
+        let (approach, past) = (runs[0], runs[1]);
+        assert!(x(approach.0) >= 7_999 && x(approach.0 - 1) < 7_999);
+        assert_eq!(outs_e[approach.1].action, Some(GateAction::Off));
+        // The reading that re-arms it tests no crossing (the crossing is tested before the
+        // re-arm, as in 1D lines): the lead is read from the next one.
+        assert!(x(past.0 - 1) > 10_100 && x(past.0 - 2) <= 10_100);
+        assert!(x(past.1) <= 12_001 && x(past.1 + 1) > 12_001);
+        std::println!(
+            "velocity read from x = {} to {} µm (the stop) and from {} to {} µm",
+            x(approach.0),
+            x(approach.1),
+            x(past.0),
+            x(past.1)
+        );
         // The same bursts either way, but for the edge's preemption: the 80 Hz burst stopped,
         // the edge's pulse on the next reading, the same burst started again after its rest.
         let actions = |o: &[Output2d]| o.iter().map(|o| o.action).collect::<StdVec<_>>();

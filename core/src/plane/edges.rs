@@ -306,6 +306,13 @@ impl Geom {
         (py * self.ux - px * self.uy, px * self.ux + py * self.uy)
     }
 
+    /// s alone, the same operations as [`Self::coords`] (so the same bits).
+    #[inline(always)]
+    fn across(&self, p: PointUm) -> f32 {
+        let (px, py) = (p.x_um as f32 - self.ax, p.y_um as f32 - self.ay);
+        py * self.ux - px * self.uy
+    }
+
     /// How far `p` is outside the zone, µm per axis (Chebyshev); ≤ 0 inside.
     #[inline(always)]
     fn zone_gap(&self, p: PointUm) -> i32 {
@@ -391,6 +398,9 @@ pub struct EdgeTracker {
     settled: Option<(PointUm, i32)>,
     /// The last sample's position (where a crossing passed between two samples is placed).
     prev: Option<PointUm>,
+    /// Bit i: edge i is armed within the longest lead of its line on this sample
+    /// ([`EdgeTracker::locate`] → [`EdgeTracker::fire`]).
+    reach: u32,
     /// Edges visited (tests: only a count tells the skipped visits from visits that change
     /// nothing).
     #[cfg(test)]
@@ -411,6 +421,7 @@ impl Default for EdgeTracker {
             in_zone: 0,
             settled: None,
             prev: None,
+            reach: 0,
             #[cfg(test)]
             visits: 0,
             #[cfg(test)]
@@ -431,9 +442,24 @@ impl EdgeTracker {
         };
     }
 
-    /// One sample at `p` with the lead `lead_um` ([`CompiledEdges::lead_um`]): the edge to
-    /// fire, if any (at most one a sample; two crossed on the same sample are one pulse).
+    /// One sample at `p` with the lead `lead_um` ([`CompiledEdges::lead_um`], at most
+    /// [`MAX_LINE_LEAD_UM`] long): the edge to fire, if any (at most one a sample; two crossed
+    /// on the same sample are one pulse). [`Self::locate`] then, if it asks, [`Self::fire`].
     pub fn update(&mut self, edges: &CompiledEdges, p: PointUm, lead_um: (f32, f32)) -> Option<u8> {
+        if self.locate(edges, p) {
+            self.fire(edges, p, lead_um)
+        } else {
+            None
+        }
+    }
+
+    /// The position's half of a sample at `p`: the zone scan, and every edge in its zone that
+    /// no lead could fire now (unarmed, or armed farther from its line than the longest lead
+    /// reaches) updated at once (its re-arming reads only the position). True when some armed
+    /// edge is within the longest lead of its line: only then is the lead read, by
+    /// [`Self::fire`], which must follow on the same sample. False: nothing can fire, the
+    /// sample is done and the caller needs no velocity for the edges.
+    pub fn locate(&mut self, edges: &CompiledEdges, p: PointUm) -> bool {
         let scan = match self.settled {
             Some((at, gap)) => {
                 (p.x_um.abs_diff(at.x_um).max(p.y_um.abs_diff(at.y_um))) >= gap as u32
@@ -447,6 +473,113 @@ impl EdgeTracker {
             {
                 self.scans += 1;
             }
+            // The settled distance: no zone is entered before the finger moves as far as the
+            // nearest zone not holding it (Chebyshev), and none is left before it moves one
+            // µm more than the nearest side of a zone holding it. Within it no zone changes,
+            // so the edges visited need no zone test of their own.
+            let (mut mask, mut settle) = (0u32, i32::MAX);
+            for (i, g) in edges.geoms.iter().enumerate() {
+                let d = g.zone_gap(p);
+                if d <= 0 {
+                    mask |= 1 << i;
+                    settle = settle.min(1i32.saturating_sub(d));
+                } else {
+                    settle = settle.min(d);
+                }
+            }
+            self.forget(self.in_zone & !mask);
+            self.in_zone = mask;
+            self.settled = Some((p, settle));
+        }
+        let (mut reach, mut todo) = (0u32, self.in_zone);
+        while todo != 0 {
+            let i = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let (Some(g), Some(armed), Some(fired_s)) = (
+                edges.geoms.get(i),
+                self.armed.get_mut(i),
+                self.fired_s.get_mut(i),
+            ) else {
+                continue;
+            };
+            #[cfg(test)]
+            {
+                self.visits += 1;
+            }
+            let s = g.across(p);
+            // An armed edge fires when s plus the lead's part across it (towards the line)
+            // reaches the line: never from farther than the longest lead. Armed and out of
+            // reach, re-arming would change nothing (an armed edge's fired_s is 0 and it is
+            // beyond the line on its side), so only an unarmed edge is re-armed here.
+            match *armed {
+                Some(Side::Right) => {
+                    if s >= -LEAD_REACH_UM {
+                        reach |= 1 << i;
+                    }
+                }
+                Some(Side::Left) => {
+                    if s <= LEAD_REACH_UM {
+                        reach |= 1 << i;
+                    }
+                }
+                None => rearm(armed, fired_s, s, edges.rearm_um),
+            }
+        }
+        self.reach = reach;
+        if reach == 0 {
+            self.prev = Some(p);
+        }
+        reach != 0
+    }
+
+    /// The lead's half of the sample [`Self::locate`] began at `p` (it returned true): the
+    /// edges within reach of the lead `lead_um` (at most [`MAX_LINE_LEAD_UM`] long, as
+    /// [`CompiledEdges::lead_um`] gives it) are tested for a crossing, in index order; the edge
+    /// to fire, if any.
+    pub fn fire(&mut self, edges: &CompiledEdges, p: PointUm, lead_um: (f32, f32)) -> Option<u8> {
+        let mut fired = None;
+        let mut todo = core::mem::take(&mut self.reach);
+        while todo != 0 {
+            let i = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let Some(g) = edges.geoms.get(i) else {
+                continue;
+            };
+            if let Some(t_um) = self.update_edge(i, g, p, lead_um, edges.rearm_um) {
+                if fired.is_none() {
+                    fired = Some(i as u8);
+                }
+                // A crossing near a shared end: the neighbours there count as crossed too.
+                let mut corner = 0;
+                if t_um <= edges.rearm_um {
+                    corner |= g.at_a;
+                }
+                if t_um >= g.len_um - edges.rearm_um {
+                    corner |= g.at_b;
+                }
+                self.disarm(edges, corner, p);
+            }
+        }
+        self.prev = Some(p);
+        fired
+    }
+
+    /// The single pass [`Self::update`] made before the split (tests: the reference the
+    /// split is checked against): every edge in its zone updated with the lead.
+    #[cfg(test)]
+    fn update_every_edge(
+        &mut self,
+        edges: &CompiledEdges,
+        p: PointUm,
+        lead_um: (f32, f32),
+    ) -> Option<u8> {
+        let scan = match self.settled {
+            Some((at, gap)) => {
+                (p.x_um.abs_diff(at.x_um).max(p.y_um.abs_diff(at.y_um))) >= gap as u32
+            }
+            None => true,
+        } || self.no_skip;
+        if scan {
             let (mut mask, mut gap) = (0u32, i32::MAX);
             for (i, g) in edges.geoms.iter().enumerate() {
                 let d = g.zone_gap(p);
@@ -469,22 +602,15 @@ impl EdgeTracker {
                 continue;
             };
             if !scan && g.zone_gap(p) > 0 {
-                // Left its zone between scans: forget it, and scan next time (the settled
-                // distance did not count this zone).
                 self.forget(1 << i);
                 self.in_zone &= !(1 << i);
                 self.settled = None;
                 continue;
             }
-            #[cfg(test)]
-            {
-                self.visits += 1;
-            }
             if let Some(t_um) = self.update_edge(i, g, p, lead_um, edges.rearm_um) {
                 if fired.is_none() {
                     fired = Some(i as u8);
                 }
-                // A crossing near a shared end: the neighbours there count as crossed too.
                 let mut corner = 0;
                 if t_um <= edges.rearm_um {
                     corner |= g.at_a;
@@ -593,14 +719,26 @@ impl EdgeTracker {
                 fire = Some(t_cross);
             }
         }
-        if s < fired_s.min(0.0) - rearm_um {
-            (*armed, *fired_s) = (Some(Side::Right), 0.0);
-        } else if s > fired_s.max(0.0) + rearm_um {
-            (*armed, *fired_s) = (Some(Side::Left), 0.0);
-        }
+        rearm(armed, fired_s, s, rearm_um);
         fire
     }
 }
+
+/// Re-arms an edge on the side the finger at `s` is `rearm_um` clear of both its line and
+/// where it last fired.
+#[inline(always)]
+fn rearm(armed: &mut Option<Side>, fired_s: &mut f32, s: f32, rearm_um: f32) {
+    if s < fired_s.min(0.0) - rearm_um {
+        (*armed, *fired_s) = (Some(Side::Right), 0.0);
+    } else if s > fired_s.max(0.0) + rearm_um {
+        (*armed, *fired_s) = (Some(Side::Left), 0.0);
+    }
+}
+
+/// How far across its line an armed edge may be and still fire, µm: the lead's part across an
+/// edge is at most the lead's length, [`MAX_LINE_LEAD_UM`] (every lead is capped so), and 1 µm
+/// covers the f32 rounding of the cap and of the unit normal.
+const LEAD_REACH_UM: f32 = MAX_LINE_LEAD_UM as f32 + 1.0;
 
 #[cfg(test)]
 mod tests {
@@ -920,6 +1058,58 @@ mod tests {
         std::println!(
             "{fires} fires; {:.2} edges visited a sample",
             visits as f64 / samples as f64
+        );
+    }
+
+    #[test]
+    fn the_lead_is_read_only_within_its_reach_and_that_changes_nothing() {
+        // Random walks with random leads up to the cap (half of them exactly capped, as
+        // `lead_um` gives for a fast finger, in any direction): the split tracker, which updates
+        // the edges no lead can fire from the position alone and asks for the lead only when an
+        // armed edge is within its reach, fires and arms exactly as the single pass that
+        // updates every edge in its zone with the lead. And it asks on few samples.
+        let (_, c) = scene();
+        let mut noise = Noise::new(36);
+        let (mut asked, mut samples, mut fires) = (0u32, 0u32, 0u32);
+        for _ in 0..10 {
+            let (mut a, mut b) = (EdgeTracker::default(), EdgeTracker::default());
+            let (mut x, mut y) = (noise.uniform() * 60_000.0, noise.uniform() * 40_000.0);
+            for _ in 0..20_000 {
+                if noise.uniform() < 0.001 {
+                    (x, y) = (noise.uniform() * 60_000.0, noise.uniform() * 40_000.0);
+                } else {
+                    x += noise.gauss() * 40.0;
+                    y += noise.gauss() * 40.0;
+                }
+                let p = pt(x as i32, y as i32);
+                let angle = noise.uniform() * 2.0 * core::f64::consts::PI;
+                let v_um_s = if noise.uniform() < 0.5 {
+                    10_000_000.0
+                } else {
+                    noise.uniform() * 400_000.0
+                };
+                let v = VelocityUmS {
+                    vx_um_s: (v_um_s * angle.cos()) as i32,
+                    vy_um_s: (v_um_s * angle.sin()) as i32,
+                };
+                let lead = c.lead_um(Some(v));
+                let fa = if a.locate(&c, p) {
+                    asked += 1;
+                    a.fire(&c, p, lead)
+                } else {
+                    None
+                };
+                assert_eq!(fa, b.update_every_edge(&c, p, lead), "{p:?}");
+                assert_eq!(a.armed, b.armed, "{p:?}");
+                assert_eq!(a.fired_s, b.fired_s, "{p:?}");
+                fires += fa.is_some() as u32;
+                samples += 1;
+            }
+        }
+        assert!(fires > 50, "the walks crossed too few edges: {fires}");
+        std::println!(
+            "{fires} fires; the lead asked on {:.1} % of samples",
+            100.0 * asked as f64 / samples as f64
         );
     }
 

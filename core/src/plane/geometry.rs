@@ -84,6 +84,25 @@ pub(crate) fn sqrt_f32(x: f32) -> f32 {
     }
 }
 
+/// `libm::roundf(x) as i32` (half away from zero, saturating, NaN → 0) without the call:
+/// libm's `roundf` is a software routine (~19 instructions and a call on the M4F, issue #36's
+/// profile), where this is a truncating conversion, its difference and two compares. Same
+/// result for every f32: below 2^23 in magnitude x − trunc(x) is exact, so the half is
+/// decided exactly; from 2^23 on every f32 is an integer and the difference is 0 (or, past
+/// i32's range, the saturated side, which the saturating step keeps).
+#[inline(always)]
+pub(crate) fn round_to_i32(x: f32) -> i32 {
+    let i = x as i32;
+    let frac = x - i as f32;
+    if frac >= 0.5 {
+        i.saturating_add(1)
+    } else if frac <= -0.5 {
+        i.saturating_sub(1)
+    } else {
+        i
+    }
+}
+
 /// (a − o) × (b − o), exact while one of the two vectors is within a validated polygon's
 /// range (2·10⁶) and the other within i32 (products ≤ 8.6·10¹⁵): positive when o, a, b turn
 /// counter-clockwise. Wrapping, so a polygon nobody validated gives a wrong answer, not a
@@ -479,6 +498,61 @@ mod tests {
                 pt(20_000 + (r * a.cos()) as i32, 20_000 + (r * a.sin()) as i32)
             })
             .collect()
+    }
+
+    #[test]
+    fn round_to_i32_is_libms_roundf_as_i32() {
+        // Every f32 near a half-integer (where rounding is decided) up to 2^24, the specials,
+        // and a million random bit patterns over the whole range.
+        let check = |x: f32| {
+            assert_eq!(
+                round_to_i32(x),
+                libm::roundf(x) as i32,
+                "{x:e} ({:#x})",
+                x.to_bits()
+            );
+        };
+        for k in -(1 << 15)..(1 << 15) {
+            for base in [k as f32 + 0.5, (k * 511) as f32 + 0.5, (k * 256) as f32] {
+                let mut x = base;
+                for _ in 0..3 {
+                    x = f32::from_bits(x.to_bits().wrapping_sub(1));
+                }
+                for _ in 0..7 {
+                    check(x);
+                    check(-x);
+                    x = f32::from_bits(x.to_bits().wrapping_add(1));
+                }
+            }
+        }
+        for x in [
+            0.0,
+            -0.0,
+            0.49999997,
+            8_388_607.5,
+            8_388_608.0,
+            16_777_217.0,
+            2_147_483_520.0,
+            2_147_483_648.0,
+            -2_147_483_648.0,
+            -2_147_483_904.0,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            f32::MIN_POSITIVE,
+        ] {
+            check(x);
+            check(-x);
+        }
+        let mut seed = 0x9e37_79b9u32;
+        for _ in 0..1_000_000 {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            check(f32::from_bits(seed));
+        }
     }
 
     #[test]

@@ -123,13 +123,13 @@ impl CompiledOriented {
     /// The position across the ridges, p = r·n, µm (rounded).
     #[inline]
     pub fn project_um(&self, r: PointUm) -> i32 {
-        libm::roundf(r.x_um as f32 * self.nx + r.y_um as f32 * self.ny) as i32
+        super::geometry::round_to_i32(r.x_um as f32 * self.nx + r.y_um as f32 * self.ny)
     }
 
     /// The velocity across the ridges, V·n, µm/s (rounded).
     #[inline]
     pub fn project_um_s(&self, v: VelocityUmS) -> i32 {
-        libm::roundf(v.along((self.nx, self.ny))) as i32
+        super::geometry::round_to_i32(v.along((self.nx, self.ny)))
     }
 
     /// What the grating reads per sample (the sample path's contract): the 1D grating's.

@@ -302,8 +302,14 @@ impl CompiledScreen {
         let gap = c.box_gap(x, y, h);
         if gap <= 0.0 {
             if contains(&c.vertices, p) {
-                // sd ≥ 0: at least h from the threshold −h.
-                return (current, clear.min(h));
+                // sd ≥ 0: sd + h from the threshold −h. The distance is worked out only when
+                // it can widen the clearance beyond h (the windows above may bound it first):
+                // one distance here lets the finger cross most of a window with no full
+                // evaluation, where h alone (100 µm by default) asked for one every h of travel.
+                if clear <= h {
+                    return (current, clear);
+                }
+                return (current, clear.min(h + c.distance_um(p)));
             }
             let sd = -c.distance_um(p);
             if sd >= -h {
