@@ -15,8 +15,9 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::metrics::{Metrics, Minute};
-use crate::sim::{SimResult, TracePoint};
+use crate::sim::{CoreOut, SimResult, TracePoint};
 use crate::timer::{Edge, LevelEdge};
+use crate::trajectory::State;
 
 /// Points per trace after decimation (min/max per bucket, so spikes survive).
 const BUCKETS: usize = 1_500;
@@ -431,10 +432,17 @@ impl Recorder {
 
     /// The next trace point.
     pub fn point(&mut self, p: &TracePoint) {
+        self.period(p.t_us, &p.state(), &p.core_out());
+    }
+
+    /// The next sample period, given as its parts: [`Self::point`] of the trace point with
+    /// time `t_us`, the finger at `state` and the core's `out`.
+    #[inline]
+    pub fn period(&mut self, t_us: u64, state: &State, out: &CoreOut) {
         let d = &mut self.data;
-        let t = p.t_us as f64 * 1e-6;
+        let t = t_us as f64 * 1e-6;
         // Region (−1 = none: fault or no scene) as a step curve.
-        let y = p.region.map(|x| x as f64).unwrap_or(-1.0);
+        let y = out.region.map(|x| x as f64).unwrap_or(-1.0);
         if t < d.t0 {
             // Before a long run's detail only the region the curve starts from is kept.
             self.last_region = Some(y);
@@ -449,11 +457,12 @@ impl Recorder {
         }
         // The four series share the sample's time, so its bucket is worked out once.
         let b = d.pos_truth.bucket_of(t);
-        d.pos_truth.push_in(b, (t, p.true_um / 1e3));
-        d.pos_core.push_in(b, t, p.meas_um.map(|m| m as f64 / 1e3));
-        let v = p.true_vel_um_s / 1e3;
+        d.pos_truth.push_in(b, (t, state.position_um / 1e3));
+        d.pos_core
+            .push_in(b, t, out.meas_um.map(|m| m as f64 / 1e3));
+        let v = state.velocity_um_s / 1e3;
         d.vel_truth.push_in(b, (t, v));
-        let est = p.est_vel_um_s.map(|v| v as f64 / 1e3);
+        let est = out.est_vel_um_s.map(|v| v as f64 / 1e3);
         d.vel_core.push_in(b, t, est);
         d.vel_max_mm_s = d.vel_max_mm_s.max(v.abs()).max(est.unwrap_or(0.0).abs());
         if self.last_region != Some(y) {
