@@ -538,21 +538,28 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
                 action = Some(a);
             }
             // The core stores each half of these options (tag, value) on its own. Copied
-            // whole, the two were one 16-byte load, which cannot take its bytes from those
-            // stores and waits for them to reach the cache; taken apart (`out`'s already
-            // hold None), each load reads one store.
+            // whole, two of them were one wider load (16 bytes for the position and the
+            // velocity, 4 for the region and the line), which cannot take its bytes from those
+            // stores and waits for them to reach the cache (the region and line's load was a
+            // quarter of the loop's own samples); taken apart, each load reads one store.
             out.meas_um = None;
             out.est_vel_um_s = None;
+            out.region = None;
+            out.line = None;
             if let Some(m) = o.position_um {
                 out.meas_um = Some(m);
             }
             if let Some(v) = o.velocity_um_s {
                 out.est_vel_um_s = Some(v);
             }
-            out.region = o.region;
-            out.line = o.line;
+            if let Some(r) = o.region {
+                out.region = Some(r);
+            }
+            if let Some(l) = o.line {
+                out.line = Some(l);
+            }
             self.fault = o.fault;
-            self.region = o.region;
+            self.region = out.region;
         } else {
             out.meas_um = None;
             out.est_vel_um_s = None;
