@@ -472,9 +472,11 @@ impl AdcModel {
                         prepared[j - i] = table.prepare(v, &mut self.rng);
                         j += 1;
                     }
-                    for (m, p) in prepared[..j - i].iter().enumerate() {
-                        out.push(Some(Sample::from_sum(table.finish(*p), t_us(i + m) as u32)));
-                    }
+                    // One reservation for the run (an iterator of known length), not a
+                    // capacity check a sample.
+                    out.extend(prepared[..j - i].iter().enumerate().map(|(m, p)| {
+                        Some(Sample::from_sum(table.finish(*p), t_us(i + m) as u32))
+                    }));
                     if j < end {
                         // Near a rail (or σ outside the table's range): every conversion drawn,
                         // after the draws before it, as `sample` does.
