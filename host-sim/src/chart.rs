@@ -441,23 +441,25 @@ impl Recorder {
 
     /// The next trace point.
     pub fn point(&mut self, p: &TracePoint) {
-        self.period(p.t_us, &p.state(), &p.core_out());
+        self.period(p.t_us, p.region, &p.state(), &p.core_out());
     }
 
     /// The next sample period, given as its parts: [`Self::point`] of the trace point with
-    /// time `t_us`, the finger at `state` and the core's `out`.
+    /// time `t_us`, the finger at `state` and the core's `out`, whose region is `region` (as a
+    /// value: read back from `out` just after the loop stored it byte by byte, it waited for
+    /// those stores).
     #[inline]
-    pub fn period(&mut self, t_us: u64, state: &State, out: &CoreOut) {
+    pub fn period(&mut self, t_us: u64, region: Option<u8>, state: &State, out: &CoreOut) {
         if t_us < self.detail_from_us {
             // Before a long run's detail only the region the curve starts from is kept.
-            self.before = Some(out.region);
+            self.before = Some(region);
             return;
         }
         self.region_before();
         let d = &mut self.data;
         let t = t_us as f64 * 1e-6;
         // Region (−1 = none: fault or no scene) as a step curve.
-        let y = region_y(out.region);
+        let y = region_y(region);
         if !self.region_opened {
             // A long run's detail starts with the region it was in.
             self.region_opened = true;

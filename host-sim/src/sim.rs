@@ -493,7 +493,7 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
     #[inline(always)]
     fn step_into(&mut self, k: u64, state: State, sample: Option<Sample>, point: &mut TracePoint) {
         let mut out = NO_CORE_OUT;
-        let action = self.step_core(k, sample, &mut out);
+        let (action, _) = self.step_core(k, sample, &mut out);
         *point = TracePoint {
             t_us: k * self.period_us as u64,
             true_um: state.position_um,
@@ -512,18 +512,23 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
     }
 
     /// Sample period `k` with its sample drawn: the core's part of its trace point into `out`
-    /// (every field), its gate action (or its tick's) returned. [`Self::step_into`] builds the
-    /// whole point from it; a pipelined run hands on just this.
+    /// (every field), its gate action (or its tick's) and `out.region` returned. The region
+    /// comes back in a register for the chart recorder: read back from `out`, whose tag and
+    /// value bytes are stored one by one, it was one 2-byte load that cannot be forwarded from
+    /// them (a third of the loop's own samples before a long run's detail).
+    /// [`Self::step_into`] builds the whole point from it; a pipelined run hands on just this.
     #[inline(always)]
     fn step_core(
         &mut self,
         k: u64,
         sample: Option<Sample>,
         out: &mut CoreOut,
-    ) -> Option<GateAction> {
+    ) -> (Option<GateAction>, Option<u8>) {
         let t_us = k * self.period_us as u64;
         let latency = self.action_latency_us as u64;
         let mut action = None;
+        // The region as a number (−1: none), so it is never copied as a whole option.
+        let mut region_code = -1i16;
         if let Some(s) = sample {
             let o = self.ctrl.on_sample(s);
             // The port's order (`saw_core::controller::apply`): level and envelope, then line.
@@ -546,6 +551,7 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
             out.est_vel_um_s = None;
             out.region = None;
             out.line = None;
+            self.region = None;
             if let Some(m) = o.position_um {
                 out.meas_um = Some(m);
             }
@@ -554,21 +560,24 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
             }
             if let Some(r) = o.region {
                 out.region = Some(r);
+                self.region = Some(r);
+                region_code = i16::from(r);
             }
             if let Some(l) = o.line {
                 out.line = Some(l);
             }
             self.fault = o.fault;
-            self.region = out.region;
         } else {
             out.meas_um = None;
             out.est_vel_um_s = None;
             out.line = None;
-            out.region = if self.fault.is_some() {
+            let region = if self.fault.is_some() {
                 None
             } else {
                 self.region
             };
+            out.region = region;
+            region_code = region.map_or(-1, i16::from);
         }
         self.tm.advance_to(self.clk(t_us + latency));
         let tick_us = t_us + (self.period_us as u64 / 2).max(latency);
@@ -578,9 +587,11 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
             self.fault = Some(SensorFault::Stale);
             self.region = None;
             out.region = None;
+            region_code = -1;
         }
         out.fault = self.fault;
-        action
+        let region = u8::try_from(region_code).ok();
+        (action, region)
     }
 }
 
@@ -839,12 +850,13 @@ pub fn stream_on(
                 let periods = c.samples.iter().zip(&mut c.outs).enumerate();
                 for (i, (&sample, out)) in periods {
                     let k = c.k0 + i as u64;
-                    if let Some(a) = lp.step_core(k, sample, out) {
+                    let (action, region) = lp.step_core(k, sample, out);
+                    if let Some(a) = action {
                         c.actions.push((i as u32, a));
                     }
                     lp.tm.take_settled(&mut edges, &mut levels);
                     if let Some(r) = &mut recorder {
-                        r.period(k * period_us as u64, &c.states[i], out);
+                        r.period(k * period_us as u64, region, &c.states[i], out);
                         if !edges.is_empty() || !levels.is_empty() {
                             r.edges(&edges, &levels);
                         }
