@@ -32,7 +32,7 @@ use saw_core::position::{Calibration, PositionMapper};
 use saw_core::sample::{Sample, CONVERSION_FULL_SCALE, OVERSAMPLE};
 use serde::Deserialize;
 
-use crate::noise::SumTable;
+use crate::noise::{Prepared, SumTable};
 use crate::trajectory::State;
 
 /// What goes wrong with the sensor during a fault window.
@@ -217,6 +217,10 @@ impl AdcParams {
             || self.oversample != OVERSAMPLE
     }
 }
+
+/// Table draws [`AdcModel::samples_into`] prepares before it finishes them: enough to cover
+/// the guide reads' latency, few enough that their guide entries are still in the L1 cache.
+const PREPARED: usize = 64;
 
 /// What the silicon effects remember between conversions.
 #[derive(Clone, Debug, Default)]
@@ -451,15 +455,39 @@ impl AdcModel {
             Some(table) if faultless && self.params.oversample == OVERSAMPLE => {
                 let top = CONVERSION_FULL_SCALE - 1;
                 let offset_lsb = self.params.offset_lsb;
-                out.extend(states.iter().enumerate().map(|(i, s)| {
-                    let v = self.ideal_conversion(s.position_um) + offset_lsb;
-                    let sum = if table.serves(v, top) {
-                        table.draw(v, &mut self.rng)
-                    } else {
-                        (0..OVERSAMPLE).map(|_| self.convert(s.position_um)).sum()
-                    };
-                    Some(Sample::from_sum(sum, t_us(i) as u32))
-                }));
+                out.reserve(states.len());
+                let mut prepared = [Prepared::default(); PREPARED];
+                let mut i = 0;
+                while i < states.len() {
+                    // The next run of samples the table serves, at most PREPARED, drawn in
+                    // order and finished after: each draw's guide read overlaps the next
+                    // ones' work.
+                    let end = (i + PREPARED).min(states.len());
+                    let mut j = i;
+                    while j < end {
+                        let v = self.ideal_conversion(states[j].position_um) + offset_lsb;
+                        if !table.serves(v, top) {
+                            break;
+                        }
+                        prepared[j - i] = table.prepare(v, &mut self.rng);
+                        j += 1;
+                    }
+                    // One reservation for the run (an iterator of known length), not a
+                    // capacity check a sample.
+                    out.extend(prepared[..j - i].iter().enumerate().map(|(m, p)| {
+                        Some(Sample::from_sum(table.finish(*p), t_us(i + m) as u32))
+                    }));
+                    if j < end {
+                        // Near a rail (or σ outside the table's range): every conversion drawn,
+                        // after the draws before it, as `sample` does.
+                        let sum = (0..OVERSAMPLE)
+                            .map(|_| self.convert(states[j].position_um))
+                            .sum();
+                        out.push(Some(Sample::from_sum(sum, t_us(j) as u32)));
+                        j += 1;
+                    }
+                    i = j;
+                }
             }
             _ => out.extend(
                 states
@@ -578,9 +606,10 @@ mod tests {
     use super::*;
 
     /// A block of samples (`samples_into`) is what `sample` gives period by period, with the
-    /// generator left in the same state: blocks with no fault (the table's own loop) whose
-    /// finger runs past both rails (where the table does not serve and each conversion is
-    /// drawn), and blocks with a spike and a dropout in them.
+    /// generator left in the same state: blocks with no fault (the table's own loop, its draws
+    /// prepared in runs and finished after) whose finger runs past both rails (where the
+    /// table does not serve and each conversion is drawn, between prepared runs), and blocks
+    /// with a spike and a dropout in them; blocks of several lengths, so runs end everywhere.
     #[test]
     fn blocks_are_single_samples() {
         use rand::RngCore;
@@ -600,10 +629,6 @@ mod tests {
                 ],
                 ..AdcParams::default().with_noise(sigma, 3)
             };
-            let (mut blocks, mut single) = (
-                AdcModel::new(Calibration::default(), params.clone()).unwrap(),
-                AdcModel::new(Calibration::default(), params).unwrap(),
-            );
             // −4 mm … 67 mm and back, 5 µm a period: past both ends of the 63 mm travel.
             let states: Vec<State> = (0..3_000u64)
                 .map(|k| {
@@ -615,20 +640,31 @@ mod tests {
                     }
                 })
                 .collect();
-            let (mut got, mut block) = (Vec::new(), Vec::new());
-            for (b, chunk) in states.chunks(512).enumerate() {
-                let k0 = (b * 512) as u64;
-                blocks.samples_into(chunk, k0, 100, &mut block);
-                got.extend_from_slice(&block);
-            }
+            let mut single = AdcModel::new(Calibration::default(), params.clone()).unwrap();
             let want: Vec<Option<Sample>> = states
                 .iter()
                 .enumerate()
                 .map(|(k, s)| single.sample(s.position_um, k as u64 * 100))
                 .collect();
-            assert_eq!(got, want, "σ {sigma}");
+            // Blocks of the pipeline's size and of sizes that are not multiples of the
+            // prepared run (PREPARED), down to one sample.
+            for len in [512, PREPARED + 33, PREPARED, 7, 1] {
+                let mut blocks = AdcModel::new(Calibration::default(), params.clone()).unwrap();
+                let (mut got, mut block) = (Vec::new(), Vec::new());
+                for (b, chunk) in states.chunks(len).enumerate() {
+                    let k0 = (b * len) as u64;
+                    blocks.samples_into(chunk, k0, 100, &mut block);
+                    got.extend_from_slice(&block);
+                }
+                assert_eq!(got, want, "σ {sigma}, blocks of {len}");
+                let mut next = single.clone();
+                assert_eq!(
+                    blocks.rng.next_u64(),
+                    next.rng.next_u64(),
+                    "σ {sigma}, blocks of {len}"
+                );
+            }
             assert!(want.iter().any(|s| s.is_none()), "σ {sigma}: no dropout");
-            assert_eq!(blocks.rng.next_u64(), single.rng.next_u64(), "σ {sigma}");
         }
     }
 

@@ -15,8 +15,9 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::metrics::{Metrics, Minute};
-use crate::sim::{SimResult, TracePoint};
+use crate::sim::{CoreOut, SimResult, TracePoint};
 use crate::timer::{Edge, LevelEdge};
+use crate::trajectory::State;
 
 /// Points per trace after decimation (min/max per bucket, so spikes survive).
 const BUCKETS: usize = 1_500;
@@ -350,6 +351,13 @@ pub struct Recorder {
     clock_hz: f64,
     trajectory: crate::trajectory::Trajectory,
     last_region: Option<f64>,
+    /// The first sample time, µs, at or after the time panels' start (`t0`): earlier points
+    /// only keep their region (`before`). Compared as an integer, not as the f64 seconds
+    /// whose conversion was most of a point's cost before a long run's detail.
+    detail_from_us: u64,
+    /// The region of the last point before the detail (None before any), turned into
+    /// `last_region` when the detail starts.
+    before: Option<Option<u8>>,
     gate_high: bool,
     code: u16,
     /// The RF level of a DAC code, 0 … 1, with the code it is for: the code changes seldom,
@@ -405,6 +413,8 @@ impl Recorder {
             clock_hz: clock_hz as f64,
             trajectory: params.trajectory.clone(),
             last_region: None,
+            detail_from_us: first_us_from(t0),
+            before: None,
             gate_high: false,
             code: 0,
             level_of: None,
@@ -431,15 +441,25 @@ impl Recorder {
 
     /// The next trace point.
     pub fn point(&mut self, p: &TracePoint) {
-        let d = &mut self.data;
-        let t = p.t_us as f64 * 1e-6;
-        // Region (−1 = none: fault or no scene) as a step curve.
-        let y = p.region.map(|x| x as f64).unwrap_or(-1.0);
-        if t < d.t0 {
+        self.period(p.t_us, p.region, &p.state(), &p.core_out());
+    }
+
+    /// The next sample period, given as its parts: [`Self::point`] of the trace point with
+    /// time `t_us`, the finger at `state` and the core's `out`, whose region is `region` (as a
+    /// value: read back from `out` just after the loop stored it byte by byte, it waited for
+    /// those stores).
+    #[inline]
+    pub fn period(&mut self, t_us: u64, region: Option<u8>, state: &State, out: &CoreOut) {
+        if t_us < self.detail_from_us {
             // Before a long run's detail only the region the curve starts from is kept.
-            self.last_region = Some(y);
+            self.before = Some(region);
             return;
         }
+        self.region_before();
+        let d = &mut self.data;
+        let t = t_us as f64 * 1e-6;
+        // Region (−1 = none: fault or no scene) as a step curve.
+        let y = region_y(region);
         if !self.region_opened {
             // A long run's detail starts with the region it was in.
             self.region_opened = true;
@@ -449,11 +469,12 @@ impl Recorder {
         }
         // The four series share the sample's time, so its bucket is worked out once.
         let b = d.pos_truth.bucket_of(t);
-        d.pos_truth.push_in(b, (t, p.true_um / 1e3));
-        d.pos_core.push_in(b, t, p.meas_um.map(|m| m as f64 / 1e3));
-        let v = p.true_vel_um_s / 1e3;
+        d.pos_truth.push_in(b, (t, state.position_um / 1e3));
+        d.pos_core
+            .push_in(b, t, out.meas_um.map(|m| m as f64 / 1e3));
+        let v = state.velocity_um_s / 1e3;
         d.vel_truth.push_in(b, (t, v));
-        let est = p.est_vel_um_s.map(|v| v as f64 / 1e3);
+        let est = out.est_vel_um_s.map(|v| v as f64 / 1e3);
         d.vel_core.push_in(b, t, est);
         d.vel_max_mm_s = d.vel_max_mm_s.max(v.abs()).max(est.unwrap_or(0.0).abs());
         if self.last_region != Some(y) {
@@ -561,8 +582,17 @@ impl Recorder {
         }
     }
 
+    /// The region curve's value of the last point before the detail (if it has not been
+    /// worked out yet): what the detail's first point, or the run's end, starts it from.
+    fn region_before(&mut self) {
+        if let Some(r) = self.before.take() {
+            self.last_region = Some(region_y(r));
+        }
+    }
+
     /// The chart's data, the curves closed at the run's end.
     pub fn finish(mut self) -> ChartData {
+        self.region_before();
         self.open(self.gate_high);
         let d = &mut self.data;
         let t_end = d.t_end;
@@ -575,6 +605,26 @@ impl Recorder {
         d.drive.push((t_end, self.drive_last));
         self.data
     }
+}
+
+/// The region curve's value of a point's region: its index, −1 for none (fault or no scene).
+fn region_y(region: Option<u8>) -> f64 {
+    region.map(|x| x as f64).unwrap_or(-1.0)
+}
+
+/// The first sample time, µs, whose time in seconds (`t_us as f64 * 1e-6`, as the curves take
+/// it) is not before `t0_s`: the conversion never decreases as t_us grows, so the times
+/// before `t0_s` are exactly those below it.
+fn first_us_from(t0_s: f64) -> u64 {
+    let before = |t_us: u64| (t_us as f64 * 1e-6) < t0_s;
+    let mut t_us = (t0_s * 1e6).max(0.0) as u64;
+    while t_us > 0 && !before(t_us - 1) {
+        t_us -= 1;
+    }
+    while before(t_us) {
+        t_us += 1;
+    }
+    t_us
 }
 
 impl ChartData {
@@ -1483,7 +1533,36 @@ fn dense_duty(pts: &[(f64, f64)], t_end: f64, bins: usize) -> Vec<Vec<(f64, f64)
 
 #[cfg(test)]
 mod duty_tests {
-    use super::{decimate, dense_duty, Decimator};
+    use super::{decimate, dense_duty, first_us_from, Decimator};
+
+    /// The detail's first sample time is the first whose seconds are not before its start:
+    /// every time below it is before (the one just below is), and it is not, for starts on
+    /// and between whole µs, at 0 and a day's run.
+    #[test]
+    fn detail_starts_at_the_first_time_not_before_it() {
+        for t0_s in [
+            0.0,
+            1e-7,
+            0.1,
+            57.0,
+            58.37,
+            297.0,
+            3597.0,
+            86_397.0,
+            86_396.9999995,
+        ] {
+            let from_us = first_us_from(t0_s);
+            assert!(from_us as f64 * 1e-6 >= t0_s, "{t0_s}: {from_us}");
+            if from_us > 0 {
+                assert!(((from_us - 1) as f64 * 1e-6) < t0_s, "{t0_s}: {from_us}");
+            }
+            // Within a µs of t0_s (no search ran away).
+            assert!(
+                (from_us as f64 - t0_s * 1e6).abs() <= 1.0,
+                "{t0_s}: {from_us}"
+            );
+        }
+    }
 
     /// The decimator fed point by point gives the points the whole-series decimation gives: a
     /// noisy series with spikes, long enough to turn to buckets, and a short one kept raw.

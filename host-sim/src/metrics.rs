@@ -9,8 +9,9 @@ use saw_core::burst::TimerSettings;
 use saw_core::gate::GateAction;
 use saw_core::texture::Texture;
 
-use crate::sim::{SimResult, TracePoint};
+use crate::sim::{CoreOut, SimResult, TracePoint};
 use crate::timer::Edge;
+use crate::trajectory::State;
 
 /// The f_b a texture asks for with the finger at `true_vel_um_s`, Hz, by the models the core
 /// uses: f = |V|/λ for a grating (one pulse per ridge crossed, or periodic bursts at that rate),
@@ -237,6 +238,17 @@ struct Prev {
     region: Option<u8>,
     /// A fault was in force.
     fault: bool,
+}
+
+/// What [`Online::period`] reads of a sample period besides the core's estimates.
+#[derive(Clone, Copy, Debug)]
+struct Parts {
+    t_us: u64,
+    true_um: f64,
+    true_vel_um_s: f64,
+    region: Option<u8>,
+    fault: Option<saw_core::position::SensorFault>,
+    line: Option<u8>,
 }
 
 /// A pulse as the metrics follow it: where its rise was placed.
@@ -503,6 +515,21 @@ impl Online {
 
     /// The next trace point.
     pub fn point(&mut self, p: &TracePoint) {
+        self.period(p.t_us, &p.state(), &p.core_out(), p.action.as_ref());
+    }
+
+    /// The next sample period, given as its parts: [`Self::point`] of the trace point with
+    /// time `t_us`, the finger at `state`, the core's `out` and the gate `action` (a
+    /// pipelined run hands on only the core's part and the actions, [`crate::sim::CoreOut`]).
+    pub fn period(&mut self, t_us: u64, state: &State, out: &CoreOut, action: Option<&GateAction>) {
+        let p = Parts {
+            t_us,
+            true_um: state.position_um,
+            true_vel_um_s: state.velocity_um_s,
+            region: out.region,
+            fault: out.fault,
+            line: out.line,
+        };
         let k = self.points;
         self.points += 1;
         let same_run = self
@@ -525,15 +552,14 @@ impl Online {
             self.counting = (minute, p.region);
             self.counted = 1;
         }
-        if let Some(GateAction::Start(s) | GateAction::Update(s) | GateAction::Pulse(s)) = p.action
-        {
+        if let Some(GateAction::Start(s) | GateAction::Update(s) | GateAction::Pulse(s)) = action {
             let planned = (s.on_clocks(), s.period_clocks());
             if self.last_planned != Some(planned) {
                 self.last_planned = Some(planned);
                 self.planned.insert(planned);
             }
         }
-        if let Some(a) = p.action {
+        if let Some(a) = action {
             let line = match a {
                 GateAction::Pulse(_) => p.line,
                 _ => None,
@@ -556,7 +582,7 @@ impl Online {
                 self.line_armed = line;
             }
         }
-        self.stall_point(p, now);
+        self.stall_point(action, now);
         // Faults, travel, switches, velocity.
         if p.fault.is_some() {
             let onset = self.prev.is_none_or(|q| !q.fault);
@@ -572,7 +598,7 @@ impl Online {
         }
         if let Some(w) = self
             .prev
-            .and_then(|q| switch_between(q.region, p, &self.boundaries_um))
+            .and_then(|q| switch_between(q.region, t_us, state, out, &self.boundaries_um))
         {
             self.switch_count += 1;
             self.switch_past_um = widen(self.switch_past_um, w.past_um);
@@ -583,7 +609,9 @@ impl Online {
                 self.switches.push(w);
             }
         }
-        self.velocity_point(p);
+        // An estimate under a fault is not compared.
+        let est = out.est_vel_um_s.filter(|_| p.fault.is_none());
+        self.velocity_point(p.t_us, p.true_vel_um_s, est);
         self.prev = Some(Prev {
             region: p.region,
             fault: p.fault.is_some(),
@@ -591,9 +619,9 @@ impl Online {
     }
 
     /// The velocity figures' sums for one point: its true velocity enters the lag window, and
-    /// its estimate (when it has one and no fault) is compared with every lag's.
-    fn velocity_point(&mut self, p: &TracePoint) {
-        let v = (p.true_vel_um_s * 1e-3) as f32;
+    /// its estimate (given only when it has one and no fault) is compared with every lag's.
+    fn velocity_point(&mut self, t_us: u64, true_vel_um_s: f64, est_vel_um_s: Option<i32>) {
+        let v = (true_vel_um_s * 1e-3) as f32;
         if self.true_buf.is_empty() {
             // Before the run the finger moved as at its start (the trajectory at t = 0).
             self.true_buf = vec![v; TRUE_BUFFER];
@@ -609,11 +637,11 @@ impl Online {
         }
         self.true_at -= 1;
         self.true_buf[self.true_at] = v;
-        let Some(est) = p.est_vel_um_s.filter(|_| p.fault.is_none()) else {
+        let Some(est) = est_vel_um_s else {
             return;
         };
         // A block of f32 sums belongs to one minute: a new minute flushes the last one's.
-        let minute = self.minute_index(p.t_us);
+        let minute = self.minute_index(t_us);
         if minute != self.lag_minute {
             self.flush_lags();
             self.lag_minute = minute;
@@ -776,8 +804,8 @@ impl Online {
     }
 
     /// The stall figure's bookkeeping for one point (its rises already placed).
-    fn stall_point(&mut self, p: &TracePoint, now: u64) {
-        match p.action {
+    fn stall_point(&mut self, action: Option<&GateAction>, now: u64) {
+        match action {
             Some(GateAction::Start(s)) => {
                 self.running_period_clk = Some(s.period_clocks());
                 self.last_rise_clk = Some(now);
@@ -1017,7 +1045,13 @@ fn pulse_matches(on: u64, period: Option<u64>, planned: &HashSet<(u64, u64)>) ->
 
 /// The switch between consecutive points, the first in region `from` and `b`, if their regions
 /// differ (both present).
-fn switch_between(from: Option<u8>, b: &TracePoint, boundaries_um: &[f64]) -> Option<Switch> {
+fn switch_between(
+    from: Option<u8>,
+    t_us: u64,
+    state: &State,
+    b: &CoreOut,
+    boundaries_um: &[f64],
+) -> Option<Switch> {
     let (Some(from), Some(to)) = (from, b.region) else {
         return None;
     };
@@ -1027,14 +1061,14 @@ fn switch_between(from: Option<u8>, b: &TracePoint, boundaries_um: &[f64]) -> Op
     let up = to > from;
     let bi = if up { to as usize - 1 } else { to as usize };
     let boundary_um = boundaries_um.get(bi).copied().unwrap_or(f64::NAN);
-    let true_um = b.true_um;
+    let true_um = state.position_um;
     let past_um = if up {
         true_um - boundary_um
     } else {
         boundary_um - true_um
     };
     Some(Switch {
-        t_us: b.t_us,
+        t_us,
         from,
         to,
         boundary_um,
@@ -1057,7 +1091,10 @@ pub fn switches(r: &SimResult) -> Vec<Switch> {
         .collect();
     r.trace
         .windows(2)
-        .filter_map(|w| switch_between(w[0].region, &w[1], &boundaries))
+        .filter_map(|w| {
+            let b = &w[1];
+            switch_between(w[0].region, b.t_us, &b.state(), &b.core_out(), &boundaries)
+        })
         .collect()
 }
 

@@ -233,6 +233,57 @@ pub struct TracePoint {
     pub line: Option<u8>,
 }
 
+impl TracePoint {
+    /// The finger's true state at the point.
+    #[inline]
+    pub fn state(&self) -> State {
+        State {
+            position_um: self.true_um,
+            velocity_um_s: self.true_vel_um_s,
+        }
+    }
+
+    /// What the core made of the point's sample ([`CoreOut`]).
+    #[inline]
+    pub fn core_out(&self) -> CoreOut {
+        CoreOut {
+            meas_um: self.meas_um,
+            est_vel_um_s: self.est_vel_um_s,
+            region: self.region,
+            line: self.line,
+            fault: self.fault,
+        }
+    }
+}
+
+/// The part of a [`TracePoint`] the metrics and the chart read that the core works out (the
+/// rest is the period's time and the finger's [`State`], known before the loop runs, and the
+/// rare gate action). A pipelined run hands these, 24 bytes a period, from the loop's thread to
+/// the feeder instead of whole trace points (72 bytes, with `sampled`, `code` and `gate` that
+/// no figure of a plain run reads).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CoreOut {
+    /// Position the core measured, µm.
+    pub meas_um: Option<i32>,
+    /// Velocity the core estimated, µm/s.
+    pub est_vel_um_s: Option<i32>,
+    /// Region the core chose.
+    pub region: Option<u8>,
+    /// The tangible line whose pulse this sample fired.
+    pub line: Option<u8>,
+    /// Fault in force after this sample (or the tick after it).
+    pub fault: Option<SensorFault>,
+}
+
+/// A [`CoreOut`] with nothing in it.
+const NO_CORE_OUT: CoreOut = CoreOut {
+    meas_um: None,
+    est_vel_um_s: None,
+    region: None,
+    line: None,
+    fault: None,
+};
+
 /// What a run produced.
 #[derive(Clone, Debug)]
 pub struct SimResult {
@@ -441,72 +492,106 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
     /// forward to wider loads, and waited for them.
     #[inline(always)]
     fn step_into(&mut self, k: u64, state: State, sample: Option<Sample>, point: &mut TracePoint) {
-        let t_us = k * self.period_us as u64;
-        let latency = self.action_latency_us as u64;
-        let State {
-            position_um,
-            velocity_um_s,
-        } = state;
+        let mut out = NO_CORE_OUT;
+        let (action, _) = self.step_core(k, sample, &mut out);
         *point = TracePoint {
-            t_us,
-            true_um: position_um,
-            true_vel_um_s: velocity_um_s,
+            t_us: k * self.period_us as u64,
+            true_um: state.position_um,
+            true_vel_um_s: state.velocity_um_s,
             sampled: sample.is_some(),
             code: sample.map(|s| s.code),
-            meas_um: None,
-            est_vel_um_s: None,
-            region: None,
-            gate: false,
-            fault: self.fault,
-            action: None,
-            line: None,
+            meas_um: out.meas_um,
+            est_vel_um_s: out.est_vel_um_s,
+            region: out.region,
+            // The line after this sample's action and its tick's (nothing moves it between).
+            gate: self.tm.is_high(),
+            fault: out.fault,
+            action,
+            line: out.line,
         };
+    }
+
+    /// Sample period `k` with its sample drawn: the core's part of its trace point into `out`
+    /// (every field), its gate action (or its tick's) and `out.region` returned. The region
+    /// comes back in a register for the chart recorder: read back from `out`, whose tag and
+    /// value bytes are stored one by one, it was one 2-byte load that cannot be forwarded from
+    /// them (a third of the loop's own samples before a long run's detail).
+    /// [`Self::step_into`] builds the whole point from it; a pipelined run hands on just this.
+    #[inline(always)]
+    fn step_core(
+        &mut self,
+        k: u64,
+        sample: Option<Sample>,
+        out: &mut CoreOut,
+    ) -> (Option<GateAction>, Option<u8>) {
+        let t_us = k * self.period_us as u64;
+        let latency = self.action_latency_us as u64;
+        let mut action = None;
+        // The region as a number (−1: none), so it is never copied as a whole option.
+        let mut region_code = -1i16;
         if let Some(s) = sample {
-            let out = self.ctrl.on_sample(s);
+            let o = self.ctrl.on_sample(s);
             // The port's order (`saw_core::controller::apply`): level and envelope, then line.
-            if let Some(e) = out.envelope {
+            if let Some(e) = o.envelope {
                 self.tm.set_envelope(e);
             }
-            if let Some(a) = out.amplitude_permille {
+            if let Some(a) = o.amplitude_permille {
                 self.tm.set_amplitude(self.clk(t_us + latency), a);
             }
-            if let Some(a) = out.action {
+            if let Some(a) = o.action {
                 self.tm.apply(self.clk(t_us + latency), a);
-                point.action = Some(a);
+                action = Some(a);
             }
             // The core stores each half of these options (tag, value) on its own. Copied
-            // whole, the two were one 16-byte load, which cannot take its bytes from those
-            // stores and waits for them to reach the cache; taken apart (the point's already
-            // hold None), each load reads one store.
-            if let Some(m) = out.position_um {
-                point.meas_um = Some(m);
+            // whole, two of them were one wider load (16 bytes for the position and the
+            // velocity, 4 for the region and the line), which cannot take its bytes from those
+            // stores and waits for them to reach the cache (the region and line's load was a
+            // quarter of the loop's own samples); taken apart, each load reads one store.
+            out.meas_um = None;
+            out.est_vel_um_s = None;
+            out.region = None;
+            out.line = None;
+            self.region = None;
+            if let Some(m) = o.position_um {
+                out.meas_um = Some(m);
             }
-            if let Some(v) = out.velocity_um_s {
-                point.est_vel_um_s = Some(v);
+            if let Some(v) = o.velocity_um_s {
+                out.est_vel_um_s = Some(v);
             }
-            point.region = out.region;
-            point.line = out.line;
-            self.fault = out.fault;
-            self.region = out.region;
+            if let Some(r) = o.region {
+                out.region = Some(r);
+                self.region = Some(r);
+                region_code = i16::from(r);
+            }
+            if let Some(l) = o.line {
+                out.line = Some(l);
+            }
+            self.fault = o.fault;
         } else {
-            point.region = if self.fault.is_some() {
+            out.meas_um = None;
+            out.est_vel_um_s = None;
+            out.line = None;
+            let region = if self.fault.is_some() {
                 None
             } else {
                 self.region
             };
+            out.region = region;
+            region_code = region.map_or(-1, i16::from);
         }
         self.tm.advance_to(self.clk(t_us + latency));
-        point.gate = self.tm.is_high();
         let tick_us = t_us + (self.period_us as u64 / 2).max(latency);
         if let Some(a) = self.ctrl.on_tick(tick_us as u32) {
             self.tm.apply(self.clk(tick_us), a);
-            point.action = Some(a);
+            action = Some(a);
             self.fault = Some(SensorFault::Stale);
             self.region = None;
-            point.region = None;
-            point.gate = self.tm.is_high();
+            out.region = None;
+            region_code = -1;
         }
-        point.fault = self.fault;
+        out.fault = self.fault;
+        let region = u8::try_from(region_code).ok();
+        (action, region)
     }
 }
 
@@ -640,17 +725,22 @@ fn record(
 const CHUNK: usize = 8 * BLOCK;
 
 /// A chunk of sample periods on its way through the pipeline: the finger states and ADC
-/// samples (drawn by the feeder), then the trace points and the edges settled after each (the
-/// loop's), for the metrics.
+/// samples (drawn by the feeder), then what the core made of each period, its gate actions and
+/// the edges settled after each (the loop's), for the metrics. The loop hands on only the
+/// core's part of each trace point ([`CoreOut`]; the feeder has the time and the state, and
+/// actions and edges are rare), so about a third of the memory a whole point took crosses
+/// between the CPUs.
 #[derive(Default)]
 struct Chunk {
     k0: u64,
     states: Vec<State>,
     samples: Vec<Option<Sample>>,
-    points: Vec<TracePoint>,
+    outs: Vec<CoreOut>,
+    /// The gate actions, each with its period's index in the chunk.
+    actions: Vec<(u32, GateAction)>,
     edges: Vec<Edge>,
-    /// Per point, the end of its edges.
-    ends: Vec<u32>,
+    /// The periods that settled edges: (index in the chunk, the end of its edges in `edges`).
+    edge_ends: Vec<(u32, u32)>,
 }
 
 /// [`stream_with`] on `threads` threads. With 1 the loop draws each block's states and samples
@@ -720,31 +810,61 @@ pub fn stream_on(
                         return (adc, metrics, ran());
                     };
                     in_flight -= 1;
-                    let mut e0 = 0;
-                    for (point, &e1) in c.points.iter().zip(&c.ends) {
-                        let e1 = e1 as usize;
-                        feed_metrics(&mut metrics, point, &c.edges[e0..e1]);
-                        e0 = e1;
+                    // The periods' edges and actions, found in order alongside them: the index
+                    // of the next period with edges and of the next with an action (u32::MAX:
+                    // none left), one comparison each a period.
+                    fn next_at<T>(list: &[(u32, T)], i: usize) -> u32 {
+                        list.get(i).map_or(u32::MAX, |x| x.0)
+                    }
+                    let (mut e0, mut ei, mut ai) = (0, 0, 0);
+                    let (mut edges_at, mut action_at) =
+                        (next_at(&c.edge_ends, 0), next_at(&c.actions, 0));
+                    for (i, (state, out)) in c.states.iter().zip(&c.outs).enumerate() {
+                        let i = i as u32;
+                        if i == edges_at {
+                            let e1 = c.edge_ends[ei].1 as usize;
+                            metrics.edges(&c.edges[e0..e1]);
+                            e0 = e1;
+                            ei += 1;
+                            edges_at = next_at(&c.edge_ends, ei);
+                        }
+                        let mut action = None;
+                        if i == action_at {
+                            action = Some(&c.actions[ai].1);
+                            ai += 1;
+                            action_at = next_at(&c.actions, ai);
+                        }
+                        let t_us = (c.k0 + i as u64) * period_us as u64;
+                        metrics.period(t_us, state, out, action);
                     }
                     spare.push(c);
                 }
             });
             for mut c in from_feeder {
-                // Each point is written in its slot (a chunk's slots are reused as they are;
-                // every field is written).
-                c.points.resize(c.states.len(), BLANK_POINT);
+                // Each period's core output is written in its slot (a chunk's slots are reused
+                // as they are; every field is written).
+                c.outs.resize(c.states.len(), NO_CORE_OUT);
+                c.actions.clear();
                 c.edges.clear();
-                c.ends.clear();
-                let periods = c.states.iter().zip(&c.samples).zip(&mut c.points);
-                for (i, ((&state, &sample), point)) in periods.enumerate() {
+                c.edge_ends.clear();
+                let periods = c.samples.iter().zip(&mut c.outs).enumerate();
+                for (i, (&sample, out)) in periods {
                     let k = c.k0 + i as u64;
-                    lp.step_into(k, state, sample, point);
+                    let (action, region) = lp.step_core(k, sample, out);
+                    if let Some(a) = action {
+                        c.actions.push((i as u32, a));
+                    }
                     lp.tm.take_settled(&mut edges, &mut levels);
                     if let Some(r) = &mut recorder {
-                        record(r, point, &edges, &levels);
+                        r.period(k * period_us as u64, region, &c.states[i], out);
+                        if !edges.is_empty() || !levels.is_empty() {
+                            r.edges(&edges, &levels);
+                        }
                     }
-                    c.edges.extend_from_slice(&edges);
-                    c.ends.push(c.edges.len() as u32);
+                    if !edges.is_empty() {
+                        c.edges.extend_from_slice(&edges);
+                        c.edge_ends.push((i as u32, c.edges.len() as u32));
+                    }
                     at_sample(k);
                 }
                 if to_feeder.send(c).is_err() {
