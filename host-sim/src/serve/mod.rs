@@ -522,3 +522,51 @@ fn send(pty: &Pty, mut bytes: &[u8]) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(extra: &[&str]) -> ServeArgs {
+        let mut argv = vec!["host-sim serve", "--pty", "/nonexistent/tty"];
+        argv.extend_from_slice(extra);
+        ServeArgs::try_parse_from(argv).unwrap()
+    }
+
+    const FIG12: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/2d-fig12.toml");
+    const CONCAVE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/2d-concave.toml");
+
+    /// A 2D scene makes the overlay board; the rheostat's flags are refused with it, one line
+    /// naming the flag, and a scene for a larger plate than the virtual overlay is refused.
+    #[test]
+    fn a_2d_scene_takes_the_overlay_and_refuses_the_rheostats_flags() {
+        let s = scene_2d(&args(&["--scene", FIG12])).unwrap().unwrap();
+        assert_eq!(s.plate_um, (95_000, 54_000));
+        assert!(scene_2d(&args(&[])).unwrap().is_none());
+        for (extra, starts) in [
+            (vec!["--rest-at", "10"], "--rest-at: "),
+            (
+                vec!["--fault", "open", "--fault-at", "1", "--fault-for", "1"],
+                "--fault: ",
+            ),
+            (vec!["--flash", "/tmp/x.bin"], "--flash: "),
+        ] {
+            let mut a = vec!["--scene", FIG12];
+            a.extend(extra);
+            let e = scene_2d(&args(&a)).unwrap_err();
+            assert!(e.starts_with(starts) && !e.contains('\n'), "{e}");
+        }
+        let e = scene_2d(&args(&["--scene", CONCAVE])).unwrap_err();
+        assert!(
+            e.ends_with("its plate 80 x 60 mm does not fit the virtual overlay 95 x 54 mm"),
+            "{e}"
+        );
+        // The resting finger must lie on the overlay.
+        let a = args(&["--scene", FIG12, "--rest-at-xy", "96,10"]);
+        let e = trajectory_2d(&a, &s).unwrap_err();
+        assert_eq!(
+            e,
+            "--rest-at-xy 96,10: must lie on the overlay, x 0 to 95 mm and y 0 to 54 mm"
+        );
+    }
+}
