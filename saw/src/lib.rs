@@ -1084,16 +1084,9 @@ fn counters_2d_text(c: &saw_link::msg::Counters2d) -> String {
     let k = &c.core;
     let l = &c.link;
     format!(
-        "touch readings {}
-sensor faults {}
-lifts {}
-window switches {}
-gate actions {}
-f_b clamped {}
-         edge pulses {} (skipped {})
-ridge pulses {} (skipped {})
-         link frames {} (refused {})
-stream records {} (dropped {})",
+        "touch readings {}\nsensor faults {}\nlifts {}\nwindow switches {}\ngate actions {}\nf_b clamped {}\n\
+         edge pulses {} (skipped {})\nridge pulses {} (skipped {})\n\
+         link frames {} (refused {})\nstream records {} (dropped {})",
         k.readings,
         k.faults,
         k.lifts,

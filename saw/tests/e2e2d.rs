@@ -216,6 +216,22 @@ fn a_2d_scene_is_pushed_read_back_edited_and_a_1d_one_refused() {
         "{in_window_0} of {}",
         down.len()
     );
+
+    // The 2D core's counters, one `name value` a line.
+    let r = saw(&vb.port, &["counters"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let lines: Vec<&str> = r.stdout.trim().lines().collect();
+    assert_eq!(lines.len(), 10, "{}", r.stdout);
+    assert!(lines[0].starts_with("touch readings "), "{}", r.stdout);
+    assert!(lines.iter().all(|l| !l.starts_with(' ')), "{}", r.stdout);
+    let c = saw_json(&vb.port, &["counters"]);
+    assert!(
+        c["result"]["counters"]["core"]["readings"]
+            .as_u64()
+            .unwrap()
+            > 2_000,
+        "{c}"
+    );
 }
 
 #[test]
