@@ -32,6 +32,7 @@ pub fn scene_id(config: &Config) -> u32 {
     crc_of(config)
 }
 
+#[cfg(feature = "plane")]
 /// A 2D scene's id: the CRC-32 of its postcard encoding (plate and configuration), as
 /// [`scene_id`] is a 1D scene's.
 pub fn plane_scene_id(scene: &msg::PlaneScene) -> u32 {

@@ -5,6 +5,7 @@
 use heapless::{String, Vec};
 use saw_core::controller::{ConfigError, Telemetry};
 use saw_core::gate::DriveMode;
+#[cfg(feature = "plane")]
 use saw_core::plane::{Config2d, Config2dError, Place, PointUm, Telemetry2d};
 use saw_core::position::SensorFault;
 use saw_core::scene::Config;
@@ -79,15 +80,19 @@ pub enum Request {
     Save,
     /// The board's clock now, for aligning board time with the host's ([`Reply::Pong`]).
     Ping,
-    // Protocol 2, appended (issue #36): 2D scenes. A board of this version that predates
-    // them answers `UnknownRequest`; the [`crate::session::Board`] defaults refuse them.
+    // Protocol 2, appended (issue #36): 2D scenes (feature `plane`). A board of this version
+    // that predates them, or is built without them, answers `UnknownRequest`; the
+    // [`crate::session::Board`] defaults refuse them.
     /// Which position sensor the board reads ([`Reply::Sensor`]).
+    #[cfg(feature = "plane")]
     Sensor,
     /// Replace the whole scene with a 2D one (a board with the 4-wire overlay only): compiled
     /// on the board and swapped in, or refused with nothing changed ([`Reply::Refused2d`]).
+    #[cfg(feature = "plane")]
     LoadScene2d(PlaneScene),
     /// Move 2D window `window` whole: its outline's bounding box's lower-left corner goes to
     /// `to` (absolute, so a repeated request lands in the same place). Any outline moves.
+    #[cfg(feature = "plane")]
     MoveWindow {
         /// Window index, topmost first from 0.
         window: u8,
@@ -96,6 +101,7 @@ pub enum Request {
     },
     /// Give 2D window `window`, an axis-aligned rectangle, new corners (a polygon is refused:
     /// it only moves).
+    #[cfg(feature = "plane")]
     ResizeWindow {
         /// Window index, topmost first from 0.
         window: u8,
@@ -262,6 +268,7 @@ pub enum Reply {
     },
     // Protocol 2, appended (issue #36).
     /// To [`Request::GetScene`] when the active scene is 2D.
+    #[cfg(feature = "plane")]
     Scene2d {
         /// Its id ([`crate::plane_scene_id`]).
         scene_id: u32,
@@ -271,12 +278,16 @@ pub enum Reply {
         scene: PlaneScene,
     },
     /// A 2D request, or a 1D one on a board that runs 2D scenes, was refused: nothing changed.
+    #[cfg(feature = "plane")]
     Refused2d(Refused2d),
     /// To [`Request::Sensor`].
+    #[cfg(feature = "plane")]
     Sensor(Sensor),
     /// To [`Request::Counters`] on a board running a 2D scene.
+    #[cfg(feature = "plane")]
     Counters2d(Counters2d),
     /// A 2D stream frame (unsolicited; its header's `seq` counts stream frames).
+    #[cfg(feature = "plane")]
     Stream2d(Stream2d),
 }
 
@@ -284,6 +295,7 @@ pub enum Reply {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg(feature = "plane")]
 pub enum Sensor {
     /// The slide rheostat: 1D scenes (regions along the stroke).
     Rheostat,
@@ -294,6 +306,7 @@ pub enum Sensor {
     },
 }
 
+#[cfg(feature = "plane")]
 impl core::fmt::Display for Sensor {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match *self {
@@ -313,6 +326,7 @@ impl core::fmt::Display for Sensor {
 /// pushed (`saw_core::scene_file::to_scene_file_2d`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg(feature = "plane")]
 pub struct PlaneScene {
     /// The plate the scene is drawn on, µm (width, height): every vertex and edge end lies on
     /// it, from (0, 0).
@@ -325,6 +339,7 @@ pub struct PlaneScene {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg(feature = "plane")]
 pub enum SceneKind {
     /// Regions along the rheostat's stroke.
     Line,
@@ -337,6 +352,7 @@ pub enum SceneKind {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg(feature = "plane")]
 pub enum Refused2d {
     /// The board's sensor does not read this kind of scene (or edit).
     WrongSensor {
@@ -391,8 +407,10 @@ pub enum Refused2d {
 }
 
 /// µm shown as mm, with a sign: 95000 → 95, -1500 → -1.5.
+#[cfg(feature = "plane")]
 struct Millimetres(i64);
 
+#[cfg(feature = "plane")]
 impl core::fmt::Display for Millimetres {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         let (sign, v) = if self.0 < 0 {
@@ -415,6 +433,7 @@ impl core::fmt::Display for Millimetres {
     }
 }
 
+#[cfg(feature = "plane")]
 impl core::fmt::Display for Refused2d {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         let mm = |v: i32| Millimetres(v as i64);
@@ -484,6 +503,7 @@ impl core::fmt::Display for Refused2d {
 /// The counters of a board running a 2D scene.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg(feature = "plane")]
 pub struct Counters2d {
     /// The 2D control core's (readings, faults, lifts, window switches, pulses, skips).
     pub core: Telemetry2d,
@@ -495,6 +515,7 @@ pub struct Counters2d {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
+#[cfg(feature = "plane")]
 pub enum Fault2d {
     /// An axis on a rail (an open or shorted terminal).
     Rail {
@@ -510,6 +531,7 @@ pub enum Fault2d {
 /// One touch reading of the 2D telemetry stream.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg(feature = "plane")]
 pub struct Record2d {
     /// The reading's time, µs since the board booted.
     pub time_us: u64,
@@ -538,6 +560,7 @@ pub struct Record2d {
 /// A frame of the 2D telemetry stream.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg(feature = "plane")]
 pub struct Stream2d {
     /// Records the board dropped since boot.
     pub dropped: u32,
@@ -646,5 +669,9 @@ impl core::fmt::Display for StoreFault {
 
 impl Request {
     /// How many request variants this protocol version defines (postcard numbers them 0..N).
+    #[cfg(feature = "plane")]
     pub const VARIANTS: u32 = 14;
+    /// How many request variants this protocol version defines (postcard numbers them 0..N).
+    #[cfg(not(feature = "plane"))]
+    pub const VARIANTS: u32 = 10;
 }

@@ -4,17 +4,23 @@
 //! decision about a request is made here, the same on the firmware and the virtual board.
 
 use saw_core::controller::Telemetry;
+#[cfg(feature = "plane")]
 use saw_core::plane::{Config2dError, PointUm, Polygon, Telemetry2d};
 use saw_core::scene::Config;
 
 use crate::frame::{self, Refusal};
 use crate::msg::{
-    Counters, Counters2d, Header, Hello, LinkCounters, LinkError, PlaneScene, Refused2d, Reply,
-    Request, SceneKind, SceneSource, Sensor, StoreFault, NAME_BYTES, PROTOCOL_VERSION,
+    Counters, Header, Hello, LinkCounters, LinkError, Reply, Request, SceneSource, StoreFault,
+    NAME_BYTES, PROTOCOL_VERSION,
 };
-use crate::{plane_scene_id, scene_id};
+#[cfg(feature = "plane")]
+use crate::msg::{Counters2d, PlaneScene, Refused2d, SceneKind, Sensor};
+#[cfg(feature = "plane")]
+use crate::plane_scene_id;
+use crate::scene_id;
 
 /// Why a board did not run a 2D scene ([`Board::apply_2d`]).
+#[cfg(feature = "plane")]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Apply2dError {
     /// The board's firmware has no 2D controller (the trait's default).
@@ -53,15 +59,18 @@ pub trait Board {
 
     /// Compiles a 2D scene (`Prepared2d::compile`) and makes it active from the next reading,
     /// or refuses it with nothing changed. Records carry `stamp` as [`Board::apply`]'s do.
+    #[cfg(feature = "plane")]
     async fn apply_2d(&mut self, scene: &PlaneScene, stamp: Stamp) -> Result<(), Apply2dError> {
         let _ = (scene, stamp);
         Err(Apply2dError::Unsupported)
     }
     /// The 2D control core's counters now.
+    #[cfg(feature = "plane")]
     async fn telemetry_2d(&mut self) -> Telemetry2d {
         Telemetry2d::default()
     }
     /// Stores a 2D scene to boot into.
+    #[cfg(feature = "plane")]
     async fn save_2d(&mut self, scene_id: u32, scene: &PlaneScene) -> Result<(), StoreFault> {
         let _ = (scene_id, scene);
         Err(StoreFault::NotFor2d)
@@ -75,6 +84,7 @@ pub enum Active {
     /// A 1D scene.
     Line(Config),
     /// A 2D scene and its plate.
+    #[cfg(feature = "plane")]
     Plane(PlaneScene),
 }
 
@@ -83,6 +93,7 @@ impl Active {
     pub fn id(&self) -> u32 {
         match self {
             Active::Line(c) => scene_id(c),
+            #[cfg(feature = "plane")]
             Active::Plane(p) => plane_scene_id(p),
         }
     }
@@ -113,6 +124,7 @@ pub struct Identity {
 #[derive(Debug)]
 pub struct Session {
     identity: Identity,
+    #[cfg(feature = "plane")]
     sensor: Sensor,
     active: Active,
     scene_id: u32,
@@ -127,6 +139,7 @@ pub struct Session {
     /// Counter values at the last reset.
     base: Counters,
     /// The 2D core's counter values at the last reset.
+    #[cfg(feature = "plane")]
     base_2d: Telemetry2d,
 }
 
@@ -134,9 +147,16 @@ impl Session {
     /// A session of a board with the slide rheostat, over the 1D scene it booted into (already
     /// applied).
     pub fn new(identity: Identity, active: Config, source: SceneSource) -> Self {
-        Self::with(identity, Sensor::Rheostat, Active::Line(active), source)
+        Self::with(
+            identity,
+            #[cfg(feature = "plane")]
+            Sensor::Rheostat,
+            Active::Line(active),
+            source,
+        )
     }
 
+    #[cfg(feature = "plane")]
     /// A session of a board with the 4-wire touch overlay of `plate_um` (its touch area, µm),
     /// over the 2D scene it booted into (already applied with [`Board::apply_2d`]).
     pub fn new_2d(
@@ -153,10 +173,16 @@ impl Session {
         )
     }
 
-    fn with(identity: Identity, sensor: Sensor, active: Active, source: SceneSource) -> Self {
+    fn with(
+        identity: Identity,
+        #[cfg(feature = "plane")] sensor: Sensor,
+        active: Active,
+        source: SceneSource,
+    ) -> Self {
         let id = active.id();
         Self {
             identity,
+            #[cfg(feature = "plane")]
             sensor,
             scene_id: id,
             active,
@@ -166,6 +192,7 @@ impl Session {
             every_samples: 0,
             link: LinkCounters::default(),
             base: Counters::default(),
+            #[cfg(feature = "plane")]
             base_2d: Telemetry2d::default(),
         }
     }
@@ -176,6 +203,7 @@ impl Session {
     }
 
     /// The sensor the board reads.
+    #[cfg(feature = "plane")]
     pub fn sensor(&self) -> Sensor {
         self.sensor
     }
@@ -233,6 +261,7 @@ impl Session {
                 scene_id: self.scene_id,
                 scene_source: self.source,
             }),
+            #[cfg(feature = "plane")]
             Request::Sensor => Reply::Sensor(self.sensor),
             Request::GetScene => match &self.active {
                 Active::Line(config) => Reply::Scene {
@@ -240,6 +269,7 @@ impl Session {
                     source: self.source,
                     config: config.clone(),
                 },
+                #[cfg(feature = "plane")]
                 Active::Plane(scene) => Reply::Scene2d {
                     scene_id: self.scene_id,
                     source: self.source,
@@ -269,16 +299,19 @@ impl Session {
                     let next = c.with_drive(drive);
                     self.apply(board, next).await
                 }
+                #[cfg(feature = "plane")]
                 Active::Plane(p) => {
                     let mut next = p.clone();
                     next.config.scene.drive = drive;
                     self.apply_2d(board, next).await
                 }
             },
+            #[cfg(feature = "plane")]
             Request::LoadScene2d(scene) => match self.plane() {
                 Ok(_) => self.apply_2d(board, scene).await,
                 Err(r) => r,
             },
+            #[cfg(feature = "plane")]
             Request::MoveWindow { window, to } => match self.plane() {
                 Ok(active) => match moved(active, window, to) {
                     Ok(next) => self.apply_2d(board, next).await,
@@ -286,6 +319,7 @@ impl Session {
                 },
                 Err(r) => r,
             },
+            #[cfg(feature = "plane")]
             Request::ResizeWindow { window, lo, hi } => match self.plane() {
                 Ok(active) => match resized(active, window, lo, hi) {
                     Ok(next) => self.apply_2d(board, next).await,
@@ -301,6 +335,7 @@ impl Session {
                 }
                 match self.active {
                     Active::Line(_) => Reply::Counters(since),
+                    #[cfg(feature = "plane")]
                     Active::Plane(_) => {
                         let now2 = board.telemetry_2d().await;
                         let since2 = since_2d(&now2, &self.base_2d);
@@ -332,6 +367,7 @@ impl Session {
             Request::Save => {
                 let saved = match &self.active {
                     Active::Line(c) => board.save(self.scene_id, c).await,
+                    #[cfg(feature = "plane")]
                     Active::Plane(p) => board.save_2d(self.scene_id, p).await,
                 };
                 match saved {
@@ -351,6 +387,7 @@ impl Session {
     /// The active 1D scene, or the refusal a 1D request gets on a board that reads the
     /// overlay (the board's sensor decides, not the scene).
     fn line(&self) -> Result<&Config, Reply> {
+        #[cfg(feature = "plane")]
         match (&self.sensor, &self.active) {
             (Sensor::Rheostat, Active::Line(c)) => Ok(c),
             (board, _) => Err(Reply::Refused2d(Refused2d::WrongSensor {
@@ -358,9 +395,14 @@ impl Session {
                 board: *board,
             })),
         }
+        #[cfg(not(feature = "plane"))]
+        match &self.active {
+            Active::Line(c) => Ok(c),
+        }
     }
 
     /// The active 2D scene, or the refusal a 2D request gets on a board with the rheostat.
+    #[cfg(feature = "plane")]
     fn plane(&self) -> Result<&PlaneScene, Reply> {
         match (&self.sensor, &self.active) {
             (Sensor::FourWire { .. }, Active::Plane(p)) => Ok(p),
@@ -382,6 +424,7 @@ impl Session {
         }
     }
 
+    #[cfg(feature = "plane")]
     /// Checks a 2D scene against the board's overlay (plate size, every point on the plate),
     /// then hands it to the board's controller.
     async fn apply_2d<B: Board>(&mut self, board: &mut B, next: PlaneScene) -> Reply {
@@ -421,6 +464,7 @@ impl Session {
             // A 2D board's 1D core counts nothing: it is not asked (its glue may have none).
             core: match self.active {
                 Active::Line(_) => board.telemetry().await,
+                #[cfg(feature = "plane")]
                 Active::Plane(_) => Telemetry::default(),
             },
             link: LinkCounters {
@@ -478,6 +522,7 @@ fn since(now: &Counters, base: &Counters) -> Counters {
 }
 
 /// The 2D counts since `base`.
+#[cfg(feature = "plane")]
 fn since_2d(n: &Telemetry2d, b: &Telemetry2d) -> Telemetry2d {
     Telemetry2d {
         readings: n.readings.wrapping_sub(b.readings),
@@ -494,6 +539,7 @@ fn since_2d(n: &Telemetry2d, b: &Telemetry2d) -> Telemetry2d {
 }
 
 /// `p` lies on a plate of `plate_um`, from (0, 0).
+#[cfg(feature = "plane")]
 fn on_plate(p: PointUm, plate_um: (u32, u32)) -> bool {
     (0..=plate_um.0 as i64).contains(&(p.x_um as i64))
         && (0..=plate_um.1 as i64).contains(&(p.y_um as i64))
@@ -501,6 +547,7 @@ fn on_plate(p: PointUm, plate_um: (u32, u32)) -> bool {
 
 /// The scene's plate fits the overlay, and every window vertex and edge end lies on the plate
 /// (what the scene file's reader checks, for a scene from any host).
+#[cfg(feature = "plane")]
 fn fits(scene: &PlaneScene, board_um: (u32, u32)) -> Result<(), Refused2d> {
     let plate_um = scene.plate_um;
     if plate_um.0 > board_um.0 || plate_um.1 > board_um.1 {
@@ -534,6 +581,7 @@ fn fits(scene: &PlaneScene, board_um: (u32, u32)) -> Result<(), Refused2d> {
 }
 
 /// Window `window` of `scene`, or the refusal naming how many there are.
+#[cfg(feature = "plane")]
 fn window_of(scene: &PlaneScene, window: u8) -> Result<&Polygon, Refused2d> {
     let windows = &scene.config.scene.windows;
     windows
@@ -546,6 +594,7 @@ fn window_of(scene: &PlaneScene, window: u8) -> Result<&Polygon, Refused2d> {
 }
 
 /// `scene` with window `window` moved so its outline's lower-left bounding corner is at `to`.
+#[cfg(feature = "plane")]
 fn moved(scene: &PlaneScene, window: u8, to: PointUm) -> Result<PlaneScene, Refused2d> {
     let outline = window_of(scene, window)?;
     let (lo, _) = outline.bounds();
@@ -572,6 +621,7 @@ fn moved(scene: &PlaneScene, window: u8, to: PointUm) -> Result<PlaneScene, Refu
 
 /// Whether `outline` is an axis-aligned rectangle: 4 vertices, each side horizontal or
 /// vertical, alternating.
+#[cfg(feature = "plane")]
 fn is_rectangle(outline: &Polygon) -> bool {
     let v = &outline.vertices;
     if v.len() != 4 {
@@ -586,6 +636,7 @@ fn is_rectangle(outline: &Polygon) -> bool {
 
 /// `scene` with rectangle `window` given the corners `lo`, `hi` (its vertices keep their order:
 /// each takes the new x of its side and the new y of its side).
+#[cfg(feature = "plane")]
 fn resized(
     scene: &PlaneScene,
     window: u8,

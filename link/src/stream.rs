@@ -10,9 +10,9 @@ use heapless::Vec;
 /// and one that does not drops (and counts) instead of stalling anything.
 pub const QUEUE_RECORDS: usize = 64;
 
-use crate::msg::{
-    Header, Record, Record2d, Reply, Stream, Stream2d, PROTOCOL_VERSION, RECORDS_PER_FRAME,
-};
+use crate::msg::{Header, Record, Reply, Stream, PROTOCOL_VERSION, RECORDS_PER_FRAME};
+#[cfg(feature = "plane")]
+use crate::msg::{Record2d, Stream2d};
 
 /// One record every `every` samples.
 #[derive(Clone, Copy, Debug, Default)]
@@ -89,13 +89,16 @@ impl Batcher {
     }
 }
 
+#[cfg(feature = "plane")]
 /// Packs 2D records into stream frames ([`Reply::Stream2d`]), as [`Batcher`] does 1D ones.
 #[derive(Clone, Debug, Default)]
+#[cfg(feature = "plane")]
 pub struct Batcher2d {
     records: Vec<Record2d, RECORDS_PER_FRAME>,
     frames: u32,
 }
 
+#[cfg(feature = "plane")]
 impl Batcher2d {
     /// Adds a record; returns a full frame to send.
     pub fn push(&mut self, record: Record2d, dropped: u32) -> Option<(Header, Reply)> {

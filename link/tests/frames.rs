@@ -287,7 +287,13 @@ proptest! {
             prop_assert_eq!(*seq, 11);
             let (_, unread): (Request, &[u8]) = postcard::take_from_bytes(&body).unwrap();
             let read = &body[..body.len() - unread.len()];
-            prop_assert_eq!(postcard::to_allocvec(req).unwrap(), read.to_vec(), "{:?}", req);
+            // Exactly those bytes, but for over-long varints: postcard reads `128, 0` as 0
+            // (`postcard_reads_an_over_long_varint_as_its_value` below), the same value.
+            let again = postcard::to_allocvec(req).unwrap();
+            if again != read {
+                prop_assert!(again.len() < read.len(), "{:?}", req);
+                prop_assert_eq!(postcard::from_bytes::<Request>(read).unwrap(), req.clone());
+            }
             prop_assert_eq!(feed(&encode(*seq, req)), vec![Ok((*seq, req.clone()))]);
         }
     }
@@ -314,4 +320,20 @@ fn random_bodies_do_decode() {
         }
     }
     assert!(decoded >= 64, "{decoded} of 256 random bodies decoded");
+}
+
+/// Found by the property above once `MoveWindow` (a short request of i32 varints, issue #36)
+/// made random bodies decode more often: postcard does not insist on the shortest varint, so
+/// `128, 0` reads as 0, in a 1D request as in a 2D one. The value is the same (a corrupted byte
+/// is still the CRC's to catch); refusing non-canonical bodies would need the board to encode
+/// every request again. Recorded here, not changed.
+#[test]
+fn postcard_reads_an_over_long_varint_as_its_value() {
+    let canonical = encode(5, &Request::MoveBoundary { index: 0, at_um: 0 });
+    let got = feed(&raw_frame(PROTOCOL_VERSION, 5, &[3, 0, 128, 0]));
+    assert_eq!(
+        got,
+        vec![Ok((5, Request::MoveBoundary { index: 0, at_um: 0 }))]
+    );
+    assert_eq!(feed(&canonical), got);
 }
