@@ -610,8 +610,21 @@ pub(crate) fn window<P: std::io::Read + std::io::Write>(
             ))
         }
     };
-    let reply = client.request(&request)?;
+    let reply = client.request(&request).map_err(|e| no_2d(e, 1))?;
     applied(reply, what)
+}
+
+/// A board whose firmware was built without 2D scenes (saw-link's `plane` feature off: the 1D
+/// images) answers a 2D request "unknown request": said as the refusal it is, exit `code`.
+fn no_2d(e: ClientError, code: u8) -> Failure {
+    match e {
+        ClientError::Link(saw_link::msg::LinkError::UnknownRequest { .. }) => Failure {
+            code,
+            kind: "refused",
+            message: "refused, nothing changed: this board's firmware has no 2D scenes (it reads the slide rheostat): a 2D scene or a window edit needs a board with the 4-wire touch overlay".into(),
+        },
+        e => e.into(),
+    }
 }
 
 /// The least a save waits for its answer. A save may erase one unit of the store: on the F446 a
@@ -792,7 +805,10 @@ fn push_2d<P: std::io::Read + std::io::Write>(
     let plate_um =
         saw_core::scene_file::plate_um_of(name, text).map_err(|e| Failure::input(e.to_string()))?;
     let scene = saw_link::msg::PlaneScene { plate_um, config };
-    match client.request(&Request::LoadScene2d(scene))? {
+    match client
+        .request(&Request::LoadScene2d(scene))
+        .map_err(|e| no_2d(e, 2))?
+    {
         Reply::Applied { scene_id } => Ok(Done {
             text: format!("{name}: running, scene {scene_id:#010x}"),
             json: json!({ "applied": scene_hex(scene_id), "file": name }),
