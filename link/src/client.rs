@@ -9,7 +9,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crate::clock::Ping;
 use crate::frame::{self, Receiver, Refusal, MAX_ENCODED};
-use crate::msg::{Header, Hello, LinkError, Reply, Request, Stream, PROTOCOL_VERSION};
+use crate::msg::{Header, Hello, LinkError, Reply, Request, Stream, Stream2d, PROTOCOL_VERSION};
 
 /// The host clock's origin: the Unix time read between two monotonic readings, the tightest
 /// of a few tries (a thread preempted between the readings would put the origin off by the
@@ -99,6 +99,8 @@ pub struct Client<P: Read + Write> {
     timeout: Duration,
     rx: Receiver<MAX_ENCODED>,
     streams: VecDeque<(Header, Stream)>,
+    /// 2D stream frames (a board with the touch overlay) that came while waiting for a reply.
+    streams_2d: VecDeque<(Header, Stream2d)>,
     bad_frames: u64,
     /// Bytes read from the port and not yet framed.
     inbox: Vec<u8>,
@@ -120,6 +122,7 @@ impl<P: Read + Write> Client<P> {
             timeout,
             rx: Receiver::default(),
             streams: VecDeque::new(),
+            streams_2d: VecDeque::new(),
             bad_frames: 0,
             inbox: Vec::with_capacity(4096),
             inbox_pos: 0,
@@ -161,8 +164,10 @@ impl<P: Read + Write> Client<P> {
             } => {
                 self.from_us = Some(from_us);
                 let stale: usize = self.streams.iter().map(|(_, s)| s.records.len()).sum();
-                self.stale_records += stale as u64;
+                let stale_2d: usize = self.streams_2d.iter().map(|(_, s)| s.records.len()).sum();
+                self.stale_records += (stale + stale_2d) as u64;
                 self.streams.clear();
+                self.streams_2d.clear();
                 Ok(StreamStart {
                     every_samples,
                     sample_rate_hz,
@@ -179,6 +184,7 @@ impl<P: Read + Write> Client<P> {
         match self.request(&Request::Stream { every_samples: 0 })? {
             Reply::Streaming { .. } => {
                 self.streams.clear();
+                self.streams_2d.clear();
                 Ok(())
             }
             other => Err(ClientError::Unexpected(Box::new(other))),
@@ -228,6 +234,7 @@ impl<P: Read + Write> Client<P> {
         loop {
             match self.read_frame(start + timeout)? {
                 Some((h, Reply::Stream(s))) => self.streams.push_back((h, s)),
+                Some((h, Reply::Stream2d(s))) => self.streams_2d.push_back((h, s)),
                 Some((h, Reply::Error(e))) if h.seq == self.seq => {
                     return Err(ClientError::Link(e))
                 }
@@ -272,6 +279,38 @@ impl<P: Read + Write> Client<P> {
                 None => loop {
                     match self.read_frame(deadline)? {
                         Some((h, Reply::Stream(s))) => break Some((h, s)),
+                        Some(_) => {}
+                        None => break None,
+                    }
+                },
+            };
+            let Some((h, mut s)) = next else {
+                return Ok(None);
+            };
+            if let Some(from_us) = self.from_us {
+                let before = s.records.len();
+                s.records.retain(|r| r.time_us >= from_us);
+                self.stale_records += (before - s.records.len()) as u64;
+                if s.records.is_empty() {
+                    continue;
+                }
+            }
+            return Ok(Some((h, s)));
+        }
+    }
+
+    /// The next 2D stream frame (a board with the touch overlay), as [`Self::next_stream`]:
+    /// records sampled before the stream started are taken out.
+    pub fn next_stream_2d(
+        &mut self,
+        deadline: Instant,
+    ) -> Result<Option<(Header, Stream2d)>, ClientError> {
+        loop {
+            let next = match self.streams_2d.pop_front() {
+                Some(s) => Some(s),
+                None => loop {
+                    match self.read_frame(deadline)? {
+                        Some((h, Reply::Stream2d(s))) => break Some((h, s)),
                         Some(_) => {}
                         None => break None,
                     }

@@ -24,15 +24,39 @@ pub mod testing;
 
 use crc::{Crc, CRC_32_ISO_HDLC};
 use saw_core::scene::Config;
+use serde::Serialize;
 
 /// A scene's id: the CRC-32 of its postcard encoding. The same scene has the same id on every
 /// host and board, so a host can tell whether the board runs the file it has.
 pub fn scene_id(config: &Config) -> u32 {
-    let mut buf = [0u8; frame::MAX_PAYLOAD];
-    match postcard::to_slice(config, &mut buf) {
-        Ok(bytes) => Crc::<u32>::new(&CRC_32_ISO_HDLC).checksum(bytes),
-        // Cannot happen for a Config (its largest encoding fits, see frame's tests); 0 reads
-        // as "unknown".
-        Err(_) => 0,
+    crc_of(config)
+}
+
+#[cfg(feature = "plane")]
+/// A 2D scene's id: the CRC-32 of its postcard encoding (plate and configuration), as
+/// [`scene_id`] is a 1D scene's.
+pub fn plane_scene_id(scene: &msg::PlaneScene) -> u32 {
+    crc_of(scene)
+}
+
+/// The CRC-32 of `value`'s postcard encoding, fed to the CRC as it is written (no buffer).
+fn crc_of<T: Serialize>(value: &T) -> u32 {
+    struct Digesting<'a>(crc::Digest<'a, u32>);
+    impl postcard::ser_flavors::Flavor for Digesting<'_> {
+        type Output = u32;
+        fn try_push(&mut self, data: u8) -> postcard::Result<()> {
+            self.0.update(&[data]);
+            Ok(())
+        }
+        fn try_extend(&mut self, data: &[u8]) -> postcard::Result<()> {
+            self.0.update(data);
+            Ok(())
+        }
+        fn finalize(self) -> postcard::Result<u32> {
+            Ok(self.0.finalize())
+        }
     }
+    const CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
+    // A digest flavor cannot fail; 0 reads as "unknown".
+    postcard::serialize_with_flavor(value, Digesting(CRC.digest())).unwrap_or(0)
 }

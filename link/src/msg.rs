@@ -5,6 +5,8 @@
 use heapless::{String, Vec};
 use saw_core::controller::{ConfigError, Telemetry};
 use saw_core::gate::DriveMode;
+#[cfg(feature = "plane")]
+use saw_core::plane::{Config2d, Config2dError, Place, PointUm, Telemetry2d};
 use saw_core::position::SensorFault;
 use saw_core::scene::Config;
 use saw_core::texture::Texture;
@@ -78,6 +80,36 @@ pub enum Request {
     Save,
     /// The board's clock now, for aligning board time with the host's ([`Reply::Pong`]).
     Ping,
+    // Protocol 2, appended (issue #36): 2D scenes (feature `plane`). A board of this version
+    // that predates them, or is built without them, answers `UnknownRequest`; the
+    // [`crate::session::Board`] defaults refuse them.
+    /// Which position sensor the board reads ([`Reply::Sensor`]).
+    #[cfg(feature = "plane")]
+    Sensor,
+    /// Replace the whole scene with a 2D one (a board with the 4-wire overlay only): compiled
+    /// on the board and swapped in, or refused with nothing changed ([`Reply::Refused2d`]).
+    #[cfg(feature = "plane")]
+    LoadScene2d(PlaneScene),
+    /// Move 2D window `window` whole: its outline's bounding box's lower-left corner goes to
+    /// `to` (absolute, so a repeated request lands in the same place). Any outline moves.
+    #[cfg(feature = "plane")]
+    MoveWindow {
+        /// Window index, topmost first from 0.
+        window: u8,
+        /// Where the outline's lower-left bounding corner goes, µm on the plate.
+        to: PointUm,
+    },
+    /// Give 2D window `window`, an axis-aligned rectangle, new corners (a polygon is refused:
+    /// it only moves).
+    #[cfg(feature = "plane")]
+    ResizeWindow {
+        /// Window index, topmost first from 0.
+        window: u8,
+        /// Lower-left corner, µm on the plate.
+        lo: PointUm,
+        /// Upper-right corner, µm on the plate.
+        hi: PointUm,
+    },
 }
 
 /// Where the active scene came from.
@@ -234,6 +266,306 @@ pub enum Reply {
         /// The board's clock when it handled the ping, µs since boot.
         board_time_us: u64,
     },
+    // Protocol 2, appended (issue #36).
+    /// To [`Request::GetScene`] when the active scene is 2D.
+    #[cfg(feature = "plane")]
+    Scene2d {
+        /// Its id ([`crate::plane_scene_id`]).
+        scene_id: u32,
+        /// Where it came from.
+        source: SceneSource,
+        /// The scene and the plate it is drawn on.
+        scene: PlaneScene,
+    },
+    /// A 2D request, or a 1D one on a board that runs 2D scenes, was refused: nothing changed.
+    #[cfg(feature = "plane")]
+    Refused2d(Refused2d),
+    /// To [`Request::Sensor`].
+    #[cfg(feature = "plane")]
+    Sensor(Sensor),
+    /// To [`Request::Counters`] on a board running a 2D scene.
+    #[cfg(feature = "plane")]
+    Counters2d(Counters2d),
+    /// A 2D stream frame (unsolicited; its header's `seq` counts stream frames).
+    #[cfg(feature = "plane")]
+    Stream2d(Stream2d),
+}
+
+/// Which position sensor a board reads: what kind of scene it runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+#[cfg(feature = "plane")]
+pub enum Sensor {
+    /// The slide rheostat: 1D scenes (regions along the stroke).
+    Rheostat,
+    /// The 4-wire resistive touch overlay: 2D scenes (windows and edges on the plate).
+    FourWire {
+        /// The overlay's touch area, µm (width, height): a scene's plate must fit it.
+        plate_um: (u32, u32),
+    },
+}
+
+#[cfg(feature = "plane")]
+impl core::fmt::Display for Sensor {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Sensor::Rheostat => f.write_str("the slide rheostat (1D scenes)"),
+            Sensor::FourWire { plate_um: (w, h) } => write!(
+                f,
+                "the 4-wire touch overlay, {} x {} mm (2D scenes)",
+                Millimetres(w as i64),
+                Millimetres(h as i64)
+            ),
+        }
+    }
+}
+
+/// A 2D scene as the link carries it: the scene file's `[screen] size_mm` (which
+/// [`Config2d`] does not hold) with the configuration, so the scene read back is the file
+/// pushed (`saw_core::scene_file::to_scene_file_2d`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg(feature = "plane")]
+pub struct PlaneScene {
+    /// The plate the scene is drawn on, µm (width, height): every vertex and edge end lies on
+    /// it, from (0, 0).
+    pub plate_um: (u32, u32),
+    /// The scene, caps and stale limit.
+    pub config: Config2d,
+}
+
+/// Which kind of scene a request was about (for [`Refused2d::WrongSensor`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+#[cfg(feature = "plane")]
+pub enum SceneKind {
+    /// Regions along the rheostat's stroke.
+    Line,
+    /// Windows and edges on the touch overlay.
+    Plane,
+}
+
+/// Why a 2D request (or a 1D request on a 2D board) was refused. The running scene is untouched
+/// by every one of these; each reads as one sentence naming the value and the rule.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+#[cfg(feature = "plane")]
+pub enum Refused2d {
+    /// The board's sensor does not read this kind of scene (or edit).
+    WrongSensor {
+        /// What the request was for.
+        asked: SceneKind,
+        /// What the board reads.
+        board: Sensor,
+    },
+    /// The board's firmware reads the overlay but cannot run 2D scenes yet.
+    Unsupported,
+    /// The controller refused the scene (the same sentence a scene file with these values gets).
+    Config(Config2dError),
+    /// The scene's plate is wider or taller than the board's overlay.
+    PlateTooLarge {
+        /// The scene's plate, µm.
+        scene_um: (u32, u32),
+        /// The board's overlay, µm.
+        board_um: (u32, u32),
+    },
+    /// A vertex or edge end lies off the scene's plate.
+    OffPlate {
+        /// Window `index`, or free edge `index` when `edge` is set.
+        index: u8,
+        /// A free edge's end, not a window's vertex.
+        edge: bool,
+        /// The point, µm.
+        at: PointUm,
+        /// The plate, µm.
+        plate_um: (u32, u32),
+    },
+    /// No such window.
+    NoWindow {
+        /// The index asked for.
+        window: u8,
+        /// Windows in the scene.
+        windows: u8,
+    },
+    /// A resize of a window that is not an axis-aligned rectangle (polygons only move).
+    NotARectangle {
+        /// The window.
+        window: u8,
+        /// Its vertices.
+        vertices: u8,
+    },
+    /// A resize whose corners are not lower-left and upper-right.
+    BadCorners {
+        /// Lower-left asked, µm.
+        lo: PointUm,
+        /// Upper-right asked, µm.
+        hi: PointUm,
+    },
+}
+
+/// µm shown as mm, with a sign: 95000 → 95, -1500 → -1.5.
+#[cfg(feature = "plane")]
+struct Millimetres(i64);
+
+#[cfg(feature = "plane")]
+impl core::fmt::Display for Millimetres {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let (sign, v) = if self.0 < 0 {
+            ("-", -self.0)
+        } else {
+            ("", self.0)
+        };
+        let (whole, frac) = (v / 1000, v % 1000);
+        if frac == 0 {
+            write!(f, "{sign}{whole}")
+        } else {
+            let mut digits = frac;
+            let mut width = 3;
+            while digits % 10 == 0 {
+                digits /= 10;
+                width -= 1;
+            }
+            write!(f, "{sign}{whole}.{digits:0width$}")
+        }
+    }
+}
+
+#[cfg(feature = "plane")]
+impl core::fmt::Display for Refused2d {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let mm = |v: i32| Millimetres(v as i64);
+        match *self {
+            Refused2d::WrongSensor {
+                asked: SceneKind::Plane,
+                board,
+            } => write!(
+                f,
+                "this board reads {board}: a 2D scene ([sensor] kind = \"4-wire\") or a window edit needs a board with the 4-wire touch overlay"
+            ),
+            Refused2d::WrongSensor { board, .. } => write!(
+                f,
+                "this board reads {board}: a 1D scene (regions, boundaries; no [sensor] table) needs a board with the slide rheostat"
+            ),
+            Refused2d::Unsupported => f.write_str(
+                "this board's firmware does not run 2D scenes yet: nothing changed",
+            ),
+            Refused2d::Config(e) => e.fmt(f),
+            Refused2d::PlateTooLarge { scene_um, board_um } => write!(
+                f,
+                "the scene's plate {} x {} mm does not fit this board's overlay {} x {} mm",
+                Millimetres(scene_um.0 as i64),
+                Millimetres(scene_um.1 as i64),
+                Millimetres(board_um.0 as i64),
+                Millimetres(board_um.1 as i64)
+            ),
+            Refused2d::OffPlate {
+                index,
+                edge,
+                at,
+                plate_um,
+            } => write!(
+                f,
+                "{} {index}: the point ({} mm, {} mm) is off the plate (0 to {} mm, 0 to {} mm)",
+                if edge { "edge" } else { "window" },
+                mm(at.x_um),
+                mm(at.y_um),
+                Millimetres(plate_um.0 as i64),
+                Millimetres(plate_um.1 as i64)
+            ),
+            Refused2d::NoWindow { window, windows } => match windows {
+                0 => write!(f, "window {window}: the board's scene has no windows"),
+                1 => write!(f, "window {window}: the board's scene has 1 window (0)"),
+                n => write!(
+                    f,
+                    "window {window}: the board's scene has {n} windows (0 to {})",
+                    n - 1
+                ),
+            },
+            Refused2d::NotARectangle { window, vertices } => write!(
+                f,
+                "window {window}: a polygon of {vertices} vertices, not an axis-aligned rectangle: it can be moved, not resized"
+            ),
+            Refused2d::BadCorners { lo, hi } => write!(
+                f,
+                "corners ({} mm, {} mm) and ({} mm, {} mm): the first must be left of and below the second",
+                mm(lo.x_um),
+                mm(lo.y_um),
+                mm(hi.x_um),
+                mm(hi.y_um)
+            ),
+        }
+    }
+}
+
+/// The counters of a board running a 2D scene.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg(feature = "plane")]
+pub struct Counters2d {
+    /// The 2D control core's (readings, faults, lifts, window switches, pulses, skips).
+    pub core: Telemetry2d,
+    /// The link's own.
+    pub link: LinkCounters,
+}
+
+/// The touch sensor's fault in a 2D record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+#[cfg(feature = "plane")]
+pub enum Fault2d {
+    /// An axis on a rail (an open or shorted terminal).
+    Rail {
+        /// The y axis (else x).
+        y_axis: bool,
+        /// Which rail.
+        fault: SensorFault,
+    },
+    /// No reading for longer than the stale limit.
+    Stale,
+}
+
+/// One touch reading of the 2D telemetry stream.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg(feature = "plane")]
+pub struct Record2d {
+    /// The reading's time, µs since the board booted.
+    pub time_us: u64,
+    /// The id of the scene in force ([`crate::plane_scene_id`]).
+    pub scene_id: u32,
+    /// Scene changes since boot at this reading (as [`Record::change`]).
+    pub change: u32,
+    /// The finger, µm on the plate, while it presses without a fault.
+    pub position: Option<PointUm>,
+    /// Velocity per axis, µm/s, where the scene reads it and both axes have a full window.
+    pub velocity_um_s: Option<(i32, i32)>,
+    /// What is under the finger while it renders: a window or the background.
+    pub place: Option<Place>,
+    /// The edge crossed on this reading (its pulse fired).
+    pub edge: Option<u8>,
+    /// Burst frequency in force, mHz (0: no bursts).
+    pub burst_millihz: u32,
+    /// Bursts (or an edge pulse) are running.
+    pub bursting: bool,
+    /// No finger on the overlay.
+    pub lifted: bool,
+    /// The sensor fault in force.
+    pub fault: Option<Fault2d>,
+}
+
+/// A frame of the 2D telemetry stream.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg(feature = "plane")]
+pub struct Stream2d {
+    /// Records the board dropped since boot.
+    pub dropped: u32,
+    /// The records, oldest first.
+    pub records: Vec<Record2d, RECORDS_PER_FRAME>,
 }
 
 /// Why a save failed.
@@ -247,6 +579,8 @@ pub enum StoreFault {
     Flash,
     /// The scene does not fit the store's item.
     TooLarge,
+    /// Appended (issue #36): the store keeps 1D scenes only, and the active scene is 2D.
+    NotFor2d,
 }
 
 /// A frame the board could not act on. The running scene is untouched by every one of these.
@@ -325,11 +659,19 @@ impl core::fmt::Display for StoreFault {
                 "the flash refused a write or an erase; the scene saved before is kept"
             ),
             StoreFault::TooLarge => write!(f, "the scene does not fit the store's item"),
+            StoreFault::NotFor2d => write!(
+                f,
+                "this board's store keeps 1D scenes only: the 2D scene runs until power-off and is not saved"
+            ),
         }
     }
 }
 
 impl Request {
     /// How many request variants this protocol version defines (postcard numbers them 0..N).
+    #[cfg(feature = "plane")]
+    pub const VARIANTS: u32 = 14;
+    /// How many request variants this protocol version defines (postcard numbers them 0..N).
+    #[cfg(not(feature = "plane"))]
     pub const VARIANTS: u32 = 10;
 }

@@ -11,6 +11,8 @@ use heapless::Vec;
 pub const QUEUE_RECORDS: usize = 64;
 
 use crate::msg::{Header, Record, Reply, Stream, PROTOCOL_VERSION, RECORDS_PER_FRAME};
+#[cfg(feature = "plane")]
+use crate::msg::{Record2d, Stream2d};
 
 /// One record every `every` samples.
 #[derive(Clone, Copy, Debug, Default)]
@@ -84,5 +86,41 @@ impl Batcher {
         self.frames = self.frames.wrapping_add(1);
         let records = core::mem::take(&mut self.records);
         Some((header, Reply::Stream(Stream { dropped, records })))
+    }
+}
+
+#[cfg(feature = "plane")]
+/// Packs 2D records into stream frames ([`Reply::Stream2d`]), as [`Batcher`] does 1D ones.
+#[derive(Clone, Debug, Default)]
+#[cfg(feature = "plane")]
+pub struct Batcher2d {
+    records: Vec<Record2d, RECORDS_PER_FRAME>,
+    frames: u32,
+}
+
+#[cfg(feature = "plane")]
+impl Batcher2d {
+    /// Adds a record; returns a full frame to send.
+    pub fn push(&mut self, record: Record2d, dropped: u32) -> Option<(Header, Reply)> {
+        let _ = self.records.push(record);
+        if self.records.is_full() {
+            self.flush(dropped)
+        } else {
+            None
+        }
+    }
+
+    /// The records gathered so far as a frame, if any.
+    pub fn flush(&mut self, dropped: u32) -> Option<(Header, Reply)> {
+        if self.records.is_empty() {
+            return None;
+        }
+        let header = Header {
+            version: PROTOCOL_VERSION,
+            seq: self.frames,
+        };
+        self.frames = self.frames.wrapping_add(1);
+        let records = core::mem::take(&mut self.records);
+        Some((header, Reply::Stream2d(Stream2d { dropped, records })))
     }
 }

@@ -16,8 +16,9 @@ use crate::frame::{self, Receiver, MAX_ENCODED};
 use saw_core::gate::DriveMode;
 use saw_core::texture::Texture;
 
-use crate::msg::{Header, Reply, Request, SceneSource, StoreFault};
-use crate::session::{Board, Identity, Session, Stamp};
+use crate::msg::{Header, PlaneScene, Reply, Request, SceneSource, StoreFault};
+use crate::session::{Apply2dError, Board, Identity, Session, Stamp};
+use saw_core::plane::{Config2d, Controller2d, PointUm, Telemetry2d};
 
 /// The F446's burst timer (90 MHz, 32-bit, 2 kHz f_b limit).
 pub const TIMER: BurstTimer = BurstTimer {
@@ -201,5 +202,179 @@ pub fn every_request() -> std::vec::Vec<Request> {
         Request::Stream { every_samples: 10 },
         Request::Save,
         Request::Ping,
+        Request::Sensor,
+        Request::LoadScene2d(fig12()),
+        Request::MoveWindow {
+            window: 1,
+            to: PointUm::new(10_000, 20_000),
+        },
+        Request::ResizeWindow {
+            window: 0,
+            lo: PointUm::new(5_000, 5_000),
+            hi: PointUm::new(20_000, 30_000),
+        },
     ]
+}
+
+/// The touch frame period the 2D test board reads at, µs (the F446's 347 µs frames:
+/// `host_sim::sim2d::board_frame_period_us`).
+pub const FRAME_US: u32 = 347;
+
+/// The 2D test board's overlay, µm: the 95 × 54 mm panel of `scenes/2d-*.toml`.
+pub const PLATE_UM: (u32, u32) = (95_000, 54_000);
+
+/// `scenes/2d-fig12.toml`, read for the F446 at [`FRAME_US`], with its plate.
+pub fn fig12() -> PlaneScene {
+    let text = include_str!("../../scenes/2d-fig12.toml");
+    plane_scene("2d-fig12.toml", text)
+}
+
+/// A 2D scene file's text read for the F446 at [`FRAME_US`], with its plate.
+pub fn plane_scene(file: &str, text: &str) -> PlaneScene {
+    let config = saw_core::scene_file::load_2d_for_board(file, text, TIMER, FRAME_US)
+        .expect("the 2D scene file loads");
+    let plate_um = saw_core::scene_file::plate_um_of(file, text).expect("its plate");
+    PlaneScene { plate_um, config }
+}
+
+/// A board with the 4-wire overlay whose 2D scenes load into a real [`Controller2d`].
+pub struct PlaneBoard {
+    pub ctrl: Controller2d,
+    pub every: u16,
+    pub saved: Option<(u32, PlaneScene)>,
+    pub stamp: Stamp,
+    pub now_us: u64,
+    /// 1D scenes the glue was asked to apply (the session must never ask).
+    pub applied_1d: u32,
+}
+
+impl PlaneBoard {
+    /// `scenes/2d-fig12.toml` loaded.
+    pub fn new() -> Self {
+        let mut ctrl = Controller2d::new(TIMER, FRAME_US).expect("the F446's timer");
+        ctrl.load(&fig12().config).expect("fig. 12 loads");
+        Self {
+            ctrl,
+            every: 0,
+            saved: None,
+            stamp: Stamp::default(),
+            now_us: 0,
+            applied_1d: 0,
+        }
+    }
+}
+
+impl Default for PlaneBoard {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Board for PlaneBoard {
+    async fn apply(&mut self, _: &Config, _: Stamp) -> Result<(), ConfigError> {
+        self.applied_1d += 1;
+        Ok(())
+    }
+    fn now_us(&mut self) -> u64 {
+        self.now_us
+    }
+    async fn telemetry(&mut self) -> Telemetry {
+        Telemetry::default()
+    }
+    fn stream(&mut self, every_samples: u16) {
+        self.every = every_samples;
+    }
+    fn stream_counts(&mut self) -> (u32, u32) {
+        (0, 0)
+    }
+    async fn save(&mut self, _: u32, _: &Config) -> Result<(), StoreFault> {
+        Err(StoreFault::NoStore)
+    }
+    async fn apply_2d(&mut self, scene: &PlaneScene, stamp: Stamp) -> Result<(), Apply2dError> {
+        self.ctrl
+            .load(&scene.config)
+            .map_err(Apply2dError::Config)?;
+        self.stamp = stamp;
+        Ok(())
+    }
+    async fn telemetry_2d(&mut self) -> Telemetry2d {
+        self.ctrl.telemetry()
+    }
+    async fn save_2d(&mut self, scene_id: u32, scene: &PlaneScene) -> Result<(), StoreFault> {
+        self.saved = Some((scene_id, scene.clone()));
+        Ok(())
+    }
+}
+
+/// A 2D board's session over fig. 12, its overlay [`PLATE_UM`].
+pub fn session_2d() -> Session {
+    Session::new_2d(ID_2D, PLATE_UM, fig12(), SceneSource::BuildTime)
+}
+
+/// What a 2D test board says it is.
+pub const ID_2D: Identity = Identity {
+    firmware: "saw-firmware 0.1.0",
+    board: "nucleo-f446re",
+    sample_rate_hz: 1_000_000 / FRAME_US,
+};
+
+/// The texture whose encoding is the longest: the 1D scenes' widest (random) or a grating
+/// with every field at its longest and the longest normal.
+fn widest() -> saw_core::plane::PlaneTexture {
+    use saw_core::plane::{OrientedGrating, PlaneTexture};
+    use saw_core::texture::{Grating, GratingRender};
+    let random = PlaneTexture::Plain(saw_core::scene::largest_config().scene.textures[0]);
+    let oriented = PlaneTexture::Oriented(OrientedGrating {
+        grating: Grating {
+            wavelength_um: u32::MAX,
+            duty_permille: u16::MAX,
+            min_speed_um_s: u32::MAX,
+            amplitude_permille: u16::MAX,
+            render: GratingRender::VelocitySynthesis,
+            rearm_um: u32::MAX,
+        },
+        normal: (-1_000_000, -1_000_000),
+    });
+    let len = |t: &PlaneTexture| postcard::to_allocvec(t).map_or(0, |v| v.len());
+    if len(&oriented) > len(&random) {
+        oriented
+    } else {
+        random
+    }
+}
+
+/// The largest 2D scene: 8 windows of 16 vertices at the plane's far coordinates, every
+/// window outlined (… edges) and the free edges to 32, each texture the widest kind.
+pub fn largest_plane_scene() -> PlaneScene {
+    use saw_core::plane::{Polygon, SegmentUm, Window2d, MAX_EDGES};
+    let mut config = Config2d::default();
+    let far = -999_999;
+    for w in 0..8 {
+        let pts: std::vec::Vec<PointUm> = (0..16)
+            .map(|k| {
+                // A convex 16-gon; far coordinates make every varint its longest.
+                let a = (k as f64) * core::f64::consts::TAU / 16.0;
+                PointUm::new(
+                    far + 500_000 + (400_000.0 * a.cos()) as i32 + w,
+                    far + 500_000 + (400_000.0 * a.sin()) as i32,
+                )
+            })
+            .collect();
+        let _ = config.scene.windows.push(Window2d {
+            outline: Polygon::from_points(&pts).expect("a convex 16-gon"),
+            texture: widest(),
+            edge: false,
+        });
+    }
+    config.scene.background = widest();
+    for k in 0..MAX_EDGES {
+        let _ = config.scene.free_edges.push(SegmentUm {
+            a: PointUm::new(far, far + k as i32),
+            b: PointUm::new(-far, -far - k as i32),
+        });
+    }
+    PlaneScene {
+        plate_um: (u32::MAX, u32::MAX),
+        config,
+    }
 }

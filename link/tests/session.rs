@@ -11,7 +11,7 @@ use saw_core::texture::Texture;
 use saw_link::frame::{self, Receiver, MAX_ENCODED};
 use saw_link::msg::{Header, LinkError, Reply, Request, SceneSource, StoreFault, PROTOCOL_VERSION};
 use saw_link::scene_id;
-use saw_link::session::{Session, Stamp};
+use saw_link::session::{Active, Session, Stamp};
 
 use saw_link::testing::{session, CoreBoard, TIMER};
 
@@ -78,7 +78,7 @@ fn a_boundary_move_runs_and_a_bad_one_changes_nothing() {
         }
     );
     assert_ne!(scene_id(&moved), scene_id(&default_config()));
-    assert_eq!(s.active(), &moved);
+    assert_eq!(s.active(), &Active::Line(moved.clone()));
     assert_eq!(s.source(), SceneSource::Link);
     // The controller runs it: at 25 mm the finger is in region 0 now (it was region 1).
     let code = |um: u32| {
@@ -145,7 +145,7 @@ fn a_refused_scene_reads_as_the_scene_file_sentence() {
     };
     // Located in the file by the host tool, the board's refusal is the host's error exactly.
     assert_eq!(doc.locate(&e), host);
-    assert_eq!(s.active(), &default_config());
+    assert_eq!(s.active(), &Active::Line(default_config()));
     assert_eq!(s.source(), SceneSource::Default);
 }
 

@@ -187,6 +187,21 @@ pub enum Command {
         #[arg(required = true, value_name = "KEY=VALUE")]
         keys: Vec<String>,
     },
+    /// Move or resize 2D window INDEX live (a board with the touch overlay): `--to X,Y` puts
+    /// its outline's lower-left bounding corner at X,Y mm (any outline); `--rect X0,Y0,X1,Y1`
+    /// gives a rectangle window new corners (a polygon only moves). Coordinates 0 to 1000 mm;
+    /// the board refuses what leaves the scene's plate.
+    Window {
+        /// Window index, topmost first from 0 (0 to 255).
+        #[arg(allow_negative_numbers = true, value_parser = index_u8)]
+        index: u8,
+        /// New lower-left bounding corner, mm: X,Y (each 0 to 1000).
+        #[arg(long, value_name = "X,Y", allow_hyphen_values = true, value_parser = xy_mm, required_unless_present = "rect", conflicts_with = "rect")]
+        to: Option<(f64, f64)>,
+        /// New corners of a rectangle, mm: X0,Y0,X1,Y1 (each 0 to 1000; lower left, upper right).
+        #[arg(long, value_name = "X0,Y0,X1,Y1", allow_hyphen_values = true, value_parser = rect_mm)]
+        rect: Option<[f64; 4]>,
+    },
     /// Standing (both IDTs) or progressive (one IDT) drive.
     Drive {
         /// The drive mode.
@@ -306,6 +321,34 @@ fn mm(s: &str) -> Result<f64, String> {
     finite_in(s, 0.0, 1000.0, "mm")
 }
 
+/// `N` comma-separated millimetres, each finite and 0 to 1000.
+fn mm_list<const N: usize>(s: &str, form: &str) -> Result<[f64; N], String> {
+    let parts: Vec<&str> = s.split(',').collect();
+    if parts.len() != N {
+        return Err(format!(
+            "must be {form}: {N} numbers separated by commas, each from 0 to 1000 mm"
+        ));
+    }
+    let mut out = [0.0; N];
+    for (o, p) in out.iter_mut().zip(parts) {
+        *o = mm(p.trim())?;
+    }
+    Ok(out)
+}
+
+fn xy_mm(s: &str) -> Result<(f64, f64), String> {
+    mm_list::<2>(s, "X,Y").map(|[x, y]| (x, y))
+}
+
+fn rect_mm(s: &str) -> Result<[f64; 4], String> {
+    mm_list::<4>(s, "X0,Y0,X1,Y1")
+}
+
+/// mm to the link's µm, rounded to the µm.
+fn um(mm: f64) -> i32 {
+    (mm * 1000.0).round() as i32
+}
+
 fn seconds(s: &str) -> Result<f64, String> {
     finite_in(s, 0.1, 86_400.0, "s")
 }
@@ -412,14 +455,24 @@ pub(crate) fn execute<P: std::io::Read + std::io::Write>(
                 Some(h) => h,
                 None => client.hello()?,
             };
+            let sensor = board_sensor(client)?;
+            let mut hj = hello_json(&hello);
+            hj["sensor"] = match sensor {
+                saw_link::msg::Sensor::FourWire { plate_um } => json!({
+                    "kind": "4-wire",
+                    "plate_mm": [plate_um.0 as f64 / 1000.0, plate_um.1 as f64 / 1000.0],
+                }),
+                _ => json!({ "kind": "rheostat" }),
+            };
             Ok(Done {
-                text: hello_text(&hello),
-                json: json!({ "hello": hello_json(&hello) }),
+                text: format!("{}; reads {sensor}", hello_text(&hello)),
+                json: json!({ "hello": hj }),
             })
         }
         Command::Push { file } => push(client, file),
         Command::Get => get(client),
         Command::Boundary { index, mm } => boundary(client, *index, *mm),
+        Command::Window { index, to, rect } => window(client, *index, *to, *rect),
         Command::Set { index, keys } => set(client, *index, keys),
         Command::Drive { mode } => {
             let drive = match mode {
@@ -433,6 +486,10 @@ pub(crate) fn execute<P: std::io::Read + std::io::Write>(
             match client.request(&Request::Counters { reset: *reset })? {
                 Reply::Counters(c) => Ok(Done {
                     text: counters_text(&c),
+                    json: json!({ "counters": c }),
+                }),
+                Reply::Counters2d(c) => Ok(Done {
+                    text: counters_2d_text(&c),
                     json: json!({ "counters": c }),
                 }),
                 other => Err(unexpected(other)),
@@ -521,6 +578,53 @@ pub(crate) fn boundary<P: std::io::Read + std::io::Write>(
     let at_um = (mm * 1000.0).round() as u32;
     let reply = client.request(&Request::MoveBoundary { index, at_um })?;
     applied(reply, format!("boundary {index} at {mm} mm"))
+}
+
+/// `saw window`: moves (`to`) or resizes (`rect`) a 2D window.
+pub(crate) fn window<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+    index: u8,
+    to: Option<(f64, f64)>,
+    rect: Option<[f64; 4]>,
+) -> Result<Done, Failure> {
+    use saw_core::plane::PointUm;
+    let (request, what) = match (to, rect) {
+        (Some((x, y)), None) => (
+            Request::MoveWindow {
+                window: index,
+                to: PointUm::new(um(x), um(y)),
+            },
+            format!("window {index} moved to ({x} mm, {y} mm)"),
+        ),
+        (None, Some([x0, y0, x1, y1])) => (
+            Request::ResizeWindow {
+                window: index,
+                lo: PointUm::new(um(x0), um(y0)),
+                hi: PointUm::new(um(x1), um(y1)),
+            },
+            format!("window {index} resized to ({x0}, {y0}) – ({x1}, {y1}) mm"),
+        ),
+        _ => {
+            return Err(Failure::input(
+                "window: give --to X,Y (move) or --rect X0,Y0,X1,Y1 (resize), one of them".into(),
+            ))
+        }
+    };
+    let reply = client.request(&request).map_err(|e| no_2d(e, 1))?;
+    applied(reply, what)
+}
+
+/// A board whose firmware was built without 2D scenes (saw-link's `plane` feature off: the 1D
+/// images) answers a 2D request "unknown request": said as the refusal it is, exit `code`.
+fn no_2d(e: ClientError, code: u8) -> Failure {
+    match e {
+        ClientError::Link(saw_link::msg::LinkError::UnknownRequest { .. }) => Failure {
+            code,
+            kind: "refused",
+            message: "refused, nothing changed: this board's firmware has no 2D scenes (it reads the slide rheostat): a 2D scene or a window edit needs a board with the 4-wire touch overlay".into(),
+        },
+        e => e.into(),
+    }
 }
 
 /// The least a save waits for its answer. A save may erase one unit of the store: on the F446 a
@@ -623,6 +727,7 @@ pub(crate) fn applied(reply: Reply, what: String) -> Result<Done, Failure> {
             json: json!({ "applied": scene_hex(scene_id) }),
         }),
         Reply::Refused(e) => Err(Failure::refused(format!("refused, nothing changed: {e}"))),
+        Reply::Refused2d(e) => Err(Failure::refused(format!("refused, nothing changed: {e}"))),
         other => Err(unexpected(other)),
     }
 }
@@ -643,6 +748,11 @@ pub(crate) fn push_text<P: std::io::Read + std::io::Write>(
     text: &str,
 ) -> Result<Done, Failure> {
     let name = name.to_string();
+    let sensor =
+        saw_core::scene_file::sensor_of(&name, text).map_err(|e| Failure::input(e.to_string()))?;
+    if sensor == saw_core::scene_file::SensorKind::FourWire {
+        return push_2d(client, &name, text);
+    }
     let doc =
         saw_core::scene_file::parse(&name, text).map_err(|e| Failure::input(e.to_string()))?;
     match client.request(&Request::LoadScene(doc.config.clone()))? {
@@ -658,12 +768,137 @@ pub(crate) fn push_text<P: std::io::Read + std::io::Write>(
             kind: "refused",
             message: doc.locate(&e).to_string(),
         }),
+        // A board with the touch overlay: the file is 1D (issue #36).
+        Reply::Refused2d(e) => Err(Failure {
+            code: 2,
+            kind: "refused",
+            message: format!("{name}: refused by the board, nothing changed: {e}"),
+        }),
         other => Err(unexpected(other)),
+    }
+}
+
+/// Loads a 2D scene file (issue #36): read and dry-run here for the board's burst timer at its
+/// touch frame period (what `hello` says: a board with the overlay counts frames as samples),
+/// as host-sim reads it, then sent with its plate. A board with the rheostat refuses it with
+/// its sentence (exit 2, as every refused file).
+fn push_2d<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+    name: &str,
+    text: &str,
+) -> Result<Done, Failure> {
+    let hello = client.hello()?;
+    let board = saw_boards::by_name(&hello.board).ok_or_else(|| {
+        Failure::input(format!(
+            "{name}: the board {} is not one this tool knows (saw-boards), so a 2D scene cannot be checked for it",
+            hello.board
+        ))
+    })?;
+    let timer = saw_core::burst::BurstTimer {
+        clock_hz: board.burst_timer_clk_hz,
+        counter_bits: board.burst_timer_bits,
+        max_burst_hz: board.max_burst_hz,
+    };
+    let frame_us = 1_000_000 / hello.sample_rate_hz.max(1);
+    let config = saw_core::scene_file::load_2d_for_board(name, text, timer, frame_us)
+        .map_err(|e| Failure::input(e.to_string()))?;
+    let plate_um =
+        saw_core::scene_file::plate_um_of(name, text).map_err(|e| Failure::input(e.to_string()))?;
+    let scene = saw_link::msg::PlaneScene { plate_um, config };
+    match client
+        .request(&Request::LoadScene2d(scene))
+        .map_err(|e| no_2d(e, 2))?
+    {
+        Reply::Applied { scene_id } => Ok(Done {
+            text: format!("{name}: running, scene {scene_id:#010x}"),
+            json: json!({ "applied": scene_hex(scene_id), "file": name }),
+        }),
+        Reply::Refused2d(e) => Err(Failure {
+            code: 2,
+            kind: "refused",
+            message: format!("{name}: refused by the board, nothing changed: {e}"),
+        }),
+        other => Err(unexpected(other)),
+    }
+}
+
+/// A 2D scene as JSON with the scene file's keys and units, as [`scene_json`] a 1D one.
+pub fn scene_json_2d(scene: &saw_link::msg::PlaneScene) -> Value {
+    let text = saw_core::scene_file::to_scene_file_2d(&scene.config, scene.plate_um, "");
+    match toml::from_str::<toml::Table>(&text) {
+        Ok(t) => serde_json::to_value(t).unwrap_or(Value::Null),
+        Err(_) => Value::Null,
+    }
+}
+
+fn scene_2d_text(scene_id: u32, source: SceneSource, p: &saw_link::msg::PlaneScene) -> String {
+    let sc = &p.config.scene;
+    let mm = |um: i32| um as f64 / 1000.0;
+    let n = sc.windows.len();
+    let mut s = format!(
+        "scene {scene_id:#010x}, {}; 2D, {n} window{} on a {} x {} mm plate, band {} mm, {} drive
+  background: {}",
+        source_name(source),
+        if n == 1 { "" } else { "s" },
+        p.plate_um.0 as f64 / 1000.0,
+        p.plate_um.1 as f64 / 1000.0,
+        sc.band_um as f64 / 1000.0,
+        drive_name(sc.drive),
+        plane_texture_text(&sc.background)
+    );
+    for (i, w) in sc.windows.iter().enumerate() {
+        let pts: Vec<String> = w
+            .outline
+            .vertices
+            .iter()
+            .map(|v| format!("({}, {})", mm(v.x_um), mm(v.y_um)))
+            .collect();
+        s += &format!(
+            "
+  window {i}: {}{}, at {} mm",
+            plane_texture_text(&w.texture),
+            if w.edge { ", outline felt" } else { "" },
+            pts.join(" ")
+        );
+    }
+    for (i, e) in sc.free_edges.iter().enumerate() {
+        s += &format!(
+            "
+  edge {i}: ({}, {}) to ({}, {}) mm",
+            mm(e.a.x_um),
+            mm(e.a.y_um),
+            mm(e.b.x_um),
+            mm(e.b.y_um)
+        );
+    }
+    s
+}
+
+pub(crate) fn plane_texture_text(t: &saw_core::plane::PlaneTexture) -> String {
+    match t {
+        saw_core::plane::PlaneTexture::Plain(t) => texture_text(t),
+        saw_core::plane::PlaneTexture::Oriented(o) => format!(
+            "grating λ {} mm, ridges' normal at {}°",
+            o.grating.wavelength_um as f64 / 1000.0,
+            significant((o.normal.1 as f64).atan2(o.normal.0 as f64).to_degrees(), 4)
+        ),
     }
 }
 
 fn get<P: std::io::Read + std::io::Write>(client: &mut Client<P>) -> Result<Done, Failure> {
     match client.request(&Request::GetScene)? {
+        Reply::Scene2d {
+            scene_id,
+            source,
+            scene,
+        } => Ok(Done {
+            text: scene_2d_text(scene_id, source, &scene),
+            json: json!({
+                "scene_id": scene_hex(scene_id),
+                "scene_source": source_key(source),
+                "scene": scene_json_2d(&scene),
+            }),
+        }),
         Reply::Scene {
             scene_id,
             source,
@@ -861,6 +1096,30 @@ pub fn merged_texture(config: &Config, index: u8, given: &str) -> Result<Texture
         .ok_or_else(|| format!("region {index}: not in the scene read back"))
 }
 
+fn counters_2d_text(c: &saw_link::msg::Counters2d) -> String {
+    let k = &c.core;
+    let l = &c.link;
+    format!(
+        "touch readings {}\nsensor faults {}\nlifts {}\nwindow switches {}\ngate actions {}\nf_b clamped {}\n\
+         edge pulses {} (skipped {})\nridge pulses {} (skipped {})\n\
+         link frames {} (refused {})\nstream records {} (dropped {})",
+        k.readings,
+        k.faults,
+        k.lifts,
+        k.window_switches,
+        k.gate_actions,
+        k.clamped,
+        k.edge_pulses,
+        k.edges_skipped,
+        k.ridge_pulses,
+        k.ridges_skipped,
+        l.frames_ok,
+        l.frames_bad,
+        l.records_sent,
+        l.records_dropped
+    )
+}
+
 fn counters_text(c: &Counters) -> String {
     let k = &c.core;
     let l = &c.link;
@@ -928,7 +1187,8 @@ impl StreamRun {
         // Back to back: the offset only (a rate fitted over a millisecond would be noise).
         let align = saw_link::clock::Alignment::offset(&start_pings)
             .ok_or_else(|| Failure::link("no ping answered".into()))?;
-        let rec = record::Recorder::create(csv, align)?;
+        let plane = board_is_2d(client)?;
+        let rec = record::Recorder::create(csv, align, plane)?;
         let before = stream_counts(client)?;
         let started = client.start_stream(every)?;
         Ok(Self {
@@ -1119,6 +1379,36 @@ fn counters<P: std::io::Read + std::io::Write>(
 ) -> Result<Counters, Failure> {
     match client.request(&Request::Counters { reset: false })? {
         Reply::Counters(c) => Ok(c),
+        // A 2D board's link counts are the same; its core's are not read here.
+        Reply::Counters2d(c) => Ok(Counters {
+            core: Default::default(),
+            link: c.link,
+        }),
         other => Err(unexpected(other)),
+    }
+}
+
+/// Whether the board reads the touch overlay (runs 2D scenes). A board of protocol 2 from
+/// before issue #36 answers `Sensor` with "unknown request": the rheostat.
+pub fn board_is_2d<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+) -> Result<bool, Failure> {
+    Ok(matches!(
+        board_sensor(client)?,
+        saw_link::msg::Sensor::FourWire { .. }
+    ))
+}
+
+/// The sensor the board reads (the rheostat for a board that predates the question).
+pub fn board_sensor<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+) -> Result<saw_link::msg::Sensor, Failure> {
+    match client.request(&Request::Sensor) {
+        Ok(Reply::Sensor(s)) => Ok(s),
+        Err(ClientError::Link(saw_link::msg::LinkError::UnknownRequest { .. })) => {
+            Ok(saw_link::msg::Sensor::Rheostat)
+        }
+        Ok(other) => Err(unexpected(other)),
+        Err(e) => Err(e.into()),
     }
 }

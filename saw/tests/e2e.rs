@@ -45,7 +45,7 @@ fn scenes() -> Vec<PathBuf> {
         .unwrap()
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-        // 1D scenes only: the link carries no 2D scene (issue #36's `scenes/2d-*.toml`).
+        // 1D scenes here; the 2D ones (`scenes/2d-*.toml`) go to a 2D board in e2e2d.rs.
         .filter(|p| {
             let text = std::fs::read_to_string(p).unwrap();
             saw_core::scene_file::sensor_of(&p.display().to_string(), &text)

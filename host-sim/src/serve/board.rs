@@ -8,9 +8,9 @@ use saw_core::controller::{ConfigError, Telemetry};
 use saw_core::scene::Config;
 use saw_core::velocity::VelocityEstimator;
 use saw_core::Controller;
-use saw_link::msg::{Record, SceneSource, StoreFault};
+use saw_link::msg::{Header, Record, Reply, SceneSource, StoreFault};
 use saw_link::session::{Board, Stamp};
-use saw_link::stream::{Decimator, QUEUE_RECORDS};
+use saw_link::stream::{Batcher, Decimator, QUEUE_RECORDS};
 
 use crate::sim::{sample_period_us, ClosedLoop, SimError, SimParams};
 use crate::trajectory::Trajectory;
@@ -34,6 +34,7 @@ pub struct VirtualBoard<E: VelocityEstimator> {
     next_k: u64,
     decimator: Decimator,
     queue: VecDeque<Record>,
+    batcher: Batcher,
     dropped: u32,
     sent: u32,
     store: Option<Box<dyn Persist + Send>>,
@@ -85,6 +86,7 @@ impl<E: VelocityEstimator> VirtualBoard<E> {
                 next_k: 0,
                 decimator: Decimator::default(),
                 queue: VecDeque::with_capacity(QUEUE_RECORDS),
+                batcher: Batcher::default(),
                 dropped: 0,
                 sent: 0,
                 store,
@@ -139,6 +141,25 @@ impl<E: VelocityEstimator> VirtualBoard<E> {
         let r = self.queue.pop_front()?;
         self.sent = self.sent.wrapping_add(1);
         Some(r)
+    }
+
+    /// The next stream frame to send: a full batch, or (with `flush`) what is gathered.
+    pub fn next_frame(&mut self, flush: bool) -> Option<(Header, Reply)> {
+        while let Some(r) = self.pop_record() {
+            if let Some(frame) = self.batcher.push(r, self.dropped) {
+                return Some(frame);
+            }
+        }
+        if flush {
+            self.batcher.flush(self.dropped)
+        } else {
+            None
+        }
+    }
+
+    /// Forgets the records gathered for a stream that stopped or restarted.
+    pub fn restart_batch(&mut self) {
+        self.batcher = Batcher::default();
     }
 
     /// Records dropped since boot.

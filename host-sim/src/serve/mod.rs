@@ -7,6 +7,7 @@
 //! dropped and counted, as on the firmware.
 
 pub mod board;
+pub mod board2d;
 pub mod flash;
 pub mod pty;
 
@@ -20,14 +21,14 @@ use embassy_futures::block_on;
 use saw_boards::BoardDef;
 use saw_core::velocity::VelocityEstimator;
 use saw_link::frame::{self, Receiver, MAX_ENCODED};
-use saw_link::msg::{Header, Reply, SceneSource};
-use saw_link::session::{Identity, Session};
-use saw_link::stream::Batcher;
+use saw_link::msg::{Header, PlaneScene, Reply, SceneSource};
+use saw_link::session::{Board, Identity, Session};
 
 use crate::door::{Range, Whole};
 use crate::sim::{board_controller, burst_timer, sample_period_us, SimParams};
 use crate::trajectory::Trajectory;
 use board::VirtualBoard;
+use board2d::VirtualBoard2d;
 use pty::Pty;
 
 /// The ST-LINK virtual COM port's rate the firmware uses (boards/README.md): 921 600 baud.
@@ -68,7 +69,10 @@ pub struct ServeArgs {
     /// The board to stand for (its timers, acquisition and velocity window).
     #[arg(long, default_value = saw_boards::NUCLEO_F446RE.name, value_parser = crate::cli::board_parser())]
     pub board: &'static BoardDef,
-    /// The scene to run when no saved scene is stored (the built-in default without it).
+    /// The scene to run when no saved scene is stored (the built-in default without it). A 2D
+    /// scene (`[sensor] kind = "4-wire"`, e.g. scenes/2d-fig12.toml) makes a board with the
+    /// 4-wire touch overlay (95 x 54 mm) that runs 2D scenes only; its finger goes round a
+    /// circle through the plate's middle at --speed, or rests at --rest-at-xy.
     #[arg(long, value_name = "FILE")]
     pub scene: Option<PathBuf>,
     /// A file standing for the board's flash: `saw save` writes the scene there and a restart
@@ -77,8 +81,12 @@ pub struct ServeArgs {
     pub flash: Option<PathBuf>,
     #[arg(long, value_name = "MM_S", default_value_t = 60.0, help = SPEED.help("Finger speed, back and forth over the travel"), value_parser = SPEED.parser())]
     pub speed: f64,
-    #[arg(long, value_name = "MM", conflicts_with = "speed", help = AT.help("Finger at rest here instead (within the scene's travel)"), value_parser = AT.parser())]
+    #[arg(long, value_name = "MM", conflicts_with = "speed", help = AT.help("Finger at rest here instead (within the scene's travel; 1D scenes)"), value_parser = AT.parser())]
     pub rest_at: Option<f64>,
+    /// The finger at rest at X,Y mm on the overlay instead (2D scenes; each 0 to the plate's
+    /// width / height: 95 and 54 mm).
+    #[arg(long, value_name = "X,Y", conflicts_with_all = ["speed", "rest_at"], allow_hyphen_values = true, value_parser = crate::cli2d::xy_mm)]
+    pub rest_at_xy: Option<(f64, f64)>,
     #[arg(long, value_name = "LSB", default_value_t = 2.0, help = NOISE.help("ADC noise per conversion"), value_parser = NOISE.parser())]
     pub noise: f64,
     #[arg(long, default_value_t = 1, help = SEED.help("Noise seed"), value_parser = SEED.parser())]
@@ -188,6 +196,26 @@ pub fn serve_with_clock(
     // The link first: a second board on a live link (or a locked flash file) is refused before
     // anything boots or logs.
     let pty = Pty::open(&a.pty)?;
+    if let Some(scene) = scene_2d(a)? {
+        let mut vb =
+            VirtualBoard2d::boot(board, &scene, trajectory_2d(a, &scene)?, a.noise, a.seed)?;
+        let identity = Identity {
+            firmware: concat!("host-sim serve ", env!("CARGO_PKG_VERSION")),
+            board: board.name,
+            sample_rate_hz: 1_000_000 / vb.frame_us(),
+        };
+        let session = Session::new_2d(identity, board2d::plate_um(), scene, SceneSource::BuildTime);
+        vb.set_stamp(session.stamp());
+        let clock = BoardClock {
+            start: Instant::now(),
+            rate: 1.0 + a.clock_ppm * 1e-6,
+        };
+        ready(&pty, clock);
+        return run(&pty, vb, session, clock, a.baud as u32, a.seconds, stop);
+    }
+    if a.rest_at_xy.is_some() {
+        return Err("--rest-at-xy: a finger on the touch overlay needs a 2D scene (--scene with [sensor] kind = \"4-wire\"); use --rest-at MM on the rheostat".into());
+    }
     let (params, source) = params(a, board)?;
     let store = match &a.flash {
         Some(path) => Some(flash::open(path, board)?),
@@ -209,6 +237,87 @@ pub fn serve_with_clock(
     };
     ready(&pty, clock);
     run(&pty, board, session, clock, a.baud as u32, a.seconds, stop)
+}
+
+/// The 2D scene of `--scene`, when it names the 4-wire overlay: read and checked for the board
+/// at its touch frame period, as `host-sim --scene` reads it. The 1D board's flags are refused
+/// with it, one line naming the flag.
+fn scene_2d(a: &ServeArgs) -> Result<Option<PlaneScene>, String> {
+    let Some(path) = &a.scene else {
+        return Ok(None);
+    };
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| format!("--scene {name}: {e}"))?;
+    if saw_core::scene_file::sensor_of(&name, &text).map_err(|e| e.to_string())?
+        != saw_core::scene_file::SensorKind::FourWire
+    {
+        return Ok(None);
+    }
+    let refuse = |flag: &str, why: &str| {
+        Err(format!(
+            "{flag}: {why}; {name} is a 2D scene for the touch overlay"
+        ))
+    };
+    if a.rest_at.is_some() {
+        return refuse(
+            "--rest-at",
+            "a position on the rheostat's travel (use --rest-at-xy X,Y)",
+        );
+    }
+    if a.fault.is_some() {
+        return refuse("--fault", "the virtual overlay injects no faults yet");
+    }
+    if a.flash.is_some() {
+        return refuse("--flash", "the store keeps 1D scenes only");
+    }
+    let frame_us = crate::sim2d::board_frame_period_us(a.board)
+        .ok_or_else(|| format!("--board {}: no touch schedule", a.board.name))?;
+    let config =
+        saw_core::scene_file::load_2d_for_board(&name, &text, burst_timer(a.board), frame_us)
+            .map_err(|e| e.to_string())?;
+    let plate_um = saw_core::scene_file::plate_um_of(&name, &text).map_err(|e| e.to_string())?;
+    let overlay = board2d::plate_um();
+    if plate_um.0 > overlay.0 || plate_um.1 > overlay.1 {
+        return Err(format!(
+            "--scene {name}: its plate {} x {} mm does not fit the virtual overlay {} x {} mm",
+            plate_um.0 as f64 / 1e3,
+            plate_um.1 as f64 / 1e3,
+            overlay.0 as f64 / 1e3,
+            overlay.1 as f64 / 1e3
+        ));
+    }
+    Ok(Some(PlaneScene { plate_um, config }))
+}
+
+/// The 2D finger: at rest at `--rest-at-xy`, or round a circle through the plate's middle
+/// (radius: 40 % of its shorter side) at `--speed`.
+fn trajectory_2d(
+    a: &ServeArgs,
+    scene: &PlaneScene,
+) -> Result<crate::trajectory2d::Trajectory2d, String> {
+    use crate::trajectory2d::{PointUm, Trajectory2d};
+    let (w, h) = board2d::plate_um();
+    match a.rest_at_xy {
+        Some((x, y)) => {
+            if !(0.0..=w as f64 / 1e3).contains(&x) || !(0.0..=h as f64 / 1e3).contains(&y) {
+                return Err(format!(
+                    "--rest-at-xy {x},{y}: must lie on the overlay, x 0 to {} mm and y 0 to {} mm",
+                    w as f64 / 1e3,
+                    h as f64 / 1e3
+                ));
+            }
+            Trajectory2d::rest(PointUm::new(x * 1e3, y * 1e3)).map_err(|e| e.to_string())
+        }
+        None => {
+            let (pw, ph) = (scene.plate_um.0 as f64, scene.plate_um.1 as f64);
+            Trajectory2d::circle(
+                PointUm::new(pw / 2.0, ph / 2.0),
+                0.4 * pw.min(ph),
+                a.speed * 1e3,
+            )
+            .map_err(|e| e.to_string())
+        }
+    }
 }
 
 fn params(a: &ServeArgs, board: &'static BoardDef) -> Result<(SimParams, SceneSource), String> {
@@ -260,9 +369,51 @@ fn params(a: &ServeArgs, board: &'static BoardDef) -> Result<(SimParams, SceneSo
     Ok((p, source))
 }
 
-fn run<E: VelocityEstimator>(
+/// What the serve loop needs of a virtual board besides the session's [`Board`].
+pub trait Virtual: Board {
+    /// Runs every sample (or touch frame) due before `t_us`, board time since boot.
+    fn run_until(&mut self, t_us: u64);
+    /// The next stream frame to send: a full batch, or (`flush`) whatever is gathered.
+    fn next_frame(&mut self, flush: bool) -> Option<(Header, Reply)>;
+    /// Forgets the records gathered for a stream that stopped or restarted.
+    fn restart_batch(&mut self);
+    /// Records dropped since boot.
+    fn dropped(&self) -> u32;
+}
+
+impl<E: VelocityEstimator> Virtual for VirtualBoard<E> {
+    fn run_until(&mut self, t_us: u64) {
+        VirtualBoard::run_until(self, t_us)
+    }
+    fn next_frame(&mut self, flush: bool) -> Option<(Header, Reply)> {
+        VirtualBoard::next_frame(self, flush)
+    }
+    fn restart_batch(&mut self) {
+        VirtualBoard::restart_batch(self)
+    }
+    fn dropped(&self) -> u32 {
+        VirtualBoard::dropped(self)
+    }
+}
+
+impl Virtual for VirtualBoard2d {
+    fn run_until(&mut self, t_us: u64) {
+        VirtualBoard2d::run_until(self, t_us)
+    }
+    fn next_frame(&mut self, flush: bool) -> Option<(Header, Reply)> {
+        VirtualBoard2d::next_frame(self, flush)
+    }
+    fn restart_batch(&mut self) {
+        VirtualBoard2d::restart_batch(self)
+    }
+    fn dropped(&self) -> u32 {
+        VirtualBoard2d::dropped(self)
+    }
+}
+
+fn run<V: Virtual>(
     pty: &Pty,
-    mut board: VirtualBoard<E>,
+    mut board: V,
     mut session: Session,
     clock: BoardClock,
     baud: u32,
@@ -277,7 +428,6 @@ fn run<E: VelocityEstimator>(
         bytes_per_s,
     };
     let mut rx = Receiver::<MAX_ENCODED>::default();
-    let mut batcher = Batcher::default();
     let mut pending: Option<Vec<u8>> = None;
     let mut last_flush = start;
     let mut stats = ServeStats::default();
@@ -299,7 +449,7 @@ fn run<E: VelocityEstimator>(
                 // A stream stopped or started anew: what was gathered for the one before is
                 // stale (the client drops it) and is not sent.
                 pending = None;
-                batcher = Batcher::default();
+                board.restart_batch();
             }
             let bytes = encode(&reply.0, &reply.1)?;
             line.spend(bytes.len());
@@ -312,15 +462,8 @@ fn run<E: VelocityEstimator>(
         line.refill();
         loop {
             if pending.is_none() {
-                let rec = board.pop_record();
-                let frame = match rec {
-                    Some(r) => batcher.push(r, board.dropped()),
-                    None if last_flush.elapsed() >= FLUSH_AFTER => batcher.flush(board.dropped()),
-                    None => None,
-                };
-                match frame {
+                match board.next_frame(last_flush.elapsed() >= FLUSH_AFTER) {
                     Some((h, r)) => pending = Some(encode(&h, &r)?),
-                    None if rec.is_some() => continue,
                     None => break,
                 }
             }
@@ -377,5 +520,53 @@ fn send(pty: &Pty, mut bytes: &[u8]) {
             Ok(n) => bytes = &bytes[n..],
             Err(_) => return,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(extra: &[&str]) -> ServeArgs {
+        let mut argv = vec!["host-sim serve", "--pty", "/nonexistent/tty"];
+        argv.extend_from_slice(extra);
+        ServeArgs::try_parse_from(argv).unwrap()
+    }
+
+    const FIG12: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/2d-fig12.toml");
+    const CONCAVE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/2d-concave.toml");
+
+    /// A 2D scene makes the overlay board; the rheostat's flags are refused with it, one line
+    /// naming the flag, and a scene for a larger plate than the virtual overlay is refused.
+    #[test]
+    fn a_2d_scene_takes_the_overlay_and_refuses_the_rheostats_flags() {
+        let s = scene_2d(&args(&["--scene", FIG12])).unwrap().unwrap();
+        assert_eq!(s.plate_um, (95_000, 54_000));
+        assert!(scene_2d(&args(&[])).unwrap().is_none());
+        for (extra, starts) in [
+            (vec!["--rest-at", "10"], "--rest-at: "),
+            (
+                vec!["--fault", "open", "--fault-at", "1", "--fault-for", "1"],
+                "--fault: ",
+            ),
+            (vec!["--flash", "/tmp/x.bin"], "--flash: "),
+        ] {
+            let mut a = vec!["--scene", FIG12];
+            a.extend(extra);
+            let e = scene_2d(&args(&a)).unwrap_err();
+            assert!(e.starts_with(starts) && !e.contains('\n'), "{e}");
+        }
+        let e = scene_2d(&args(&["--scene", CONCAVE])).unwrap_err();
+        assert!(
+            e.ends_with("its plate 80 x 60 mm does not fit the virtual overlay 95 x 54 mm"),
+            "{e}"
+        );
+        // The resting finger must lie on the overlay.
+        let a = args(&["--scene", FIG12, "--rest-at-xy", "96,10"]);
+        let e = trajectory_2d(&a, &s).unwrap_err();
+        assert_eq!(
+            e,
+            "--rest-at-xy 96,10: must lie on the overlay, x 0 to 95 mm and y 0 to 54 mm"
+        );
     }
 }

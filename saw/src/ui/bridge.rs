@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use saw_core::gate::DriveMode;
 use saw_link::client::Client;
-use saw_link::msg::{Record, Reply, Request};
+use saw_link::msg::{Record, Record2d, Reply, Request};
 use serde_json::{json, Value};
 use tokio::sync::broadcast;
 
@@ -56,6 +56,10 @@ pub enum Command {
     ResetCounters,
     /// The board's scene as a scene file.
     Export,
+    /// Move 2D window `index` whole: its lower-left bounding corner to (`x_mm`, `y_mm`).
+    MoveWindow { index: u8, x_mm: f64, y_mm: f64 },
+    /// Give rectangle window `index` the corners (x0, y0) – (x1, y1), mm.
+    ResizeWindow { index: u8, rect: [f64; 4] },
 }
 
 /// Reads one command from the page: `{"id": N, "cmd": …}`. Every value is checked here; the
@@ -80,7 +84,34 @@ pub fn parse_command(text: &str) -> Result<(u64, Command), (u64, String)> {
                 ))
             })
     };
+    // Millimetres on the plate: finite, 0 to 1000.
+    let plate_mm = |name: &str| -> Result<f64, (u64, String)> {
+        let x = v
+            .get(name)
+            .ok_or_else(|| fail(format!("`{name}` missing")))?;
+        x.as_f64()
+            .filter(|m| m.is_finite() && (0.0..=1000.0).contains(m))
+            .ok_or_else(|| {
+                fail(format!(
+                    "`{name}` = {x}: must be a number from 0 to 1000 mm"
+                ))
+            })
+    };
     let c = match cmd {
+        "move_window" => Command::MoveWindow {
+            index: index("index")?,
+            x_mm: plate_mm("x_mm")?,
+            y_mm: plate_mm("y_mm")?,
+        },
+        "resize_window" => Command::ResizeWindow {
+            index: index("index")?,
+            rect: [
+                plate_mm("x0_mm")?,
+                plate_mm("y0_mm")?,
+                plate_mm("x1_mm")?,
+                plate_mm("y1_mm")?,
+            ],
+        },
         "boundary" => {
             let x = v.get("mm").ok_or_else(|| fail("`mm` missing".into()))?;
             let mm = x
@@ -265,6 +296,27 @@ fn record_json(r: &Record) -> Value {
     ])
 }
 
+/// A 2D record as the page reads it (by name).
+fn record_2d_json(r: &Record2d) -> Value {
+    use saw_core::plane::Place;
+    json!({
+        "time_us": r.time_us,
+        "x_um": r.position.map(|p| p.x_um),
+        "y_um": r.position.map(|p| p.y_um),
+        "vx_um_s": r.velocity_um_s.map(|v| v.0),
+        "vy_um_s": r.velocity_um_s.map(|v| v.1),
+        // A window's index, -1 for the background, null while nothing renders.
+        "window": r.place.map(|p| match p { Place::Window(i) => i as i32, Place::Background => -1 }),
+        "edge": r.edge,
+        "f_b_hz": r.burst_millihz as f64 / 1000.0,
+        "bursting": r.bursting,
+        "lifted": r.lifted,
+        "fault": r.fault.map(crate::record::fault_2d_name),
+        "scene_id": crate::scene_hex(r.scene_id),
+        "change": r.change,
+    })
+}
+
 /// One session on an open port; returns why it ended.
 fn linked<P: Read + Write>(
     client: &mut Client<P>,
@@ -288,6 +340,11 @@ fn linked<P: Read + Write>(
         |s| &mut s.link,
         json!({"t": "link", "ok": true, "hello": hello}),
     );
+    // A board with the touch overlay streams 2D records (issue #36).
+    let plane = match crate::board_is_2d(client) {
+        Ok(p) => p,
+        Err(f) => return f.message,
+    };
     if let Err(e) = publish_scene(client, out) {
         return e;
     }
@@ -334,11 +391,21 @@ fn linked<P: Read + Write>(
                 return e;
             }
         }
-        match client.next_stream(Instant::now() + Duration::from_millis(5)) {
-            Ok(Some((_, s))) => {
+        let deadline = Instant::now() + Duration::from_millis(5);
+        let next = if plane {
+            client.next_stream_2d(deadline).map(|f| {
+                f.map(|(_, s)| (s.dropped, s.records.iter().map(record_2d_json).collect()))
+            })
+        } else {
+            client
+                .next_stream(deadline)
+                .map(|f| f.map(|(_, s)| (s.dropped, s.records.iter().map(record_json).collect())))
+        };
+        match next {
+            Ok(Some((d, rs))) => {
                 heard = Instant::now();
-                dropped = s.dropped;
-                records.extend(s.records.iter().map(record_json));
+                dropped = d;
+                records.extend::<Vec<Value>>(rs);
             }
             Ok(None) => {}
             Err(e) => return e.to_string(),
@@ -355,6 +422,10 @@ fn linked<P: Read + Write>(
                 Ok(Reply::Counters(c)) => {
                     out.keep(|s| &mut s.counters, json!({"t": "counters", "counters": c}))
                 }
+                Ok(Reply::Counters2d(c)) => out.keep(
+                    |s| &mut s.counters,
+                    json!({"t": "counters", "counters": c, "plane": true}),
+                ),
                 Ok(other) => {
                     return format!("the board answered the counters request with {other:?}")
                 }
@@ -379,6 +450,10 @@ fn execute<P: Read + Write>(
 ) -> Result<Done, Failure> {
     match cmd {
         Command::Boundary { index, mm } => crate::boundary(client, *index, *mm),
+        Command::MoveWindow { index, x_mm, y_mm } => {
+            crate::window(client, *index, Some((*x_mm, *y_mm)), None)
+        }
+        Command::ResizeWindow { index, rect } => crate::window(client, *index, None, Some(*rect)),
         Command::Set { index, keys } => crate::set(client, *index, keys),
         Command::Push { name, text } => crate::push_text(client, name, text),
         Command::Save => crate::save(client, timeout),
@@ -398,10 +473,21 @@ fn execute<P: Read + Write>(
                     json: json!({"scene_file": saw_core::scene_file::to_scene_file(&config, &title)}),
                 })
             }
+            Reply::Scene2d {
+                scene_id, scene, ..
+            } => {
+                let title = format!(
+                    "Scene {scene_id:#010x}, saved from the panel (saw ui): the board's own account of its 2D scene."
+                );
+                Ok(Done {
+                    text: format!("scene {scene_id:#010x} as a scene file"),
+                    json: json!({"scene_file": saw_core::scene_file::to_scene_file_2d(&scene.config, scene.plate_um, &title)}),
+                })
+            }
             other => Err(crate::unexpected(other)),
         },
         Command::ResetCounters => match client.request(&Request::Counters { reset: true })? {
-            Reply::Counters(_) => Ok(Done {
+            Reply::Counters(_) | Reply::Counters2d(_) => Ok(Done {
                 text: "counters from zero".into(),
                 json: Value::Null,
             }),
@@ -434,6 +520,50 @@ fn publish_scene<P: Read + Write>(client: &mut Client<P>, out: &Out) -> Result<(
                     "drive": format!("{:?}", config.scene.drive),
                     "regions": regions,
                     "lines": config.scene.lines.positions_um.iter().map(|&u| u as f64 / 1000.0).collect::<Vec<_>>(),
+                }),
+            );
+            Ok(())
+        }
+        Ok(Reply::Scene2d {
+            scene_id,
+            source,
+            scene,
+        }) => {
+            let sc = &scene.config.scene;
+            let mm = |u: i32| u as f64 / 1000.0;
+            let windows: Vec<Value> = sc
+                .windows
+                .iter()
+                .enumerate()
+                .map(|(i, w)| {
+                    let v = &w.outline.vertices;
+                    // An axis-aligned rectangle resizes by its corners; any other outline moves.
+                    let rect = v.len() == 4
+                        && (0..4).all(|k| {
+                            let (a, b) = (v[k], v[(k + 1) % 4]);
+                            (a.x_um == b.x_um) != (a.y_um == b.y_um)
+                        });
+                    json!({
+                        "index": i,
+                        "points": v.iter().map(|p| [mm(p.x_um), mm(p.y_um)]).collect::<Vec<_>>(),
+                        "label": crate::plane_texture_text(&w.texture),
+                        "rect": rect,
+                        "edge": w.edge,
+                    })
+                })
+                .collect();
+            out.keep(
+                |s| &mut s.scene,
+                json!({
+                    "t": "scene2d",
+                    "scene_id": format!("{scene_id:#010x}"),
+                    "source": crate::source_name(source),
+                    "plate_mm": [scene.plate_um.0 as f64 / 1000.0, scene.plate_um.1 as f64 / 1000.0],
+                    "band_mm": sc.band_um as f64 / 1000.0,
+                    "drive": format!("{:?}", sc.drive),
+                    "background": crate::plane_texture_text(&sc.background),
+                    "windows": windows,
+                    "edges": sc.free_edges.iter().map(|e| [mm(e.a.x_um), mm(e.a.y_um), mm(e.b.x_um), mm(e.b.y_um)]).collect::<Vec<_>>(),
                 }),
             );
             Ok(())
@@ -475,11 +605,34 @@ mod tests {
                 "`mode` = Some(\"sideways\")",
             ),
             (r#"{"id":4,"cmd":"launch"}"#, "`cmd` = \"launch\""),
+            (
+                r#"{"id":4,"cmd":"move_window","index":0,"x_mm":-0.5,"y_mm":3}"#,
+                "`x_mm` = -0.5: must be a number from 0 to 1000 mm",
+            ),
+            (
+                r#"{"id":4,"cmd":"move_window","index":0,"x_mm":1,"y_mm":"NaN"}"#,
+                "`y_mm` = \"NaN\"",
+            ),
+            (
+                r#"{"id":4,"cmd":"resize_window","index":0,"x0_mm":1,"y0_mm":1,"x1_mm":2}"#,
+                "`y1_mm` missing",
+            ),
         ] {
             let (id, why) = parse_command(text).unwrap_err();
             assert_eq!(id, 4, "{text}");
             assert!(why.contains(says), "{text}: {why}");
         }
+        assert_eq!(
+            parse_command(r#"{"id":7,"cmd":"move_window","index":2,"x_mm":36,"y_mm":2.5}"#),
+            Ok((
+                7,
+                Command::MoveWindow {
+                    index: 2,
+                    x_mm: 36.0,
+                    y_mm: 2.5
+                }
+            ))
+        );
         assert!(parse_command("not json").is_err());
         let big = format!(
             r#"{{"id":1,"cmd":"push","name":"x.toml","text":"{}"}}"#,

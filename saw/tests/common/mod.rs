@@ -58,6 +58,7 @@ impl VirtualBoard {
     }
 
     /// Pulls the plug: the board stops; its directory (and the flash file in it) stays.
+    #[allow(dead_code)] // not every test file pulls the plug
     pub fn power_off(mut self) -> tempfile::TempDir {
         self.stop.store(true, Ordering::Relaxed);
         let _ = self.handle.take().unwrap().join().unwrap();
