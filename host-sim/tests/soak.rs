@@ -13,6 +13,7 @@ fn soak(seed: u64, from: u64, samples: u64, threads: usize, plant: Plant) -> Sum
         samples,
         threads: Some(threads),
         plant,
+        plane: false,
     })
 }
 
