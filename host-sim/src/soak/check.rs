@@ -222,7 +222,10 @@ pub struct LineCheck {
     /// On-times a duty window may still hold, in time order.
     recent: VecDeque<OnTime>,
     /// Rises whose window (starting there) is not yet over, with its length.
-    open_windows: VecDeque<(u64, u64)>,
+    /// The caps the window is judged by are the ones in force at its rise (a window holding a
+    /// scene change is not judged, so they hold through it): one judged late, behind a longer
+    /// window of an earlier scene in the queue, is not judged by a later scene's caps.
+    open_windows: VecDeque<(u64, u64, Caps)>,
     /// Scene changes a window may still hold.
     changes: VecDeque<u64>,
     /// Starts and Pulses seen.
@@ -451,7 +454,8 @@ impl LineCheck {
             one_pulse,
             source: self.sources,
         });
-        self.open_windows.push_back((r, self.caps.window_clocks));
+        self.open_windows
+            .push_back((r, self.caps.window_clocks, caps));
     }
 
     fn fall(&mut self, f: u64, cut: bool) {
@@ -540,7 +544,7 @@ impl LineCheck {
         let keep_from = self
             .open_windows
             .front()
-            .map_or(now, |&(r, _)| r)
+            .map_or(now, |&(r, _, _)| r)
             .min(horizon)
             .saturating_sub(w);
         while self.recent.front().is_some_and(|o| o.fall <= keep_from) {
@@ -572,24 +576,25 @@ impl LineCheck {
 
     /// Judges the windows starting at a rise that are over by `now`.
     fn judge_open_windows(&mut self, now: u64) {
-        while let Some(&(r, w)) = self.open_windows.front() {
+        while let Some(&(r, w, caps)) = self.open_windows.front() {
             if r + w > now {
                 break;
             }
             self.open_windows.pop_front();
-            self.judge_window(r, r + w);
+            self.judge_window_caps(r, r + w, w, Some(caps));
         }
     }
 
     /// The duty rule over `[a, b)` with the caps in force (a window holding a scene change is
-    /// not judged).
-    fn judge_window(&mut self, a: u64, b: u64) {
-        self.judge_window_len(a, b, b - a);
+    /// not judged), for a window of length `len` whose part before `a` holds no on-time
+    /// (`len` ≥ `b − a`).
+    fn judge_window_len(&mut self, a: u64, b: u64, len: u64) {
+        self.judge_window_caps(a, b, len, None);
     }
 
-    /// [`Self::judge_window`] for a window of length `len` whose part before `a` holds no
-    /// on-time (`len` ≥ `b − a`).
-    fn judge_window_len(&mut self, a: u64, b: u64, len: u64) {
+    /// [`Self::judge_window_len`] with the caps of the window's own scene when known (`None`:
+    /// the caps in force now, and the previous scene's for a window over by the last change).
+    fn judge_window_caps(&mut self, a: u64, b: u64, len: u64, own: Option<Caps>) {
         if self.changes.iter().any(|&c| c > a && c < b) {
             return;
         }
@@ -632,8 +637,8 @@ impl LineCheck {
         };
         let longest = l.run_longest.max(kept_last);
         // A window over by the last change is the old scene's (its on-time was spent under it).
-        let mut caps = self.caps;
-        let old_scene = self.changed_at.is_some_and(|c| b <= c);
+        let mut caps = own.unwrap_or(self.caps);
+        let old_scene = own.is_none() && self.changed_at.is_some_and(|c| b <= c);
         if old_scene {
             caps.loosen(self.before);
         }
@@ -673,8 +678,8 @@ impl LineCheck {
             self.push_on(h.rise, end, h.source, !h.one_pulse);
         }
         // Windows still open are judged up to the end (the line is low after it).
-        while let Some((r, w)) = self.open_windows.pop_front() {
-            self.judge_window(r, r + w);
+        while let Some((r, w, caps)) = self.open_windows.pop_front() {
+            self.judge_window_caps(r, r + w, w, Some(caps));
         }
         self.spans.clear();
         self.recent.clear();
