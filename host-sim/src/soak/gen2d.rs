@@ -296,6 +296,9 @@ pub fn moved_window(rng: &mut ChaCha8Rng, cfg: &Config2d) -> Option<Config2d> {
     Some(c)
 }
 
+/// An edge's ends, µm.
+pub type EdgeUm = ((f64, f64), (f64, f64));
+
 /// What the finger does over one piece of an episode.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Move {
@@ -402,7 +405,7 @@ pub const MOVES: [&str; 8] = [
 pub fn soak_finger(
     rng: &mut ChaCha8Rng,
     duration_s: f64,
-    edges: &[((f64, f64), (f64, f64))],
+    edges: &[EdgeUm],
 ) -> (Vec<Piece>, [u64; MOVES.len()]) {
     let mut pieces = Vec::new();
     let mut counts = [0; MOVES.len()];

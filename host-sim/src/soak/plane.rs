@@ -387,7 +387,7 @@ pub fn run_episode2d(seed: u64, episode: u64, samples: u64, plant: Plant) -> Epi
     report.wrapped = samples > 0 && (g_t0 + samples * period_us - 1) >> 32 != g_t0 >> 32;
 
     let mut cfg = loadable_config2d(&mut rng, &timer, frame_us);
-    let edges_um: Vec<((f64, f64), (f64, f64))> = scene_edges(&cfg.scene)
+    let edges_um: Vec<gen2d::EdgeUm> = scene_edges(&cfg.scene)
         .iter()
         .map(|g| ((g.a.0 * 1e3, g.a.1 * 1e3), (g.b.0 * 1e3, g.b.1 * 1e3)))
         .collect();
