@@ -19,7 +19,11 @@
 # by the runner (every trial answered, values it does not allow refused, half of it resumed);
 # `analysis_csv` — a session or lab CSV through the analysis' reader and the analysis;
 # `session_log` — a session log reopened as a resume does, its CSV read back and its protocol
-# resumed. New inputs that reach new code are kept in fuzz/corpus/<target>/ (or in $NEW_INPUTS
+# resumed. The plane's (issue #36), bodies in the target files: `scene_file_2d` — a 2D scene
+# file through the 2D reader and the board check, an accepted one written back and read again;
+# `controller2d` — Controller2d over postcard-decoded configurations and arbitrary readings,
+# frames, ticks and reloads, on-times against the caps and the line off on lifts and faults
+# (their corpora are not replayed by `cargo test`). New inputs that reach new code are kept in fuzz/corpus/<target>/ (or in $NEW_INPUTS
 # when set, leaving the corpus as it is), which `cargo test -p saw-link --test fuzz_corpus` and
 # `cargo test -p saw-experiment --test fuzz_corpus` replay. A crash leaves its input in
 # fuzz/artifacts/<target>/ and fails the script.
@@ -121,7 +125,7 @@ if [ -n "$PLANT" ]; then
     exit 1
 fi
 
-[ "${#TARGETS[@]}" -eq 0 ] && TARGETS=(link_bytes scene_file scene_struct protocol analysis_csv session_log)
+[ "${#TARGETS[@]}" -eq 0 ] && TARGETS=(link_bytes scene_file scene_struct protocol analysis_csv session_log scene_file_2d controller2d)
 for t in "${TARGETS[@]}"; do
     mkdir -p "corpus/$t"
     options "$t"

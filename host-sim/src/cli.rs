@@ -128,7 +128,7 @@ fn parse_level(s: &str) -> Result<log::LevelFilter, String> {
 /// The binary's other commands, each dispatched before the simulator's flags are parsed
 /// (`main.rs`), with what each does: `--help` lists them, `host-sim help COMMAND` shows one's
 /// help.
-pub const COMMANDS: [(&str, &str); 7] = [
+pub const COMMANDS: [(&str, &str); 8] = [
     (
         "serve",
         "a virtual board behind a pseudo-terminal, for saw and its panel (docs/link.md)",
@@ -153,6 +153,10 @@ pub const COMMANDS: [(&str, &str); 7] = [
     (
         "guard",
         "outlier guards: lag against outlier error (docs/conversion-budget.md)",
+    ),
+    (
+        "touch-budget",
+        "the touch frame's phases against its period, per board (docs/touch.md)",
     ),
 ];
 

@@ -35,5 +35,6 @@ pub mod sim2d;
 pub mod soak;
 pub mod timer;
 pub mod touch;
+pub mod touch_budget;
 pub mod trajectory;
 pub mod trajectory2d;

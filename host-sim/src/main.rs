@@ -35,6 +35,10 @@ fn main() -> ExitCode {
     if let Some(code) = host_sim::budget::run_from_env() {
         return code;
     }
+    // `host-sim touch-budget …`: the touch frame's phases against its period (docs/touch.md).
+    if let Some(code) = host_sim::touch_budget::run_from_env() {
+        return code;
+    }
     // `host-sim guard …`: outlier guards' lag, noise and outlier error (issue #35).
     if let Some(code) = host_sim::guard::run_from_env() {
         return code;

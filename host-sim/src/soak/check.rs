@@ -60,11 +60,17 @@ pub enum Rule {
     BrokenSceneAccepted,
     /// The timer model got an action it could not make sense of.
     TimerProtocol,
+    /// 2D: the line high while the finger is off the plate, or landing (fewer than 16 pressed
+    /// frames since it touched down).
+    OnWhileLifted,
+    /// 2D: an edge fired again without the finger clear of its line by the re-arm distance in
+    /// between (two pulses for one crossing).
+    EdgeRepeat,
 }
 
 impl Rule {
     /// Every rule, in the order the summary lists them.
-    pub const ALL: [Rule; 9] = [
+    pub const ALL: [Rule; 11] = [
         Rule::OnTime,
         Rule::Duty,
         Rule::OnDuringFault,
@@ -74,6 +80,8 @@ impl Rule {
         Rule::RefusalChangedScene,
         Rule::BrokenSceneAccepted,
         Rule::TimerProtocol,
+        Rule::OnWhileLifted,
+        Rule::EdgeRepeat,
     ];
 
     /// Its place in [`Rule::ALL`].
@@ -93,6 +101,8 @@ impl Rule {
             Rule::RefusalChangedScene => "a refused scene changed the running one",
             Rule::BrokenSceneAccepted => "a broken scene was accepted",
             Rule::TimerProtocol => "timer protocol error",
+            Rule::OnWhileLifted => "line high while lifted or landing",
+            Rule::EdgeRepeat => "an edge pulsed twice for one crossing",
         }
     }
 }
@@ -176,6 +186,8 @@ struct Span {
     a: u64,
     b: u64,
     reported: bool,
+    /// The rule a high line breaks here.
+    rule: Rule,
 }
 
 /// Violations kept per episode with their detail (all are counted).
@@ -210,7 +222,10 @@ pub struct LineCheck {
     /// On-times a duty window may still hold, in time order.
     recent: VecDeque<OnTime>,
     /// Rises whose window (starting there) is not yet over, with its length.
-    open_windows: VecDeque<(u64, u64)>,
+    /// The caps the window is judged by are the ones in force at its rise (a window holding a
+    /// scene change is not judged, so they hold through it): one judged late, behind a longer
+    /// window of an earlier scene in the queue, is not judged by a later scene's caps.
+    open_windows: VecDeque<(u64, u64, Caps)>,
     /// Scene changes a window may still hold.
     changes: VecDeque<u64>,
     /// Starts and Pulses seen.
@@ -296,15 +311,22 @@ impl LineCheck {
         }
     }
 
-    /// The line must be low over local sample period `k` (pushed before that sample is run).
+    /// The line must be low over local sample period `k` (pushed before that sample is run):
+    /// an injected sensor fault holds it off.
     pub fn must_be_off(&mut self, k: u64) {
+        self.must_be_off_for(k, Rule::OnDuringFault);
+    }
+
+    /// The line must be low over local sample period `k`, or `rule` is broken.
+    pub fn must_be_off_for(&mut self, k: u64, rule: Rule) {
         let (a, b) = (k * self.period_clocks, (k + 1) * self.period_clocks);
         match self.spans.back_mut() {
-            Some(s) if s.b == a => s.b = b,
+            Some(s) if s.b == a && s.rule == rule => s.b = b,
             _ => self.spans.push_back(Span {
                 a,
                 b,
                 reported: false,
+                rule,
             }),
         }
     }
@@ -313,24 +335,34 @@ impl LineCheck {
     /// recorded since the last call, in time order. `now` is the time up to which the timer
     /// has run.
     pub fn step(&mut self, action: Option<(u64, GateAction)>, edges: &[Edge], now: u64) {
-        let mut action = action;
+        self.step_many(action.as_slice(), edges, now);
+    }
+
+    /// [`Self::step`] with any number of actions, in time order (the plane soak's reading and
+    /// its watchdog tick may both act in one frame).
+    pub fn step_many(&mut self, actions: &[(u64, GateAction)], edges: &[Edge], now: u64) {
+        let mut next = 0;
         for e in edges {
-            // Edges before the action come first. At its very time, the timer's own edges (an
+            // Edges before an action come first. At its very time, the timer's own edges (an
             // update event's) precede it, except a Start's or Pulse's rise and an Off's fall,
             // which it makes.
-            if let Some((ta, a)) = action {
-                if e.t > ta {
-                    self.action(ta, a);
-                    action = None;
+            while let Some(&(ta, a)) = actions.get(next) {
+                if e.t <= ta {
+                    break;
                 }
+                self.action(ta, a);
+                next += 1;
             }
-            let at_action = action.filter(|(ta, _)| *ta == e.t).map(|(_, a)| a);
+            let at_action = actions
+                .get(next)
+                .filter(|(ta, _)| *ta == e.t)
+                .map(|(_, a)| *a);
             if e.high {
                 // A Start rises at its action; a Pulse's rise comes later (`pulse_rise_at`).
                 let started = matches!(at_action, Some(GateAction::Start(_)));
-                if let (true, Some((ta, a))) = (started, action) {
+                if let (true, Some(&(ta, a))) = (started, actions.get(next)) {
                     self.action(ta, a);
-                    action = None;
+                    next += 1;
                 }
                 let pulse = self.pulse_rise_at == Some(e.t);
                 if pulse {
@@ -341,7 +373,7 @@ impl LineCheck {
                 self.fall(e.t, matches!(at_action, Some(GateAction::Off)));
             }
         }
-        if let Some((ta, a)) = action {
+        for &(ta, a) in actions.get(next..).unwrap_or(&[]) {
             self.action(ta, a);
         }
         self.prune(now);
@@ -422,7 +454,8 @@ impl LineCheck {
             one_pulse,
             source: self.sources,
         });
-        self.open_windows.push_back((r, self.caps.window_clocks));
+        self.open_windows
+            .push_back((r, self.caps.window_clocks, caps));
     }
 
     fn fall(&mut self, f: u64, cut: bool) {
@@ -452,8 +485,10 @@ impl LineCheck {
             );
         }
         self.push_on(h.rise, f, h.source, !h.one_pulse);
+        // A window reaching back past the episode's start holds nothing before it (the line
+        // was off: a new controller): its budget is the whole window's.
         let w = self.caps.window_clocks;
-        self.judge_window(f.saturating_sub(w), f);
+        self.judge_window_len(f.saturating_sub(w), f, w);
         self.done = Some(Done {
             rise: h.rise,
             settings: h.settings,
@@ -482,12 +517,16 @@ impl LineCheck {
             self.spans[i].reported = true;
             let t = s.a.max(rise);
             self.violate(
-                Rule::OnDuringFault,
+                s.rule,
                 self.sample_at(t),
                 format!(
-                    "the line high from {} clocks into a sample period the injected faults \
-                     keep off",
-                    t % self.period_clocks
+                    "the line high from {} clocks into a sample period the {} keep off",
+                    t % self.period_clocks,
+                    if s.rule == Rule::OnWhileLifted {
+                        "lift and landing"
+                    } else {
+                        "injected faults"
+                    }
                 ),
             );
         }
@@ -505,7 +544,7 @@ impl LineCheck {
         let keep_from = self
             .open_windows
             .front()
-            .map_or(now, |&(r, _)| r)
+            .map_or(now, |&(r, _, _)| r)
             .min(horizon)
             .saturating_sub(w);
         while self.recent.front().is_some_and(|o| o.fall <= keep_from) {
@@ -537,18 +576,25 @@ impl LineCheck {
 
     /// Judges the windows starting at a rise that are over by `now`.
     fn judge_open_windows(&mut self, now: u64) {
-        while let Some(&(r, w)) = self.open_windows.front() {
+        while let Some(&(r, w, caps)) = self.open_windows.front() {
             if r + w > now {
                 break;
             }
             self.open_windows.pop_front();
-            self.judge_window(r, r + w);
+            self.judge_window_caps(r, r + w, w, Some(caps));
         }
     }
 
     /// The duty rule over `[a, b)` with the caps in force (a window holding a scene change is
-    /// not judged).
-    fn judge_window(&mut self, a: u64, b: u64) {
+    /// not judged), for a window of length `len` whose part before `a` holds no on-time
+    /// (`len` ≥ `b − a`).
+    fn judge_window_len(&mut self, a: u64, b: u64, len: u64) {
+        self.judge_window_caps(a, b, len, None);
+    }
+
+    /// [`Self::judge_window_len`] with the caps of the window's own scene when known (`None`:
+    /// the caps in force now, and the previous scene's for a window over by the last change).
+    fn judge_window_caps(&mut self, a: u64, b: u64, len: u64, own: Option<Caps>) {
         if self.changes.iter().any(|&c| c > a && c < b) {
             return;
         }
@@ -591,8 +637,8 @@ impl LineCheck {
         };
         let longest = l.run_longest.max(kept_last);
         // A window over by the last change is the old scene's (its on-time was spent under it).
-        let mut caps = self.caps;
-        let old_scene = self.changed_at.is_some_and(|c| b <= c);
+        let mut caps = own.unwrap_or(self.caps);
+        let old_scene = own.is_none() && self.changed_at.is_some_and(|c| b <= c);
         if old_scene {
             caps.loosen(self.before);
         }
@@ -606,9 +652,9 @@ impl LineCheck {
         // shortened the window) lies inside one of the old scene's longer windows, whose budget
         // is its cap × its length; any other window is judged over its own span.
         let budget_clocks = if old_scene {
-            (b - a).max(caps.window_clocks)
+            len.max(caps.window_clocks)
         } else {
-            b - a
+            len
         };
         if on * 1000 > caps.duty_permille * budget_clocks + allowance {
             self.violate(
@@ -632,8 +678,8 @@ impl LineCheck {
             self.push_on(h.rise, end, h.source, !h.one_pulse);
         }
         // Windows still open are judged up to the end (the line is low after it).
-        while let Some((r, w)) = self.open_windows.pop_front() {
-            self.judge_window(r, r + w);
+        while let Some((r, w, caps)) = self.open_windows.pop_front() {
+            self.judge_window_caps(r, r + w, w, Some(caps));
         }
         self.spans.clear();
         self.recent.clear();

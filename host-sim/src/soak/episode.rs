@@ -51,6 +51,8 @@ pub enum Plant {
     /// After a refused scene the harness loads the built-in default scene (a device that resets
     /// on a bad upload).
     ResetOnRefusal,
+    /// `--plane` only: the port restarts the burst when the core turns it off for a lift-off.
+    CarrierOnLift,
 }
 
 /// What happened mid-episode.
@@ -98,6 +100,18 @@ pub struct EpisodeReport {
     pub kept: Vec<Violation>,
     /// Whether the episode crossed the core's 2^32 µs wrap.
     pub wrapped: bool,
+    /// `--plane`: the board's frame period, µs (what a sample lasts).
+    pub frame_us: u32,
+    /// `--plane`: edge pulses fired (the core's `Output2d::edge`).
+    pub edge_pulses: u64,
+    /// `--plane`: edge crossings the core skipped (`Telemetry2d::edges_skipped`).
+    pub edges_skipped: u64,
+    /// `--plane`: oriented-grating ridge pulses.
+    pub ridge_pulses: u64,
+    /// `--plane`: a rendering finger lifted (`Telemetry2d::lifts`).
+    pub lifts: u64,
+    /// `--plane`: the finger's pieces by [`super::gen2d::MOVES`] kind.
+    pub moves: [u64; super::gen2d::MOVES.len()],
 }
 
 /// The reference for the fault rule (`tests/tests/safety_fuzz.rs` `must_be_off`, online): the

@@ -10,6 +10,8 @@
 pub mod check;
 pub mod episode;
 pub mod gen;
+pub mod gen2d;
+pub mod plane;
 
 use std::process::ExitCode;
 use std::time::Instant;
@@ -59,6 +61,10 @@ pub struct SoakArgs {
     /// Print one JSON object instead of the summary.
     #[arg(long)]
     pub json: bool,
+    /// Soak the 2D plane instead: random 2D scenes, 2D fingers with lift-offs and landings,
+    /// touch faults, through the touch sensor and `Controller2d` (docs/soak.md, "The plane").
+    #[arg(long)]
+    pub plane: bool,
     /// A defect planted in the harness, to see the checks catch it (tests use it).
     #[arg(long, value_enum, default_value_t = Plant::None, hide = true)]
     pub plant: Plant,
@@ -90,6 +96,8 @@ pub struct SoakOptions {
     pub threads: Option<usize>,
     /// A defect planted in the harness.
     pub plant: Plant,
+    /// The 2D plane's soak (`--plane`) instead of the 1D one.
+    pub plane: bool,
 }
 
 /// A violation with the command that reproduces it.
@@ -156,12 +164,24 @@ pub struct Summary {
     pub checksum: String,
     /// The harness's planted defect (`none` for a real soak).
     pub plant: Plant,
+    /// The 2D plane's soak (`--plane`): samples are touch frames.
+    pub plane: bool,
+    /// `--plane`: edge pulses fired.
+    pub edge_pulses: u64,
+    /// `--plane`: edge crossings the core skipped.
+    pub edges_skipped: u64,
+    /// `--plane`: oriented-grating ridge pulses.
+    pub ridge_pulses: u64,
+    /// `--plane`: a rendering finger lifted.
+    pub lifts: u64,
+    /// `--plane`: the finger's pieces by kind.
+    pub moves: std::collections::BTreeMap<&'static str, u64>,
 }
 
 /// The command that reruns by itself the episode of `seed` holding global sample `sample`, its
 /// first `samples` samples (as many as the soak ran of it: a violation can be judged a few
 /// samples after the one it names, at a pulse's fall or the next rise).
-pub fn reproduce(seed: u64, sample: u64, samples: u64, plant: Plant) -> String {
+pub fn reproduce(seed: u64, sample: u64, samples: u64, plant: Plant, plane: bool) -> String {
     let from = sample - sample % EPISODE_SAMPLES;
     let plant = match plant {
         Plant::None => String::new(),
@@ -172,7 +192,8 @@ pub fn reproduce(seed: u64, sample: u64, samples: u64, plant: Plant) -> String {
                 .unwrap_or_default()
         ),
     };
-    format!("host-sim soak --seed {seed} --from {from} --samples {samples}{plant}")
+    let plane = if plane { " --plane" } else { "" };
+    format!("host-sim soak{plane} --seed {seed} --from {from} --samples {samples}{plant}")
 }
 
 /// Multiples of 2^32 µs in `(from_us, to_us]`.
@@ -201,13 +222,19 @@ pub fn run(opts: &SoakOptions) -> Summary {
         wall_s: 0.0,
         ratio: 0.0,
         threads,
-        wraps: wraps_between(
-            opts.from.saturating_mul(PERIOD_US),
-            end.saturating_mul(PERIOD_US),
-        ),
+        // The plane's episodes each run on their board's frame period: its wraps are counted
+        // per episode.
+        wraps: if opts.plane {
+            0
+        } else {
+            wraps_between(
+                opts.from.saturating_mul(PERIOD_US),
+                end.saturating_mul(PERIOD_US),
+            )
+        },
         wraps_in_episode: 0,
         pulses: 0,
-        faults: gen::SOAK_FAULTS.iter().map(|k| (*k, 0)).collect(),
+        faults: fault_names(opts.plane).iter().map(|k| (*k, 0)).collect(),
         faults_total: 0,
         off_samples: 0,
         reloads: 0,
@@ -220,6 +247,16 @@ pub fn run(opts: &SoakOptions) -> Summary {
         found: Vec::new(),
         checksum: String::new(),
         plant: opts.plant,
+        plane: opts.plane,
+        edge_pulses: 0,
+        edges_skipped: 0,
+        ridge_pulses: 0,
+        lifts: 0,
+        moves: if opts.plane {
+            gen2d::MOVES.iter().map(|k| (*k, 0)).collect()
+        } else {
+            Default::default()
+        },
     };
     let mut combined = episode::CRC64.digest();
     let mut e = first;
@@ -231,7 +268,11 @@ pub fn run(opts: &SoakOptions) -> Summary {
                 .map(|ep| {
                     let start = ep * EPISODE_SAMPLES;
                     let n = end.min(start + EPISODE_SAMPLES) - start;
-                    run_episode(opts.seed, ep, n, opts.plant)
+                    if opts.plane {
+                        plane::run_episode2d(opts.seed, ep, n, opts.plant)
+                    } else {
+                        run_episode(opts.seed, ep, n, opts.plant)
+                    }
                 })
                 .collect::<Vec<_>>()
         };
@@ -246,7 +287,11 @@ pub fn run(opts: &SoakOptions) -> Summary {
         e = chunk_end;
     }
     s.checksum = format!("{:016x}", combined.finalize());
-    s.simulated_s = s.samples as f64 * PERIOD_US as f64 * 1e-6;
+    if opts.plane {
+        s.wraps = s.wraps_in_episode;
+    } else {
+        s.simulated_s = s.samples as f64 * PERIOD_US as f64 * 1e-6;
+    }
     s.wall_s = started.elapsed().as_secs_f64();
     s.ratio = s.simulated_s / s.wall_s.max(1e-9);
     s
@@ -256,8 +301,18 @@ fn add(s: &mut Summary, r: &EpisodeReport, opts: &SoakOptions) {
     s.samples += r.samples;
     s.episodes += 1;
     s.wraps_in_episode += u64::from(r.wrapped);
+    if opts.plane {
+        s.simulated_s += r.samples as f64 * r.frame_us as f64 * 1e-6;
+        s.edge_pulses += r.edge_pulses;
+        s.edges_skipped += r.edges_skipped;
+        s.ridge_pulses += r.ridge_pulses;
+        s.lifts += r.lifts;
+        for (k, n) in gen2d::MOVES.iter().zip(r.moves) {
+            *s.moves.entry(k).or_default() += n;
+        }
+    }
     s.pulses += r.pulses;
-    for (k, n) in gen::SOAK_FAULTS.iter().zip(r.faults) {
+    for (k, n) in fault_names(opts.plane).iter().zip(r.faults) {
         *s.faults.entry(k).or_default() += n;
         s.faults_total += n;
     }
@@ -276,9 +331,18 @@ fn add(s: &mut Summary, r: &EpisodeReport, opts: &SoakOptions) {
             s.found.push(Found {
                 violation: v.clone(),
                 episode: r.episode,
-                reproduce: reproduce(opts.seed, v.sample, r.samples, opts.plant),
+                reproduce: reproduce(opts.seed, v.sample, r.samples, opts.plant, opts.plane),
             });
         }
+    }
+}
+
+/// The fault kinds' names: the 1D soak's or the plane's.
+fn fault_names(plane: bool) -> &'static [&'static str; 7] {
+    if plane {
+        &gen2d::FAULTS_2D
+    } else {
+        &gen::SOAK_FAULTS
     }
 }
 
@@ -287,7 +351,12 @@ pub fn render(s: &Summary) -> String {
     let mut out = String::new();
     let h = s.simulated_s / 3600.0;
     out.push_str(&format!(
-        "soak: seed {}, samples {}..{} ({} episodes of {EPISODE_SAMPLES}), {} threads{}\n",
+        "soak{}: seed {}, samples {}..{} ({} episodes of {EPISODE_SAMPLES}), {} threads{}\n",
+        if s.plane {
+            " --plane (2D, a sample is a touch frame)"
+        } else {
+            ""
+        },
         s.seed,
         s.from,
         s.from + s.samples,
@@ -308,6 +377,17 @@ pub fn render(s: &Summary) -> String {
         s.wraps, s.wraps_in_episode
     ));
     out.push_str(&format!("pulses checked: {}\n", s.pulses));
+    if s.plane {
+        let moves: Vec<String> = s.moves.iter().map(|(k, n)| format!("{k} {n}")).collect();
+        out.push_str(&format!(
+            "finger: {}; {} lifts while rendering\nedges: {} pulses ({} crossings skipped), {} ridge pulses\n",
+            moves.join(", "),
+            s.lifts,
+            s.edge_pulses,
+            s.edges_skipped,
+            s.ridge_pulses
+        ));
+    }
     let kinds: Vec<String> = s.faults.iter().map(|(k, n)| format!("{k} {n}")).collect();
     out.push_str(&format!(
         "faults injected: {} ({}); {} sample periods held off\n",
@@ -368,6 +448,7 @@ pub fn run_from_env() -> Option<ExitCode> {
         samples: a.samples,
         threads: a.threads,
         plant: a.plant,
+        plane: a.plane,
     });
     if a.json {
         match serde_json::to_string(&s) {
