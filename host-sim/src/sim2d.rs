@@ -451,8 +451,8 @@ pub fn demo_config() -> Config2d {
 
 /// A sensor calibrated on a noiseless copy of the overlay: three touches at (0.1, 0.1),
 /// (0.9, 0.5), (0.5, 0.9) of the plate, targets at those fractions of [`SCREEN_MM`], as a
-/// three-point calibration on a panel would be done.
-fn calibrated_sensor(
+/// three-point calibration on a panel would be done. The virtual board (`serve`) uses it too.
+pub(crate) fn calibrated_sensor(
     overlay: &Overlay,
     schedule: &Schedule,
     adc: &AdcTiming,

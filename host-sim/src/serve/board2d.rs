@@ -11,11 +11,9 @@ use saw_core::controller::{ConfigError, Telemetry};
 use saw_core::gate::GateAction;
 use saw_core::plane::{Controller2d, Telemetry2d, TouchFault};
 use saw_core::scene::Config;
-use saw_core::touch::calibration::{Affine, CalPoint};
-use saw_core::touch::fault::{Axis, RailBands};
+use saw_core::touch::fault::Axis;
 use saw_core::touch::frame::{Reading, TouchSensor};
 use saw_core::touch::plates::{AdcTiming, Schedule};
-use saw_core::touch::pressure::PressureConfig;
 use saw_link::msg::{Fault2d, Header, PlaneScene, Record2d, Reply, StoreFault};
 use saw_link::session::{Apply2dError, Board, Stamp};
 use saw_link::stream::{Batcher2d, Decimator, QUEUE_RECORDS};
@@ -83,7 +81,8 @@ impl VirtualBoard2d {
         let timer = burst_timer(board);
         let mut ctrl = Controller2d::new(timer, frame_us).map_err(|e| e.to_string())?;
         ctrl.load(&scene.config).map_err(|e| e.to_string())?;
-        let sensor = calibrated_sensor(&overlay, &sched, &adc)?;
+        let sensor =
+            crate::sim2d::calibrated_sensor(&overlay, &sched, &adc).map_err(|e| e.to_string())?;
         let tm = TimerModel::new(timer.clock_hz, timer.counter_bits, true).with_level(
             LevelPort::new(board.rf_level.table, board.rf_level.envelope_timer_clk_hz),
         );
@@ -239,37 +238,6 @@ fn fault_2d(f: TouchFault) -> Fault2d {
         },
         TouchFault::Stale => Fault2d::Stale,
     }
-}
-
-/// A sensor calibrated on a noiseless copy of the overlay: three touches at (0.1, 0.1),
-/// (0.9, 0.5), (0.5, 0.9) of the plate, targets at those fractions of [`SCREEN_MM`]. The same
-/// calibration as `sim2d`'s (private there; host-sim's other files are not this module's).
-fn calibrated_sensor(
-    overlay: &Overlay,
-    schedule: &Schedule,
-    adc: &AdcTiming,
-) -> Result<TouchSensor, String> {
-    let mut quiet = TouchModel::new(
-        Overlay {
-            noise_lsb: 0.0,
-            ..*overlay
-        },
-        0,
-    );
-    let (w_um, h_um) = (SCREEN_MM.0 * 1e3, SCREEN_MM.1 * 1e3);
-    let cal = [(0.1, 0.1), (0.9, 0.5), (0.5, 0.9)].map(|(x, y)| {
-        let f = Finger { x, y, force_n: 1.0 };
-        quiet.frame(schedule, adc, Some(&f), 0);
-        let fr = quiet.frame(schedule, adc, Some(&f), 0);
-        CalPoint {
-            x_code: fr.x_code,
-            y_code: fr.y_code,
-            x_um: (x * w_um).round() as i32,
-            y_um: (y * h_um).round() as i32,
-        }
-    });
-    let map = Affine::from_points(cal, &RailBands::default()).map_err(|e| e.to_string())?;
-    TouchSensor::new(PressureConfig::DEFAULT, RailBands::default(), map).map_err(|e| e.to_string())
 }
 
 impl Board for VirtualBoard2d {
