@@ -724,6 +724,7 @@ fn help_lists_every_command() {
         "  bench          the velocity estimators measured and charted (docs/bench-results.md)",
         "  budget         lag against noise per ADC configuration (docs/conversion-budget.md)",
         "  guard          outlier guards: lag against outlier error (docs/conversion-budget.md)",
+        "  touch-budget   the touch frame's phases against its period, per board (docs/touch.md)",
         "  help           this help, or a command's: host-sim help serve",
     ] {
         assert!(lines.contains(&want), "missing {want:?} in\n{text}");
@@ -746,6 +747,7 @@ fn help_command_gives_each_commands_help() {
         "bench",
         "budget",
         "guard",
+        "touch-budget",
     ] {
         let own = run(&[cmd, "--help"]);
         let via = run(&["help", cmd]);
@@ -777,7 +779,7 @@ fn help_command_gives_each_commands_help() {
         err.lines().next(),
         Some(
             "error: unknown command 'nope': host-sim's commands are serve, soak, model, \
-             tile-to-scene, bench, budget, guard"
+             tile-to-scene, bench, budget, guard, touch-budget"
         )
     );
 }
