@@ -55,16 +55,45 @@ impl Decimator {
     }
 }
 
-/// Packs records into stream frames.
-#[derive(Clone, Debug, Default)]
-pub struct Batcher {
-    records: Vec<Record, RECORDS_PER_FRAME>,
+/// A record kind the stream carries, and the reply its frame travels in.
+pub trait Streamed: Sized {
+    /// `records` as one stream frame's reply (`dropped`: the queue's drop count so far).
+    fn frame(dropped: u32, records: Vec<Self, RECORDS_PER_FRAME>) -> Reply;
+}
+
+impl Streamed for Record {
+    fn frame(dropped: u32, records: Vec<Self, RECORDS_PER_FRAME>) -> Reply {
+        Reply::Stream(Stream { dropped, records })
+    }
+}
+
+#[cfg(feature = "plane")]
+impl Streamed for Record2d {
+    fn frame(dropped: u32, records: Vec<Self, RECORDS_PER_FRAME>) -> Reply {
+        Reply::Stream2d(Stream2d { dropped, records })
+    }
+}
+
+/// Packs records into stream frames ([`Reply::Stream`] for 1D records, [`Reply::Stream2d`]
+/// for 2D ones: [`Batcher2d`]).
+#[derive(Clone, Debug)]
+pub struct Batcher<R = Record> {
+    records: Vec<R, RECORDS_PER_FRAME>,
     frames: u32,
 }
 
-impl Batcher {
+impl<R> Default for Batcher<R> {
+    fn default() -> Self {
+        Self {
+            records: Vec::new(),
+            frames: 0,
+        }
+    }
+}
+
+impl<R: Streamed> Batcher<R> {
     /// Adds a record; returns a full frame to send (`dropped`: the queue's drop count so far).
-    pub fn push(&mut self, record: Record, dropped: u32) -> Option<(Header, Reply)> {
+    pub fn push(&mut self, record: R, dropped: u32) -> Option<(Header, Reply)> {
         // Never full here: a full batch is handed out below before the next push.
         let _ = self.records.push(record);
         if self.records.is_full() {
@@ -85,42 +114,10 @@ impl Batcher {
         };
         self.frames = self.frames.wrapping_add(1);
         let records = core::mem::take(&mut self.records);
-        Some((header, Reply::Stream(Stream { dropped, records })))
+        Some((header, R::frame(dropped, records)))
     }
 }
 
+/// Packs 2D records into stream frames ([`Reply::Stream2d`]).
 #[cfg(feature = "plane")]
-/// Packs 2D records into stream frames ([`Reply::Stream2d`]), as [`Batcher`] does 1D ones.
-#[derive(Clone, Debug, Default)]
-#[cfg(feature = "plane")]
-pub struct Batcher2d {
-    records: Vec<Record2d, RECORDS_PER_FRAME>,
-    frames: u32,
-}
-
-#[cfg(feature = "plane")]
-impl Batcher2d {
-    /// Adds a record; returns a full frame to send.
-    pub fn push(&mut self, record: Record2d, dropped: u32) -> Option<(Header, Reply)> {
-        let _ = self.records.push(record);
-        if self.records.is_full() {
-            self.flush(dropped)
-        } else {
-            None
-        }
-    }
-
-    /// The records gathered so far as a frame, if any.
-    pub fn flush(&mut self, dropped: u32) -> Option<(Header, Reply)> {
-        if self.records.is_empty() {
-            return None;
-        }
-        let header = Header {
-            version: PROTOCOL_VERSION,
-            seq: self.frames,
-        };
-        self.frames = self.frames.wrapping_add(1);
-        let records = core::mem::take(&mut self.records);
-        Some((header, Reply::Stream2d(Stream2d { dropped, records })))
-    }
-}
+pub type Batcher2d = Batcher<Record2d>;
