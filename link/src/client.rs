@@ -287,13 +287,13 @@ impl<P: Read + Write> Client<P> {
             let Some((h, mut s)) = next else {
                 return Ok(None);
             };
-            if let Some(from_us) = self.from_us {
-                let before = s.records.len();
-                s.records.retain(|r| r.time_us >= from_us);
-                self.stale_records += (before - s.records.len()) as u64;
-                if s.records.is_empty() {
-                    continue;
-                }
+            if !keep_fresh(
+                &mut s.records,
+                self.from_us,
+                |r| r.time_us,
+                &mut self.stale_records,
+            ) {
+                continue;
             }
             return Ok(Some((h, s)));
         }
@@ -319,13 +319,13 @@ impl<P: Read + Write> Client<P> {
             let Some((h, mut s)) = next else {
                 return Ok(None);
             };
-            if let Some(from_us) = self.from_us {
-                let before = s.records.len();
-                s.records.retain(|r| r.time_us >= from_us);
-                self.stale_records += (before - s.records.len()) as u64;
-                if s.records.is_empty() {
-                    continue;
-                }
+            if !keep_fresh(
+                &mut s.records,
+                self.from_us,
+                |r| r.time_us,
+                &mut self.stale_records,
+            ) {
+                continue;
             }
             return Ok(Some((h, s)));
         }
@@ -386,4 +386,21 @@ impl<P: Read + Write> Client<P> {
             }
         }
     }
+}
+
+/// Takes out of a stream frame's `records` those sampled before the stream started
+/// (`from_us`), counting them in `stale`; false when none are left (the frame is skipped).
+fn keep_fresh<R, const N: usize>(
+    records: &mut heapless::Vec<R, N>,
+    from_us: Option<u64>,
+    time_us: impl Fn(&R) -> u64,
+    stale: &mut u64,
+) -> bool {
+    let Some(from_us) = from_us else {
+        return true;
+    };
+    let before = records.len();
+    records.retain(|r| time_us(r) >= from_us);
+    *stale += (before - records.len()) as u64;
+    !records.is_empty()
 }
