@@ -3,6 +3,9 @@
 //! board's touch schedule through the core's `TouchSensor` and `Controller2d` into the
 //! burst-timer model, as `sim2d::run` does, but incrementally, in real time, behind the link.
 //! The link's decisions are `saw_link::session`'s (`Session::new_2d`), as for the 1D board.
+//! The overlay's touch area is the plate of the scene the board boots with (a real board has one
+//! overlay, so a scene pushed later for a larger plate is refused by the session); the plates'
+//! electrical model (resistance, capacitance, noise) is `touch::Overlay`'s whatever the size.
 
 use std::collections::VecDeque;
 
@@ -11,15 +14,17 @@ use saw_core::controller::{ConfigError, Telemetry};
 use saw_core::gate::GateAction;
 use saw_core::plane::{Controller2d, Telemetry2d, TouchFault};
 use saw_core::scene::Config;
-use saw_core::touch::fault::Axis;
+use saw_core::touch::calibration::{Affine, CalPoint};
+use saw_core::touch::fault::{Axis, RailBands};
 use saw_core::touch::frame::{Reading, TouchSensor};
 use saw_core::touch::plates::{AdcTiming, Schedule};
+use saw_core::touch::pressure::PressureConfig;
 use saw_link::msg::{Fault2d, Header, PlaneScene, Record2d, Reply, StoreFault};
 use saw_link::session::{Apply2dError, Board, Stamp};
 use saw_link::stream::{Batcher2d, Decimator, QUEUE_RECORDS};
 
 use crate::sim::burst_timer;
-use crate::sim2d::{adc_timing, frame_period_us, schedule, SCREEN_MM};
+use crate::sim2d::{adc_timing, frame_period_us, schedule};
 use crate::timer::{LevelPort, TimerModel};
 use crate::touch::{Finger, Overlay, TouchModel};
 use crate::trajectory2d::Trajectory2d;
@@ -27,12 +32,41 @@ use crate::trajectory2d::Trajectory2d;
 /// Frames of the timer model kept before they are dropped: the virtual board runs for hours.
 const HISTORY_FRAMES: u64 = 3_000;
 
-/// The overlay's touch area, µm: `sim2d::SCREEN_MM`, the panel the model's plates stand for.
-pub fn plate_um() -> (u32, u32) {
-    (
-        (SCREEN_MM.0 * 1e3).round() as u32,
-        (SCREEN_MM.1 * 1e3).round() as u32,
-    )
+/// A sensor calibrated for an overlay whose touch area is `plate_um`: three touches on a
+/// noiseless copy of the overlay at (0.1, 0.1), (0.9, 0.5), (0.5, 0.9) of the plate, targets at
+/// those fractions of the plate, as a three-point calibration on a panel would be done.
+/// `sim2d::calibrated_sensor` does the same for the fixed 95 × 54 mm `SCREEN_MM`; this one
+/// takes the scene's plate.
+fn calibrated_sensor(
+    overlay: &Overlay,
+    schedule: &Schedule,
+    adc: &AdcTiming,
+    plate_um: (u32, u32),
+) -> Result<TouchSensor, Boot2dError> {
+    let mut quiet = TouchModel::new(
+        Overlay {
+            noise_lsb: 0.0,
+            ..*overlay
+        },
+        0,
+    );
+    let (w_um, h_um) = (plate_um.0 as f64, plate_um.1 as f64);
+    let cal = [(0.1, 0.1), (0.9, 0.5), (0.5, 0.9)].map(|(x, y)| {
+        let f = Finger { x, y, force_n: 1.0 };
+        // The first frame after a touch-down settles the model's filters; the second is read.
+        quiet.frame(schedule, adc, Some(&f), 0);
+        let fr = quiet.frame(schedule, adc, Some(&f), 0);
+        CalPoint {
+            x_code: fr.x_code,
+            y_code: fr.y_code,
+            x_um: (x * w_um).round() as i32,
+            y_um: (y * h_um).round() as i32,
+        }
+    });
+    let map = Affine::from_points(cal, &RailBands::default())
+        .map_err(|e| format!("the overlay's calibration: {e}"))?;
+    TouchSensor::new(PressureConfig::DEFAULT, RailBands::default(), map)
+        .map_err(|e| format!("the overlay's calibration: {e}"))
 }
 
 /// A Nucleo with the touch overlay, on the host.
@@ -44,6 +78,8 @@ pub struct VirtualBoard2d {
     adc: AdcTiming,
     tm: TimerModel,
     trajectory: Trajectory2d,
+    /// The overlay's touch area, µm: the boot scene's plate.
+    plate_um: (u32, u32),
     force_n: f64,
     frame_us: u32,
     next_k: u64,
@@ -64,6 +100,7 @@ pub type Boot2dError = String;
 impl VirtualBoard2d {
     /// Boots with `scene` (checked by `load_2d_for_board` at this board's frame period) and the
     /// finger on `trajectory`: 2 LSB of noise per conversion unless `noise_lsb` says otherwise.
+    /// The overlay's touch area is the scene's plate.
     pub fn boot(
         board: &'static BoardDef,
         scene: &PlaneScene,
@@ -81,8 +118,7 @@ impl VirtualBoard2d {
         let timer = burst_timer(board);
         let mut ctrl = Controller2d::new(timer, frame_us).map_err(|e| e.to_string())?;
         ctrl.load(&scene.config).map_err(|e| e.to_string())?;
-        let sensor =
-            crate::sim2d::calibrated_sensor(&overlay, &sched, &adc).map_err(|e| e.to_string())?;
+        let sensor = calibrated_sensor(&overlay, &sched, &adc, scene.plate_um)?;
         let tm = TimerModel::new(timer.clock_hz, timer.counter_bits, true).with_level(
             LevelPort::new(board.rf_level.table, board.rf_level.envelope_timer_clk_hz),
         );
@@ -94,6 +130,7 @@ impl VirtualBoard2d {
             adc,
             tm,
             trajectory,
+            plate_um: scene.plate_um,
             force_n: 1.0,
             frame_us,
             next_k: 0,
@@ -106,6 +143,11 @@ impl VirtualBoard2d {
             stamp: Stamp::default(),
             now_us: 0,
         })
+    }
+
+    /// The overlay's touch area, µm (width, height): the plate of the scene it booted with.
+    pub fn plate_um(&self) -> (u32, u32) {
+        self.plate_um
     }
 
     /// The touch frame period, µs.
@@ -130,8 +172,8 @@ impl VirtualBoard2d {
             let (t0_us, t_us) = (k * f, (k + 1) * f);
             let start = self.trajectory.state(t0_us as f64 * 1e-6);
             let (fx, fy) = (
-                start.x_um / 1e3 / SCREEN_MM.0,
-                start.y_um / 1e3 / SCREEN_MM.1,
+                start.x_um / self.plate_um.0 as f64,
+                start.y_um / self.plate_um.1 as f64,
             );
             let on_plate = (0.0..=1.0).contains(&fx) && (0.0..=1.0).contains(&fy);
             let finger = on_plate.then_some(Finger {
@@ -281,5 +323,56 @@ impl Board for VirtualBoard2d {
 
     async fn telemetry_2d(&mut self) -> Telemetry2d {
         self.ctrl.telemetry()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::trajectory2d::PointUm as TrajPoint;
+
+    /// The plate of an 80 × 60 mm scene: a resting finger is read where it rests on that plate,
+    /// on both axes. (Calibrated for the fixed 95 × 54 mm screen instead, a finger at (40, 30)
+    /// mm, half-way across this plate, read as (47.5, 27) mm.)
+    #[test]
+    fn the_overlay_is_the_boot_scenes_plate() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/2d-concave.toml");
+        let text = std::fs::read_to_string(path).unwrap();
+        let board = &saw_boards::NUCLEO_F446RE;
+        let frame_us = crate::sim2d::board_frame_period_us(board).unwrap();
+        let config =
+            saw_core::scene_file::load_2d_for_board(path, &text, burst_timer(board), frame_us)
+                .unwrap();
+        let scene = PlaneScene {
+            plate_um: (80_000, 60_000),
+            config,
+        };
+        for (x_mm, y_mm) in [(40.0, 30.0), (8.0, 52.0), (70.0, 3.0)] {
+            let rest = Trajectory2d::rest(TrajPoint::new(x_mm * 1e3, y_mm * 1e3)).unwrap();
+            let mut vb = VirtualBoard2d::boot(board, &scene, rest, 2.0, 1).unwrap();
+            assert_eq!(vb.plate_um(), (80_000, 60_000));
+            Board::stream(&mut vb, 1);
+            let mut n = 0;
+            // 100 ms of frames, drained every 5 ms (the queue holds 64 records).
+            for t_us in (5_000..=100_000).step_by(5_000) {
+                vb.run_until(t_us);
+                while let Some((_, reply)) = vb.next_frame(true) {
+                    let Reply::Stream2d(s) = reply else {
+                        panic!("not a 2D frame: {reply:?}")
+                    };
+                    for r in s.records.iter().filter_map(|r| r.position) {
+                        let (dx, dy) = (r.x_um as f64 - x_mm * 1e3, r.y_um as f64 - y_mm * 1e3);
+                        assert!(
+                            dx.abs() <= 300.0 && dy.abs() <= 300.0,
+                            "at ({x_mm}, {y_mm}) mm read ({}, {}) µm",
+                            r.x_um,
+                            r.y_um
+                        );
+                        n += 1;
+                    }
+                }
+            }
+            assert!(n > 100, "{n} readings at ({x_mm}, {y_mm}) mm");
+        }
     }
 }

@@ -71,7 +71,8 @@ pub struct ServeArgs {
     pub board: &'static BoardDef,
     /// The scene to run when no saved scene is stored (the built-in default without it). A 2D
     /// scene (`[sensor] kind = "4-wire"`, e.g. scenes/2d-fig12.toml) makes a board with the
-    /// 4-wire touch overlay (95 x 54 mm) that runs 2D scenes only; its finger goes round a
+    /// 4-wire touch overlay of the scene's plate ([screen] size_mm) that runs 2D scenes only (a
+    /// scene pushed for a larger plate is refused); its finger goes round a
     /// circle through the plate's middle at --speed, or rests at --rest-at-xy.
     #[arg(long, value_name = "FILE")]
     pub scene: Option<PathBuf>,
@@ -84,7 +85,7 @@ pub struct ServeArgs {
     #[arg(long, value_name = "MM", conflicts_with = "speed", help = AT.help("Finger at rest here instead (within the scene's travel; 1D scenes)"), value_parser = AT.parser())]
     pub rest_at: Option<f64>,
     /// The finger at rest at X,Y mm on the overlay instead (2D scenes; each 0 to the plate's
-    /// width / height: 95 and 54 mm).
+    /// width / height: the scene's plate).
     #[arg(long, value_name = "X,Y", conflicts_with_all = ["speed", "rest_at"], allow_hyphen_values = true, value_parser = crate::cli2d::xy_mm)]
     pub rest_at_xy: Option<(f64, f64)>,
     #[arg(long, value_name = "LSB", default_value_t = 2.0, help = NOISE.help("ADC noise per conversion"), value_parser = NOISE.parser())]
@@ -204,7 +205,7 @@ pub fn serve_with_clock(
             board: board.name,
             sample_rate_hz: 1_000_000 / vb.frame_us(),
         };
-        let session = Session::new_2d(identity, board2d::plate_um(), scene, SceneSource::BuildTime);
+        let session = Session::new_2d(identity, vb.plate_um(), scene, SceneSource::BuildTime);
         vb.set_stamp(session.stamp());
         let clock = BoardClock {
             start: Instant::now(),
@@ -275,17 +276,8 @@ fn scene_2d(a: &ServeArgs) -> Result<Option<PlaneScene>, String> {
     let config =
         saw_core::scene_file::load_2d_for_board(&name, &text, burst_timer(a.board), frame_us)
             .map_err(|e| e.to_string())?;
+    // The virtual overlay is the scene's plate (the reader has checked it: 1 mm to 1 m a side).
     let plate_um = saw_core::scene_file::plate_um_of(&name, &text).map_err(|e| e.to_string())?;
-    let overlay = board2d::plate_um();
-    if plate_um.0 > overlay.0 || plate_um.1 > overlay.1 {
-        return Err(format!(
-            "--scene {name}: its plate {} x {} mm does not fit the virtual overlay {} x {} mm",
-            plate_um.0 as f64 / 1e3,
-            plate_um.1 as f64 / 1e3,
-            overlay.0 as f64 / 1e3,
-            overlay.1 as f64 / 1e3
-        ));
-    }
     Ok(Some(PlaneScene { plate_um, config }))
 }
 
@@ -296,7 +288,7 @@ fn trajectory_2d(
     scene: &PlaneScene,
 ) -> Result<crate::trajectory2d::Trajectory2d, String> {
     use crate::trajectory2d::{PointUm, Trajectory2d};
-    let (w, h) = board2d::plate_um();
+    let (w, h) = scene.plate_um;
     match a.rest_at_xy {
         Some((x, y)) => {
             if !(0.0..=w as f64 / 1e3).contains(&x) || !(0.0..=h as f64 / 1e3).contains(&y) {
@@ -536,8 +528,8 @@ mod tests {
     const FIG12: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/2d-fig12.toml");
     const CONCAVE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/2d-concave.toml");
 
-    /// A 2D scene makes the overlay board; the rheostat's flags are refused with it, one line
-    /// naming the flag, and a scene for a larger plate than the virtual overlay is refused.
+    /// A 2D scene makes the overlay board, its plate the scene's; the rheostat's flags are
+    /// refused with it, one line naming the flag.
     #[test]
     fn a_2d_scene_takes_the_overlay_and_refuses_the_rheostats_flags() {
         let s = scene_2d(&args(&["--scene", FIG12])).unwrap().unwrap();
@@ -556,17 +548,23 @@ mod tests {
             let e = scene_2d(&args(&a)).unwrap_err();
             assert!(e.starts_with(starts) && !e.contains('\n'), "{e}");
         }
-        let e = scene_2d(&args(&["--scene", CONCAVE])).unwrap_err();
-        assert!(
-            e.ends_with("its plate 80 x 60 mm does not fit the virtual overlay 95 x 54 mm"),
-            "{e}"
-        );
-        // The resting finger must lie on the overlay.
+        // The 80 × 60 mm scene makes an 80 × 60 mm overlay (it was refused when the virtual
+        // overlay was fixed at 95 × 54 mm).
+        let c = scene_2d(&args(&["--scene", CONCAVE])).unwrap().unwrap();
+        assert_eq!(c.plate_um, (80_000, 60_000));
+        // The resting finger must lie on the overlay: the scene's plate.
         let a = args(&["--scene", FIG12, "--rest-at-xy", "96,10"]);
         let e = trajectory_2d(&a, &s).unwrap_err();
         assert_eq!(
             e,
             "--rest-at-xy 96,10: must lie on the overlay, x 0 to 95 mm and y 0 to 54 mm"
         );
+        let a = args(&["--scene", CONCAVE, "--rest-at-xy", "85,10"]);
+        let e = trajectory_2d(&a, &c).unwrap_err();
+        assert_eq!(
+            e,
+            "--rest-at-xy 85,10: must lie on the overlay, x 0 to 80 mm and y 0 to 60 mm"
+        );
+        assert!(trajectory_2d(&args(&["--scene", CONCAVE, "--rest-at-xy", "75,58"]), &c).is_ok());
     }
 }
