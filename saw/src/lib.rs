@@ -614,6 +614,10 @@ pub(crate) fn window<P: std::io::Read + std::io::Write>(
     applied(reply, what)
 }
 
+/// What a board whose firmware has no 2D scenes is told it lacks, when it answers a 2D request
+/// "unknown request" (`saw`, the panel and Python's `sawlink` say the same).
+pub const NO_2D_FIRMWARE: &str = "this board's firmware has no 2D scenes (it reads the slide rheostat): a 2D scene or a window edit needs a board with the 4-wire touch overlay";
+
 /// A board whose firmware was built without 2D scenes (saw-link's `plane` feature off: the 1D
 /// images) answers a 2D request "unknown request": said as the refusal it is, exit `code`.
 fn no_2d(e: ClientError, code: u8) -> Failure {
@@ -621,7 +625,7 @@ fn no_2d(e: ClientError, code: u8) -> Failure {
         ClientError::Link(saw_link::msg::LinkError::UnknownRequest { .. }) => Failure {
             code,
             kind: "refused",
-            message: "refused, nothing changed: this board's firmware has no 2D scenes (it reads the slide rheostat): a 2D scene or a window edit needs a board with the 4-wire touch overlay".into(),
+            message: format!("refused, nothing changed: {NO_2D_FIRMWARE}"),
         },
         e => e.into(),
     }
@@ -778,6 +782,34 @@ pub(crate) fn push_text<P: std::io::Read + std::io::Write>(
     }
 }
 
+/// A 2D scene file read for the board `hello` names, as host-sim reads it: dry-run for that
+/// board's burst timer at its touch frame period (a board with the overlay counts frames as
+/// samples, so `sample_rate_hz` is its frame rate), with the file's plate. `saw push`, the panel
+/// and Python's `sawlink` prepare a 2D push with it. The error is the reader's sentence, or
+/// one naming a board this tool does not know.
+pub fn plane_scene_for_board(
+    hello: &Hello,
+    name: &str,
+    text: &str,
+) -> Result<saw_link::msg::PlaneScene, String> {
+    let board = saw_boards::by_name(&hello.board).ok_or_else(|| {
+        format!(
+            "{name}: the board {} is not one this tool knows (saw-boards), so a 2D scene cannot be checked for it",
+            hello.board
+        )
+    })?;
+    let timer = saw_core::burst::BurstTimer {
+        clock_hz: board.burst_timer_clk_hz,
+        counter_bits: board.burst_timer_bits,
+        max_burst_hz: board.max_burst_hz,
+    };
+    let frame_us = 1_000_000 / hello.sample_rate_hz.max(1);
+    let config = saw_core::scene_file::load_2d_for_board(name, text, timer, frame_us)
+        .map_err(|e| e.to_string())?;
+    let plate_um = saw_core::scene_file::plate_um_of(name, text).map_err(|e| e.to_string())?;
+    Ok(saw_link::msg::PlaneScene { plate_um, config })
+}
+
 /// Loads a 2D scene file (issue #36): read and dry-run here for the board's burst timer at its
 /// touch frame period (what `hello` says: a board with the overlay counts frames as samples),
 /// as host-sim reads it, then sent with its plate. A board with the rheostat refuses it with
@@ -788,23 +820,7 @@ fn push_2d<P: std::io::Read + std::io::Write>(
     text: &str,
 ) -> Result<Done, Failure> {
     let hello = client.hello()?;
-    let board = saw_boards::by_name(&hello.board).ok_or_else(|| {
-        Failure::input(format!(
-            "{name}: the board {} is not one this tool knows (saw-boards), so a 2D scene cannot be checked for it",
-            hello.board
-        ))
-    })?;
-    let timer = saw_core::burst::BurstTimer {
-        clock_hz: board.burst_timer_clk_hz,
-        counter_bits: board.burst_timer_bits,
-        max_burst_hz: board.max_burst_hz,
-    };
-    let frame_us = 1_000_000 / hello.sample_rate_hz.max(1);
-    let config = saw_core::scene_file::load_2d_for_board(name, text, timer, frame_us)
-        .map_err(|e| Failure::input(e.to_string()))?;
-    let plate_um =
-        saw_core::scene_file::plate_um_of(name, text).map_err(|e| Failure::input(e.to_string()))?;
-    let scene = saw_link::msg::PlaneScene { plate_um, config };
+    let scene = plane_scene_for_board(&hello, name, text).map_err(Failure::input)?;
     match client
         .request(&Request::LoadScene2d(scene))
         .map_err(|e| no_2d(e, 2))?
