@@ -29,6 +29,39 @@ use crate::timer::{LevelPort, TimerModel};
 use crate::touch::{Finger, Overlay, TouchModel};
 use crate::trajectory2d::Trajectory2d;
 
+/// A fault the virtual overlay injects (`host-sim serve --fault` with a 2D scene).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TouchFaultKind {
+    /// One axis's position phase reads a rail: 0 (`high` false) or full scale, as an open or
+    /// shorted terminal reads (the core's per-axis rail check, `RailBands`).
+    Rail {
+        /// The Y phase (else X).
+        y_axis: bool,
+        /// Full scale (else 0).
+        high: bool,
+    },
+    /// The finger lifts off the overlay, landing again where its path is when the fault ends.
+    Lift,
+    /// No frames at all (the ADC or its DMA stopped): the core's stale watchdog turns the
+    /// carrier off after its limit.
+    Dropout,
+}
+
+/// A fault and when it lasts, µs of board time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TouchFaultWindow {
+    /// What happens.
+    pub kind: TouchFaultKind,
+    /// From, µs since boot.
+    pub start_us: u64,
+    /// Until (exclusive), µs since boot.
+    pub end_us: u64,
+}
+
+/// The largest code of a phase (16 conversions of 12 bits summed): a position phase at the high
+/// rail.
+const CODE_MAX: u16 = (saw_core::sample::CODE_FULL_SCALE - 1) as u16;
+
 /// Frames of the timer model kept before they are dropped: the virtual board runs for hours.
 const HISTORY_FRAMES: u64 = 3_000;
 
@@ -92,6 +125,8 @@ pub struct VirtualBoard2d {
     sent: u32,
     stamp: Stamp,
     now_us: u64,
+    /// The fault injected, if any.
+    fault: Option<TouchFaultWindow>,
 }
 
 /// Why the 2D board cannot start.
@@ -142,7 +177,13 @@ impl VirtualBoard2d {
             sent: 0,
             stamp: Stamp::default(),
             now_us: 0,
+            fault: None,
         })
+    }
+
+    /// Injects `fault` (frames from its start to its end, by their start time).
+    pub fn inject(&mut self, fault: TouchFaultWindow) {
+        self.fault = Some(fault);
     }
 
     /// The overlay's touch area, µm (width, height): the plate of the scene it booted with.
@@ -176,16 +217,39 @@ impl VirtualBoard2d {
                 start.y_um / self.plate_um.1 as f64,
             );
             let on_plate = (0.0..=1.0).contains(&fx) && (0.0..=1.0).contains(&fy);
-            let finger = on_plate.then_some(Finger {
+            let fault = self
+                .fault
+                .filter(|w| (w.start_us..w.end_us).contains(&t0_us))
+                .map(|w| w.kind);
+            let finger = (on_plate && fault != Some(TouchFaultKind::Lift)).then_some(Finger {
                 x: fx,
                 y: fy,
                 force_n: self.force_n,
             });
+            if fault == Some(TouchFaultKind::Dropout) {
+                // No frame: nothing read, nothing recorded; the watchdog's tick still runs.
+                self.tm.advance_to(clk(t_us));
+                let tick_us = t_us + f / 2;
+                if let Some(a) = self.ctrl.on_tick(tick_us as u32) {
+                    self.tm.apply(clk(tick_us), a);
+                    self.burst_millihz = 0;
+                }
+                self.next_k += 1;
+                continue;
+            }
             // Frame stamps are the controller's u32 µs (they wrap after 71 minutes, as the
             // firmware's would; the controller compares them by differences).
-            let frame = self
+            let mut frame = self
                 .model
                 .frame(&self.sched, &self.adc, finger.as_ref(), t_us as u32);
+            if let Some(TouchFaultKind::Rail { y_axis, high }) = fault {
+                let code = if high { CODE_MAX } else { 0 };
+                if y_axis {
+                    frame.y_code = code;
+                } else {
+                    frame.x_code = code;
+                }
+            }
             let reading = self.sensor.on_frame(&frame);
             let out = self.ctrl.on_reading(t_us as u32, reading);
             if let Some(e) = out.envelope {
@@ -330,6 +394,131 @@ impl Board for VirtualBoard2d {
 mod tests {
     use super::*;
     use crate::trajectory2d::PointUm as TrajPoint;
+    use saw_core::position::SensorFault;
+
+    /// `scenes/<name>` read for the F446 with its plate.
+    fn scene(name: &str) -> PlaneScene {
+        let path = format!("{}/../scenes/{name}", env!("CARGO_MANIFEST_DIR"));
+        let text = std::fs::read_to_string(&path).unwrap();
+        let board = &saw_boards::NUCLEO_F446RE;
+        let frame_us = crate::sim2d::board_frame_period_us(board).unwrap();
+        let config =
+            saw_core::scene_file::load_2d_for_board(&path, &text, burst_timer(board), frame_us)
+                .unwrap();
+        let plate_um = saw_core::scene_file::plate_um_of(&path, &text).unwrap();
+        PlaneScene { plate_um, config }
+    }
+
+    /// Every record of `until_us` of board time, the stream at every frame, drained every 5 ms.
+    fn records(vb: &mut VirtualBoard2d, until_us: u64) -> Vec<Record2d> {
+        Board::stream(vb, 1);
+        let mut out = Vec::new();
+        for t_us in (5_000..=until_us).step_by(5_000) {
+            vb.run_until(t_us);
+            while let Some((_, reply)) = vb.next_frame(true) {
+                let Reply::Stream2d(s) = reply else {
+                    panic!("not a 2D frame: {reply:?}")
+                };
+                out.extend(s.records.iter().copied());
+            }
+        }
+        out
+    }
+
+    /// The finger resting in fig. 12's window 0 (20 Hz), a fault injected from 30 to 60 ms.
+    fn faulted(kind: TouchFaultKind) -> Vec<Record2d> {
+        let rest = Trajectory2d::rest(TrajPoint::new(17_000.0, 27_000.0)).unwrap();
+        let board = &saw_boards::NUCLEO_F446RE;
+        let mut vb = VirtualBoard2d::boot(board, &scene("2d-fig12.toml"), rest, 2.0, 1).unwrap();
+        vb.inject(TouchFaultWindow {
+            kind,
+            start_us: 30_000,
+            end_us: 60_000,
+        });
+        records(&mut vb, 150_000)
+    }
+
+    /// A rail on one axis: every reading inside the window names that axis and rail with the
+    /// carrier off; none before it does, and after it the finger reads and renders again.
+    #[test]
+    fn an_injected_rail_is_read_as_that_axis_fault_and_turns_the_carrier_off() {
+        for (y_axis, high) in [(false, false), (true, true)] {
+            let r = faulted(TouchFaultKind::Rail { y_axis, high });
+            let want = Fault2d::Rail {
+                y_axis,
+                fault: if high {
+                    SensorFault::RailHigh
+                } else {
+                    SensorFault::RailLow
+                },
+            };
+            // One frame (347 µs) in at each end: a frame is faulted by its start time.
+            let inside: Vec<_> = r
+                .iter()
+                .filter(|r| (30_400..=60_000).contains(&r.time_us))
+                .collect();
+            assert!(inside.len() > 80, "{}", inside.len());
+            assert!(
+                inside.iter().all(|r| r.fault == Some(want) && !r.bursting),
+                "{:?}",
+                inside.iter().find(|r| r.fault != Some(want) || r.bursting)
+            );
+            let before: Vec<_> = r
+                .iter()
+                .filter(|r| (10_000..30_000).contains(&r.time_us))
+                .collect();
+            assert!(before
+                .iter()
+                .all(|r| r.fault.is_none() && r.bursting && r.position.is_some()));
+            let last = r.last().unwrap();
+            assert!(
+                last.time_us > 140_000 && last.fault.is_none() && last.bursting,
+                "{last:?}"
+            );
+        }
+    }
+
+    /// A lift: every reading inside the window is lifted, with no position and the carrier off;
+    /// the finger lands again after it.
+    #[test]
+    fn an_injected_lift_reads_lifted_and_the_finger_lands_after() {
+        let r = faulted(TouchFaultKind::Lift);
+        let inside: Vec<_> = r
+            .iter()
+            .filter(|r| (30_400..=60_000).contains(&r.time_us))
+            .collect();
+        assert!(inside.len() > 80);
+        assert!(inside
+            .iter()
+            .all(|r| r.lifted && r.position.is_none() && !r.bursting && r.fault.is_none()));
+        let last = r.last().unwrap();
+        let p = last.position.unwrap();
+        assert!(
+            (p.x_um - 17_000).abs() <= 300 && (p.y_um - 27_000).abs() <= 300,
+            "{last:?}"
+        );
+        assert!(last.bursting && !last.lifted);
+    }
+
+    /// A dropout: no readings at all inside the window (so no records), the stale watchdog's
+    /// fault counted (5 ms without a reading, the scene's limit), then readings again.
+    #[test]
+    fn an_injected_dropout_stops_the_readings() {
+        let rest = Trajectory2d::rest(TrajPoint::new(17_000.0, 27_000.0)).unwrap();
+        let board = &saw_boards::NUCLEO_F446RE;
+        let mut vb = VirtualBoard2d::boot(board, &scene("2d-fig12.toml"), rest, 2.0, 1).unwrap();
+        vb.inject(TouchFaultWindow {
+            kind: TouchFaultKind::Dropout,
+            start_us: 30_000,
+            end_us: 60_000,
+        });
+        let r = records(&mut vb, 150_000);
+        assert!(!r.iter().any(|r| (30_400..=60_000).contains(&r.time_us)));
+        assert!(r.iter().any(|r| r.time_us < 30_000) && r.iter().any(|r| r.time_us > 60_400));
+        assert!(r.last().unwrap().bursting);
+        let t = embassy_futures::block_on(Board::telemetry_2d(&mut vb));
+        assert_eq!(t.faults, 1, "{t:?}");
+    }
 
     /// The plate of an 80 × 60 mm scene: a resting finger is read where it rests on that plate,
     /// on both axes. (Calibrated for the fixed 95 × 54 mm screen instead, a finger at (40, 30)

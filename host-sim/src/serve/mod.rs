@@ -42,15 +42,54 @@ const FAULT_AT: Range = Range::new(0.0, 1e6, "s");
 const FAULT_FOR: Range = Range::new(0.001, 1e6, "s");
 const CLOCK_PPM: Range = Range::new(-1000.0, 1000.0, "ppm");
 
-/// A sensor fault the virtual board's ADC sees (`--fault`).
+/// A sensor fault the virtual board's ADC sees (`--fault`): the rheostat's (`open`, `short`),
+/// the touch overlay's (`rail-*`, `lift`), or either's (`dropout`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum ServeFault {
-    /// The wiper open: every conversion reads 0.
+    /// The wiper open: every conversion reads 0 (1D).
     Open,
-    /// The wiper shorted to the supply: every conversion reads full scale.
+    /// The wiper shorted to the supply: every conversion reads full scale (1D).
     Short,
-    /// No samples at all (the ADC or its DMA stopped).
+    /// No samples (touch frames) at all: the ADC or its DMA stopped.
     Dropout,
+    /// The overlay's X phase reads 0: an X terminal open or shorted low (2D).
+    RailLowX,
+    /// The overlay's X phase reads full scale (2D).
+    RailHighX,
+    /// The overlay's Y phase reads 0 (2D).
+    RailLowY,
+    /// The overlay's Y phase reads full scale (2D).
+    RailHighY,
+    /// The finger lifts off the overlay for the fault's span, then lands where its path is (2D).
+    Lift,
+}
+
+impl ServeFault {
+    /// What the virtual overlay does for it, or None for the rheostat's own faults.
+    fn touch(self) -> Option<board2d::TouchFaultKind> {
+        use board2d::TouchFaultKind as K;
+        match self {
+            ServeFault::Open | ServeFault::Short => None,
+            ServeFault::Dropout => Some(K::Dropout),
+            ServeFault::RailLowX => Some(K::Rail {
+                y_axis: false,
+                high: false,
+            }),
+            ServeFault::RailHighX => Some(K::Rail {
+                y_axis: false,
+                high: true,
+            }),
+            ServeFault::RailLowY => Some(K::Rail {
+                y_axis: true,
+                high: false,
+            }),
+            ServeFault::RailHighY => Some(K::Rail {
+                y_axis: true,
+                high: true,
+            }),
+            ServeFault::Lift => Some(K::Lift),
+        }
+    }
 }
 const SEED: Whole = Whole::new(0, u64::MAX);
 /// A partial stream frame goes out after this long, so a slow stream still arrives steadily.
@@ -96,7 +135,8 @@ pub struct ServeArgs {
     pub baud: u64,
     #[arg(long, value_name = "S", help = SECONDS.help("Stop after this long (default: run until interrupted)"), value_parser = SECONDS.parser())]
     pub seconds: Option<f64>,
-    /// A sensor fault to inject (with --fault-at and --fault-for): the core turns the carrier
+    /// A sensor fault to inject (with --fault-at and --fault-for; open and short with a 1D scene,
+    /// rail-* and lift with a 2D one, dropout with either): the core turns the carrier
     /// off while it lasts and reports it in the stream.
     #[arg(long, value_enum, requires_all = ["fault_at", "fault_for"])]
     pub fault: Option<ServeFault>,
@@ -200,6 +240,16 @@ pub fn serve_with_clock(
     if let Some(scene) = scene_2d(a)? {
         let mut vb =
             VirtualBoard2d::boot(board, &scene, trajectory_2d(a, &scene)?, a.noise, a.seed)?;
+        if let (Some(kind), Some(at), Some(dur)) =
+            (a.fault.and_then(ServeFault::touch), a.fault_at, a.fault_for)
+        {
+            let start_us = (at * 1e6) as u64;
+            vb.inject(board2d::TouchFaultWindow {
+                kind,
+                start_us,
+                end_us: start_us + (dur * 1e6) as u64,
+            });
+        }
         let identity = Identity {
             firmware: concat!("host-sim serve ", env!("CARGO_PKG_VERSION")),
             board: board.name,
@@ -265,8 +315,13 @@ fn scene_2d(a: &ServeArgs) -> Result<Option<PlaneScene>, String> {
             "a position on the rheostat's travel (use --rest-at-xy X,Y)",
         );
     }
-    if a.fault.is_some() {
-        return refuse("--fault", "the virtual overlay injects no faults yet");
+    if let Some(f) = a.fault.filter(|f| f.touch().is_none()) {
+        let name = clap::ValueEnum::to_possible_value(&f)
+            .map_or(String::new(), |v| v.get_name().to_string());
+        return refuse(
+            "--fault",
+            &format!("{name} is the rheostat's wiper fault (use rail-low-x, rail-high-x, rail-low-y, rail-high-y, lift or dropout)"),
+        );
     }
     if a.flash.is_some() {
         return refuse("--flash", "the store keeps 1D scenes only");
@@ -313,6 +368,14 @@ fn trajectory_2d(
 }
 
 fn params(a: &ServeArgs, board: &'static BoardDef) -> Result<(SimParams, SceneSource), String> {
+    if let Some(f) = a
+        .fault
+        .filter(|f| f.touch().is_some() && *f != ServeFault::Dropout)
+    {
+        let name = clap::ValueEnum::to_possible_value(&f)
+            .map_or(String::new(), |v| v.get_name().to_string());
+        return Err(format!("--fault {name}: a touch overlay's fault needs a 2D scene (--scene with [sensor] kind = \"4-wire\"); the rheostat's are open, short and dropout"));
+    }
     let (config, source) = match &a.scene {
         Some(path) => {
             let text = std::fs::read_to_string(path)
@@ -350,6 +413,8 @@ fn params(a: &ServeArgs, board: &'static BoardDef) -> Result<(SimParams, SceneSo
             ServeFault::Open => crate::adc::FaultKind::Open,
             ServeFault::Short => crate::adc::FaultKind::Short,
             ServeFault::Dropout => crate::adc::FaultKind::Dropout,
+            // Refused before (a touch overlay's fault on the rheostat).
+            _ => return Err(format!("--fault {kind:?}: not a rheostat fault")),
         };
         let start_us = (at * 1e6) as u64;
         p = p.with_faults(vec![crate::adc::FaultWindow {
@@ -539,7 +604,7 @@ mod tests {
             (vec!["--rest-at", "10"], "--rest-at: "),
             (
                 vec!["--fault", "open", "--fault-at", "1", "--fault-for", "1"],
-                "--fault: ",
+                "--fault: open is the rheostat's wiper fault",
             ),
             (vec!["--flash", "/tmp/x.bin"], "--flash: "),
         ] {
@@ -552,6 +617,33 @@ mod tests {
         // overlay was fixed at 95 × 54 mm).
         let c = scene_2d(&args(&["--scene", CONCAVE])).unwrap().unwrap();
         assert_eq!(c.plate_um, (80_000, 60_000));
+        // A touch overlay's fault with a 1D scene, one line naming the flag; dropout is either's.
+        let board = &saw_boards::NUCLEO_F446RE;
+        let e = params(
+            &args(&["--fault", "lift", "--fault-at", "1", "--fault-for", "1"]),
+            board,
+        )
+        .unwrap_err();
+        assert!(
+            e.starts_with("--fault lift: a touch overlay's fault needs a 2D scene"),
+            "{e}"
+        );
+        assert!(params(
+            &args(&["--fault", "dropout", "--fault-at", "1", "--fault-for", "1"]),
+            board
+        )
+        .is_ok());
+        let f = &[
+            "--scene",
+            FIG12,
+            "--fault",
+            "rail-high-y",
+            "--fault-at",
+            "1",
+            "--fault-for",
+            "1",
+        ];
+        assert!(scene_2d(&args(f)).is_ok());
         // The resting finger must lie on the overlay: the scene's plate.
         let a = args(&["--scene", FIG12, "--rest-at-xy", "96,10"]);
         let e = trajectory_2d(&a, &s).unwrap_err();
