@@ -214,3 +214,21 @@ def test_the_virtual_overlay_is_the_scenes_plate(start_board):
         assert len(on) > 100
         worst = max(abs(math.hypot(r.x_um / 1e3 - 40, r.y_um / 1e3 - 30) - 24) for r in on)
         assert worst <= 0.3, worst
+
+
+def test_an_injected_rail_fault_reaches_the_records(start_board):
+    # The virtual overlay's Y phase at full scale from 1.0 s to 1.5 s of board time
+    # (`host-sim serve --fault rail-high-y`), the finger resting in window 0.
+    vb = start_board("--scene", str(FIG12), "--rest-at-xy", "17,27", "--fault", "rail-high-y",
+                     "--fault-at", "1.0", "--fault-for", "0.5")
+    with sawlink.Board(vb.port, timeout_s=2.0) as b:
+        rec = b.record(seconds=2.0, every=EVERY)
+        faults_counted = b.counters()["core"]["faults"]
+    # A frame is faulted by its start: one frame (347 µs) of slack at each end.
+    inside = [r for r in rec if 1_000_400 <= r.time_us <= 1_500_000]
+    outside = [r for r in rec if r.time_us < 1_000_000 or r.time_us > 1_520_000]
+    assert len(inside) > 100 and outside
+    assert all(r.fault == "RailHigh-y" and not r.bursting and r.x_um is None for r in inside)
+    assert all(r.fault is None for r in outside)
+    assert outside[-1].bursting and abs(outside[-1].x_um - 17_000) <= 300
+    assert faults_counted >= 1
