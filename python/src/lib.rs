@@ -1236,7 +1236,8 @@ impl Board {
 
     /// Streams `seconds` (0.1 to 86 400 s) of telemetry, one record every `every` samples
     /// (1 to 10 000; 10 = 1 kHz on a 10 kHz board), and returns them as a `Recording`: every
-    /// record sampled after the board started this stream, none of an earlier one's. A stream
+    /// record sampled after the board started this stream, none of an earlier one's (`Record`s;
+    /// on a board with the touch overlay `Record2d`s, one every `every` touch frames). A stream
     /// that stalls for `timeout_s` raises `NoAnswer`.
     #[pyo3(signature = (seconds, every = 10, timeout_s = None))]
     fn record(
@@ -1297,8 +1298,9 @@ impl Board {
         })
     }
 
-    /// A live stream: iterate for records as they come, one every `every` samples (sampled
-    /// after the board started it); it ends after `seconds` if given, else when closed (`with
+    /// A live stream: iterate for records as they come (`Record`s, or `Record2d`s on a board
+    /// with the touch overlay), one every `every` samples (sampled after the board started
+    /// it); it ends after `seconds` if given, else when closed (`with
     /// board.stream() as s:` closes it). A wait of `timeout_s` for the next frame raises
     /// `NoAnswer`. Other calls on the board are refused while it runs.
     #[pyo3(signature = (every = 10, seconds = None, timeout_s = None))]
