@@ -1,12 +1,11 @@
 # Type stubs for `sawlink` (maturin ships this file in the wheel as sawlink/__init__.pyi, with
-# py.typed). Typed here: the experiment runner and the analysis (`Experiment`, `analyze`,
-# `ExperimentError`). The rest of the module (Board, Stream, Recording, Record, the other
-# exceptions) is not stubbed yet: the module-level `__getattr__` below tells type checkers this
-# stub is incomplete, so those names are `Any` rather than errors.
+# py.typed). Typed here: the board (`Board`, its records, recordings and streams, 1D and 2D), the
+# experiment runner and the analysis (`Experiment`, `analyze`), and the exceptions. The
+# module-level `__getattr__` below keeps anything not stubbed `Any` rather than an error.
 
 from os import PathLike
 from pathlib import Path
-from typing import Any, Dict, Optional, Sequence, Union
+from typing import Any, Dict, Iterator, List, Optional, Sequence, Union
 
 _Path = Union[str, PathLike[str]]
 
@@ -20,11 +19,139 @@ class ExperimentError(SawError):
     """A protocol, a session log or a data file refused, or the session's files not written:
     the experiment crate's own sentence."""
 
+class PortError(SawError):
+    """The port could not be opened or failed."""
+
+class PortMissing(PortError):
+    """No such port: the board is not plugged in (or no virtual board serves that path)."""
+
+class PortBusy(PortError):
+    """Another program (a `saw`, the web panel, another Board) holds the port."""
+
+class NoAnswer(SawError):
+    """The board did not answer within the call's timeout."""
+
+class ProtocolError(SawError):
+    """Another protocol version, a refused frame, an out-of-turn reply."""
+
+class Refused(SawError):
+    """The board refused the change and nothing changed (a 1D call on a board with the touch
+    overlay, or a 2D one on a rheostat board, too)."""
+    sentence: str
+
+class SaveFailed(SawError):
+    """The save failed; the scene saved before (if any) is kept."""
+    sentence: str
+
+class Record:
+    """One telemetry record of a board with the slide rheostat (1D scenes)."""
+    time_us: int
+    scene_id: int
+    change: int
+    position_um: Optional[int]
+    velocity_um_s: Optional[int]
+    region: Optional[int]
+    burst_millihz: int
+    bursting: bool
+    fault: Optional[str]
+    @property
+    def f_b_hz(self) -> float: ...
+
+class Record2d:
+    """One telemetry record of a board with the 4-wire touch overlay (2D scenes, issue #36)."""
+    time_us: int
+    scene_id: int
+    change: int
+    x_um: Optional[int]
+    y_um: Optional[int]
+    vx_um_s: Optional[int]
+    vy_um_s: Optional[int]
+    edge: Optional[int]
+    burst_millihz: int
+    bursting: bool
+    lifted: bool
+    fault: Optional[str]
+    @property
+    def window(self) -> Union[int, str, None]:
+        """The window's index, "background", or None while nothing renders."""
+    @property
+    def f_b_hz(self) -> float: ...
+
+class Recording:
+    """Records gathered by `Board.record`: `Record`s, or `Record2d`s on a 2D board."""
+    dropped: int
+    frames_lost: int
+    bad_frames: int
+    stale: int
+    from_us: int
+    rate_hz: float
+    every: int
+    @property
+    def plane(self) -> bool: ...
+    def __len__(self) -> int: ...
+    def __getitem__(self, i: int) -> Union[Record, Record2d]: ...
+    def columns(self) -> Dict[str, List[Any]]: ...
+    def to_pandas(self) -> Any: ...
+
+class Stream:
+    """A live stream from `Board.stream`: iterate for records; `with` stops it."""
+    rate_hz: float
+    from_us: int
+    @property
+    def dropped(self) -> int: ...
+    @property
+    def frames_lost(self) -> int: ...
+    def __iter__(self) -> Iterator[Union[Record, Record2d]]: ...
+    def __next__(self) -> Union[Record, Record2d]: ...
+    def close(self) -> None: ...
+    def __enter__(self) -> "Stream": ...
+    def __exit__(self, *exc: Any) -> bool: ...
+
 class Board:
-    """A board on a serial port (not stubbed yet: its attributes are `Any`)."""
+    """A board (or a virtual one) on a serial port, opened once and locked while open."""
 
     def __init__(self, port: _Path, timeout_s: float = 1.0) -> None: ...
-    def __getattr__(self, name: str) -> Any: ...
+    @property
+    def port(self) -> Path: ...
+    @property
+    def sample_rate_hz(self) -> int: ...
+    @property
+    def plane(self) -> bool:
+        """The board reads the 4-wire touch overlay and runs 2D scenes."""
+    def hello(self, timeout_s: Optional[float] = None) -> Dict[str, Any]: ...
+    def push(self, scene: Union[_Path, Dict[str, Any]], timeout_s: Optional[float] = None) -> int: ...
+    def push_text(self, text: str, name: str = "<text>", timeout_s: Optional[float] = None) -> int: ...
+    def get(self, timeout_s: Optional[float] = None) -> Dict[str, Any]: ...
+    def set(self, region: int, *pairs: str, timeout_s: Optional[float] = None, **keys: Any) -> int: ...
+    def boundary(self, index: int, mm: float, timeout_s: Optional[float] = None) -> int: ...
+    def move_window(
+        self, index: int, x_mm: float, y_mm: float, timeout_s: Optional[float] = None
+    ) -> int: ...
+    def resize_window(
+        self,
+        index: int,
+        x0_mm: float,
+        y0_mm: float,
+        x1_mm: float,
+        y1_mm: float,
+        timeout_s: Optional[float] = None,
+    ) -> int: ...
+    def drive(self, mode: str, timeout_s: Optional[float] = None) -> int: ...
+    def counters(self, reset: bool = False, timeout_s: Optional[float] = None) -> Dict[str, Any]: ...
+    def save(self, timeout_s: Optional[float] = None) -> Dict[str, Any]: ...
+    def ping(self) -> Dict[str, int]: ...
+    def record(self, seconds: float, every: int = 10, timeout_s: Optional[float] = None) -> Recording: ...
+    def stream(
+        self, every: int = 10, seconds: Optional[float] = None, timeout_s: Optional[float] = None
+    ) -> Stream: ...
+    def close(self) -> None: ...
+    def __enter__(self) -> "Board": ...
+    def __exit__(self, *exc: Any) -> bool: ...
+
+def scene_id_of_file(path: _Path) -> int: ...
+
+PROTOCOL_VERSION: int
+SAVE_TIMEOUT_S: float
 
 class Experiment:
     """A protocol run with one participant: the runner, its log (`<subject>.log.jsonl`, `.csv`,

@@ -19,13 +19,16 @@
 # by the runner (every trial answered, values it does not allow refused, half of it resumed);
 # `analysis_csv` — a session or lab CSV through the analysis' reader and the analysis;
 # `session_log` — a session log reopened as a resume does, its CSV read back and its protocol
-# resumed. The plane's (issue #36), bodies in the target files: `scene_file_2d` — a 2D scene
-# file through the 2D reader and the board check, an accepted one written back and read again;
-# `controller2d` — Controller2d over postcard-decoded configurations and arbitrary readings,
-# frames, ticks and reloads, on-times against the caps and the line off on lifts and faults
-# (their corpora are not replayed by `cargo test`). New inputs that reach new code are kept in fuzz/corpus/<target>/ (or in $NEW_INPUTS
-# when set, leaving the corpus as it is), which `cargo test -p saw-link --test fuzz_corpus` and
-# `cargo test -p saw-experiment --test fuzz_corpus` replay. A crash leaves its input in
+# resumed. The plane's (issue #36), bodies in fuzz/bodies/plane.rs (included by path by the
+# targets and by tests/tests/fuzz_corpus_2d.rs): `scene_file_2d` — a 2D scene file through the
+# 2D reader and the board check, an accepted one written back and read again; `controller2d` —
+# Controller2d over postcard-decoded configurations and arbitrary readings, frames, ticks and
+# reloads, on-times against the caps and the line off on lifts and faults; `link_bytes_2d` —
+# link_bytes' two doors into a 2D board's session over a real Controller2d, refusals changing
+# nothing. New inputs that reach new code are kept in fuzz/corpus/<target>/ (or in $NEW_INPUTS
+# when set, leaving the corpus as it is), which `cargo test -p saw-link --test fuzz_corpus`,
+# `cargo test -p saw-experiment --test fuzz_corpus` and `cargo test -p saw-tests --test
+# fuzz_corpus_2d` replay. A crash leaves its input in
 # fuzz/artifacts/<target>/ and fails the script.
 #
 # --plant NAME builds saw-core's `fuzz-plant-NAME` panic into the reader (docs/fuzzing.md) and
@@ -125,7 +128,7 @@ if [ -n "$PLANT" ]; then
     exit 1
 fi
 
-[ "${#TARGETS[@]}" -eq 0 ] && TARGETS=(link_bytes scene_file scene_struct protocol analysis_csv session_log scene_file_2d controller2d)
+[ "${#TARGETS[@]}" -eq 0 ] && TARGETS=(link_bytes scene_file scene_struct protocol analysis_csv session_log scene_file_2d controller2d link_bytes_2d)
 for t in "${TARGETS[@]}"; do
     mkdir -p "corpus/$t"
     options "$t"

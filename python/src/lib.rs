@@ -9,6 +9,11 @@
 //!     board.push("scenes/grating.toml")
 //!     rec = board.record(seconds=5, every=10)
 //! ```
+//!
+//! A board with the 4-wire touch overlay (issue #36) runs 2D scenes: the same `push`, `get`,
+//! `counters`, `record` and `stream` carry them (`Record2d`s, the 2D columns), `move_window` and
+//! `resize_window` edit them; a 1D call on it (or a 2D one on a rheostat board) raises `Refused`
+//! with the board's sentence.
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
@@ -21,7 +26,10 @@ use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 use saw::port::{self, Port};
 use saw_core::gate::DriveMode;
 use saw_link::client::{Client, ClientError, StreamStart};
-use saw_link::msg::{Header, Hello, Record, Reply, Request, PROTOCOL_VERSION};
+use saw_link::msg::{
+    Header, Hello, Record, Record2d, Refused2d, Reply, Request, SceneKind, Sensor,
+    Stream as StreamFrame, Stream2d, PROTOCOL_VERSION,
+};
 
 mod experiment;
 
@@ -114,6 +122,17 @@ fn whole_in(name: &str, v: i64, (lo, hi): (i64, i64)) -> PyResult<i64> {
 
 fn index_u8(name: &str, v: i64) -> PyResult<u8> {
     Ok(whole_in(name, v, (0, 255))? as u8)
+}
+
+/// A point on the plate from two coordinates in mm, each checked as `saw window` checks them
+/// (finite, 0 to 1000 mm), to the board's µm.
+fn point_um(x: (&str, f64), y: (&str, f64)) -> PyResult<saw_core::plane::PointUm> {
+    let x_mm = finite_in(x.0, x.1, MM, "mm")?;
+    let y_mm = finite_in(y.0, y.1, MM, "mm")?;
+    Ok(saw_core::plane::PointUm::new(
+        (x_mm * 1000.0).round() as i32,
+        (y_mm * 1000.0).round() as i32,
+    ))
 }
 
 /// A Python exception for a client failure.
@@ -281,6 +300,181 @@ impl PyRecord {
     }
 }
 
+/// One 2D telemetry record (a board with the touch overlay): the columns of `saw stream`'s 2D
+/// CSV (docs/link.md, "2D scenes").
+#[pyclass(frozen, name = "Record2d", module = "sawlink")]
+#[derive(Clone, Debug)]
+pub struct PyRecord2d {
+    /// The reading's time, µs since the board booted.
+    #[pyo3(get)]
+    time_us: u64,
+    /// The id of the scene in force at this reading.
+    #[pyo3(get)]
+    scene_id: u32,
+    /// Scene changes since boot at this reading.
+    #[pyo3(get)]
+    change: u32,
+    /// The finger on the plate, µm (None while lifted or faulted).
+    #[pyo3(get)]
+    x_um: Option<i32>,
+    /// The finger on the plate, µm (None while lifted or faulted).
+    #[pyo3(get)]
+    y_um: Option<i32>,
+    /// Velocity along x, µm/s, where the scene reads it (None elsewhere).
+    #[pyo3(get)]
+    vx_um_s: Option<i32>,
+    /// Velocity along y, µm/s, where the scene reads it (None elsewhere).
+    #[pyo3(get)]
+    vy_um_s: Option<i32>,
+    /// What is under the finger while it renders (the `window` getter).
+    place: Option<saw_core::plane::Place>,
+    /// The edge whose pulse fired at this reading, or None.
+    #[pyo3(get)]
+    edge: Option<u8>,
+    /// Burst frequency in force, mHz (0: no bursts).
+    #[pyo3(get)]
+    burst_millihz: u32,
+    /// Bursts (or an edge pulse) are running.
+    #[pyo3(get)]
+    bursting: bool,
+    /// No finger on the overlay.
+    #[pyo3(get)]
+    lifted: bool,
+    /// The touch fault in force (`"RailLow-x"`, `"RailHigh-y"`, `"Stale"`), or None.
+    #[pyo3(get)]
+    fault: Option<String>,
+}
+
+impl PyRecord2d {
+    fn of(r: &Record2d) -> Self {
+        PyRecord2d {
+            time_us: r.time_us,
+            scene_id: r.scene_id,
+            change: r.change,
+            x_um: r.position.map(|p| p.x_um),
+            y_um: r.position.map(|p| p.y_um),
+            vx_um_s: r.velocity_um_s.map(|v| v.0),
+            vy_um_s: r.velocity_um_s.map(|v| v.1),
+            place: r.place,
+            edge: r.edge,
+            burst_millihz: r.burst_millihz,
+            bursting: r.bursting,
+            lifted: r.lifted,
+            fault: r.fault.map(saw::record::fault_2d_name),
+        }
+    }
+
+    /// The `window` value: the window's index, `"background"`, or None.
+    fn window_object(&self, py: Python<'_>) -> PyResult<Option<PyObject>> {
+        use saw_core::plane::Place;
+        Ok(match self.place {
+            Some(Place::Window(i)) => Some(i.into_pyobject(py)?.into_any().unbind()),
+            Some(Place::Background) => Some("background".into_pyobject(py)?.into_any().unbind()),
+            None => None,
+        })
+    }
+}
+
+#[pymethods]
+impl PyRecord2d {
+    /// Burst frequency in force, Hz.
+    #[getter]
+    fn f_b_hz(&self) -> f64 {
+        self.burst_millihz as f64 / 1000.0
+    }
+
+    /// The window under the finger: its index, `"background"`, or None while nothing renders
+    /// (lifted, landing, a fault), as the CSV's `window` column.
+    #[getter]
+    fn window(&self, py: Python<'_>) -> PyResult<Option<PyObject>> {
+        self.window_object(py)
+    }
+
+    fn __repr__(&self) -> String {
+        use saw_core::plane::Place;
+        let opt = |v: Option<i32>| v.map_or("None".to_string(), |v| v.to_string());
+        let window = match self.place {
+            Some(Place::Window(i)) => i.to_string(),
+            Some(Place::Background) => "'background'".to_string(),
+            None => "None".to_string(),
+        };
+        format!(
+            "Record2d(time_us={}, scene_id={:#010x}, change={}, x_um={}, y_um={}, vx_um_s={}, vy_um_s={}, window={}, edge={}, burst_millihz={}, bursting={}, lifted={}, fault={})",
+            self.time_us,
+            self.scene_id,
+            self.change,
+            opt(self.x_um),
+            opt(self.y_um),
+            opt(self.vx_um_s),
+            opt(self.vy_um_s),
+            window,
+            self.edge.map_or("None".to_string(), |e| e.to_string()),
+            self.burst_millihz,
+            if self.bursting { "True" } else { "False" },
+            if self.lifted { "True" } else { "False" },
+            self.fault.as_deref().map_or("None".to_string(), |f| format!("{f:?}"))
+        )
+    }
+}
+
+/// The records of a recording: a rheostat board's or a touch overlay's.
+enum Records {
+    Line(Vec<PyRecord>),
+    Plane(Vec<PyRecord2d>),
+}
+
+impl Records {
+    fn len(&self) -> usize {
+        match self {
+            Records::Line(r) => r.len(),
+            Records::Plane(r) => r.len(),
+        }
+    }
+
+    /// Appends a frame's records (of the same board, so of the same kind).
+    fn append(&mut self, batch: Records) {
+        match (self, batch) {
+            (Records::Line(a), Records::Line(b)) => a.extend(b),
+            (Records::Plane(a), Records::Plane(b)) => a.extend(b),
+            // A board does not change its sensor; were it to, its records would not belong in
+            // one table.
+            _ => {}
+        }
+    }
+
+    /// Each record as the Python object `Stream` yields.
+    fn into_objects(self, py: Python<'_>) -> PyResult<Vec<PyObject>> {
+        match self {
+            Records::Line(r) => r
+                .into_iter()
+                .map(|r| Ok(Bound::new(py, r)?.into_any().unbind()))
+                .collect(),
+            Records::Plane(r) => r
+                .into_iter()
+                .map(|r| Ok(Bound::new(py, r)?.into_any().unbind()))
+                .collect(),
+        }
+    }
+}
+
+/// The column names of a 2D recording, in order (the 2D CSV's, without the host time).
+const COLUMNS_2D: [&str; 14] = [
+    "time_us",
+    "scene_id",
+    "change",
+    "x_um",
+    "y_um",
+    "vx_um_s",
+    "vy_um_s",
+    "window",
+    "edge",
+    "burst_millihz",
+    "f_b_hz",
+    "bursting",
+    "lifted",
+    "fault",
+];
+
 /// The column names of a recording, in order.
 const COLUMNS: [&str; 10] = [
     "time_us",
@@ -295,10 +489,11 @@ const COLUMNS: [&str; 10] = [
     "fault",
 ];
 
-/// Records gathered by `Board.record`, with what the link lost while they were gathered.
+/// Records gathered by `Board.record`, with what the link lost while they were gathered: `Record`s
+/// from a rheostat board, `Record2d`s from one with the touch overlay.
 #[pyclass(frozen, module = "sawlink")]
 pub struct Recording {
-    records: Vec<PyRecord>,
+    records: Records,
     /// Records the board dropped during the recording (its queue full: the line was busy).
     #[pyo3(get)]
     dropped: u64,
@@ -329,7 +524,13 @@ impl Recording {
         self.records.len()
     }
 
-    fn __getitem__(&self, i: isize) -> PyResult<PyRecord> {
+    /// The board runs 2D scenes: the records are `Record2d`s, the columns the 2D ones.
+    #[getter]
+    fn plane(&self) -> bool {
+        matches!(self.records, Records::Plane(_))
+    }
+
+    fn __getitem__(&self, py: Python<'_>, i: isize) -> PyResult<PyObject> {
         let n = self.records.len() as isize;
         let j = if i < 0 { i + n } else { i };
         if j < 0 || j >= n {
@@ -337,13 +538,43 @@ impl Recording {
                 "record {i} of a recording of {n}"
             )));
         }
-        Ok(self.records[j as usize].clone())
+        let j = j as usize;
+        Ok(match &self.records {
+            Records::Line(r) => Bound::new(py, r[j].clone())?.into_any().unbind(),
+            Records::Plane(r) => Bound::new(py, r[j].clone())?.into_any().unbind(),
+        })
     }
 
-    /// The records as a dict of lists, one list per field (`pandas.DataFrame(rec.columns())`).
+    /// The records as a dict of lists, one list per field (`pandas.DataFrame(rec.columns())`):
+    /// `Record`'s fields, or on a 2D board `Record2d`'s (x_um, y_um, vx_um_s, vy_um_s, window,
+    /// edge, …, lifted, fault).
     fn columns<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        let r = &self.records;
+        let r = match &self.records {
+            Records::Line(r) => r,
+            Records::Plane(r) => {
+                let c = &COLUMNS_2D;
+                d.set_item(c[0], r.iter().map(|r| r.time_us).collect::<Vec<_>>())?;
+                d.set_item(c[1], r.iter().map(|r| r.scene_id).collect::<Vec<_>>())?;
+                d.set_item(c[2], r.iter().map(|r| r.change).collect::<Vec<_>>())?;
+                d.set_item(c[3], r.iter().map(|r| r.x_um).collect::<Vec<_>>())?;
+                d.set_item(c[4], r.iter().map(|r| r.y_um).collect::<Vec<_>>())?;
+                d.set_item(c[5], r.iter().map(|r| r.vx_um_s).collect::<Vec<_>>())?;
+                d.set_item(c[6], r.iter().map(|r| r.vy_um_s).collect::<Vec<_>>())?;
+                let windows = r
+                    .iter()
+                    .map(|r| r.window_object(py))
+                    .collect::<PyResult<Vec<_>>>()?;
+                d.set_item(c[7], windows)?;
+                d.set_item(c[8], r.iter().map(|r| r.edge).collect::<Vec<_>>())?;
+                d.set_item(c[9], r.iter().map(|r| r.burst_millihz).collect::<Vec<_>>())?;
+                d.set_item(c[10], r.iter().map(|r| r.f_b_hz()).collect::<Vec<_>>())?;
+                d.set_item(c[11], r.iter().map(|r| r.bursting).collect::<Vec<_>>())?;
+                d.set_item(c[12], r.iter().map(|r| r.lifted).collect::<Vec<_>>())?;
+                d.set_item(c[13], r.iter().map(|r| r.fault.clone()).collect::<Vec<_>>())?;
+                return Ok(d);
+            }
+        };
         d.set_item(COLUMNS[0], r.iter().map(|r| r.time_us).collect::<Vec<_>>())?;
         d.set_item(COLUMNS[1], r.iter().map(|r| r.scene_id).collect::<Vec<_>>())?;
         d.set_item(COLUMNS[2], r.iter().map(|r| r.change).collect::<Vec<_>>())?;
@@ -397,6 +628,9 @@ pub struct Board {
     port: PathBuf,
     timeout: Duration,
     hello: Hello,
+    /// The board's touch overlay, µm (width, height), when it reads one (runs 2D scenes); None
+    /// for the slide rheostat. Asked at open and at every `hello()`.
+    overlay: Option<(u32, u32)>,
     /// The stream is running (a `Stream` iterator is open).
     streaming: bool,
 }
@@ -453,20 +687,28 @@ impl Board {
 
     /// Sends `request`, waits up to `wait` with the GIL released.
     fn ask(&mut self, py: Python<'_>, request: Request, wait: Duration) -> PyResult<Reply> {
-        if self.streaming {
-            return Err(SawError::new_err(
-                "a stream is running on this board: close it (or leave its `with` block) first",
-            ));
-        }
-        let client = self.client()?;
-        py.allow_threads(|| client.request_within(&request, wait))
-            .map_err(link_err)
+        self.ask_raw(py, request, wait)?.map_err(link_err)
     }
 
     fn applied(&mut self, py: Python<'_>, request: Request, wait: Duration) -> PyResult<u32> {
-        match self.ask(py, request, wait)? {
+        let plane_request = matches!(
+            request,
+            Request::MoveWindow { .. } | Request::ResizeWindow { .. }
+        );
+        let reply = match self.ask_raw(py, request, wait)? {
+            Ok(r) => r,
+            Err(e) if plane_request => return Err(no_2d(py, e)),
+            Err(e) => return Err(link_err(e)),
+        };
+        match reply {
             Reply::Applied { scene_id } => Ok(scene_id),
             Reply::Refused(e) => Err(with_sentence::<Refused>(
+                py,
+                format!("refused, nothing changed: {e}"),
+                e.to_string(),
+            )),
+            // A 2D edit refused, or a 1D one on a board with the overlay (and the reverse).
+            Reply::Refused2d(e) => Err(with_sentence::<Refused>(
                 py,
                 format!("refused, nothing changed: {e}"),
                 e.to_string(),
@@ -475,11 +717,52 @@ impl Board {
         }
     }
 
-    fn scene(&mut self, py: Python<'_>, wait: Duration) -> PyResult<(u32, Reply)> {
+    /// Sends `request` as [`Self::ask`] does: a running stream or a closed board raises here;
+    /// the client's own failure is left for the caller to word.
+    fn ask_raw(
+        &mut self,
+        py: Python<'_>,
+        request: Request,
+        wait: Duration,
+    ) -> PyResult<Result<Reply, ClientError>> {
+        if self.streaming {
+            return Err(SawError::new_err(
+                "a stream is running on this board: close it (or leave its `with` block) first",
+            ));
+        }
+        let client = self.client()?;
+        Ok(py.allow_threads(|| client.request_within(&request, wait)))
+    }
+
+    /// The board's active scene: `Reply::Scene` (1D) or `Reply::Scene2d`.
+    fn scene(&mut self, py: Python<'_>, wait: Duration) -> PyResult<Reply> {
         match self.ask(py, Request::GetScene, wait)? {
-            r @ Reply::Scene { scene_id, .. } => Ok((scene_id, r)),
+            r @ (Reply::Scene { .. } | Reply::Scene2d { .. }) => Ok(r),
             other => Err(unexpected(other)),
         }
+    }
+
+    /// The sensor the board reads: the overlay's plate, or None for the rheostat (also a board
+    /// from before 2D scenes, which answers "unknown request").
+    fn sensor(&mut self, py: Python<'_>, wait: Duration) -> PyResult<Option<(u32, u32)>> {
+        match self.ask_raw(py, Request::Sensor, wait)? {
+            Ok(Reply::Sensor(Sensor::FourWire { plate_um })) => Ok(Some(plate_um)),
+            Ok(Reply::Sensor(_)) => Ok(None),
+            Err(ClientError::Link(saw_link::msg::LinkError::UnknownRequest { .. })) => Ok(None),
+            Ok(other) => Err(unexpected(other)),
+            Err(e) => Err(link_err(e)),
+        }
+    }
+
+    /// A 1D call on a board with the overlay: the board's own sentence (the session's
+    /// `Refused2d::WrongSensor`), raised before anything is sent where the call would first have
+    /// to read a 1D scene the board does not have.
+    fn not_1d(&self, py: Python<'_>, plate_um: (u32, u32)) -> PyErr {
+        let e = Refused2d::WrongSensor {
+            asked: SceneKind::Line,
+            board: Sensor::FourWire { plate_um },
+        };
+        with_sentence::<Refused>(py, format!("refused, nothing changed: {e}"), e.to_string())
     }
 
     /// Loads the scene file `text` (named `name`): read and checked here, compiled on the board.
@@ -490,6 +773,11 @@ impl Board {
         text: &str,
         wait: Duration,
     ) -> PyResult<u32> {
+        let sensor =
+            saw_core::scene_file::sensor_of(name, text).map_err(|e| input(e.to_string()))?;
+        if sensor == saw_core::scene_file::SensorKind::FourWire {
+            return self.push_2d(py, name, text, wait);
+        }
         let doc = saw_core::scene_file::parse(name, text).map_err(|e| input(e.to_string()))?;
         match self.ask(py, Request::LoadScene(doc.config.clone()), wait)? {
             Reply::Applied { scene_id } => Ok(scene_id),
@@ -497,6 +785,31 @@ impl Board {
             Reply::Refused(e) => Err(with_sentence::<Refused>(
                 py,
                 doc.locate(&e).to_string(),
+                e.to_string(),
+            )),
+            // A board with the touch overlay: the file is 1D.
+            Reply::Refused2d(e) => Err(with_sentence::<Refused>(
+                py,
+                format!("{name}: refused by the board, nothing changed: {e}"),
+                e.to_string(),
+            )),
+            other => Err(unexpected(other)),
+        }
+    }
+
+    /// Loads a 2D scene file (`[sensor] kind = "4-wire"`): read and dry-run here for the board
+    /// `hello` named, at its frame period, as `saw push` does (`saw::plane_scene_for_board`),
+    /// then sent with its plate.
+    fn push_2d(&mut self, py: Python<'_>, name: &str, text: &str, wait: Duration) -> PyResult<u32> {
+        let scene = saw::plane_scene_for_board(&self.hello, name, text).map_err(input)?;
+        let reply = self
+            .ask_raw(py, Request::LoadScene2d(scene), wait)?
+            .map_err(|e| no_2d(py, e))?;
+        match reply {
+            Reply::Applied { scene_id } => Ok(scene_id),
+            Reply::Refused2d(e) => Err(with_sentence::<Refused>(
+                py,
+                format!("{name}: refused by the board, nothing changed: {e}"),
                 e.to_string(),
             )),
             other => Err(unexpected(other)),
@@ -520,6 +833,7 @@ impl Board {
     fn records_dropped(&mut self, py: Python<'_>, wait: Duration) -> PyResult<u32> {
         match self.ask(py, Request::Counters { reset: false }, wait)? {
             Reply::Counters(c) => Ok(c.link.records_dropped),
+            Reply::Counters2d(c) => Ok(c.link.records_dropped),
             other => Err(unexpected(other)),
         }
     }
@@ -535,10 +849,57 @@ impl Board {
         &mut self,
         py: Python<'_>,
         deadline: Instant,
-    ) -> PyResult<Option<(Header, saw_link::msg::Stream)>> {
+    ) -> PyResult<Option<(Header, StreamFrame)>> {
         let client = self.client()?;
         py.allow_threads(|| client.next_stream(deadline))
             .map_err(link_err)
+    }
+
+    fn next_frame_2d(
+        &mut self,
+        py: Python<'_>,
+        deadline: Instant,
+    ) -> PyResult<Option<(Header, Stream2d)>> {
+        let client = self.client()?;
+        py.allow_threads(|| client.next_stream_2d(deadline))
+            .map_err(link_err)
+    }
+
+    /// The next stream frame of whichever kind the board sends (its sensor's): its header, the
+    /// board's drop count and its records.
+    fn next_records(
+        &mut self,
+        py: Python<'_>,
+        deadline: Instant,
+    ) -> PyResult<Option<(Header, u32, Records)>> {
+        if self.overlay.is_some() {
+            let Some((h, s)) = self.next_frame_2d(py, deadline)? else {
+                return Ok(None);
+            };
+            let records = s.records.iter().map(PyRecord2d::of).collect();
+            Ok(Some((h, s.dropped, Records::Plane(records))))
+        } else {
+            let Some((h, s)) = self.next_frame(py, deadline)? else {
+                return Ok(None);
+            };
+            let records = s.records.iter().map(PyRecord::of).collect();
+            Ok(Some((h, s.dropped, Records::Line(records))))
+        }
+    }
+}
+
+/// A 2D request's failure: a board whose firmware has no 2D scenes answers "unknown request",
+/// raised as the refusal it is (`saw`'s sentence); any other failure as usual.
+fn no_2d(py: Python<'_>, e: ClientError) -> PyErr {
+    match e {
+        ClientError::Link(saw_link::msg::LinkError::UnknownRequest { .. }) => {
+            with_sentence::<Refused>(
+                py,
+                format!("refused, nothing changed: {}", saw::NO_2D_FIRMWARE),
+                saw::NO_2D_FIRMWARE.to_string(),
+            )
+        }
+        e => link_err(e),
     }
 }
 
@@ -587,9 +948,11 @@ impl Board {
                 scene_id: 0,
                 scene_source: saw_link::msg::SceneSource::Default,
             },
+            overlay: None,
             streaming: false,
         };
         board.hello = board.hello_reply(py, timeout)?;
+        board.overlay = board.sensor(py, timeout)?;
         Ok(board)
     }
 
@@ -605,25 +968,43 @@ impl Board {
         self.hello.sample_rate_hz
     }
 
-    /// Who is there: protocol, firmware, board, samples/s, the active scene's id and source.
+    /// The board reads the 4-wire touch overlay and runs 2D scenes (asked at open and at
+    /// every `hello()`).
+    #[getter]
+    fn plane(&self) -> bool {
+        self.overlay.is_some()
+    }
+
+    /// Who is there: protocol, firmware, board, samples/s (a board with the overlay: touch
+    /// frames/s), the active scene's id and source, and the sensor it reads (`{"kind":
+    /// "rheostat"}` or `{"kind": "4-wire", "plate_mm": [w, h]}`, as `saw --json hello`).
     #[pyo3(signature = (timeout_s = None))]
     fn hello(&mut self, py: Python<'_>, timeout_s: Option<f64>) -> PyResult<PyObject> {
         let wait = self.wait(timeout_s)?;
         let h = self.hello_reply(py, wait)?;
         self.hello = h.clone();
+        self.overlay = self.sensor(py, wait)?;
         // The names `saw --json hello` uses (a source as a word: "default", "saved", "link"),
         // with the scene id as a Python int.
         let mut v = serde_json::to_value(&h)
             .map_err(|e| SawError::new_err(format!("cannot convert a reply: {e}")))?;
         v["scene_source"] = saw::source_key(h.scene_source).into();
+        v["sensor"] = match self.overlay {
+            Some((w, h)) => serde_json::json!({
+                "kind": "4-wire",
+                "plate_mm": [w as f64 / 1000.0, h as f64 / 1000.0],
+            }),
+            None => serde_json::json!({ "kind": "rheostat" }),
+        };
         to_python(py, &v)
     }
 
     /// Loads a scene: a scene file's path, or a dict shaped like one (`{"substrate": {...},
-    /// "region": [{"kind": "grating", ...}, ...]}`, as `tomllib` reads a file). Read and checked
+    /// "region": [{"kind": "grating", ...}, ...]}`, as `tomllib` reads a file; a 2D scene's
+    /// `{"sensor": {"kind": "4-wire"}, "screen": {...}, "window": [...]}`). Read and checked
     /// here as `saw push` does, compiled on the board. Returns the scene id now running; raises
-    /// `Refused` (nothing changed) with the board's `.sentence`, `InputError` for a file that
-    /// does not read.
+    /// `Refused` (nothing changed) with the board's `.sentence` (a 1D scene on a board with the
+    /// overlay, a 2D one on a rheostat board too), `InputError` for a file that does not read.
     #[pyo3(signature = (scene, timeout_s = None))]
     fn push(
         &mut self,
@@ -652,26 +1033,44 @@ impl Board {
         self.push_text(py, &name, &text, wait)
     }
 
+    /// Loads a scene given as the text of a scene file (`name` stands for the file in error
+    /// messages), as `push` loads a file. Returns the scene id now running.
+    #[pyo3(name = "push_text", signature = (text, name = "<text>", timeout_s = None))]
+    fn push_text_py(
+        &mut self,
+        py: Python<'_>,
+        text: &str,
+        name: &str,
+        timeout_s: Option<f64>,
+    ) -> PyResult<u32> {
+        let wait = self.wait(timeout_s)?;
+        self.push_text(py, name, text, wait)
+    }
+
     /// The active scene: `{"scene_id": int, "scene_source": str, "scene": dict}`, the scene with the
     /// scene file's keys and units as `saw --json get` prints it.
     #[pyo3(signature = (timeout_s = None))]
     fn get(&mut self, py: Python<'_>, timeout_s: Option<f64>) -> PyResult<PyObject> {
         let wait = self.wait(timeout_s)?;
-        let (_, reply) = self.scene(py, wait)?;
-        let Reply::Scene {
-            scene_id,
-            source,
-            config,
-        } = reply
-        else {
-            unreachable!("scene() returns only a Scene")
+        // The scene file's keys and units (`saw --json get`): pushed back as a dict it is the
+        // same scene (a 2D scene with its [sensor] and [screen] tables).
+        let (scene_id, source, scene) = match self.scene(py, wait)? {
+            Reply::Scene {
+                scene_id,
+                source,
+                config,
+            } => (scene_id, source, saw::scene_json(&config)),
+            Reply::Scene2d {
+                scene_id,
+                source,
+                scene,
+            } => (scene_id, source, saw::scene_json_2d(&scene)),
+            other => return Err(unexpected(other)),
         };
         let d = PyDict::new(py);
         d.set_item("scene_id", scene_id)?;
         d.set_item("scene_source", saw::source_key(source))?;
-        // The scene file's keys and units (`saw --json get`): pushed back as a dict it is the
-        // same scene.
-        d.set_item("scene", to_python(py, &saw::scene_json(&config))?)?;
+        d.set_item("scene", to_python(py, &scene)?)?;
         Ok(d.into_any().unbind())
     }
 
@@ -705,10 +1104,15 @@ impl Board {
         }
         let table = saw::region_toml(&all).map_err(input)?;
         // Over the region's own values in the board's scene, as `saw set` does: the keys named
-        // change, the rest stay (a new kind starts from its defaults).
-        let (_, reply) = self.scene(py, wait)?;
-        let Reply::Scene { config, .. } = reply else {
-            unreachable!("scene() returns only a Scene")
+        // change, the rest stay (a new kind starts from its defaults). A board with the overlay
+        // has no regions: its own refusal of a 1D edit.
+        let config = match self.scene(py, wait)? {
+            Reply::Scene { config, .. } => config,
+            Reply::Scene2d { scene, .. } => {
+                let plate = self.overlay.unwrap_or(scene.plate_um);
+                return Err(self.not_1d(py, plate));
+            }
+            other => return Err(unexpected(other)),
         };
         let texture = saw::merged_texture(&config, region, &table).map_err(input)?;
         self.applied(py, Request::SetTexture { region, texture }, wait)
@@ -729,6 +1133,47 @@ impl Board {
         let wait = self.wait(timeout_s)?;
         let at_um = (mm * 1000.0).round() as u32;
         self.applied(py, Request::MoveBoundary { index, at_um }, wait)
+    }
+
+    /// Moves 2D window `index` whole so its bounding box's lower-left corner is at (`x_mm`,
+    /// `y_mm`) on the plate (each 0 to 1000 mm; the board refuses a point off its plate), live,
+    /// as `saw window INDEX --to X,Y`. Returns the scene id now running.
+    #[pyo3(signature = (index, x_mm, y_mm, timeout_s = None))]
+    fn move_window(
+        &mut self,
+        py: Python<'_>,
+        index: i64,
+        x_mm: f64,
+        y_mm: f64,
+        timeout_s: Option<f64>,
+    ) -> PyResult<u32> {
+        let window = index_u8("index", index)?;
+        let to = point_um(("x_mm", x_mm), ("y_mm", y_mm))?;
+        let wait = self.wait(timeout_s)?;
+        self.applied(py, Request::MoveWindow { window, to }, wait)
+    }
+
+    /// Gives 2D window `index`, an axis-aligned rectangle, the corners (`x0_mm`, `y0_mm`)
+    /// lower-left and (`x1_mm`, `y1_mm`) upper-right (each 0 to 1000 mm), live, as `saw window
+    /// INDEX --rect X0,Y0,X1,Y1`; a polygon window is refused (it only moves). Returns the scene
+    /// id now running.
+    #[pyo3(signature = (index, x0_mm, y0_mm, x1_mm, y1_mm, timeout_s = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn resize_window(
+        &mut self,
+        py: Python<'_>,
+        index: i64,
+        x0_mm: f64,
+        y0_mm: f64,
+        x1_mm: f64,
+        y1_mm: f64,
+        timeout_s: Option<f64>,
+    ) -> PyResult<u32> {
+        let window = index_u8("index", index)?;
+        let lo = point_um(("x0_mm", x0_mm), ("y0_mm", y0_mm))?;
+        let hi = point_um(("x1_mm", x1_mm), ("y1_mm", y1_mm))?;
+        let wait = self.wait(timeout_s)?;
+        self.applied(py, Request::ResizeWindow { window, lo, hi }, wait)
     }
 
     /// `"standing"` (both IDTs) or `"progressive"` (one IDT). Returns the scene id now running.
@@ -759,6 +1204,9 @@ impl Board {
         let wait = self.wait(timeout_s)?;
         match self.ask(py, Request::Counters { reset }, wait)? {
             Reply::Counters(c) => to_python(py, &c),
+            // A board with the overlay: the 2D core's (readings, lifts, window switches, edge
+            // pulses, …), the same link counters.
+            Reply::Counters2d(c) => to_python(py, &c),
             other => Err(unexpected(other)),
         }
     }
@@ -788,7 +1236,8 @@ impl Board {
 
     /// Streams `seconds` (0.1 to 86 400 s) of telemetry, one record every `every` samples
     /// (1 to 10 000; 10 = 1 kHz on a 10 kHz board), and returns them as a `Recording`: every
-    /// record sampled after the board started this stream, none of an earlier one's. A stream
+    /// record sampled after the board started this stream, none of an earlier one's (`Record`s;
+    /// on a board with the touch overlay `Record2d`s, one every `every` touch frames). A stream
     /// that stalls for `timeout_s` raises `NoAnswer`.
     #[pyo3(signature = (seconds, every = 10, timeout_s = None))]
     fn record(
@@ -805,7 +1254,12 @@ impl Board {
         let start = self.start_stream(py, every)?;
         let rate_hz = start.sample_rate_hz as f64 / every as f64;
         let end = Instant::now() + Duration::from_secs_f64(seconds);
-        let mut records = Vec::with_capacity((rate_hz * seconds) as usize + 64);
+        let capacity = (rate_hz * seconds) as usize + 64;
+        let mut records = if self.overlay.is_some() {
+            Records::Plane(Vec::with_capacity(capacity))
+        } else {
+            Records::Line(Vec::with_capacity(capacity))
+        };
         let mut tally = Tally::default();
         let stale_before = self.client()?.stale_records();
         let outcome = (|| loop {
@@ -813,10 +1267,10 @@ impl Board {
             if now >= end {
                 return Ok(());
             }
-            match self.next_frame(py, end.min(now + wait))? {
-                Some((h, s)) => {
-                    tally.frame(&h, s.dropped);
-                    records.extend(s.records.iter().map(PyRecord::of));
+            match self.next_records(py, end.min(now + wait))? {
+                Some((h, dropped, batch)) => {
+                    tally.frame(&h, dropped);
+                    records.append(batch);
                 }
                 None if Instant::now() >= end => return Ok(()),
                 None => return Err(stalled(wait)),
@@ -844,8 +1298,9 @@ impl Board {
         })
     }
 
-    /// A live stream: iterate for records as they come, one every `every` samples (sampled
-    /// after the board started it); it ends after `seconds` if given, else when closed (`with
+    /// A live stream: iterate for records as they come (`Record`s, or `Record2d`s on a board
+    /// with the touch overlay), one every `every` samples (sampled after the board started
+    /// it); it ends after `seconds` if given, else when closed (`with
     /// board.stream() as s:` closes it). A wait of `timeout_s` for the next frame raises
     /// `NoAnswer`. Other calls on the board are refused while it runs.
     #[pyo3(signature = (every = 10, seconds = None, timeout_s = None))]
@@ -952,7 +1407,8 @@ impl Board {
 #[pyclass(module = "sawlink")]
 pub struct Stream {
     board: Py<Board>,
-    pending: VecDeque<PyRecord>,
+    /// `Record`s or `Record2d`s, as the board sends them.
+    pending: VecDeque<PyObject>,
     tally: Tally,
     end: Option<Instant>,
     wait: Duration,
@@ -989,7 +1445,7 @@ impl Stream {
         slf
     }
 
-    fn __next__(&mut self, py: Python<'_>) -> PyResult<Option<PyRecord>> {
+    fn __next__(&mut self, py: Python<'_>) -> PyResult<Option<PyObject>> {
         loop {
             if let Some(r) = self.pending.pop_front() {
                 return Ok(Some(r));
@@ -1004,11 +1460,11 @@ impl Stream {
                 self.close(py)?;
                 return Ok(None);
             }
-            let frame = self.board.borrow_mut(py).next_frame(py, deadline)?;
+            let frame = self.board.borrow_mut(py).next_records(py, deadline)?;
             match frame {
-                Some((h, s)) => {
-                    self.tally.frame(&h, s.dropped);
-                    self.pending.extend(s.records.iter().map(PyRecord::of));
+                Some((h, dropped, batch)) => {
+                    self.tally.frame(&h, dropped);
+                    self.pending.extend(batch.into_objects(py)?);
                 }
                 None if self.end.is_some_and(|e| Instant::now() >= e) => {}
                 None => return Err(stalled(self.wait)),
@@ -1072,6 +1528,7 @@ fn sawlink(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Stream>()?;
     m.add_class::<Recording>()?;
     m.add_class::<PyRecord>()?;
+    m.add_class::<PyRecord2d>()?;
     m.add_function(wrap_pyfunction!(scene_id_of_file, m)?)?;
     experiment::register(m)?;
     m.add("SawError", py.get_type::<SawError>())?;

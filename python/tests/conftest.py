@@ -17,10 +17,13 @@ import pytest
 import sawlink
 
 REPO = Path(__file__).resolve().parents[2]
-# 1D scenes only: a file with a [sensor] table is a 2D scene (issue #36, `scenes/2d-*.toml`, the
-# rule of saw_core::scene_file::sensor_of), which the link does not carry.
+# 1D scenes: a file with a [sensor] table is a 2D scene (issue #36, `scenes/2d-*.toml`, the rule
+# of saw_core::scene_file::sensor_of), which runs on a board with the touch overlay
+# (test_plane.py).
 SCENES = sorted(p for p in (REPO / "scenes").glob("*.toml")
                 if "sensor" not in tomllib.loads(p.read_text()))
+SCENES_2D = sorted(p for p in (REPO / "scenes").glob("*.toml")
+                   if "sensor" in tomllib.loads(p.read_text()))
 HOST_SIM = Path(os.environ.get("SAWLINK_HOST_SIM", REPO / "target" / "release" / "host-sim"))
 
 

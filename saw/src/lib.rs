@@ -278,10 +278,11 @@ pub enum Command {
         #[arg(long, value_name = "N", default_value_t = 10, allow_negative_numbers = true, value_parser = every_n)]
         every: u16,
     },
-    /// Measure the link: the round trip of boundary moves (the scene is restored after), and
-    /// the fastest stream that arrives without a drop.
+    /// Measure the link: the round trip of boundary moves (window 0's moves on a board with the
+    /// touch overlay; the scene is restored after), and the fastest stream that arrives without
+    /// a drop.
     Bench {
-        /// Boundary moves to time (10 to 100000).
+        /// Boundary (or window) moves to time (10 to 100000).
         #[arg(long, default_value_t = 200, allow_negative_numbers = true, value_parser = moves_n)]
         moves: u32,
         /// Seconds each stream rate is tried (0.5 to 60).
@@ -614,6 +615,10 @@ pub(crate) fn window<P: std::io::Read + std::io::Write>(
     applied(reply, what)
 }
 
+/// What a board whose firmware has no 2D scenes is told it lacks, when it answers a 2D request
+/// "unknown request" (`saw`, the panel and Python's `sawlink` say the same).
+pub const NO_2D_FIRMWARE: &str = "this board's firmware has no 2D scenes (it reads the slide rheostat): a 2D scene or a window edit needs a board with the 4-wire touch overlay";
+
 /// A board whose firmware was built without 2D scenes (saw-link's `plane` feature off: the 1D
 /// images) answers a 2D request "unknown request": said as the refusal it is, exit `code`.
 fn no_2d(e: ClientError, code: u8) -> Failure {
@@ -621,7 +626,7 @@ fn no_2d(e: ClientError, code: u8) -> Failure {
         ClientError::Link(saw_link::msg::LinkError::UnknownRequest { .. }) => Failure {
             code,
             kind: "refused",
-            message: "refused, nothing changed: this board's firmware has no 2D scenes (it reads the slide rheostat): a 2D scene or a window edit needs a board with the 4-wire touch overlay".into(),
+            message: format!("refused, nothing changed: {NO_2D_FIRMWARE}"),
         },
         e => e.into(),
     }
@@ -778,6 +783,34 @@ pub(crate) fn push_text<P: std::io::Read + std::io::Write>(
     }
 }
 
+/// A 2D scene file read for the board `hello` names, as host-sim reads it: dry-run for that
+/// board's burst timer at its touch frame period (a board with the overlay counts frames as
+/// samples, so `sample_rate_hz` is its frame rate), with the file's plate. `saw push`, the panel
+/// and Python's `sawlink` prepare a 2D push with it. The error is the reader's sentence, or
+/// one naming a board this tool does not know.
+pub fn plane_scene_for_board(
+    hello: &Hello,
+    name: &str,
+    text: &str,
+) -> Result<saw_link::msg::PlaneScene, String> {
+    let board = saw_boards::by_name(&hello.board).ok_or_else(|| {
+        format!(
+            "{name}: the board {} is not one this tool knows (saw-boards), so a 2D scene cannot be checked for it",
+            hello.board
+        )
+    })?;
+    let timer = saw_core::burst::BurstTimer {
+        clock_hz: board.burst_timer_clk_hz,
+        counter_bits: board.burst_timer_bits,
+        max_burst_hz: board.max_burst_hz,
+    };
+    let frame_us = 1_000_000 / hello.sample_rate_hz.max(1);
+    let config = saw_core::scene_file::load_2d_for_board(name, text, timer, frame_us)
+        .map_err(|e| e.to_string())?;
+    let plate_um = saw_core::scene_file::plate_um_of(name, text).map_err(|e| e.to_string())?;
+    Ok(saw_link::msg::PlaneScene { plate_um, config })
+}
+
 /// Loads a 2D scene file (issue #36): read and dry-run here for the board's burst timer at its
 /// touch frame period (what `hello` says: a board with the overlay counts frames as samples),
 /// as host-sim reads it, then sent with its plate. A board with the rheostat refuses it with
@@ -788,23 +821,7 @@ fn push_2d<P: std::io::Read + std::io::Write>(
     text: &str,
 ) -> Result<Done, Failure> {
     let hello = client.hello()?;
-    let board = saw_boards::by_name(&hello.board).ok_or_else(|| {
-        Failure::input(format!(
-            "{name}: the board {} is not one this tool knows (saw-boards), so a 2D scene cannot be checked for it",
-            hello.board
-        ))
-    })?;
-    let timer = saw_core::burst::BurstTimer {
-        clock_hz: board.burst_timer_clk_hz,
-        counter_bits: board.burst_timer_bits,
-        max_burst_hz: board.max_burst_hz,
-    };
-    let frame_us = 1_000_000 / hello.sample_rate_hz.max(1);
-    let config = saw_core::scene_file::load_2d_for_board(name, text, timer, frame_us)
-        .map_err(|e| Failure::input(e.to_string()))?;
-    let plate_um =
-        saw_core::scene_file::plate_um_of(name, text).map_err(|e| Failure::input(e.to_string()))?;
-    let scene = saw_link::msg::PlaneScene { plate_um, config };
+    let scene = plane_scene_for_board(&hello, name, text).map_err(Failure::input)?;
     match client
         .request(&Request::LoadScene2d(scene))
         .map_err(|e| no_2d(e, 2))?
@@ -1029,8 +1046,18 @@ pub(crate) fn set<P: std::io::Read + std::io::Write>(
     let given = region_toml(keys).map_err(Failure::input)?;
     // The region is read in the board's scene: lengths are checked against its substrate, and
     // the values not named are the region's own.
-    let Reply::Scene { config, .. } = client.request(&Request::GetScene)? else {
-        return Err(Failure::link("the board did not send its scene".into()));
+    let config = match client.request(&Request::GetScene)? {
+        Reply::Scene { config, .. } => config,
+        // A board with the overlay has no regions: its own sentence for a 1D edit (the session's
+        // `WrongSensor`, which it answers `boundary` with), exit 1 as every refused edit.
+        Reply::Scene2d { .. } => {
+            let e = saw_link::msg::Refused2d::WrongSensor {
+                asked: saw_link::msg::SceneKind::Line,
+                board: board_sensor(client)?,
+            };
+            return Err(Failure::refused(format!("refused, nothing changed: {e}")));
+        }
+        other => return Err(unexpected(other)),
     };
     let texture = merged_texture(&config, index, &given).map_err(Failure::input)?;
     let reply = client.request(&Request::SetTexture {
@@ -1294,43 +1321,37 @@ fn ping<P: std::io::Read + std::io::Write>(
     })
 }
 
-/// Round trips of boundary moves and the lossless stream rate.
+/// Round trips of live edits and the lossless stream rate: boundary 0's moves on a board with
+/// the rheostat, window 0's on one with the touch overlay (the 2D analogue: a live edit of the
+/// scene's geometry), each restored after.
 fn bench<P: std::io::Read + std::io::Write>(
     client: &mut Client<P>,
     moves: u32,
     seconds: f64,
 ) -> Result<Done, Failure> {
-    let Reply::Scene { config, .. } = client.request(&Request::GetScene)? else {
-        return Err(Failure::link("the board did not send its scene".into()));
+    let (edit, requests) = match client.request(&Request::GetScene)? {
+        Reply::Scene { config, .. } => ("boundary", boundary_moves(&config)?),
+        Reply::Scene2d { scene, .. } => ("window", window_moves(&scene)?),
+        other => return Err(unexpected(other)),
     };
-    let Some(&at_um) = config.scene.boundaries_um.first() else {
-        return Err(Failure::input(
-            "the active scene has no boundary to move".into(),
-        ));
-    };
+    let [there, back, home] = requests;
     let mut rtt_us: Vec<f64> = Vec::with_capacity(moves as usize);
     for i in 0..moves {
-        // 0.1 mm either side of where it was: a real move each time, always a valid layout.
-        let to = if i % 2 == 0 {
-            at_um + 100
-        } else {
-            at_um.saturating_sub(100)
-        };
+        // A real move each time, always a valid layout.
+        let request = if i % 2 == 0 { &there } else { &back };
         let t = Instant::now();
-        match client.request(&Request::MoveBoundary {
-            index: 0,
-            at_um: to,
-        })? {
+        match client.request(request)? {
             Reply::Applied { .. } => {}
-            other => return Err(unexpected(other)),
+            other => return Err(bench_refused(other)),
         }
         rtt_us.push(t.elapsed().as_secs_f64() * 1e6);
     }
     // Back where it was: the same scene, so the board reports its source as before.
-    match client.request(&Request::MoveBoundary { index: 0, at_um })? {
+    match client.request(&home)? {
         Reply::Applied { .. } => {}
-        other => return Err(unexpected(other)),
+        other => return Err(bench_refused(other)),
     }
+    let plane = edit == "window";
     rtt_us.sort_by(f64::total_cmp);
     let pick = |q: f64| rtt_us[((rtt_us.len() - 1) as f64 * q).round() as usize];
     let (median, p99, max) = (pick(0.5), pick(0.99), pick(1.0));
@@ -1343,8 +1364,14 @@ fn bench<P: std::io::Read + std::io::Write>(
         client.start_stream(every)?;
         let end = Instant::now() + Duration::from_secs_f64(seconds);
         let mut records = 0u64;
-        while let Some((_, s)) = client.next_stream(end)? {
-            records += s.records.len() as u64;
+        if plane {
+            while let Some((_, s)) = client.next_stream_2d(end)? {
+                records += s.records.len() as u64;
+            }
+        } else {
+            while let Some((_, s)) = client.next_stream(end)? {
+                records += s.records.len() as u64;
+            }
         }
         // Frames still in flight after the stop are dropped by the client.
         client.stop_stream()?;
@@ -1358,7 +1385,7 @@ fn bench<P: std::io::Read + std::io::Write>(
         );
     }
     let text = format!(
-        "boundary move round trip over {moves} moves: median {:.0} µs, 99th percentile {:.0} µs, max {:.0} µs\n\
+        "{edit} move round trip over {moves} moves: median {:.0} µs, 99th percentile {:.0} µs, max {:.0} µs\n\
          fastest stream without a drop over {seconds} s: {}",
         median,
         p99,
@@ -1368,10 +1395,74 @@ fn bench<P: std::io::Read + std::io::Write>(
     Ok(Done {
         text,
         json: json!({
-            "moves": moves, "rtt_us": { "median": median, "p99": p99, "max": max },
+            "edit": edit, "moves": moves, "rtt_us": { "median": median, "p99": p99, "max": max },
             "lossless_rate_hz": lossless, "rates": rates,
         }),
     })
+}
+
+/// `bench`'s boundary moves on a 1D scene: boundary 0 0.1 mm up, back 0.1 mm below where it was,
+/// and home.
+fn boundary_moves(config: &Config) -> Result<[Request; 3], Failure> {
+    let Some(&at_um) = config.scene.boundaries_um.first() else {
+        return Err(Failure::input(
+            "the active scene has no boundary to move".into(),
+        ));
+    };
+    let at = |at_um| Request::MoveBoundary { index: 0, at_um };
+    Ok([at(at_um + 100), at(at_um.saturating_sub(100)), at(at_um)])
+}
+
+/// `bench`'s window moves on a 2D scene: window 0 (its bounding box's lower-left corner) 0.1 mm
+/// along x, back, and home. Towards the plate's middle along x, or along y if the window spans
+/// the plate's width, so every move stays on the plate.
+fn window_moves(scene: &saw_link::msg::PlaneScene) -> Result<[Request; 3], Failure> {
+    use saw_core::plane::PointUm;
+    let Some(w) = scene.config.scene.windows.first() else {
+        return Err(Failure::input(
+            "the active scene has no window to move".into(),
+        ));
+    };
+    let v = &w.outline.vertices;
+    let (lo_x, hi_x) = v.iter().fold((i32::MAX, i32::MIN), |(lo, hi), p| {
+        (lo.min(p.x_um), hi.max(p.x_um))
+    });
+    let (lo_y, hi_y) = v.iter().fold((i32::MAX, i32::MIN), |(lo, hi), p| {
+        (lo.min(p.y_um), hi.max(p.y_um))
+    });
+    let (w_um, h_um) = (scene.plate_um.0 as i64, scene.plate_um.1 as i64);
+    // A step of 0.1 mm that keeps the window on the plate, by axis: + if there is room above, −
+    // if below, none if the window spans that side of the plate within 0.1 mm.
+    let step = |lo: i32, hi: i32, size: i64| {
+        if hi as i64 + 100 <= size {
+            Some(100)
+        } else if lo >= 100 {
+            Some(-100)
+        } else {
+            None
+        }
+    };
+    let home = PointUm::new(lo_x, lo_y);
+    let moved = match (step(lo_x, hi_x, w_um), step(lo_y, hi_y, h_um)) {
+        (Some(dx), _) => PointUm::new(lo_x + dx, lo_y),
+        (None, Some(dy)) => PointUm::new(lo_x, lo_y + dy),
+        (None, None) => {
+            return Err(Failure::input(
+                "window 0 covers the whole plate: there is no room to move it".into(),
+            ))
+        }
+    };
+    let to = |to| Request::MoveWindow { window: 0, to };
+    Ok([to(moved), to(home), to(home)])
+}
+
+/// A bench move the board did not apply: its refusal (exit 1), or an out-of-turn reply.
+fn bench_refused(reply: Reply) -> Failure {
+    match reply {
+        Reply::Refused(e) => Failure::refused(format!("refused, nothing changed: {e}")),
+        Reply::Refused2d(e) => Failure::refused(format!("refused, nothing changed: {e}")),
+        other => unexpected(other),
+    }
 }
 
 fn counters<P: std::io::Read + std::io::Write>(

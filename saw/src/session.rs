@@ -64,7 +64,7 @@ fn parse(line: &str) -> Result<Step, String> {
         | Command::Experiment { .. }
         | Command::Bench { .. }
         | Command::Ping { .. } => Err(format!(
-            "`{}` does not run inside a session (it streams or holds the port itself); a session takes hello, push, get, boundary, set, drive, counters, save and wait",
+            "`{}` does not run inside a session (it streams or holds the port itself); a session takes hello, push, get, boundary, set, window, drive, counters, save and wait",
             words[0]
         )),
         c => Ok(Step::Run(c)),

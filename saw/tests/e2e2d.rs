@@ -295,3 +295,119 @@ fn a_board_with_the_rheostat_refuses_a_2d_scene_with_a_sentence() {
     // Still usable: a 1D edit runs.
     assert_eq!(saw(&vb.port, &["boundary", "0", "30"]).code, 0);
 }
+
+/// The sentence a board with the overlay answers a 1D edit with (the session's
+/// `Refused2d::WrongSensor`), as docs/link.md gives it.
+const NOT_1D: &str = "this board reads the 4-wire touch overlay, 95 x 54 mm (2D scenes): a 1D scene (regions, boundaries; no [sensor] table) needs a board with the slide rheostat";
+
+/// `saw session` on a 2D board: the 2D columns, `window` lines applied live (window 0 moved out
+/// from under the resting finger and back: the records of each part say so), and `boundary` and
+/// `set` lines answered with the board's sentence while the session goes on.
+#[test]
+fn a_session_on_a_2d_board_logs_its_columns_and_runs_window_lines() {
+    use std::io::Write;
+    let vb = VirtualBoard::start(&[
+        "--scene",
+        s(&scene("2d-fig12.toml")),
+        "--rest-at-xy",
+        "17,27",
+    ]);
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("session.csv");
+    let script = "wait 0.2\nwindow 0 --to 60,5\nwait 0.3\nboundary 0 30\nset 0 f_b_hz=30\nwindow 0 --to 5,5\nwait 0.3\n";
+    let mut child = Command::new(env!("CARGO_BIN_EXE_saw"))
+        .arg("--port")
+        .arg(&vb.port)
+        .args(["--json", "session", "--csv", s(&csv), "--every", "3"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(script.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{stdout} {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<Value> = stdout
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 8, "{stdout}");
+    let moved = lines[1]["result"]["applied"].as_str().unwrap().to_string();
+    let back = lines[5]["result"]["applied"].as_str().unwrap().to_string();
+    for i in [3, 4] {
+        assert_eq!(lines[i]["ok"], false, "{}", lines[i]);
+        assert_eq!(lines[i]["kind"], "refused", "{}", lines[i]);
+        assert_eq!(
+            lines[i]["error"],
+            format!("refused, nothing changed: {NOT_1D}"),
+            "{}",
+            lines[i]
+        );
+    }
+    assert_eq!(lines[7]["result"]["commands"], 7, "{}", lines[7]);
+    assert_eq!(lines[7]["result"]["commands_failed"], 2, "{}", lines[7]);
+
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut rows = text.lines();
+    assert_eq!(rows.next(), Some(saw::record::CSV_HEADER_2D));
+    let header: Vec<&str> = saw::record::CSV_HEADER_2D.split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    // Each scene's records: where the finger at (17, 27) mm is, window 0 or the background.
+    let mut seen: Vec<(String, std::collections::BTreeSet<String>)> = Vec::new();
+    for row in rows {
+        let r: Vec<&str> = row.split(',').collect();
+        let id = r[col("scene_id")].to_string();
+        match seen.last_mut() {
+            Some((last, windows)) if *last == id => {
+                windows.insert(r[col("window")].to_string());
+            }
+            _ => seen.push((id, [r[col("window")].to_string()].into())),
+        }
+    }
+    let ids: Vec<&str> = seen.iter().map(|(id, _)| id.as_str()).collect();
+    assert_eq!(ids.len(), 3, "{seen:?}");
+    assert_eq!(&ids[1..], [moved.as_str(), back.as_str()], "{seen:?}");
+    let windows: Vec<Vec<&str>> = seen
+        .iter()
+        .map(|(_, w)| w.iter().map(String::as_str).collect())
+        .collect();
+    assert_eq!(windows, [vec!["0"], vec!["background"], vec!["0"]]);
+}
+
+/// `saw bench` on a 2D board times window 0's moves, puts the window back (the scene id as
+/// before), and counts the 2D records of each stream rate (a bench reading 1D frames would
+/// count none and call every rate lossless).
+#[test]
+fn bench_on_a_2d_board_moves_a_window_and_streams_2d_records() {
+    let vb = VirtualBoard::start(&["--scene", s(&scene("2d-fig12.toml"))]);
+    let before = saw_json(&vb.port, &["hello"])["result"]["hello"]["scene_id"].clone();
+    let r = saw_json(&vb.port, &["bench", "--moves", "10", "--seconds", "0.5"]);
+    assert_eq!(r["ok"], true, "{r}");
+    let b = &r["result"];
+    assert_eq!(b["edit"], "window", "{b}");
+    assert_eq!(b["moves"], 10, "{b}");
+    let rates = b["rates"].as_array().unwrap();
+    assert_eq!(rates.len(), 6, "{b}");
+    for rate in rates {
+        let asked = rate["rate_hz"].as_f64().unwrap();
+        let records = rate["records"].as_f64().unwrap();
+        // At least a third of what 0.5 s at that rate gives (the line caps every frame at
+        // ~2 600/s), so the 2D records were read.
+        assert!(records >= asked * 0.5 / 3.0, "{rate}");
+    }
+    // Every third frame (960/s) fits the line: a lossless rate was found.
+    assert!(b["lossless_rate_hz"].as_f64().unwrap() >= 960.0, "{b}");
+    let after = saw_json(&vb.port, &["hello"])["result"]["hello"]["scene_id"].clone();
+    assert_eq!(after, before);
+}

@@ -42,15 +42,54 @@ const FAULT_AT: Range = Range::new(0.0, 1e6, "s");
 const FAULT_FOR: Range = Range::new(0.001, 1e6, "s");
 const CLOCK_PPM: Range = Range::new(-1000.0, 1000.0, "ppm");
 
-/// A sensor fault the virtual board's ADC sees (`--fault`).
+/// A sensor fault the virtual board's ADC sees (`--fault`): the rheostat's (`open`, `short`),
+/// the touch overlay's (`rail-*`, `lift`), or either's (`dropout`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum ServeFault {
-    /// The wiper open: every conversion reads 0.
+    /// The wiper open: every conversion reads 0 (1D).
     Open,
-    /// The wiper shorted to the supply: every conversion reads full scale.
+    /// The wiper shorted to the supply: every conversion reads full scale (1D).
     Short,
-    /// No samples at all (the ADC or its DMA stopped).
+    /// No samples (touch frames) at all: the ADC or its DMA stopped.
     Dropout,
+    /// The overlay's X phase reads 0: an X terminal open or shorted low (2D).
+    RailLowX,
+    /// The overlay's X phase reads full scale (2D).
+    RailHighX,
+    /// The overlay's Y phase reads 0 (2D).
+    RailLowY,
+    /// The overlay's Y phase reads full scale (2D).
+    RailHighY,
+    /// The finger lifts off the overlay for the fault's span, then lands where its path is (2D).
+    Lift,
+}
+
+impl ServeFault {
+    /// What the virtual overlay does for it, or None for the rheostat's own faults.
+    fn touch(self) -> Option<board2d::TouchFaultKind> {
+        use board2d::TouchFaultKind as K;
+        match self {
+            ServeFault::Open | ServeFault::Short => None,
+            ServeFault::Dropout => Some(K::Dropout),
+            ServeFault::RailLowX => Some(K::Rail {
+                y_axis: false,
+                high: false,
+            }),
+            ServeFault::RailHighX => Some(K::Rail {
+                y_axis: false,
+                high: true,
+            }),
+            ServeFault::RailLowY => Some(K::Rail {
+                y_axis: true,
+                high: false,
+            }),
+            ServeFault::RailHighY => Some(K::Rail {
+                y_axis: true,
+                high: true,
+            }),
+            ServeFault::Lift => Some(K::Lift),
+        }
+    }
 }
 const SEED: Whole = Whole::new(0, u64::MAX);
 /// A partial stream frame goes out after this long, so a slow stream still arrives steadily.
@@ -71,7 +110,8 @@ pub struct ServeArgs {
     pub board: &'static BoardDef,
     /// The scene to run when no saved scene is stored (the built-in default without it). A 2D
     /// scene (`[sensor] kind = "4-wire"`, e.g. scenes/2d-fig12.toml) makes a board with the
-    /// 4-wire touch overlay (95 x 54 mm) that runs 2D scenes only; its finger goes round a
+    /// 4-wire touch overlay of the scene's plate ([screen] size_mm) that runs 2D scenes only (a
+    /// scene pushed for a larger plate is refused); its finger goes round a
     /// circle through the plate's middle at --speed, or rests at --rest-at-xy.
     #[arg(long, value_name = "FILE")]
     pub scene: Option<PathBuf>,
@@ -84,7 +124,7 @@ pub struct ServeArgs {
     #[arg(long, value_name = "MM", conflicts_with = "speed", help = AT.help("Finger at rest here instead (within the scene's travel; 1D scenes)"), value_parser = AT.parser())]
     pub rest_at: Option<f64>,
     /// The finger at rest at X,Y mm on the overlay instead (2D scenes; each 0 to the plate's
-    /// width / height: 95 and 54 mm).
+    /// width / height: the scene's plate).
     #[arg(long, value_name = "X,Y", conflicts_with_all = ["speed", "rest_at"], allow_hyphen_values = true, value_parser = crate::cli2d::xy_mm)]
     pub rest_at_xy: Option<(f64, f64)>,
     #[arg(long, value_name = "LSB", default_value_t = 2.0, help = NOISE.help("ADC noise per conversion"), value_parser = NOISE.parser())]
@@ -95,7 +135,8 @@ pub struct ServeArgs {
     pub baud: u64,
     #[arg(long, value_name = "S", help = SECONDS.help("Stop after this long (default: run until interrupted)"), value_parser = SECONDS.parser())]
     pub seconds: Option<f64>,
-    /// A sensor fault to inject (with --fault-at and --fault-for): the core turns the carrier
+    /// A sensor fault to inject (with --fault-at and --fault-for; open and short with a 1D scene,
+    /// rail-* and lift with a 2D one, dropout with either): the core turns the carrier
     /// off while it lasts and reports it in the stream.
     #[arg(long, value_enum, requires_all = ["fault_at", "fault_for"])]
     pub fault: Option<ServeFault>,
@@ -199,12 +240,22 @@ pub fn serve_with_clock(
     if let Some(scene) = scene_2d(a)? {
         let mut vb =
             VirtualBoard2d::boot(board, &scene, trajectory_2d(a, &scene)?, a.noise, a.seed)?;
+        if let (Some(kind), Some(at), Some(dur)) =
+            (a.fault.and_then(ServeFault::touch), a.fault_at, a.fault_for)
+        {
+            let start_us = (at * 1e6) as u64;
+            vb.inject(board2d::TouchFaultWindow {
+                kind,
+                start_us,
+                end_us: start_us + (dur * 1e6) as u64,
+            });
+        }
         let identity = Identity {
             firmware: concat!("host-sim serve ", env!("CARGO_PKG_VERSION")),
             board: board.name,
             sample_rate_hz: 1_000_000 / vb.frame_us(),
         };
-        let session = Session::new_2d(identity, board2d::plate_um(), scene, SceneSource::BuildTime);
+        let session = Session::new_2d(identity, vb.plate_um(), scene, SceneSource::BuildTime);
         vb.set_stamp(session.stamp());
         let clock = BoardClock {
             start: Instant::now(),
@@ -264,8 +315,13 @@ fn scene_2d(a: &ServeArgs) -> Result<Option<PlaneScene>, String> {
             "a position on the rheostat's travel (use --rest-at-xy X,Y)",
         );
     }
-    if a.fault.is_some() {
-        return refuse("--fault", "the virtual overlay injects no faults yet");
+    if let Some(f) = a.fault.filter(|f| f.touch().is_none()) {
+        let name = clap::ValueEnum::to_possible_value(&f)
+            .map_or(String::new(), |v| v.get_name().to_string());
+        return refuse(
+            "--fault",
+            &format!("{name} is the rheostat's wiper fault (use rail-low-x, rail-high-x, rail-low-y, rail-high-y, lift or dropout)"),
+        );
     }
     if a.flash.is_some() {
         return refuse("--flash", "the store keeps 1D scenes only");
@@ -275,17 +331,8 @@ fn scene_2d(a: &ServeArgs) -> Result<Option<PlaneScene>, String> {
     let config =
         saw_core::scene_file::load_2d_for_board(&name, &text, burst_timer(a.board), frame_us)
             .map_err(|e| e.to_string())?;
+    // The virtual overlay is the scene's plate (the reader has checked it: 1 mm to 1 m a side).
     let plate_um = saw_core::scene_file::plate_um_of(&name, &text).map_err(|e| e.to_string())?;
-    let overlay = board2d::plate_um();
-    if plate_um.0 > overlay.0 || plate_um.1 > overlay.1 {
-        return Err(format!(
-            "--scene {name}: its plate {} x {} mm does not fit the virtual overlay {} x {} mm",
-            plate_um.0 as f64 / 1e3,
-            plate_um.1 as f64 / 1e3,
-            overlay.0 as f64 / 1e3,
-            overlay.1 as f64 / 1e3
-        ));
-    }
     Ok(Some(PlaneScene { plate_um, config }))
 }
 
@@ -296,7 +343,7 @@ fn trajectory_2d(
     scene: &PlaneScene,
 ) -> Result<crate::trajectory2d::Trajectory2d, String> {
     use crate::trajectory2d::{PointUm, Trajectory2d};
-    let (w, h) = board2d::plate_um();
+    let (w, h) = scene.plate_um;
     match a.rest_at_xy {
         Some((x, y)) => {
             if !(0.0..=w as f64 / 1e3).contains(&x) || !(0.0..=h as f64 / 1e3).contains(&y) {
@@ -321,6 +368,14 @@ fn trajectory_2d(
 }
 
 fn params(a: &ServeArgs, board: &'static BoardDef) -> Result<(SimParams, SceneSource), String> {
+    if let Some(f) = a
+        .fault
+        .filter(|f| f.touch().is_some() && *f != ServeFault::Dropout)
+    {
+        let name = clap::ValueEnum::to_possible_value(&f)
+            .map_or(String::new(), |v| v.get_name().to_string());
+        return Err(format!("--fault {name}: a touch overlay's fault needs a 2D scene (--scene with [sensor] kind = \"4-wire\"); the rheostat's are open, short and dropout"));
+    }
     let (config, source) = match &a.scene {
         Some(path) => {
             let text = std::fs::read_to_string(path)
@@ -358,6 +413,8 @@ fn params(a: &ServeArgs, board: &'static BoardDef) -> Result<(SimParams, SceneSo
             ServeFault::Open => crate::adc::FaultKind::Open,
             ServeFault::Short => crate::adc::FaultKind::Short,
             ServeFault::Dropout => crate::adc::FaultKind::Dropout,
+            // Refused before (a touch overlay's fault on the rheostat).
+            _ => return Err(format!("--fault {kind:?}: not a rheostat fault")),
         };
         let start_us = (at * 1e6) as u64;
         p = p.with_faults(vec![crate::adc::FaultWindow {
@@ -536,8 +593,8 @@ mod tests {
     const FIG12: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/2d-fig12.toml");
     const CONCAVE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/2d-concave.toml");
 
-    /// A 2D scene makes the overlay board; the rheostat's flags are refused with it, one line
-    /// naming the flag, and a scene for a larger plate than the virtual overlay is refused.
+    /// A 2D scene makes the overlay board, its plate the scene's; the rheostat's flags are
+    /// refused with it, one line naming the flag.
     #[test]
     fn a_2d_scene_takes_the_overlay_and_refuses_the_rheostats_flags() {
         let s = scene_2d(&args(&["--scene", FIG12])).unwrap().unwrap();
@@ -547,7 +604,7 @@ mod tests {
             (vec!["--rest-at", "10"], "--rest-at: "),
             (
                 vec!["--fault", "open", "--fault-at", "1", "--fault-for", "1"],
-                "--fault: ",
+                "--fault: open is the rheostat's wiper fault",
             ),
             (vec!["--flash", "/tmp/x.bin"], "--flash: "),
         ] {
@@ -556,17 +613,50 @@ mod tests {
             let e = scene_2d(&args(&a)).unwrap_err();
             assert!(e.starts_with(starts) && !e.contains('\n'), "{e}");
         }
-        let e = scene_2d(&args(&["--scene", CONCAVE])).unwrap_err();
+        // The 80 × 60 mm scene makes an 80 × 60 mm overlay (it was refused when the virtual
+        // overlay was fixed at 95 × 54 mm).
+        let c = scene_2d(&args(&["--scene", CONCAVE])).unwrap().unwrap();
+        assert_eq!(c.plate_um, (80_000, 60_000));
+        // A touch overlay's fault with a 1D scene, one line naming the flag; dropout is either's.
+        let board = &saw_boards::NUCLEO_F446RE;
+        let e = params(
+            &args(&["--fault", "lift", "--fault-at", "1", "--fault-for", "1"]),
+            board,
+        )
+        .unwrap_err();
         assert!(
-            e.ends_with("its plate 80 x 60 mm does not fit the virtual overlay 95 x 54 mm"),
+            e.starts_with("--fault lift: a touch overlay's fault needs a 2D scene"),
             "{e}"
         );
-        // The resting finger must lie on the overlay.
+        assert!(params(
+            &args(&["--fault", "dropout", "--fault-at", "1", "--fault-for", "1"]),
+            board
+        )
+        .is_ok());
+        let f = &[
+            "--scene",
+            FIG12,
+            "--fault",
+            "rail-high-y",
+            "--fault-at",
+            "1",
+            "--fault-for",
+            "1",
+        ];
+        assert!(scene_2d(&args(f)).is_ok());
+        // The resting finger must lie on the overlay: the scene's plate.
         let a = args(&["--scene", FIG12, "--rest-at-xy", "96,10"]);
         let e = trajectory_2d(&a, &s).unwrap_err();
         assert_eq!(
             e,
             "--rest-at-xy 96,10: must lie on the overlay, x 0 to 95 mm and y 0 to 54 mm"
         );
+        let a = args(&["--scene", CONCAVE, "--rest-at-xy", "85,10"]);
+        let e = trajectory_2d(&a, &c).unwrap_err();
+        assert_eq!(
+            e,
+            "--rest-at-xy 85,10: must lie on the overlay, x 0 to 80 mm and y 0 to 60 mm"
+        );
+        assert!(trajectory_2d(&args(&["--scene", CONCAVE, "--rest-at-xy", "75,58"]), &c).is_ok());
     }
 }
