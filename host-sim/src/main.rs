@@ -146,10 +146,12 @@ fn help(topic: &[String]) -> ExitCode {
     }
 }
 
-/// Samples the bare core loop draws for the speed line (its slices run them in turn: 64
-/// slices take 139 264).
-const BARE_CORE_SAMPLES: u64 = 200_000;
-/// Fewest slices the bare core loop's figure is the median of: a run too short to have them
+/// Samples the bare core loop draws for the speed line (3.3 s of the run's trajectory, three
+/// legs of the default triangle; its slices run them in turn, from the fresh controller again
+/// after the last): 0.26 MB, drawn before the run, so the resident memory the run reports
+/// holds them.
+const BARE_CORE_SAMPLES: u64 = 32_768;
+/// Fewest slices the bare core loop's figure is the mean of: a run too short to have them
 /// between its chunks, and a scenario run (which has none), run the rest after it.
 const BARE_MIN_SLICES: usize = 32;
 
@@ -176,13 +178,19 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
             let period_s = sim::sample_period_us(params.board) as f64 * 1e-6;
             let n = sim::samples_in(&params);
             let mut next_mark = (10.0 / period_s) as u64;
+            // The index of the next sample to mark (a mark or the last): one comparison a
+            // sample.
+            let mut due = next_mark.min(n).saturating_sub(1);
             let threads = sim::stream_threads();
             let st = sim::stream_timed(&params, true, threads, Some(&mut bare), |k| {
-                if k + 1 == next_mark || k + 1 == n {
+                if k == due {
                     if let Some(b) = sim::resident_bytes() {
                         memory.push(((k + 1) as f64 * period_s, b));
                     }
-                    next_mark *= 10;
+                    if k + 1 == next_mark {
+                        next_mark = next_mark.saturating_mul(10);
+                    }
+                    due = next_mark.min(n).saturating_sub(1);
                 }
             })?;
             let data = st.chart.ok_or("the streamed run kept no chart")?;
@@ -219,14 +227,14 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
     println!("chart: {}", output.display());
     let in_run = bare.slices();
     bare.top_up(BARE_MIN_SLICES);
-    // The bare loop's CPU time per sample: the median of its slices (a slice that another
-    // process's work on the same CPU slowed, through the caches it left, is an outlier there).
-    let bare_ns = |q| {
-        bare.ns_per_sample_at(q)
-            .ok_or("the bare core loop could not be timed")
-    };
-    let (bare_lo, bare_mid, bare_hi) = (bare_ns(0.25)?, bare_ns(0.5)?, bare_ns(0.75)?);
-    let bare_s = bare_mid * 1e-9;
+    // The bare loop's CPU time per sample: the mean of its slices, spread over the run as the
+    // closed loop's CPU time is (`sim::BareCore`); the quartiles show how much the machine
+    // moved it.
+    let untimed = "the bare core loop could not be timed";
+    let bare_ns = |q| bare.ns_per_sample_at(q).ok_or(untimed);
+    let (bare_lo, bare_hi) = (bare_ns(0.25)?, bare_ns(0.75)?);
+    let bare_mean = bare.ns_per_sample().ok_or(untimed)?;
+    let bare_s = bare_mean * 1e-9;
     let per_sample = sim_s / m.samples.max(1) as f64;
     let period_s = header.sample_period_us as f64 * 1e-6;
     let slices = match in_run {
@@ -248,7 +256,7 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
     println!(
         "simulated {:.2} s in {:.3} s: {:.0}× real time ({:.0} ns per sample: ADC model, core, \
          timer model, metrics{}); the bare core loop alone runs at {:.0}× ({:.1} ns per sample \
-         in CPU time, the median of {slices}, quartiles {bare_lo:.1}–{bare_hi:.1} ns), so the \
+         in CPU time, the mean of {slices}, quartiles {bare_lo:.1}–{bare_hi:.1} ns), so the \
          closed loop costs {:.1}× the core; with the chart written, {:.2} s in all",
         params.duration_s,
         sim_s,
@@ -263,7 +271,7 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
             }
         },
         period_s / bare_s,
-        bare_mid,
+        bare_mean,
         per_sample / bare_s,
         started.elapsed().as_secs_f64()
     );

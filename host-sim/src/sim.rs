@@ -438,6 +438,14 @@ pub struct ClosedLoop<E: VelocityEstimator> {
     clock_hz: u64,
     period_us: u32,
     action_latency_us: u32,
+    /// Kernel clocks a sample period takes, where that is a whole number (both boards: 100 µs
+    /// of a clock in whole 10 kHz), and the action latency's: then a period's clock is
+    /// `k · period + latency` exactly, one multiply, not a conversion of its time.
+    period_clk: Option<u64>,
+    latency_clk: u64,
+    /// From a sample to the stale watchdog's tick after it, µs: half a period, or the action
+    /// latency if longer.
+    tick_after_us: u64,
     fault: Option<SensorFault>,
     region: Option<u8>,
 }
@@ -452,6 +460,7 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
         ctrl.velocity_every_sample(true);
         let adc =
             AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
+        let (period_us, clock_hz) = (sample_period_us(params.board), timer.clock_hz as u64);
         Ok(Self {
             ctrl,
             adc,
@@ -462,8 +471,12 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
                 ),
             ),
             clock_hz: timer.clock_hz as u64,
-            period_us: sample_period_us(params.board),
+            period_us,
             action_latency_us: params.action_latency_us,
+            period_clk: (period_us as u64 * clock_hz % 1_000_000 == 0)
+                .then_some(period_us as u64 * clock_hz / 1_000_000),
+            latency_clk: params.action_latency_us as u64 * clock_hz / 1_000_000,
+            tick_after_us: (period_us as u64 / 2).max(params.action_latency_us as u64),
             fault: None,
             region: None,
         })
@@ -472,6 +485,16 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
     /// Kernel-clock ticks at `t_us`.
     pub fn clk(&self, t_us: u64) -> u64 {
         t_us * self.clock_hz / 1_000_000
+    }
+
+    /// [`Self::clk`] of period `k`'s time `t_us` plus the action latency: ⌊(k·P + L)·f / 10⁶⌋
+    /// is k·(P·f / 10⁶) + ⌊L·f / 10⁶⌋ when P·f / 10⁶ is whole.
+    #[inline(always)]
+    fn clk_acting(&self, k: u64, t_us: u64) -> u64 {
+        match self.period_clk {
+            Some(p) => k * p + self.latency_clk,
+            None => self.clk(t_us + self.action_latency_us as u64),
+        }
     }
 
     /// Sample period `k`: the finger at `state`, the sample (unless the ADC model drops it),
@@ -585,8 +608,8 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
             out.region = region;
             region_code = region.map_or(-1, i16::from);
         }
-        self.tm.advance_to(self.clk(t_us + latency));
-        let tick_us = t_us + (self.period_us as u64 / 2).max(latency);
+        self.tm.advance_to(self.clk_acting(k, t_us));
+        let tick_us = t_us + self.tick_after_us;
         if let Some(a) = self.ctrl.on_tick(tick_us as u32) {
             self.tm.apply(self.clk(tick_us), a);
             action = Some(a);
@@ -965,12 +988,19 @@ pub const BARE_SLICES_AIMED: u64 = 64;
 /// machine is measured against.
 ///
 /// It is timed in slices of [`BARE_SLICE`] samples, each in its thread's CPU time, and its
-/// figure is their median. [`stream_timed`] runs them on the closed loop's own thread between
-/// its chunks, so the bare loop and the closed loop share the machine as it is during the run:
-/// the same other work, the same CPU, the feeder busy on the other. (Timed after the run as
-/// the best of five 200 000-sample passes in wall time, as before, the figure moved from 22 to
-/// 40 ns between runs on a quiet machine and to 54–89 ns under load: each pass was as long as
-/// a scheduler's time slice, so any other work on the CPU fell into all five.)
+/// figure is their mean ([`Self::ns_per_sample`]). [`stream_timed`] runs them on the closed
+/// loop's own thread between its chunks, spread evenly over the run, so the bare loop and the
+/// closed loop share the machine as it is during the run: the same other work, the same CPU,
+/// the feeder busy on the other. The closed loop's figure is its threads' CPU time over the
+/// whole run, a mean over whatever the machine did meanwhile; the slices' mean is the same
+/// kind of figure over the same stretch. (On this machine's virtual CPUs the bare loop runs
+/// about 23 ns a sample while the other CPU idles and about 40 ns while it compiles, and a
+/// run's slices can hold both: a median would pick one of the two.)
+///
+/// Before, it was timed after the run as the best of five 200 000-sample passes in wall time:
+/// with the feeder gone, and each pass as long as a scheduler's time slice (so other work on
+/// the CPU fell into all five), it moved from 22 to 40 ns between runs on a quiet machine and
+/// to 54–234 ns under load.
 #[derive(Clone, Debug)]
 pub struct BareCore {
     fresh: Controller<BoardEstimator>,
@@ -1083,6 +1113,12 @@ impl BareCore {
     /// Slices timed.
     pub fn slices(&self) -> usize {
         self.slices_ns.len()
+    }
+
+    /// CPU time per sample, ns: the mean of the slices (all of one length), None before any.
+    pub fn ns_per_sample(&self) -> Option<f64> {
+        let n = self.slices_ns.len();
+        (n > 0).then(|| self.slices_ns.iter().sum::<f64>() / n as f64)
     }
 
     /// CPU time per sample, ns, at the slices' `q` quantile (0.5: the median; nearest rank),
