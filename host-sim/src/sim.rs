@@ -438,9 +438,9 @@ pub struct ClosedLoop<E: VelocityEstimator> {
     clock_hz: u64,
     period_us: u32,
     action_latency_us: u32,
-    /// Kernel clocks a sample period takes, where that is a whole number (both boards: 100 µs
-    /// of a clock in whole 10 kHz), and the action latency's: then a period's clock is
-    /// `k · period + latency` exactly, one multiply, not a conversion of its time.
+    /// Kernel clocks a sample period takes, where that is a whole number (both boards: their
+    /// clocks are whole multiples of 10 kHz), and the action latency's: then a period's clock
+    /// is `k · period + latency` exactly, one multiply, not a conversion of its time.
     period_clk: Option<u64>,
     latency_clk: u64,
     /// From a sample to the stale watchdog's tick after it, µs: half a period, or the action
