@@ -146,12 +146,21 @@ fn help(topic: &[String]) -> ExitCode {
     }
 }
 
-/// Samples the bare core loop is timed over for the speed line.
-const BARE_CORE_SAMPLES: u64 = 200_000;
+/// Samples the bare core loop draws for the speed line (3.3 s of the run's trajectory, three
+/// legs of the default triangle; its slices run them in turn, from the fresh controller again
+/// after the last): 0.26 MB, drawn before the run, so the resident memory the run reports
+/// holds them.
+const BARE_CORE_SAMPLES: u64 = 32_768;
+/// Fewest slices the bare core loop's figure is the mean of: a run too short to have them
+/// between its chunks, and a scenario run (which has none), run the rest after it.
+const BARE_MIN_SLICES: usize = 32;
 
 fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> {
-    let started = Instant::now();
     let Plan { params, scenario } = plan;
+    // The bare core loop the speed line compares with, its input drawn before the run's time
+    // starts; a plain run times it in slices between its chunks (`sim::BareCore`).
+    let mut bare = sim::BareCore::new(&params, BARE_CORE_SAMPLES)?;
+    let started = Instant::now();
     let mut memory: Vec<(f64, u64)> = Vec::new();
     // A scenario's expectations look at the whole trace; a plain run keeps none (constant
     // memory whatever its duration) and computes its figures and chart as it goes.
@@ -169,12 +178,19 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
             let period_s = sim::sample_period_us(params.board) as f64 * 1e-6;
             let n = sim::samples_in(&params);
             let mut next_mark = (10.0 / period_s) as u64;
-            let st = sim::stream_with(&params, true, |k| {
-                if k + 1 == next_mark || k + 1 == n {
+            // The index of the next sample to mark (a mark or the last): one comparison a
+            // sample.
+            let mut due = next_mark.min(n).saturating_sub(1);
+            let threads = sim::stream_threads();
+            let st = sim::stream_timed(&params, true, threads, Some(&mut bare), |k| {
+                if k == due {
                     if let Some(b) = sim::resident_bytes() {
                         memory.push(((k + 1) as f64 * period_s, b));
                     }
-                    next_mark *= 10;
+                    if k + 1 == next_mark {
+                        next_mark = next_mark.saturating_mul(10);
+                    }
+                    due = next_mark.min(n).saturating_sub(1);
                 }
             })?;
             let data = st.chart.ok_or("the streamed run kept no chart")?;
@@ -182,7 +198,8 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
             (st.header, st.metrics, data, None)
         }
     };
-    let sim_s = started.elapsed().as_secs_f64();
+    // The bare loop's slices ran inside the plain run: not the closed loop's time.
+    let sim_s = started.elapsed().as_secs_f64() - bare.spent().1;
     print!("{}", report::summary(&header, &m));
     let output = cli::chart_path(args);
     if let Some(dir) = output.parent() {
@@ -208,14 +225,39 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
     }
     chart::write_png(&data, &m, &output, &title)?;
     println!("chart: {}", output.display());
-    let bare = sim::bare_core_s_per_sample(&params, BARE_CORE_SAMPLES)?;
+    let in_run = bare.slices();
+    bare.top_up(BARE_MIN_SLICES);
+    // The bare loop's CPU time per sample: the mean of its slices, spread over the run as the
+    // closed loop's CPU time is (`sim::BareCore`); the quartiles show how much the machine
+    // moved it.
+    let untimed = "the bare core loop could not be timed";
+    let bare_ns = |q| bare.ns_per_sample_at(q).ok_or(untimed);
+    let (bare_lo, bare_hi) = (bare_ns(0.25)?, bare_ns(0.75)?);
+    let bare_mean = bare.ns_per_sample().ok_or(untimed)?;
+    let bare_s = bare_mean * 1e-9;
     let per_sample = sim_s / m.samples.max(1) as f64;
     let period_s = header.sample_period_us as f64 * 1e-6;
+    let slices = match in_run {
+        0 => format!(
+            "{} slices of {} samples after the run",
+            bare.slices(),
+            sim::BARE_SLICE
+        ),
+        n if n == bare.slices() => format!(
+            "{n} slices of {} samples between the loop's chunks",
+            sim::BARE_SLICE
+        ),
+        n => format!(
+            "{} slices of {} samples, {n} between the loop's chunks",
+            bare.slices(),
+            sim::BARE_SLICE
+        ),
+    };
     println!(
         "simulated {:.2} s in {:.3} s: {:.0}× real time ({:.0} ns per sample: ADC model, core, \
-         timer model, metrics{}); the bare core loop alone runs at {:.0}× ({:.0} ns per sample, \
-         the best of {} passes timed now over {} samples), so the closed loop costs {:.1}× the core; with the chart \
-         written, {:.2} s in all",
+         timer model, metrics{}); the bare core loop alone runs at {:.0}× ({:.1} ns per sample \
+         in CPU time, the mean of {slices}, quartiles {bare_lo:.1}–{bare_hi:.1} ns), so the \
+         closed loop costs {:.1}× the core; with the chart written, {:.2} s in all",
         params.duration_s,
         sim_s,
         params.duration_s / sim_s,
@@ -228,11 +270,9 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
                 n => format!(", chart recording; pipelined on {n} threads"),
             }
         },
-        period_s / bare,
-        bare * 1e9,
-        sim::BARE_CORE_PASSES,
-        BARE_CORE_SAMPLES,
-        per_sample / bare,
+        period_s / bare_s,
+        bare_mean,
+        per_sample / bare_s,
         started.elapsed().as_secs_f64()
     );
     if busy_s.len() > 1 {
@@ -240,14 +280,14 @@ fn run(args: &Args, plan: Plan) -> Result<ExitCode, Box<dyn std::error::Error>> 
         // what an idle machine's wall time would be near.
         let ns: Vec<String> = busy_s
             .iter()
-            .map(|b| format!("{:.0}", b / m.samples.max(1) as f64 * 1e9))
+            .map(|b| format!("{:.1}", b / m.samples.max(1) as f64 * 1e9))
             .collect();
         let most = busy_s.iter().copied().fold(0.0, f64::max) / m.samples.max(1) as f64;
         println!(
             "the loop's threads ran {} ns per sample (CPU time; the loop and the feeder): the \
-             busier {:.1}× the core",
+             busier {:.2}× the core",
             ns.join(" and "),
-            most / bare
+            most / bare_s
         );
     }
     if memory.len() > 1 {

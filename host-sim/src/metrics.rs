@@ -205,6 +205,10 @@ pub struct Stall {
 /// Lags, in sample periods, the velocity estimate is compared with the true velocity at
 /// (0 … 100: up to 10 ms at 10 kHz).
 pub const VELOCITY_LAGS: usize = 101;
+/// Lags the per-sample sums run over: [`VELOCITY_LAGS`] padded to a whole AVX register (8
+/// f32), so the lags past the [`LAG_GROUP`]s are one register kept over the batch instead of
+/// a scalar loop a lag. The padding lags (101–103 periods back) are summed and never read.
+const LAG_SLOTS: usize = VELOCITY_LAGS.div_ceil(8) * 8;
 /// Samples summed in f32 before the sums move to f64 (bounds the rounding error of the
 /// per-lag sums while keeping the per-sample loop in SIMD-wide f32).
 const LAG_BLOCK: u32 = 256;
@@ -215,7 +219,7 @@ pub const SWITCHES_LISTED: usize = 1_000;
 const LAG_BATCH: usize = 16;
 /// True velocities the lag window slides over before it is moved back to the buffer's end
 /// (the windows of the batch must stay in place until it is added).
-const TRUE_BUFFER: usize = 1024 + VELOCITY_LAGS;
+const TRUE_BUFFER: usize = 1024 + LAG_SLOTS;
 /// Recent sample points the gate's edges are placed against (an edge is placed once the point
 /// covering it has arrived, so two or three are enough; eight leave room).
 const RING: usize = 8;
@@ -353,6 +357,10 @@ pub struct Online {
     last_rise_clk: Option<u64>,
     running_period_clk: Option<u64>,
     replaced_period_clk: u64,
+    /// The kernel clock after which the line counts as silent, from the three above (u64::MAX:
+    /// no burst running or no rise yet): worked out when one of them changes, so each point
+    /// tests one comparison.
+    silent_after_clk: u64,
     stall_clk: (u64, u64, u64),
     fault_onsets: usize,
     fault_samples: usize,
@@ -370,7 +378,7 @@ pub struct Online {
     lag_pending: Vec<(usize, f32)>,
     /// Σ (estimate − true velocity `lag` points earlier)², per lag: this block's (f32) and the
     /// run's (f64), (mm/s)².
-    lag_block: [f32; VELOCITY_LAGS],
+    lag_block: [f32; LAG_SLOTS],
     lag_sums: [f64; VELOCITY_LAGS],
     block_n: u32,
     /// The minute the current f32 block of lag sums belongs to (flushed when it changes).
@@ -433,6 +441,7 @@ impl Online {
             last_rise_clk: None,
             running_period_clk: None,
             replaced_period_clk: 0,
+            silent_after_clk: u64::MAX,
             stall_clk: (0, 0, 0),
             fault_onsets: 0,
             fault_samples: 0,
@@ -444,7 +453,7 @@ impl Online {
             true_buf: Vec::new(),
             true_at: 0,
             lag_pending: Vec::with_capacity(LAG_BATCH),
-            lag_block: [0.0; VELOCITY_LAGS],
+            lag_block: [0.0; LAG_SLOTS],
             lag_sums: [0.0; VELOCITY_LAGS],
             block_n: 0,
             lag_minute: 0,
@@ -625,13 +634,13 @@ impl Online {
         if self.true_buf.is_empty() {
             // Before the run the finger moved as at its start (the trajectory at t = 0).
             self.true_buf = vec![v; TRUE_BUFFER];
-            self.true_at = TRUE_BUFFER - (VELOCITY_LAGS - 1);
+            self.true_at = TRUE_BUFFER - (LAG_SLOTS - 1);
         }
         if self.true_at == 0 {
             // The batch's windows are about to move: add them first, then carry the last
             // points' velocities to the buffer's end.
             self.add_pending_lags();
-            let keep = VELOCITY_LAGS - 1;
+            let keep = LAG_SLOTS - 1;
             self.true_buf.copy_within(..keep, TRUE_BUFFER - keep);
             self.true_at = TRUE_BUFFER - keep;
         }
@@ -682,10 +691,11 @@ impl Online {
         for (sum, acc) in sums.iter_mut().zip(&block) {
             *sum += *acc as f64;
         }
-        for (sum, acc) in self.lag_sums.iter_mut().zip(&mut self.lag_block) {
+        for (sum, acc) in self.lag_sums.iter_mut().zip(&self.lag_block) {
             *sum += *acc as f64;
-            *acc = 0.0;
         }
+        // The padding lags too, or their sums would grow without bound.
+        self.lag_block = [0.0; LAG_SLOTS];
         self.block_n = 0;
     }
 
@@ -723,6 +733,7 @@ impl Online {
             // The stall figure counts every rise the line makes.
             self.last_rise_clk = Some(e.t);
             self.replaced_period_clk = 0;
+            self.arm_stall();
             self.open = Some(Placed {
                 rise: e.t,
                 region,
@@ -804,37 +815,46 @@ impl Online {
     }
 
     /// The stall figure's bookkeeping for one point (its rises already placed).
+    #[inline]
     fn stall_point(&mut self, action: Option<&GateAction>, now: u64) {
-        match action {
-            Some(GateAction::Start(s)) => {
-                self.running_period_clk = Some(s.period_clocks());
-                self.last_rise_clk = Some(now);
+        if let Some(a) = action {
+            match a {
+                GateAction::Start(s) => {
+                    self.running_period_clk = Some(s.period_clocks());
+                    self.last_rise_clk = Some(now);
+                }
+                GateAction::Update(s) => {
+                    // With preload an update acts at the next update event: until the next
+                    // rise the period replaced still runs, so it counts for the allowance too.
+                    self.replaced_period_clk = self
+                        .replaced_period_clk
+                        .max(self.running_period_clk.unwrap_or(0));
+                    self.running_period_clk = Some(s.period_clocks());
+                }
+                GateAction::Off | GateAction::Pulse(_) => self.running_period_clk = None,
             }
-            Some(GateAction::Update(s)) => {
-                // With preload an update acts at the next update event: until the next rise
-                // the period replaced still runs, so it counts for the allowance too.
-                self.replaced_period_clk = self
-                    .replaced_period_clk
-                    .max(self.running_period_clk.unwrap_or(0));
-                self.running_period_clk = Some(s.period_clocks());
-            }
-            Some(GateAction::Off | GateAction::Pulse(_)) => self.running_period_clk = None,
-            _ => {}
+            self.arm_stall();
         }
-        let silent = match (self.running_period_clk, self.last_rise_clk) {
-            (Some(period), Some(rise)) => {
-                now.saturating_sub(rise) > 2 * period.max(self.replaced_period_clk)
-            }
-            _ => false,
-        };
         let (total, longest, current) = &mut self.stall_clk;
-        if silent {
+        if now > self.silent_after_clk {
             *current += self.period_clk;
             *total += self.period_clk;
             *longest = (*longest).max(*current);
         } else {
             *current = 0;
         }
+    }
+
+    /// Works out when the line falls silent: a burst running and no rise for more than two of
+    /// its periods (or of the period an update replaced), i.e. `now − rise > 2 · period`, as
+    /// `now > rise + 2 · period` (false alike for a `now` before the rise).
+    fn arm_stall(&mut self) {
+        self.silent_after_clk = match (self.running_period_clk, self.last_rise_clk) {
+            (Some(period), Some(rise)) => {
+                rise.saturating_add(period.max(self.replaced_period_clk).saturating_mul(2))
+            }
+            _ => u64::MAX,
+        };
     }
 
     /// The figures of everything fed.
@@ -974,10 +994,11 @@ impl Online {
 
 /// Adds, for each `(at, e)` of `pending` in order, (`e` − t)² to each lag's sum in `acc`, t
 /// the true velocity that lag back (`window[at + lag]`): the velocity figures' per-sample work
-/// (101 lags). Each lag's sum takes the same IEEE operations in the same order as one sample
-/// at a time would; [`LAG_GROUP`] lags at once stay in registers over the batch.
+/// (101 lags, padded to [`LAG_SLOTS`]). Each lag's sum takes the same IEEE operations in the
+/// same order as one sample at a time would; [`LAG_GROUP`] lags at once, and then the
+/// [`LAG_REST`] after them, stay in registers over the batch.
 #[inline(always)]
-fn add_lags(acc: &mut [f32; VELOCITY_LAGS], window: &[f32], pending: &[(usize, f32)]) {
+fn add_lags(acc: &mut [f32; LAG_SLOTS], window: &[f32], pending: &[(usize, f32)]) {
     let mut lags = acc.chunks_exact_mut(LAG_GROUP);
     let mut lag0 = 0;
     for group in &mut lags {
@@ -993,23 +1014,29 @@ fn add_lags(acc: &mut [f32; VELOCITY_LAGS], window: &[f32], pending: &[(usize, f
         lag0 += LAG_GROUP;
     }
     let rest = lags.into_remainder();
+    let mut a = [0f32; LAG_REST];
+    a.copy_from_slice(rest);
     for &(at, e) in pending {
-        for (a, &t) in rest.iter_mut().zip(&window[at + lag0..]) {
+        let w = &window[at + lag0..at + lag0 + LAG_REST];
+        for (a, &t) in a.iter_mut().zip(w) {
             *a += (e - t) * (e - t);
         }
     }
+    rest.copy_from_slice(&a);
 }
 
 /// Lags [`add_lags`] keeps in registers at once: four AVX registers, four independent sums
 /// in flight.
 const LAG_GROUP: usize = 32;
+/// The lags after the last whole [`LAG_GROUP`]: one AVX register.
+const LAG_REST: usize = LAG_SLOTS % LAG_GROUP;
 
 /// [`add_lags`] compiled for AVX: eight lags an instruction instead of SSE2's four. Each lag
 /// gets the same IEEE subtraction, product and sum in the same order (Rust fuses no
 /// multiply-add and reorders no float arithmetic), so the sums are bit for bit the same.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
-fn add_lags_avx(acc: &mut [f32; VELOCITY_LAGS], window: &[f32], pending: &[(usize, f32)]) {
+fn add_lags_avx(acc: &mut [f32; LAG_SLOTS], window: &[f32], pending: &[(usize, f32)]) {
     add_lags(acc, window, pending)
 }
 
@@ -1175,17 +1202,13 @@ mod expected_tests {
         };
         // One buffer of true velocities; batches of 1 … 16 estimates whose windows start at
         // overlapping places, as the metrics' sliding buffer gives them.
-        let buf: Vec<f32> = (0..4 * VELOCITY_LAGS).map(|_| next()).collect();
-        let (mut a, mut b, mut one) = (
-            [0f32; VELOCITY_LAGS],
-            [0f32; VELOCITY_LAGS],
-            [0f32; VELOCITY_LAGS],
-        );
-        let mut at = 3 * VELOCITY_LAGS;
+        let buf: Vec<f32> = (0..4 * LAG_SLOTS).map(|_| next()).collect();
+        let (mut a, mut b, mut one) = ([0f32; LAG_SLOTS], [0f32; LAG_SLOTS], [0f32; LAG_SLOTS]);
+        let mut at = 3 * LAG_SLOTS;
         for i in 0..2_000 {
             let batch: Vec<(usize, f32)> = (0..1 + i % LAG_BATCH)
                 .map(|j| {
-                    at = if at == 0 { 3 * VELOCITY_LAGS } else { at - 1 };
+                    at = if at == 0 { 3 * LAG_SLOTS } else { at - 1 };
                     let e = if (i + j) % 7 == 0 {
                         buf[at + 3]
                     } else {

@@ -358,17 +358,23 @@ pub struct Streamed {
     pub chart: Option<crate::chart::ChartData>,
     /// Wall time of the closed loop with its metrics and chart recording, s.
     pub loop_s: f64,
-    /// CPU time each of the loop's threads ran, s (Linux's schedstat; empty elsewhere): on a
-    /// machine busy with other work a pipelined run waits for a CPU, and its wall time says
-    /// less than these.
+    /// CPU time each of the loop's threads ran, s (the thread's CPU clock; empty where it
+    /// cannot be read): on a machine busy with other work a pipelined run waits for a CPU, and
+    /// its wall time says less than these. Neither this nor `loop_s` counts the bare core
+    /// loop's slices ([`BareCore`]) timed in the loop's thread.
     pub busy_s: Vec<f64>,
 }
 
-/// CPU time the calling thread has run, s (Linux's /proc/thread-self/schedstat).
+/// CPU time the calling thread has run, ns (its `CLOCK_THREAD_CPUTIME_ID`: one system call,
+/// to the nanosecond, cheap enough to bracket each of the bare loop's slices).
+fn thread_cpu_ns() -> Option<u64> {
+    let t = nix::time::clock_gettime(nix::time::ClockId::CLOCK_THREAD_CPUTIME_ID).ok()?;
+    Some(u64::try_from(t.tv_sec()).ok()? * 1_000_000_000 + u64::try_from(t.tv_nsec()).ok()?)
+}
+
+/// CPU time the calling thread has run, s ([`thread_cpu_ns`]).
 fn thread_cpu_s() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    let ns: u64 = stat.split_whitespace().next()?.parse().ok()?;
-    Some(ns as f64 * 1e-9)
+    Some(thread_cpu_ns()? as f64 * 1e-9)
 }
 
 /// Why a run could not start.
@@ -432,6 +438,14 @@ pub struct ClosedLoop<E: VelocityEstimator> {
     clock_hz: u64,
     period_us: u32,
     action_latency_us: u32,
+    /// Kernel clocks a sample period takes, where that is a whole number (both boards: their
+    /// clocks are whole multiples of 10 kHz), and the action latency's: then a period's clock
+    /// is `k · period + latency` exactly, one multiply, not a conversion of its time.
+    period_clk: Option<u64>,
+    latency_clk: u64,
+    /// From a sample to the stale watchdog's tick after it, µs: half a period, or the action
+    /// latency if longer.
+    tick_after_us: u64,
     fault: Option<SensorFault>,
     region: Option<u8>,
 }
@@ -446,6 +460,7 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
         ctrl.velocity_every_sample(true);
         let adc =
             AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
+        let (period_us, clock_hz) = (sample_period_us(params.board), timer.clock_hz as u64);
         Ok(Self {
             ctrl,
             adc,
@@ -456,8 +471,12 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
                 ),
             ),
             clock_hz: timer.clock_hz as u64,
-            period_us: sample_period_us(params.board),
+            period_us,
             action_latency_us: params.action_latency_us,
+            period_clk: (period_us as u64 * clock_hz % 1_000_000 == 0)
+                .then_some(period_us as u64 * clock_hz / 1_000_000),
+            latency_clk: params.action_latency_us as u64 * clock_hz / 1_000_000,
+            tick_after_us: (period_us as u64 / 2).max(params.action_latency_us as u64),
             fault: None,
             region: None,
         })
@@ -466,6 +485,16 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
     /// Kernel-clock ticks at `t_us`.
     pub fn clk(&self, t_us: u64) -> u64 {
         t_us * self.clock_hz / 1_000_000
+    }
+
+    /// [`Self::clk`] of period `k`'s time `t_us` plus the action latency: ⌊(k·P + L)·f / 10⁶⌋
+    /// is k·(P·f / 10⁶) + ⌊L·f / 10⁶⌋ when P·f / 10⁶ is whole.
+    #[inline(always)]
+    fn clk_acting(&self, k: u64, t_us: u64) -> u64 {
+        match self.period_clk {
+            Some(p) => k * p + self.latency_clk,
+            None => self.clk(t_us + self.action_latency_us as u64),
+        }
     }
 
     /// Sample period `k`: the finger at `state`, the sample (unless the ADC model drops it),
@@ -579,8 +608,8 @@ impl<E: VelocityEstimator> ClosedLoop<E> {
             out.region = region;
             region_code = region.map_or(-1, i16::from);
         }
-        self.tm.advance_to(self.clk(t_us + latency));
-        let tick_us = t_us + (self.period_us as u64 / 2).max(latency);
+        self.tm.advance_to(self.clk_acting(k, t_us));
+        let tick_us = t_us + self.tick_after_us;
         if let Some(a) = self.ctrl.on_tick(tick_us as u32) {
             self.tm.apply(self.clk(tick_us), a);
             action = Some(a);
@@ -755,6 +784,21 @@ pub fn stream_on(
     params: &SimParams,
     chart: bool,
     threads: usize,
+    at_sample: impl FnMut(u64),
+) -> Result<Streamed, SimError> {
+    stream_timed(params, chart, threads, None, at_sample)
+}
+
+/// [`stream_on`], timing the bare core loop `bare` in slices on the loop's thread between its
+/// chunks ([`BareCore`]): about [`BARE_SLICES_AIMED`] of them, spread over the run. The
+/// slices' CPU time is taken out of the loop thread's `busy_s` and their wall time out of
+/// `loop_s`, so both are the closed loop's own as without them; the figures and the chart are
+/// the same (the bare loop shares nothing with the closed loop).
+pub fn stream_timed(
+    params: &SimParams,
+    chart: bool,
+    threads: usize,
+    mut bare: Option<&mut BareCore>,
     mut at_sample: impl FnMut(u64),
 ) -> Result<Streamed, SimError> {
     let timer = burst_timer(params.board);
@@ -767,11 +811,19 @@ pub fn stream_on(
     let cpu_started = thread_cpu_s();
     let mut feeder_cpu_s = None;
     let n = samples_in(params);
+    // The chunks after which the bare loop runs a slice: one in `every`.
+    let every = n.div_ceil(CHUNK as u64).div_ceil(BARE_SLICES_AIMED).max(1);
+    let (bare_cpu0, bare_wall0) = bare.as_ref().map_or((0, 0.0), |b| b.spent());
     if threads < 2 {
         drive(&mut lp, params, n, |k, point, lp| {
             lp.tm.take_settled(&mut edges, &mut levels);
             sink.feed(&point, &edges, &levels);
             at_sample(k);
+            if (k + 1) % CHUNK as u64 == 0 && ((k + 1) / CHUNK as u64) % every == 0 {
+                if let Some(b) = bare.as_mut() {
+                    b.slice();
+                }
+            }
         });
     } else {
         let adc = lp.adc.clone();
@@ -840,7 +892,7 @@ pub fn stream_on(
                     spare.push(c);
                 }
             });
-            for mut c in from_feeder {
+            for (chunk, mut c) in (1u64..).zip(from_feeder) {
                 // Each period's core output is written in its slot (a chunk's slots are reused
                 // as they are; every field is written).
                 c.outs.resize(c.states.len(), NO_CORE_OUT);
@@ -870,6 +922,13 @@ pub fn stream_on(
                 if to_feeder.send(c).is_err() {
                     break;
                 }
+                // The feeder has this chunk's metrics and the next chunks' draws to work on
+                // meanwhile, as it has while the loop steps a chunk.
+                if chunk % every == 0 {
+                    if let Some(b) = bare.as_mut() {
+                        b.slice();
+                    }
+                }
             }
             drop(to_feeder);
             feeder.join().expect("the feeder thread panicked")
@@ -884,8 +943,15 @@ pub fn stream_on(
     sink.last_edges(&edges, &levels);
     let metrics = sink.metrics.finish();
     let chart = sink.recorder.map(crate::chart::Recorder::finish);
-    let loop_s = started.elapsed().as_secs_f64();
-    let busy_s = std::iter::once(cpu_started.and_then(|c| Some(thread_cpu_s()? - c)))
+    // The bare loop's slices ran on this thread: not the closed loop's time.
+    let (bare_cpu_ns, bare_wall_s) = bare.as_ref().map_or((0, 0.0), |b| {
+        let (cpu, wall) = b.spent();
+        (cpu - bare_cpu0, wall - bare_wall0)
+    });
+    let loop_s = started.elapsed().as_secs_f64() - bare_wall_s;
+    let loop_cpu_s =
+        cpu_started.and_then(|c| Some(thread_cpu_s()? - c - bare_cpu_ns as f64 * 1e-9));
+    let busy_s = std::iter::once(loop_cpu_s)
         .chain(feeder_cpu_s)
         .collect::<Option<Vec<f64>>>()
         .unwrap_or_default();
@@ -904,46 +970,173 @@ pub fn stream_on(
     })
 }
 
-/// Passes the bare core loop is timed over; the fastest counts (a shared machine slows some).
-pub const BARE_CORE_PASSES: usize = 5;
+/// Samples each timed slice of the bare core loop runs ([`BareCore::slice`]): about 45 µs of
+/// it, against which the two CPU-clock reads around it (each a system call, well under 1 µs)
+/// are about 1 %.
+pub const BARE_SLICE: usize = 2048;
+/// Samples run untimed before each slice: they bring the bare loop's code and state back into
+/// the caches the closed loop's chunk has used since the last slice, so the slice times the
+/// loop, not the refill.
+const BARE_WARM: usize = 128;
+/// Slices a streamed run spreads over its chunks ([`stream_timed`]); a run of fewer chunks has
+/// one after each.
+pub const BARE_SLICES_AIMED: u64 = 64;
 
-/// Wall time per sample of the bare core loop (the controller's `on_sample` and `on_tick`
-/// alone, over `samples` samples the ADC model drew beforehand along `params`' trajectory),
-/// s, the best of [`BARE_CORE_PASSES`] passes (each from the freshly loaded controller): the
-/// ceiling a closed loop on this machine is measured against.
-pub fn bare_core_s_per_sample(params: &SimParams, samples: u64) -> Result<f64, SimError> {
-    let period_us = sample_period_us(params.board);
-    let mut ctrl = board_controller(params.board)?;
-    ctrl.load(&params.config).map_err(SimError::Config)?;
-    // The same core work as the closed loop's (which reads the velocity of every sample).
-    ctrl.velocity_every_sample(true);
-    let mut adc =
-        AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
-    let input: Vec<Sample> = (0..samples)
-        .filter_map(|k| {
+/// The bare core loop: the controller's `on_sample` and `on_tick` alone, over samples the ADC
+/// model drew beforehand along the run's trajectory (from its start), with the closed loop's
+/// controller, scene and velocity every sample. It is the ceiling a closed loop on this
+/// machine is measured against.
+///
+/// It is timed in slices of [`BARE_SLICE`] samples, each in its thread's CPU time, and its
+/// figure is their mean ([`Self::ns_per_sample`]). [`stream_timed`] runs them on the closed
+/// loop's own thread between its chunks, spread evenly over the run, so the bare loop and the
+/// closed loop share the machine as it is during the run: the same other work, the same CPU,
+/// the feeder busy on the other. The closed loop's figure is its threads' CPU time over the
+/// whole run, a mean over whatever the machine did meanwhile; the slices' mean is the same
+/// kind of figure over the same stretch. (On this machine's virtual CPUs the bare loop runs
+/// about 23 ns a sample while the other CPU idles and about 40 ns while it compiles, and a
+/// run's slices can hold both: a median would pick one of the two.)
+///
+/// Before, it was timed after the run as the best of five 200 000-sample passes in wall time:
+/// with the feeder gone, and each pass as long as a scheduler's time slice (so other work on
+/// the CPU fell into all five), it moved from 22 to 40 ns between runs on a quiet machine and
+/// to 54–234 ns under load.
+#[derive(Clone, Debug)]
+pub struct BareCore {
+    fresh: Controller<BoardEstimator>,
+    ctrl: Controller<BoardEstimator>,
+    input: Vec<Sample>,
+    /// The next input sample.
+    at: usize,
+    period_us: u32,
+    /// Each timed slice's CPU time per sample, ns.
+    slices_ns: Vec<f64>,
+    /// CPU time (ns) and wall time (s) of every slice so far, its warm-up and clock reads
+    /// included: what the thread it ran on spent on it.
+    spent_cpu_ns: u64,
+    spent_wall_s: f64,
+    /// Actions the core gave (kept so the loop's work is not optimised away).
+    actions: u64,
+}
+
+impl BareCore {
+    /// The bare loop of `params`' run, over `samples` samples it draws now (it starts again
+    /// from the freshly loaded controller when it has run them all).
+    pub fn new(params: &SimParams, samples: u64) -> Result<Self, SimError> {
+        let period_us = sample_period_us(params.board);
+        let mut ctrl = board_controller(params.board)?;
+        ctrl.load(&params.config).map_err(SimError::Config)?;
+        // The same core work as the closed loop's (which reads the velocity of every sample).
+        ctrl.velocity_every_sample(true);
+        let mut adc =
+            AdcModel::new(params.config.calibration, params.adc.clone()).map_err(SimError::Adc)?;
+        // Allocated at its size once: grown by doubling, it freed a block the allocator had
+        // mapped on its own, which raises glibc's threshold for such blocks, and the run's
+        // allocations after it then stayed resident (1 MB more in the run's memory marks).
+        let mut input = Vec::with_capacity(usize::try_from(samples).unwrap_or(0));
+        input.extend((0..samples).filter_map(|k| {
             let t_us = k * period_us as u64;
             adc.sample(
                 params.trajectory.state(t_us as f64 * 1e-6).position_um,
                 t_us,
             )
+        }));
+        Ok(Self {
+            fresh: ctrl.clone(),
+            ctrl,
+            input,
+            at: 0,
+            period_us,
+            slices_ns: Vec::new(),
+            spent_cpu_ns: 0,
+            spent_wall_s: 0.0,
+            actions: 0,
         })
-        .collect();
-    let mut best = f64::INFINITY;
-    for _ in 0..BARE_CORE_PASSES {
-        let mut ctrl = ctrl.clone();
-        let started = std::time::Instant::now();
-        let mut actions = 0u64;
-        for s in &input {
-            let out = ctrl.on_sample(*s);
-            actions += u64::from(out.action.is_some());
-            if ctrl.on_tick(s.t_us.wrapping_add(period_us / 2)).is_some() {
-                actions += 1;
-            }
-        }
-        std::hint::black_box(actions);
-        best = best.min(started.elapsed().as_secs_f64());
     }
-    Ok(best / input.len().max(1) as f64)
+
+    /// Runs the next `n` input samples through the core (from the fresh controller again at
+    /// the input's end: its time cannot run backwards).
+    #[inline(never)]
+    fn run(&mut self, mut n: usize) {
+        while n > 0 && !self.input.is_empty() {
+            if self.at >= self.input.len() {
+                self.ctrl = self.fresh.clone();
+                self.at = 0;
+            }
+            let end = self.at + n.min(self.input.len() - self.at);
+            let mut actions = 0u64;
+            for s in &self.input[self.at..end] {
+                let out = self.ctrl.on_sample(*s);
+                actions += u64::from(out.action.is_some());
+                if self
+                    .ctrl
+                    .on_tick(s.t_us.wrapping_add(self.period_us / 2))
+                    .is_some()
+                {
+                    actions += 1;
+                }
+            }
+            self.actions += std::hint::black_box(actions);
+            n -= end - self.at;
+            self.at = end;
+        }
+    }
+
+    /// One slice: [`BARE_WARM`] samples untimed, then [`BARE_SLICE`] timed in the thread's
+    /// CPU time (a slice whose clock cannot be read is not counted).
+    pub fn slice(&mut self) {
+        let wall = std::time::Instant::now();
+        let c0 = thread_cpu_ns();
+        self.run(BARE_WARM);
+        let c1 = thread_cpu_ns();
+        self.run(BARE_SLICE);
+        let c2 = thread_cpu_ns();
+        if let (Some(c0), Some(c1), Some(c2)) = (c0, c1, c2) {
+            if !self.input.is_empty() {
+                self.slices_ns
+                    .push(c2.saturating_sub(c1) as f64 / BARE_SLICE as f64);
+            }
+            self.spent_cpu_ns += c2.saturating_sub(c0);
+        }
+        self.spent_wall_s += wall.elapsed().as_secs_f64();
+    }
+
+    /// Runs slices until `slices` are timed (after a run too short for them in between).
+    pub fn top_up(&mut self, slices: usize) {
+        // Bounded, in case the clock cannot be read.
+        for _ in 0..slices {
+            if self.slices_ns.len() >= slices {
+                break;
+            }
+            self.slice();
+        }
+    }
+
+    /// Slices timed.
+    pub fn slices(&self) -> usize {
+        self.slices_ns.len()
+    }
+
+    /// CPU time per sample, ns: the mean of the slices (all of one length), None before any.
+    pub fn ns_per_sample(&self) -> Option<f64> {
+        let n = self.slices_ns.len();
+        (n > 0).then(|| self.slices_ns.iter().sum::<f64>() / n as f64)
+    }
+
+    /// CPU time per sample, ns, at the slices' `q` quantile (0.5: the median; nearest rank),
+    /// None before any slice.
+    pub fn ns_per_sample_at(&self, q: f64) -> Option<f64> {
+        let mut v = self.slices_ns.clone();
+        v.sort_by(f64::total_cmp);
+        let last = v.len().checked_sub(1)?;
+        let i = ((last as f64 * q.clamp(0.0, 1.0)).round() as usize).min(last);
+        v.get(i).copied()
+    }
+
+    /// What the slices so far cost the thread they ran on: CPU time, ns, and wall time, s.
+    pub fn spent(&self) -> (u64, f64) {
+        (self.spent_cpu_ns, self.spent_wall_s)
+    }
 }
 
 /// Sample periods whose finger states and ADC samples are worked out ahead, together.

@@ -140,3 +140,41 @@ fn two_threads_without_a_chart() {
     assert!(one.chart.is_none() && two.chart.is_none());
     assert_eq!(one.metrics, two.metrics);
 }
+
+/// The bare core loop timed in slices between the chunks (`sim::stream_timed`, the plain
+/// run's speed line) leaves the figures, chart and telemetry as they are, on one thread and on
+/// two, and runs one slice every ⌈chunks / `BARE_SLICES_AIMED`⌉ chunks (after each of the
+/// short cases' chunks; every third of the 61 s case's 150).
+#[test]
+fn the_bare_loops_slices_leave_the_run_as_it_is() {
+    for (what, p) in cases() {
+        let plain = sim::stream_on(&p, true, 1, |_| {}).unwrap();
+        let n = sim::samples_in(&p);
+        let every = n.div_ceil(4096).div_ceil(sim::BARE_SLICES_AIMED).max(1);
+        for threads in [1, 2] {
+            let mut bare = sim::BareCore::new(&p, 8_192).unwrap();
+            let timed = sim::stream_timed(&p, true, threads, Some(&mut bare), |_| {}).unwrap();
+            assert_eq!(plain.metrics, timed.metrics, "{what}, {threads} threads");
+            assert_eq!(plain.chart, timed.chart, "{what}, {threads} threads");
+            assert_eq!(
+                plain.header.telemetry, timed.header.telemetry,
+                "{what}, {threads} threads"
+            );
+            // Two threads slice after every `every`-th chunk handed back, the last (partial)
+            // one included; one thread after whole chunks only.
+            let chunks = if threads == 2 {
+                n.div_ceil(4096)
+            } else {
+                n / 4096
+            };
+            assert_eq!(
+                bare.slices() as u64,
+                chunks / every,
+                "{what}, {threads} threads"
+            );
+            if let Some(ns) = bare.ns_per_sample() {
+                assert!(ns > 0.0 && ns.is_finite(), "{what}: {ns} ns a sample");
+            }
+        }
+    }
+}
