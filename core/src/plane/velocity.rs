@@ -185,7 +185,9 @@ pub struct PlaneLsq<const N: usize> {
     /// centred sum is an i32, so the test is the same and costs the M4F one 32-bit compare
     /// a side instead of a 64-bit one.
     centred_min: i32,
-    centred_max: i32,
+    /// centred_max − centred_min: the range test is one unsigned compare of centred −
+    /// centred_min (below the minimum it wraps above the span).
+    centred_span: u32,
     period_us: u32,
 }
 
@@ -209,6 +211,7 @@ impl<const N: usize> PlaneLsq<N> {
         // The range holds 0 (speed 0), so both ends clamp to a non-empty i32 interval.
         let narrow = |c: i64| c.clamp(i32::MIN as i64, i32::MAX as i64) as i32;
         let (centred_min, centred_max) = (narrow(lo), narrow(hi));
+        let centred_span = centred_max.wrapping_sub(centred_min) as u32;
         Ok(Self {
             old: PointUm::new(0, 0),
             mid: PointUm::new(0, 0),
@@ -229,7 +232,7 @@ impl<const N: usize> PlaneLsq<N> {
             resting: false,
             gain_q32,
             centred_min,
-            centred_max,
+            centred_span,
             period_us: sample_period_us,
         })
     }
@@ -332,7 +335,7 @@ impl<const N: usize> PlaneLsq<N> {
     /// The speed, µm/s, of one axis's centred sum: rounded to nearest, saturating.
     #[inline(always)]
     fn speed(&self, centred: i32) -> i32 {
-        if (self.centred_min..=self.centred_max).contains(&centred) {
+        if centred.wrapping_sub(self.centred_min) as u32 <= self.centred_span {
             ((centred as i64 * self.gain_q32 + (1 << 31)) >> 32) as i32
         } else if centred > 0 {
             i32::MAX
@@ -572,6 +575,39 @@ mod tests {
                 check::<64>(&steps)?;
             }
         }
+    }
+
+    /// The one-compare range test gives the exact rounded, saturated product (worked in
+    /// i128) at and around both ends of the range and across i32, for a window whose range
+    /// lies inside i32 (N = 2 at 10 µs) and the controller's (N = 32 at 100 µs).
+    #[test]
+    fn the_speed_is_the_exact_saturated_product_at_the_range_ends() {
+        fn check<const N: usize>(period_us: u32) {
+            let e = PlaneLsq::<N>::new(period_us).unwrap();
+            let exact = |c: i32| {
+                let v = (c as i128 * e.gain_q32 as i128 + (1 << 31)) >> 32;
+                v.clamp(i32::MIN as i128, i32::MAX as i128) as i32
+            };
+            let max = e.centred_min.wrapping_add(e.centred_span as i32);
+            for end in [e.centred_min, max, 0, i32::MIN, i32::MAX] {
+                for d in -2..=2 {
+                    let c = end.saturating_add(d);
+                    assert_eq!(e.speed(c), exact(c), "N {N} T {period_us} c {c}");
+                }
+            }
+            // The ends are where the speed stops fitting i32 unsaturated.
+            let fits =
+                |c: i32| i32::try_from((c as i128 * e.gain_q32 as i128 + (1 << 31)) >> 32).is_ok();
+            assert!(fits(e.centred_min) && fits(max), "N {N}");
+            if e.centred_min > i32::MIN {
+                assert!(!fits(e.centred_min - 1), "N {N}");
+            }
+            if max < i32::MAX {
+                assert!(!fits(max + 1), "N {N}");
+            }
+        }
+        check::<2>(10);
+        check::<32>(100);
     }
 
     #[test]
