@@ -319,6 +319,12 @@ impl<const N: usize> PlaneLsq<N> {
     /// the line from the newest to `m`, as `LsqSlope` fills each axis. Out of line: rare.
     #[inline(never)]
     fn bridge(&mut self, m: PointUm, slots: u32) {
+        // The caller passes 2..=MAX_BRIDGED_SLOTS; said here too, so the compiler sees a
+        // divisor of at least 2 below and keeps no division-by-zero panic on the reading's
+        // path (scripts/panic-check.sh follows the 2D image's frame_step into this call).
+        if slots < 2 {
+            return;
+        }
         let newest = (self.head + self.len + N - 1) % N;
         let (Some(&ax), Some(&ay)) = (self.window_x.get(newest), self.window_y.get(newest)) else {
             return;
