@@ -11,15 +11,14 @@ use super::edges::EdgeTracker;
 use super::geometry::PointUm;
 use super::scene::{CompiledScene2d, Config2d, Config2dError, PlaneCompiled, MAX_STALE_US};
 use super::screen::{Place, ScreenTracker};
-use super::velocity::{PlaneVelocity, VelocityUmS};
+use super::velocity::{PlaneEstimator, PlaneLsq, VelocityUmS};
 use crate::burst::{BurstTimer, SafetyLimits, TimerSettings};
-use crate::controller::{WindowEstimator, DEFAULT_WINDOW, RECOVERY_SAMPLES};
+use crate::controller::{DEFAULT_WINDOW, RECOVERY_SAMPLES};
 use crate::gate::{BurstOutput, DriveMode, Envelope, Gate, GateAction};
 use crate::texture::compiled::{Moment, Need, Render, Request, Want};
 use crate::texture::lines::MAX_LINE_LEAD_UM;
 use crate::touch::fault::AxisFault;
 use crate::touch::frame::Reading;
-use crate::velocity::{LsqSlope, Median3, VelocityEstimator};
 
 /// Why the carrier is held off.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -130,11 +129,11 @@ impl Prepared2d {
 
 /// The 2D control core.
 #[derive(Clone, Debug)]
-pub struct Controller2d<E: VelocityEstimator = WindowEstimator<DEFAULT_WINDOW>> {
+pub struct Controller2d<V: PlaneEstimator = PlaneLsq<DEFAULT_WINDOW>> {
     timer: BurstTimer,
     sample_period_us: u32,
     active: Option<Prepared2d>,
-    velocity: PlaneVelocity<E>,
+    velocity: V,
     /// The estimators were rested on the last reading: woken before the next update.
     resting: bool,
     /// The texture in force reads the velocity: update, else rest (but in an edge's zone).
@@ -168,26 +167,19 @@ impl Controller2d {
     }
 }
 
-impl<const N: usize> Controller2d<WindowEstimator<N>> {
-    /// A controller with the default estimator over an `N`-sample window on each axis.
+impl<const N: usize> Controller2d<PlaneLsq<N>> {
+    /// A controller with the default estimator (the 1D default on both axes, one clock) over
+    /// an `N`-sample window.
     pub fn with_window(timer: BurstTimer, sample_period_us: u32) -> Result<Self, Config2dError> {
-        let one = || {
-            LsqSlope::<N>::new(sample_period_us)
-                .map(|l| Median3::new(l, sample_period_us))
-                .map_err(Config2dError::Estimator)
-        };
-        let velocity = PlaneVelocity::new(one()?, one()?);
+        let velocity = PlaneLsq::<N>::new(sample_period_us).map_err(Config2dError::Estimator)?;
         Ok(Self::with_estimators(timer, sample_period_us, velocity))
     }
 }
 
-impl<E: VelocityEstimator> Controller2d<E> {
-    /// A controller with chosen estimators (one per axis), no scene (line off).
-    pub fn with_estimators(
-        timer: BurstTimer,
-        sample_period_us: u32,
-        velocity: PlaneVelocity<E>,
-    ) -> Self {
+impl<V: PlaneEstimator> Controller2d<V> {
+    /// A controller with a chosen plane estimator (e.g. [`super::PlaneVelocity`] over any 1D
+    /// estimator per axis), no scene (line off).
+    pub fn with_estimators(timer: BurstTimer, sample_period_us: u32, velocity: V) -> Self {
         Self {
             timer,
             sample_period_us,

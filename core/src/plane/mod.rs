@@ -19,7 +19,7 @@ pub use edges::{CompiledEdges, EdgeError, EdgePulse, EdgeTracker, Edges, MAX_EDG
 pub use grating::{CompiledOriented, OrientedError, OrientedGrating};
 pub use scene::{Config2d, Config2dError, Owner, PlaneTexture, Scene2d, Window2d, PLANE_SPAN_UM};
 pub use screen::{CompiledScreen, Place, Screen, ScreenError, ScreenTracker, Window, MAX_WINDOWS};
-pub use velocity::{PlaneVelocity, VelocityUmS};
+pub use velocity::{PlaneEstimator, PlaneLsq, PlaneVelocity, VelocityUmS};
 
 #[cfg(test)]
 mod work {

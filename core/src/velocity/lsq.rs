@@ -55,10 +55,7 @@ impl<const N: usize> LsqSlope<N> {
             return Err(EstimatorError::WindowTooShort { window: N, min: 2 });
         }
         check_period(sample_period_us)?;
-        let n = N as i64;
-        let denom = n * (n * n - 1) * sample_period_us as i64;
-        let gain_q32 = ((6_000_000i128 << 32) + denom as i128 / 2) / denom as i128;
-        let gain_q32 = gain_q32 as i64;
+        let gain_q32 = slope_gain_q32(N, sample_period_us);
         let (centred_min, centred_max) = speed_range(gain_q32);
         Ok(Self {
             window: [0; N],
@@ -201,11 +198,21 @@ impl<const N: usize> LsqSlope<N> {
     }
 }
 
+/// µm/s per unit of the centred sum 2·Σ(k − (N−1)/2)·x_k of an `n`-sample window, Q32:
+/// 6·10⁶ / (n (n²−1) T_s), rounded (`n` ≥ 2 and a period of at least 10 µs: the constructors'
+/// checks). Shared with the plane's two-axis slope (`plane::velocity::PlaneLsq`).
+pub(crate) fn slope_gain_q32(n: usize, sample_period_us: u32) -> i64 {
+    let n = n as i64;
+    let denom = n * (n * n - 1) * sample_period_us as i64;
+    let gain_q32 = ((6_000_000i128 << 32) + denom as i128 / 2) / denom as i128;
+    gain_q32 as i64
+}
+
 /// The centred sums c whose speed ⌊(c·g + 2³¹) / 2³²⌋ lies in i32, for a gain g ≥ 0: the
 /// speed grows with c, so it is the interval between the smallest c reaching i32::MIN and
 /// the largest staying at or below i32::MAX (in i128, where c·g cannot overflow), narrowed
 /// to where c·g + 2³¹ fits i64. A zero gain gives speed 0 for every c.
-fn speed_range(gain_q32: i64) -> (i64, i64) {
+pub(crate) fn speed_range(gain_q32: i64) -> (i64, i64) {
     if gain_q32 <= 0 {
         return (i64::MIN, i64::MAX);
     }

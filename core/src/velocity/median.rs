@@ -75,7 +75,7 @@ impl<E> Median3<E> {
     }
 }
 
-fn median3(a: i32, b: i32, c: i32) -> i32 {
+pub(crate) fn median3(a: i32, b: i32, c: i32) -> i32 {
     a.max(b).min(a.min(b).max(c))
 }
 

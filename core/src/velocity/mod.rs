@@ -37,6 +37,10 @@ pub use gate::InnovationGate;
 pub use lsq::{LsqSlope, LSQ_NARROW_WINDOW};
 pub use median::Median3;
 pub use super_twisting::{SuperTwisting, STD_LAMBDA0, STD_LAMBDA1};
+// The pieces the plane's two-axis slope (`plane::velocity::PlaneLsq`) shares with the 1D ones.
+pub(crate) use common::{check_period, SlotClock, Tick};
+pub(crate) use lsq::{slope_gain_q32, speed_range};
+pub(crate) use median::median3;
 
 /// One velocity estimator: fed each position with its timestamp, answers velocity in µm/s
 /// (positive towards the far end), or `None` while it has too little history.
