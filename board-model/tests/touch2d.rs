@@ -10,6 +10,7 @@
 
 use host_sim::touch::{Finger, Overlay, TouchModel};
 use saw_board_model::board::{BoardKind, PIN_BURST_A};
+use saw_board_model::periph::adc_g4::AdcG4;
 use saw_board_model::periph::{Time, TICKS_PER_S};
 use saw_board_model::run::{self, Options, Outcome, TouchScript};
 use saw_board_model::touch::{Drive, Trace};
@@ -37,15 +38,24 @@ fn elf(board: BoardKind) -> PathBuf {
 }
 
 fn run2d(board: BoardKind, secs: f64, finger: impl Fn(f64) -> Option<Finger> + 'static) -> Outcome {
+    run2d_m(board, secs, finger).0
+}
+
+/// As `run2d`, with the machine (its peripherals' records) kept.
+fn run2d_m(
+    board: BoardKind,
+    secs: f64,
+    finger: impl Fn(f64) -> Option<Finger> + 'static,
+) -> (Outcome, saw_board_model::machine::Machine) {
     let mut o = Options::new(board, &elf(board), secs);
     o.touch = Some(TouchScript {
         overlay: Overlay::default(),
         seed: 7,
         finger: Rc::new(finger),
     });
-    let (out, _m) = run::run(&o).unwrap();
+    let (out, m) = run::run(&o).unwrap();
     assert!(out.stop.is_none(), "{board:?}: {:?}", out.stop);
-    out
+    (out, m)
 }
 
 fn at(mm: (f64, f64)) -> Option<Finger> {
@@ -165,7 +175,31 @@ fn ns(t: Time) -> f64 {
 fn plate_switching_at_its_designed_times() {
     for board in BOARDS {
         let d = design(board);
-        let o = run2d(board, 0.06, script);
+        let (o, m) = run2d_m(board, 0.06, script);
+        if let Some(adc) = m
+            .sim()
+            .periphs
+            .iter()
+            .find_map(|p| p.p.as_any().downcast_ref::<AdcG4>())
+        {
+            // Pre-flash item 3 (docs/touch.md): ADSTART/ADSTP written with ADC_CR's other rs
+            // bits 0, and the ES0430 dummy conversion: no late result reaches memory.
+            eprintln!(
+                "{board:?}: ADC_CR writes with ADEN written back: {}; late (ES0430) results in memory: {}",
+                adc.aden_written_back.len(),
+                adc.late_results_delivered.len()
+            );
+            assert!(
+                adc.aden_written_back.is_empty(),
+                "{board:?}: ADEN written back at {:?}",
+                adc.aden_written_back
+            );
+            assert!(
+                adc.late_results_delivered.is_empty(),
+                "{board:?}: late results at {:?}",
+                adc.late_results_delivered
+            );
+        }
         let tr = o.touch.as_ref().unwrap();
         let sw = switches(tr);
         assert!(sw.len() > 100, "{board:?}: {} switches", sw.len());
