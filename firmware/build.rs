@@ -34,22 +34,33 @@ fn main() {
 /// period exactly as host-sim checks it. Written to `OUT_DIR/touch2d.rs`.
 ///
 /// The frame: the core's `Schedule` (`saw_core::touch::plates`, the default plates and this
-/// board's conversion time, 16 conversions a phase), each phase followed by
+/// board's acquisition, `saw_boards::touch::touch_adc`), each phase followed by
 /// [`MARGIN_NS`] before the next switches (the software trigger starts up to an interrupt's
 /// latency late; the margin keeps the last conversion of a phase before the next phase's pin
 /// switch), the frame rounded up to whole µs. Every event is a tick of TIM3 at its kernel clock.
 fn touch_plan(board: &str, manifest: &std::path::Path, out: &std::path::Path) {
     use saw_core::touch::plates::{AdcTiming, PlateRc, Schedule};
-    /// After each phase's conversions, before the next pin switch, ns.
-    const MARGIN_NS: u64 = 2_000;
+    /// After each phase's conversions, before the next pin switch, ns: an interrupt held off
+    /// longer than this (defmt-rtt's critical section while it encodes a line) pushes a phase's
+    /// last conversions past the next switch, and the interrupt then drops the frame (its DMA
+    /// count disagrees); 2 µs saw 0.3–1.6 µs of such delay on the board model's optimistic CPU.
+    const MARGIN_NS: u64 = 4_000;
     println!("cargo:rerun-if-env-changed=SAW_SCENE_2D");
     let b = saw_boards::by_name(board).unwrap_or_else(|| fail(&format!("unknown board {board}")));
     let pins = saw_boards::touch::touch_pins(b).unwrap_or_else(|| fail(&format!("{board}: no touch pins")));
+    // The board's acquisition as saw-boards states it (host-sim's `sim2d::adc_timing` maps the
+    // same fields): a discarded conversion after each switch, then the summed ones.
+    let t = saw_boards::touch::touch_adc(b);
     let adc = AdcTiming {
-        conversion_ns: saw_boards::touch::conversion_ns(b),
-        conversions_position: 16,
-        conversions_pressure: 16,
+        conversion_ns: t.conversion_ns,
+        conversions_position: t.conversions_position,
+        conversions_pressure: t.conversions_pressure,
+        discard: t.discard,
     };
+    let max = saw_boards::touch::MAX_RANKS;
+    if t.ranks(true) > max || t.ranks(false) > max {
+        fail("a touch phase needs more ranks than one regular sequence has (16)");
+    }
     let rc = PlateRc::DEFAULT;
     let sched = Schedule::new(&rc, &adc).unwrap_or_else(|e| fail(&format!("touch schedule: {e}")));
     let f_hz = b.adc.trigger_timer_clk_hz as u64;
@@ -130,6 +141,8 @@ fn touch_plan(board: &str, manifest: &std::path::Path, out: &std::path::Path) {
     let config = saw_core::scene_file::load_2d_for_board(&file, &text, timer, frame_us as u32)
         .unwrap_or_else(|e| fail(&format!("SAW_SCENE_2D: {e}")));
     let bytes = postcard::to_allocvec(&config).unwrap_or_else(|e| fail(&format!("SAW_SCENE_2D: {e}")));
+    let ranks: Vec<u8> = sched.slots.iter().map(|s| t.ranks(s.phase.is_position()) as u8).collect();
+    let discard = t.discard;
     let ev: Vec<String> = events.iter().map(|(t, k, p)| format!("Event {{ tick: {t}, kind: {k}, slot: {p} }}")).collect();
     let code = format!(
         "/// TIM3 ticks per µs (its kernel clock).\npub const TICKS_PER_US: u32 = {};\n\
@@ -137,6 +150,7 @@ fn touch_plan(board: &str, manifest: &std::path::Path, out: &std::path::Path) {
          /// After each phase's conversions, before the next switch, ns.\npub const MARGIN_NS: u32 = {MARGIN_NS};\n\
          /// The frame's events in time order.\npub const EVENTS: [Event; {}] = [{}];\n\
          /// The ADC channel each slot converts (X, Y, Z1, Z2).\npub const CHANNELS: [u8; 4] = [{}, {}, {}, {}];\n\
+         /// Each slot's regular sequence: ranks (one DMA word each), the first DISCARD thrown away.\npub const RANKS: [u8; 4] = {ranks:?};\npub const DISCARD: u8 = {discard};\n\
          /// Three touches from the design's plate figures.\npub const CAL: [CalPoint; 3] = [{}];\n\
          /// The 2D scene, postcard.\npub const SCENE_2D: &[u8] = &{bytes:?};\npub const SCENE_2D_FILE: &str = {file:?};\n",
         f_hz / 1_000_000,

@@ -1710,6 +1710,21 @@ impl Machine {
         let _ = self.uc.mem_write(cb as u64 + 24 + 16, &read.to_le_bytes());
     }
 
+    /// The core executes nothing for `ticks` while the peripherals run on, then takes whatever
+    /// became pending: an interrupt held off that long, as by a critical section (defmt-rtt
+    /// holds PRIMASK while it encodes a line) or a slower core than the model's one cycle an
+    /// instruction. Thread code is delayed as much, which a real critical section's own code
+    /// would be too.
+    pub fn hold_core(&mut self, ticks: Time) -> Option<Stop> {
+        let until = self.now() + ticks;
+        while self.now() < until {
+            if let Err(e) = self.idle_until(until) {
+                return Some(Stop::Fault(e));
+            }
+        }
+        None
+    }
+
     /// Runs in short steps until the core is in thread mode (IPSR = 0), then sets PC to `addr`.
     pub fn divert_in_thread_mode(&mut self, addr: u32) -> Option<Stop> {
         for _ in 0..10_000 {

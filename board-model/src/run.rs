@@ -64,6 +64,9 @@ pub struct Options {
     pub count_per_trigger: Option<usize>,
     /// The 4-wire overlay on the 2D image's pins and the finger on it (`crate::touch`).
     pub touch: Option<TouchScript>,
+    /// At each (virtual time s, duration µs): the core runs nothing for that long, interrupts
+    /// held off (`Machine::hold_core`), peripherals running on.
+    pub hold_core: Vec<(f64, f64)>,
 }
 
 /// The overlay and where the finger is at each virtual time (s since reset).
@@ -114,6 +117,7 @@ impl Options {
             count_at_s: Vec::new(),
             count_per_trigger: None,
             touch: None,
+            hold_core: Vec::new(),
         }
     }
 }
@@ -261,6 +265,9 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
     if let Some(s) = opts.rtt_host_stalls_s {
         plan.push((at(s), 9));
     }
+    for (s, _) in &opts.hold_core {
+        plan.push((at(*s), 5));
+    }
     m.sim_mut().rtt_host_blocking = opts.rtt_host_blocking;
     let mut instruction_counts = Vec::new();
     for (i, (s, _)) in opts.link_input.iter().enumerate() {
@@ -285,6 +292,18 @@ pub fn run(opts: &Options) -> Result<(Outcome, Machine), String> {
                 m.sim_mut().stuck_irqs.push(irq);
             }
             4 => m.sim_mut().stuck_irqs.clear(),
+            5 => {
+                // The hold planned at this time.
+                let us = opts
+                    .hold_core
+                    .iter()
+                    .find(|(s, _)| at(*s) == t)
+                    .map_or(0.0, |h| h.1);
+                stop = m.hold_core((us * 1e-6 * TICKS_PER_S as f64) as Time);
+                if stop.is_some() {
+                    break;
+                }
+            }
             6 => instruction_counts.push(m.sim().instructions_in.clone()),
             7 => m.sim_mut().scs.set_pending(crate::scs::exc::NMI),
             8 => m.sim_mut().scs.force_irq(opts.unhandled_irq.unwrap().1),

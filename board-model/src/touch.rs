@@ -13,6 +13,20 @@
 //! conversion started before the node settled reads the step's remainder (the RC's
 //! e^(−t/τ)). A node with no path (a floating plate without contact) keeps its charge.
 //!
+//! **The ADC's hold capacitor** (the datasheets' ADC input model: the pin, the sampling switch
+//! R_ADC and the sample-and-hold capacitor C_ADC; DS10693 / DS12288 "ADC characteristics",
+//! `saw_boards::AdcDef::{switch_ohm, hold_ff}`: 6 kΩ / 7 pF F446, 11.5 kΩ / 5 pF G474): C_ADC
+//! keeps the voltage of the last conversion, whatever channel it was. When a sampling phase
+//! starts (one sampling time, the board's plan, before the conversion's hold) the switch
+//! connects it to the node, and the two share their charge: V = (C_node·V_node +
+//! C_ADC·V_hold) / (C_node + C_ADC). R_ADC·C_ADC (42 / 58 ns) is far inside the sampling time,
+//! so the sharing is taken as instant; the node then recovers through its own path for the
+//! rest of the sampling (C_ADC's 0.3 % on the node's τ left out), and C_ADC holds the end
+//! value. So the first conversion after a channel switch reads the node dipped toward the
+//! previous channel's voltage by up to C_ADC / C_node of the step (7 / 2 461 of a full scale
+//! step: 11.6 LSB on the F446), less what the node recovers within the sampling time, and the
+//! dip decays into the next conversions with the node's τ.
+//!
 //! Drive patterns the overlay method uses: X (X+ high, X− low), Y (Y+ high, Y− low), Z (Y+
 //! high, X− low; Z1 and Z2 differ only in the channel). Any other pattern (a switch's
 //! intermediate steps: one pin released or driven before the others) has its driven pins take
@@ -52,8 +66,12 @@ pub struct Conversion {
     /// End of its sampling phase (where the ADC models hold the input).
     pub at: Time,
     pub terminal: Terminal,
-    /// The node's voltage then, fraction of VDD, before noise.
+    /// The node's voltage then, fraction of VDD, before noise (the hold capacitor's charge
+    /// sharing included).
     pub v: f64,
+    /// The hold capacitor's share in `v`, fraction of VDD: `v` less what the node would read
+    /// without the sampling switch.
+    pub shared: f64,
     pub code: u16,
 }
 
@@ -78,6 +96,14 @@ pub struct Panel {
     channels: [(u8, Terminal); 4],
     rng: ChaCha8Rng,
     noise: Option<Normal<f64>>,
+    /// C_ADC's voltage (the last conversion's), fraction of VDD.
+    hold_v: f64,
+    /// C_ADC and the node's capacitance, F.
+    c_hold_f: f64,
+    c_node_f: f64,
+    /// One sampling phase, ticks (the board's plan: the firmware converts every overlay
+    /// channel at it).
+    sampling: Time,
     pub trace: Trace,
 }
 
@@ -115,6 +141,10 @@ impl Panel {
             noise: (overlay.noise_lsb > 0.0)
                 .then(|| Normal::new(0.0, overlay.noise_lsb).ok())
                 .flatten(),
+            hold_v: 0.0,
+            c_hold_f: board.adc.hold_ff as f64 * 1e-15,
+            c_node_f: overlay.rc.c_node_pf() as f64 * 1e-12,
+            sampling: sampling_ticks(board),
             trace: Trace::default(),
         }
     }
@@ -193,11 +223,26 @@ impl Panel {
     }
 
     /// The ADC converts channel `ch` with its sampling ending at `t`: None if it is not an
-    /// overlay channel.
+    /// overlay channel. The sampling phase began one sampling time earlier: the hold
+    /// capacitor shares its charge with the node then (module doc).
     pub fn convert(&mut self, t: Time, ch: u8) -> Option<u16> {
         let terminal = self.channels.iter().find(|(c, _)| *c == ch)?.1;
+        let i = index(terminal);
+        self.relax_to(t.saturating_sub(self.sampling));
+        let before = self.v[i];
+        let (cn, ch_f) = (self.c_node_f, self.c_hold_f);
+        let dip = (cn * before + ch_f * self.hold_v) / (cn + ch_f) - before;
+        // Where the node would be at the hold without the switch: the same relaxation from
+        // `before` (deterministic: no noise is drawn), then the state put back.
+        let saved = (self.v, self.at);
         self.relax_to(t);
-        let v = self.v[index(terminal)];
+        let without = self.v[i];
+        (self.v, self.at) = saved;
+        self.v[i] = before + dip;
+        self.relax_to(t);
+        let shared = self.v[i] - without;
+        let v = self.v[i];
+        self.hold_v = v;
         let n = match &self.noise {
             Some(d) => d.sample(&mut self.rng),
             None => 0.0,
@@ -207,10 +252,18 @@ impl Panel {
             at: t,
             terminal,
             v,
+            shared,
             code,
         });
         Some(code)
     }
+}
+
+/// One sampling phase of `board`'s plan, master ticks: sampling half-cycles at its ADC clock.
+fn sampling_ticks(board: &saw_boards::BoardDef) -> Time {
+    let half_cycles = board.adc.sample_half_cycles as u128;
+    let den = 2 * board.adc.clk_hz.max(1) as u128;
+    (half_cycles * crate::periph::TICKS_PER_S as u128 / den) as Time
 }
 
 #[cfg(test)]
@@ -241,9 +294,36 @@ mod tests {
             force_n: 1.0,
         }));
         p.set_pins(0, [HI, LO, AN, AN]);
-        // F446 channel 8 = Y+.
-        let code = p.convert(200 * US, 8).unwrap();
+        // F446 channel 8 = Y+. The first conversion charges the hold capacitor (the test
+        // below); the second, 10 µs (5 τ) later, reads the settled node.
+        p.convert(200 * US, 8).unwrap();
+        let code = p.convert(210 * US, 8).unwrap();
         assert_eq!(code, (4096.0_f64 * 200.0 / 700.0).round() as u16);
+        assert!(p.trace.conversions[1].shared.abs() * 4096.0 < 0.01);
+    }
+
+    /// The hold capacitor's charge sharing, worked by hand from the ADC input model: X drive,
+    /// finger at x = 0.25 at 1 N (300 Ω), Y+ settled at 200/700 of VDD = 1 170.29 LSB; C_ADC
+    /// (7 pF, F446) holds 0 V. At the sampling's start (56 cycles at 22.5 MHz = 2.4889 µs
+    /// before the hold) the node drops by 200/700 · 7/(2 454 + 7) of VDD = 3.329 LSB, then
+    /// recovers with τ = (R_th + 300 + 400) Ω · 2.454 nF, R_th = 200 · 500 / 700 = 142.86 Ω:
+    /// τ = 2.0684 µs; at the hold 3.329 · e^(−2.4889/2.0684) = 0.999 LSB remain: 1 169.29 LSB,
+    /// code 1 169.
+    #[test]
+    fn the_first_conversion_shares_charge_with_the_hold_capacitor() {
+        let mut p = panel(Some(Finger {
+            x: 0.25,
+            y: 0.6,
+            force_n: 1.0,
+        }));
+        p.set_pins(0, [HI, LO, AN, AN]);
+        assert_eq!(p.convert(200 * US, 8), Some(1_169));
+        let tau_s = (200.0 * 500.0 / 700.0 + 700.0) * 2.454e-9;
+        let dip_lsb = 4096.0 * (200.0 / 700.0) * 7.0 / 2_461.0;
+        let want = -dip_lsb * (-(56.0_f64 / 22.5e6) / tau_s).exp();
+        let got = p.trace.conversions[0].shared * 4096.0;
+        assert!((got - want).abs() < 0.002, "{got} LSB vs {want}");
+        assert!((want + 0.999).abs() < 0.001, "{want}");
     }
 
     /// An early conversion reads wrong: from Y+ at 0 V (nothing before), τ = (R_th + 300 + 400)

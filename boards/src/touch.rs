@@ -162,6 +162,53 @@ pub const fn conversion_ns(board: &BoardDef) -> u32 {
     }
 }
 
+/// How a board's 2D image converts each phase of the overlay (the fields of
+/// `saw_core::touch::plates::AdcTiming`, which host-sim's `sim2d::adc_timing` and the firmware's
+/// build script build from this; saw-boards depends on nothing).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TouchAdc {
+    /// One conversion, sampling included, ns ([`conversion_ns`]).
+    pub conversion_ns: u32,
+    /// Conversions summed per position phase (X, Y).
+    pub conversions_position: u32,
+    /// Conversions summed per pressure phase (Z1, Z2): pressure needs less precision than
+    /// position (TI's TSC2101 recommends 8 bits for it), and each one taken off the last phase
+    /// is one conversion less between the frame's last sample and the gate.
+    pub conversions_pressure: u32,
+    /// Conversions thrown away right after each switch, before the summed ones: the first
+    /// conversion of a channel shares charge with the hold capacitor still holding the
+    /// previous channel's voltage (`docs/touch.md`, "Why 1 nF").
+    pub discard: u32,
+}
+
+impl TouchAdc {
+    /// Ranks of one phase's regular sequence: the discarded conversions and the summed ones.
+    pub const fn ranks(&self, position: bool) -> u32 {
+        self.discard
+            + if position {
+                self.conversions_position
+            } else {
+                self.conversions_pressure
+            }
+    }
+}
+
+/// The regular sequence's length on both chips: 16 ranks (RM0390 §13.13.9 ADC_SQR1.L,
+/// RM0440 §21.7.11 ADC_SQR1.L): one start converts a whole phase.
+pub const MAX_RANKS: u32 = 16;
+
+/// `board`'s 2D acquisition: its plan's conversion time; one discarded conversion, then 15
+/// summed a position phase (the sequence's 16 ranks) and 4 a pressure phase. Both chips convert
+/// a phase as one regular sequence of its channel, one DMA word a conversion.
+pub const fn touch_adc(board: &BoardDef) -> TouchAdc {
+    TouchAdc {
+        conversion_ns: conversion_ns(board),
+        conversions_position: 15,
+        conversions_pressure: 4,
+        discard: 1,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -261,6 +308,23 @@ mod tests {
                 assert_ne!(tp.channel, b.adc.channel, "{}", b.name);
             }
         }
+    }
+
+    /// Every phase fits one regular sequence (≤ 16 ranks) and sums at least one conversion, on
+    /// every board; F446: 1 + 15 and 1 + 4 ranks (seen failing with 16 position conversions:
+    /// 17 ranks).
+    #[test]
+    fn each_phase_is_one_regular_sequence() {
+        for b in ALL {
+            let t = touch_adc(b);
+            for position in [true, false] {
+                assert!(t.ranks(position) <= MAX_RANKS, "{}", b.name);
+                assert!(t.ranks(position) > t.discard, "{}", b.name);
+            }
+        }
+        let f = touch_adc(&crate::NUCLEO_F446RE);
+        assert_eq!((f.ranks(true), f.ranks(false)), (16, 5));
+        assert_eq!(f.conversion_ns, 3_023);
     }
 
     /// Hand-worked: F446 68 cycles / 22.5 MHz = 3 022.2 ns → 3 023; G474 60 / 37.5 MHz = 1 600.

@@ -8,14 +8,18 @@
 //! then MODER: RM0390 §7.4.1/§7.4.7, RM0440 §9.4.1/§9.4.7 — the output level is in ODR before
 //! the pin becomes an output) and the ADC's sequence to the phase's channel; at its trigger (its
 //! settling time later) it starts the conversions by software (F446 ADC_CR2.SWSTART, RM0390
-//! §13.13.3, a 16-rank scan of the one channel; G474 ADC_CR.ADSTART with EXTEN = 0, RM0440
-//! §21.4.15, 16 conversions summed by the oversampler, OVSR = 16×, OVSS = 0, §21.4.30), and CCR1
-//! is loaded with the next event's tick (output compare frozen mode: the match only sets CC1IF,
-//! RM0390 §17.3.8, RM0440 §29.3.9). DMA takes the codes (normal mode, re-armed at each frame's
-//! start); the frame's first event hands the previous frame to the control task, which runs it
-//! on the sample path's interrupt executor. A software start is late by the interrupt's latency,
-//! never early: the settling is a floor. `MARGIN_NS` after each phase's conversions keeps a late
-//! phase's last conversion before the next switch.
+//! §13.13.3; G474 ADC_CR.ADSTART with EXTEN = 0, RM0440 §21.4.15): one regular sequence of the
+//! slot's `RANKS`, all its channel, the first `DISCARD` thrown away (the hold capacitor's charge
+//! sharing after the channel switch), the rest summed (`saw_boards::touch::touch_adc`: 1 + 15
+//! a position phase, 1 + 4 a pressure phase); and CCR1 is loaded with the next event's tick
+//! (output compare frozen mode: the match only sets CC1IF, RM0390 §17.3.8, RM0440 §29.3.9). DMA
+//! takes every conversion (normal mode, re-armed at each frame's start); the frame's first
+//! event hands the previous frame to the control task, which runs it on the sample path's
+//! interrupt executor. A software start is late by the interrupt's latency, never early: the
+//! settling is a floor. `MARGIN_NS` after each phase's conversions keeps a late phase's last
+//! conversion before the next switch, and every switch checks it did: the DMA count must be the
+//! earlier slots' words exactly (F446 NDTR, RM0390 §9.5.6; G474 CNDTR, RM0440 §12.6.4), or the
+//! frame is dropped and counted (`MIXED`), never delivered with two plates in one sum.
 //!
 //! Not in this image: the host link and the scene store (the 1D image's); the 2D scene is the one
 //! built in (`SAW_SCENE_2D`, default `scenes/2d-fig12.toml`).
@@ -58,7 +62,7 @@ pub struct Event {
     pub slot: u8,
 }
 
-// TICKS_PER_US, FRAME_US, FRAME_TICKS, MARGIN_NS, EVENTS, CHANNELS, CAL, SCENE_2D,
+// TICKS_PER_US, FRAME_US, FRAME_TICKS, MARGIN_NS, EVENTS, CHANNELS, RANKS, DISCARD, CAL, SCENE_2D,
 // SCENE_2D_FILE: written by build.rs.
 include!(concat!(env!("OUT_DIR"), "/touch2d.rs"));
 
@@ -170,6 +174,12 @@ static NEXT: AtomicU32 = AtomicU32::new(0);
 pub static LATE: AtomicU32 = AtomicU32::new(0);
 /// Frames whose DMA had not moved every code by the frame's end (not delivered).
 pub static INCOMPLETE: AtomicU32 = AtomicU32::new(0);
+/// Frames dropped because a phase's conversions had not all reached memory when the next phase
+/// switched the pins (the DMA count at the switch disagreed with the phase's): their sums could
+/// mix two phases' plates.
+pub static MIXED: AtomicU32 = AtomicU32::new(0);
+/// This frame has failed the DMA count check at one of its switches.
+static MIXED_NOW: AtomicBool = AtomicBool::new(false);
 /// Frames the control task had no room for.
 pub static DROPPED: AtomicU32 = AtomicU32::new(0);
 /// Frames delivered.
@@ -179,25 +189,56 @@ static RUNNING: AtomicBool = AtomicBool::new(false);
 
 // ---- ADC and DMA, per chip ------------------------------------------------------------------
 
+/// Each slot's first word in the frame's DMA buffer (slots back to back, one word a rank).
+const FIRST: [usize; 4] = [
+    0,
+    RANKS[0] as usize,
+    RANKS[0] as usize + RANKS[1] as usize,
+    RANKS[0] as usize + RANKS[1] as usize + RANKS[2] as usize,
+];
+/// The frame's DMA words: every rank of every slot.
+pub const WORDS: usize = FIRST[3] + RANKS[3] as usize;
+const _: () = assert!(DISCARD < RANKS[0] && DISCARD < RANKS[1] && DISCARD < RANKS[2]);
+const _: () = assert!(DISCARD < RANKS[3] && WORDS <= 64);
+/// The frame's codes, as the DMA writes them.
+static mut BUF: [u16; WORDS] = [0; WORDS];
+
+/// Slot `k`'s code: its summed conversions (the first `DISCARD` ranks left out: charge sharing
+/// with the hold capacitor after the channel switch), scaled to 16 conversions' sum (the core's
+/// code scale), rounded, as host-sim's overlay model scales it.
+fn code(k: usize) -> u16 {
+    let k = k % 4;
+    let (from, to) = (FIRST[k] + DISCARD as usize, FIRST[k] + RANKS[k] as usize);
+    let base = core::ptr::addr_of!(BUF) as *const u16;
+    let mut sum = 0u32;
+    for j in from..to.min(WORDS) {
+        // SAFETY: j < WORDS; the DMA has stopped writing (the frame is complete).
+        sum += unsafe { core::ptr::read_volatile(base.add(j)) } as u32;
+    }
+    let n = (to - from).max(1) as u32;
+    ((sum * 16 + n / 2) / n).min(u16::MAX as u32) as u16
+}
+
+/// Bounded busy-waits on an ADC bit (a stop, the dummy conversion): never a hang; at least
+/// ~10 µs at 180 MHz, longer than one conversion (3.0 µs F446, 1.6 µs G474).
+const WAIT_LOOPS: u32 = 2_000;
+
 #[cfg(feature = "nucleo-f446re")]
 mod chip {
-    //! F446: ADC1 scan of 16 ranks of the phase's channel, 56-cycle sampling (the 1D plan's),
-    //! DMA2 stream 0 channel 0 (RM0390 §9.3.3 table 29), 64 half-words a frame.
+    //! F446: ADC1 scan of the slot's ranks (all its channel), 56-cycle sampling (the 1D
+    //! plan's), DMA2 stream 0 channel 0 (RM0390 §9.3.3 table 29), one half-word a conversion.
     use super::*;
     use embassy_stm32::adc::{Adc, SampleTime};
     use embassy_stm32::pac::dma::vals;
     use embassy_stm32::peripherals::{ADC1, DMA2_CH0};
 
-    pub const WORDS_PER_SLOT: usize = 16;
-    pub const WORDS: usize = 4 * WORDS_PER_SLOT;
     const STREAM: usize = 0;
-    pub static mut BUF: [u16; WORDS] = [0; WORDS];
 
     pub fn init(adc: Peri<'static, ADC1>, _dma: Peri<'static, DMA2_CH0>) {
         // Clock, ADCPRE (PCLK2 / 4 = 22.5 MHz) and ADON by embassy; kept on for good.
         core::mem::forget(Adc::new(adc));
         let r = pac::ADC1;
-        // SCAN: the 16 ranks in one start (RM0390 §13.3.5); 12 bits.
+        // SCAN: the slot's ranks in one start (RM0390 §13.3.5); 12 bits.
         r.cr1().modify(|w| w.set_scan(true));
         // DMA with DDS = 1: a request per conversion for as long as the stream runs (§13.8.1);
         // single (not continuous) mode; no external trigger: SWSTART starts it (§13.3.4).
@@ -216,7 +257,7 @@ mod chip {
                     .modify(|w| w.set_smp(ch as usize - 10, SampleTime::CYCLES56));
             }
         }
-        set_channel(CHANNELS[0]);
+        set_channel(CHANNELS[0], RANKS[0]);
         pac::RCC.ahb1enr().modify(|w| w.set_dma2en(true));
         let s = pac::DMA2.st(STREAM);
         s.cr().modify(|w| w.set_en(false));
@@ -237,19 +278,25 @@ mod chip {
         rearm();
     }
 
-    /// All 16 ranks to `ch` (SQR1 L = 15).
-    pub fn set_channel(ch: u8) {
+    /// `ranks` ranks (1..=16) of `ch`: SQR3 SQ1–6, SQR2 SQ7–12, SQR1 SQ13–16 and L = ranks − 1
+    /// (RM0390 §13.13.9–11).
+    pub fn set_channel(ch: u8, ranks: u8) {
         let r = pac::ADC1;
         r.sqr3().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
         r.sqr2().write(|w| (0..6).for_each(|i| w.set_sq(i, ch)));
         r.sqr1().write(|w| {
             (0..4).for_each(|i| w.set_sq(i, ch));
-            w.set_l(15);
+            w.set_l(ranks.clamp(1, 16) - 1);
         });
     }
 
     pub fn start() {
         pac::ADC1.cr2().modify(|w| w.set_swstart(true));
+    }
+
+    /// Words the stream has still to move this frame (NDTR, RM0390 §9.5.6).
+    pub fn remaining() -> u32 {
+        pac::DMA2.st(STREAM).ndtr().read().ndt() as u32
     }
 
     /// Whether the stream moved every word of the frame (normal mode: NDTR counts to 0 and the
@@ -278,50 +325,54 @@ mod chip {
         s.cr().modify(|w| w.set_en(true));
         complete
     }
-
-    /// Slot `k`'s code: its 16 conversions summed.
-    pub fn code(k: usize) -> u16 {
-        let mut sum = 0u32;
-        let base = core::ptr::addr_of!(BUF) as *const u16;
-        for i in 0..WORDS_PER_SLOT {
-            let j = (k * WORDS_PER_SLOT + i) % WORDS;
-            // SAFETY: j < WORDS; the DMA has stopped writing (the frame is complete).
-            sum += unsafe { core::ptr::read_volatile(base.add(j)) } as u32;
-        }
-        sum.min(u16::MAX as u32) as u16
-    }
 }
 
 #[cfg(all(feature = "nucleo-g474re", not(feature = "nucleo-f446re")))]
 mod chip {
-    //! G474: ADC1, one regular rank of the phase's channel, the oversampler summing 16
-    //! conversions (OVSR 011 = 16×, OVSS 0: the sum of 16, ≤ 65 520, in the 16-bit DR; RM0440
-    //! §21.4.30), 47.5-cycle sampling (the 1D plan's); DMA1 channel 1 through DMAMUX1 channel 0,
-    //! request 5 = ADC1 (RM0440 §13.3.2 table 91), 4 half-words a frame.
+    //! G474: ADC1, a regular sequence of the slot's ranks (all its channel; the oversampler
+    //! off, so each conversion is a word and the first can be thrown away), 47.5-cycle sampling
+    //! (the 1D plan's); DMA1 channel 1 through DMAMUX1 channel 0, request 5 = ADC1 (RM0440
+    //! §13.3.2 table 91), one half-word a conversion.
     use super::*;
     use embassy_stm32::adc::{vals, Adc, AdcConfig, SampleTime};
     use embassy_stm32::peripherals::{ADC1, DMA1_CH1};
 
-    pub const WORDS: usize = 4;
     const CH: usize = 0;
-    pub static mut BUF: [u16; WORDS] = [0; WORDS];
+
+    /// ADC_CR's rs bits (RM0440 §21.7.3): ADCAL, JADSTP, ADSTP, JADSTART, ADSTART, ADDIS,
+    /// ADEN. Software may set ADEN "only when all bits of ADC_CR are 0" but ADVREGEN and
+    /// ADCALDIF, so a read-modify-write that sets ADSTART must not write ADEN's 1 back: the
+    /// rs bits are written 0 (no effect) but the one being set, as ST's
+    /// `LL_ADC_REG_StartConversion` does (`MODIFY_REG(CR, ADC_CR_BITS_PROPERTY_RS, ADSTART)`).
+    const CR_RS: u32 = (1 << 31) | (1 << 5) | (1 << 4) | (1 << 3) | (1 << 2) | (1 << 1) | 1;
+    const ADSTART: u32 = 1 << 2;
+    const ADSTP: u32 = 1 << 4;
+
+    fn cr_set(bit: u32) {
+        let r = pac::ADC1;
+        let cr = r.cr().read().0;
+        r.cr().write_value(pac::adc::regs::Cr((cr & !CR_RS) | bit));
+    }
+
+    /// ADSTART = 0 (RM0440 §21.4.17, "Stopping an ongoing conversion"): ADSTP if a sequence
+    /// runs, then a bounded wait for ADSTART to clear. SQR and CFGR are writable only then.
+    fn stop() {
+        let r = pac::ADC1;
+        if !r.cr().read().adstart() {
+            return;
+        }
+        cr_set(ADSTP);
+        for _ in 0..WAIT_LOOPS {
+            if !r.cr().read().adstart() {
+                break;
+            }
+        }
+    }
 
     pub fn init(adc: Peri<'static, ADC1>, _dma: Peri<'static, DMA1_CH1>) {
-        let mut cfg = AdcConfig::default();
-        cfg.oversampling_ratio = Some(3);
-        cfg.oversampling_shift = Some(0);
-        cfg.oversampling_mode = Some((vals::Rovsm::CONTINUED, vals::Trovs::AUTOMATIC, true));
-        // Calibration, ADEN, the oversampler (embassy); kept on for good.
-        core::mem::forget(Adc::new(adc, cfg));
+        // Calibration, ADEN (embassy); the oversampler left off; kept on for good.
+        core::mem::forget(Adc::new(adc, AdcConfig::default()));
         let r = pac::ADC1;
-        // DMA circular on the ADC side (DMACFG = 1: a request per result for as long as DMAEN,
-        // §21.4.29), single mode, software start (EXTEN = 0). CFGR only while ADSTART = 0.
-        r.cfgr().modify(|w| {
-            w.set_dmaen(vals::Dmaen::ENABLE);
-            w.set_dmacfg(vals::Dmacfg::CIRCULAR);
-            w.set_cont(false);
-            w.set_exten(vals::Exten::DISABLED);
-        });
         for ch in CHANNELS {
             if ch < 10 {
                 r.smpr()
@@ -331,7 +382,16 @@ mod chip {
                     .modify(|w| w.set_smp(ch as usize - 10, SampleTime::CYCLES47_5));
             }
         }
-        set_channel(CHANNELS[0]);
+        dummy_conversion();
+        // DMA circular on the ADC side (DMACFG = 1: a request per result for as long as DMAEN,
+        // §21.4.29), single mode, software start (EXTEN = 0). CFGR only while ADSTART = 0.
+        r.cfgr().modify(|w| {
+            w.set_dmaen(vals::Dmaen::ENABLE);
+            w.set_dmacfg(vals::Dmacfg::CIRCULAR);
+            w.set_cont(false);
+            w.set_exten(vals::Exten::DISABLED);
+        });
+        set_channel(CHANNELS[0], RANKS[0]);
         pac::RCC.ahb1enr().modify(|w| {
             w.set_dma1en(true);
             w.set_dmamux1en(true);
@@ -353,22 +413,68 @@ mod chip {
         rearm();
     }
 
-    /// SQR1: L = 0 (one rank), SQ1 = `ch`; written only between conversions (ADSTART = 0,
-    /// RM0440 §21.7.11: the margin after each phase's conversions).
-    pub fn set_channel(ch: u8) {
-        pac::ADC1.sqr1().write(|w| {
-            w.set_l(0);
-            w.set_sq(0, ch);
+    /// ES0430 ("Wrong ADC result if conversion done late after calibration or previous
+    /// conversion"): the first conversion more than 1 ms after the calibration may be wrong, so
+    /// one is converted and thrown away before the acquisition, as the 1D image does
+    /// (`board::g474`, `dummy_conversion`). DMAEN = 0 (no request), EXTEN = 0 (ADSTART starts
+    /// it at once and clears at its end of sequence, RM0440 §21.4.15, §21.4.18). Afterwards the
+    /// 2D image converts at least once a frame (≤ 0.3 ms), so no later conversion is late.
+    fn dummy_conversion() {
+        let r = pac::ADC1;
+        r.cfgr().modify(|w| {
+            w.set_dmaen(vals::Dmaen::DISABLE);
+            w.set_exten(vals::Exten::DISABLED);
+            w.set_cont(false);
+        });
+        set_channel(CHANNELS[0], 1);
+        cr_set(ADSTART);
+        for _ in 0..WAIT_LOOPS {
+            if !r.cr().read().adstart() {
+                break;
+            }
+        }
+        stop();
+        let _ = r.dr().read();
+        // ISR flags are rc_w1.
+        r.isr().write(|w| {
+            w.set_ovr(true);
+            w.set_eoc(true);
+            w.set_eos(true);
+            w.set_eosmp(true);
         });
     }
 
+    /// `ranks` ranks (1..=16) of `ch`: SQR1 L = ranks − 1 and SQ1–4, SQR2 SQ5–9, SQR3 SQ10–14,
+    /// SQR4 SQ15–16 (RM0440 §21.7.11–14). Written only while ADSTART = 0 (§21.7.11): a phase
+    /// whose conversions still run at its successor's switch is stopped first (its frame is
+    /// dropped by the DMA count check).
+    pub fn set_channel(ch: u8, ranks: u8) {
+        stop();
+        let r = pac::ADC1;
+        r.sqr1().write(|w| {
+            w.set_l(ranks.clamp(1, 16) - 1);
+            (0..4).for_each(|i| w.set_sq(i, ch));
+        });
+        r.sqr2().write(|w| (0..5).for_each(|i| w.set_sq(i, ch)));
+        r.sqr3().write(|w| (0..5).for_each(|i| w.set_sq(i, ch)));
+        r.sqr4().write(|w| (0..2).for_each(|i| w.set_sq(i, ch)));
+    }
+
     pub fn start() {
-        pac::ADC1.cr().modify(|w| w.set_adstart(true));
+        cr_set(ADSTART);
+    }
+
+    /// Words the channel has still to move this frame (CNDTR, RM0440 §12.6.4).
+    pub fn remaining() -> u32 {
+        pac::DMA1.ch(CH).ndtr().read().ndt() as u32
     }
 
     /// Whether the channel moved every word of the frame (CNDTR at 0, RM0440 §12.4.4), then
     /// re-armed: EN = 0, flags cleared, CNDTR reloaded (writable only while EN = 0), EN = 1. An
-    /// overrun (OVR) is cleared (ISR bits are rc_w1).
+    /// overrun (OVR: with DMA, no request until it is cleared, §21.4.27) is recovered as the 1D
+    /// image recovers it (`board::g474`, `Sampler::restart`): the ADC stopped, OVR/EOC/EOS
+    /// cleared (rc_w1) and DMAEN toggled (CFGR writable only while ADSTART = 0), with the
+    /// channel re-armed here.
     pub fn rearm() -> bool {
         let c = pac::DMA1.ch(CH);
         let complete = c.ndtr().read().ndt() == 0;
@@ -376,18 +482,18 @@ mod chip {
         pac::DMA1.ifcr().write(|w| w.set_gif(CH, true));
         let r = pac::ADC1;
         if r.isr().read().ovr() {
-            r.isr().write(|w| w.set_ovr(true));
+            stop();
+            r.isr().write(|w| {
+                w.set_ovr(true);
+                w.set_eoc(true);
+                w.set_eos(true);
+            });
+            r.cfgr().modify(|w| w.set_dmaen(vals::Dmaen::DISABLE));
+            r.cfgr().modify(|w| w.set_dmaen(vals::Dmaen::ENABLE));
         }
         c.ndtr().write(|w| w.set_ndt(WORDS as u16));
         c.cr().modify(|w| w.set_en(true));
         complete
-    }
-
-    /// Slot `k`'s code: the oversampler's sum of 16.
-    pub fn code(k: usize) -> u16 {
-        let base = core::ptr::addr_of!(BUF) as *const u16;
-        // SAFETY: k % WORDS < WORDS; the channel has stopped writing (the frame is complete).
-        unsafe { core::ptr::read_volatile(base.add(k % WORDS)) }
     }
 }
 
@@ -455,7 +561,15 @@ pub fn on_event() {
     if ev.kind != 1 {
         write_drive(&DRIVES[slot]);
         switched = r.cnt().read().cnt() as u32;
-        chip::set_channel(CHANNELS[slot]);
+        // Every earlier slot's words in memory, or this frame mixes plates: a late start (an
+        // interrupt held off past the margin) left conversions running across the switch. Read
+        // after the pins: a word counted here had its sampling end a SAR conversion (12 / 12.5
+        // ADC cycles: 533 / 333 ns) before it reached memory, longer than the pin writes take.
+        // The frame boundary's check is `rearm`'s (all words moved).
+        if i != 0 && chip::remaining() != (WORDS - FIRST[slot]) as u32 {
+            MIXED_NOW.store(true, Ordering::Relaxed);
+        }
+        chip::set_channel(CHANNELS[slot], RANKS[slot]);
     }
     if ev.kind != 0 {
         chip::start();
@@ -478,7 +592,12 @@ pub fn on_event() {
 /// The frame boundary: the last frame's codes, if the DMA moved them all, to the control task.
 fn deliver() {
     let complete = chip::rearm();
+    let mixed = MIXED_NOW.swap(false, Ordering::Relaxed);
     if !RUNNING.swap(true, Ordering::Relaxed) {
+        return;
+    }
+    if mixed {
+        MIXED.fetch_add(1, Ordering::Relaxed);
         return;
     }
     if !complete {
@@ -486,10 +605,10 @@ fn deliver() {
         return;
     }
     let frame = Frame {
-        x_code: chip::code(0),
-        y_code: chip::code(1),
-        z1_code: chip::code(2),
-        z2_code: chip::code(3),
+        x_code: code(0),
+        y_code: code(1),
+        z1_code: code(2),
+        z2_code: code(3),
         t_us: Instant::now().as_micros() as u32,
     };
     if queue_frame(frame) {
@@ -594,9 +713,10 @@ async fn control2d(
         if now >= next_log {
             next_log = now + TELEMETRY_PERIOD_US;
             info!(
-                "telemetry2d frames {=u32} late {=u32} incomplete {=u32} dropped {=u32} {} burst {} line {}",
+                "telemetry2d frames {=u32} late {=u32} mixed {=u32} incomplete {=u32} dropped {=u32} {} burst {} line {}",
                 DELIVERED.load(Ordering::Relaxed),
                 LATE.load(Ordering::Relaxed),
+                MIXED.load(Ordering::Relaxed),
                 INCOMPLETE.load(Ordering::Relaxed),
                 DROPPED.load(Ordering::Relaxed),
                 ctrl.telemetry(),

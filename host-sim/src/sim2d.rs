@@ -35,9 +35,6 @@ use crate::trajectory2d::Trajectory2d;
 /// height (the 4.3-inch panel docs/touch.md takes for its interlayer capacitance).
 pub const SCREEN_MM: (f64, f64) = (95.0, 54.0);
 
-/// Conversions per phase (the 1D stage's code scale, `Schedule`'s default acquisition).
-pub const CONVERSIONS_PER_PHASE: u32 = 16;
-
 /// A 2D run's parameters.
 #[derive(Clone, Debug)]
 pub struct Params2d {
@@ -113,12 +110,17 @@ impl std::error::Error for Sim2dError {}
 /// Longest 2D run, s: frame stamps are u32 µs (4 295 s); a run keeps its trace in memory.
 pub const MAX_DURATION_S: f64 = 600.0;
 
-/// The board's touch acquisition: its ADC's conversion time, 16 conversions a phase.
+/// The board's touch acquisition as saw-boards states it (`saw_boards::touch::touch_adc`: its
+/// ADC's conversion time, the conversions summed a position and a pressure phase, the ones
+/// discarded after each switch), as the core's `AdcTiming`. The firmware's build script builds
+/// the same from the same figures.
 pub fn adc_timing(board: &BoardDef) -> AdcTiming {
+    let t = saw_boards::touch::touch_adc(board);
     AdcTiming {
-        conversion_ns: saw_boards::touch::conversion_ns(board),
-        conversions_position: CONVERSIONS_PER_PHASE,
-        conversions_pressure: CONVERSIONS_PER_PHASE,
+        conversion_ns: t.conversion_ns,
+        conversions_position: t.conversions_position,
+        conversions_pressure: t.conversions_pressure,
+        discard: t.discard,
     }
 }
 

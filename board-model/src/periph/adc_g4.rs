@@ -231,6 +231,12 @@ pub struct AdcG4 {
     /// firmware's buffer: their end-of-conversion times. A firmware that works around the
     /// erratum leaves this empty.
     pub late_results_delivered: Vec<Time>,
+    /// Times of ADC_CR writes that carry ADEN = 1 while ADEN already reads 1: RM0440 §21.7.3
+    /// lets software set ADEN "only when all bits of ADC_CR are 0" but ADVREGEN/ADCALDIF, so a
+    /// read-modify-write that sets another rs bit writes ADEN back outside the rule (ST's
+    /// LL_ADC_REG_StartConversion writes the rs bits 0). The model cannot know what silicon does
+    /// with it, so it records the write instead of refusing it.
+    pub aden_written_back: Vec<Time>,
     conversion: Option<Conversion>,
     fault: Option<String>,
 }
@@ -258,6 +264,7 @@ impl AdcG4 {
             ready_at: None,
             last_activity_at: None,
             late_results_delivered: Vec::new(),
+            aden_written_back: Vec::new(),
             conversion: None,
             fault: None,
         };
@@ -521,6 +528,9 @@ impl AdcG4 {
     ) -> Result<(), Unmodelled> {
         let old = self.cr;
         let written = merge(old, value, mask);
+        if value & mask & CR_ADEN != 0 && old & CR_ADEN != 0 {
+            self.aden_written_back.push(now);
+        }
         let set = written & !old & CR_RS;
         let refuse = |why: &str| Err(Unmodelled::write(offset, value, format!("ADC1_CR: {why}")));
         if set & (CR_JADSTART | CR_JADSTP) != 0 {

@@ -281,6 +281,7 @@ const INTERLAYER_PF: (u32, u32) = (0, 100_000);
 const FILTER_PF: (u32, u32) = (0, 1_000_000);
 const CONVERSION_NS: (u32, u32) = (1, 1_000_000);
 const CONVERSIONS: (u32, u32) = (1, 256);
+const DISCARD: (u32, u32) = (0, 16);
 
 fn check(
     field: &'static str,
@@ -350,6 +351,12 @@ pub struct AdcTiming {
     /// Conversions per pressure phase. The codes are scaled to 16 conversions' sum; fewer
     /// convert faster at more noise, which only the touch thresholds see.
     pub conversions_pressure: u32,
+    /// Conversions thrown away at the start of every phase, before the summed ones: the first
+    /// conversion after a channel switch meets the ADC's hold capacitor still charged to the
+    /// previous channel, and the charge it shares with the node dips the node by up to
+    /// C_ADC / C_node of the step (`docs/touch.md`, "Why 1 nF"). They take their time in the
+    /// phase's slot like the others.
+    pub discard: u32,
 }
 
 /// One phase's slot in the frame.
@@ -362,7 +369,7 @@ pub struct PhaseSlot {
     pub start_ns: u64,
     /// From the pin switch to the ADC trigger, ns.
     pub settle_ns: u64,
-    /// The conversions, ns.
+    /// The conversions, the discarded ones first, ns.
     pub convert_ns: u64,
 }
 
@@ -404,6 +411,7 @@ impl Schedule {
             CONVERSIONS,
             "conversions",
         )?;
+        check("discard", adc.discard, DISCARD, "conversions")?;
         let mut start_ns = 0;
         let slots = SEQUENCE.map(|phase| {
             let conversions = if phase.is_position() {
@@ -415,7 +423,7 @@ impl Schedule {
                 phase,
                 start_ns,
                 settle_ns: rc.settle_ns(phase),
-                convert_ns: conversions as u64 * adc.conversion_ns as u64,
+                convert_ns: (conversions + adc.discard) as u64 * adc.conversion_ns as u64,
             };
             start_ns = slot.end_ns();
             slot
@@ -526,6 +534,7 @@ mod tests {
             conversion_ns: 3_023,
             conversions_position: 16,
             conversions_pressure: 16,
+            discard: 0,
         };
         let s = Schedule::new(&PlateRc::DEFAULT, &adc).unwrap();
         assert_eq!(s.frame_ns(), 346_052);
@@ -549,10 +558,47 @@ mod tests {
             conversion_ns: 1_600,
             conversions_position: 16,
             conversions_pressure: 16,
+            discard: 0,
         };
         let s = Schedule::new(&PlateRc::DEFAULT, &adc).unwrap();
         assert_eq!(s.frame_ns(), 254_980);
         assert_eq!(s.per_axis_rate_hz(), 3_921);
+    }
+
+    /// The boards' 2D acquisition (`saw_boards::touch::touch_adc`): one conversion discarded
+    /// after each switch, then 15 summed a position phase and 4 a pressure phase. F446, 3 023 ns
+    /// a conversion: X and Y convert 16 × 3 023 = 48 368 ns, Z1 and Z2 5 × 3 023 = 15 115 ns;
+    /// frame = 152 580 + 2 · 48 368 + 2 · 15 115 = 279 546 ns, 1e9 / 279 546 = 3 577 a second;
+    /// settling 152 580 / 279 546 = 545 ‰. G474, 1 600 ns: 152 580 + 2 · 25 600 + 2 · 8 000 =
+    /// 219 780 ns, 4 550 a second.
+    #[test]
+    fn discarded_conversions_take_their_time_in_the_slot() {
+        let adc = AdcTiming {
+            conversion_ns: 3_023,
+            conversions_position: 15,
+            conversions_pressure: 4,
+            discard: 1,
+        };
+        let s = Schedule::new(&PlateRc::DEFAULT, &adc).unwrap();
+        assert_eq!(s.slots[0].convert_ns, 48_368);
+        assert_eq!(s.slots[2].convert_ns, 15_115);
+        assert_eq!(s.slots[3].convert_ns, 15_115);
+        assert_eq!(s.frame_ns(), 279_546);
+        assert_eq!(s.per_axis_rate_hz(), 3_577);
+        assert_eq!(s.settle_share_permille(), 545);
+        let g474 = AdcTiming {
+            conversion_ns: 1_600,
+            ..adc
+        };
+        let s = Schedule::new(&PlateRc::DEFAULT, &g474).unwrap();
+        assert_eq!(s.frame_ns(), 219_780);
+        assert_eq!(s.per_axis_rate_hz(), 4_550);
+        // More than 16 discarded is refused with a sentence.
+        let e = Schedule::new(&PlateRc::DEFAULT, &AdcTiming { discard: 17, ..adc }).unwrap_err();
+        assert_eq!(
+            std::format!("{e}"),
+            "discard 17 conversions is outside the accepted 0 to 16 conversions"
+        );
     }
 
     /// No filter capacitor: C = 454 pF, τ_X = 2075 · 454 = 942 050 ps → 8 488.7… → 8 489 ns.
@@ -604,6 +650,7 @@ mod tests {
             conversion_ns: 3_023,
             conversions_position: 0,
             conversions_pressure: 16,
+            discard: 0,
         };
         let e = Schedule::new(&PlateRc::DEFAULT, &adc).unwrap_err();
         assert_eq!(
@@ -623,6 +670,7 @@ mod tests {
             conversion_ns: 1_000_000,
             conversions_position: 256,
             conversions_pressure: 256,
+            discard: 16,
         };
         let s = Schedule::new(&big, &adc).unwrap();
         assert!(s.per_axis_rate_hz() < 1);

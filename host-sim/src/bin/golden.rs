@@ -238,12 +238,17 @@ fn gen(dir: &Path) -> Result<(), String> {
 const OVER_BUDGET_2D: f64 = 590.0;
 
 /// The 2D vectors' touch plate: the 4.3-inch panel of host-sim's overlay model (95 × 54 mm;
-/// finger fractions map to µm by these), read with the F446's default acquisition.
+/// finger fractions map to µm by these), read with the F446's 2D acquisition
+/// (`saw_boards::touch::touch_adc`, the fields `sim2d::adc_timing` maps).
 const PLATE_UM: (f64, f64) = (95_000.0, 54_000.0);
-const F446_TOUCH: AdcTiming = AdcTiming {
-    conversion_ns: 3_023,
-    conversions_position: 16,
-    conversions_pressure: 16,
+const F446_TOUCH: AdcTiming = {
+    let t = saw_boards::touch::touch_adc(&saw_boards::NUCLEO_F446RE);
+    AdcTiming {
+        conversion_ns: t.conversion_ns,
+        conversions_position: t.conversions_position,
+        conversions_pressure: t.conversions_pressure,
+        discard: t.discard,
+    }
 };
 
 /// The finger of a 2D vector at `t_s`: where it is (µm), or None when lifted.
