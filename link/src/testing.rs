@@ -216,9 +216,9 @@ pub fn every_request() -> std::vec::Vec<Request> {
     ]
 }
 
-/// The touch frame period the 2D test board reads at, µs (the F446's 347 µs frames:
-/// `host_sim::sim2d::board_frame_period_us`).
-pub const FRAME_US: u32 = 347;
+/// The touch frame period the 2D test board reads at, µs (the F446's 280 µs frames:
+/// `host_sim::sim2d::board_frame_period_us`, which saw's e2e2d test holds this to).
+pub const FRAME_US: u32 = 280;
 
 /// The 2D test board's overlay, µm: the 95 × 54 mm panel of `scenes/2d-*.toml`.
 pub const PLATE_UM: (u32, u32) = (95_000, 54_000);

@@ -196,7 +196,7 @@ pub enum Command {
         #[arg(allow_negative_numbers = true, value_parser = index_u8)]
         index: u8,
         /// New lower-left bounding corner, mm: X,Y (each 0 to 1000).
-        #[arg(long, value_name = "X,Y", allow_hyphen_values = true, value_parser = xy_mm, required_unless_present = "rect", conflicts_with = "rect")]
+        #[arg(long, value_name = "X,Y", allow_hyphen_values = true, value_parser = xy_mm, conflicts_with = "rect")]
         to: Option<(f64, f64)>,
         /// New corners of a rectangle, mm: X0,Y0,X1,Y1 (each 0 to 1000; lower left, upper right).
         #[arg(long, value_name = "X0,Y0,X1,Y1", allow_hyphen_values = true, value_parser = rect_mm)]

@@ -50,7 +50,11 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-const FRAME_US: u32 = 347; // the F446's touch frame (host_sim::sim2d::board_frame_period_us)
+/// The F446's touch frame, µs: the period the virtual overlay board reads at (its schedule's,
+/// 280 µs since one conversion is thrown away after each switch and a pressure phase sums 4).
+fn frame_us() -> u32 {
+    host_sim::sim2d::board_frame_period_us(&saw_boards::NUCLEO_F446RE).expect("a frame period")
+}
 
 /// The F446's burst timer.
 fn timer() -> saw_core::burst::BurstTimer {
@@ -69,7 +73,7 @@ fn read_back(port: &Path) -> (String, saw_core::plane::Config2d, (u32, u32)) {
     let table: toml::Table = serde_json::from_value(g["result"]["scene"].clone()).unwrap();
     let text = toml::to_string(&table).unwrap();
     let config =
-        saw_core::scene_file::load_2d_for_board("back.toml", &text, timer(), FRAME_US).unwrap();
+        saw_core::scene_file::load_2d_for_board("back.toml", &text, timer(), frame_us()).unwrap();
     let plate = saw_core::scene_file::plate_um_of("back.toml", &text).unwrap();
     (
         g["result"]["scene_id"].as_str().unwrap().to_string(),
@@ -80,7 +84,7 @@ fn read_back(port: &Path) -> (String, saw_core::plane::Config2d, (u32, u32)) {
 
 fn file_config(name: &str) -> saw_core::plane::Config2d {
     let text = std::fs::read_to_string(scene(name)).unwrap();
-    saw_core::scene_file::load_2d_for_board(name, &text, timer(), FRAME_US).unwrap()
+    saw_core::scene_file::load_2d_for_board(name, &text, timer(), frame_us()).unwrap()
 }
 
 #[test]
@@ -163,6 +167,8 @@ fn a_2d_scene_is_pushed_read_back_edited_and_a_1d_one_refused() {
         (vec!["window", "0", "--to", "3"], "X,Y"),
         (vec!["window", "0", "--rect", "1,2,3,inf"], "--rect"),
         (vec!["window", "0", "--to", "-1,3"], "0 to 1000"),
+        // Neither flag: the sentence names both (clap's own error named only --to).
+        (vec!["window", "0"], "give --to X,Y (move) or --rect X0,Y0,X1,Y1 (resize)"),
     ] {
         let r = saw(&vb.port, &args);
         assert_eq!(r.code, 2, "{args:?}: {}", r.stderr);

@@ -147,3 +147,14 @@ fn write_the_seed_inputs() {
         }
     }
 }
+
+/// The 2D test board (`saw_link::testing`, which the fuzz bodies and the session tests read
+/// scenes for) reads at the F446's touch frame as host-sim's schedule gives it: a change to the
+/// schedule (conversions, discards, margins) fails here, not as scenes compiled for a stale rate.
+#[test]
+fn the_test_boards_frame_is_the_f446_schedules() {
+    assert_eq!(
+        Some(saw_link::testing::FRAME_US),
+        host_sim::sim2d::board_frame_period_us(&saw_boards::NUCLEO_F446RE)
+    );
+}

@@ -459,7 +459,16 @@ fn dummy_conversion() {
         w.set_exten(Exten::DISABLED);
         w.set_cont(false);
     });
-    adc.cr().modify(|w| w.set_adstart(true));
+    // ADSTART set with ADC_CR's other rs bits written 0 (RM0440 §21.7.3: ADEN may be written 1
+    // only while every other bit but ADVREGEN and ADCALDIF is 0), as ST's
+    // `LL_ADC_REG_StartConversion` does and `restart` below: a read-modify-write would write
+    // ADEN's 1 back while the ADC is enabled.
+    let cr = adc.cr().read();
+    adc.cr().write(|w| {
+        w.set_advregen(cr.advregen());
+        w.set_adcaldif(cr.adcaldif());
+        w.set_adstart(true);
+    });
     while adc.cr().read().adstart() {}
     let _ = adc.dr().read();
     // ISR flags are rc_w1.
