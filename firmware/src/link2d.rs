@@ -1,0 +1,472 @@
+//! The 2D image's host link and scene store (feature `touch-2d`, issue #36): the board glue
+//! behind `saw_link`'s 2D session (`Session::new_2d`: push, read back, move and resize windows,
+//! counters, save), the hand-over of a compiled 2D scene to the control loop, the 2D stream's
+//! tap (one `Record2d` per frame at the stream's rate), and the boot scene (the 2D scene saved in
+//! flash if it reads back and compiles, else the built-in one).
+//!
+//! What is not 2D is the 1D image's, shared: the UART task (`link::serve`), the save's hold of
+//! RF and the watchdog (`link::quiet`, `link::hold_rf`), the store's flash, hooks and boot repair
+//! (`store.rs`). A 2D scene is an item of the same store under its own tag (`saw_store::FORMAT_2D`),
+//! so this image never loads a 1D scene and the 1D image never loads a 2D one.
+
+use core::cell::UnsafeCell;
+use core::mem::MaybeUninit;
+use core::sync::atomic::{AtomicBool, Ordering};
+
+use defmt::{info, warn};
+use embassy_stm32::gpio::Output;
+use embassy_stm32::mode::Async;
+use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_sync::signal::Signal;
+use saw_core::burst::BurstTimer;
+use saw_core::controller::{ConfigError, Telemetry};
+use saw_core::gate::{Envelope, GateAction};
+use saw_core::plane::{
+    Config2d, Controller2d, EdgePulse, Output2d, Prepared2d, Telemetry2d, TouchFault,
+};
+use saw_core::touch::fault::Axis;
+use saw_core::touch::frame::Reading;
+use saw_link::msg::{Fault2d, PlaneScene, Record2d, SceneSource, StoreFault};
+use saw_link::session::{Apply2dError, Board, Identity, Session, Stamp};
+use saw_link::stream::{Decimator, QUEUE_RECORDS};
+use saw_store::{SceneStore, ITEM_BYTES_2D};
+
+use crate::board::{StoreFlash, BOARD};
+use crate::link::{
+    self, Streaming, DROPPED, EVERY, INSTALLED, STAMP_CHANGE, STAMP_SCENE, TELEMETRY_WANTED,
+};
+use crate::rf::{BurstGate, Line};
+
+// PLATE_UM: written by build.rs (the built-in scene's plate, the calibration's).
+include!(concat!(env!("OUT_DIR"), "/plate2d.rs"));
+
+/// The 2D store: the 1D store's flash and layout, a 2D scene's item buffer.
+pub type Store2d = SceneStore<StoreFlash, ITEM_BYTES_2D>;
+
+/// A compiled 2D scene and its edge pulse (whose triangle table the control loop builds when it
+/// installs it, not on the first edge's sample path).
+struct Pending {
+    prepared: Prepared2d,
+    edge: EdgePulse,
+}
+
+/// The compiled scene's hand-over from the link task to the control loop, without a copy inside
+/// a critical section: a `Prepared2d` is kilobytes, and an embassy `Signal` moves its value with
+/// interrupts off, which would hold off the plate schedule's TIM3 interrupt (2 µs of margin a
+/// phase, `docs/touch.md`) for the whole copy. Here the link task writes the slot while `full`
+/// is clear and then sets it; the control loop takes it while `full` is set and then clears it.
+/// The slot is a `MaybeUninit`, not an `Option`: an `Option<Pending>`'s `None` is not all zeros,
+/// so that static went to `.data`, its ~9.5 KB image in flash.
+struct Handoff {
+    full: AtomicBool,
+    slot: UnsafeCell<MaybeUninit<Pending>>,
+}
+
+// SAFETY: `slot` is written only by the link task while `full` is false and read (taken) only by
+// the control loop while `full` is true; `full` is stored with Release after each side's access
+// and loaded with Acquire before it, so the two never touch the slot at once (one writer, one
+// reader, alternating).
+unsafe impl Sync for Handoff {}
+
+static HANDOFF: Handoff = Handoff {
+    full: AtomicBool::new(false),
+    slot: UnsafeCell::new(MaybeUninit::uninit()),
+};
+/// The 2D counters, handed over between two frames (asked by `link::TELEMETRY_WANTED`).
+static TELEMETRY_2D: Signal<CriticalSectionRawMutex, Telemetry2d> = Signal::new();
+/// Records from the control loop to the link.
+pub static RECORDS_2D: Channel<CriticalSectionRawMutex, Record2d, QUEUE_RECORDS> = Channel::new();
+
+/// Builds the triangle table of `edge`'s one-pulse now (between frames or at boot: ~80 µs on
+/// the G474), so the first edge's pulse does not build it on the frame's path.
+fn prebuild(burst: &mut BurstGate, timer: &BurstTimer, edge: &EdgePulse) {
+    let clocks = edge.pulse_us as u64 * timer.clock_hz as u64 / 1_000_000;
+    if let (Envelope::Triangular, Ok(s)) = (edge.envelope, timer.one_pulse(clocks)) {
+        let us = burst.prebuild_triangle(&s, edge.amplitude_permille);
+        info!("rf level: the edge pulse's triangle built in {} us", us);
+    }
+}
+
+/// The control loop's end of the 2D stream: one atomic load and a compare per frame while
+/// stopped, a record queued when one is due.
+pub struct Tap2d {
+    decimator: Decimator,
+    every: u16,
+    stamp: Stamp,
+    last_us: Option<(u32, u64)>,
+    /// The f_b of the periodic burst last started or updated, mHz (0 after an off or a pulse).
+    burst_millihz: u32,
+}
+
+impl Tap2d {
+    const fn new(stamp: Stamp) -> Self {
+        Self {
+            decimator: Decimator::new(),
+            every: 0,
+            stamp,
+            last_us: None,
+            burst_millihz: 0,
+        }
+    }
+
+    /// After a frame went through the controller (`out`) onto the gate (`line`): its record, if
+    /// the stream wants one. The f_b is the running burst's, as the virtual board reports it
+    /// (host-sim `serve/board2d.rs`): from the last start or update, 0 while the line is off or
+    /// firing a pulse.
+    #[inline]
+    pub fn record(&mut self, t_us: u32, reading: Reading, out: &Output2d, line: Line) {
+        if let Some(a) = out.action {
+            self.burst_millihz = millihz(BOARD.burst_timer_clk_hz, a);
+        }
+        let every = EVERY.load(Ordering::Relaxed);
+        if every != self.every {
+            self.every = every;
+            self.decimator.set(every);
+            // A new stream's first record is widened against the clock again.
+            self.last_us = None;
+        }
+        if !self.decimator.take() {
+            return;
+        }
+        let bursting = line != Line::Off;
+        let record = Record2d {
+            time_us: link::widen(&mut self.last_us, t_us),
+            scene_id: self.stamp.scene_id,
+            change: self.stamp.change,
+            position: out.position,
+            velocity_um_s: out.velocity.map(|v| (v.vx_um_s, v.vy_um_s)),
+            place: out.place,
+            edge: out.edge,
+            burst_millihz: if line == Line::Running {
+                self.burst_millihz
+            } else {
+                0
+            },
+            bursting,
+            lifted: reading == Reading::Lifted,
+            fault: out.fault.map(fault_2d),
+        };
+        push(record);
+    }
+}
+
+/// Queues a record, or counts it dropped. Never inlined: the panic check's allow list names the
+/// 1D `StreamTap::push` for the channel's RefCell borrow, which cannot fail; this is the same.
+#[inline(never)]
+fn push(record: Record2d) {
+    if RECORDS_2D.try_send(record).is_err() {
+        DROPPED.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// The f_b of a gate action's periodic settings, mHz (0 for an off or a pulse).
+fn millihz(clock_hz: u32, a: GateAction) -> u32 {
+    match a {
+        GateAction::Start(s) | GateAction::Update(s) => {
+            (clock_hz as u64 * 1000).checked_div(s.period_clocks()).unwrap_or(0).min(u32::MAX as u64) as u32
+        }
+        GateAction::Off | GateAction::Pulse(_) => 0,
+    }
+}
+
+fn fault_2d(f: TouchFault) -> Fault2d {
+    match f {
+        TouchFault::Rail(a) => Fault2d::Rail {
+            y_axis: a.axis == Axis::Y,
+            fault: a.fault,
+        },
+        TouchFault::Stale => Fault2d::Stale,
+    }
+}
+
+/// What the 2D control loop owns of the link: the stream tap, the RF arm (low only while a save
+/// holds RF off) and the watchdog timeout a save replaced.
+pub struct ControlLink {
+    pub tap: Tap2d,
+    rf_arm: Output<'static>,
+    held: Option<crate::store::Timeout>,
+}
+
+impl ControlLink {
+    /// Records stamped with `stamp` (the scene booted into); `rf_arm` already high.
+    pub fn new(rf_arm: Output<'static>, stamp: Stamp) -> Self {
+        Self {
+            tap: Tap2d::new(stamp),
+            rf_arm,
+            held: None,
+        }
+    }
+
+    /// Between two frames: a scene compiled by the link (installed, its edge pulse's table built,
+    /// its first frame a record), a counters request, a save's hold of RF.
+    pub fn service(&mut self, ctrl: &mut Controller2d, burst: &mut BurstGate) {
+        if HANDOFF.full.load(Ordering::Acquire) {
+            // SAFETY: `full` is set: the link task has written (initialised) the slot and waits
+            // for `INSTALLED`; it is moved out once here, then `full` cleared (see `Handoff`).
+            let p = unsafe { (*HANDOFF.slot.get()).assume_init_read() };
+            HANDOFF.full.store(false, Ordering::Release);
+            {
+                ctrl.install(p.prepared);
+                prebuild(burst, ctrl.timer(), &p.edge);
+                // The planted defect `plant-link2d-old-stamp` (never in a real image) keeps the
+                // old stamp: the board model's link2d test must fail on it.
+                if !cfg!(feature = "plant-link2d-old-stamp") {
+                    self.tap.stamp = Stamp {
+                        scene_id: STAMP_SCENE.load(Ordering::Relaxed),
+                        change: STAMP_CHANGE.load(Ordering::Relaxed),
+                    };
+                }
+                self.tap.decimator.force_next();
+            }
+            INSTALLED.signal(());
+        }
+        if TELEMETRY_WANTED.swap(false, Ordering::Relaxed) {
+            TELEMETRY_2D.signal(ctrl.telemetry());
+        }
+        if let Some(quiet) = link::QUIET.try_take() {
+            link::hold_rf(quiet, &mut self.rf_arm, &mut self.held);
+        }
+    }
+}
+
+/// The 2D board as the session sees it.
+pub struct Board2d {
+    timer: BurstTimer,
+    frame_us: u32,
+    sent: u32,
+    /// The scene store; None when the board has none (then `save` says so).
+    store: Option<Store2d>,
+}
+
+impl Board for Board2d {
+    async fn apply(
+        &mut self,
+        _config: &saw_core::scene::Config,
+        _stamp: Stamp,
+    ) -> Result<(), ConfigError> {
+        // Never asked: the session refuses a 1D scene on a board with the overlay before the
+        // glue sees it (`Refused2d::WrongSensor`). Refused here too, should that change.
+        Err(ConfigError::Limits(
+            saw_core::burst::BurstError::ZeroFrequency,
+        ))
+    }
+
+    fn now_us(&mut self) -> u64 {
+        embassy_time::Instant::now().as_micros()
+    }
+
+    async fn telemetry(&mut self) -> Telemetry {
+        Telemetry::default()
+    }
+
+    fn stream(&mut self, every_samples: u16) {
+        EVERY.store(every_samples, Ordering::Relaxed);
+        // Records of the stream before are stale to whoever asked: the line is not spent on them.
+        RECORDS_2D.clear();
+    }
+
+    fn stream_counts(&mut self) -> (u32, u32) {
+        (DROPPED.load(Ordering::Relaxed), self.sent)
+    }
+
+    async fn save(
+        &mut self,
+        _scene_id: u32,
+        _config: &saw_core::scene::Config,
+    ) -> Result<(), StoreFault> {
+        // Never asked: the session saves a 2D scene with `save_2d`.
+        Err(StoreFault::NotFor2d)
+    }
+
+    /// Compiled here, in the link task (thread mode, below the frames); the control loop only
+    /// moves it in between two frames (`ControlLink::service`). Refused: nothing changes.
+    async fn apply_2d(&mut self, scene: &PlaneScene, stamp: Stamp) -> Result<(), Apply2dError> {
+        // Every apply waits for its install below, so the slot is free; should one still be
+        // waiting, this waits for the control loop to take it.
+        while HANDOFF.full.load(Ordering::Acquire) {
+            INSTALLED.wait().await;
+        }
+        stage(&self.timer, self.frame_us, scene).map_err(Apply2dError::Config)?;
+        STAMP_SCENE.store(stamp.scene_id, Ordering::Relaxed);
+        STAMP_CHANGE.store(stamp.change, Ordering::Relaxed);
+        INSTALLED.reset();
+        HANDOFF.full.store(true, Ordering::Release);
+        INSTALLED.wait().await;
+        Ok(())
+    }
+
+    async fn telemetry_2d(&mut self) -> Telemetry2d {
+        TELEMETRY_2D.reset();
+        TELEMETRY_WANTED.store(true, Ordering::Relaxed);
+        TELEMETRY_2D.wait().await
+    }
+
+    /// As the 1D save (`link::FirmwareBoard::save`): RF held off from before the first flash
+    /// operation to after the last, the watchdog lengthened meanwhile.
+    async fn save_2d(&mut self, scene_id: u32, scene: &PlaneScene) -> Result<(), StoreFault> {
+        let Some(store) = self.store.as_mut() else {
+            return Err(StoreFault::NoStore);
+        };
+        link::quiet(true).await;
+        let result = store.save_2d(scene_id, scene).await;
+        link::quiet(false).await;
+        match result {
+            Ok(()) => {
+                info!("store: 2D scene {=u32:08x} saved", scene_id);
+                Ok(())
+            }
+            Err(e) => {
+                warn!("store: 2D scene {=u32:08x} not saved: {}", scene_id, e);
+                Err(e.into())
+            }
+        }
+    }
+}
+
+impl Streaming for Board2d {
+    type Record = Record2d;
+    fn records(&self) -> &'static Channel<CriticalSectionRawMutex, Record2d, QUEUE_RECORDS> {
+        &RECORDS_2D
+    }
+    fn count_sent(&mut self) {
+        self.sent = self.sent.wrapping_add(1);
+    }
+}
+
+/// Compiles `scene` into the hand-over's slot (the caller saw `full` clear, and sets it). Not
+/// async: a compiled scene held in the link task's future across its wait for the install would
+/// be a second ~9.5 KB copy in RAM (the task's future is a static).
+#[inline(never)]
+fn stage(timer: &BurstTimer, frame_us: u32, scene: &PlaneScene) -> Result<(), saw_core::plane::Config2dError> {
+    let prepared = compile(timer, frame_us, &scene.config)?;
+    // SAFETY: `full` is clear: the control loop does not touch the slot (see `Handoff`).
+    unsafe { (*HANDOFF.slot.get()).write(Pending { prepared, edge: scene.config.scene.edge_pulse }) };
+    Ok(())
+}
+
+/// `Prepared2d::compile` in a frame of its own (~35 KB of stack with the largest scene), so its
+/// frame is not stacked on its caller's.
+#[inline(never)]
+fn compile(
+    timer: &BurstTimer,
+    frame_us: u32,
+    config: &Config2d,
+) -> Result<Prepared2d, saw_core::plane::Config2dError> {
+    Prepared2d::compile(timer, frame_us, config)
+}
+
+/// `scene` loaded into the controller (`Controller2d::load`: compiled in its own frame, moved in)
+/// if its plate fits the overlay, and its edge pulse's table built; false if refused.
+#[inline(never)]
+fn load(
+    ctrl: &mut Controller2d,
+    timer: &BurstTimer,
+    burst: &mut BurstGate,
+    scene: &PlaneScene,
+) -> bool {
+    if scene.plate_um.0 > PLATE_UM.0
+        || scene.plate_um.1 > PLATE_UM.1
+        || ctrl.load(&scene.config).is_err()
+    {
+        return false;
+    }
+    prebuild(burst, timer, &scene.config.scene.edge_pulse);
+    true
+}
+
+/// The session and the board glue, from the boot.
+pub struct Booted {
+    pub session: Session,
+    pub board: Board2d,
+}
+
+/// The scene to boot into, loaded into `ctrl`, and the link's session over it: the 2D scene saved
+/// in flash if it reads back and compiles, else the one built in (`SAW_SCENE_2D`, checked by
+/// build.rs on the host). Logs which.
+pub async fn boot(
+    ctrl: &mut Controller2d,
+    timer: &BurstTimer,
+    burst: &mut BurstGate,
+    flash: Option<StoreFlash>,
+    builtin: &[u8],
+    builtin_file: &str,
+    frame_us: u32,
+) -> Booted {
+    let mut store: Option<Store2d> = crate::store::open(flash);
+    let mut booted: Option<(PlaneScene, SceneSource)> = None;
+    match store.as_mut() {
+        Some(s) => match crate::store::load_2d_at_boot(s).await {
+            Ok(Some(saved)) => {
+                if load(ctrl, timer, burst, &saved.scene) {
+                    info!(
+                        "boot: the 2D scene saved in flash (id {=u32:08x})",
+                        saved.scene_id
+                    );
+                    booted = Some((saved.scene, SceneSource::Saved));
+                } else {
+                    warn!(
+                        "boot: the saved 2D scene {=u32:08x} is refused",
+                        saved.scene_id
+                    );
+                }
+            }
+            Ok(None) => info!("boot: no scene saved in flash"),
+            Err(e) => warn!("boot: the saved scene cannot be read ({})", e),
+        },
+        None => info!("boot: no scene store on this board"),
+    }
+    let (scene, source) = match booted {
+        Some(b) => b,
+        None => {
+            let config = match postcard::from_bytes::<Config2d>(builtin) {
+                Ok(c) => c,
+                Err(_) => {
+                    warn!("boot: the 2D scene does not decode; no scene, RF stays off");
+                    Config2d::default()
+                }
+            };
+            let scene = PlaneScene {
+                plate_um: PLATE_UM,
+                config,
+            };
+            if load(ctrl, timer, burst, &scene) {
+                info!("boot: the 2D scene built in ({})", builtin_file);
+            } else {
+                warn!("boot: the 2D scene is refused; no scene, RF stays off");
+            }
+            (scene, SceneSource::BuildTime)
+        }
+    };
+    let session = Session::new_2d(
+        Identity {
+            firmware: concat!("saw-firmware ", env!("CARGO_PKG_VERSION")),
+            board: BOARD.name,
+            sample_rate_hz: 1_000_000 / frame_us.max(1),
+        },
+        PLATE_UM,
+        scene,
+        source,
+    );
+    Booted {
+        session,
+        board: Board2d {
+            timer: *timer,
+            frame_us,
+            sent: 0,
+            store,
+        },
+    }
+}
+
+/// The host link task of the 2D image: `link::serve` over `Board2d`.
+#[embassy_executor::task]
+pub async fn link2d(
+    tx: UartTx<'static, Async>,
+    rx: RingBufferedUartRx<'static>,
+    session: Session,
+    board: Board2d,
+) {
+    link::serve(tx, rx, session, board).await
+}
