@@ -9,9 +9,7 @@
 //! (`store.rs`). A 2D scene is an item of the same store under its own tag (`saw_store::FORMAT_2D`),
 //! so this image never loads a 1D scene and the 1D image never loads a 2D one.
 
-use core::cell::UnsafeCell;
-use core::mem::MaybeUninit;
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicPtr, Ordering};
 
 use defmt::{info, warn};
 use embassy_stm32::gpio::Output;
@@ -24,7 +22,7 @@ use saw_core::burst::BurstTimer;
 use saw_core::controller::{ConfigError, Telemetry};
 use saw_core::gate::{Envelope, GateAction};
 use saw_core::plane::{
-    Config2d, Controller2d, EdgePulse, Output2d, Prepared2d, Telemetry2d, TouchFault,
+    Config2d, Config2dError, Controller2d, EdgePulse, Output2d, Telemetry2d, TouchFault,
 };
 use saw_core::touch::fault::Axis;
 use saw_core::touch::frame::Reading;
@@ -35,7 +33,7 @@ use saw_store::{SceneStore, ITEM_BYTES_2D};
 
 use crate::board::{StoreFlash, BOARD};
 use crate::link::{
-    self, Streaming, DROPPED, EVERY, INSTALLED, STAMP_CHANGE, STAMP_SCENE, TELEMETRY_WANTED,
+    self, Streaming, DROPPED, EVERY, STAMP_CHANGE, STAMP_SCENE, TELEMETRY_WANTED,
 };
 use crate::rf::{BurstGate, Line};
 
@@ -45,35 +43,22 @@ include!(concat!(env!("OUT_DIR"), "/plate2d.rs"));
 /// The 2D store: the 1D store's flash and layout, a 2D scene's item buffer.
 pub type Store2d = SceneStore<StoreFlash, ITEM_BYTES_2D>;
 
-/// A compiled 2D scene and its edge pulse (whose triangle table the control loop builds when it
-/// installs it, not on the first edge's sample path).
-struct Pending {
-    prepared: Prepared2d,
-    edge: EdgePulse,
-}
-
-/// The compiled scene's hand-over from the link task to the control loop, without a copy inside
-/// a critical section: a `Prepared2d` is kilobytes, and an embassy `Signal` moves its value with
-/// interrupts off, which would hold off the plate schedule's TIM3 interrupt (2 µs of margin a
-/// phase, `docs/touch.md`) for the whole copy. Here the link task writes the slot while `full`
-/// is clear and then sets it; the control loop takes it while `full` is set and then clears it.
-/// The slot is a `MaybeUninit`, not an `Option`: an `Option<Pending>`'s `None` is not all zeros,
-/// so that static went to `.data`, its ~9.5 KB image in flash.
-struct Handoff {
-    full: AtomicBool,
-    slot: UnsafeCell<MaybeUninit<Pending>>,
-}
-
-// SAFETY: `slot` is written only by the link task while `full` is false and read (taken) only by
-// the control loop while `full` is true; `full` is stored with Release after each side's access
-// and loaded with Acquire before it, so the two never touch the slot at once (one writer, one
-// reader, alternating).
-unsafe impl Sync for Handoff {}
-
-static HANDOFF: Handoff = Handoff {
-    full: AtomicBool::new(false),
-    slot: UnsafeCell::new(MaybeUninit::uninit()),
-};
+/// A 2D scene on its way to the control loop, which compiles and installs it between two frames
+/// (`Controller2d::load`: all or nothing, the old scene kept on a refusal) and answers in
+/// `APPLIED`. Not compiled in the link task as the 1D scene is: a compiled 2D scene is ~9.5 KB, and
+/// handing it over would keep a second copy in RAM and stack `Prepared2d::compile`'s ~36 KB frame on
+/// the link task's ~42 KB poll frame, more than the F446's stack (the board model's stack check).
+/// Compiled in the control loop it stacks on an idle thread mode instead (the link task waits for
+/// the answer); the frames arriving meanwhile wait in their queue (4 frames, 1.4 ms on the F446).
+///
+/// The link task stores the scene's address while `FULL` is clear, then sets `FULL` and waits; the
+/// control loop reads the scene while `FULL` is set, then clears it and answers. The scene lives in
+/// the session's `apply_2d` future, which the link task awaits until the answer (the link task's
+/// futures are never cancelled: `link::serve` awaits each request to its end).
+static SCENE: AtomicPtr<PlaneScene> = AtomicPtr::new(core::ptr::null_mut());
+static FULL: AtomicBool = AtomicBool::new(false);
+/// The control loop's answer: the scene runs, or the controller's refusal.
+static APPLIED: Signal<CriticalSectionRawMutex, Result<(), Config2dError>> = Signal::new();
 /// The 2D counters, handed over between two frames (asked by `link::TELEMETRY_WANTED`).
 static TELEMETRY_2D: Signal<CriticalSectionRawMutex, Telemetry2d> = Signal::new();
 /// Records from the control loop to the link.
@@ -202,14 +187,17 @@ impl ControlLink {
     /// Between two frames: a scene compiled by the link (installed, its edge pulse's table built,
     /// its first frame a record), a counters request, a save's hold of RF.
     pub fn service(&mut self, ctrl: &mut Controller2d, burst: &mut BurstGate) {
-        if HANDOFF.full.load(Ordering::Acquire) {
-            // SAFETY: `full` is set: the link task has written (initialised) the slot and waits
-            // for `INSTALLED`; it is moved out once here, then `full` cleared (see `Handoff`).
-            let p = unsafe { (*HANDOFF.slot.get()).assume_init_read() };
-            HANDOFF.full.store(false, Ordering::Release);
-            {
-                ctrl.install(p.prepared);
-                prebuild(burst, ctrl.timer(), &p.edge);
+        if FULL.load(Ordering::Acquire) {
+            let scene = SCENE.load(Ordering::Relaxed);
+            // SAFETY: `FULL` is set: `scene` is the address of the scene the link task's
+            // `apply_2d` holds while it waits for `APPLIED` (see `SCENE`), read only here.
+            let result = match unsafe { scene.as_ref() } {
+                Some(scene) => install(ctrl, burst, scene),
+                // Cannot happen (`apply_2d` stores a reference's address before `FULL`); the
+                // stale limit's sentence is the nearest the controller has for "no scene".
+                None => Err(Config2dError::StaleLimit { stale_after_us: 0, min_us: 0 }),
+            };
+            if result.is_ok() {
                 // The planted defect `plant-link2d-old-stamp` (never in a real image) keeps the
                 // old stamp: the board model's link2d test must fail on it.
                 if !cfg!(feature = "plant-link2d-old-stamp") {
@@ -220,7 +208,8 @@ impl ControlLink {
                 }
                 self.tap.decimator.force_next();
             }
-            INSTALLED.signal(());
+            FULL.store(false, Ordering::Release);
+            APPLIED.signal(result);
         }
         if TELEMETRY_WANTED.swap(false, Ordering::Relaxed) {
             TELEMETRY_2D.signal(ctrl.telemetry());
@@ -233,8 +222,6 @@ impl ControlLink {
 
 /// The 2D board as the session sees it.
 pub struct Board2d {
-    timer: BurstTimer,
-    frame_us: u32,
     sent: u32,
     /// The scene store; None when the board has none (then `save` says so).
     store: Option<Store2d>,
@@ -282,19 +269,15 @@ impl Board for Board2d {
 
     /// Compiled here, in the link task (thread mode, below the frames); the control loop only
     /// moves it in between two frames (`ControlLink::service`). Refused: nothing changes.
+    /// Compiled and installed by the control loop between two frames (see `SCENE`); refused:
+    /// nothing changes.
     async fn apply_2d(&mut self, scene: &PlaneScene, stamp: Stamp) -> Result<(), Apply2dError> {
-        // Every apply waits for its install below, so the slot is free; should one still be
-        // waiting, this waits for the control loop to take it.
-        while HANDOFF.full.load(Ordering::Acquire) {
-            INSTALLED.wait().await;
-        }
-        stage(&self.timer, self.frame_us, scene).map_err(Apply2dError::Config)?;
         STAMP_SCENE.store(stamp.scene_id, Ordering::Relaxed);
         STAMP_CHANGE.store(stamp.change, Ordering::Relaxed);
-        INSTALLED.reset();
-        HANDOFF.full.store(true, Ordering::Release);
-        INSTALLED.wait().await;
-        Ok(())
+        APPLIED.reset();
+        SCENE.store(scene as *const PlaneScene as *mut PlaneScene, Ordering::Relaxed);
+        FULL.store(true, Ordering::Release);
+        APPLIED.wait().await.map_err(Apply2dError::Config)
     }
 
     async fn telemetry_2d(&mut self) -> Telemetry2d {
@@ -335,26 +318,15 @@ impl Streaming for Board2d {
     }
 }
 
-/// Compiles `scene` into the hand-over's slot (the caller saw `full` clear, and sets it). Not
-/// async: a compiled scene held in the link task's future across its wait for the install would
-/// be a second ~9.5 KB copy in RAM (the task's future is a static).
+/// `scene` compiled and installed (`Controller2d::load`, in a frame of its own: ~36 KB with its
+/// compile), its edge pulse's triangle table built; the controller's refusal otherwise, nothing
+/// changed.
 #[inline(never)]
-fn stage(timer: &BurstTimer, frame_us: u32, scene: &PlaneScene) -> Result<(), saw_core::plane::Config2dError> {
-    let prepared = compile(timer, frame_us, &scene.config)?;
-    // SAFETY: `full` is clear: the control loop does not touch the slot (see `Handoff`).
-    unsafe { (*HANDOFF.slot.get()).write(Pending { prepared, edge: scene.config.scene.edge_pulse }) };
+fn install(ctrl: &mut Controller2d, burst: &mut BurstGate, scene: &PlaneScene) -> Result<(), Config2dError> {
+    ctrl.load(&scene.config)?;
+    let timer = *ctrl.timer();
+    prebuild(burst, &timer, &scene.config.scene.edge_pulse);
     Ok(())
-}
-
-/// `Prepared2d::compile` in a frame of its own (~35 KB of stack with the largest scene), so its
-/// frame is not stacked on its caller's.
-#[inline(never)]
-fn compile(
-    timer: &BurstTimer,
-    frame_us: u32,
-    config: &Config2d,
-) -> Result<Prepared2d, saw_core::plane::Config2dError> {
-    Prepared2d::compile(timer, frame_us, config)
 }
 
 /// `scene` loaded into the controller (`Controller2d::load`: compiled in its own frame, moved in)
@@ -451,12 +423,7 @@ pub async fn boot(
     );
     Booted {
         session,
-        board: Board2d {
-            timer: *timer,
-            frame_us,
-            sent: 0,
-            store,
-        },
+        board: Board2d { sent: 0, store },
     }
 }
 
