@@ -57,6 +57,11 @@ pub type Store2d = SceneStore<StoreFlash, ITEM_BYTES_2D>;
 /// futures are never cancelled: `link::serve` awaits each request to its end).
 static SCENE: AtomicPtr<PlaneScene> = AtomicPtr::new(core::ptr::null_mut());
 static FULL: AtomicBool = AtomicBool::new(false);
+/// Sets `FULL` from a task of its own (`arm2d`): the executor polls it after the link task's
+/// poll has returned, so the control loop never compiles a scene (~46 KB of stack) on top of the
+/// link task's ~42 KB poll frame. Set from inside that poll, the first push on the board model
+/// ran the F446's stack off the start of RAM (board-model/tests/link2d.rs, the save test).
+static ARM: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// The control loop's answer: the scene runs, or the controller's refusal.
 static APPLIED: Signal<CriticalSectionRawMutex, Result<(), Config2dError>> = Signal::new();
 /// The 2D counters, handed over between two frames (asked by `link::TELEMETRY_WANTED`).
@@ -276,7 +281,8 @@ impl Board for Board2d {
         STAMP_CHANGE.store(stamp.change, Ordering::Relaxed);
         APPLIED.reset();
         SCENE.store(scene as *const PlaneScene as *mut PlaneScene, Ordering::Relaxed);
-        FULL.store(true, Ordering::Release);
+        // `FULL` is set by `arm2d`, after this task's poll has returned (see `ARM`).
+        ARM.signal(());
         APPLIED.wait().await.map_err(Apply2dError::Config)
     }
 
@@ -424,6 +430,15 @@ pub async fn boot(
     Booted {
         session,
         board: Board2d { sent: 0, store },
+    }
+}
+
+/// Arms the hand-over (`ARM`): a shallow task, so the control loop's compile stacks on little.
+#[embassy_executor::task]
+pub async fn arm2d() {
+    loop {
+        ARM.wait().await;
+        FULL.store(true, Ordering::Release);
     }
 }
 

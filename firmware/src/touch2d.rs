@@ -688,4 +688,5 @@ async fn main(spawner: embassy_executor::Spawner) {
     let link = crate::link2d::ControlLink::new(rf_arm, booted.session.stamp());
     high.spawn(unwrap!(control2d(ctrl, sensor, burst, link, wdg)));
     spawner.spawn(unwrap!(crate::link2d::link2d(parts.link_tx, parts.link_rx, booted.session, booted.board)));
+    spawner.spawn(unwrap!(crate::link2d::arm2d()));
 }
