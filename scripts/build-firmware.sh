@@ -67,16 +67,18 @@ esac
 # which the board model's plate-timing check must fail. TOUCH_2D=plant-link builds the planted defect
 # `plant-link2d-old-stamp` (records keep the old scene's stamp after a push) into
 # <board>-2d-plant-link.elf, which board-model/tests/link2d.rs must fail.
-# The 2D images build with the profile `release-2d` (opt-level "z": firmware/Cargo.toml says why).
+# TOUCH_2D=link builds the 2D image with the host link running (feature `link-2d`, profile
+# `release-2d` at opt-level "z": firmware/Cargo.toml says why) into <board>-2d-link.elf.
 PROFILE=release
 case "${TOUCH_2D:-0}" in
     0) ;;
-    1) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d"; PROFILE=release-2d ;;
-    largest) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d-largest"; PROFILE=release-2d
+    1) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d" ;;
+    link) PLANT+=(--features link-2d); SUFFIX="$SUFFIX-2d-link"; PROFILE=release-2d ;;
+    largest) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d-largest"
         export SAW_SCENE_2D=board-model/scenes/2d-largest.toml ;;
-    plant) PLANT+=(--features plant-touch-no-settle); SUFFIX="$SUFFIX-2d-plant"; PROFILE=release-2d ;;
+    plant) PLANT+=(--features plant-touch-no-settle); SUFFIX="$SUFFIX-2d-plant" ;;
     plant-link) PLANT+=(--features plant-link2d-old-stamp); SUFFIX="$SUFFIX-2d-plant-link"; PROFILE=release-2d ;;
-    *) echo "build-firmware: TOUCH_2D is 0, 1, largest, plant or plant-link, not '$TOUCH_2D'" >&2; exit 2 ;;
+    *) echo "build-firmware: TOUCH_2D is 0, 1, link, largest, plant or plant-link, not '$TOUCH_2D'" >&2; exit 2 ;;
 esac
 case "${SELFTEST:-0}" in
     0) ;;

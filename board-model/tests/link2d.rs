@@ -8,7 +8,9 @@
 //! from the image: scenes are read with the scene-file reader as `saw push` reads them, edited
 //! windows are built here vertex by vertex, f_b comes from the files' `f_b_hz`.
 //!
-//! Needs `$SAW_FIRMWARE_DIR/<board>-2d.elf` (default `../firmware/target`).
+//! Needs `$SAW_FIRMWARE_DIR/<board>-2d-link.elf` (`TOUCH_2D=link scripts/build-firmware.sh
+//! nucleo-f446re`; default directory `../firmware/target`). Not yet run by scripts/board-model.sh:
+//! the link image is not the default 2D image (firmware/Cargo.toml, feature `link-2d`).
 
 use host_sim::touch::{Finger, Overlay};
 use saw_board_model::board::{BoardKind, PIN_BURST_A};
@@ -39,10 +41,10 @@ const MIN_HEADROOM: u32 = 16 * 1024;
 fn elf(board: BoardKind) -> PathBuf {
     let dir = std::env::var("SAW_FIRMWARE_DIR")
         .unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/../firmware/target").into());
-    let p = PathBuf::from(dir).join(format!("{}-2d.elf", board.name()));
+    let p = PathBuf::from(dir).join(format!("{}-2d-link.elf", board.name()));
     assert!(
         p.exists(),
-        "{} is missing: run TOUCH_2D=1 scripts/build-firmware.sh first",
+        "{} is missing: run TOUCH_2D=link scripts/build-firmware.sh nucleo-f446re first",
         p.display()
     );
     p

@@ -7,7 +7,7 @@
 //! counters come out on request, stream records come out through a bounded queue that drops and
 //! counts when the link falls behind.
 //!
-//! The 2D image (`link2d.rs`) runs the same UART task (`uart::serve`, generic over the board
+//! The 2D image (`link2d.rs`) runs the same UART task (`uart::link`, over the board
 //! glue: [`Streaming`]), the same save hold (`QUIET`, [`quiet`], [`hold_rf`]) and the same
 //! hand-over statics where they carry no 1D type (the stamp, `INSTALLED`, `TELEMETRY_WANTED`,
 //! `EVERY`, `DROPPED`); only one image runs on a board, so they are never shared at run time.
@@ -237,7 +237,12 @@ impl Board for FirmwareBoard {
 }
 
 pub use uart::link;
-pub(crate) use uart::serve;
+
+/// The board glue the link task serves: the 1D image's, or the 2D image's (`link2d.rs`).
+#[cfg(not(feature = "touch-2d"))]
+pub type LinkBoard = FirmwareBoard;
+#[cfg(feature = "touch-2d")]
+pub type LinkBoard = crate::link2d::Board2d;
 
 /// What the link task needs of a board besides the session's [`Board`]: the queue its stream
 /// records come through (1D [`Record`]s, the 2D image's `Record2d`s) and a count of those sent.
@@ -280,7 +285,7 @@ mod uart {
     use saw_link::session::Session;
     use saw_link::stream::Batcher;
 
-    use super::{FirmwareBoard, Streaming, BAUD, DROPPED};
+    use super::{LinkBoard, Streaming, BAUD, DROPPED};
 
     /// A partial stream frame goes out after this long, so a slow stream arrives steadily.
     const FLUSH_AFTER: Duration = Duration::from_millis(20);
@@ -298,22 +303,20 @@ mod uart {
         }
     }
 
+    /// The link's loop: requests in, answers out, the stream's records framed and sent; over the
+    /// image's board glue (`LinkBoard`: the 1D `FirmwareBoard`, the 2D image's `link2d::Board2d`).
+    /// One task, not a generic function under a task per image: a task awaiting a generic
+    /// function kept its arguments beside the function's future, 1.5 KB more RAM in the 1D image.
     #[embassy_executor::task]
-    pub async fn link(tx: UartTx<'static, Async>, rx: RingBufferedUartRx<'static>, session: Session, board: FirmwareBoard) {
-        serve(tx, rx, session, board).await
-    }
-
-    /// The link's loop: requests in, answers out, the stream's records framed and sent; for
-    /// either image's board glue (the 1D `link` task, the 2D image's `link2d::link2d`).
-    pub async fn serve<B: Streaming>(
+    pub async fn link(
         mut tx: UartTx<'static, Async>,
         mut rx: RingBufferedUartRx<'static>,
         mut session: Session,
-        mut board: B,
+        mut board: LinkBoard,
     ) {
         info!("link: {} baud on the ST-LINK virtual COM port", BAUD);
         let mut receiver = Receiver::<MAX_ENCODED>::default();
-        let mut batcher = Batcher::<B::Record>::default();
+        let mut batcher = Batcher::<<LinkBoard as Streaming>::Record>::default();
         let mut bytes = [0u8; 64];
         let records = board.records();
         loop {

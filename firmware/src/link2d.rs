@@ -4,7 +4,7 @@
 //! tap (one `Record2d` per frame at the stream's rate), and the boot scene (the 2D scene saved in
 //! flash if it reads back and compiles, else the built-in one).
 //!
-//! What is not 2D is the 1D image's, shared: the UART task (`link::serve`), the save's hold of
+//! What is not 2D is the 1D image's, shared: the UART task (`link::link`), the save's hold of
 //! RF and the watchdog (`link::quiet`, `link::hold_rf`), the store's flash, hooks and boot repair
 //! (`store.rs`). A 2D scene is an item of the same store under its own tag (`saw_store::FORMAT_2D`),
 //! so this image never loads a 1D scene and the 1D image never loads a 2D one.
@@ -54,7 +54,7 @@ pub type Store2d = SceneStore<StoreFlash, ITEM_BYTES_2D>;
 /// The link task stores the scene's address while `FULL` is clear, then sets `FULL` and waits; the
 /// control loop reads the scene while `FULL` is set, then clears it and answers. The scene lives in
 /// the session's `apply_2d` future, which the link task awaits until the answer (the link task's
-/// futures are never cancelled: `link::serve` awaits each request to its end).
+/// futures are never cancelled: `link::link` awaits each request to its end).
 static SCENE: AtomicPtr<PlaneScene> = AtomicPtr::new(core::ptr::null_mut());
 static FULL: AtomicBool = AtomicBool::new(false);
 /// Sets `FULL` from a task of its own (`arm2d`): the executor polls it after the link task's
@@ -433,6 +433,25 @@ pub async fn boot(
     }
 }
 
+/// Starts the link (and `arm2d`) in the image built with `link-2d` (TOUCH_2D=link); the default
+/// 2D image boots the saved scene but runs no link (at opt-level "s" it does not fit 128 KiB with
+/// it; at "z" the plate schedule misses its timing: firmware/Cargo.toml). Not on the G474: with the link task's future (29 KB) its
+/// statics leave its 96 KiB RAM too little stack for the boot's scene compile (the board model
+/// found a stack overflow 3.3 ms after reset: docs/board-model.md, "The 2D image's link and
+/// store"); its 2D image runs without the link until that RAM is found, and says so.
+pub fn start(spawner: embassy_executor::Spawner, tx: UartTx<'static, Async>, rx: RingBufferedUartRx<'static>, booted: Booted) {
+    #[cfg(all(feature = "link-2d", feature = "nucleo-f446re"))]
+    {
+        spawner.spawn(defmt::unwrap!(link::link(tx, rx, booted.session, booted.board)));
+        spawner.spawn(defmt::unwrap!(arm2d()));
+    }
+    #[cfg(not(all(feature = "link-2d", feature = "nucleo-f446re")))]
+    {
+        let _ = (spawner, tx, rx, booted);
+        warn!("link: not in this 2D image (TOUCH_2D=link builds it, F446 only: docs/board-model.md)");
+    }
+}
+
 /// Arms the hand-over (`ARM`): a shallow task, so the control loop's compile stacks on little.
 #[embassy_executor::task]
 pub async fn arm2d() {
@@ -442,13 +461,3 @@ pub async fn arm2d() {
     }
 }
 
-/// The host link task of the 2D image: `link::serve` over `Board2d`.
-#[embassy_executor::task]
-pub async fn link2d(
-    tx: UartTx<'static, Async>,
-    rx: RingBufferedUartRx<'static>,
-    session: Session,
-    board: Board2d,
-) {
-    link::serve(tx, rx, session, board).await
-}

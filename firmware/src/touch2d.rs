@@ -687,6 +687,5 @@ async fn main(spawner: embassy_executor::Spawner) {
     let high = EXECUTOR_HIGH.start(interrupt::UART4);
     let link = crate::link2d::ControlLink::new(rf_arm, booted.session.stamp());
     high.spawn(unwrap!(control2d(ctrl, sensor, burst, link, wdg)));
-    spawner.spawn(unwrap!(crate::link2d::link2d(parts.link_tx, parts.link_rx, booted.session, booted.board)));
-    spawner.spawn(unwrap!(crate::link2d::arm2d()));
+    crate::link2d::start(spawner, parts.link_tx, parts.link_rx, booted);
 }
