@@ -7,6 +7,7 @@
 use embassy_futures::block_on;
 use saw_core::burst::BurstTimer;
 use saw_link::msg::PlaneScene;
+use saw_store::Hooks;
 use saw_store::{Saved, Saved2d, SceneStore, StoreError, FORMAT_2D, ITEM_BYTES, ITEM_BYTES_2D};
 use sequential_storage::mock_flash::{MockFlashBase, WriteCountCheck};
 
@@ -170,7 +171,8 @@ fn a_2d_item_of_another_layout_is_reported() {
     );
 }
 
-/// Four 2 KiB pages of 8-byte words: a 2D item a page, so the saves below change page and erase.
+/// Four 2 KiB pages of 8-byte words: two of the largest 2D items a page, so the saves below change
+/// page and erase.
 type Small = MockFlashBase<4, 8, 256>;
 const SMALL: core::ops::Range<u32> = Small::FULL_FLASH_RANGE;
 
@@ -238,10 +240,10 @@ fn a_cut_at_any_byte_of_a_2d_save_leaves_the_old_or_the_new_scene() {
         into_room >= item,
         "{into_room} cut points for a {item}-byte item"
     );
-    // With 1 to 4 earlier saves of the largest scene (a page each) the save changes page, and
-    // from the third on it must erase one first.
+    // With 1 to 8 earlier saves of the largest scene (two to a 2 KiB page) the save changes
+    // page, and once the four pages are used it must erase one first.
     let mut most = 0;
-    for history in 1..=4 {
+    for history in 1..=8 {
         most = most.max(cut_everywhere(history));
     }
     assert!(
