@@ -163,6 +163,10 @@ fn touch_plan(board: &str, manifest: &std::path::Path, out: &std::path::Path) {
         cal.join(", "),
     );
     fs::write(out.join("touch2d.rs"), code).unwrap_or_else(|e| fail(&format!("touch2d.rs: {e}")));
+    // The overlay's touch area for the link (`src/link2d.rs`, `Session::new_2d`): the built-in
+    // scene's plate, which the calibration above maps the codes onto.
+    let plate = format!("/// The overlay's touch area, µm (the built-in scene's plate).\npub const PLATE_UM: (u32, u32) = ({w_um}, {h_um});\n");
+    fs::write(out.join("plate2d.rs"), plate).unwrap_or_else(|e| fail(&format!("plate2d.rs: {e}")));
 }
 
 fn embed_scene(board: &str, manifest: &std::path::Path, out: &std::path::Path) {

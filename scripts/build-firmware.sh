@@ -64,14 +64,21 @@ esac
 # (board-model/scenes/2d-largest.toml: 8 windows of 16 vertices, 32 edges) into
 # <board>-2d-largest.elf, for the board model's stack check. TOUCH_2D=plant builds the planted
 # defect `plant-touch-no-settle` (conversions a quarter of the settling after the switch) into <board>-2d-plant.elf,
-# which the board model's plate-timing check must fail.
+# which the board model's plate-timing check must fail. TOUCH_2D=plant-link builds the planted defect
+# `plant-link2d-old-stamp` (records keep the old scene's stamp after a push) into
+# <board>-2d-plant-link.elf, which board-model/tests/link2d.rs must fail.
+# TOUCH_2D=link builds the 2D image with the host link running (feature `link-2d`, profile
+# `release-2d` at opt-level "z": firmware/Cargo.toml says why) into <board>-2d-link.elf.
+PROFILE=release
 case "${TOUCH_2D:-0}" in
     0) ;;
     1) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d" ;;
+    link) PLANT+=(--features link-2d); SUFFIX="$SUFFIX-2d-link"; PROFILE=release-2d ;;
     largest) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d-largest"
         export SAW_SCENE_2D=board-model/scenes/2d-largest.toml ;;
     plant) PLANT+=(--features plant-touch-no-settle); SUFFIX="$SUFFIX-2d-plant" ;;
-    *) echo "build-firmware: TOUCH_2D is 0, 1, largest or plant, not '$TOUCH_2D'" >&2; exit 2 ;;
+    plant-link) PLANT+=(--features plant-link2d-old-stamp); SUFFIX="$SUFFIX-2d-plant-link"; PROFILE=release-2d ;;
+    *) echo "build-firmware: TOUCH_2D is 0, 1, link, largest, plant or plant-link, not '$TOUCH_2D'" >&2; exit 2 ;;
 esac
 case "${SELFTEST:-0}" in
     0) ;;
@@ -100,11 +107,11 @@ for board in "${BOARDS[@]}"; do
         *) echo "build-firmware: unknown board '$board'" >&2; exit 2 ;;
     esac
     feat+=("${PLANT[@]}")
-    echo "==> $board: (cd firmware && PATH=$LLD_DIR:\$PATH RUSTC=$RUSTC RUSTC_BOOTSTRAP=1 CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER=$FLIP_LINK $CARGO build --release $BUILD_STD ${feat[*]})"
+    echo "==> $board: (cd firmware && PATH=$LLD_DIR:\$PATH RUSTC=$RUSTC RUSTC_BOOTSTRAP=1 CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER=$FLIP_LINK $CARGO build --profile $PROFILE $BUILD_STD ${feat[*]})"
     start=$(date +%s)
-    (cd "$FW" && "$CARGO" build --release "$BUILD_STD" "${feat[@]}")
+    (cd "$FW" && "$CARGO" build --profile "$PROFILE" "$BUILD_STD" "${feat[@]}")
     secs=$(( $(date +%s) - start ))
-    elf="$CARGO_TARGET_DIR/$TARGET/release/saw-firmware"
+    elf="$CARGO_TARGET_DIR/$TARGET/$PROFILE/saw-firmware"
     cp "$elf" "$CARGO_TARGET_DIR/$board$SUFFIX.elf"
     flash=$(sections "$elf" .vector_table .text .rodata .data .gnu.sgstubs)
     ram=$(sections "$elf" .data .bss .uninit)

@@ -6,6 +6,11 @@
 //! statics below: a compiled scene goes in whole (`INSTALL`; the control loop only moves it in),
 //! counters come out on request, stream records come out through a bounded queue that drops and
 //! counts when the link falls behind.
+//!
+//! The 2D image (`link2d.rs`) runs the same UART task (`uart::link`, over the board
+//! glue: [`Streaming`]), the same save hold (`QUIET`, [`quiet`], [`hold_rf`]) and the same
+//! hand-over statics where they carry no 1D type (the stamp, `INSTALLED`, `TELEMETRY_WANTED`,
+//! `EVERY`, `DROPPED`); only one image runs on a board, so they are never shared at run time.
 
 use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, Ordering};
 
@@ -23,8 +28,8 @@ use saw_link::stream::{Decimator, QUEUE_RECORDS};
 /// A compiled scene on its way to the control loop.
 pub static INSTALL: Signal<CriticalSectionRawMutex, Prepared> = Signal::new();
 /// The stamp its records carry (scene id, change count), set before `INSTALL`.
-static STAMP_SCENE: AtomicU32 = AtomicU32::new(0);
-static STAMP_CHANGE: AtomicU32 = AtomicU32::new(0);
+pub(crate) static STAMP_SCENE: AtomicU32 = AtomicU32::new(0);
+pub(crate) static STAMP_CHANGE: AtomicU32 = AtomicU32::new(0);
 /// The control loop has installed it.
 pub static INSTALLED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// The link asks for the counters; the control loop answers in `TELEMETRY`.
@@ -70,15 +75,7 @@ impl StreamTap {
     /// the sample path does not read the clock per record (issue #33's tap cost check).
     #[inline]
     pub fn widen(&mut self, t_us: u32) -> u64 {
-        let wide = match self.last_us {
-            Some((last32, last64)) => last64.wrapping_add(u64::from(t_us.wrapping_sub(last32))),
-            None => {
-                let now = embassy_time::Instant::now().as_micros();
-                now.wrapping_sub(u64::from((now as u32).wrapping_sub(t_us)))
-            }
-        };
-        self.last_us = Some((t_us, wide));
-        wide
+        widen(&mut self.last_us, t_us)
     }
 
     /// Whether this sample becomes a record (follows `EVERY`). A stream that reads the
@@ -108,6 +105,21 @@ impl StreamTap {
     }
 }
 
+/// `t_us` (32-bit µs) as µs since boot (64 bits), from the last record's pair `last_us` (then
+/// updated): see [`StreamTap::widen`]; the 2D tap's too.
+#[inline]
+pub(crate) fn widen(last_us: &mut Option<(u32, u64)>, t_us: u32) -> u64 {
+    let wide = match *last_us {
+        Some((last32, last64)) => last64.wrapping_add(u64::from(t_us.wrapping_sub(last32))),
+        None => {
+            let now = embassy_time::Instant::now().as_micros();
+            now.wrapping_sub(u64::from((now as u32).wrapping_sub(t_us)))
+        }
+    };
+    *last_us = Some((t_us, wide));
+    wide
+}
+
 /// The control loop's end of the hand-over, called once per iteration between samples.
 /// Returns a `QUIET` request for the control loop to carry out (then it calls `quieted`).
 pub fn service(ctrl: &mut crate::board::Controller, tap: &mut StreamTap) -> Option<bool> {
@@ -132,8 +144,25 @@ pub fn quieted() {
     QUIETED.signal(());
 }
 
+/// The control loop carries out a `QUIET` request (`quiet`: a save is about to touch the flash):
+/// RF off at the amplifier before the flash can stall us, then a watchdog long enough for an
+/// erase; the gate keeps following the controller, so bursts resume in step when the arm comes
+/// back. Then [`quieted`]. Both images' control loops.
+pub fn hold_rf(quiet: bool, rf_arm: &mut embassy_stm32::gpio::Output<'static>, held: &mut Option<crate::store::Timeout>) {
+    if quiet {
+        rf_arm.set_low();
+        *held = Some(crate::store::lengthen_watchdog());
+        defmt::info!("save: rf arm low, watchdog lengthened");
+    } else if let Some(t) = held.take() {
+        crate::store::restore_watchdog(t);
+        rf_arm.set_high();
+        defmt::info!("save: done, watchdog restored, rf arm high");
+    }
+    quieted();
+}
+
 /// Asks the control loop to hold RF off (or let it run) and waits until it has.
-async fn quiet(on: bool) {
+pub(crate) async fn quiet(on: bool) {
     QUIETED.reset();
     QUIET.signal(on);
     QUIETED.wait().await;
@@ -209,6 +238,33 @@ impl Board for FirmwareBoard {
 
 pub use uart::link;
 
+/// The board glue the link task serves: the 1D image's, or the 2D image's (`link2d.rs`).
+#[cfg(not(feature = "touch-2d"))]
+pub type LinkBoard = FirmwareBoard;
+#[cfg(feature = "touch-2d")]
+pub type LinkBoard = crate::link2d::Board2d;
+
+/// What the link task needs of a board besides the session's [`Board`]: the queue its stream
+/// records come through (1D [`Record`]s, the 2D image's `Record2d`s) and a count of those sent.
+pub trait Streaming: Board {
+    /// The records it streams.
+    type Record: saw_link::stream::Streamed + 'static;
+    /// The queue from the control loop.
+    fn records(&self) -> &'static Channel<CriticalSectionRawMutex, Self::Record, QUEUE_RECORDS>;
+    /// One more record taken from the queue for a frame.
+    fn count_sent(&mut self);
+}
+
+impl Streaming for FirmwareBoard {
+    type Record = Record;
+    fn records(&self) -> &'static Channel<CriticalSectionRawMutex, Record, QUEUE_RECORDS> {
+        &RECORDS
+    }
+    fn count_sent(&mut self) {
+        self.sent = self.sent.wrapping_add(1);
+    }
+}
+
 // The UART side: the F446's USART2, the G474's LPUART1 (board/*.rs bring them up).
 /// The link's line rate: 921 600 baud, 8N1, a standard rate the ST-LINK/V2-1's (F446) and
 /// STLINK-V3E's (G474) virtual COM ports take (not yet measured on a board). On the F446, 45 MHz / BRR 49 gives 918 367 baud,
@@ -229,7 +285,7 @@ mod uart {
     use saw_link::session::Session;
     use saw_link::stream::Batcher;
 
-    use super::{FirmwareBoard, BAUD, DROPPED, RECORDS};
+    use super::{LinkBoard, Streaming, BAUD, DROPPED};
 
     /// A partial stream frame goes out after this long, so a slow stream arrives steadily.
     const FLUSH_AFTER: Duration = Duration::from_millis(20);
@@ -247,19 +303,24 @@ mod uart {
         }
     }
 
+    /// The link's loop: requests in, answers out, the stream's records framed and sent; over the
+    /// image's board glue (`LinkBoard`: the 1D `FirmwareBoard`, the 2D image's `link2d::Board2d`).
+    /// One task, not a generic function under a task per image: a task awaiting a generic
+    /// function kept its arguments beside the function's future, 1.5 KB more RAM in the 1D image.
     #[embassy_executor::task]
     pub async fn link(
         mut tx: UartTx<'static, Async>,
         mut rx: RingBufferedUartRx<'static>,
         mut session: Session,
-        mut board: FirmwareBoard,
+        mut board: LinkBoard,
     ) {
         info!("link: {} baud on the ST-LINK virtual COM port", BAUD);
         let mut receiver = Receiver::<MAX_ENCODED>::default();
-        let mut batcher = Batcher::default();
+        let mut batcher = Batcher::<<LinkBoard as Streaming>::Record>::default();
         let mut bytes = [0u8; 64];
+        let records = board.records();
         loop {
-            match select3(rx.read(&mut bytes), RECORDS.receive(), Timer::after(FLUSH_AFTER)).await {
+            match select3(rx.read(&mut bytes), records.receive(), Timer::after(FLUSH_AFTER)).await {
                 Either3::First(Ok(n)) => {
                     for &b in &bytes[..n] {
                         let (header, reply) = match receiver.push(b) {
@@ -274,7 +335,7 @@ mod uart {
                 // drops at the next zero; the ring buffer restarts on the next read.
                 Either3::First(Err(e)) => warn!("link: uart {}", e),
                 Either3::Second(record) => {
-                    board.sent = board.sent.wrapping_add(1);
+                    board.count_sent();
                     if let Some((h, r)) = batcher.push(record, DROPPED.load(Ordering::Relaxed)) {
                         send(&mut tx, &h, &r).await;
                     }

@@ -26,6 +26,8 @@ mod selftest;
 mod store;
 #[cfg(feature = "touch-2d")]
 mod touch2d;
+#[cfg(feature = "touch-2d")]
+mod link2d;
 
 use defmt::{info, unwrap, warn};
 use defmt_rtt as _;
@@ -427,19 +429,7 @@ async fn control(
         }
         // Between samples: a scene compiled by the link, a counters request, a save's hold.
         if let Some(quiet) = link::service(&mut ctrl, &mut tap) {
-            if quiet {
-                // RF off at the amplifier before the flash can stall us, then a watchdog long
-                // enough for an erase; the gate keeps following the controller, so bursts
-                // resume in step when the arm comes back.
-                rf_arm.set_low();
-                held = Some(store::lengthen_watchdog());
-                info!("save: rf arm low, watchdog lengthened");
-            } else if let Some(t) = held.take() {
-                store::restore_watchdog(t);
-                rf_arm.set_high();
-                info!("save: done, watchdog restored, rf arm high");
-            }
-            link::quieted();
+            link::hold_rf(quiet, &mut rf_arm, &mut held);
         }
         // A completed iteration is a live control loop.
         wdg.pet();

@@ -4,7 +4,8 @@
 //! sequential-storage cannot see: the F446's flash caches flushed after every erase, and the
 //! G474's double ECC errors (a save cut by a power loss) refused on read and, at boot, the double
 //! words that raise them programmed to zeros, which sequential-storage then takes for the torn
-//! write they are (`saw_store::SceneStore::zero_unreadable`).
+//! write they are (`saw_store::SceneStore::zero_unreadable`). The 2D image keeps its 2D scene
+//! in the same store and the same way (`load_2d_at_boot`; the item's tag keeps the kinds apart).
 
 use defmt::{info, warn};
 use saw_store::{Hooks, Saved, SceneStore, StoreError};
@@ -61,12 +62,45 @@ fn ecc_zeroed(offset: u32, len: usize) {
 /// Only if the store still cannot be read is it erased (nothing loaded: the caller boots the
 /// embedded or default scene); a scene read with an ECC error is never used.
 pub async fn load_at_boot(store: &mut SceneStore<StoreFlash>) -> Result<Option<Saved>, StoreError> {
+    load_repaired::<Saved, { saw_store::ITEM_BYTES }>(store).await
+}
+
+/// The 2D image's boot load (`load_at_boot`, the 2D scene: `SceneStore::load_2d`).
+#[cfg(feature = "touch-2d")]
+pub async fn load_2d_at_boot(
+    store: &mut SceneStore<StoreFlash, { saw_store::ITEM_BYTES_2D }>,
+) -> Result<Option<saw_store::Saved2d>, StoreError> {
+    load_repaired::<saw_store::Saved2d, { saw_store::ITEM_BYTES_2D }>(store).await
+}
+
+/// A scene kind the store keeps, and how it is loaded.
+#[allow(async_fn_in_trait)] // concrete types only
+pub trait Stored: Sized {
+    /// The store's load of this kind.
+    async fn load<const N: usize>(store: &mut SceneStore<StoreFlash, N>) -> Result<Option<Self>, StoreError>;
+}
+
+impl Stored for Saved {
+    async fn load<const N: usize>(store: &mut SceneStore<StoreFlash, N>) -> Result<Option<Self>, StoreError> {
+        store.load().await
+    }
+}
+
+#[cfg(feature = "touch-2d")]
+impl Stored for saw_store::Saved2d {
+    async fn load<const N: usize>(store: &mut SceneStore<StoreFlash, N>) -> Result<Option<Self>, StoreError> {
+        store.load_2d().await
+    }
+}
+
+/// `load_at_boot` for either kind of scene.
+async fn load_repaired<T: Stored, const N: usize>(store: &mut SceneStore<StoreFlash, N>) -> Result<Option<T>, StoreError> {
     let base = BOARD.store.region_base;
     crate::flash_ecc::clear_corrected();
     let zeroed = if crate::flash_ecc::HAS_ECC { store.zero_unreadable().await } else { Ok(None) };
     let at = match zeroed {
         Ok(Some(z)) => {
-            let loaded = store.load().await;
+            let loaded = T::load(store).await;
             let unreadable = matches!(
                 loaded,
                 Err(StoreError::Unreadable | StoreError::Corrupted | StoreError::Flash)
@@ -83,7 +117,7 @@ pub async fn load_at_boot(store: &mut SceneStore<StoreFlash>) -> Result<Option<S
             base + z.first
         }
         Ok(None) => {
-            let loaded = store.load().await;
+            let loaded = T::load(store).await;
             let Some(at) = crate::flash_ecc::take() else {
                 return loaded;
             };
@@ -108,9 +142,10 @@ pub async fn load_at_boot(store: &mut SceneStore<StoreFlash>) -> Result<Option<S
 }
 
 /// The store, or why there is none (logged once at boot).
-pub fn open(flash: Option<StoreFlash>) -> Option<SceneStore<StoreFlash>> {
+/// (`N`: the item buffer, `saw_store::ITEM_BYTES` for 1D scenes, `ITEM_BYTES_2D` for 2D ones.)
+pub fn open<const N: usize>(flash: Option<StoreFlash>) -> Option<SceneStore<StoreFlash, N>> {
     let s = BOARD.store;
-    match SceneStore::with_hooks(flash?, s.region_range(), HOOKS) {
+    match SceneStore::<StoreFlash, N>::sized(flash?, s.region_range(), HOOKS) {
         Ok(store) => {
             info!(
                 "store: {} KiB at {=u32:#010x} ({} erase units of {} KiB){}",

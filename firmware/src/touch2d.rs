@@ -21,8 +21,8 @@
 //! earlier slots' words exactly (F446 NDTR, RM0390 §9.5.6; G474 CNDTR, RM0440 §12.6.4), or the
 //! frame is dropped and counted (`MIXED`), never delivered with two plates in one sum.
 //!
-//! Not in this image: the host link and the scene store (the 1D image's); the 2D scene is the one
-//! built in (`SAW_SCENE_2D`, default `scenes/2d-fig12.toml`).
+//! The host link and the scene store are `link2d.rs`'s: the boot scene is the 2D scene saved in
+//! flash, else the one built in (`SAW_SCENE_2D`, default `scenes/2d-fig12.toml`).
 
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
@@ -673,11 +673,13 @@ pub fn frame_step(
     sensor: &mut TouchSensor,
     ctrl: &mut Controller,
     burst: &mut BurstGate,
+    tap: &mut crate::link2d::Tap2d,
     frame: &Frame,
 ) {
     let reading = sensor.on_frame(frame);
     let out = ctrl.on_reading(frame.t_us, reading);
     apply2d(&out, burst);
+    tap.record(frame.t_us, reading, &out, burst.line());
 }
 
 /// The stale watchdog's tick. Never inlined: a root of the panic check.
@@ -696,7 +698,7 @@ async fn control2d(
     ctrl: &'static mut Controller,
     mut sensor: TouchSensor,
     mut burst: BurstGate,
-    _rf_arm: Output<'static>,
+    mut link: crate::link2d::ControlLink,
     mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
 ) {
     let mut watchdog = Ticker::every(WATCHDOG_PERIOD);
@@ -705,9 +707,10 @@ async fn control2d(
     start_timer();
     loop {
         match select(FRAMES.receive(), watchdog.next()).await {
-            Either::First(frame) => frame_step(&mut sensor, ctrl, &mut burst, &frame),
+            Either::First(frame) => frame_step(&mut sensor, ctrl, &mut burst, &mut link.tap, &frame),
             Either::Second(()) => tick_step2d(ctrl, &mut burst, Instant::now().as_micros() as u32),
         }
+        link.service(ctrl, &mut burst);
         wdg.pet();
         let now = Instant::now().as_micros();
         if now >= next_log {
@@ -730,7 +733,7 @@ async fn control2d(
 const IWDG_TIMEOUT_US: u32 = 50_000;
 
 #[embassy_executor::main]
-async fn main(_spawner: embassy_executor::Spawner) {
+async fn main(spawner: embassy_executor::Spawner) {
     let Some(p) = board::init() else {
         fault::halt_without_clock(board::HSE_SOURCE, board::HSE_TIMEOUT_MS)
     };
@@ -778,7 +781,7 @@ async fn main(_spawner: embassy_executor::Spawner) {
     // 34 KB) reached 72.9 KB, 696 B short of the G474's stack region with the largest 2D scene
     // (board model: stack check).
     let ctrl = new_controller(timer);
-    load_scene(ctrl, &timer, &mut burst);
+    let booted = crate::link2d::boot(ctrl, &timer, &mut burst, parts.store, SCENE_2D, SCENE_2D_FILE, FRAME_US).await;
     let Ok(map) = Affine::from_points(CAL, &RailBands::default()) else {
         defmt::panic!("touch: the built-in calibration is refused")
     };
@@ -802,5 +805,7 @@ async fn main(_spawner: embassy_executor::Spawner) {
     wdg.unleash();
     interrupt::UART4.set_priority(SAMPLE_PATH_PRIORITY);
     let high = EXECUTOR_HIGH.start(interrupt::UART4);
-    high.spawn(unwrap!(control2d(ctrl, sensor, burst, rf_arm, wdg)));
+    let link = crate::link2d::ControlLink::new(rf_arm, booted.session.stamp());
+    high.spawn(unwrap!(control2d(ctrl, sensor, burst, link, wdg)));
+    crate::link2d::start(spawner, parts.link_tx, parts.link_rx, booted);
 }

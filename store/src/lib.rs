@@ -29,6 +29,13 @@
 //! controller refuses it. `FORMAT` must change with `Config`'s encoding (`tests/foreign.rs` pins
 //! format 1's bytes); it did not when `limits.max_level_percent` was added, so a scene saved by
 //! firmware from before that is format 1 of an older layout, which is reported as not decoding.
+//!
+//! A 2D scene (issue #36, feature `plane`: windows on the touch overlay) is an item under the
+//! same key, `FORMAT_2D ‖ postcard(scene_id, PlaneScene)`: one board reads one sensor and boots
+//! one scene, so a save of either kind replaces the other. The tag keeps them apart: a 1D load
+//! of a 2D item (or the reverse) is [`StoreError::WrongKind`], never decoded. A 2D scene encodes
+//! to up to ~1 460 bytes (the largest a scene file allows), so a 2D store's item buffer is
+//! [`ITEM_BYTES_2D`] (`SceneStore<F, ITEM_BYTES_2D>`); a 1D store keeps its 768 bytes.
 
 #![no_std]
 
@@ -44,10 +51,19 @@ use sequential_storage::map::{MapConfig, MapStorage};
 
 /// The item's layout version: bump it when `Config`'s encoding changes.
 pub const FORMAT: u8 = 1;
+/// A 2D item's tag (`FORMAT_2D ‖ postcard(scene_id, PlaneScene)`): 0x80 | its layout version,
+/// far from the 1D versions, which count up from 1. Bump it when `PlaneScene`'s encoding
+/// changes.
+pub const FORMAT_2D: u8 = 0x81;
 /// The largest item, bytes: a format byte, the id and the largest `Config` (8 regions of the
 /// widest texture and 16 lines encode to under 500 bytes, `tests::largest_scene_fits`), with
 /// room for the map's key and word alignment.
 pub const ITEM_BYTES: usize = 768;
+/// A 2D store's item buffer: the link's whole payload (`saw_link::frame::MAX_PAYLOAD`), so any
+/// 2D scene the link accepts fits the buffer (the largest a scene file allows encodes to ~1 460
+/// bytes, `tests/plane.rs`). The flash's erase unit bounds an item too: on the G474's 2 KiB
+/// pages sequential-storage takes items up to 2 024 bytes; a larger one is `TooLarge`.
+pub const ITEM_BYTES_2D: usize = 2048;
 const KEY: u8 = 0;
 
 /// A scene as stored.
@@ -57,6 +73,16 @@ pub struct Saved {
     pub scene_id: u32,
     /// The scene.
     pub config: Config,
+}
+
+/// A 2D scene as stored.
+#[cfg(feature = "plane")]
+#[derive(Clone, Debug, PartialEq)]
+pub struct Saved2d {
+    /// Its id (`saw_link::plane_scene_id`).
+    pub scene_id: u32,
+    /// The scene and its plate.
+    pub scene: saw_link::msg::PlaneScene,
 }
 
 /// Why the store could not be read or written. Nothing is lost on any of these: a failed save
@@ -75,6 +101,17 @@ pub enum StoreError {
     OtherFormat {
         /// The version found.
         found: u8,
+    },
+    /// A stored 2D item of another layout version (a 2D load).
+    OtherFormat2d {
+        /// The tag found.
+        found: u8,
+    },
+    /// The stored scene is of the other kind: a 2D scene on a board that runs 1D scenes
+    /// (`saved_2d`), or a 1D scene on one that runs 2D scenes.
+    WrongKind {
+        /// The stored scene is 2D (the load was 1D).
+        saved_2d: bool,
     },
     /// A stored item that does not decode.
     Undecodable,
@@ -106,10 +143,22 @@ impl core::fmt::Display for StoreError {
                     "the saved scene has layout version {found}, this firmware reads {FORMAT}"
                 )
             }
+            StoreError::OtherFormat2d { found } => write!(
+                f,
+                "the saved 2D scene has layout tag {found:#04x}, this firmware reads {FORMAT_2D:#04x}"
+            ),
+            StoreError::WrongKind { saved_2d: true } => write!(
+                f,
+                "the saved scene is a 2D scene (windows on the touch overlay) and this firmware runs 1D scenes; the next save replaces it"
+            ),
+            StoreError::WrongKind { saved_2d: false } => write!(
+                f,
+                "the saved scene is a 1D scene (regions along the slide rheostat) and this firmware runs 2D scenes; the next save replaces it"
+            ),
             StoreError::Undecodable => write!(f, "the saved scene does not decode"),
             StoreError::TooLarge => write!(
                 f,
-                "the scene does not fit the store's {ITEM_BYTES}-byte item"
+                "the scene does not fit the store's item ({ITEM_BYTES} bytes for a 1D scene, {ITEM_BYTES_2D} for a 2D one, at most an erase unit)"
             ),
             StoreError::Unreadable => write!(
                 f,
@@ -281,18 +330,31 @@ async fn zero_unreadable_in<F: NorFlash>(
     Ok(done)
 }
 
+/// `body` decoded as a `T` with nothing after it: `save` writes the scene and nothing after it,
+/// so bytes left over mean another layout whose start happened to decode, not this scene
+/// (`tests/foreign.rs`).
+fn decode_whole<T: serde::de::DeserializeOwned>(body: &[u8]) -> Result<T, StoreError> {
+    let (value, rest): (T, &[u8]) =
+        postcard::take_from_bytes(body).map_err(|_| StoreError::Undecodable)?;
+    if !rest.is_empty() {
+        return Err(StoreError::Undecodable);
+    }
+    Ok(value)
+}
+
 /// The map's cache: where the one key's newest item is. Without it, reclaiming a unit looks up
 /// every item it holds across the whole store to see whether a newer copy exists — quadratic in
 /// the saves a unit holds: a 128 KiB F446 sector holds ~1 900 saves of the default scene, and the
 /// board model found one such save still searching after 1.7 s (`board-model check`, save).
 type KeyCache = Cache<Uncached, Uncached, ArrayKeyPointers<u8, 1>, u8>;
 
-/// The scene store over `flash`, in `range` (offsets in `flash`).
-pub struct SceneStore<F: NorFlash> {
+/// The scene store over `flash`, in `range` (offsets in `flash`), with an item buffer of `N`
+/// bytes ([`ITEM_BYTES`] for 1D scenes, [`ITEM_BYTES_2D`] for 2D ones).
+pub struct SceneStore<F: NorFlash, const N: usize = ITEM_BYTES> {
     /// Always `Some` between calls: `erase` takes it apart to start the map afresh.
     map: Option<MapStorage<u8, HookedFlash<F>, KeyCache>>,
     range: Range<u32>,
-    buf: [u8; ITEM_BYTES],
+    buf: [u8; N],
 }
 
 fn map_over<F: NorFlash>(
@@ -308,17 +370,25 @@ fn map_over<F: NorFlash>(
 }
 
 impl<F: NorFlash> SceneStore<F> {
-    /// A store over `range` of `flash`: whole erase units, at least two.
+    /// A store of 1D scenes over `range` of `flash`: whole erase units, at least two.
     pub fn new(flash: F, range: Range<u32>) -> Result<Self, StoreError> {
         Self::with_hooks(flash, range, Hooks::NONE)
     }
 
     /// The same, with the board's `hooks` around every read and erase.
     pub fn with_hooks(flash: F, range: Range<u32>, hooks: Hooks) -> Result<Self, StoreError> {
+        Self::sized(flash, range, hooks)
+    }
+}
+
+impl<F: NorFlash, const N: usize> SceneStore<F, N> {
+    /// A store with an item buffer of `N` bytes (`SceneStore::<F, ITEM_BYTES_2D>::sized` for 2D
+    /// scenes) over `range` of `flash`, with the board's `hooks`.
+    pub fn sized(flash: F, range: Range<u32>, hooks: Hooks) -> Result<Self, StoreError> {
         Ok(Self {
             map: Some(map_over(HookedFlash { flash, hooks }, range.clone())?),
             range,
-            buf: [0; ITEM_BYTES],
+            buf: [0; N],
         })
     }
 
@@ -355,33 +425,71 @@ impl<F: NorFlash> SceneStore<F> {
 
     /// The saved scene; `None` when nothing was ever saved (or the flash is erased).
     pub async fn load(&mut self) -> Result<Option<Saved>, StoreError> {
-        let Some(map) = self.map.as_mut() else {
-            return Err(StoreError::Corrupted);
+        let Some(body) = self.fetch(FORMAT).await? else {
+            return Ok(None);
         };
-        let item: Option<&[u8]> = map.fetch_item(&mut self.buf, &KEY).await.map_err(from_ss)?;
-        let Some(bytes) = item else { return Ok(None) };
-        let (&format, body) = bytes.split_first().ok_or(StoreError::Undecodable)?;
-        if format != FORMAT {
-            return Err(StoreError::OtherFormat { found: format });
-        }
-        let ((scene_id, config), rest): ((u32, Config), &[u8]) =
-            postcard::take_from_bytes(body).map_err(|_| StoreError::Undecodable)?;
-        // `save` writes the scene and nothing after it: bytes left over mean another layout
-        // whose start happened to decode, not this scene (`tests/foreign.rs`).
-        if !rest.is_empty() {
-            return Err(StoreError::Undecodable);
-        }
+        let (scene_id, config) = decode_whole::<(u32, Config)>(body)?;
         Ok(Some(Saved { scene_id, config }))
     }
 
     /// Stores `saved` as the scene to boot into.
     pub async fn save(&mut self, saved: &Saved) -> Result<(), StoreError> {
-        let mut item = [0u8; ITEM_BYTES];
-        item[0] = FORMAT;
-        let n = postcard::to_slice(&(saved.scene_id, &saved.config), &mut item[1..])
+        self.save_item(FORMAT, &(saved.scene_id, &saved.config))
+            .await
+    }
+
+    /// The saved 2D scene; `None` when nothing was ever saved (or the flash is erased).
+    #[cfg(feature = "plane")]
+    pub async fn load_2d(&mut self) -> Result<Option<Saved2d>, StoreError> {
+        let Some(body) = self.fetch(FORMAT_2D).await? else {
+            return Ok(None);
+        };
+        let (scene_id, scene) = decode_whole::<(u32, saw_link::msg::PlaneScene)>(body)?;
+        Ok(Some(Saved2d { scene_id, scene }))
+    }
+
+    /// Stores the 2D scene `scene` (id `scene_id`) as the scene to boot into; it replaces a 1D
+    /// one. By reference: a 2D scene is kilobytes, the firmware's link task does not copy it.
+    #[cfg(feature = "plane")]
+    pub async fn save_2d(
+        &mut self,
+        scene_id: u32,
+        scene: &saw_link::msg::PlaneScene,
+    ) -> Result<(), StoreError> {
+        self.save_item(FORMAT_2D, &(scene_id, scene)).await
+    }
+
+    /// The stored item's body behind the tag `format`; the tag of the other kind is
+    /// `WrongKind`, any other `OtherFormat` (1D) / `OtherFormat2d` (2D).
+    async fn fetch(&mut self, format: u8) -> Result<Option<&[u8]>, StoreError> {
+        let Some(map) = self.map.as_mut() else {
+            return Err(StoreError::Corrupted);
+        };
+        let item: Option<&[u8]> = map.fetch_item(&mut self.buf, &KEY).await.map_err(from_ss)?;
+        let Some(bytes) = item else { return Ok(None) };
+        let (&found, body) = bytes.split_first().ok_or(StoreError::Undecodable)?;
+        match (found, format) {
+            (f, want) if f == want => Ok(Some(body)),
+            (FORMAT_2D, FORMAT) => Err(StoreError::WrongKind { saved_2d: true }),
+            (FORMAT, FORMAT_2D) => Err(StoreError::WrongKind { saved_2d: false }),
+            (found, FORMAT) => Err(StoreError::OtherFormat { found }),
+            (found, _) => Err(StoreError::OtherFormat2d { found }),
+        }
+    }
+
+    /// Writes `format ‖ postcard(value)` as the key's item, then reads it back.
+    async fn save_item<T: serde::Serialize>(
+        &mut self,
+        format: u8,
+        value: &T,
+    ) -> Result<(), StoreError> {
+        let mut item = [0u8; N];
+        let (tag, rest) = item.split_first_mut().ok_or(StoreError::TooLarge)?;
+        *tag = format;
+        let n = postcard::to_slice(value, rest)
             .map_err(|_| StoreError::TooLarge)?
             .len();
-        let value: &[u8] = &item[..1 + n];
+        let value: &[u8] = item.get(..1 + n).ok_or(StoreError::TooLarge)?;
         let Some(map) = self.map.as_mut() else {
             return Err(StoreError::Corrupted);
         };

@@ -1,0 +1,463 @@
+//! The 2D image's host link and scene store (feature `touch-2d`, issue #36): the board glue
+//! behind `saw_link`'s 2D session (`Session::new_2d`: push, read back, move and resize windows,
+//! counters, save), the hand-over of a compiled 2D scene to the control loop, the 2D stream's
+//! tap (one `Record2d` per frame at the stream's rate), and the boot scene (the 2D scene saved in
+//! flash if it reads back and compiles, else the built-in one).
+//!
+//! What is not 2D is the 1D image's, shared: the UART task (`link::link`), the save's hold of
+//! RF and the watchdog (`link::quiet`, `link::hold_rf`), the store's flash, hooks and boot repair
+//! (`store.rs`). A 2D scene is an item of the same store under its own tag (`saw_store::FORMAT_2D`),
+//! so this image never loads a 1D scene and the 1D image never loads a 2D one.
+
+use core::sync::atomic::{AtomicBool, AtomicPtr, Ordering};
+
+use defmt::{info, warn};
+use embassy_stm32::gpio::Output;
+use embassy_stm32::mode::Async;
+use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_sync::signal::Signal;
+use saw_core::burst::BurstTimer;
+use saw_core::controller::{ConfigError, Telemetry};
+use saw_core::gate::{Envelope, GateAction};
+use saw_core::plane::{
+    Config2d, Config2dError, Controller2d, EdgePulse, Output2d, Telemetry2d, TouchFault,
+};
+use saw_core::touch::fault::Axis;
+use saw_core::touch::frame::Reading;
+use saw_link::msg::{Fault2d, PlaneScene, Record2d, SceneSource, StoreFault};
+use saw_link::session::{Apply2dError, Board, Identity, Session, Stamp};
+use saw_link::stream::{Decimator, QUEUE_RECORDS};
+use saw_store::{SceneStore, ITEM_BYTES_2D};
+
+use crate::board::{StoreFlash, BOARD};
+use crate::link::{
+    self, Streaming, DROPPED, EVERY, STAMP_CHANGE, STAMP_SCENE, TELEMETRY_WANTED,
+};
+use crate::rf::{BurstGate, Line};
+
+// PLATE_UM: written by build.rs (the built-in scene's plate, the calibration's).
+include!(concat!(env!("OUT_DIR"), "/plate2d.rs"));
+
+/// The 2D store: the 1D store's flash and layout, a 2D scene's item buffer.
+pub type Store2d = SceneStore<StoreFlash, ITEM_BYTES_2D>;
+
+/// A 2D scene on its way to the control loop, which compiles and installs it between two frames
+/// (`Controller2d::load`: all or nothing, the old scene kept on a refusal) and answers in
+/// `APPLIED`. Not compiled in the link task as the 1D scene is: a compiled 2D scene is ~9.5 KB, and
+/// handing it over would keep a second copy in RAM and stack `Prepared2d::compile`'s ~36 KB frame on
+/// the link task's ~42 KB poll frame, more than the F446's stack (the board model's stack check).
+/// Compiled in the control loop it stacks on an idle thread mode instead (the link task waits for
+/// the answer); the frames arriving meanwhile wait in their queue (4 frames, 1.4 ms on the F446).
+///
+/// The link task stores the scene's address while `FULL` is clear, then sets `FULL` and waits; the
+/// control loop reads the scene while `FULL` is set, then clears it and answers. The scene lives in
+/// the session's `apply_2d` future, which the link task awaits until the answer (the link task's
+/// futures are never cancelled: `link::link` awaits each request to its end).
+static SCENE: AtomicPtr<PlaneScene> = AtomicPtr::new(core::ptr::null_mut());
+static FULL: AtomicBool = AtomicBool::new(false);
+/// Sets `FULL` from a task of its own (`arm2d`): the executor polls it after the link task's
+/// poll has returned, so the control loop never compiles a scene (~46 KB of stack) on top of the
+/// link task's ~42 KB poll frame. Set from inside that poll, the first push on the board model
+/// ran the F446's stack off the start of RAM (board-model/tests/link2d.rs, the save test).
+static ARM: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// The control loop's answer: the scene runs, or the controller's refusal.
+static APPLIED: Signal<CriticalSectionRawMutex, Result<(), Config2dError>> = Signal::new();
+/// The 2D counters, handed over between two frames (asked by `link::TELEMETRY_WANTED`).
+static TELEMETRY_2D: Signal<CriticalSectionRawMutex, Telemetry2d> = Signal::new();
+/// Records from the control loop to the link.
+pub static RECORDS_2D: Channel<CriticalSectionRawMutex, Record2d, QUEUE_RECORDS> = Channel::new();
+
+/// Builds the triangle table of `edge`'s one-pulse now (between frames or at boot: ~80 µs on
+/// the G474), so the first edge's pulse does not build it on the frame's path.
+fn prebuild(burst: &mut BurstGate, timer: &BurstTimer, edge: &EdgePulse) {
+    let clocks = edge.pulse_us as u64 * timer.clock_hz as u64 / 1_000_000;
+    if let (Envelope::Triangular, Ok(s)) = (edge.envelope, timer.one_pulse(clocks)) {
+        let us = burst.prebuild_triangle(&s, edge.amplitude_permille);
+        info!("rf level: the edge pulse's triangle built in {} us", us);
+    }
+}
+
+/// The control loop's end of the 2D stream: one atomic load and a compare per frame while
+/// stopped, a record queued when one is due.
+pub struct Tap2d {
+    decimator: Decimator,
+    every: u16,
+    stamp: Stamp,
+    last_us: Option<(u32, u64)>,
+    /// The f_b of the periodic burst last started or updated, mHz (0 after an off or a pulse).
+    burst_millihz: u32,
+}
+
+impl Tap2d {
+    const fn new(stamp: Stamp) -> Self {
+        Self {
+            decimator: Decimator::new(),
+            every: 0,
+            stamp,
+            last_us: None,
+            burst_millihz: 0,
+        }
+    }
+
+    /// After a frame went through the controller (`out`) onto the gate (`line`): its record, if
+    /// the stream wants one. The f_b is the running burst's, as the virtual board reports it
+    /// (host-sim `serve/board2d.rs`): from the last start or update, 0 while the line is off or
+    /// firing a pulse.
+    #[inline]
+    pub fn record(&mut self, t_us: u32, reading: Reading, out: &Output2d, line: Line) {
+        if let Some(a) = out.action {
+            self.burst_millihz = millihz(BOARD.burst_timer_clk_hz, a);
+        }
+        let every = EVERY.load(Ordering::Relaxed);
+        if every != self.every {
+            self.every = every;
+            self.decimator.set(every);
+            // A new stream's first record is widened against the clock again.
+            self.last_us = None;
+        }
+        if !self.decimator.take() {
+            return;
+        }
+        let bursting = line != Line::Off;
+        let record = Record2d {
+            time_us: link::widen(&mut self.last_us, t_us),
+            scene_id: self.stamp.scene_id,
+            change: self.stamp.change,
+            position: out.position,
+            velocity_um_s: out.velocity.map(|v| (v.vx_um_s, v.vy_um_s)),
+            place: out.place,
+            edge: out.edge,
+            burst_millihz: if line == Line::Running {
+                self.burst_millihz
+            } else {
+                0
+            },
+            bursting,
+            lifted: reading == Reading::Lifted,
+            fault: out.fault.map(fault_2d),
+        };
+        push(record);
+    }
+}
+
+/// Queues a record, or counts it dropped. Never inlined: the panic check's allow list names the
+/// 1D `StreamTap::push` for the channel's RefCell borrow, which cannot fail; this is the same.
+#[inline(never)]
+fn push(record: Record2d) {
+    if RECORDS_2D.try_send(record).is_err() {
+        DROPPED.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// The f_b of a gate action's periodic settings, mHz (0 for an off or a pulse).
+fn millihz(clock_hz: u32, a: GateAction) -> u32 {
+    match a {
+        GateAction::Start(s) | GateAction::Update(s) => {
+            (clock_hz as u64 * 1000).checked_div(s.period_clocks()).unwrap_or(0).min(u32::MAX as u64) as u32
+        }
+        GateAction::Off | GateAction::Pulse(_) => 0,
+    }
+}
+
+fn fault_2d(f: TouchFault) -> Fault2d {
+    match f {
+        TouchFault::Rail(a) => Fault2d::Rail {
+            y_axis: a.axis == Axis::Y,
+            fault: a.fault,
+        },
+        TouchFault::Stale => Fault2d::Stale,
+    }
+}
+
+/// What the 2D control loop owns of the link: the stream tap, the RF arm (low only while a save
+/// holds RF off) and the watchdog timeout a save replaced.
+pub struct ControlLink {
+    pub tap: Tap2d,
+    rf_arm: Output<'static>,
+    held: Option<crate::store::Timeout>,
+}
+
+impl ControlLink {
+    /// Records stamped with `stamp` (the scene booted into); `rf_arm` already high.
+    pub fn new(rf_arm: Output<'static>, stamp: Stamp) -> Self {
+        Self {
+            tap: Tap2d::new(stamp),
+            rf_arm,
+            held: None,
+        }
+    }
+
+    /// Between two frames: a scene compiled by the link (installed, its edge pulse's table built,
+    /// its first frame a record), a counters request, a save's hold of RF.
+    pub fn service(&mut self, ctrl: &mut Controller2d, burst: &mut BurstGate) {
+        if FULL.load(Ordering::Acquire) {
+            let scene = SCENE.load(Ordering::Relaxed);
+            // SAFETY: `FULL` is set: `scene` is the address of the scene the link task's
+            // `apply_2d` holds while it waits for `APPLIED` (see `SCENE`), read only here.
+            let result = match unsafe { scene.as_ref() } {
+                Some(scene) => install(ctrl, burst, scene),
+                // Cannot happen (`apply_2d` stores a reference's address before `FULL`); the
+                // stale limit's sentence is the nearest the controller has for "no scene".
+                None => Err(Config2dError::StaleLimit { stale_after_us: 0, min_us: 0 }),
+            };
+            if result.is_ok() {
+                // The planted defect `plant-link2d-old-stamp` (never in a real image) keeps the
+                // old stamp: the board model's link2d test must fail on it.
+                if !cfg!(feature = "plant-link2d-old-stamp") {
+                    self.tap.stamp = Stamp {
+                        scene_id: STAMP_SCENE.load(Ordering::Relaxed),
+                        change: STAMP_CHANGE.load(Ordering::Relaxed),
+                    };
+                }
+                self.tap.decimator.force_next();
+            }
+            FULL.store(false, Ordering::Release);
+            APPLIED.signal(result);
+        }
+        if TELEMETRY_WANTED.swap(false, Ordering::Relaxed) {
+            TELEMETRY_2D.signal(ctrl.telemetry());
+        }
+        if let Some(quiet) = link::QUIET.try_take() {
+            link::hold_rf(quiet, &mut self.rf_arm, &mut self.held);
+        }
+    }
+}
+
+/// The 2D board as the session sees it.
+pub struct Board2d {
+    sent: u32,
+    /// The scene store; None when the board has none (then `save` says so).
+    store: Option<Store2d>,
+}
+
+impl Board for Board2d {
+    async fn apply(
+        &mut self,
+        _config: &saw_core::scene::Config,
+        _stamp: Stamp,
+    ) -> Result<(), ConfigError> {
+        // Never asked: the session refuses a 1D scene on a board with the overlay before the
+        // glue sees it (`Refused2d::WrongSensor`). Refused here too, should that change.
+        Err(ConfigError::Limits(
+            saw_core::burst::BurstError::ZeroFrequency,
+        ))
+    }
+
+    fn now_us(&mut self) -> u64 {
+        embassy_time::Instant::now().as_micros()
+    }
+
+    async fn telemetry(&mut self) -> Telemetry {
+        Telemetry::default()
+    }
+
+    fn stream(&mut self, every_samples: u16) {
+        EVERY.store(every_samples, Ordering::Relaxed);
+        // Records of the stream before are stale to whoever asked: the line is not spent on them.
+        RECORDS_2D.clear();
+    }
+
+    fn stream_counts(&mut self) -> (u32, u32) {
+        (DROPPED.load(Ordering::Relaxed), self.sent)
+    }
+
+    async fn save(
+        &mut self,
+        _scene_id: u32,
+        _config: &saw_core::scene::Config,
+    ) -> Result<(), StoreFault> {
+        // Never asked: the session saves a 2D scene with `save_2d`.
+        Err(StoreFault::NotFor2d)
+    }
+
+    /// Compiled here, in the link task (thread mode, below the frames); the control loop only
+    /// moves it in between two frames (`ControlLink::service`). Refused: nothing changes.
+    /// Compiled and installed by the control loop between two frames (see `SCENE`); refused:
+    /// nothing changes.
+    async fn apply_2d(&mut self, scene: &PlaneScene, stamp: Stamp) -> Result<(), Apply2dError> {
+        STAMP_SCENE.store(stamp.scene_id, Ordering::Relaxed);
+        STAMP_CHANGE.store(stamp.change, Ordering::Relaxed);
+        APPLIED.reset();
+        SCENE.store(scene as *const PlaneScene as *mut PlaneScene, Ordering::Relaxed);
+        // `FULL` is set by `arm2d`, after this task's poll has returned (see `ARM`).
+        ARM.signal(());
+        APPLIED.wait().await.map_err(Apply2dError::Config)
+    }
+
+    async fn telemetry_2d(&mut self) -> Telemetry2d {
+        TELEMETRY_2D.reset();
+        TELEMETRY_WANTED.store(true, Ordering::Relaxed);
+        TELEMETRY_2D.wait().await
+    }
+
+    /// As the 1D save (`link::FirmwareBoard::save`): RF held off from before the first flash
+    /// operation to after the last, the watchdog lengthened meanwhile.
+    async fn save_2d(&mut self, scene_id: u32, scene: &PlaneScene) -> Result<(), StoreFault> {
+        let Some(store) = self.store.as_mut() else {
+            return Err(StoreFault::NoStore);
+        };
+        link::quiet(true).await;
+        let result = store.save_2d(scene_id, scene).await;
+        link::quiet(false).await;
+        match result {
+            Ok(()) => {
+                info!("store: 2D scene {=u32:08x} saved", scene_id);
+                Ok(())
+            }
+            Err(e) => {
+                warn!("store: 2D scene {=u32:08x} not saved: {}", scene_id, e);
+                Err(e.into())
+            }
+        }
+    }
+}
+
+impl Streaming for Board2d {
+    type Record = Record2d;
+    fn records(&self) -> &'static Channel<CriticalSectionRawMutex, Record2d, QUEUE_RECORDS> {
+        &RECORDS_2D
+    }
+    fn count_sent(&mut self) {
+        self.sent = self.sent.wrapping_add(1);
+    }
+}
+
+/// `scene` compiled and installed (`Controller2d::load`, in a frame of its own: ~36 KB with its
+/// compile), its edge pulse's triangle table built; the controller's refusal otherwise, nothing
+/// changed.
+#[inline(never)]
+fn install(ctrl: &mut Controller2d, burst: &mut BurstGate, scene: &PlaneScene) -> Result<(), Config2dError> {
+    ctrl.load(&scene.config)?;
+    let timer = *ctrl.timer();
+    prebuild(burst, &timer, &scene.config.scene.edge_pulse);
+    Ok(())
+}
+
+/// `scene` loaded into the controller (`Controller2d::load`: compiled in its own frame, moved in)
+/// if its plate fits the overlay, and its edge pulse's table built; false if refused.
+#[inline(never)]
+fn load(
+    ctrl: &mut Controller2d,
+    timer: &BurstTimer,
+    burst: &mut BurstGate,
+    scene: &PlaneScene,
+) -> bool {
+    if scene.plate_um.0 > PLATE_UM.0
+        || scene.plate_um.1 > PLATE_UM.1
+        || ctrl.load(&scene.config).is_err()
+    {
+        return false;
+    }
+    prebuild(burst, timer, &scene.config.scene.edge_pulse);
+    true
+}
+
+/// The session and the board glue, from the boot.
+pub struct Booted {
+    pub session: Session,
+    pub board: Board2d,
+}
+
+/// The scene to boot into, loaded into `ctrl`, and the link's session over it: the 2D scene saved
+/// in flash if it reads back and compiles, else the one built in (`SAW_SCENE_2D`, checked by
+/// build.rs on the host). Logs which.
+pub async fn boot(
+    ctrl: &mut Controller2d,
+    timer: &BurstTimer,
+    burst: &mut BurstGate,
+    flash: Option<StoreFlash>,
+    builtin: &[u8],
+    builtin_file: &str,
+    frame_us: u32,
+) -> Booted {
+    let mut store: Option<Store2d> = crate::store::open(flash);
+    let mut booted: Option<(PlaneScene, SceneSource)> = None;
+    match store.as_mut() {
+        Some(s) => match crate::store::load_2d_at_boot(s).await {
+            Ok(Some(saved)) => {
+                if load(ctrl, timer, burst, &saved.scene) {
+                    info!(
+                        "boot: the 2D scene saved in flash (id {=u32:08x})",
+                        saved.scene_id
+                    );
+                    booted = Some((saved.scene, SceneSource::Saved));
+                } else {
+                    warn!(
+                        "boot: the saved 2D scene {=u32:08x} is refused",
+                        saved.scene_id
+                    );
+                }
+            }
+            Ok(None) => info!("boot: no scene saved in flash"),
+            Err(e) => warn!("boot: the saved scene cannot be read ({})", e),
+        },
+        None => info!("boot: no scene store on this board"),
+    }
+    let (scene, source) = match booted {
+        Some(b) => b,
+        None => {
+            let config = match postcard::from_bytes::<Config2d>(builtin) {
+                Ok(c) => c,
+                Err(_) => {
+                    warn!("boot: the 2D scene does not decode; no scene, RF stays off");
+                    Config2d::default()
+                }
+            };
+            let scene = PlaneScene {
+                plate_um: PLATE_UM,
+                config,
+            };
+            if load(ctrl, timer, burst, &scene) {
+                info!("boot: the 2D scene built in ({})", builtin_file);
+            } else {
+                warn!("boot: the 2D scene is refused; no scene, RF stays off");
+            }
+            (scene, SceneSource::BuildTime)
+        }
+    };
+    let session = Session::new_2d(
+        Identity {
+            firmware: concat!("saw-firmware ", env!("CARGO_PKG_VERSION")),
+            board: BOARD.name,
+            sample_rate_hz: 1_000_000 / frame_us.max(1),
+        },
+        PLATE_UM,
+        scene,
+        source,
+    );
+    Booted {
+        session,
+        board: Board2d { sent: 0, store },
+    }
+}
+
+/// Starts the link (and `arm2d`) in the image built with `link-2d` (TOUCH_2D=link); the default
+/// 2D image boots the saved scene but runs no link (at opt-level "s" it does not fit 128 KiB with
+/// it; at "z" the plate schedule misses its timing: firmware/Cargo.toml). Not on the G474: with the link task's future (29 KB) its
+/// statics leave its 96 KiB RAM too little stack for the boot's scene compile (the board model
+/// found a stack overflow 3.3 ms after reset: docs/board-model.md, "The 2D image's link and
+/// store"); its 2D image runs without the link until that RAM is found, and says so.
+pub fn start(spawner: embassy_executor::Spawner, tx: UartTx<'static, Async>, rx: RingBufferedUartRx<'static>, booted: Booted) {
+    #[cfg(all(feature = "link-2d", feature = "nucleo-f446re"))]
+    {
+        spawner.spawn(defmt::unwrap!(link::link(tx, rx, booted.session, booted.board)));
+        spawner.spawn(defmt::unwrap!(arm2d()));
+    }
+    #[cfg(not(all(feature = "link-2d", feature = "nucleo-f446re")))]
+    {
+        let _ = (spawner, tx, rx, booted);
+        warn!("link: not in this 2D image (TOUCH_2D=link builds it, F446 only: docs/board-model.md)");
+    }
+}
+
+/// Arms the hand-over (`ARM`): a shallow task, so the control loop's compile stacks on little.
+#[embassy_executor::task]
+pub async fn arm2d() {
+    loop {
+        ARM.wait().await;
+        FULL.store(true, Ordering::Release);
+    }
+}
+
