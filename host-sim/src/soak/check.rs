@@ -686,3 +686,89 @@ impl LineCheck {
         self.changes.clear();
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 1 MHz kernel clock: one clock a µs, so the times below read as µs.
+    const TIMER: BurstTimer = BurstTimer {
+        clock_hz: 1_000_000,
+        counter_bits: 32,
+        max_burst_hz: 2_000,
+    };
+
+    fn limits(max_duty_permille: u16, max_on_time_us: u32) -> SafetyLimits {
+        SafetyLimits {
+            max_duty_permille,
+            max_on_time_us,
+            max_level_permille: 1000,
+        }
+    }
+
+    /// A pulse started at `rise` (settings whose on-time is the pulse's, at 50 % duty) and
+    /// stopped by an Off at its `fall`, as it was planned to end.
+    fn pulse(c: &mut LineCheck, rise: u64, fall: u64) {
+        let on = (fall - rise) as u32;
+        let s = TimerSettings {
+            psc: 0,
+            arr: 2 * on - 1,
+            ccr: on,
+        };
+        c.step(
+            Some((rise, GateAction::Start(s))),
+            &[Edge { t: rise, high: true }],
+            rise,
+        );
+        c.step(
+            Some((fall, GateAction::Off)),
+            &[Edge { t: fall, high: false }],
+            fall,
+        );
+    }
+
+    /// The first 10^9-frame plane soak's 130 violations (`host-sim soak --plane`, 2026-11-29)
+    /// were the checker's: windows opened at rises under a 561 ‰ scene waited in the queue behind
+    /// an earlier scene's longer window and were judged after two later loads, by a 1 ‰ scene's
+    /// caps. The episode that showed it no longer arises since the touch frame went from 347 to
+    /// 280 µs, so the case is built here: every window is judged by the caps in force at its
+    /// rise. Seen failing with `judge_open_windows` passing `None` for the window's own caps
+    /// (the checker before the fix): duty violations, "160.0 ‰ against a cap of 1 ‰".
+    #[test]
+    fn a_window_judged_late_keeps_its_own_scenes_caps() {
+        // Scene 0: 100 ‰ and 100 ms on, so its duty window is 1 s.
+        let mut c = LineCheck::new(TIMER, 100, 0, &limits(100, 100_000));
+        // 50 ms on at 0: its window [0, 1 s) holds the load below, so it is never judged, but
+        // it heads the queue until 1 s.
+        pulse(&mut c, 0, 50_000);
+        // Scene A at 100 ms: 561 ‰, 50 ms on, a 300 ms window (the stated window's floor).
+        c.scene(&limits(561, 50_000), 100_000);
+        // 40 ms on every 80 ms under A: 500 ‰, within A's caps; the window at 200 ms holds
+        // four pulses, 160 ms of 300 (533 ‰).
+        for k in 0..4 {
+            let rise = 200_000 + k * 80_000;
+            pulse(&mut c, rise, rise + 40_000);
+        }
+        // Two loads of a 1 ‰ scene after A's first windows are over, before scene 0's window is.
+        c.scene(&limits(1, 1_000), 600_000);
+        c.scene(&limits(1, 1_000), 700_000);
+        c.step(None, &[], 1_100_000);
+        c.finish(1_200_000);
+        assert_eq!(c.pulses, 5);
+        assert_eq!(c.count, 0, "{:#?}", c.kept);
+        // The same on-times under a scene that was in force at their rises and caps them at
+        // 400 ‰ are caught: the windows are judged, and judged by their own scene's caps.
+        let mut c = LineCheck::new(TIMER, 100, 0, &limits(100, 100_000));
+        pulse(&mut c, 0, 50_000);
+        c.scene(&limits(400, 50_000), 100_000);
+        for k in 0..4 {
+            let rise = 200_000 + k * 80_000;
+            pulse(&mut c, rise, rise + 40_000);
+        }
+        c.scene(&limits(1000, 1_000_000), 600_000);
+        c.scene(&limits(1000, 1_000_000), 700_000);
+        c.step(None, &[], 1_100_000);
+        c.finish(1_200_000);
+        assert!(c.by_rule[Rule::Duty.index()] >= 1, "{:#?}", c.kept);
+    }
+}
