@@ -34,7 +34,7 @@ const BOARDS: [BoardKind; 1] = [BoardKind::F446];
 /// The overlay's touch area (scenes/2d-fig12.toml's plate, which the image calibrates to), mm.
 const PLATE_MM: (f64, f64) = (95.0, 54.0);
 /// The firmware's margin after each phase's conversions (docs/touch.md, "Firmware").
-const MARGIN_NS: u64 = 2_000;
+const MARGIN_NS: u64 = 4_000;
 /// Least headroom below the deepest stack (the brief's and tests/touch2d.rs's).
 const MIN_HEADROOM: u32 = 16 * 1024;
 
@@ -50,13 +50,16 @@ fn elf(board: BoardKind) -> PathBuf {
     p
 }
 
-/// The board's frame, µs: the core's schedule (default plates, the board's conversion time, 16
-/// conversions a phase) plus the firmware's margin after each of the 4 phases, rounded up.
+/// The board's frame, µs: the core's schedule (default plates, the board's acquisition as
+/// saw-boards' `touch_adc` states it) plus the firmware's margin after each of the 4 phases,
+/// rounded up.
 fn frame_us(board: BoardKind) -> u32 {
+    let t = saw_boards::touch::touch_adc(board.def());
     let adc = AdcTiming {
-        conversion_ns: saw_boards::touch::conversion_ns(board.def()),
-        conversions_position: 16,
-        conversions_pressure: 16,
+        conversion_ns: t.conversion_ns,
+        conversions_position: t.conversions_position,
+        conversions_pressure: t.conversions_pressure,
+        discard: t.discard,
     };
     let sched = Schedule::new(&PlateRc::DEFAULT, &adc).unwrap();
     (sched.frame_ns() + 4 * MARGIN_NS).div_ceil(1_000) as u32
