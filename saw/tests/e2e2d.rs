@@ -168,7 +168,10 @@ fn a_2d_scene_is_pushed_read_back_edited_and_a_1d_one_refused() {
         (vec!["window", "0", "--rect", "1,2,3,inf"], "--rect"),
         (vec!["window", "0", "--to", "-1,3"], "0 to 1000"),
         // Neither flag: the sentence names both (clap's own error named only --to).
-        (vec!["window", "0"], "give --to X,Y (move) or --rect X0,Y0,X1,Y1 (resize)"),
+        (
+            vec!["window", "0"],
+            "give --to X,Y (move) or --rect X0,Y0,X1,Y1 (resize)",
+        ),
     ] {
         let r = saw(&vb.port, &args);
         assert_eq!(r.code, 2, "{args:?}: {}", r.stderr);

@@ -717,12 +717,18 @@ mod tests {
         };
         c.step(
             Some((rise, GateAction::Start(s))),
-            &[Edge { t: rise, high: true }],
+            &[Edge {
+                t: rise,
+                high: true,
+            }],
             rise,
         );
         c.step(
             Some((fall, GateAction::Off)),
-            &[Edge { t: fall, high: false }],
+            &[Edge {
+                t: fall,
+                high: false,
+            }],
             fall,
         );
     }
