@@ -458,6 +458,7 @@ pub(crate) fn calibrated_sensor(
     overlay: &Overlay,
     schedule: &Schedule,
     adc: &AdcTiming,
+    plate_um: (u32, u32),
 ) -> Result<TouchSensor, Sim2dError> {
     let mut quiet = TouchModel::new(
         Overlay {
@@ -466,9 +467,10 @@ pub(crate) fn calibrated_sensor(
         },
         0,
     );
-    let (w_um, h_um) = (SCREEN_MM.0 * 1e3, SCREEN_MM.1 * 1e3);
+    let (w_um, h_um) = (plate_um.0 as f64, plate_um.1 as f64);
     let cal = [(0.1, 0.1), (0.9, 0.5), (0.5, 0.9)].map(|(x, y)| {
         let f = Finger { x, y, force_n: 1.0 };
+        // The first frame after a touch-down settles the model's filters; the second is read.
         quiet.frame(schedule, adc, Some(&f), 0);
         let fr = quiet.frame(schedule, adc, Some(&f), 0);
         CalPoint {
@@ -502,7 +504,8 @@ pub fn run(params: &Params2d) -> Result<Run2d, Sim2dError> {
     let timer = burst_timer(board);
     let mut ctrl = Controller2d::new(timer, frame_us).map_err(Sim2dError::Config)?;
     ctrl.load(&params.config).map_err(Sim2dError::Config)?;
-    let mut sensor = calibrated_sensor(&params.overlay, &sched, &adc)?;
+    let plate_um = ((SCREEN_MM.0 * 1e3) as u32, (SCREEN_MM.1 * 1e3) as u32);
+    let mut sensor = calibrated_sensor(&params.overlay, &sched, &adc, plate_um)?;
     let mut model = TouchModel::new(params.overlay, params.seed);
     let mut tm = TimerModel::new(timer.clock_hz, timer.counter_bits, true).with_level(
         LevelPort::new(board.rf_level.table, board.rf_level.envelope_timer_clk_hz),

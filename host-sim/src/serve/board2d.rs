@@ -14,11 +14,9 @@ use saw_core::controller::{ConfigError, Telemetry};
 use saw_core::gate::GateAction;
 use saw_core::plane::{Controller2d, Telemetry2d, TouchFault};
 use saw_core::scene::Config;
-use saw_core::touch::calibration::{Affine, CalPoint};
-use saw_core::touch::fault::{Axis, RailBands};
+use saw_core::touch::fault::Axis;
 use saw_core::touch::frame::{Reading, TouchSensor};
 use saw_core::touch::plates::{AdcTiming, Schedule};
-use saw_core::touch::pressure::PressureConfig;
 use saw_link::msg::{Fault2d, Header, PlaneScene, Record2d, Reply, StoreFault};
 use saw_link::session::{Apply2dError, Board, Stamp};
 use saw_link::stream::{Batcher2d, Decimator, QUEUE_RECORDS};
@@ -64,43 +62,6 @@ const CODE_MAX: u16 = (saw_core::sample::CODE_FULL_SCALE - 1) as u16;
 
 /// Frames of the timer model kept before they are dropped: the virtual board runs for hours.
 const HISTORY_FRAMES: u64 = 3_000;
-
-/// A sensor calibrated for an overlay whose touch area is `plate_um`: three touches on a
-/// noiseless copy of the overlay at (0.1, 0.1), (0.9, 0.5), (0.5, 0.9) of the plate, targets at
-/// those fractions of the plate, as a three-point calibration on a panel would be done.
-/// `sim2d::calibrated_sensor` does the same for the fixed 95 × 54 mm `SCREEN_MM`; this one
-/// takes the scene's plate.
-fn calibrated_sensor(
-    overlay: &Overlay,
-    schedule: &Schedule,
-    adc: &AdcTiming,
-    plate_um: (u32, u32),
-) -> Result<TouchSensor, Boot2dError> {
-    let mut quiet = TouchModel::new(
-        Overlay {
-            noise_lsb: 0.0,
-            ..*overlay
-        },
-        0,
-    );
-    let (w_um, h_um) = (plate_um.0 as f64, plate_um.1 as f64);
-    let cal = [(0.1, 0.1), (0.9, 0.5), (0.5, 0.9)].map(|(x, y)| {
-        let f = Finger { x, y, force_n: 1.0 };
-        // The first frame after a touch-down settles the model's filters; the second is read.
-        quiet.frame(schedule, adc, Some(&f), 0);
-        let fr = quiet.frame(schedule, adc, Some(&f), 0);
-        CalPoint {
-            x_code: fr.x_code,
-            y_code: fr.y_code,
-            x_um: (x * w_um).round() as i32,
-            y_um: (y * h_um).round() as i32,
-        }
-    });
-    let map = Affine::from_points(cal, &RailBands::default())
-        .map_err(|e| format!("the overlay's calibration: {e}"))?;
-    TouchSensor::new(PressureConfig::DEFAULT, RailBands::default(), map)
-        .map_err(|e| format!("the overlay's calibration: {e}"))
-}
 
 /// A Nucleo with the touch overlay, on the host.
 pub struct VirtualBoard2d {
@@ -153,7 +114,13 @@ impl VirtualBoard2d {
         let timer = burst_timer(board);
         let mut ctrl = Controller2d::new(timer, frame_us).map_err(|e| e.to_string())?;
         ctrl.load(&scene.config).map_err(|e| e.to_string())?;
-        let sensor = calibrated_sensor(&overlay, &sched, &adc, scene.plate_um)?;
+        let sensor = crate::sim2d::calibrated_sensor(&overlay, &sched, &adc, scene.plate_um)
+            .map_err(|e| match e {
+                crate::sim2d::Sim2dError::Calibration(e) => {
+                    format!("the overlay's calibration: {e}")
+                }
+                e => e.to_string(),
+            })?;
         let tm = TimerModel::new(timer.clock_hz, timer.counter_bits, true).with_level(
             LevelPort::new(board.rf_level.table, board.rf_level.envelope_timer_clk_hz),
         );
