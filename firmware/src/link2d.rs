@@ -20,11 +20,10 @@ use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use saw_core::burst::BurstTimer;
 use saw_core::controller::{ConfigError, Telemetry};
-use saw_core::gate::{Envelope, GateAction};
+use saw_core::gate::Envelope;
 use saw_core::plane::{
-    Config2d, Config2dError, Controller2d, EdgePulse, Output2d, Telemetry2d, TouchFault,
+    Config2d, Config2dError, Controller2d, EdgePulse, Output2d, Telemetry2d,
 };
-use saw_core::touch::fault::Axis;
 use saw_core::touch::frame::Reading;
 use saw_link::msg::{Fault2d, PlaneScene, Record2d, SceneSource, StoreFault};
 use saw_link::session::{Apply2dError, Board, Identity, Session, Stamp};
@@ -108,7 +107,7 @@ impl Tap2d {
     #[inline]
     pub fn record(&mut self, t_us: u32, reading: Reading, out: &Output2d, line: Line) {
         if let Some(a) = out.action {
-            self.burst_millihz = millihz(BOARD.burst_timer_clk_hz, a);
+            self.burst_millihz = Record2d::millihz_of(BOARD.burst_timer_clk_hz, a);
         }
         let every = EVERY.load(Ordering::Relaxed);
         if every != self.every {
@@ -136,7 +135,7 @@ impl Tap2d {
             },
             bursting,
             lifted: reading == Reading::Lifted,
-            fault: out.fault.map(fault_2d),
+            fault: out.fault.map(Fault2d::from),
         };
         push(record);
     }
@@ -148,26 +147,6 @@ impl Tap2d {
 fn push(record: Record2d) {
     if RECORDS_2D.try_send(record).is_err() {
         DROPPED.fetch_add(1, Ordering::Relaxed);
-    }
-}
-
-/// The f_b of a gate action's periodic settings, mHz (0 for an off or a pulse).
-fn millihz(clock_hz: u32, a: GateAction) -> u32 {
-    match a {
-        GateAction::Start(s) | GateAction::Update(s) => {
-            (clock_hz as u64 * 1000).checked_div(s.period_clocks()).unwrap_or(0).min(u32::MAX as u64) as u32
-        }
-        GateAction::Off | GateAction::Pulse(_) => 0,
-    }
-}
-
-fn fault_2d(f: TouchFault) -> Fault2d {
-    match f {
-        TouchFault::Rail(a) => Fault2d::Rail {
-            y_axis: a.axis == Axis::Y,
-            fault: a.fault,
-        },
-        TouchFault::Stale => Fault2d::Stale,
     }
 }
 

@@ -528,6 +528,38 @@ pub enum Fault2d {
     Stale,
 }
 
+#[cfg(feature = "plane")]
+impl From<saw_core::plane::TouchFault> for Fault2d {
+    /// The controller's fault as the stream carries it (the board and the virtual board alike).
+    fn from(f: saw_core::plane::TouchFault) -> Self {
+        match f {
+            saw_core::plane::TouchFault::Rail(a) => Fault2d::Rail {
+                y_axis: a.axis == saw_core::touch::fault::Axis::Y,
+                fault: a.fault,
+            },
+            saw_core::plane::TouchFault::Stale => Fault2d::Stale,
+        }
+    }
+}
+
+#[cfg(feature = "plane")]
+impl Record2d {
+    /// The burst frequency a gate action sets, mHz, for [`Record2d::burst_millihz`]: the timer's
+    /// kernel clock over the settings' period (saturating); 0 for an Off and for a one-pulse (an
+    /// edge's, which sets no frequency).
+    pub fn millihz_of(clock_hz: u32, action: saw_core::gate::GateAction) -> u32 {
+        use saw_core::gate::GateAction;
+        match action {
+            GateAction::Start(s) | GateAction::Update(s) => (clock_hz as u64 * 1000)
+                .checked_div(s.period_clocks())
+                .unwrap_or(0)
+                .min(u32::MAX as u64)
+                as u32,
+            GateAction::Off | GateAction::Pulse(_) => 0,
+        }
+    }
+}
+
 /// One touch reading of the 2D telemetry stream.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -402,3 +402,45 @@ fn a_board_whose_glue_has_no_2d_controller_refuses_by_the_trait_defaults() {
     assert_ne!(before, scene_id(&default_config()));
     still_usable(&mut s, &mut b, before);
 }
+
+/// A gate action's burst frequency as a 2D record carries it: the kernel clock over the period
+/// (worked by hand: 90 MHz over 90 000 clocks is 1 kHz, 1 000 000 mHz), 0 for an Off and for an
+/// edge's one-pulse; a touch fault as the stream names it, per axis.
+#[test]
+fn a_records_burst_frequency_and_fault_come_from_the_gate_and_the_controller() {
+    use saw_core::burst::TimerSettings;
+    use saw_core::gate::GateAction;
+    use saw_core::plane::TouchFault;
+    use saw_core::position::SensorFault;
+    use saw_core::touch::fault::{Axis, AxisFault};
+    use saw_link::msg::{Fault2d, Record2d};
+    let s = TimerSettings {
+        psc: 8,
+        arr: 9_999,
+        ccr: 100,
+    };
+    assert_eq!(
+        Record2d::millihz_of(90_000_000, GateAction::Start(s)),
+        1_000_000
+    );
+    assert_eq!(
+        Record2d::millihz_of(90_000_000, GateAction::Update(s)),
+        1_000_000
+    );
+    assert_eq!(Record2d::millihz_of(90_000_000, GateAction::Pulse(s)), 0);
+    assert_eq!(Record2d::millihz_of(90_000_000, GateAction::Off), 0);
+    for (axis, y_axis) in [(Axis::X, false), (Axis::Y, true)] {
+        let f = TouchFault::Rail(AxisFault {
+            axis,
+            fault: SensorFault::RailHigh,
+        });
+        assert_eq!(
+            Fault2d::from(f),
+            Fault2d::Rail {
+                y_axis,
+                fault: SensorFault::RailHigh
+            }
+        );
+    }
+    assert_eq!(Fault2d::from(TouchFault::Stale), Fault2d::Stale);
+}

@@ -11,10 +11,8 @@ use std::collections::VecDeque;
 
 use saw_boards::BoardDef;
 use saw_core::controller::{ConfigError, Telemetry};
-use saw_core::gate::GateAction;
-use saw_core::plane::{Controller2d, Telemetry2d, TouchFault};
+use saw_core::plane::{Controller2d, Telemetry2d};
 use saw_core::scene::Config;
-use saw_core::touch::fault::Axis;
 use saw_core::touch::frame::{Reading, TouchSensor};
 use saw_core::touch::plates::{AdcTiming, Schedule};
 use saw_link::msg::{Fault2d, Header, PlaneScene, Record2d, Reply, StoreFault};
@@ -227,7 +225,7 @@ impl VirtualBoard2d {
             }
             if let Some(a) = out.action {
                 self.tm.apply(clk(t_us), a);
-                self.burst_millihz = millihz(clock, a);
+                self.burst_millihz = Record2d::millihz_of(clock as u32, a);
             }
             self.tm.advance_to(clk(t_us));
             if self.decimator.take() {
@@ -246,7 +244,7 @@ impl VirtualBoard2d {
                     },
                     bursting: self.tm.is_running(),
                     lifted: reading == Reading::Lifted,
-                    fault: out.fault.map(fault_2d),
+                    fault: out.fault.map(Fault2d::from),
                 };
                 if self.queue.len() < QUEUE_RECORDS {
                     self.queue.push_back(record);
@@ -290,26 +288,6 @@ impl VirtualBoard2d {
     /// Records dropped since boot.
     pub fn dropped(&self) -> u32 {
         self.dropped
-    }
-}
-
-/// The f_b of a gate action's periodic settings, mHz (0 for an off or a pulse).
-fn millihz(clock_hz: u64, a: GateAction) -> u32 {
-    match a {
-        GateAction::Start(s) | GateAction::Update(s) => {
-            (clock_hz * 1000 / s.period_clocks().max(1) as u64).min(u32::MAX as u64) as u32
-        }
-        GateAction::Off | GateAction::Pulse(_) => 0,
-    }
-}
-
-fn fault_2d(f: TouchFault) -> Fault2d {
-    match f {
-        TouchFault::Rail(a) => Fault2d::Rail {
-            y_axis: a.axis == Axis::Y,
-            fault: a.fault,
-        },
-        TouchFault::Stale => Fault2d::Stale,
     }
 }
 
