@@ -460,6 +460,15 @@ fn coordinate(
     max_mm: f64,
 ) -> Result<i32, SceneFileError> {
     let mm = *v.get_ref();
+    if mm.is_nan() {
+        return Err(cx.err(
+            v.span(),
+            field,
+            format_args!(
+                "{axis} = NaN is not a number: give mm from 0 to {max_mm} (`[screen] size_mm`)"
+            ),
+        ));
+    }
     if !(0.0..=max_mm).contains(&mm) {
         let shown = if mm.is_finite() {
             format!("{mm} mm")
@@ -955,6 +964,12 @@ mod tests {
                 7,
                 "window[0].rect_mm",
                 "x1 = 100 mm is outside the plate: 0 mm to 95 mm (`[screen] size_mm`)",
+            ),
+            (
+                format!("{HEAD}{}", w("[5, 5, nan, 30]")),
+                7,
+                "window[0].rect_mm",
+                "x1 = NaN is not a number: give mm from 0 to 95 (`[screen] size_mm`)",
             ),
             (
                 format!(

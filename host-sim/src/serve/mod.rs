@@ -119,7 +119,7 @@ pub struct ServeArgs {
     /// boots into it. Without it the board has no scene store.
     #[arg(long, value_name = "FILE")]
     pub flash: Option<PathBuf>,
-    #[arg(long, value_name = "MM_S", default_value_t = 60.0, help = SPEED.help("Finger speed, back and forth over the travel"), value_parser = SPEED.parser())]
+    #[arg(long, value_name = "MM_S", default_value_t = 60.0, help = SPEED.help("Finger speed: back and forth over the travel (1D scenes), round the circle through the plate's middle (2D scenes)"), value_parser = SPEED.parser())]
     pub speed: f64,
     #[arg(long, value_name = "MM", conflicts_with = "speed", help = AT.help("Finger at rest here instead (within the scene's travel; 1D scenes)"), value_parser = AT.parser())]
     pub rest_at: Option<f64>,
