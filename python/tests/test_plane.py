@@ -15,7 +15,9 @@ from conftest import REPO, SCENES
 FIG12 = REPO / "scenes" / "2d-fig12.toml"
 CONCAVE = REPO / "scenes" / "2d-concave.toml"
 GRATING = next(p for p in SCENES if p.stem == "grating")
-EVERY = 10                 # 288 records/s on the F446's 2 881 touch frames/s
+FRAME_US = 280             # the F446's touch frame on host-sim's schedule (saw-tests' fuzz_corpus_2d
+                           # holds saw_link::testing::FRAME_US to it): 1 discard + 15 / 4 conversions
+EVERY = 10                 # 357 records/s on the F446's 3 571 touch frames/s
 
 # The session's sentences (link/src/msg.rs, `Refused2d::WrongSensor`), as docs/link.md gives them.
 NOT_1D = ("this board reads the 4-wire touch overlay, 95 x 54 mm (2D scenes): a 1D scene "
@@ -55,7 +57,7 @@ def test_a_2d_scene_pushed_reads_back_equal(resting):
     hello = b.hello()
     assert b.plane
     assert hello["sensor"] == {"kind": "4-wire", "plate_mm": [95, 54]}
-    assert hello["sample_rate_hz"] == 2881          # 1 / 347 µs: the F446's touch frame
+    assert hello["sample_rate_hz"] == 1_000_000 // FRAME_US   # 3 571: the F446's touch frame
     with open(FIG12, "rb") as f:
         file = tomllib.load(f)
     # Another scene first, so the push of the file is a change the board must make.
@@ -121,7 +123,7 @@ def test_records_carry_x_and_y(resting):
     assert set(cols["f_b_hz"]) == {20.0} and all(cols["bursting"])
     assert {len(v) for v in cols.values()} == {len(rec)}
     steps = {b - a for a, b in zip(cols["time_us"], cols["time_us"][1:])}
-    assert steps == {EVERY * 347}
+    assert steps == {EVERY * FRAME_US}
     assert rec.dropped == 0
 
 
@@ -151,7 +153,7 @@ def test_2d_counters(resting):
     first = resting.counters()["core"]["readings"]
     resting.record(seconds=0.2, every=EVERY)
     later = resting.counters()["core"]
-    # 2 881 readings a second, and more than the 0.2 s recorded went by.
+    # 3 571 readings a second, and more than the 0.2 s recorded went by.
     assert later["readings"] - first >= 500
     assert {"lifts", "window_switches", "edge_pulses"} <= set(later)
 
@@ -224,7 +226,7 @@ def test_an_injected_rail_fault_reaches_the_records(start_board):
     with sawlink.Board(vb.port, timeout_s=2.0) as b:
         rec = b.record(seconds=2.0, every=EVERY)
         faults_counted = b.counters()["core"]["faults"]
-    # A frame is faulted by its start: one frame (347 µs) of slack at each end.
+    # A frame is faulted by its start: one frame (280 µs) of slack at each end.
     inside = [r for r in rec if 1_000_400 <= r.time_us <= 1_500_000]
     outside = [r for r in rec if r.time_us < 1_000_000 or r.time_us > 1_520_000]
     assert len(inside) > 100 and outside

@@ -397,7 +397,7 @@ mod tests {
                     SensorFault::RailLow
                 },
             };
-            // One frame (347 µs) in at each end: a frame is faulted by its start time.
+            // One frame (280 µs) in at each end: a frame is faulted by its start time.
             let inside: Vec<_> = r
                 .iter()
                 .filter(|r| (30_400..=60_000).contains(&r.time_us))
