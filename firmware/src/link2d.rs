@@ -70,7 +70,7 @@ pub static RECORDS_2D: Channel<CriticalSectionRawMutex, Record2d, QUEUE_RECORDS>
 
 /// Builds the triangle table of `edge`'s one-pulse now (between frames or at boot: ~80 µs on
 /// the G474), so the first edge's pulse does not build it on the frame's path.
-fn prebuild(burst: &mut BurstGate, timer: &BurstTimer, edge: &EdgePulse) {
+pub(crate) fn prebuild(burst: &mut BurstGate, timer: &BurstTimer, edge: &EdgePulse) {
     let clocks = edge.pulse_us as u64 * timer.clock_hz as u64 / 1_000_000;
     if let (Envelope::Triangular, Ok(s)) = (edge.envelope, timer.one_pulse(clocks)) {
         let us = burst.prebuild_triangle(&s, edge.amplitude_permille);

@@ -39,7 +39,7 @@ use embassy_sync::channel::Channel;
 use embassy_time::{Duration, Instant, Ticker};
 use saw_boards::touch::TouchPins;
 use saw_core::burst::BurstTimer;
-use saw_core::gate::{BurstOutput, Envelope};
+use saw_core::gate::BurstOutput;
 use saw_core::plane::{apply2d, Config2d, Controller2d};
 use saw_core::touch::calibration::{Affine, CalPoint};
 use saw_core::touch::fault::RailBands;
@@ -655,15 +655,7 @@ fn load_scene(ctrl: &mut Controller, timer: &BurstTimer, burst: &mut BurstGate) 
     }
     info!("boot: the 2D scene built in ({})", SCENE_2D_FILE);
     // The edge pulse's triangle table now, not on the first edge's sample path.
-    let e = c.scene.edge_pulse;
-    let clocks = e.pulse_us as u64 * timer.clock_hz as u64 / 1_000_000;
-    if let (Envelope::Triangular, Ok(s)) = (e.envelope, timer.one_pulse(clocks)) {
-        let us = burst.prebuild_triangle(&s, e.amplitude_permille);
-        info!(
-            "rf level: the edge pulse's triangle built at boot in {} us",
-            us
-        );
-    }
+    crate::link2d::prebuild(burst, timer, &c.scene.edge_pulse);
 }
 
 /// One frame through the sensor and the controller onto the burst gate. Never inlined: a root
