@@ -42,18 +42,19 @@ pub const DEFAULT_TURNS: f64 = 3.0;
 /// The rows of a raster without --rows.
 pub const DEFAULT_ROWS: u64 = 5;
 
-/// `X,Y` in mm, each within [`COORD`].
+/// `X,Y` in mm, each within [`COORD`]; a bad coordinate is named (`X`, `Y`) with the rule it
+/// breaks, the same rules as every other number at the door (NaN and inf: "finite").
 pub fn xy_mm(s: &str) -> Result<(f64, f64), String> {
-    let rule = format!("must be two numbers X,Y in mm, each {}", COORD.span());
     let parts: Vec<&str> = s.split(',').collect();
     let [x, y] = parts.as_slice() else {
-        return Err(format!("{rule} (give both, separated by a comma)"));
+        return Err(format!(
+            "must be two numbers X,Y in mm, each {} (give both, separated by a comma)",
+            COORD.span()
+        ));
     };
-    let one = |v: &str| match v.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() && (COORD.lo..=COORD.hi).contains(&v) => Ok(v),
-        _ => Err(rule.clone()),
-    };
-    Ok((one(x)?, one(y)?))
+    let x = COORD.check(x).map_err(|rule| format!("X {rule}"))?;
+    let y = COORD.check(y).map_err(|rule| format!("Y {rule}"))?;
+    Ok((x, y))
 }
 
 /// The flags only a 2D run reads.

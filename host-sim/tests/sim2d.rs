@@ -288,7 +288,7 @@ fn bad_flags_are_refused_with_one_line_naming_the_flag() {
         "--to-xy",
         "72,20",
     ];
-    let cases: [(Vec<&str>, &str); 5] = [
+    let cases: [(Vec<&str>, &str); 7] = [
         (
             [&line[..], &["--speed", "NaN"]].concat(),
             "invalid value 'NaN' for '--speed <MM_S>': must be a finite number from 0.1 to 1000 mm/s",
@@ -296,6 +296,14 @@ fn bad_flags_are_refused_with_one_line_naming_the_flag() {
         (
             vec!["--trajectory", "line", "--from-xy", "1", "--to-xy", "3,3"],
             "invalid value '1' for '--from-xy <X,Y>': must be two numbers X,Y in mm",
+        ),
+        (
+            vec!["--trajectory", "line", "--from-xy", "nan,3", "--to-xy", "3,3"],
+            "invalid value 'nan,3' for '--from-xy <X,Y>': X must be a finite number from -1000 to 1000 mm",
+        ),
+        (
+            vec!["--trajectory", "line", "--from-xy", "1,3", "--to-xy", "3,2000"],
+            "invalid value '3,2000' for '--to-xy <X,Y>': Y must be from -1000 to 1000 mm",
         ),
         (
             [&["--scene", "../scenes/lines.toml"][..], &line[..]].concat(),
