@@ -248,8 +248,9 @@ fn check_refusal(text: &str, e: &SceneFileError) -> Result<(), TestCaseError> {
     });
     if text.parse::<toml::Table>().is_ok() {
         // TOML that reads: the field is one of the scene's, or a key the user wrote on the line
-        // named (an unknown field, a value of the wrong type).
-        let on_line = lines[e.line - 1].contains(e.field.as_str());
+        // named (an unknown field, a value of the wrong type), under its table's name.
+        let key = e.field.rsplit('.').next().unwrap_or(&e.field);
+        let on_line = lines[e.line - 1].contains(key);
         prop_assert!(
             in_schema || on_line,
             "{}: `{}` is no scene field",

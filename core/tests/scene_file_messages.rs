@@ -212,7 +212,7 @@ fn unknown_keys_and_values_name_the_nearest_or_a_short_list() {
     let cases = [
         (
             "[[region]]\nkind = \"constant\"\nf_b_hx = 80\n",
-            "typo.toml:3:1: `f_b_hx`: unknown key `f_b_hx`: did you mean `f_b_hz`?",
+            "typo.toml:3:1: `region[0].f_b_hx`: unknown key `f_b_hx`: did you mean `f_b_hz`?",
         ),
         (
             "hysteresis = 0.1\n\n[[region]]\nkind = \"off\"\n",
@@ -220,37 +220,37 @@ fn unknown_keys_and_values_name_the_nearest_or_a_short_list() {
         ),
         (
             "[limits]\nmax_duty = 30\n\n[[region]]\nkind = \"off\"\n",
-            "cap.toml:2:1: `max_duty`: unknown key `max_duty`: did you mean `max_duty_percent`?",
+            "cap.toml:2:1: `limits.max_duty`: unknown key `max_duty`: did you mean `max_duty_percent`?",
         ),
         (
             "[[region]]\nkind = \"constant\"\nf_b_hz = 80\ncolour = \"red\"\n",
-            "colour.toml:4:1: `colour`: unknown key `colour`: a `constant` region takes `kind`, \
+            "colour.toml:4:1: `region[0].colour`: unknown key `colour`: a `constant` region takes `kind`, \
              `until_mm`, `f_b_hz` and `duty_percent` (docs/scenes.md lists every kind's keys)",
         ),
         (
             "[[region]]\nkind = \"off\"\ncolour = \"red\"\n",
-            "off.toml:3:1: `colour`: unknown key `colour`: an `off` region takes `kind` and \
+            "off.toml:3:1: `region[0].colour`: unknown key `colour`: an `off` region takes `kind` and \
              `until_mm` (docs/scenes.md lists every kind's keys)",
         ),
         (
             "[limits]\nzzz = 30\n\n[[region]]\nkind = \"off\"\n",
-            "limits.toml:2:1: `zzz`: unknown key `zzz`: [limits] takes `max_duty_percent`, \
+            "limits.toml:2:1: `limits.zzz`: unknown key `zzz`: [limits] takes `max_duty_percent`, \
              `max_level_percent`, `max_on_time_ms` and `stale_after_ms`",
         ),
         // A key in [lines] after a region is judged by the lines' keys, not the region's.
         (
             "[[region]]\nkind = \"constant\"\nf_b_hz = 80\n\n[lines]\npositions_mm = [10]\n\
              duty = 1\n",
-            "lines.toml:7:1: `duty`: unknown key `duty`: [lines] takes `positions_mm`, `pulse_ms`, \
+            "lines.toml:7:1: `lines.duty`: unknown key `duty`: [lines] takes `positions_mm`, `pulse_ms`, \
              `envelope`, `amplitude_percent` and `rearm_mm`",
         ),
         (
             "[[region]]\nkind = \"grating\"\nwavelength_mm = 1\nrender = \"hybird\"\n",
-            "render.toml:4:10: `render`: unknown value `hybird`: did you mean `hybrid`?",
+            "render.toml:4:10: `region[0].render`: unknown value `hybird`: did you mean `hybrid`?",
         ),
         (
             "[[region]]\nkind = \"grating\"\nwavelength_mm = 1\nrender = \"phase\"\n",
-            "phase.toml:4:10: `render`: unknown value `phase`: it must be `position`, `hybrid` or \
+            "phase.toml:4:10: `region[0].render`: unknown value `phase`: it must be `position`, `hybrid` or \
              `velocity`",
         ),
     ];

@@ -52,7 +52,7 @@ fn every_scene_refusal_exits_2_and_points_at_the_value() {
         (
             "typo.toml",
             "[[region]]\nkind = \"constant\"\nf_b_hx = 80\n",
-            ":3:1: `f_b_hx`: unknown key `f_b_hx`: did you mean `f_b_hz`?",
+            ":3:1: `region[0].f_b_hx`: unknown key `f_b_hx`: did you mean `f_b_hz`?",
             "the table's keys",
         ),
     ];

@@ -436,7 +436,7 @@ mod tests {
     #[test]
     fn unknown_field_is_located() {
         let e = err("[[region]]\nkind = \"constant\"\nf_b_hz = 80\ncolour = \"red\"\n");
-        assert_eq!((e.line, e.field.as_str()), (4, "colour"), "{e}");
+        assert_eq!((e.line, e.field.as_str()), (4, "region[0].colour"), "{e}");
         assert!(e.message.contains("colour"), "{e}");
         assert!(e.to_string().starts_with("bad.toml:4:"), "{e}");
     }

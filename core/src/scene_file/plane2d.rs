@@ -890,25 +890,25 @@ mod tests {
             (
                 format!("{HEAD}{}", rect("[5, 5, 30, 30]", "f_b_hx = 3\n")),
                 10,
-                "f_b_hx",
+                "window[0].f_b_hx",
                 "unknown key `f_b_hx`: did you mean `f_b_hz`?",
             ),
             (
                 format!("{HEAD}bnad_mm = 0.2\n"),
                 6,
-                "bnad_mm",
+                "screen.bnad_mm",
                 "unknown key `bnad_mm`: did you mean `band_mm`?",
             ),
             (
                 format!("{HEAD}colour = 1\n"),
                 6,
-                "colour",
+                "screen.colour",
                 "unknown key `colour`: [screen] takes `size_mm`, `band_mm` and `background`",
             ),
             (
                 format!("{HEAD}{}", rect("[5, 5, 30, 30]", "colour = 1\n")),
                 10,
-                "colour",
+                "window[0].colour",
                 "unknown key `colour`: a window takes `rect_mm` or `polygon_mm`, `outline`, \
                  `kind`, its kind's keys as a region's and, for a grating, `ridge_angle_deg` \
                  (docs/scenes.md)",

@@ -5,7 +5,8 @@
 extern crate std;
 
 use core::ops::Range;
-use std::string::String;
+use std::format;
+use std::string::{String, ToString};
 use std::vec::Vec as StdVec;
 
 use serde::Deserialize;
@@ -44,13 +45,56 @@ pub(super) fn read_as<T: serde::de::DeserializeOwned>(cx: &Ctx<'_>) -> Result<T,
         let start = span.start.min(text.len());
         let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
         let line_text = text[line_start..].split('\n').next().unwrap_or("");
-        let field = line_text.split('=').next().unwrap_or("").trim();
-        let field = if field.is_empty() { "(file)" } else { field };
+        let key = line_text.split('=').next().unwrap_or("").trim();
+        let field = if key.is_empty() {
+            "(file)".to_string()
+        } else if text.parse::<toml::Table>().is_err() {
+            // Not TOML: the tables are not known, only the line the parser stopped at.
+            key.to_string()
+        } else {
+            qualified(&text[..line_start], key)
+        };
         match super::keys::unknown(e.message(), region_kind_at(text, start).as_deref()) {
-            Some(sentence) => cx.err(span, field, sentence),
-            None => cx.err(span, field, e.message()),
+            Some(sentence) => cx.err(span, &field, sentence),
+            None => cx.err(span, &field, e.message()),
         }
     })
+}
+
+/// `key` as the checks after the read name a field: under the table the text `before` it last
+/// opened (`[limits]` → `limits.max_duty`, the third `[[window]]` → `window[2].outline`), bare
+/// at the top. A header line itself (`[[windw]]`) is named as written.
+fn qualified(before: &str, key: &str) -> String {
+    if key.starts_with('[') {
+        return key.to_string();
+    }
+    let mut table: Option<(&str, bool)> = None;
+    for line in before.lines() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if let Some(name) = line.strip_prefix("[[").and_then(|l| l.strip_suffix("]]")) {
+            table = Some((name.trim(), true));
+        } else if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+            table = Some((name.trim(), false));
+        }
+    }
+    match table {
+        None => key.to_string(),
+        Some((name, false)) => format!("{name}.{key}"),
+        Some((name, true)) => {
+            // The array's index: how many of its headers came before, this one included.
+            let index = before
+                .lines()
+                .filter(|l| {
+                    let l = l.split('#').next().unwrap_or("").trim();
+                    l.strip_prefix("[[")
+                        .and_then(|l| l.strip_suffix("]]"))
+                        .is_some_and(|n| n.trim() == name)
+                })
+                .count()
+                - 1;
+            format!("{name}[{index}].{key}")
+        }
+    }
 }
 
 /// The `kind` of the `[[region]]` table that holds byte `at`, if the file reads that far: the
