@@ -479,11 +479,8 @@ fn run<V: Virtual>(
     stop: &AtomicBool,
 ) -> Result<ServeStats, String> {
     let start = clock.start;
-    let mut line = Line::new(baud);
+    let mut uart = Uart::new(baud);
     let mut rx = Receiver::<MAX_ENCODED>::default();
-    let mut pending: Option<Vec<u8>> = None;
-    let mut last_flush_us = 0u64;
-    let mut board_us = 0u64;
     let mut stats = ServeStats::default();
     let mut inbuf = [0u8; 4096];
     let end = seconds.map(|s| start + Duration::from_secs_f64(s));
@@ -493,15 +490,7 @@ fn run<V: Virtual>(
             // The samples due so far run first (and the stream with them): a request acts at
             // the board time it arrives.
             let now_us = clock.board_us(Instant::now());
-            stats.stream_frames += catch_up(
-                |b| send(pty, b),
-                &mut board,
-                &mut line,
-                &mut pending,
-                &mut last_flush_us,
-                &mut board_us,
-                now_us,
-            )?;
+            stats.stream_frames += uart.catch_up(&mut board, now_us, |b| send(pty, b))?;
         }
         for &byte in &inbuf[..n] {
             let reply = match rx.push(byte) {
@@ -512,24 +501,16 @@ fn run<V: Virtual>(
             if matches!(reply.1, Reply::Streaming { .. }) {
                 // A stream stopped or started anew: what was gathered for the one before is
                 // stale (the client drops it) and is not sent.
-                pending = None;
+                uart.pending = None;
                 board.restart_batch();
             }
             let bytes = encode(&reply.0, &reply.1)?;
-            line.spend(bytes.len());
+            uart.line.spend(bytes.len());
             let _ = send(pty, &bytes);
             stats.replies += 1;
         }
         let now_us = clock.board_us(Instant::now());
-        stats.stream_frames += catch_up(
-            |b| send(pty, b),
-            &mut board,
-            &mut line,
-            &mut pending,
-            &mut last_flush_us,
-            &mut board_us,
-            now_us,
-        )?;
+        stats.stream_frames += uart.catch_up(&mut board, now_us, |b| send(pty, b))?;
         std::thread::sleep(Duration::from_micros(500));
     }
     stats.dropped = board.dropped();
@@ -540,52 +521,72 @@ fn run<V: Virtual>(
 /// samples run, so the line and the queue meet at least this often in board time.
 const STEP_US: u64 = 1_000;
 
-/// Runs the board from `board_us` to `to_us` in steps of `STEP_US`, serving the line after each
-/// step. The stream is paced in board time, not by when this thread got the CPU: a host that
-/// leaves the loop unscheduled for 50 ms then runs 50 ms of samples with 50 ms of line beside
-/// them, so what drops is what the board's UART would drop, whatever else the machine is doing
-/// (an e2e test once saw 20 records dropped at a quarter of the line from such a stall, when the
-/// samples ran in one piece and the line had one frame of room). Returns the frames sent.
-fn catch_up<V: Virtual>(
-    mut send: impl FnMut(&[u8]) -> bool,
-    board: &mut V,
-    line: &mut Line,
-    pending: &mut Option<Vec<u8>>,
-    last_flush_us: &mut u64,
-    board_us: &mut u64,
-    to_us: u64,
-) -> Result<u64, String> {
-    let mut frames = 0;
-    // Until a frame finds no one reading: the rest of this catch-up's records then wait in the
-    // queue (and drop there, as the board's would), not in `send`.
-    let mut reader = true;
-    loop {
-        let step_us = (*board_us + STEP_US).min(to_us.max(*board_us));
-        board.run_until(step_us);
-        *board_us = step_us;
-        line.refill(step_us);
-        // The stream: frames go when the line has room; until then records wait in the queue,
-        // and the queue drops when full.
-        while reader {
-            if pending.is_none() {
-                let flush = step_us.saturating_sub(*last_flush_us) >= FLUSH_AFTER_US;
-                match board.next_frame(flush) {
-                    Some((h, r)) => *pending = Some(encode(&h, &r)?),
-                    None => break,
-                }
-            }
-            let Some(bytes) = pending.as_ref() else { break };
-            if line.budget < bytes.len() as f64 {
-                break;
-            }
-            line.spend(bytes.len());
-            reader = send(bytes);
-            *pending = None;
-            *last_flush_us = step_us;
-            frames += 1;
+/// The board's side of the line: its pace, the encoded frame waiting for room, when the last
+/// frame went and how far the board has run, all in board time.
+struct Uart {
+    line: Line,
+    pending: Option<Vec<u8>>,
+    last_flush_us: u64,
+    board_us: u64,
+}
+
+impl Uart {
+    fn new(baud: u32) -> Self {
+        Uart {
+            line: Line::new(baud),
+            pending: None,
+            last_flush_us: 0,
+            board_us: 0,
         }
-        if step_us >= to_us {
-            return Ok(frames);
+    }
+
+    /// Runs the board to `to_us` in steps of `STEP_US`, serving the line after each step. The
+    /// stream is paced in board time, not by when this thread got the CPU: a host that leaves
+    /// the loop unscheduled for 50 ms then runs 50 ms of samples with 50 ms of line beside
+    /// them, so what drops is what the board's UART would drop, whatever else the machine is
+    /// doing (an e2e test once saw 20 records dropped at a quarter of the line from such a
+    /// stall, when the samples ran in one piece and the line had one frame of room). Returns
+    /// the frames sent.
+    fn catch_up<V: Virtual>(
+        &mut self,
+        board: &mut V,
+        to_us: u64,
+        mut send: impl FnMut(&[u8]) -> bool,
+    ) -> Result<u64, String> {
+        let mut frames = 0;
+        // Until a frame finds no one reading: the rest of this catch-up's records then wait in
+        // the queue (and drop there, as the board's would), not in `send`.
+        let mut reader = true;
+        loop {
+            let step_us = (self.board_us + STEP_US).min(to_us.max(self.board_us));
+            board.run_until(step_us);
+            self.board_us = step_us;
+            self.line.refill(step_us);
+            // The stream: frames go when the line has room; until then records wait in the
+            // queue, and the queue drops when full.
+            while reader {
+                if self.pending.is_none() {
+                    let flush = step_us.saturating_sub(self.last_flush_us) >= FLUSH_AFTER_US;
+                    match board.next_frame(flush) {
+                        Some((h, r)) => self.pending = Some(encode(&h, &r)?),
+                        None => break,
+                    }
+                }
+                let Some(bytes) = self.pending.take() else {
+                    break;
+                };
+                if self.line.budget < bytes.len() as f64 {
+                    self.pending = Some(bytes);
+                    break;
+                }
+                self.line.spend(bytes.len());
+                reader = send(&bytes);
+                self.last_flush_us = step_us;
+                frames += 1;
+            }
+            if step_us >= to_us {
+                return Ok(frames);
+            }
         }
     }
 }
@@ -667,27 +668,19 @@ mod tests {
             .unwrap()
             .board;
         Board::stream(&mut board, 4);
-        let mut line = Line::new(LINK_BAUD);
-        let (mut pending, mut last_flush_us, mut board_us) = (None, 0, 0);
+        let mut uart = Uart::new(LINK_BAUD);
         let mut bytes_sent = 0usize;
         let mut frames = 0;
         // 2 s in 0.5 ms turns with a 60 ms stall every 200 ms.
         let mut to_us = 0;
         while to_us < 2_000_000 {
             to_us += if to_us % 200_000 == 0 { 60_000 } else { 500 };
-            frames += catch_up(
-                |b| {
+            frames += uart
+                .catch_up(&mut board, to_us, |b| {
                     bytes_sent += b.len();
                     true
-                },
-                &mut board,
-                &mut line,
-                &mut pending,
-                &mut last_flush_us,
-                &mut board_us,
-                to_us,
-            )
-            .unwrap();
+                })
+                .unwrap();
         }
         assert_eq!(Virtual::dropped(&board), 0);
         // The records went: 5 000 records in 2 s at every fourth sample of 10 kHz, in frames
