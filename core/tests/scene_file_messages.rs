@@ -244,6 +244,18 @@ fn unknown_keys_and_values_name_the_nearest_or_a_short_list() {
             "lines.toml:7:1: `lines.duty`: unknown key `duty`: [lines] takes `positions_mm`, `pulse_ms`, \
              `envelope`, `amplitude_percent` and `rearm_mm`",
         ),
+        // A table no file takes: named by its name, its comment left off.
+        (
+            "[limits]\nmax_duty_percent = 30\n\n[[regin]]  # [[region]]\nkind = \"off\"\n",
+            "table.toml:4:3: `regin`: unknown key `regin`: did you mean `region`?",
+        ),
+        // Comments do not open tables; the second region's key is the second region's.
+        (
+            "[[region]] # [limits]\nkind = \"off\"\nuntil_mm = 10\n[[region]]\nkind = \"off\"\n\
+             foo = 1\n",
+            "second.toml:6:1: `region[1].foo`: unknown key `foo`: an `off` region takes `kind` and \
+             `until_mm` (docs/scenes.md lists every kind's keys)",
+        ),
         (
             "[[region]]\nkind = \"grating\"\nwavelength_mm = 1\nrender = \"hybird\"\n",
             "render.toml:4:10: `region[0].render`: unknown value `hybird`: did you mean `hybrid`?",

@@ -46,8 +46,15 @@ pub(super) fn read_as<T: serde::de::DeserializeOwned>(cx: &Ctx<'_>) -> Result<T,
         let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
         let line_text = text[line_start..].split('\n').next().unwrap_or("");
         let key = line_text.split('=').next().unwrap_or("").trim();
+        let header = key.starts_with('[');
         let field = if key.is_empty() {
             "(file)".to_string()
+        } else if header {
+            // A table's header (`[[regin]]  # …`): the table's name, as its keys are named.
+            let inside = key.split('#').next().unwrap_or("");
+            inside
+                .trim_matches(|c: char| c == '[' || c == ']' || c.is_whitespace())
+                .to_string()
         } else if text.parse::<toml::Table>().is_err() {
             // Not TOML: the tables are not known, only the line the parser stopped at.
             key.to_string()
@@ -63,11 +70,8 @@ pub(super) fn read_as<T: serde::de::DeserializeOwned>(cx: &Ctx<'_>) -> Result<T,
 
 /// `key` as the checks after the read name a field: under the table the text `before` it last
 /// opened (`[limits]` → `limits.max_duty`, the third `[[window]]` → `window[2].outline`), bare
-/// at the top. A header line itself (`[[windw]]`) is named as written.
+/// at the top.
 fn qualified(before: &str, key: &str) -> String {
-    if key.starts_with('[') {
-        return key.to_string();
-    }
     let mut table: Option<(&str, bool)> = None;
     for line in before.lines() {
         let line = line.split('#').next().unwrap_or("").trim();
