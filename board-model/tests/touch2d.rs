@@ -893,13 +893,13 @@ fn a_phase_converting_across_the_next_switch_is_dropped_and_counted() {
             .map(|(i, _)| i / 3)
             .collect::<std::collections::BTreeSet<_>>();
         assert!(!held.is_empty(), "{board:?}: the held frame is not mixed");
-        // Every mixed frame up to the telemetry line is counted; the line's own encoding holds
-        // interrupts off too (defmt-rtt's critical section) and may mix one more frame after
-        // its counters were read (seen on the G474: a Y phase cut to 6 of its 16 conversions
-        // at the 1 s line).
+        // The held frame is the only one mixed, and it is counted: the 1 s telemetry line's
+        // own encoding (interrupts off, defmt-rtt's critical section) waits for a gap in the
+        // frame's events and cuts no phase (before it did, the G474's line cut a Y phase to 6
+        // of its 16 conversions here; `the_telemetry_line_cuts_no_phase` over 3 s).
         let mixed = field(&telemetry, "mixed").unwrap_or(0) as usize;
         assert!(
-            mixed >= held.len() && mixed <= mixed_frames.len(),
+            mixed == held.len() && mixed_frames == held,
             "{board:?}: {mixed} counted, {} mixed in the trace ({} at the hold): {telemetry}",
             mixed_frames.len(),
             held.len()
@@ -1003,10 +1003,17 @@ fn charge_sharing_at_the_touch_down_threshold() {
 /// of its 16 conversions, the frame dropped as mixed). Pressed from 10 ms over `SECS` s (a
 /// telemetry line a second): every window between two switches holds its slots' ranks (no
 /// mixed frame in the trace), and each line counts `mixed 0`, `late 0`, `forced 0`.
+///
+/// Not run by CI (`--ignored`): 3 s of both boards take ~45 s, and CI is at its time limit;
+/// `a_phase_converting_across_the_next_switch_is_dropped_and_counted` checks the 1 s line of
+/// its run the same way. Seen failing with the window planted out (the line emitted when due,
+/// no room check): the F446's 3 s line cut an X phase to 12 of 16 conversions.
 #[test]
+#[ignore]
 fn the_telemetry_line_cuts_no_phase() {
     const SECS: f64 = 3.05;
     let pressed = |t: f64| (t >= 0.010).then(|| at((47.5, 51.6))).flatten();
+    let mut failed = Vec::new();
     for board in BOARDS {
         let d = design(board);
         let o = run2d(board, SECS, pressed);
@@ -1052,11 +1059,16 @@ fn the_telemetry_line_cuts_no_phase() {
             "{board:?}: {} telemetry lines",
             lines.len()
         );
-        assert!(cut.is_empty(), "{board:?}: phases cut: {cut:?}");
+        if !cut.is_empty() {
+            failed.push(format!("{board:?}: phases cut: {cut:?}"));
+        }
         for l in &lines {
             for key in ["mixed", "late", "forced", "incomplete"] {
-                assert_eq!(field(l, key), Some(0), "{board:?}: {key} in {l}");
+                if field(l, key) != Some(0) {
+                    failed.push(format!("{board:?}: {key} in {l}"));
+                }
             }
         }
     }
+    assert!(failed.is_empty(), "{failed:#?}");
 }
