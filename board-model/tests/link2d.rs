@@ -557,8 +557,8 @@ fn windows_moved_and_resized_live_change_what_renders() {
             for r in &mine {
                 assert_eq!(r.change, k as u32, "{board:?}: step {k}: {r:?}");
             }
-            // The window under the finger in every record (2026-11-30, with the acquisition's
-            // DMA count check: 0 of 85, 186, 102, 131; before it up to 5 % read elsewhere).
+            // The window under the finger in every record (2026-11-30: 0 of 85, 186, 102, 131;
+            // earlier acquisitions put up to 5 % elsewhere; see the stream test).
             let elsewhere = mine.iter().filter(|r| r.place != Some(*place)).count();
             eprintln!(
                 "{board:?}: step {k}: {elsewhere} of {} records not in {place:?}",
@@ -581,9 +581,9 @@ fn windows_moved_and_resized_live_change_what_renders() {
                 period * 1e3,
                 want * 1e3
             );
-            // Every step, the 20 Hz one too (50.0000 ms measured 2026-11-30: with the DMA count
-            // check no frame reads a wrong position and restarts its burst, which before it
-            // kept a 50 ms period from completing).
+            // Every step, the 20 Hz one too (50.0000 ms measured 2026-11-30: no frame reads a
+            // wrong position and restarts its burst now, which earlier kept a 50 ms period from
+            // completing).
             assert!(
                 (period - want).abs() <= 0.02 * want,
                 "{board:?}: step {k}: PA0 period {period} s, want {want} s ({f_b} Hz)"
@@ -671,9 +671,11 @@ fn the_stream_carries_the_fingers_x_and_y() {
             2 * frame_us(board)
         );
         assert!((slope - 50.0).abs() < 0.5, "{board:?}: slope {slope} mm/s");
-        // Every record on the finger (2026-11-30, with the acquisition's DMA count check: 0 of
-        // 717 off by 0.3 mm, worst x 0.064 mm off the fit, y 0.025 mm; before the check 7–16
-        // of ~590 were off): x within 0.1 mm, y within 0.05 mm (the measured, 1.5× and 2×).
+        // Every record on the finger (2026-11-30: 0 of 717 off by 0.3 mm, worst x 0.064 mm off
+        // the fit, y 0.025 mm; 7–16 of ~590 were off with the 2 µs margin and 16-conversion
+        // phases; the same 0 with the DMA count check planted out: no frame of this run is
+        // mixed now, the acquisition's timing removed them): x within 0.1 mm, y within 0.05 mm
+        // (the measured, 1.5× and 2×).
         assert_eq!(off, 0, "{board:?}: {off} of {} records off", pts.len());
         assert!(worst_x <= 0.1, "{board:?}: worst x {worst_x} mm off the fit");
         assert!(worst_y <= 0.05, "{board:?}: worst y {worst_y} mm off 40");
