@@ -893,13 +893,13 @@ fn a_phase_converting_across_the_next_switch_is_dropped_and_counted() {
             .map(|(i, _)| i / 3)
             .collect::<std::collections::BTreeSet<_>>();
         assert!(!held.is_empty(), "{board:?}: the held frame is not mixed");
-        // Every mixed frame up to the telemetry line is counted; the line's own encoding holds
-        // interrupts off too (defmt-rtt's critical section) and may mix one more frame after
-        // its counters were read (seen on the G474: a Y phase cut to 6 of its 16 conversions
-        // at the 1 s line).
+        // The held frame is the only one mixed, and it is counted: the 1 s telemetry line's
+        // own encoding (interrupts off, defmt-rtt's critical section) waits for a gap in the
+        // frame's events and cuts no phase (before it did, the G474's line cut a Y phase to 6
+        // of its 16 conversions here; `the_telemetry_line_cuts_no_phase` over 3 s).
         let mixed = field(&telemetry, "mixed").unwrap_or(0) as usize;
         assert!(
-            mixed >= held.len() && mixed <= mixed_frames.len(),
+            mixed == held.len() && mixed_frames == held,
             "{board:?}: {mixed} counted, {} mixed in the trace ({} at the hold): {telemetry}",
             mixed_frames.len(),
             held.len()
@@ -908,5 +908,289 @@ fn a_phase_converting_across_the_next_switch_is_dropped_and_counted() {
         assert_eq!(faults, 0, "{board:?}: a touch fault was logged");
         assert!(rises >= 4, "{board:?}: {rises} bursts in the 5 ms after");
         assert_eq!(offs, 0, "{board:?}: the carrier was forced off");
+    }
+}
+
+/// The hold capacitor at the touch-down threshold (pre-flash item 2, docs/touch.md, "Charge
+/// sharing at the touch-down threshold"): the finger at the threshold's contact (1.5 kΩ: 0.2 N
+/// on the overlay's 300 Ω·N law; the largest contact whose reading is used, so the slowest
+/// node, τ 5–6 µs) held 6 ms at each of five points (the corners at 10/90 % and the middle:
+/// the largest steps between one phase's node and the previous conversion's). Each slot's code
+/// error per conversion: the mean of its summed conversions (the first `discard` left out)
+/// against the model's settled voltage, LSB, worst over the pressed frames; printed with one
+/// more discard (the same trace, the second conversion left out too: what a second discard
+/// would sum, 1 + 1 + 14) for the decision the docs record.
+#[test]
+fn charge_sharing_at_the_touch_down_threshold() {
+    const POINTS: [(f64, f64); 5] = [(0.1, 0.1), (0.9, 0.1), (0.1, 0.9), (0.9, 0.9), (0.5, 0.5)];
+    const FROM_S: f64 = 0.010;
+    const HOLD_S: f64 = 0.006;
+    let finger = |t: f64| {
+        let k = ((t - FROM_S) / HOLD_S).floor();
+        (t >= FROM_S && (k as usize) < POINTS.len()).then(|| {
+            let (x, y) = POINTS[k as usize];
+            Finger { x, y, force_n: 0.2 }
+        })
+    };
+    for board in BOARDS {
+        let d = design(board);
+        let o = run2d(board, FROM_S + HOLD_S * POINTS.len() as f64, finger);
+        let tr = o.touch.as_ref().unwrap();
+        let sw = switches(tr);
+        let first_x = sw
+            .iter()
+            .position(|(_, p)| phase_of(p) == Some(Phase::X))
+            .unwrap();
+        let sw = &sw[first_x..];
+        let model = TouchModel::new(
+            Overlay {
+                noise_lsb: 0.0,
+                ..Overlay::default()
+            },
+            0,
+        );
+        // Worst per slot (X, Y, Z1, Z2): mean error of the summed conversions with one discard,
+        // with two; the first conversion's share.
+        let (mut one, mut two, mut first) = ([0f64; 4], [0f64; 4], [0f64; 4]);
+        let mut runs = 0;
+        for (k, w) in sw.windows(2).enumerate() {
+            let (t0, t1) = (w[0].0, w[1].0);
+            let phase = [Phase::X, Phase::Y, Phase::Z1][k % 3];
+            // The same finger throughout the window (not across a point's change).
+            let (f0, f1) = (finger(ns(t0) / 1e9), finger(ns(t1) / 1e9));
+            let Some(f) = f0.filter(|f| f1.is_some_and(|g| g.x == f.x && g.y == f.y)) else {
+                continue;
+            };
+            let convs: Vec<_> = tr
+                .conversions
+                .iter()
+                .filter(|c| c.at > t0 && c.at < t1)
+                .collect();
+            let targets = model.targets(phase, Some(&f));
+            let err = |c: &saw_board_model::touch::Conversion| {
+                let i = [Terminal::XPlus, Terminal::XMinus, Terminal::YPlus, Terminal::YMinus]
+                    .iter()
+                    .position(|t| *t == c.terminal)
+                    .unwrap();
+                (c.v - targets[i].0) * 4096.0
+            };
+            let slots: Vec<(usize, &[&saw_board_model::touch::Conversion])> = match phase {
+                Phase::X => vec![(0, &convs[..])],
+                Phase::Y => vec![(1, &convs[..])],
+                _ => vec![(2, &convs[..d.ranks[2]]), (3, &convs[d.ranks[2]..])],
+            };
+            for (s, run) in slots {
+                assert_eq!(run.len(), d.ranks[s], "{board:?}: slot {s} at {:.1} µs", ns(t0) / 1e3);
+                let mean = |cs: &[&saw_board_model::touch::Conversion]| {
+                    (cs.iter().map(|c| err(c)).sum::<f64>() / cs.len() as f64).abs()
+                };
+                one[s] = one[s].max(mean(&run[d.discard..]));
+                two[s] = two[s].max(mean(&run[d.discard + 1..]));
+                first[s] = first[s].max(err(run[0]).abs());
+                runs += 1;
+            }
+        }
+        eprintln!(
+            "{board:?}: at the touch-down threshold (0.2 N, 1.5 kΩ), {runs} slots: code error per conversion (X, Y, Z1, Z2) with 1 discard {one:.3?} LSB, with 2 discards {two:.3?} LSB; first conversion {first:.2?} LSB"
+        );
+        assert!(runs > 100, "{board:?}: {runs} slots measured");
+        // The figures docs/touch.md publishes (2026-11-30), each within 0.01 LSB: the position
+        // codes' worst with one discard and with two.
+        let (want_one, want_two) = match board {
+            BoardKind::F446 => (0.44, 0.27),
+            _ => (0.90, 0.70),
+        };
+        let pos = |a: [f64; 4]| a[0].max(a[1]);
+        assert!(
+            (pos(one) - want_one).abs() <= 0.01 && (pos(two) - want_two).abs() <= 0.01,
+            "{board:?}: position error {:.3} / {:.3} LSB, published {want_one} / {want_two}",
+            pos(one),
+            pos(two)
+        );
+    }
+}
+
+/// The 1 Hz telemetry line cuts no phase (docs/touch.md, "The telemetry line's window"):
+/// defmt-rtt holds interrupts off while it encodes a line, and before the line waited for a
+/// gap in the frame's events its encoding held a G474 Y phase's start ~12 µs (a phase cut to 6
+/// of its 16 conversions, the frame dropped as mixed). Pressed from 10 ms over `SECS` s (a
+/// telemetry line a second): every window between two switches holds its slots' ranks (no
+/// mixed frame in the trace), and each line counts `mixed 0`, `late 0`, `forced 0`.
+///
+/// Not run by CI (`--ignored`): 3 s of both boards take ~45 s, and CI is at its time limit;
+/// `a_phase_converting_across_the_next_switch_is_dropped_and_counted` checks the 1 s line of
+/// its run the same way. Seen failing with the window planted out (the line emitted when due,
+/// no room check): the F446's 3 s line cut an X phase to 12 of 16 conversions.
+#[test]
+#[ignore]
+fn the_telemetry_line_cuts_no_phase() {
+    const SECS: f64 = 3.05;
+    let pressed = |t: f64| (t >= 0.010).then(|| at((47.5, 51.6))).flatten();
+    let mut failed = Vec::new();
+    for board in BOARDS {
+        let d = design(board);
+        let o = run2d(board, SECS, pressed);
+        let tr = o.touch.as_ref().unwrap();
+        let sw = switches(tr);
+        let first_x = sw
+            .iter()
+            .position(|(_, p)| phase_of(p) == Some(Phase::X))
+            .unwrap();
+        let sw = &sw[first_x..];
+        let mut cut = Vec::new();
+        for (i, w) in sw.windows(2).enumerate() {
+            let n = tr
+                .conversions
+                .iter()
+                .filter(|c| c.at > w[0].0 && c.at < w[1].0)
+                .count();
+            let want = match i % 3 {
+                0 => d.ranks[0],
+                1 => d.ranks[1],
+                _ => d.ranks[2] + d.ranks[3],
+            };
+            if n != want {
+                cut.push((ns(w[0].0) / 1e3, n, want));
+            }
+        }
+        let lines: Vec<&str> = o
+            .log
+            .iter()
+            .filter(|l| l.text.starts_with("telemetry2d"))
+            .map(|l| l.text.as_str())
+            .collect();
+        for l in &lines {
+            eprintln!("{board:?}: {l}");
+        }
+        eprintln!(
+            "{board:?}: {} switches over {SECS} s, {} telemetry lines, windows cut: {cut:?}",
+            sw.len(),
+            lines.len()
+        );
+        assert!(
+            lines.len() as f64 >= SECS.floor(),
+            "{board:?}: {} telemetry lines",
+            lines.len()
+        );
+        if !cut.is_empty() {
+            failed.push(format!("{board:?}: phases cut: {cut:?}"));
+        }
+        for l in &lines {
+            for key in ["mixed", "late", "forced", "incomplete"] {
+                if field(l, key) != Some(0) {
+                    failed.push(format!("{board:?}: {key} in {l}"));
+                }
+            }
+        }
+    }
+    assert!(failed.is_empty(), "{failed:#?}");
+}
+
+/// The alternative to a second discard, measured on the board model's overlay and hold
+/// capacitor (`saw_board_model::touch::Panel`) rather than the image (the sampling time is the
+/// board plan's, shared with the 1D images): the firmware's sequence replayed at the core's
+/// schedule — pins at each slot's start, 1 + 15 / 1 + 4 conversions from its trigger one
+/// conversion apart — with the threshold's finger at the five points of
+/// `charge_sharing_at_the_touch_down_threshold`, for each longer sampling time of the chip
+/// (F446 84 / 112 / 144 cycles, RM0390 §13.13.4; G474 92.5 / 247.5, RM0440 §21.7.6): the worst
+/// position code error per conversion and the per-axis rate of the schedule with it. Printed,
+/// for the decision docs/touch.md records.
+#[test]
+fn charge_sharing_with_a_longer_sampling_time() {
+    use saw_board_model::machine::PinMode;
+    use saw_board_model::touch::Panel;
+    const HI: PinMode = PinMode::Output { high: true };
+    const LO: PinMode = PinMode::Output { high: false };
+    const AN: PinMode = PinMode::Analog;
+    const POINTS: [(f64, f64); 5] = [(0.1, 0.1), (0.9, 0.1), (0.1, 0.9), (0.9, 0.9), (0.5, 0.5)];
+    for (board, halves) in [
+        (BoardKind::F446, &[112u32, 168, 224, 288][..]),
+        (BoardKind::G474, &[95, 185, 495][..]),
+    ] {
+        let base = board.def();
+        let t = saw_boards::touch::touch_adc(base);
+        let p = saw_boards::touch::touch_pins(base).unwrap();
+        for &half in halves {
+            let mut def = *base;
+            def.adc.sample_half_cycles = half;
+            let extra_ns =
+                (half as u64 - base.adc.sample_half_cycles as u64) * 1_000_000_000 / (2 * base.adc.clk_hz as u64);
+            let conv_ns = t.conversion_ns as u64 + extra_ns;
+            let adc = AdcTiming {
+                conversion_ns: conv_ns as u32,
+                conversions_position: t.conversions_position,
+                conversions_pressure: t.conversions_pressure,
+                discard: t.discard,
+            };
+            let sched = Schedule::new(&PlateRc::DEFAULT, &adc).unwrap();
+            let sampling = half as u64 * TICKS_PER_S / (2 * def.adc.clk_hz as u64);
+            let tick = |ns: u64| ns * TICKS_PER_S / 1_000_000_000;
+            let mut worst = [0f64; 4];
+            for (x, y) in POINTS {
+                let f = Finger { x, y, force_n: 0.2 };
+                let mut panel = Panel::new(
+                    &def,
+                    Overlay {
+                        noise_lsb: 0.0,
+                        ..Overlay::default()
+                    },
+                    1,
+                    Rc::new(move |_| Some(f)),
+                );
+                let model = TouchModel::new(
+                    Overlay {
+                        noise_lsb: 0.0,
+                        ..Overlay::default()
+                    },
+                    0,
+                );
+                let frame = sched.frame_ns();
+                for k in 0..12u64 {
+                    for (s, slot) in sched.slots.iter().enumerate() {
+                        let t0 = k * frame + slot.start_ns;
+                        let (pins, ch, term) = match s {
+                            0 => ([HI, LO, AN, AN], p.y_plus.channel, 2),
+                            1 => ([AN, AN, HI, LO], p.x_plus.channel, 0),
+                            2 => ([AN, LO, HI, AN], p.x_plus.channel, 0),
+                            _ => ([AN, LO, HI, AN], p.y_minus.channel, 3),
+                        };
+                        panel.set_pins(tick(t0), pins);
+                        let n = t.ranks(s < 2) as u64;
+                        let trig = t0 + slot.settle_ns;
+                        let codes: Vec<f64> = (0..n)
+                            .map(|i| {
+                                let at = tick(trig + i * conv_ns) + sampling;
+                                panel.convert(at, ch).unwrap();
+                                panel.trace.conversions.last().unwrap().v
+                            })
+                            .collect();
+                        if k < 2 {
+                            continue;
+                        }
+                        let target = model.targets(sched.slots[s].phase, Some(&f))[term].0;
+                        let summed = &codes[t.discard as usize..];
+                        let mean = summed.iter().map(|v| (v - target) * 4096.0).sum::<f64>()
+                            / summed.len() as f64;
+                        worst[s] = worst[s].max(mean.abs());
+                    }
+                }
+            }
+            eprintln!(
+                "{board:?}: sampling {:.1} cycles, conversion {conv_ns} ns: per-axis rate {:.0} Hz, frame {:.1} µs; code error per conversion at the threshold (X, Y, Z1, Z2) {worst:.3?} LSB",
+                half as f64 / 2.0,
+                1e9 / sched.frame_ns() as f64,
+                sched.frame_ns() as f64 / 1e3
+            );
+            // The G474's one longer sampling time, as docs/touch.md publishes it: within ½ LSB
+            // (0.36) at 3 701 Hz per axis.
+            if board == BoardKind::G474 && half == 185 {
+                let pos = worst[0].max(worst[1]);
+                let rate = (1e9 / sched.frame_ns() as f64).round();
+                assert!(
+                    (pos - 0.36).abs() <= 0.01 && rate == 3_701.0,
+                    "{board:?}: 92.5 cycles: {pos:.3} LSB at {rate} Hz"
+                );
+            }
+        }
     }
 }

@@ -27,7 +27,7 @@
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use defmt::{info, unwrap, warn};
-use embassy_futures::select::{select, Either};
+use embassy_futures::select::{select3, Either3};
 use embassy_stm32::gpio::Output;
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -36,6 +36,7 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::Peri;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
+use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Ticker};
 use saw_boards::touch::TouchPins;
 use saw_core::burst::BurstTimer;
@@ -186,6 +187,60 @@ pub static DROPPED: AtomicU32 = AtomicU32::new(0);
 pub static DELIVERED: AtomicU32 = AtomicU32::new(0);
 /// The first frame boundary has passed (nothing was converted before it).
 static RUNNING: AtomicBool = AtomicBool::new(false);
+
+// ---- The telemetry line's window ------------------------------------------------------------
+//
+// defmt-rtt holds interrupts off (its critical section) for the whole encoding of a line, which
+// delays TIM3's events; the switches are absolute, so a delay longer than `MARGIN_NS` cuts a
+// phase's conversions at the next switch (a mixed frame, dropped: on the G474 the 1 Hz line cut
+// a Y phase to 6 of its 16 conversions). So the periodic line waits for a window: the control
+// task asks for it (`LOG_WANTED`), every event but the frame's first (whose delivery wakes the
+// control task for the frame's own work) signals it (`LOG_WINDOW`), and the line is encoded only
+// if, read inside the critical section that then holds through the encoding, the next event is
+// at least `LOG_BUDGET_TICKS` away (`log_room_ticks`).
+
+/// The control task wants to emit the telemetry line.
+static LOG_WANTED: AtomicBool = AtomicBool::new(false);
+/// An event has passed while `LOG_WANTED`: a gap without events may be starting.
+static LOG_WINDOW: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// The longest a telemetry line held the interrupts off (its encoding, inside the critical
+/// section), TIM3 ticks: reported in the next line, to check `LOG_BUDGET_NS` on silicon.
+static LOG_HELD_TICKS: AtomicU32 = AtomicU32::new(0);
+/// Telemetry lines emitted without a window after `LOG_DEFER_MAX_US` of waiting (a budget no
+/// gap of the frame holds): each may cut a phase (counted in `MIXED` then).
+static LOG_FORCED: AtomicU32 = AtomicU32::new(0);
+/// The room the telemetry line needs before the next event, ns: its encoding's longest hold on
+/// the board model (`LOG_MODEL_NS`) and half again for silicon's loads, stores and branches
+/// (the model runs an instruction a cycle). An event delayed less than `MARGIN_NS` costs
+/// nothing, so this holds a silicon line up to 1.5 × model + 4 µs. Within the frame's settling
+/// windows (45.9 / 49.2 / 57.5 µs) and, on the F446, its position conversions (52.4 µs).
+const LOG_BUDGET_NS: u32 = LOG_MODEL_NS * 3 / 2;
+/// The telemetry line's encoding on the board model, its longest hold over 3 s (2026-11-30,
+/// `log_held_ns` in the line: 23 455 ns F446, 28 133 ns G474), rounded up.
+const LOG_MODEL_NS: u32 = 28_200;
+const LOG_BUDGET_TICKS: u32 = LOG_BUDGET_NS * TICKS_PER_US / 1_000;
+const _: () = assert!(LOG_BUDGET_TICKS < FRAME_TICKS / 4);
+/// Past this wait for a window the line is emitted anyway (counted in `LOG_FORCED`).
+const LOG_DEFER_MAX_US: u64 = 100_000;
+
+/// TIM3 ticks until the acquisition's next event, 0 if one is due (its interrupt pending).
+/// Called with interrupts off: TIM3 cannot move CCR1 between the reads.
+fn log_room_ticks() -> u32 {
+    let r = pac::TIM3;
+    // CC1IF set: an event's compare matched and its interrupt has not run (RM0390 §17.4.5,
+    // RM0440 §29.6.5).
+    if r.sr().read().ccif(0) {
+        return 0;
+    }
+    let cnt = r.cnt().read().cnt() as u32;
+    let ccr = r.ccr(0).read().ccr() as u32;
+    if ccr > cnt {
+        ccr - cnt
+    } else {
+        // The next event is in the next frame (the counter reloads at FRAME_TICKS − 1).
+        ccr + FRAME_TICKS - cnt
+    }
+}
 
 // ---- ADC and DMA, per chip ------------------------------------------------------------------
 
@@ -576,6 +631,8 @@ pub fn on_event() {
     }
     if i == 0 {
         deliver();
+    } else if LOG_WANTED.load(Ordering::Relaxed) {
+        LOG_WINDOW.signal(());
     }
     let n = (i + 1) % EVENTS.len();
     NEXT.store(n as u32, Ordering::Relaxed);
@@ -698,28 +755,66 @@ async fn control2d(
     // The task's state is in place: the acquisition may start.
     start_timer();
     loop {
-        match select(FRAMES.receive(), watchdog.next()).await {
-            Either::First(frame) => frame_step(&mut sensor, ctrl, &mut burst, &mut link.tap, &frame),
-            Either::Second(()) => tick_step2d(ctrl, &mut burst, Instant::now().as_micros() as u32),
+        let window = match select3(FRAMES.receive(), watchdog.next(), LOG_WINDOW.wait()).await {
+            Either3::First(frame) => {
+                frame_step(&mut sensor, ctrl, &mut burst, &mut link.tap, &frame);
+                false
+            }
+            Either3::Second(()) => {
+                tick_step2d(ctrl, &mut burst, Instant::now().as_micros() as u32);
+                false
+            }
+            Either3::Third(()) => true,
+        };
+        // The line first: a window's room is counted from the event that signalled it.
+        let now = Instant::now().as_micros();
+        if now >= next_log {
+            // Outside a window only past the longest wait (a budget no gap holds).
+            let forced = now >= next_log + LOG_DEFER_MAX_US;
+            if (window || forced) && telemetry(ctrl, &burst, forced) {
+                LOG_WANTED.store(false, Ordering::Relaxed);
+                LOG_WINDOW.reset();
+                next_log = now + TELEMETRY_PERIOD_US;
+            } else {
+                LOG_WANTED.store(true, Ordering::Relaxed);
+            }
         }
         link.service(ctrl, &mut burst);
         wdg.pet();
-        let now = Instant::now().as_micros();
-        if now >= next_log {
-            next_log = now + TELEMETRY_PERIOD_US;
-            info!(
-                "telemetry2d frames {=u32} late {=u32} mixed {=u32} incomplete {=u32} dropped {=u32} {} burst {} line {}",
-                DELIVERED.load(Ordering::Relaxed),
-                LATE.load(Ordering::Relaxed),
-                MIXED.load(Ordering::Relaxed),
-                INCOMPLETE.load(Ordering::Relaxed),
-                DROPPED.load(Ordering::Relaxed),
-                ctrl.telemetry(),
-                burst.stats,
-                burst.line()
-            );
-        }
     }
+}
+
+/// The telemetry line, emitted if the acquisition's next event is `LOG_BUDGET_TICKS` away (or
+/// `forced`), inside one critical section with that check, so nothing moves the next event
+/// between them; the encoding's hold measured on TIM3's counter. Whether it was emitted.
+#[inline(never)]
+fn telemetry(ctrl: &Controller, burst: &BurstGate, forced: bool) -> bool {
+    cortex_m::interrupt::free(|_| {
+        if !forced && log_room_ticks() < LOG_BUDGET_TICKS {
+            return false;
+        }
+        if forced {
+            LOG_FORCED.fetch_add(1, Ordering::Relaxed);
+        }
+        let t0 = pac::TIM3.cnt().read().cnt() as u32;
+        info!(
+            "telemetry2d frames {=u32} late {=u32} mixed {=u32} incomplete {=u32} dropped {=u32} log_held_ns {=u32} forced {=u32} {} burst {} line {}",
+            DELIVERED.load(Ordering::Relaxed),
+            LATE.load(Ordering::Relaxed),
+            MIXED.load(Ordering::Relaxed),
+            INCOMPLETE.load(Ordering::Relaxed),
+            DROPPED.load(Ordering::Relaxed),
+            LOG_HELD_TICKS.load(Ordering::Relaxed) * 1_000 / TICKS_PER_US,
+            LOG_FORCED.load(Ordering::Relaxed),
+            ctrl.telemetry(),
+            burst.stats,
+            burst.line()
+        );
+        // The counter reloads every frame; the line takes less than one.
+        let held = (pac::TIM3.cnt().read().cnt() as u32 + FRAME_TICKS - t0) % FRAME_TICKS;
+        LOG_HELD_TICKS.fetch_max(held, Ordering::Relaxed);
+        true
+    })
 }
 
 const IWDG_TIMEOUT_US: u32 = 50_000;
