@@ -236,7 +236,19 @@ impl Board for FirmwareBoard {
     }
 }
 
-pub use uart::link;
+/// Starts the link task over `session` and `board`, both moved into statics of their own (see
+/// `uart::link`).
+pub fn spawn(
+    spawner: embassy_executor::Spawner,
+    tx: embassy_stm32::usart::UartTx<'static, embassy_stm32::mode::Async>,
+    rx: embassy_stm32::usart::RingBufferedUartRx<'static>,
+    session: saw_link::session::Session,
+    board: LinkBoard,
+) {
+    static SESSION: static_cell::StaticCell<saw_link::session::Session> = static_cell::StaticCell::new();
+    static BOARD: static_cell::StaticCell<LinkBoard> = static_cell::StaticCell::new();
+    spawner.spawn(defmt::unwrap!(uart::link(tx, rx, SESSION.init(session), BOARD.init(board))));
+}
 
 /// The board glue the link task serves: the 1D image's, or the 2D image's (`link2d.rs`).
 #[cfg(not(feature = "touch-2d"))]
@@ -307,12 +319,16 @@ mod uart {
     /// image's board glue (`LinkBoard`: the 1D `FirmwareBoard`, the 2D image's `link2d::Board2d`).
     /// One task, not a generic function under a task per image: a task awaiting a generic
     /// function kept its arguments beside the function's future, 1.5 KB more RAM in the 1D image.
+    ///
+    /// The session and the board glue are the caller's statics (`spawn`), by reference: a task's
+    /// argument by value stays in its future beside the copy the body works on (the 2D image's
+    /// session and store glue, 4.2 KB twice).
     #[embassy_executor::task]
     pub async fn link(
         mut tx: UartTx<'static, Async>,
         mut rx: RingBufferedUartRx<'static>,
-        mut session: Session,
-        mut board: LinkBoard,
+        session: &'static mut Session,
+        board: &'static mut LinkBoard,
     ) {
         info!("link: {} baud on the ST-LINK virtual COM port", BAUD);
         let mut receiver = Receiver::<MAX_ENCODED>::default();
@@ -325,7 +341,7 @@ mod uart {
                     for &b in &bytes[..n] {
                         let (header, reply) = match receiver.push(b) {
                             None => continue,
-                            Some(Ok(len)) => session.on_frame(&mut board, receiver.payload(len)).await,
+                            Some(Ok(len)) => session.on_frame(board, receiver.payload(len)).await,
                             Some(Err(e)) => session.on_bad_frame(None, e),
                         };
                         send(&mut tx, &header, &reply).await;

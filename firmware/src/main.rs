@@ -249,7 +249,7 @@ async fn main(spawner: Spawner) {
     high.spawn(unwrap!(sampler(parts.sampler)));
     high.spawn(unwrap!(control(ctrl, burst, rf_arm, wdg, session.stamp())));
     let board = link::FirmwareBoard { timer, sample_period_us: SAMPLE_PERIOD_US, sent: 0, store };
-    spawner.spawn(unwrap!(link::link(parts.link_tx, parts.link_rx, session, board)));
+    link::spawn(spawner, parts.link_tx, parts.link_rx, session, board);
 }
 
 /// The scene to boot into, compiled, and says which: the one saved in flash if it reads back and
