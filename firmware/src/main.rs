@@ -378,7 +378,7 @@ fn sample_step(ctrl: &mut Controller, burst: &mut BurstGate, tap: &mut link::Str
     core::hint::black_box([1u8, 2, 3, 4].get(usize::from(sample.code & 7)).copied().unwrap());
     // Drive mode, then amplitude, then the line (saw-core's order).
     saw_core::controller::apply(&out, burst);
-    if tap.take(ctrl) {
+    if tap.take(ctrl) && tap.started_by(sample.t_us) {
         let time_us = tap.widen(sample.t_us);
         tap.push(saw_link::msg::Record {
             time_us,
