@@ -32,8 +32,8 @@
 # lift-off, sensor-to-gate latency, edge pulses, the closed loop against host-sim, the stack with
 # the largest 2D scene (docs/board-model.md, "The 2D image"); this script builds those images
 # first when they are missing (TOUCH_2D=1 / TOUCH_2D=largest scripts/build-firmware.sh); and
-# tests/link2d.rs, the 2D image's host link and store (firmware/target/nucleo-f446re-2d-link.elf,
-# TOUCH_2D=link, built when missing): push and read back, refusals, windows moved live, x and y in
+# tests/link2d.rs, the 2D images' host link and store (firmware/target/<board>-2d-link.elf,
+# TOUCH_2D=link, both boards, built when missing): push and read back, refusals, windows moved live, x and y in
 # the stream, a save and power cuts in it.
 # Needs firmware/target/<board>.elf (scripts/build-firmware.sh) and defmt-print (scripts/setup.sh).
 set -euo pipefail
@@ -59,12 +59,14 @@ for kind in 1 largest; do
         fi
     done
 done
-# tests/link2d.rs: the F446 2D image with the link (TOUCH_2D=link, issue #36).
-if [ ! -f "$SAW_FIRMWARE_DIR/nucleo-f446re-2d-link.elf" ]; then
-    echo "== board model: building the 2D link image nucleo-f446re-2d-link.elf (TOUCH_2D=link)"
-    TOUCH_2D=link CARGO_TARGET_DIR="$ROOT/firmware/target" "$ROOT/scripts/build-firmware.sh" nucleo-f446re >/dev/null
-    [ "$SAW_FIRMWARE_DIR" = "$ROOT/firmware/target" ] || cp "$ROOT/firmware/target/nucleo-f446re-2d-link.elf" "$SAW_FIRMWARE_DIR/"
-fi
+# tests/link2d.rs: both boards' 2D images with the link (TOUCH_2D=link, issue #36).
+for b in nucleo-f446re nucleo-g474re; do
+    if [ ! -f "$SAW_FIRMWARE_DIR/$b-2d-link.elf" ]; then
+        echo "== board model: building the 2D link image $b-2d-link.elf (TOUCH_2D=link)"
+        TOUCH_2D=link CARGO_TARGET_DIR="$ROOT/firmware/target" "$ROOT/scripts/build-firmware.sh" "$b" >/dev/null
+        [ "$SAW_FIRMWARE_DIR" = "$ROOT/firmware/target" ] || cp "$ROOT/firmware/target/$b-2d-link.elf" "$SAW_FIRMWARE_DIR/"
+    fi
+done
 cd "$ROOT/board-model"
 echo "== board model: tests"
 cargo test --release

@@ -26,10 +26,14 @@ use saw_link::msg::{
 use std::path::PathBuf;
 use std::rc::Rc;
 
-/// The boards whose 2D image runs with the link. Not the G474 yet: with the link its 2D image's
-/// statics (52 KB) leave its 96 KiB RAM a 46 KB stack, and the boot's scene compile
-/// (`Prepared2d::compile`, a 36 KB frame at opt-level z, under main's 24 KB) runs off the start
-/// of RAM 3.3 ms after reset (`g474_2d_image_boots_with_the_link`, ignored: it fails).
+/// Both boards' 2D link images: the push, read-back and refusal test runs on each (the G474's
+/// image ran off the start of its 96 KiB RAM at boot until the link task's future went from
+/// 25 016 B to 8 824 B, `saw_link::session::Session::on_frame`). The stack check runs on the
+/// F446's only: the G474's keeps 1 568 B, not 16 KiB (`g474_2d_image_boots_with_the_link`).
+const BOTH: [BoardKind; 2] = [BoardKind::F446, BoardKind::G474];
+/// The heavier tests (windows edited live, the stream, the save and its power cuts) run on the
+/// F446's only: the link task, the session and the store are the same code on both, and CI's
+/// time is short.
 const BOARDS: [BoardKind; 1] = [BoardKind::F446];
 /// The overlay's touch area (scenes/2d-fig12.toml's plate, which the image calibrates to), mm.
 const PLATE_MM: (f64, f64) = (95.0, 54.0);
@@ -44,7 +48,7 @@ fn elf(board: BoardKind) -> PathBuf {
     let p = PathBuf::from(dir).join(format!("{}-2d-link.elf", board.name()));
     assert!(
         p.exists(),
-        "{} is missing: run TOUCH_2D=link scripts/build-firmware.sh nucleo-f446re first",
+        "{} is missing: run TOUCH_2D=link scripts/build-firmware.sh first",
         p.display()
     );
     p
@@ -231,7 +235,7 @@ const REST_MM: (f64, f64) = (32.5, 27.0);
 /// run keeps 16 KiB of headroom.
 #[test]
 fn a_2d_scene_pushed_reads_back_and_a_bad_one_changes_nothing() {
-    for board in BOARDS {
+    for board in BOTH {
         let (fig, big) = (fig12(board), largest(board));
         let mut bad_config = fig.clone();
         // Below twice the frame period: the controller's stale-limit rule.
@@ -397,8 +401,9 @@ fn a_2d_scene_pushed_reads_back_and_a_bad_one_changes_nothing() {
     }
 }
 
-/// The deepest stack over a push of the largest scene keeps 16 KiB of headroom: F446 65 016 B of
-/// 83 128 B, 18 112 B (13 760 B before the link task's wrapper went, firmware/src/link.rs).
+/// The deepest stack over a push of the largest scene keeps 16 KiB of headroom: F446 62 824 B of
+/// 95 264 B, 32 440 B (18 112 B while the link task's future was 25 KB; 13 760 B before its
+/// wrapper went, firmware/src/link.rs).
 #[test]
 fn pushes_keep_16_kib_of_stack_headroom() {
     for board in BOARDS {
@@ -414,10 +419,12 @@ fn pushes_keep_16_kib_of_stack_headroom() {
     }
 }
 
-/// The G474's 2D image with the link boots and answers hello. Fails today: a stack overflow at
-/// boot (see `BOARDS`).
+/// The G474's 2D image with the link boots and answers hello (it overflowed its stack at boot
+/// while the link task's future was 25 KB). Its deepest stack is at boot, the scene's compile
+/// under main's poll frame: 60 920 B of 62 488 B reserved, 1 568 B of headroom, printed, not
+/// asserted against the 16 KiB the F446's keeps (docs/board-model.md, "The 2D image's link and
+/// store"); an overflow stops the run, which fails here.
 #[test]
-#[ignore = "fails: the G474 starts no link (with it, its 2D image overflowed its stack at boot)"]
 fn g474_2d_image_boots_with_the_link() {
     let board = BoardKind::G474;
     let (o, _m) = run2d(
@@ -428,6 +435,13 @@ fn g474_2d_image_boots_with_the_link() {
         None,
     );
     assert!(matches!(answer(&o, 1).1, Reply::Hello(_)));
+    let s = o.stack.expect("the image's stack region");
+    eprintln!(
+        "G474 boot and hello: deepest stack {} B of {} B reserved, headroom {} B",
+        s.deepest(),
+        s.region.reserved(),
+        s.headroom()
+    );
 }
 
 /// A scene file read without the board's checks (its plate may not fit the board).

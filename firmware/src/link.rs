@@ -40,6 +40,10 @@ pub static TELEMETRY: Signal<CriticalSectionRawMutex, Telemetry> = Signal::new()
 pub static EVERY: AtomicU16 = AtomicU16::new(0);
 /// Records from the control loop to the link.
 pub static RECORDS: Channel<CriticalSectionRawMutex, Record, QUEUE_RECORDS> = Channel::new();
+/// When the stream in force started (µs since boot, low 32 bits), stored before `EVERY`: a
+/// sample taken before it and tapped after (still converting when the request was answered) is
+/// no record of it (`StreamTap::started_by`).
+pub static STREAM_FROM_US: AtomicU32 = AtomicU32::new(0);
 /// Records the queue had no room for.
 pub static DROPPED: AtomicU32 = AtomicU32::new(0);
 /// The link asks the control loop to hold RF off (true: a save is about to touch the flash) or
@@ -61,12 +65,14 @@ pub struct StreamTap {
     pub stamp: Stamp,
     /// The last record's time, 32-bit and widened to 64: the next is widened from it.
     last_us: Option<(u32, u64)>,
+    /// A new stream's start (`STREAM_FROM_US`) until its first record.
+    from_us: Option<u32>,
 }
 
 impl StreamTap {
     /// Stopped; records stamped with `stamp` (the scene the board booted into).
     pub const fn new(stamp: Stamp) -> Self {
-        Self { decimator: Decimator::new(), every: 0, stamp, last_us: None }
+        Self { decimator: Decimator::new(), every: 0, stamp, last_us: None, from_us: None }
     }
 
     /// A streamed sample's 32-bit µs time as µs since boot (64 bits). From the record before:
@@ -90,9 +96,27 @@ impl StreamTap {
             self.decimator.set(every);
             // A new stream's first record is widened against the clock again.
             self.last_us = None;
+            // Read after `EVERY`, stored before it (`FirmwareBoard::stream`); one core.
+            core::sync::atomic::compiler_fence(Ordering::Acquire);
+            self.from_us = Some(STREAM_FROM_US.load(Ordering::Relaxed));
             ctrl.velocity_every_sample((1..=STREAM_VELOCITY_EVERY_SAMPLE).contains(&every));
         }
         self.decimator.take()
+    }
+
+    /// Whether the sample taken at `t_us` belongs to the stream in force: not before its start.
+    /// On the G474 a sample's conversions outlast the answer to a stream request (the board
+    /// model's check `link: records carry the scene in force and start after the request`: a
+    /// record 16 µs before `from_us`).
+    #[inline]
+    pub fn started_by(&mut self, t_us: u32) -> bool {
+        match self.from_us {
+            Some(from) if (t_us.wrapping_sub(from) as i32) < 0 => false,
+            _ => {
+                self.from_us = None;
+                true
+            }
+        }
     }
 
     /// Queues a record, or counts it dropped. Never inlined: the panic check's allow list
@@ -201,6 +225,9 @@ impl Board for FirmwareBoard {
     }
 
     fn stream(&mut self, every_samples: u16) {
+        // Read after the session's `from_us`: no record is older than that.
+        STREAM_FROM_US.store(embassy_time::Instant::now().as_micros() as u32, Ordering::Relaxed);
+        core::sync::atomic::compiler_fence(Ordering::Release);
         EVERY.store(every_samples, Ordering::Relaxed);
         // Records of the stream before are stale to whoever asked (the host drops those older
         // than the answer's `from_us`): the line is not spent on them.
@@ -236,7 +263,19 @@ impl Board for FirmwareBoard {
     }
 }
 
-pub use uart::link;
+/// Starts the link task over `session` and `board`, both moved into statics of their own (see
+/// `uart::link`).
+pub fn spawn(
+    spawner: embassy_executor::Spawner,
+    tx: embassy_stm32::usart::UartTx<'static, embassy_stm32::mode::Async>,
+    rx: embassy_stm32::usart::RingBufferedUartRx<'static>,
+    session: saw_link::session::Session,
+    board: LinkBoard,
+) {
+    static SESSION: static_cell::StaticCell<saw_link::session::Session> = static_cell::StaticCell::new();
+    static BOARD: static_cell::StaticCell<LinkBoard> = static_cell::StaticCell::new();
+    spawner.spawn(defmt::unwrap!(uart::link(tx, rx, SESSION.init(session), BOARD.init(board))));
+}
 
 /// The board glue the link task serves: the 1D image's, or the 2D image's (`link2d.rs`).
 #[cfg(not(feature = "touch-2d"))]
@@ -307,12 +346,16 @@ mod uart {
     /// image's board glue (`LinkBoard`: the 1D `FirmwareBoard`, the 2D image's `link2d::Board2d`).
     /// One task, not a generic function under a task per image: a task awaiting a generic
     /// function kept its arguments beside the function's future, 1.5 KB more RAM in the 1D image.
+    ///
+    /// The session and the board glue are the caller's statics (`spawn`), by reference: a task's
+    /// argument by value stays in its future beside the copy the body works on (the 2D image's
+    /// session and store glue, 4.2 KB twice).
     #[embassy_executor::task]
     pub async fn link(
         mut tx: UartTx<'static, Async>,
         mut rx: RingBufferedUartRx<'static>,
-        mut session: Session,
-        mut board: LinkBoard,
+        session: &'static mut Session,
+        board: &'static mut LinkBoard,
     ) {
         info!("link: {} baud on the ST-LINK virtual COM port", BAUD);
         let mut receiver = Receiver::<MAX_ENCODED>::default();
@@ -325,7 +368,7 @@ mod uart {
                     for &b in &bytes[..n] {
                         let (header, reply) = match receiver.push(b) {
                             None => continue,
-                            Some(Ok(len)) => session.on_frame(&mut board, receiver.payload(len)).await,
+                            Some(Ok(len)) => session.on_frame(board, receiver.payload(len)).await,
                             Some(Err(e)) => session.on_bad_frame(None, e),
                         };
                         send(&mut tx, &header, &reply).await;

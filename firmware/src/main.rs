@@ -249,7 +249,7 @@ async fn main(spawner: Spawner) {
     high.spawn(unwrap!(sampler(parts.sampler)));
     high.spawn(unwrap!(control(ctrl, burst, rf_arm, wdg, session.stamp())));
     let board = link::FirmwareBoard { timer, sample_period_us: SAMPLE_PERIOD_US, sent: 0, store };
-    spawner.spawn(unwrap!(link::link(parts.link_tx, parts.link_rx, session, board)));
+    link::spawn(spawner, parts.link_tx, parts.link_rx, session, board);
 }
 
 /// The scene to boot into, compiled, and says which: the one saved in flash if it reads back and
@@ -378,7 +378,7 @@ fn sample_step(ctrl: &mut Controller, burst: &mut BurstGate, tap: &mut link::Str
     core::hint::black_box([1u8, 2, 3, 4].get(usize::from(sample.code & 7)).copied().unwrap());
     // Drive mode, then amplitude, then the line (saw-core's order).
     saw_core::controller::apply(&out, burst);
-    if tap.take(ctrl) {
+    if tap.take(ctrl) && tap.started_by(sample.t_us) {
         let time_us = tap.widen(sample.t_us);
         tap.push(saw_link::msg::Record {
             time_us,

@@ -868,17 +868,17 @@ async fn main(spawner: embassy_executor::Spawner) {
     // 34 KB) reached 72.9 KB, 696 B short of the G474's stack region with the largest 2D scene
     // (board model: stack check).
     let ctrl = new_controller(timer);
-    // The image that runs the link (`link-2d`, F446) boots the scene saved in flash, else the
+    // The image that runs the link (`link-2d`) boots the scene saved in flash, else the
     // built-in one, behind the link's session (`link2d::boot`). An image without the link has
     // nothing that could save a 2D scene: it boots the built-in scene in a frame of its own
     // (`load_scene`), as before the link. With `link2d::boot` there, its session and scene
     // copies in main's frame under the compile left the G474 704 B of stack with the largest 2D
     // scene (board model, tests/touch2d.rs's stack check; 33 488 B on the F446).
-    #[cfg(all(feature = "link-2d", feature = "nucleo-f446re"))]
+    #[cfg(feature = "link-2d")]
     let booted = crate::link2d::boot(ctrl, &timer, &mut burst, parts.store, SCENE_2D, SCENE_2D_FILE, FRAME_US).await;
-    #[cfg(all(feature = "link-2d", feature = "nucleo-f446re"))]
+    #[cfg(feature = "link-2d")]
     let stamp = booted.session.stamp();
-    #[cfg(not(all(feature = "link-2d", feature = "nucleo-f446re")))]
+    #[cfg(not(feature = "link-2d"))]
     let stamp = {
         load_scene(ctrl, &timer, &mut burst);
         // No stream without the link: the records' stamp is never read.
@@ -909,11 +909,11 @@ async fn main(spawner: embassy_executor::Spawner) {
     let high = EXECUTOR_HIGH.start(interrupt::UART4);
     let link = crate::link2d::ControlLink::new(rf_arm, stamp);
     high.spawn(unwrap!(control2d(ctrl, sensor, burst, link, wdg)));
-    #[cfg(all(feature = "link-2d", feature = "nucleo-f446re"))]
+    #[cfg(feature = "link-2d")]
     crate::link2d::start(spawner, parts.link_tx, parts.link_rx, booted);
-    #[cfg(not(all(feature = "link-2d", feature = "nucleo-f446re")))]
+    #[cfg(not(feature = "link-2d"))]
     {
         let _ = (spawner, parts.link_tx, parts.link_rx, parts.store);
-        warn!("link: not in this 2D image (TOUCH_2D=link builds it, F446 only: docs/board-model.md)");
+        warn!("link: not in this 2D image (TOUCH_2D=link builds it: docs/board-model.md)");
     }
 }

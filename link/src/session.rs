@@ -234,15 +234,20 @@ impl Session {
 
     /// Answers one whole frame (the payload [`frame::Receiver`] reported). The returned header
     /// and reply are what the board sends back.
+    ///
+    /// Every request and scene is held once in this future, by value where it was decoded or
+    /// built and by reference below it: a value matched on, or an async fn's argument, stays in
+    /// the future beside the copy its body works on, and the firmware's link task future holds
+    /// this one (issue #36: 25 016 B in the F446's 2D image with a Request and a Reply held
+    /// four times over, 2 KB each; the G474's 2D image ran out of stack with it).
     pub async fn on_frame<B: Board>(&mut self, board: &mut B, payload: &[u8]) -> (Header, Reply) {
-        match frame::request(payload) {
-            Ok((header, request)) => {
-                self.link.frames_ok = self.link.frames_ok.wrapping_add(1);
-                let reply = self.handle(board, request).await;
-                (reply_header(header.seq), reply)
-            }
-            Err(Refusal { seq, error }) => self.on_bad_frame(seq, error),
-        }
+        let (header, request) = match frame::request(payload) {
+            Ok(decoded) => decoded,
+            Err(Refusal { seq, error }) => return self.on_bad_frame(seq, error),
+        };
+        self.link.frames_ok = self.link.frames_ok.wrapping_add(1);
+        let reply = self.handle(board, &request).await;
+        (reply_header(header.seq), reply)
     }
 
     /// Counts a refused frame and gives the error reply (seq 0 when the header did not decode).
@@ -251,7 +256,7 @@ impl Session {
         (reply_header(seq.unwrap_or(0)), Reply::Error(error))
     }
 
-    async fn handle<B: Board>(&mut self, board: &mut B, request: Request) -> Reply {
+    async fn handle<B: Board>(&mut self, board: &mut B, request: &Request) -> Reply {
         match request {
             Request::Hello => Reply::Hello(Hello {
                 protocol: PROTOCOL_VERSION,
@@ -276,58 +281,69 @@ impl Session {
                     scene: scene.clone(),
                 },
             },
-            Request::LoadScene(config) => match self.line() {
-                Ok(_) => self.apply(board, config).await,
-                Err(r) => r,
-            },
-            Request::MoveBoundary { index, at_um } => match self.line() {
-                Ok(active) => match active.with_boundary(index, at_um) {
-                    Ok(next) => self.apply(board, next).await,
-                    Err(e) => Reply::Refused(e),
-                },
-                Err(r) => r,
-            },
-            Request::SetTexture { region, texture } => match self.line() {
-                Ok(active) => match active.with_texture(region, texture) {
-                    Ok(next) => self.apply(board, next).await,
-                    Err(e) => Reply::Refused(e),
-                },
-                Err(r) => r,
-            },
+            // Each refusal returns before the await: a `Result<_, Reply>` matched around an
+            // await would keep a Reply's 2 KB in the future (see `on_frame`).
+            Request::LoadScene(config) => {
+                if let Err(r) = self.line() {
+                    return r;
+                }
+                self.apply(board, config).await
+            }
+            Request::MoveBoundary { index, at_um } => {
+                let next = match self.line().map(|a| a.with_boundary(*index, *at_um)) {
+                    Ok(Ok(next)) => next,
+                    Ok(Err(e)) => return Reply::Refused(e),
+                    Err(r) => return r,
+                };
+                self.apply(board, &next).await
+            }
+            Request::SetTexture { region, texture } => {
+                let next = match self.line().map(|a| a.with_texture(*region, *texture)) {
+                    Ok(Ok(next)) => next,
+                    Ok(Err(e)) => return Reply::Refused(e),
+                    Err(r) => return r,
+                };
+                self.apply(board, &next).await
+            }
             Request::SetDrive(drive) => match &self.active {
                 Active::Line(c) => {
-                    let next = c.with_drive(drive);
-                    self.apply(board, next).await
+                    let next = c.with_drive(*drive);
+                    self.apply(board, &next).await
                 }
                 #[cfg(feature = "plane")]
                 Active::Plane(p) => {
                     let mut next = p.clone();
-                    next.config.scene.drive = drive;
-                    self.apply_2d(board, next).await
+                    next.config.scene.drive = *drive;
+                    self.apply_2d(board, &next).await
                 }
             },
             #[cfg(feature = "plane")]
-            Request::LoadScene2d(scene) => match self.plane() {
-                Ok(_) => self.apply_2d(board, scene).await,
-                Err(r) => r,
-            },
+            Request::LoadScene2d(scene) => {
+                if let Err(r) = self.plane() {
+                    return r;
+                }
+                self.apply_2d(board, scene).await
+            }
             #[cfg(feature = "plane")]
-            Request::MoveWindow { window, to } => match self.plane() {
-                Ok(active) => match moved(active, window, to) {
-                    Ok(next) => self.apply_2d(board, next).await,
-                    Err(e) => Reply::Refused2d(e),
-                },
-                Err(r) => r,
-            },
+            Request::MoveWindow { window, to } => {
+                let next = match self.plane().map(|a| moved(a, *window, *to)) {
+                    Ok(Ok(next)) => next,
+                    Ok(Err(e)) => return Reply::Refused2d(e),
+                    Err(r) => return r,
+                };
+                self.apply_2d(board, &next).await
+            }
             #[cfg(feature = "plane")]
-            Request::ResizeWindow { window, lo, hi } => match self.plane() {
-                Ok(active) => match resized(active, window, lo, hi) {
-                    Ok(next) => self.apply_2d(board, next).await,
-                    Err(e) => Reply::Refused2d(e),
-                },
-                Err(r) => r,
-            },
+            Request::ResizeWindow { window, lo, hi } => {
+                let next = match self.plane().map(|a| resized(a, *window, *lo, *hi)) {
+                    Ok(Ok(next)) => next,
+                    Ok(Err(e)) => return Reply::Refused2d(e),
+                    Err(r) => return r,
+                };
+                self.apply_2d(board, &next).await
+            }
             Request::Counters { reset } => {
+                let reset = *reset;
                 let now = self.counters(board).await;
                 let since = since(&now, &self.base);
                 if reset {
@@ -350,6 +366,7 @@ impl Session {
                 }
             }
             Request::Stream { every_samples } => {
+                let every_samples = *every_samples;
                 // Read before the decimation changes: every record of this stream is of this
                 // time or later.
                 let from_us = board.now_us();
@@ -413,13 +430,14 @@ impl Session {
         }
     }
 
-    async fn apply<B: Board>(&mut self, board: &mut B, next: Config) -> Reply {
+    /// By reference, as `apply_2d`: the copy the session keeps is made once the board took it.
+    async fn apply<B: Board>(&mut self, board: &mut B, next: &Config) -> Reply {
         let stamp = Stamp {
-            scene_id: scene_id(&next),
+            scene_id: scene_id(next),
             change: self.change.wrapping_add(1),
         };
-        match board.apply(&next, stamp).await {
-            Ok(()) => self.applied(stamp, Active::Line(next)),
+        match board.apply(next, stamp).await {
+            Ok(()) => self.applied(stamp, Active::Line(next.clone())),
             Err(e) => Reply::Refused(e),
         }
     }
@@ -427,18 +445,20 @@ impl Session {
     #[cfg(feature = "plane")]
     /// Checks a 2D scene against the board's overlay (plate size, every point on the plate),
     /// then hands it to the board's controller.
-    async fn apply_2d<B: Board>(&mut self, board: &mut B, next: PlaneScene) -> Reply {
+    /// By reference (an async fn's argument by value is held twice in its future, see
+    /// `on_frame`); the session's copy is made once the board took the scene.
+    async fn apply_2d<B: Board>(&mut self, board: &mut B, next: &PlaneScene) -> Reply {
         if let Sensor::FourWire { plate_um } = self.sensor {
-            if let Err(e) = fits(&next, plate_um) {
+            if let Err(e) = fits(next, plate_um) {
                 return Reply::Refused2d(e);
             }
         }
         let stamp = Stamp {
-            scene_id: plane_scene_id(&next),
+            scene_id: plane_scene_id(next),
             change: self.change.wrapping_add(1),
         };
-        match board.apply_2d(&next, stamp).await {
-            Ok(()) => self.applied(stamp, Active::Plane(next)),
+        match board.apply_2d(next, stamp).await {
+            Ok(()) => self.applied(stamp, Active::Plane(next.clone())),
             Err(Apply2dError::Unsupported) => Reply::Refused2d(Refused2d::Unsupported),
             Err(Apply2dError::Config(e)) => Reply::Refused2d(Refused2d::Config(e)),
         }
