@@ -348,8 +348,10 @@ impl<V: PlaneEstimator> Controller2d<V> {
         };
         let drive = core::mem::take(&mut self.drive_pending).then_some(active.scene.drive);
         self.forgotten = false;
-        let place = self.screen.update(&active.scene.screen, p);
-        if self.place != Some(place) {
+        let (place, evaluated) = self.screen.track(&active.scene.screen, p);
+        // Not evaluated, the place is the last reading's, which `self.place` holds: the tracker
+        // is reset (and evaluates) whenever the controller forgets its place.
+        if evaluated && self.place != Some(place) {
             self.note_place_change(place);
         }
         // The edges' position half first: the lead (the velocity) is read only when an armed
