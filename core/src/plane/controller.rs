@@ -348,8 +348,10 @@ impl<V: PlaneEstimator> Controller2d<V> {
         };
         let drive = core::mem::take(&mut self.drive_pending).then_some(active.scene.drive);
         self.forgotten = false;
-        let place = self.screen.update(&active.scene.screen, p);
-        if self.place != Some(place) {
+        let (place, evaluated) = self.screen.track(&active.scene.screen, p);
+        // Not evaluated, the place is the last reading's, which `self.place` holds: the tracker
+        // is reset (and evaluates) whenever the controller forgets its place.
+        if evaluated && self.place != Some(place) {
             self.note_place_change(place);
         }
         // The edges' position half first: the lead (the velocity) is read only when an armed
@@ -1401,6 +1403,40 @@ mod tests {
             .all(|o| o.action.is_none() && o.fault.is_some()));
         assert_eq!(again[n - 1].fault, None);
         assert!(matches!(again[n - 1].action, Some(GateAction::Start(_))));
+    }
+
+    /// A lift forgets the place even where the screen would answer without evaluating: a
+    /// finger lifted and landed again on the very point, inside a window, counts a second lift
+    /// (the controller holds its place again) and renders the window's burst again. (Seen
+    /// failing with the screen tracker not reset on a lift: the tracker's fast path answered
+    /// the old place unevaluated, the controller's place stayed None, the second lift went
+    /// uncounted: 1 lift.)
+    #[test]
+    fn a_landing_on_the_lifted_point_places_the_finger_again() {
+        let mut c = loaded(&config(&[window(
+            rect(0, 0, 20_000, 20_000),
+            hz(80),
+            false,
+        )]));
+        let p = PointUm::new(10_000, 10_000);
+        let mut t = 0;
+        for _ in 0..2 {
+            let outs = feed(&mut c, &mut t, (0..50).map(|_| down(p)));
+            assert!(outs.iter().all(|o| o.place == Some(Place::Window(0))));
+            assert!(outs
+                .iter()
+                .any(|o| matches!(o.action, Some(GateAction::Start(_)))));
+            feed(&mut c, &mut t, [Reading::Lifted]);
+            feed(
+                &mut c,
+                &mut t,
+                [Reading::Landing {
+                    x_um: p.x_um,
+                    y_um: p.y_um,
+                }],
+            );
+        }
+        assert_eq!(c.telemetry().lifts, 2);
     }
 
     /// A window's texture starts afresh on entry: an oriented grating (normal (1, 1), λ =

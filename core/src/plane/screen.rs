@@ -376,10 +376,18 @@ impl ScreenTracker {
     /// last full evaluation, the answer is the same and nothing is computed.
     #[inline]
     pub fn update(&mut self, screen: &CompiledScreen, p: PointUm) -> Place {
+        self.track(screen, p).0
+    }
+
+    /// [`Self::update`], and whether the rules were evaluated on this sample: false means the
+    /// place is the one the last sample answered (a caller keeping its own copy of the place
+    /// needs no compare then).
+    #[inline(always)]
+    pub fn track(&mut self, screen: &CompiledScreen, p: PointUm) -> (Place, bool) {
         if let Some((at, clear)) = self.settled {
             let moved = p.x_um.abs_diff(at.x_um) as f32 + p.y_um.abs_diff(at.y_um) as f32;
             if moved < clear {
-                return self.place;
+                return (self.place, false);
             }
         }
         #[cfg(test)]
@@ -389,7 +397,7 @@ impl ScreenTracker {
         let (place, clear) = screen.locate(p, self.place);
         self.place = place;
         self.settled = (clear > SETTLE_MARGIN_UM).then_some((p, clear - SETTLE_MARGIN_UM));
-        place
+        (place, true)
     }
 }
 
