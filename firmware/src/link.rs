@@ -12,7 +12,7 @@
 //! hand-over statics where they carry no 1D type (the stamp, `INSTALLED`, `TELEMETRY_WANTED`,
 //! `EVERY`, `DROPPED`); only one image runs on a board, so they are never shared at run time.
 
-use core::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
@@ -36,8 +36,19 @@ pub static INSTALLED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 pub static TELEMETRY_WANTED: AtomicBool = AtomicBool::new(false);
 /// The counters, handed over between two samples.
 pub static TELEMETRY: Signal<CriticalSectionRawMutex, Telemetry> = Signal::new();
-/// Stream decimation in force (0: stopped).
-pub static EVERY: AtomicU16 = AtomicU16::new(0);
+/// The stream in force: its decimation (samples a record, 0: stopped) in the low 16 bits, and
+/// above them a count of stream requests, so a request that repeats the decimation in force (a
+/// host reconnecting) is a new stream to the tap too: its start (`STREAM_FROM_US`) is read
+/// again and nothing older than it becomes a record. One word: the tap's per-sample cost stays
+/// one load and a compare.
+pub static EVERY: AtomicU32 = AtomicU32::new(0);
+
+/// Starts (or stops, `every_samples` 0) a stream: the link task is `EVERY`'s only writer.
+pub(crate) fn request_stream(every_samples: u16) {
+    let requests = (EVERY.load(Ordering::Relaxed) >> 16).wrapping_add(1);
+    EVERY.store(requests << 16 | every_samples as u32, Ordering::Relaxed);
+}
+
 /// Records from the control loop to the link.
 pub static RECORDS: Channel<CriticalSectionRawMutex, Record, QUEUE_RECORDS> = Channel::new();
 /// When the stream in force started (µs since boot, low 32 bits), stored before `EVERY`: a
@@ -60,7 +71,8 @@ const STREAM_VELOCITY_EVERY_SAMPLE: u16 = 2;
 /// stopped.
 pub struct StreamTap {
     decimator: Decimator,
-    every: u16,
+    /// `EVERY` as last seen.
+    every: u32,
     /// The scene in force, as its records carry it.
     pub stamp: Stamp,
     /// The last record's time, 32-bit and widened to 64: the next is widened from it.
@@ -90,9 +102,10 @@ impl StreamTap {
     /// path more than updating it (docs/sample-contract.md; the board model's stream-cost check).
     #[inline]
     pub fn take(&mut self, ctrl: &mut crate::board::Controller) -> bool {
-        let every = EVERY.load(Ordering::Relaxed);
-        if every != self.every {
-            self.every = every;
+        let word = EVERY.load(Ordering::Relaxed);
+        if word != self.every {
+            self.every = word;
+            let every = word as u16;
             self.decimator.set(every);
             // A new stream's first record is widened against the clock again.
             self.last_us = None;
@@ -228,7 +241,7 @@ impl Board for FirmwareBoard {
         // Read after the session's `from_us`: no record is older than that.
         STREAM_FROM_US.store(embassy_time::Instant::now().as_micros() as u32, Ordering::Relaxed);
         core::sync::atomic::compiler_fence(Ordering::Release);
-        EVERY.store(every_samples, Ordering::Relaxed);
+        request_stream(every_samples);
         // Records of the stream before are stale to whoever asked (the host drops those older
         // than the answer's `from_us`): the line is not spent on them.
         RECORDS.clear();

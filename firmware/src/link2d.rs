@@ -82,7 +82,8 @@ pub(crate) fn prebuild(burst: &mut BurstGate, timer: &BurstTimer, edge: &EdgePul
 /// stopped, a record queued when one is due.
 pub struct Tap2d {
     decimator: Decimator,
-    every: u16,
+    /// `EVERY` as last seen (decimation and request count).
+    every: u32,
     stamp: Stamp,
     last_us: Option<(u32, u64)>,
     /// The f_b of the periodic burst last started or updated, mHz (0 after an off or a pulse).
@@ -109,10 +110,10 @@ impl Tap2d {
         if let Some(a) = out.action {
             self.burst_millihz = Record2d::millihz_of(BOARD.burst_timer_clk_hz, a);
         }
-        let every = EVERY.load(Ordering::Relaxed);
-        if every != self.every {
-            self.every = every;
-            self.decimator.set(every);
+        let word = EVERY.load(Ordering::Relaxed);
+        if word != self.every {
+            self.every = word;
+            self.decimator.set(word as u16);
             // A new stream's first record is widened against the clock again.
             self.last_us = None;
         }
@@ -233,7 +234,7 @@ impl Board for Board2d {
     }
 
     fn stream(&mut self, every_samples: u16) {
-        EVERY.store(every_samples, Ordering::Relaxed);
+        link::request_stream(every_samples);
         // Records of the stream before are stale to whoever asked: the line is not spent on them.
         RECORDS_2D.clear();
     }
