@@ -337,6 +337,11 @@ mod chip {
         rearm();
     }
 
+    /// Nothing to end: the F446's SQRs take a write while a sequence runs (RM0390 §13.13.9–11
+    /// set no condition); a phase still converting is caught by the DMA count check.
+    #[inline(always)]
+    pub fn end_phase(_words_after: u32) {}
+
     /// `ranks` ranks (1..=16) of `ch`: SQR3 SQ1–6, SQR2 SQ7–12, SQR1 SQ13–16 and L = ranks − 1
     /// (RM0390 §13.13.9–11).
     pub fn set_channel(ch: u8, ranks: u8) {
@@ -421,6 +426,27 @@ mod chip {
             return;
         }
         cr_set(ADSTP);
+        for _ in 0..WAIT_LOOPS {
+            if !r.cr().read().adstart() {
+                break;
+            }
+        }
+    }
+
+    /// Ends the running phase's sequence before a switch, `words_after` being the frame's words
+    /// that come after it. ADSTP only while two or more of its conversions are still to reach
+    /// memory: software may set ADSTP only while ADSTART = 1 (RM0440 §21.4.17), and ADSTART
+    /// clears by itself at the sequence's end, so an ADSTP written as the last conversion ends
+    /// lands on ADSTART = 0 (the board model caught that, during a push on the G474 link image).
+    /// With one left (a conversion, 1.4 µs at most) its own end is waited for instead.
+    pub fn end_phase(words_after: u32) {
+        let r = pac::ADC1;
+        if !r.cr().read().adstart() {
+            return;
+        }
+        if remaining().saturating_sub(words_after) >= 2 {
+            cr_set(ADSTP);
+        }
         for _ in 0..WAIT_LOOPS {
             if !r.cr().read().adstart() {
                 break;
@@ -625,9 +651,11 @@ pub fn on_event() {
         // after the pins: a word counted here had its sampling end a SAR conversion (12 / 12.5
         // ADC cycles: 533 / 333 ns) before it reached memory, longer than the pin writes take.
         // The frame boundary's check is `rearm`'s (all words moved).
-        if i != 0 && chip::remaining() != (WORDS - FIRST[slot]) as u32 {
+        let words_after = if i == 0 { 0 } else { (WORDS - FIRST[slot]) as u32 };
+        if i != 0 && chip::remaining() != words_after {
             MIXED_NOW.store(true, Ordering::Relaxed);
         }
+        chip::end_phase(words_after);
         chip::set_channel(CHANNELS[slot], RANKS[slot]);
     }
     if ev.kind != 0 {
