@@ -111,6 +111,35 @@ fn switches(tr: &Trace) -> Vec<(Time, [Drive; 4])> {
     out
 }
 
+/// The phases whose conversions were not the design's, from the first X switch on: (window
+/// index, its start µs, conversions, designed conversions). A cut phase (an interrupt held off
+/// past the margin) or a mixed one shows here.
+fn off_design_windows(tr: &Trace, d: &Design) -> Vec<(usize, f64, usize, usize)> {
+    let sw = switches(tr);
+    let first_x = sw
+        .iter()
+        .position(|(_, p)| phase_of(p) == Some(Phase::X))
+        .unwrap();
+    let sw = &sw[first_x..];
+    let mut out = Vec::new();
+    for (i, w) in sw.windows(2).enumerate() {
+        let n = tr
+            .conversions
+            .iter()
+            .filter(|c| c.at > w[0].0 && c.at < w[1].0)
+            .count();
+        let want = match i % 3 {
+            0 => d.ranks[0],
+            1 => d.ranks[1],
+            _ => d.ranks[2] + d.ranks[3],
+        };
+        if n != want {
+            out.push((i, ns(w[0].0) / 1e3, n, want));
+        }
+    }
+    out
+}
+
 /// The designed frame: the switch times of Y and Z from X's, the settling before each trigger
 /// and the frame period, ns: each phase's settling and conversions from the core's schedule,
 /// then the margin; the frame rounded up to whole µs.
@@ -818,32 +847,11 @@ fn a_phase_converting_across_the_next_switch_is_dropped_and_counted() {
         let tr = out.touch.as_ref().unwrap();
         // Mixed frames in the trace: a window's conversions ≠ its ranks (Z's window holds Z1's
         // and Z2's).
-        let sw = switches(tr);
-        let first_x = sw
-            .iter()
-            .position(|(_, p)| phase_of(p) == Some(Phase::X))
-            .unwrap();
-        let sw = &sw[first_x..];
         let mut mixed_frames = std::collections::BTreeSet::new();
-        for (i, w) in sw.windows(2).enumerate() {
-            let n = tr
-                .conversions
-                .iter()
-                .filter(|c| c.at > w[0].0 && c.at < w[1].0)
-                .count();
-            let want = match i % 3 {
-                0 => d.ranks[0],
-                1 => d.ranks[1],
-                _ => d.ranks[2] + d.ranks[3],
-            };
-            if n != want {
-                mixed_frames.insert(i / 3);
-                if std::env::var("TOUCH2D_TRACE").is_ok() {
-                    eprintln!(
-                        "  window {i} at {:.1} µs: {n} conversions, {want} designed",
-                        ns(w[0].0) / 1e3
-                    );
-                }
+        for (i, at_us, n, want) in off_design_windows(tr, &d) {
+            mixed_frames.insert(i / 3);
+            if std::env::var("TOUCH2D_TRACE").is_ok() {
+                eprintln!("  window {i} at {at_us:.1} µs: {n} conversions, {want} designed");
             }
         }
         let telemetry = out
@@ -1031,28 +1039,10 @@ fn the_telemetry_line_cuts_no_phase() {
         let d = design(board);
         let o = run2d(board, SECS, pressed);
         let tr = o.touch.as_ref().unwrap();
-        let sw = switches(tr);
-        let first_x = sw
-            .iter()
-            .position(|(_, p)| phase_of(p) == Some(Phase::X))
-            .unwrap();
-        let sw = &sw[first_x..];
-        let mut cut = Vec::new();
-        for (i, w) in sw.windows(2).enumerate() {
-            let n = tr
-                .conversions
-                .iter()
-                .filter(|c| c.at > w[0].0 && c.at < w[1].0)
-                .count();
-            let want = match i % 3 {
-                0 => d.ranks[0],
-                1 => d.ranks[1],
-                _ => d.ranks[2] + d.ranks[3],
-            };
-            if n != want {
-                cut.push((ns(w[0].0) / 1e3, n, want));
-            }
-        }
+        let cut: Vec<(f64, usize, usize)> = off_design_windows(tr, &d)
+            .into_iter()
+            .map(|(_, at_us, n, want)| (at_us, n, want))
+            .collect();
         let lines: Vec<&str> = o
             .log
             .iter()
@@ -1064,7 +1054,7 @@ fn the_telemetry_line_cuts_no_phase() {
         }
         eprintln!(
             "{board:?}: {} switches over {SECS} s, {} telemetry lines, windows cut: {cut:?}",
-            sw.len(),
+            switches(tr).len(),
             lines.len()
         );
         assert!(
