@@ -111,16 +111,22 @@ fn switches(tr: &Trace) -> Vec<(Time, [Drive; 4])> {
     out
 }
 
-/// The phases whose conversions were not the design's, from the first X switch on: (window
-/// index, its start µs, conversions, designed conversions). A cut phase (an interrupt held off
-/// past the margin) or a mixed one shows here.
-fn off_design_windows(tr: &Trace, d: &Design) -> Vec<(usize, f64, usize, usize)> {
-    let sw = switches(tr);
+/// The switches from the first X phase on: a frame's three windows (X, Y, Z) at a time.
+fn switches_from_x(tr: &Trace) -> Vec<(Time, [Drive; 4])> {
+    let mut sw = switches(tr);
     let first_x = sw
         .iter()
         .position(|(_, p)| phase_of(p) == Some(Phase::X))
         .unwrap();
-    let sw = &sw[first_x..];
+    sw.drain(..first_x);
+    sw
+}
+
+/// The phases whose conversions were not the design's, from the first X switch on: (window
+/// index, its start µs, conversions, designed conversions). A cut phase (an interrupt held off
+/// past the margin) or a mixed one shows here.
+fn off_design_windows(tr: &Trace, d: &Design) -> Vec<(usize, f64, usize, usize)> {
+    let sw = &switches_from_x(tr);
     let mut out = Vec::new();
     for (i, w) in sw.windows(2).enumerate() {
         let n = tr
@@ -944,12 +950,7 @@ fn charge_sharing_at_the_touch_down_threshold() {
         let d = design(board);
         let o = run2d(board, FROM_S + HOLD_S * POINTS.len() as f64, finger);
         let tr = o.touch.as_ref().unwrap();
-        let sw = switches(tr);
-        let first_x = sw
-            .iter()
-            .position(|(_, p)| phase_of(p) == Some(Phase::X))
-            .unwrap();
-        let sw = &sw[first_x..];
+        let sw = &switches_from_x(tr);
         let model = TouchModel::new(
             Overlay {
                 noise_lsb: 0.0,
