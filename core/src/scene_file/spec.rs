@@ -72,33 +72,27 @@ pub(super) fn read_as<T: serde::de::DeserializeOwned>(cx: &Ctx<'_>) -> Result<T,
 /// opened (`[limits]` → `limits.max_duty`, the third `[[window]]` → `window[2].outline`), bare
 /// at the top.
 fn qualified(before: &str, key: &str) -> String {
-    let mut table: Option<(&str, bool)> = None;
-    for line in before.lines() {
-        let line = line.split('#').next().unwrap_or("").trim();
-        if let Some(name) = line.strip_prefix("[[").and_then(|l| l.strip_suffix("]]")) {
-            table = Some((name.trim(), true));
-        } else if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
-            table = Some((name.trim(), false));
-        }
-    }
-    match table {
+    let headers: StdVec<(&str, bool)> = before.lines().filter_map(header).collect();
+    match headers.last() {
         None => key.to_string(),
-        Some((name, false)) => format!("{name}.{key}"),
-        Some((name, true)) => {
+        Some(&(name, false)) => format!("{name}.{key}"),
+        Some(&(name, true)) => {
             // The array's index: how many of its headers came before, this one included.
-            let index = before
-                .lines()
-                .filter(|l| {
-                    let l = l.split('#').next().unwrap_or("").trim();
-                    l.strip_prefix("[[")
-                        .and_then(|l| l.strip_suffix("]]"))
-                        .is_some_and(|n| n.trim() == name)
-                })
-                .count()
-                - 1;
+            let index = headers.iter().filter(|&&h| h == (name, true)).count() - 1;
             format!("{name}[{index}].{key}")
         }
     }
+}
+
+/// A table's header line: `[name]` (false) or `[[name]]` (true), its comment left off.
+fn header(line: &str) -> Option<(&str, bool)> {
+    let line = line.split('#').next().unwrap_or("").trim();
+    if let Some(name) = line.strip_prefix("[[").and_then(|l| l.strip_suffix("]]")) {
+        return Some((name.trim(), true));
+    }
+    line.strip_prefix('[')
+        .and_then(|l| l.strip_suffix(']'))
+        .map(|name| (name.trim(), false))
 }
 
 /// The `kind` of the `[[region]]` table that holds byte `at`, if the file reads that far: the
