@@ -273,30 +273,7 @@ impl<P: Read + Write> Client<P> {
         &mut self,
         deadline: Instant,
     ) -> Result<Option<(Header, Stream)>, ClientError> {
-        loop {
-            let next = match self.streams.pop_front() {
-                Some(s) => Some(s),
-                None => loop {
-                    match self.read_frame(deadline)? {
-                        Some((h, Reply::Stream(s))) => break Some((h, s)),
-                        Some(_) => {}
-                        None => break None,
-                    }
-                },
-            };
-            let Some((h, mut s)) = next else {
-                return Ok(None);
-            };
-            if !keep_fresh(
-                &mut s.records,
-                self.from_us,
-                |r| r.time_us,
-                &mut self.stale_records,
-            ) {
-                continue;
-            }
-            return Ok(Some((h, s)));
-        }
+        self.next_frame(deadline)
     }
 
     /// The next 2D stream frame (a board with the touch overlay), as [`Self::next_stream`]:
@@ -305,13 +282,25 @@ impl<P: Read + Write> Client<P> {
         &mut self,
         deadline: Instant,
     ) -> Result<Option<(Header, Stream2d)>, ClientError> {
+        self.next_frame(deadline)
+    }
+
+    /// The next stream frame of kind `S`: one queued while waiting for a reply, else read from
+    /// the port (frames of other kinds passed over), with its stale records taken out.
+    fn next_frame<S: StreamFrame>(
+        &mut self,
+        deadline: Instant,
+    ) -> Result<Option<(Header, S)>, ClientError> {
         loop {
-            let next = match self.streams_2d.pop_front() {
+            let next = match S::queue(self).pop_front() {
                 Some(s) => Some(s),
                 None => loop {
                     match self.read_frame(deadline)? {
-                        Some((h, Reply::Stream2d(s))) => break Some((h, s)),
-                        Some(_) => {}
+                        Some((h, reply)) => {
+                            if let Some(s) = S::from_reply(reply) {
+                                break Some((h, s));
+                            }
+                        }
                         None => break None,
                     }
                 },
@@ -319,15 +308,9 @@ impl<P: Read + Write> Client<P> {
             let Some((h, mut s)) = next else {
                 return Ok(None);
             };
-            if !keep_fresh(
-                &mut s.records,
-                self.from_us,
-                |r| r.time_us,
-                &mut self.stale_records,
-            ) {
-                continue;
+            if s.keep_fresh(self.from_us, &mut self.stale_records) {
+                return Ok(Some((h, s)));
             }
-            return Ok(Some((h, s)));
         }
     }
 
@@ -385,6 +368,46 @@ impl<P: Read + Write> Client<P> {
                 }
             }
         }
+    }
+}
+
+/// A stream frame of one kind (1D or 2D), so one loop reads both.
+trait StreamFrame: Sized {
+    /// The frame, if `reply` is one of this kind.
+    fn from_reply(reply: Reply) -> Option<Self>;
+    /// Where frames of this kind wait while the client waits for a reply.
+    fn queue<P: Read + Write>(client: &mut Client<P>) -> &mut VecDeque<(Header, Self)>;
+    /// Takes out the records sampled before `from_us` ([`keep_fresh`]).
+    fn keep_fresh(&mut self, from_us: Option<u64>, stale: &mut u64) -> bool;
+}
+
+impl StreamFrame for Stream {
+    fn from_reply(reply: Reply) -> Option<Self> {
+        match reply {
+            Reply::Stream(s) => Some(s),
+            _ => None,
+        }
+    }
+    fn queue<P: Read + Write>(client: &mut Client<P>) -> &mut VecDeque<(Header, Self)> {
+        &mut client.streams
+    }
+    fn keep_fresh(&mut self, from_us: Option<u64>, stale: &mut u64) -> bool {
+        keep_fresh(&mut self.records, from_us, |r| r.time_us, stale)
+    }
+}
+
+impl StreamFrame for Stream2d {
+    fn from_reply(reply: Reply) -> Option<Self> {
+        match reply {
+            Reply::Stream2d(s) => Some(s),
+            _ => None,
+        }
+    }
+    fn queue<P: Read + Write>(client: &mut Client<P>) -> &mut VecDeque<(Header, Self)> {
+        &mut client.streams_2d
+    }
+    fn keep_fresh(&mut self, from_us: Option<u64>, stale: &mut u64) -> bool {
+        keep_fresh(&mut self.records, from_us, |r| r.time_us, stale)
     }
 }
 
