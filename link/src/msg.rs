@@ -577,7 +577,9 @@ pub struct Record2d {
     pub velocity_um_s: Option<(i32, i32)>,
     /// What is under the finger while it renders: a window or the background.
     pub place: Option<Place>,
-    /// The edge crossed on this reading (its pulse fired).
+    /// The edge crossed (its pulse fired) since the stream's previous record: at `--every 1`
+    /// on this reading; decimated, the last one crossed on the readings the stream skipped
+    /// ([`crate::stream::EdgeLatch`]), so no pulse goes unreported.
     pub edge: Option<u8>,
     /// Burst frequency in force, mHz (0: no bursts).
     pub burst_millihz: u32,

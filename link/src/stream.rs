@@ -55,6 +55,42 @@ impl Decimator {
     }
 }
 
+/// The edge a 2D record reports: the last one crossed since the stream's previous record, so a
+/// decimated stream (`--every N`) loses no edge pulse to the frames it skips. Two crossings
+/// between two records report the later one (at the overlay's ~3.6 kHz frames and a re-arm
+/// band of 100 µm, that takes `--every` above ~36 at 1 m/s). One store per crossing and one
+/// load per record: the sample path's cost is unchanged between crossings.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct EdgeLatch {
+    edge: Option<u8>,
+}
+
+impl EdgeLatch {
+    /// Nothing crossed.
+    pub const fn new() -> Self {
+        Self { edge: None }
+    }
+
+    /// A frame's crossing, if any (`Output2d::edge`).
+    #[inline]
+    pub fn note(&mut self, edge: Option<u8>) {
+        if edge.is_some() {
+            self.edge = edge;
+        }
+    }
+
+    /// The edge for a record now: the last one noted since the last take (or the clear).
+    #[inline]
+    pub fn take(&mut self) -> Option<u8> {
+        self.edge.take()
+    }
+
+    /// Forgets what was noted (a new stream starts: its first record reports nothing before it).
+    pub fn clear(&mut self) {
+        self.edge = None;
+    }
+}
+
 /// A record kind the stream carries, and the reply its frame travels in.
 pub trait Streamed: Sized {
     /// `records` as one stream frame's reply (`dropped`: the queue's drop count so far).

@@ -17,7 +17,7 @@ use saw_core::touch::frame::{Reading, TouchSensor};
 use saw_core::touch::plates::{AdcTiming, Schedule};
 use saw_link::msg::{Fault2d, Header, PlaneScene, Record2d, Reply, StoreFault};
 use saw_link::session::{Apply2dError, Board, Stamp};
-use saw_link::stream::{Batcher2d, Decimator, QUEUE_RECORDS};
+use saw_link::stream::{Batcher2d, Decimator, EdgeLatch, QUEUE_RECORDS};
 
 use crate::sim::burst_timer;
 use crate::sim2d::{adc_timing, frame_period_us, schedule};
@@ -78,6 +78,8 @@ pub struct VirtualBoard2d {
     /// The burst frequency of the periodic settings running, mHz (0: none).
     burst_millihz: u32,
     decimator: Decimator,
+    /// The edge the next record reports (the last crossed since the record before).
+    edge: EdgeLatch,
     queue: VecDeque<Record2d>,
     batcher: Batcher2d,
     dropped: u32,
@@ -136,6 +138,7 @@ impl VirtualBoard2d {
             next_k: 0,
             burst_millihz: 0,
             decimator: Decimator::default(),
+            edge: EdgeLatch::new(),
             queue: VecDeque::with_capacity(QUEUE_RECORDS),
             batcher: Batcher2d::default(),
             dropped: 0,
@@ -228,6 +231,7 @@ impl VirtualBoard2d {
                 self.burst_millihz = Record2d::millihz_of(clock as u32, a);
             }
             self.tm.advance_to(clk(t_us));
+            self.edge.note(out.edge);
             if self.decimator.take() {
                 let record = Record2d {
                     time_us: t_us,
@@ -236,7 +240,7 @@ impl VirtualBoard2d {
                     position: out.position,
                     velocity_um_s: out.velocity.map(|v| (v.vx_um_s, v.vy_um_s)),
                     place: out.place,
-                    edge: out.edge,
+                    edge: self.edge.take(),
                     burst_millihz: if self.tm.is_running() {
                         self.burst_millihz
                     } else {
@@ -310,6 +314,7 @@ impl Board for VirtualBoard2d {
 
     fn stream(&mut self, every_samples: u16) {
         self.decimator.set(every_samples);
+        self.edge.clear();
         self.queue.clear();
     }
 
@@ -327,6 +332,8 @@ impl Board for VirtualBoard2d {
             .map_err(Apply2dError::Config)?;
         self.stamp = stamp;
         self.decimator.force_next();
+        // The old scene's edge numbers mean nothing in the new one.
+        self.edge.clear();
         Ok(())
     }
 
@@ -463,6 +470,39 @@ mod tests {
         assert!(r.last().unwrap().bursting);
         let t = embassy_futures::block_on(Board::telemetry_2d(&mut vb));
         assert_eq!(t.faults, 1, "{t:?}");
+    }
+
+    /// A decimated stream reports every edge pulse that fired, each once, on the first record
+    /// after it: the finger circles fig. 12's screen (its outlines flagged) at 100 mm/s for 3 s,
+    /// streamed at every 5th frame. (With each record reporting only its own frame's crossing,
+    /// 4 of the 18 pulses were in the records.)
+    #[test]
+    fn a_decimated_stream_reports_every_edge_pulse() {
+        let board = &saw_boards::NUCLEO_F446RE;
+        let fig12 = scene("2d-fig12.toml");
+        let (w, h) = (fig12.plate_um.0 as f64, fig12.plate_um.1 as f64);
+        let circle =
+            Trajectory2d::circle(TrajPoint::new(w / 2.0, h / 2.0), 0.4 * w.min(h), 100e3).unwrap();
+        let mut vb = VirtualBoard2d::boot(board, &fig12, circle, 2.0, 3).unwrap();
+        Board::stream(&mut vb, 5);
+        let mut edges = 0u32;
+        let mut records = 0u32;
+        for t_us in (5_000..=3_000_000).step_by(5_000) {
+            vb.run_until(t_us);
+            while let Some((_, reply)) = vb.next_frame(true) {
+                let Reply::Stream2d(s) = reply else {
+                    panic!("not a 2D frame: {reply:?}")
+                };
+                records += s.records.len() as u32;
+                edges += s.records.iter().filter(|r| r.edge.is_some()).count() as u32;
+            }
+        }
+        let t = embassy_futures::block_on(Board::telemetry_2d(&mut vb));
+        assert_eq!(vb.dropped(), 0);
+        // 3 s of 280 µs frames, one in five a record.
+        assert!((2_100..=2_150).contains(&records), "{records}");
+        assert!(t.edge_pulses >= 10, "{t:?}");
+        assert_eq!(edges, t.edge_pulses, "{t:?}");
     }
 
     /// The plate of an 80 × 60 mm scene: a resting finger is read where it rests on that plate,
