@@ -863,7 +863,23 @@ fn scene_2d_text(scene_id: u32, source: SceneSource, p: &saw_link::msg::PlaneSce
         drive_name(sc.drive),
         plane_texture_text(&sc.background)
     );
+    // Edges are numbered as the controller numbers them (and the stream's `edge` and host-sim's
+    // reports name them): the felt outlines' sides first, window by window, each outline from
+    // its first vertex, then the free segments.
+    let mut next_edge = 0usize;
     for (i, w) in sc.windows.iter().enumerate() {
+        let felt = if w.edge {
+            let sides = w.outline.vertices.len();
+            next_edge += sides;
+            format!(
+                ", outline felt as edges {}–{} (edge {} from the first vertex)",
+                next_edge - sides,
+                next_edge - 1,
+                next_edge - sides
+            )
+        } else {
+            String::new()
+        };
         let pts: Vec<String> = w
             .outline
             .vertices
@@ -874,14 +890,15 @@ fn scene_2d_text(scene_id: u32, source: SceneSource, p: &saw_link::msg::PlaneSce
             "
   window {i}: {}{}, at {} mm",
             plane_texture_text(&w.texture),
-            if w.edge { ", outline felt" } else { "" },
+            felt,
             pts.join(" ")
         );
     }
     for (i, e) in sc.free_edges.iter().enumerate() {
         s += &format!(
             "
-  edge {i}: ({}, {}) to ({}, {}) mm",
+  edge {}: ({}, {}) to ({}, {}) mm",
+            next_edge + i,
             mm(e.a.x_um),
             mm(e.a.y_um),
             mm(e.b.x_um),
@@ -1518,6 +1535,28 @@ pub fn board_sensor<P: std::io::Read + std::io::Write>(
 #[cfg(test)]
 mod tests {
     use super::fastest_lossless;
+
+    /// `saw get` numbers a 2D scene's edges as the stream and host-sim do: the felt outlines'
+    /// sides first, then the free segments. `scenes/2d-concave.toml` felt window 1 has six
+    /// sides, so its first free segment, (50, 40) to (75, 40) mm, is edge 6 (it read "edge 0").
+    #[test]
+    fn get_numbers_edges_as_the_stream_does() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/2d-concave.toml");
+        let text = std::fs::read_to_string(path).unwrap();
+        let timer = saw_core::burst::BurstTimer {
+            clock_hz: 90_000_000,
+            counter_bits: 16,
+            max_burst_hz: 2_000,
+        };
+        let config = saw_core::scene_file::load_2d_for_board(path, &text, timer, 280).unwrap();
+        let plate_um = saw_core::scene_file::plate_um_of(path, &text).unwrap();
+        let scene = saw_link::msg::PlaneScene { plate_um, config };
+        let text = super::scene_2d_text(1, saw_link::msg::SceneSource::Link, &scene);
+        assert!(text.contains("outline felt as edges 0–5 (edge 0 from the first vertex)"), "{text}");
+        assert!(text.contains("edge 6: (50, 40) to (75, 40) mm"), "{text}");
+        assert!(text.contains("edge 7: (50, 45) to (75, 55) mm"), "{text}");
+        assert!(!text.contains("edge 0:"), "{text}");
+    }
 
     /// The fastest rate with no drop at it or below: a quiet moment at a fast rate, with a slower
     /// one dropping, is not lossless.
