@@ -8,7 +8,7 @@ use std::path::Path;
 use plotters::prelude::*;
 use saw_core::plane::Config2d;
 
-use crate::sim2d::{scene_edges, Run2d, SCREEN_MM};
+use crate::sim2d::{scene_edges, Run2d};
 
 /// Pixels.
 const SIZE: (u32, u32) = (1400, 900);
@@ -33,7 +33,7 @@ pub fn write_png(
 ) -> Result<(), Box<dyn std::error::Error>> {
     let root = BitMapBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE)?;
-    let (w, h) = SCREEN_MM;
+    let (w, h) = run.plate_mm;
     // Show the plate and anything of the scene or path beyond it.
     let (mut x0, mut x1, mut y0, mut y1) = (0.0f64, w, 0.0f64, h);
     let mut grow = |x: f64, y: f64| {

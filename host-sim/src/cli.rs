@@ -202,7 +202,9 @@ pub struct Args {
     pub offset: f64,
     #[arg(long, value_name = "S", allow_hyphen_values = true,
           help = format!("{} [default: 3; constant and ramp: until the finger reaches --to; \
-                          reversal: until it is back at --from]", DURATION.help("Simulated time")),
+                          reversal: until it is back at --from; a 2D path: to its end; a 2D run is \
+                          at most {} s]", DURATION.help("Simulated time"),
+                          crate::cli2d::DURATION_2D.hi),
           value_parser = DURATION.parser())]
     pub duration: Option<f64>,
     #[arg(long, value_name = "SEED", default_value_t = 1, allow_hyphen_values = true,
@@ -230,7 +232,8 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     pub scenario: Option<PathBuf>,
     /// Chart path (PNG) [default: out/sim-<scene>.png, named after the scene file (out/sim-default.png
-    /// for the built-in scene) or the scenario (out/scenario-<name>.png)].
+    /// for the built-in scene) or the scenario (out/scenario-<name>.png); a 2D run's
+    /// out/sim2d-<scene>.png (out/sim2d-demo.png)].
     #[arg(long, short, value_name = "PNG", value_parser = png_path)]
     pub output: Option<PathBuf>,
     /// Log level of the core's log lines (error, warn, info, debug, trace, off).
@@ -509,7 +512,7 @@ pub fn plan(args: &Args, m: &ArgMatches) -> Result<Plan, Refusal> {
         None => (saw_core::default_config(), "the default scene".to_string()),
         Some(path) => {
             let text = std::fs::read_to_string(path)
-                .map_err(|e| Refusal::Run(format!("{}: {e}", path.display()).into()))?;
+                .map_err(|e| Refusal::Run(format!("--scene {}: {e}", path.display()).into()))?;
             let config = saw_core::scene_file::load_for_board(
                 &path.display().to_string(),
                 &text,

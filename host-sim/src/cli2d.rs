@@ -191,22 +191,32 @@ pub fn plan(args: &Args, m: &ArgMatches) -> Result<Option<Plan2d>, Refusal> {
             .into(),
         )
     })?;
-    let (config, scene): (Config2d, String) = match &args.scene {
+    let screen_um = (
+        (sim2d::SCREEN_MM.0 * 1e3) as u32,
+        (sim2d::SCREEN_MM.1 * 1e3) as u32,
+    );
+    let (config, scene, plate_um): (Config2d, String, (u32, u32)) = match &args.scene {
         Some(path) => {
             let text = std::fs::read_to_string(path)
-                .map_err(|e| Refusal::Run(format!("{}: {e}", path.display()).into()))?;
+                .map_err(|e| Refusal::Run(format!("--scene {}: {e}", path.display()).into()))?;
             let file = path.display().to_string();
             match scene_file::sensor_of(&file, &text).map_err(Refusal::Scene)? {
                 SensorKind::FourWire => (
                     scene_file::load_2d_for_board(&file, &text, burst_timer(board), frame_us)
                         .map_err(Refusal::Scene)?,
-                    file,
+                    file.clone(),
+                    // The overlay is the scene's plate, as `serve`'s is.
+                    scene_file::plate_um_of(&file, &text).map_err(Refusal::Scene)?,
                 ),
                 // A sensor this simulator does not know yet: the 1D run's reader says why.
                 _ => return Ok(None),
             }
         }
-        None if args.trajectory.is_2d() => (sim2d::demo_config(), "the 2D demo screen".into()),
+        None if args.trajectory.is_2d() => (
+            sim2d::demo_config(),
+            "the 2D demo screen".into(),
+            screen_um,
+        ),
         None => return Ok(None),
     };
     if let Some(f) = FLAGS_1D.iter().find_map(|id| given(m, id)) {
@@ -252,6 +262,45 @@ pub fn plan(args: &Args, m: &ArgMatches) -> Result<Option<Plan2d>, Refusal> {
     let refused = |e: crate::trajectory2d::TrajectoryError| {
         Refusal::Door(format!("--trajectory {}: {e}", kind.name()))
     };
+    // The shapes' own rules, named by their flags (the trajectory's checks name its fields).
+    match kind {
+        Kind::Line | Kind::Raster => {
+            if let (Some(a), Some(b)) = (f2.from_xy, f2.to_xy) {
+                if kind == Kind::Line && a == b {
+                    return Err(Refusal::Door(format!(
+                        "--from-xy {},{} and --to-xy {},{} are one point: a line needs two",
+                        fmt_num(a.0),
+                        fmt_num(a.1),
+                        fmt_num(b.0),
+                        fmt_num(b.1)
+                    )));
+                }
+                if kind == Kind::Raster && (a.0 == b.0 || a.1 == b.1) {
+                    return Err(Refusal::Door(format!(
+                        "--from-xy {},{} and --to-xy {},{}: a raster's opposite corners must \
+                         differ in both x and y",
+                        fmt_num(a.0),
+                        fmt_num(a.1),
+                        fmt_num(b.0),
+                        fmt_num(b.1)
+                    )));
+                }
+            }
+        }
+        Kind::Spiral => {
+            if let (Some(r1), r0) = (f2.radius, f2.r0.unwrap_or(0.0)) {
+                if r1 <= r0 {
+                    return Err(Refusal::Door(format!(
+                        "--radius {} mm: must be above --r0 {} mm (the spiral winds out from \
+                         --r0 to --radius)",
+                        fmt_num(r1),
+                        fmt_num(r0)
+                    )));
+                }
+            }
+        }
+        _ => {}
+    }
     let trajectory = match kind {
         Kind::Line => Trajectory2d::line(
             need(f2.from_xy, "--from-xy")?,
@@ -285,7 +334,7 @@ pub fn plan(args: &Args, m: &ArgMatches) -> Result<Option<Plan2d>, Refusal> {
                 Refusal::Door("--trajectory path needs --path FILE (CSV t_s,x_mm,y_mm)".into())
             })?;
             let text = std::fs::read_to_string(path)
-                .map_err(|e| Refusal::Run(format!("{}: {e}", path.display()).into()))?;
+                .map_err(|e| Refusal::Run(format!("--path {}: {e}", path.display()).into()))?;
             match Trajectory2d::path_from_csv(&text) {
                 Ok(t) => Ok(t),
                 Err(e) => {
@@ -312,12 +361,63 @@ pub fn plan(args: &Args, m: &ArgMatches) -> Result<Option<Plan2d>, Refusal> {
             .map_or(crate::cli::DEFAULT_DURATION_S, |t| t + 0.05)
             .clamp(DURATION_2D.lo, DURATION_2D.hi),
     };
+    if let Some(l) = f2.lift_at {
+        if l >= duration_s {
+            return Err(Refusal::Door(format!(
+                "--lift-at {} s: the run ends at {} s (--duration), so the finger would never \
+                 lift; give a time before it",
+                fmt_num(l),
+                fmt_num(duration_s)
+            )));
+        }
+    }
     let mut params = Params2d::new(board, trajectory, duration_s, config);
+    params.plate_um = plate_um;
     params.overlay.noise_lsb = args.noise;
     params.seed = args.seed;
     params.force_n = f2.force.unwrap_or(1.0);
     params.lift_at_s = f2.lift_at;
     Ok(Some(Plan2d { params, scene }))
+}
+
+/// What a run did that its flags may not have meant, one sentence each: the path off the
+/// plate, a finger that never pressed, a path cut by `--duration`. Printed as `warning:` lines
+/// (stderr) and listed in the JSON's `warnings`.
+pub fn warnings(plan: &Plan2d, run: &Run2d) -> Vec<String> {
+    let p = &plan.params;
+    let mut w = Vec::new();
+    let (pw, ph) = run.plate_mm;
+    if let Some(first) = run.first_off_plate_s {
+        let off_s = run.off_plate_frames as f64 * run.frame_period_us as f64 * 1e-6;
+        w.push(format!(
+            "the finger's path is off the {} x {} mm plate for {:.3} s of the {:.3} s ({:.1} % \
+             of the frames), first at t = {:.4} s: the overlay reads no finger there",
+            fmt_num(pw),
+            fmt_num(ph),
+            off_s,
+            p.duration_s,
+            100.0 * run.off_plate_frames as f64 / run.frames.max(1) as f64,
+            first
+        ));
+    }
+    if run.pressed_frames == 0 {
+        w.push(format!(
+            "the finger never pressed the overlay (off the plate, lifted, or --force {} N below \
+             the touch-down): nothing rendered",
+            fmt_num(p.force_n)
+        ));
+    }
+    if let Some(path_s) = p.trajectory.duration_s() {
+        if p.duration_s < path_s {
+            w.push(format!(
+                "the run ends at {} s (--duration), before the path does ({:.3} s): the rest of \
+                 the path is not run",
+                fmt_num(p.duration_s),
+                path_s
+            ));
+        }
+    }
+    w
 }
 
 /// The run as one JSON object: its parameters, the events, and the counts.
@@ -333,8 +433,12 @@ pub fn json(plan: &Plan2d, run: &Run2d) -> serde_json::Value {
         "seed": p.seed,
         "force_n": p.force_n,
         "lift_at_s": p.lift_at_s,
+        "plate_mm": [run.plate_mm.0, run.plate_mm.1],
         "frame_period_us": run.frame_period_us,
         "frames": run.frames,
+        "pressed_frames": run.pressed_frames,
+        "off_plate_frames": run.off_plate_frames,
+        "warnings": warnings(plan, run),
         "window_switches": run.window_switches,
         "edge_pulses": run.edge_pulses,
         "lifts": run.lifts,
@@ -417,6 +521,9 @@ pub fn chart_path(args: &Args) -> PathBuf {
 /// Runs `plan`: JSON on stdout with `--json`, else the summary and the chart.
 pub fn run(args: &Args, plan: &Plan2d) -> Result<(), Box<dyn std::error::Error>> {
     let r = sim2d::run(&plan.params)?;
+    for w in warnings(plan, &r) {
+        eprintln!("warning: {w}");
+    }
     if args.two_d.json {
         println!("{}", serde_json::to_string_pretty(&json(plan, &r))?);
         return Ok(());

@@ -24,6 +24,18 @@ fn main() -> ExitCode {
     // `host-sim help [COMMAND]`: the other commands are dispatched by hand before clap, so
     // clap knows no `help` subcommand; this gives the same text as `--help`.
     let argv: Vec<String> = std::env::args().skip(1).collect();
+    // A reader that stops early (`host-sim … | head`) ends the run as it ends `cat`, not with
+    // a panic in `println!`: SIGPIPE back to its default, which Rust's runtime sets to ignore.
+    // Not for `serve`, whose line may be a socket a host closes: it must see EPIPE and go on.
+    if argv.first().map(String::as_str) != Some("serve") {
+        // SAFETY: at the start of main, before any thread exists; SIG_DFL installs no handler.
+        let _ = unsafe {
+            nix::sys::signal::signal(
+                nix::sys::signal::Signal::SIGPIPE,
+                nix::sys::signal::SigHandler::SigDfl,
+            )
+        };
+    }
     if argv.first().map(String::as_str) == Some("help") {
         return help(&argv[1..]);
     }
@@ -74,8 +86,13 @@ fn main() -> ExitCode {
         }
         ExitCode::from(r.exit_code())
     };
-    // A 4-wire scene, or a 2D trajectory on the demo screen (issue #36).
-    match host_sim::cli2d::plan(&args, &matches) {
+    // A 4-wire scene, or a 2D trajectory on the demo screen (issue #36). Its scene check runs
+    // the controller's compile, whose refusal log ("previous kept") is a live board's: the file's
+    // refusal is the error line below, so the log is held to errors while the plan is made.
+    log::set_max_level(args.log.min(log::LevelFilter::Error));
+    let plan2d = host_sim::cli2d::plan(&args, &matches);
+    log::set_max_level(args.log);
+    match plan2d {
         Ok(Some(plan2d)) => {
             return match host_sim::cli2d::run(&args, &plan2d) {
                 Ok(()) => ExitCode::SUCCESS,

@@ -48,6 +48,9 @@ pub struct Params2d {
     pub config: Config2d,
     /// The plates, contact law and noise.
     pub overlay: Overlay,
+    /// The overlay's touch area, µm: the scene's plate (`[screen] size_mm`), calibrated as
+    /// `serve` calibrates its overlay; [`SCREEN_MM`] unless set.
+    pub plate_um: (u32, u32),
     /// Noise seed.
     pub seed: u64,
     /// Press force while touching, N.
@@ -71,6 +74,7 @@ impl Params2d {
             duration_s,
             config,
             overlay: Overlay::default(),
+            plate_um: ((SCREEN_MM.0 * 1e3) as u32, (SCREEN_MM.1 * 1e3) as u32),
             seed: 1,
             force_n: 1.0,
             lift_at_s: None,
@@ -223,6 +227,16 @@ pub struct Run2d {
     pub frame_period_us: u32,
     /// Frames simulated.
     pub frames: u64,
+    /// The overlay's touch area, mm (the scene's plate).
+    pub plate_mm: (f64, f64),
+    /// Frames whose path point was off the plate (not counting a lift): the finger was off
+    /// the overlay there, and nothing rendered.
+    pub off_plate_frames: u64,
+    /// The first such frame's start, s.
+    pub first_off_plate_s: Option<f64>,
+    /// Frames the sensor read a finger on (landing or down): 0 when the finger never pressed
+    /// the overlay (off the plate, or lighter than the touch-down threshold).
+    pub pressed_frames: u64,
     /// Window switches, in time order.
     pub window_switches: Vec<WindowSwitch>,
     /// Edge pulses, in time order.
@@ -504,7 +518,8 @@ pub fn run(params: &Params2d) -> Result<Run2d, Sim2dError> {
     let timer = burst_timer(board);
     let mut ctrl = Controller2d::new(timer, frame_us).map_err(Sim2dError::Config)?;
     ctrl.load(&params.config).map_err(Sim2dError::Config)?;
-    let plate_um = ((SCREEN_MM.0 * 1e3) as u32, (SCREEN_MM.1 * 1e3) as u32);
+    let plate_um = params.plate_um;
+    let plate_mm = (plate_um.0 as f64 / 1e3, plate_um.1 as f64 / 1e3);
     let mut sensor = calibrated_sensor(&params.overlay, &sched, &adc, plate_um)?;
     let mut model = TouchModel::new(params.overlay, params.seed);
     let mut tm = TimerModel::new(timer.clock_hz, timer.counter_bits, true).with_level(
@@ -518,6 +533,10 @@ pub fn run(params: &Params2d) -> Result<Run2d, Sim2dError> {
     let mut run = Run2d {
         frame_period_us: frame_us,
         frames,
+        plate_mm,
+        off_plate_frames: 0,
+        first_off_plate_s: None,
+        pressed_frames: 0,
         window_switches: Vec::new(),
         edge_pulses: Vec::new(),
         lifts: Vec::new(),
@@ -536,11 +555,15 @@ pub fn run(params: &Params2d) -> Result<Run2d, Sim2dError> {
         let t_s = t_us as f64 * 1e-6;
         let start = params.trajectory.state(t0_us as f64 * 1e-6);
         let (fx, fy) = (
-            start.x_um / 1e3 / SCREEN_MM.0,
-            start.y_um / 1e3 / SCREEN_MM.1,
+            start.x_um / 1e3 / plate_mm.0,
+            start.y_um / 1e3 / plate_mm.1,
         );
         let lifted = params.lift_at_s.is_some_and(|l| t0_us as f64 * 1e-6 >= l);
         let on_plate = (0.0..=1.0).contains(&fx) && (0.0..=1.0).contains(&fy);
+        if !on_plate && !lifted {
+            run.off_plate_frames += 1;
+            run.first_off_plate_s.get_or_insert(t0_us as f64 * 1e-6);
+        }
         let finger = (!lifted && on_plate).then_some(Finger {
             x: fx,
             y: fy,
@@ -548,6 +571,9 @@ pub fn run(params: &Params2d) -> Result<Run2d, Sim2dError> {
         });
         let frame = model.frame(&sched, &adc, finger.as_ref(), t_us as u32);
         let reading = sensor.on_frame(&frame);
+        if reading != Reading::Lifted {
+            run.pressed_frames += 1;
+        }
         let out = ctrl.on_reading(t_us as u32, reading);
         // The port's order (`apply2d`): level and envelope, then the line.
         if let Some(e) = out.envelope {

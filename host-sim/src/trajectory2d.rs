@@ -281,6 +281,13 @@ impl Trajectory2d {
                 rule: "different from corner_a's x (the rows have no length)",
             });
         }
+        if corner_a.y_um == corner_b.y_um {
+            return Err(TrajectoryError::Value {
+                field: "corner_b y_um",
+                value: corner_b.y_um,
+                rule: "different from corner_a's y (the rows would lie on one another)",
+            });
+        }
         if rows < 2 {
             return Err(TrajectoryError::Value {
                 field: "rows",

@@ -363,7 +363,7 @@ fn help_states_unit_and_range_of_every_simulator_flag() {
         "Acceleration of --trajectory ramp, m/s² (0.01 to 100)",
         "ADC noise per conversion (12-bit), LSB RMS (0 to 100)",
         "ADC offset per conversion (12-bit), LSB (-4095 to 4095)",
-        "Simulated time, s (0.01 to 86400) [default: 3; constant and ramp: until the finger reaches --to; reversal: until it is back at --from]",
+        "Simulated time, s (0.01 to 86400) [default: 3; constant and ramp: until the finger reaches --to; reversal: until it is back at --from; a 2D path: to its end; a 2D run is at most 600 s]",
         "Noise seed (0 to 18446744073709551615)",
     ] {
         assert!(text.lines().any(|l| l.trim() == line), "missing {line:?} in\n{text}");

@@ -288,7 +288,7 @@ fn bad_flags_are_refused_with_one_line_naming_the_flag() {
         "--to-xy",
         "72,20",
     ];
-    let cases: [(Vec<&str>, &str); 7] = [
+    let cases: [(Vec<&str>, &str); 11] = [
         (
             [&line[..], &["--speed", "NaN"]].concat(),
             "invalid value 'NaN' for '--speed <MM_S>': must be a finite number from 0.1 to 1000 mm/s",
@@ -317,6 +317,26 @@ fn bad_flags_are_refused_with_one_line_naming_the_flag() {
             [&line[..], &["--accel", "3"]].concat(),
             "--accel 3 is a 1D flag; the 2D demo screen is a 2D scene",
         ),
+        // The shapes' own rules, named by their flags, not the trajectory's fields.
+        (
+            vec!["--trajectory", "line", "--from-xy", "5,20", "--to-xy", "5,20"],
+            "--from-xy 5,20 and --to-xy 5,20 are one point: a line needs two",
+        ),
+        (
+            vec!["--trajectory", "raster", "--from-xy", "5,5", "--to-xy", "90,5"],
+            "--from-xy 5,5 and --to-xy 90,5: a raster's opposite corners must differ in both x and y",
+        ),
+        (
+            vec![
+                "--trajectory", "spiral", "--center-xy", "40,25", "--radius", "10", "--r0", "20",
+            ],
+            "--radius 10 mm: must be above --r0 20 mm",
+        ),
+        // A lift the run never reaches.
+        (
+            [&line[..], &["--lift-at", "2", "--duration", "0.5"]].concat(),
+            "--lift-at 2 s: the run ends at 0.5 s (--duration), so the finger would never lift",
+        ),
     ];
     for (args, want) in cases {
         let out = Command::new(EXE).args(&args).output().unwrap();
@@ -333,6 +353,85 @@ fn bad_flags_are_refused_with_one_line_naming_the_flag() {
             rest.is_empty() || rest == ["For more information, try '--help'."],
             "{args:?}: {err}"
         );
+    }
+}
+
+/// The overlay is the scene's plate: on `scenes/2d-concave.toml` (80 × 60 mm) a stroke up to
+/// y = 59 mm stays on the overlay (no lift, no warning; on the fixed 95 × 54 mm screen it lifted
+/// at y ≈ 54 mm), and a run that leaves the plate, never presses or is cut short by `--duration`
+/// says so in one `warning:` line each (stderr, and the JSON's `warnings`).
+#[test]
+fn runs_use_the_scenes_plate_and_warn_when_the_finger_is_not_on_it() {
+    let run = |args: &[&str]| {
+        let out = Command::new(EXE)
+            .args(args)
+            .args(["--speed", "100", "--json"])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        (v, String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    let concave = "../scenes/2d-concave.toml";
+    let (v, err) = run(&[
+        "--scene", concave, "--trajectory", "line", "--from-xy", "20,40", "--to-xy", "20,59",
+    ]);
+    assert_eq!(v["plate_mm"], serde_json::json!([80.0, 60.0]), "{v}");
+    assert_eq!(v["lifts"].as_array().unwrap().len(), 0, "{v}");
+    assert_eq!(v["off_plate_frames"], 0, "{v}");
+    assert!(v["warnings"].as_array().unwrap().is_empty() && err.is_empty(), "{v} {err}");
+
+    // From 5 mm left of the plate at 100 mm/s: 50 ms off it, from the start.
+    let fig12 = "../scenes/2d-fig12.toml";
+    let (v, err) = run(&[
+        "--scene", fig12, "--trajectory", "line", "--from-xy", "-5,20", "--to-xy", "40,20",
+    ]);
+    let frames = v["off_plate_frames"].as_u64().unwrap() as f64;
+    let off_s = frames * v["frame_period_us"].as_f64().unwrap() * 1e-6;
+    assert!((off_s - 0.05).abs() <= 0.001, "{off_s} {v}");
+    assert!(
+        err.starts_with("warning: the finger's path is off the 95 x 54 mm plate for 0.05")
+            && err.contains("first at t = 0.0000 s"),
+        "{err}"
+    );
+    assert_eq!(v["warnings"].as_array().unwrap().len(), 1, "{v}");
+
+    let (v, err) = run(&[
+        "--scene", fig12, "--trajectory", "line", "--from-xy", "5,20", "--to-xy", "40,20",
+        "--force", "0.1",
+    ]);
+    assert_eq!(v["pressed_frames"], 0, "{v}");
+    assert!(err.contains("warning: the finger never pressed the overlay"), "{err}");
+
+    let (_, err) = run(&[
+        "--scene", fig12, "--trajectory", "line", "--from-xy", "5,20", "--to-xy", "75,20",
+        "--duration", "0.2",
+    ]);
+    assert!(
+        err.contains("warning: the run ends at 0.2 s (--duration), before the path does (0.700 s)"),
+        "{err}"
+    );
+}
+
+/// A file that cannot be read is named by its flag.
+#[test]
+fn an_unreadable_file_is_named_by_its_flag() {
+    for (args, want) in [
+        (
+            vec!["--trajectory", "path", "--path", "/nonexistent/walk.csv"],
+            "error: --path /nonexistent/walk.csv: No such file",
+        ),
+        (
+            vec![
+                "--scene", "/nonexistent/s.toml", "--trajectory", "line", "--from-xy", "5,20",
+                "--to-xy", "40,20",
+            ],
+            "error: --scene /nonexistent/s.toml: No such file",
+        ),
+    ] {
+        let out = Command::new(EXE).args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.starts_with(want), "{args:?}: {err}");
     }
 }
 
