@@ -413,6 +413,47 @@ fn runs_use_the_scenes_plate_and_warn_when_the_finger_is_not_on_it() {
     );
 }
 
+/// A reader that stops early ends the run quietly, as it ends `cat` (SIGPIPE), not with a
+/// panic in `println!`; a scene the controller refuses is one `error:` line, without the
+/// core's live-board log ("previous kept") before it.
+#[test]
+fn a_closed_pipe_and_a_refused_scene_end_without_noise() {
+    use std::os::unix::process::ExitStatusExt;
+    let mut child = Command::new(EXE)
+        .args(["--trajectory", "line", "--from-xy", "44,12", "--to-xy", "72,20", "-o"])
+        .arg(std::env::temp_dir().join("host-sim-sim2d-pipe.png"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(out.status.signal(), Some(13), "{:?} {err}", out.status);
+
+    let dir = std::env::temp_dir().join("host-sim-sim2d-tests");
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bowtie.toml");
+    std::fs::write(
+        &bad,
+        "[sensor]\nkind = \"4-wire\"\n[screen]\nsize_mm = [95, 54]\n[[window]]\n\
+         polygon_mm = [[10, 10], [30, 30], [30, 10], [10, 30]]\nkind = \"constant\"\nf_b_hz = 80\n",
+    )
+    .unwrap();
+    let out = Command::new(EXE)
+        .arg("--scene")
+        .arg(&bad)
+        .args(["--trajectory", "line", "--from-xy", "5,20", "--to-xy", "40,20"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    let lines: Vec<&str> = err.lines().filter(|l| !l.is_empty()).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(lines[0].starts_with("error: ") && lines[0].contains("window[0]"), "{err}");
+}
+
 /// A file that cannot be read is named by its flag.
 #[test]
 fn an_unreadable_file_is_named_by_its_flag() {
