@@ -13,13 +13,20 @@ use crate::sim2d::{scene_edges, Run2d};
 /// Pixels.
 const SIZE: (u32, u32) = (1400, 900);
 
-/// A colour for f_b on a blue (low) → red (high) scale over `lo..=hi`.
-fn fb_colour(fb: f64, lo: f64, hi: f64) -> RGBColor {
-    let u = if hi > lo {
-        ((fb - lo) / (hi - lo)).clamp(0.0, 1.0)
+/// Where f_b lies on the scale over `lo..=hi`, 0 to 1, logarithmic: the felt bands are ratios
+/// (bumpy under 30 Hz, rough to 100 Hz, smooth above 1 kHz: the seed paper), and on a linear
+/// scale to 1 kHz a scene's 20 and 80 Hz windows came out the same blue.
+fn fb_scale(fb: f64, lo: f64, hi: f64) -> f64 {
+    if hi > lo && lo > 0.0 && fb > 0.0 {
+        ((fb / lo).ln() / (hi / lo).ln()).clamp(0.0, 1.0)
     } else {
         0.5
-    };
+    }
+}
+
+/// A colour for f_b on a blue (low) → red (high) logarithmic scale over `lo..=hi`.
+fn fb_colour(fb: f64, lo: f64, hi: f64) -> RGBColor {
+    let u = fb_scale(fb, lo, hi);
     let c = HSLColor(0.66 * (1.0 - u), 0.9, 0.45).to_rgba();
     RGBColor(c.0, c.1, c.2)
 }
@@ -166,7 +173,7 @@ pub fn write_png(
     } else {
         for k in 0..=20 {
             let u = k as f64 / 20.0;
-            let fb = lo + (hi - lo) * u;
+            let fb = lo * (hi / lo).powf(u);
             let y = 380 - (u * 280.0) as i32;
             legend.draw(&Rectangle::new(
                 [(20, y - 14), (50, y)],
@@ -175,6 +182,7 @@ pub fn write_png(
         }
         legend.draw(&Text::new(format!("{hi:.1} Hz"), (60, 95), font.clone()))?;
         legend.draw(&Text::new(format!("{lo:.1} Hz"), (60, 370), font.clone()))?;
+        legend.draw(&Text::new("(log scale)", (60, 395), font.clone()))?;
     }
     legend.draw(&PathElement::new(
         vec![(20, 430), (50, 430)],
@@ -213,4 +221,19 @@ pub fn write_png(
     legend.draw(&Text::new("edge", (60, 542), font))?;
     root.present()?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fb_scale;
+
+    /// fig. 12's 20 and 80 Hz windows under a 1 kHz background sit apart on the scale: 80 Hz
+    /// is a third of the way up (ln 4 / ln 50 = 0.354), not 6 % as on a linear one.
+    #[test]
+    fn the_f_b_scale_is_logarithmic() {
+        assert_eq!(fb_scale(20.0, 20.0, 1000.0), 0.0);
+        assert!((fb_scale(1000.0, 20.0, 1000.0) - 1.0).abs() < 1e-12);
+        assert!((fb_scale(80.0, 20.0, 1000.0) - 0.354).abs() < 0.001);
+        assert_eq!(fb_scale(80.0, 80.0, 80.0), 0.5);
+    }
 }
