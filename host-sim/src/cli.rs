@@ -128,7 +128,11 @@ fn parse_level(s: &str) -> Result<log::LevelFilter, String> {
 /// The binary's other commands, each dispatched before the simulator's flags are parsed
 /// (`main.rs`), with what each does: `--help` lists them, `host-sim help COMMAND` shows one's
 /// help.
-pub const COMMANDS: [(&str, &str); 8] = [
+pub const COMMANDS: [(&str, &str); 9] = [
+    (
+        "check",
+        "scene files (1D or 2D) read as each board takes them, nothing run",
+    ),
     (
         "serve",
         "a virtual board behind a pseudo-terminal, for saw and its panel (docs/link.md)",

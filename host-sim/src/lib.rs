@@ -18,6 +18,7 @@ pub mod adc;
 pub mod bench;
 pub mod budget;
 pub mod chart;
+pub mod check;
 pub mod chart2d;
 pub mod cli;
 pub mod cli2d;

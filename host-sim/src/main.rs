@@ -39,6 +39,10 @@ fn main() -> ExitCode {
     if argv.first().map(String::as_str) == Some("help") {
         return help(&argv[1..]);
     }
+    // `host-sim check FILE…`: scene files read as the boards take them, nothing run.
+    if let Some(code) = host_sim::check::run_from_env() {
+        return code;
+    }
     // `host-sim bench …`: the velocity estimators measured (docs/bench-results.md).
     if let Some(code) = host_sim::bench::run_from_env() {
         return code;

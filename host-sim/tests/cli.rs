@@ -740,6 +740,7 @@ fn help_command_gives_each_commands_help() {
     assert_eq!(help.status.code(), Some(0), "{help:?}");
     assert_eq!(help.stdout, main.stdout);
     for cmd in [
+        "check",
         "serve",
         "soak",
         "model",
@@ -778,7 +779,7 @@ fn help_command_gives_each_commands_help() {
     assert_eq!(
         err.lines().next(),
         Some(
-            "error: unknown command 'nope': host-sim's commands are serve, soak, model, \
+            "error: unknown command 'nope': host-sim's commands are check, serve, soak, model, \
              tile-to-scene, bench, budget, guard, touch-budget"
         )
     );
@@ -833,4 +834,46 @@ fn sweeps_name_an_out_dir_they_cannot_write() {
         let want = format!("{cmd}: --out {out_dir}: cannot create {out_dir}/charts: ");
         assert!(lines[0].starts_with(&want), "{cmd}: {err}");
     }
+}
+
+/// `host-sim check`: every shipped scene is taken by both boards (one `ok` line each, saying
+/// 1D or 2D as its `[sensor]` does), and a bad file is refused on its line with exit 1, the
+/// good file beside it still checked.
+#[test]
+fn check_reads_scene_files_as_the_boards_take_them() {
+    let scenes = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes");
+    let mut files: Vec<String> = std::fs::read_dir(scenes)
+        .unwrap()
+        .map(|e| e.unwrap().path().display().to_string())
+        .filter(|p| p.ends_with(".toml"))
+        .collect();
+    files.sort();
+    let args: Vec<&str> = std::iter::once("check").chain(files.iter().map(String::as_str)).collect();
+    let out = run(&args);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{text}");
+    assert_eq!(text.lines().count(), 2 * files.len(), "{text}");
+    assert!(text.lines().all(|l| l.contains(": ok on nucleo-")), "{text}");
+    assert!(
+        text.contains("2d-fig12.toml: ok on nucleo-f446re: 2D, 3 windows and 12 edges on a 95 x 54 mm plate"),
+        "{text}"
+    );
+    assert!(text.contains("lines.toml: ok on nucleo-g474re: 1D, 1 region and 5 lines"), "{text}");
+
+    let dir = std::env::temp_dir().join("host-sim-cli-check");
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[[region]]\nkind = \"constant\"\nf_b_hz = 99999\n").unwrap();
+    let bad = bad.display().to_string();
+    let good = format!("{scenes}/default.toml");
+    let out = run(&["check", &bad, &good, "--board", "nucleo-f446re"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 2, "{text}");
+    assert!(
+        lines[0].starts_with(&format!("{bad}: refused on nucleo-f446re: {bad}:3:")),
+        "{text}"
+    );
+    assert!(lines[1].starts_with(&format!("{good}: ok on nucleo-f446re: 1D")), "{text}");
 }
