@@ -232,6 +232,13 @@ fn unknown_keys_and_values_name_the_nearest_or_a_short_list() {
             "off.toml:3:1: `region[0].colour`: unknown key `colour`: an `off` region takes `kind` and \
              `until_mm` (docs/scenes.md lists every kind's keys)",
         ),
+        // A 2D scene without `[sensor]` is read as 1D: its tables are named as 2D ones.
+        (
+            "[screen]\nsize_mm = [95, 54]\n\n[[window]]\nrect_mm = [5, 5, 30, 49]\nkind = \"off\"\n",
+            "nosensor.toml:1:2: `screen`: unknown key `screen`: `screen` is a 2D scene's table, and a \
+             file without `[sensor]` is a 1D scene for the rheostat: add `[sensor] kind = \"4-wire\"` \
+             for the touch overlay",
+        ),
         (
             "[limits]\nzzz = 30\n\n[[region]]\nkind = \"off\"\n",
             "limits.toml:2:1: `limits.zzz`: unknown key `zzz`: [limits] takes `max_duty_percent`, \

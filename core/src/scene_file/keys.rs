@@ -151,6 +151,17 @@ pub(super) fn unknown(message: &str, region_kind: Option<&str>) -> Option<String
     let (typed, expected) = rest.split_once(", expected")?;
     let typed = ticked(typed).first().copied()?;
     let expected = ticked(expected);
+    // A 2D scene's table in a file read as 1D: the file does not name its sensor.
+    if what == "key"
+        && keys("top").is_some_and(|k| k == expected.as_slice())
+        && keys("2d.top").is_some_and(|k| k.contains(&typed))
+    {
+        return Some(format!(
+            "unknown key `{typed}`: `{typed}` is a 2D scene's table, and a file without \
+             `[sensor]` is a 1D scene for the rheostat: add `[sensor] kind = \"4-wire\"` for \
+             the touch overlay"
+        ));
+    }
     let kind_keys = region_kind
         .and_then(|k| spec::kind_fields(k).map(|f| (k, f)))
         .filter(|_| what == "key" && keys("region").is_some_and(|r| r == expected.as_slice()));
