@@ -164,8 +164,13 @@ pub enum Command {
         /// The scene file (TOML, as in scenes/).
         file: PathBuf,
     },
-    /// Print the active scene (`--json`: the whole configuration).
-    Get,
+    /// Print the active scene (`--json`: the whole configuration; `--toml`: as a scene file).
+    Get {
+        /// Print the scene as a scene file (TOML, docs/scenes.md), to keep what was tuned live
+        /// and push it again: `saw get --toml > tuned.toml`.
+        #[arg(long)]
+        toml: bool,
+    },
     /// Move boundary INDEX (where region INDEX ends) to MM, live.
     Boundary {
         /// Boundary index, 0 = the end of the first region (0 to 255).
@@ -471,7 +476,7 @@ pub(crate) fn execute<P: std::io::Read + std::io::Write>(
             })
         }
         Command::Push { file } => push(client, file),
-        Command::Get => get(client),
+        Command::Get { toml } => get(client, *toml),
         Command::Boundary { index, mm } => boundary(client, *index, *mm),
         Command::Window { index, to, rect } => window(client, *index, *to, *rect),
         Command::Set { index, keys } => set(client, *index, keys),
@@ -919,14 +924,34 @@ pub(crate) fn plane_texture_text(t: &saw_core::plane::PlaneTexture) -> String {
     }
 }
 
-fn get<P: std::io::Read + std::io::Write>(client: &mut Client<P>) -> Result<Done, Failure> {
+fn get<P: std::io::Read + std::io::Write>(
+    client: &mut Client<P>,
+    toml: bool,
+) -> Result<Done, Failure> {
+    // The file's title: which scene it was read back from.
+    let title = |scene_id: u32, source: SceneSource| {
+        format!(
+            "Read back with `saw get --toml`: scene {scene_id:#010x}, {}.",
+            source_name(source)
+        )
+    };
     match client.request(&Request::GetScene)? {
         Reply::Scene2d {
             scene_id,
             source,
             scene,
         } => Ok(Done {
-            text: scene_2d_text(scene_id, source, &scene),
+            text: if toml {
+                saw_core::scene_file::to_scene_file_2d(
+                    &scene.config,
+                    scene.plate_um,
+                    &title(scene_id, source),
+                )
+                .trim_end()
+                .to_string()
+            } else {
+                scene_2d_text(scene_id, source, &scene)
+            },
             json: json!({
                 "scene_id": scene_hex(scene_id),
                 "scene_source": source_key(source),
@@ -938,7 +963,13 @@ fn get<P: std::io::Read + std::io::Write>(client: &mut Client<P>) -> Result<Done
             source,
             config,
         } => Ok(Done {
-            text: scene_text(scene_id, source, &config),
+            text: if toml {
+                saw_core::scene_file::to_scene_file(&config, &title(scene_id, source))
+                    .trim_end()
+                    .to_string()
+            } else {
+                scene_text(scene_id, source, &config)
+            },
             json: json!({
                 "scene_id": scene_hex(scene_id),
                 "scene_source": source_key(source),

@@ -126,6 +126,24 @@ fn a_2d_scene_is_pushed_read_back_edited_and_a_1d_one_refused() {
         v.y_um -= 3_000;
     }
     assert_eq!(moved, want);
+    // `get --toml` is a scene file of what runs: the moved window, kept and pushed again.
+    let tuned = saw(&vb.port, &["get", "--toml"]);
+    assert_eq!(tuned.code, 0, "{}", tuned.stderr);
+    assert!(tuned.stdout.starts_with("# Read back with `saw get --toml`: scene 0x"), "{}", tuned.stdout);
+    let dir = std::env::temp_dir().join(format!("saw-e2e2d-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let tuned_file = dir.join("tuned.toml");
+    std::fs::write(&tuned_file, &tuned.stdout).unwrap();
+    assert_eq!(
+        saw_core::scene_file::load_2d_for_board("tuned.toml", &tuned.stdout, timer(), frame_us())
+            .unwrap(),
+        want
+    );
+    let r = saw(&vb.port, &["push", s(&fig12)]);
+    assert_eq!(r.code, 0, "{} {}", r.stdout, r.stderr);
+    let r = saw(&vb.port, &["push", s(&tuned_file)]);
+    assert_eq!(r.code, 0, "{} {}", r.stdout, r.stderr);
+    assert_eq!(read_back(&vb.port).1, want);
     let r = saw(&vb.port, &["window", "1", "--rect", "40,10,62.5,30"]);
     assert_eq!(r.code, 0, "{} {}", r.stdout, r.stderr);
     let (id, resized, _) = read_back(&vb.port);
