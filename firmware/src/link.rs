@@ -307,6 +307,8 @@ pub trait Streaming: Board {
     fn count_sent(&mut self);
 }
 
+// The 2D image's saw-link (`plane-only`) has no 1D stream frame.
+#[cfg(not(feature = "touch-2d"))]
 impl Streaming for FirmwareBoard {
     type Record = Record;
     fn records(&self) -> &'static Channel<CriticalSectionRawMutex, Record, QUEUE_RECORDS> {
@@ -375,6 +377,9 @@ mod uart {
         let mut batcher = Batcher::<<LinkBoard as Streaming>::Record>::default();
         let mut bytes = [0u8; 64];
         let records = board.records();
+        // The 2D image's boot scene, compiled by the control loop before the first request.
+        #[cfg(feature = "touch-2d")]
+        crate::link2d::boot_scene(session, board).await;
         loop {
             match select3(rx.read(&mut bytes), records.receive(), Timer::after(FLUSH_AFTER)).await {
                 Either3::First(Ok(n)) => {
