@@ -50,7 +50,7 @@ pub enum Request {
     GetScene,
     /// Replace the whole scene: compiled on the board (the same step a scene file goes
     /// through on the host) and swapped in at the next sample, or refused with nothing changed.
-    LoadScene(Config),
+    LoadScene(LineScene),
     /// Move boundary `index` (where region `index` ends) to `at_um`.
     MoveBoundary {
         /// Boundary index, 0 = the end of the first region.
