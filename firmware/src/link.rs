@@ -285,9 +285,21 @@ pub fn spawn(
     session: saw_link::session::Session,
     board: LinkBoard,
 ) {
-    static SESSION: static_cell::StaticCell<saw_link::session::Session> = static_cell::StaticCell::new();
     static BOARD: static_cell::StaticCell<LinkBoard> = static_cell::StaticCell::new();
-    spawner.spawn(defmt::unwrap!(uart::link(tx, rx, SESSION.init(session), BOARD.init(board))));
+    spawn_on(spawner, tx, rx, session, BOARD.init(board));
+}
+
+/// `spawn` over board glue already in its static (the 2D image's: its boot loads the saved scene
+/// through the glue's store there, so main's future never holds the store).
+pub fn spawn_on(
+    spawner: embassy_executor::Spawner,
+    tx: embassy_stm32::usart::UartTx<'static, embassy_stm32::mode::Async>,
+    rx: embassy_stm32::usart::RingBufferedUartRx<'static>,
+    session: saw_link::session::Session,
+    board: &'static mut LinkBoard,
+) {
+    static SESSION: static_cell::StaticCell<saw_link::session::Session> = static_cell::StaticCell::new();
+    spawner.spawn(defmt::unwrap!(uart::link(tx, rx, SESSION.init(session), board)));
 }
 
 /// The board glue the link task serves: the 1D image's, or the 2D image's (`link2d.rs`).

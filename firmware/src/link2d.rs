@@ -385,7 +385,7 @@ pub async fn boot_scene(session: &mut Session, board: &mut Board2d) {
 /// The session and the board glue, from the boot.
 pub struct Booted {
     pub session: Session,
-    pub board: Board2d,
+    pub board: &'static mut Board2d,
 }
 
 /// The scene to boot into and the link's session over it: the 2D scene saved in flash if it
@@ -398,45 +398,57 @@ pub async fn boot(
     builtin_file: &'static str,
     frame_us: u32,
 ) -> Booted {
-    let mut store: Option<Store2d> = crate::store::open(flash);
-    let mut booted: Option<(PlaneScene, SceneSource)> = None;
-    match store.as_mut() {
-        Some(s) => match crate::store::load_2d_at_boot(s).await {
-            Ok(Some(saved)) => {
-                if saved.scene.plate_um.0 <= PLATE_UM.0 && saved.scene.plate_um.1 <= PLATE_UM.1 {
-                    booted = Some((saved.scene, SceneSource::Saved));
-                } else {
-                    warn!(
-                        "boot: the saved 2D scene {=u32:08x} does not fit the overlay",
-                        saved.scene_id
-                    );
-                }
-            }
-            Ok(None) => info!("boot: no scene saved in flash"),
-            Err(e) => warn!("boot: the saved scene cannot be read ({})", e),
-        },
-        None => info!("boot: no scene store on this board"),
-    }
-    let (scene, source) = match booted {
-        Some(b) => b,
-        None => (builtin_scene(builtin), SceneSource::BuildTime),
-    };
     let identity = Identity {
         firmware: concat!("saw-firmware ", env!("CARGO_PKG_VERSION")),
         board: BOARD.name,
         sample_rate_hz: 1_000_000 / frame_us.max(1),
     };
-    let session = Session::new_2d(identity, PLATE_UM, scene, source);
-    Booted {
-        session,
-        board: Board2d {
-            sent: 0,
-            store,
-            identity,
-            builtin,
-            builtin_file,
-        },
-    }
+    // The glue (with the store's 2 KB item buffer) in its static before the load, and nothing of
+    // the scene held across the load's await: main's future (a static of its own for good) holds
+    // a reference and the load's state only. Holding the store and the scene, it was 4 880 B,
+    // which the G474's stack lacked (board-model tests/link2d.rs's stack checks).
+    static BOARD2D: static_cell::StaticCell<Board2d> = static_cell::StaticCell::new();
+    let board = BOARD2D.init(Board2d {
+        sent: 0,
+        store: crate::store::open(flash),
+        identity,
+        builtin,
+        builtin_file,
+    });
+    let loaded = match board.store.as_mut() {
+        Some(s) => Some(crate::store::load_2d_at_boot(s).await),
+        None => None,
+    };
+    let saved = match loaded {
+        Some(Ok(Some(saved))) => {
+            if saved.scene.plate_um.0 <= PLATE_UM.0 && saved.scene.plate_um.1 <= PLATE_UM.1 {
+                Some(saved.scene)
+            } else {
+                warn!(
+                    "boot: the saved 2D scene {=u32:08x} does not fit the overlay",
+                    saved.scene_id
+                );
+                None
+            }
+        }
+        Some(Ok(None)) => {
+            info!("boot: no scene saved in flash");
+            None
+        }
+        Some(Err(e)) => {
+            warn!("boot: the saved scene cannot be read ({})", e);
+            None
+        }
+        None => {
+            info!("boot: no scene store on this board");
+            None
+        }
+    };
+    let session = match saved {
+        Some(scene) => Session::new_2d(identity, PLATE_UM, scene, SceneSource::Saved),
+        None => Session::new_2d(identity, PLATE_UM, builtin_scene(builtin), SceneSource::BuildTime),
+    };
+    Booted { session, board }
 }
 
 /// Starts the link (and `arm2d`), either board; the link task's first step is the boot scene's
@@ -445,7 +457,7 @@ pub async fn boot(
 /// statics, `link::spawn`): before, its 96 KiB RAM left too little stack for the boot's scene
 /// compile (the board model found a stack overflow 3.3 ms after reset).
 pub fn start(spawner: embassy_executor::Spawner, tx: UartTx<'static, Async>, rx: RingBufferedUartRx<'static>, booted: Booted) {
-    link::spawn(spawner, tx, rx, booted.session, booted.board);
+    link::spawn_on(spawner, tx, rx, booted.session, booted.board);
     spawner.spawn(defmt::unwrap!(arm2d()));
 }
 
