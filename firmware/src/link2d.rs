@@ -61,6 +61,11 @@ static FULL: AtomicBool = AtomicBool::new(false);
 /// link task's ~42 KB poll frame. Set from inside that poll, the first push on the board model
 /// ran the F446's stack off the start of RAM (board-model/tests/link2d.rs, the save test).
 static ARM: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// `FULL` has been set: wakes the control loop while it waits for the boot scene
+/// (`ControlLink::boot`; after that it finds `FULL` between two frames).
+static ARMED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// The boot scene is in (or refused, and the built-in one tried): the acquisition may start.
+static BOOTED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// The control loop's answer: the scene runs, or the controller's refusal.
 static APPLIED: Signal<CriticalSectionRawMutex, Result<(), Config2dError>> = Signal::new();
 /// The 2D counters, handed over between two frames (asked by `link::TELEMETRY_WANTED`).
@@ -166,6 +171,25 @@ impl ControlLink {
             tap: Tap2d::new(stamp),
             rf_arm,
             held: None,
+        }
+    }
+
+    /// Before the acquisition starts: the boot scene's hand-over(s) from the link task
+    /// (`boot_scene`), each compiled and installed here when `arm2d` raises `FULL`, until the
+    /// link task says the boot is done. The plates are not switched yet: the compile's log lines
+    /// (interrupts held off while defmt encodes them) and the edge pulse's table build delay no
+    /// plate event (with the acquisition running, the boot scene's compile made the F446's Z1
+    /// switch 100 µs late and cost a frame: board-model tests/touch2d.rs,
+    /// `plate_switching_at_its_designed_times`). `pet` feeds the watchdog meanwhile.
+    pub async fn boot(&mut self, ctrl: &mut Controller2d, burst: &mut BurstGate, mut pet: impl FnMut()) {
+        use embassy_futures::select::{select, Either};
+        loop {
+            let done = matches!(select(ARMED.wait(), BOOTED.wait()).await, Either::Second(()));
+            self.service(ctrl, burst);
+            pet();
+            if done {
+                return;
+            }
         }
     }
 
@@ -380,6 +404,7 @@ pub async fn boot_scene(session: &mut Session, board: &mut Board2d) {
         }
         Err(_) => warn!("boot: the 2D scene is refused; no scene, RF stays off"),
     }
+    BOOTED.signal(());
 }
 
 /// The session and the board glue, from the boot.
@@ -467,6 +492,7 @@ pub async fn arm2d() {
     loop {
         ARM.wait().await;
         FULL.store(true, Ordering::Release);
+        ARMED.signal(());
     }
 }
 

@@ -764,6 +764,8 @@ async fn control2d(
     mut link: crate::link2d::ControlLink,
     mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
 ) {
+    // The boot scene first (`ControlLink::boot`), then the acquisition.
+    link.boot(ctrl, &mut burst, || wdg.pet()).await;
     let mut watchdog = Ticker::every(WATCHDOG_PERIOD);
     let mut next_log = Instant::now().as_micros() + TELEMETRY_PERIOD_US;
     // The task's state is in place: the acquisition may start.
