@@ -285,8 +285,9 @@ pub fn spawn(
     session: saw_link::session::Session,
     board: LinkBoard,
 ) {
+    static SESSION: static_cell::StaticCell<saw_link::session::Session> = static_cell::StaticCell::new();
     static BOARD: static_cell::StaticCell<LinkBoard> = static_cell::StaticCell::new();
-    spawn_on(spawner, tx, rx, session, BOARD.init(board));
+    spawner.spawn(defmt::unwrap!(uart::link(tx, rx, SESSION.init(session), BOARD.init(board))));
 }
 
 /// `spawn` over board glue already in its static (the 2D image's: its boot loads the saved scene
