@@ -282,8 +282,6 @@ impl Board for Board2d {
         Err(StoreFault::NotFor2d)
     }
 
-    /// Compiled here, in the link task (thread mode, below the frames); the control loop only
-    /// moves it in between two frames (`ControlLink::service`). Refused: nothing changes.
     /// Compiled and installed by the control loop between two frames (see `SCENE`); refused:
     /// nothing changes.
     async fn apply_2d(&mut self, scene: &PlaneScene, stamp: Stamp) -> Result<(), Apply2dError> {
