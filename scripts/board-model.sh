@@ -32,9 +32,9 @@
 # lift-off, sensor-to-gate latency, edge pulses, the closed loop against host-sim, the stack with
 # the largest 2D scene (docs/board-model.md, "The 2D image"); this script builds those images
 # first when they are missing (TOUCH_2D=1 / TOUCH_2D=largest scripts/build-firmware.sh); and
-# tests/link2d.rs, the 2D images' host link and store (firmware/target/<board>-2d-link.elf,
-# TOUCH_2D=link, both boards, built when missing): push and read back, refusals, windows moved live, x and y in
-# the stream, a save and power cuts in it.
+# tests/link2d.rs, the 2D image's host link and store (the same <board>-2d.elf, both boards):
+# push and read back, refusals, windows moved live, x and y in the stream, a save and power cuts
+# in it.
 # Needs firmware/target/<board>.elf (scripts/build-firmware.sh) and defmt-print (scripts/setup.sh).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -58,14 +58,6 @@ for kind in 1 largest; do
             [ "$SAW_FIRMWARE_DIR" = "$ROOT/firmware/target" ] || cp "$ROOT/firmware/target/$b$suffix.elf" "$SAW_FIRMWARE_DIR/"
         fi
     done
-done
-# tests/link2d.rs: both boards' 2D images with the link (TOUCH_2D=link, issue #36).
-for b in nucleo-f446re nucleo-g474re; do
-    if [ ! -f "$SAW_FIRMWARE_DIR/$b-2d-link.elf" ]; then
-        echo "== board model: building the 2D link image $b-2d-link.elf (TOUCH_2D=link)"
-        TOUCH_2D=link CARGO_TARGET_DIR="$ROOT/firmware/target" "$ROOT/scripts/build-firmware.sh" "$b" >/dev/null
-        [ "$SAW_FIRMWARE_DIR" = "$ROOT/firmware/target" ] || cp "$ROOT/firmware/target/$b-2d-link.elf" "$SAW_FIRMWARE_DIR/"
-    fi
 done
 cd "$ROOT/board-model"
 echo "== board model: tests"

@@ -59,25 +59,24 @@ case "${DUAL_ADC:-0}" in
     *) echo "build-firmware: DUAL_ADC is 0, 1 or 128, not '$DUAL_ADC'" >&2; exit 2 ;;
 esac
 # TOUCH_2D=1 builds the 2D image (feature `touch-2d`: the 4-wire overlay, Controller2d, the 2D
-# scene SAW_SCENE_2D or scenes/2d-fig12.toml built in; issue #36) and leaves
-# firmware/target/<board>-2d.elf. TOUCH_2D=largest builds it with the largest 2D scene
+# scene saved in flash or SAW_SCENE_2D / scenes/2d-fig12.toml built in, the host link and the
+# store; issue #36) and leaves firmware/target/<board>-2d.elf. TOUCH_2D=largest builds it with the largest 2D scene
 # (board-model/scenes/2d-largest.toml: 8 windows of 16 vertices, 32 edges) into
 # <board>-2d-largest.elf, for the board model's stack check. TOUCH_2D=plant builds the planted
 # defect `plant-touch-no-settle` (conversions a quarter of the settling after the switch) into <board>-2d-plant.elf,
 # which the board model's plate-timing check must fail. TOUCH_2D=plant-link builds the planted defect
 # `plant-link2d-old-stamp` (records keep the old scene's stamp after a push) into
 # <board>-2d-plant-link.elf, which board-model/tests/link2d.rs must fail.
-# TOUCH_2D=link builds the 2D image with the host link running (feature `link-2d`, profile
-# `release-2d` at opt-level "z": firmware/Cargo.toml says why) into <board>-2d-link.elf.
+# TOUCH_2D=link is TOUCH_2D=1 (the 2D image has run the link since 2026-11-30; it was an image of
+# its own, at opt-level "z", before): <board>-2d.elf.
 PROFILE=release
 case "${TOUCH_2D:-0}" in
     0) ;;
-    1) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d" ;;
-    link) PLANT+=(--features link-2d); SUFFIX="$SUFFIX-2d-link"; PROFILE=release-2d ;;
+    1|link) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d" ;;
     largest) PLANT+=(--features touch-2d); SUFFIX="$SUFFIX-2d-largest"
         export SAW_SCENE_2D=board-model/scenes/2d-largest.toml ;;
     plant) PLANT+=(--features plant-touch-no-settle); SUFFIX="$SUFFIX-2d-plant" ;;
-    plant-link) PLANT+=(--features plant-link2d-old-stamp); SUFFIX="$SUFFIX-2d-plant-link"; PROFILE=release-2d ;;
+    plant-link) PLANT+=(--features plant-link2d-old-stamp); SUFFIX="$SUFFIX-2d-plant-link" ;;
     *) echo "build-firmware: TOUCH_2D is 0, 1, link, largest, plant or plant-link, not '$TOUCH_2D'" >&2; exit 2 ;;
 esac
 case "${SELFTEST:-0}" in

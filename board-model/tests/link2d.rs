@@ -8,9 +8,9 @@
 //! from the image: scenes are read with the scene-file reader as `saw push` reads them, edited
 //! windows are built here vertex by vertex, f_b comes from the files' `f_b_hz`.
 //!
-//! Needs `$SAW_FIRMWARE_DIR/<board>-2d-link.elf` (`TOUCH_2D=link scripts/build-firmware.sh
-//! nucleo-f446re`; default directory `../firmware/target`). Not yet run by scripts/board-model.sh:
-//! the link image is not the default 2D image (firmware/Cargo.toml, feature `link-2d`).
+//! Needs `$SAW_FIRMWARE_DIR/<board>-2d.elf` (`TOUCH_2D=1 scripts/build-firmware.sh`, the 2D image,
+//! which runs the link; default directory `../firmware/target`; scripts/board-model.sh builds it
+//! when missing).
 
 use host_sim::touch::{Finger, Overlay};
 use saw_board_model::board::{BoardKind, PIN_BURST_A};
@@ -26,10 +26,11 @@ use saw_link::msg::{
 use std::path::PathBuf;
 use std::rc::Rc;
 
-/// Both boards' 2D link images: the push, read-back and refusal test runs on each (the G474's
-/// image ran off the start of its 96 KiB RAM at boot until the link task's future went from
-/// 25 016 B to 8 824 B, `saw_link::session::Session::on_frame`). The stack check runs on the
-/// F446's only: the G474's keeps 1 568 B, not 16 KiB (`g474_2d_image_boots_with_the_link`).
+/// Both boards' 2D images: the push, read-back and refusal test and the stack checks run on each
+/// (the G474's image ran off the start of its 96 KiB RAM at boot until the link task's future
+/// went from 25 016 B to 8 824 B, `saw_link::session::Session::on_frame`; then kept 1 568 B of
+/// headroom at boot until the boot scene's compile left main's poll frame,
+/// `firmware/src/link2d.rs`, `boot_scene`).
 const BOTH: [BoardKind; 2] = [BoardKind::F446, BoardKind::G474];
 /// The heavier tests (windows edited live, the stream, the save and its power cuts) run on the
 /// F446's only: the link task, the session and the store are the same code on both, and CI's
@@ -45,10 +46,10 @@ const MIN_HEADROOM: u32 = 16 * 1024;
 fn elf(board: BoardKind) -> PathBuf {
     let dir = std::env::var("SAW_FIRMWARE_DIR")
         .unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/../firmware/target").into());
-    let p = PathBuf::from(dir).join(format!("{}-2d-link.elf", board.name()));
+    let p = PathBuf::from(dir).join(format!("{}-2d.elf", board.name()));
     assert!(
         p.exists(),
-        "{} is missing: run TOUCH_2D=link scripts/build-firmware.sh first",
+        "{} is missing: run TOUCH_2D=1 scripts/build-firmware.sh first",
         p.display()
     );
     p
@@ -259,6 +260,23 @@ fn a_2d_scene_pushed_reads_back_and_a_bad_one_changes_nothing() {
         };
         let mut oversize = vec![0x55u8; saw_link::frame::MAX_ENCODED + 64];
         oversize.push(0);
+        // A 1D scene as `saw push scenes/default.toml` sends it, and a 1D texture edit: the 2D
+        // image leaves their bodies unread (saw-link's `plane-only`) and refuses them.
+        let line = {
+            let text = std::fs::read_to_string(
+                concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/default.toml"),
+            )
+            .unwrap();
+            let def = board.def();
+            let timer = saw_core::burst::BurstTimer {
+                clock_hz: def.burst_timer_clk_hz,
+                counter_bits: def.burst_timer_bits,
+                max_burst_hz: def.max_burst_hz,
+            };
+            saw_core::scene_file::load_for_board("scenes/default.toml", &text, timer, 100)
+                .unwrap()
+        };
+        let texture = line.scene.textures[0];
         let input = vec![
             (0.30, frame(1, &Request::Hello)),
             (0.31, frame(2, &Request::Sensor)),
@@ -269,6 +287,8 @@ fn a_2d_scene_pushed_reads_back_and_a_bad_one_changes_nothing() {
             (0.48, frame(7, &Request::LoadScene2d(bad_config.clone()))),
             (0.50, malformed),
             (0.52, oversize),
+            (0.53, frame(11, &Request::LoadScene(line))),
+            (0.54, frame(12, &Request::SetTexture { region: 0, texture })),
             (0.56, frame(9, &Request::GetScene)),
             (0.58, frame(10, &Request::Stream { every_samples: 1 })),
         ];
@@ -347,6 +367,19 @@ fn a_2d_scene_pushed_reads_back_and_a_bad_one_changes_nothing() {
             .into_iter()
             .any(|(_, _, r)| matches!(r, Reply::Error(LinkError::Oversize { .. })));
         assert!(oversized, "{board:?}: the oversized frame was not refused");
+        for seq in [11, 12] {
+            let r = refused(seq);
+            assert!(
+                matches!(r, Refused2d::WrongSensor { .. }),
+                "{board:?}: request {seq}: {r:?}"
+            );
+            assert_eq!(
+                r.to_string(),
+                "this board reads the 4-wire touch overlay, 95 x 54 mm (2D scenes): a 1D scene \
+                 (regions, boundaries; no [sensor] table) needs a board with the slide rheostat",
+                "{board:?}"
+            );
+        }
         assert_eq!(
             answer(&o, 9).1,
             back,
@@ -406,7 +439,7 @@ fn a_2d_scene_pushed_reads_back_and_a_bad_one_changes_nothing() {
 /// wrapper went, firmware/src/link.rs).
 #[test]
 fn pushes_keep_16_kib_of_stack_headroom() {
-    for board in BOARDS {
+    for board in BOTH {
         let input = vec![(0.34, frame(1, &Request::LoadScene2d(largest(board))))];
         let (o, _m) = run2d(
             board,
@@ -419,11 +452,11 @@ fn pushes_keep_16_kib_of_stack_headroom() {
     }
 }
 
-/// The G474's 2D image with the link boots and answers hello (it overflowed its stack at boot
-/// while the link task's future was 25 KB). Its deepest stack is at boot, the scene's compile
-/// under main's poll frame: 60 920 B of 62 488 B reserved, 1 568 B of headroom, printed, not
-/// asserted against the 16 KiB the F446's keeps (docs/board-model.md, "The 2D image's link and
-/// store"); an overflow stops the run, which fails here.
+/// The G474's 2D image boots and answers hello with 16 KiB of stack headroom (it overflowed its
+/// stack at boot while the link task's future was 25 KB; then kept 1 568 B with the boot scene
+/// compiled under main's poll frame, 60 920 B of 62 488 B: now the control loop compiles it on
+/// an idle thread mode, `firmware/src/link2d.rs`, `boot_scene`). The largest scene's boot is
+/// tests/touch2d.rs's stack check.
 #[test]
 fn g474_2d_image_boots_with_the_link() {
     let board = BoardKind::G474;
@@ -435,13 +468,7 @@ fn g474_2d_image_boots_with_the_link() {
         None,
     );
     assert!(matches!(answer(&o, 1).1, Reply::Hello(_)));
-    let s = o.stack.expect("the image's stack region");
-    eprintln!(
-        "G474 boot and hello: deepest stack {} B of {} B reserved, headroom {} B",
-        s.deepest(),
-        s.region.reserved(),
-        s.headroom()
-    );
+    check_stack(board, &o, "boot and hello");
 }
 
 /// A scene file read without the board's checks (its plate may not fit the board).

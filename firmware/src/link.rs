@@ -290,6 +290,19 @@ pub fn spawn(
     spawner.spawn(defmt::unwrap!(uart::link(tx, rx, SESSION.init(session), BOARD.init(board))));
 }
 
+/// `spawn` over board glue already in its static (the 2D image's: its boot loads the saved scene
+/// through the glue's store there, so main's future never holds the store).
+pub fn spawn_on(
+    spawner: embassy_executor::Spawner,
+    tx: embassy_stm32::usart::UartTx<'static, embassy_stm32::mode::Async>,
+    rx: embassy_stm32::usart::RingBufferedUartRx<'static>,
+    session: saw_link::session::Session,
+    board: &'static mut LinkBoard,
+) {
+    static SESSION: static_cell::StaticCell<saw_link::session::Session> = static_cell::StaticCell::new();
+    spawner.spawn(defmt::unwrap!(uart::link(tx, rx, SESSION.init(session), board)));
+}
+
 /// The board glue the link task serves: the 1D image's, or the 2D image's (`link2d.rs`).
 #[cfg(not(feature = "touch-2d"))]
 pub type LinkBoard = FirmwareBoard;
@@ -307,6 +320,8 @@ pub trait Streaming: Board {
     fn count_sent(&mut self);
 }
 
+// The 2D image's saw-link (`plane-only`) has no 1D stream frame.
+#[cfg(not(feature = "touch-2d"))]
 impl Streaming for FirmwareBoard {
     type Record = Record;
     fn records(&self) -> &'static Channel<CriticalSectionRawMutex, Record, QUEUE_RECORDS> {
@@ -375,6 +390,9 @@ mod uart {
         let mut batcher = Batcher::<<LinkBoard as Streaming>::Record>::default();
         let mut bytes = [0u8; 64];
         let records = board.records();
+        // The 2D image's boot scene, compiled by the control loop before the first request.
+        #[cfg(feature = "touch-2d")]
+        crate::link2d::boot_scene(session, board).await;
         loop {
             match select3(rx.read(&mut bytes), records.receive(), Timer::after(FLUSH_AFTER)).await {
                 Either3::First(Ok(n)) => {

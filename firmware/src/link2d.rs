@@ -26,7 +26,7 @@ use saw_core::plane::{
 };
 use saw_core::touch::frame::Reading;
 use saw_link::msg::{Fault2d, PlaneScene, Record2d, SceneSource, StoreFault};
-use saw_link::session::{Apply2dError, Board, Identity, Session, Stamp};
+use saw_link::session::{Active, Apply2dError, Board, Identity, Session, Stamp};
 use saw_link::stream::{Decimator, QUEUE_RECORDS};
 use saw_store::{SceneStore, ITEM_BYTES_2D};
 
@@ -61,6 +61,11 @@ static FULL: AtomicBool = AtomicBool::new(false);
 /// link task's ~42 KB poll frame. Set from inside that poll, the first push on the board model
 /// ran the F446's stack off the start of RAM (board-model/tests/link2d.rs, the save test).
 static ARM: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// `FULL` has been set: wakes the control loop while it waits for the boot scene
+/// (`ControlLink::boot`; after that it finds `FULL` between two frames).
+static ARMED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// The boot scene is in (or refused, and the built-in one tried): the acquisition may start.
+static BOOTED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// The control loop's answer: the scene runs, or the controller's refusal.
 static APPLIED: Signal<CriticalSectionRawMutex, Result<(), Config2dError>> = Signal::new();
 /// The 2D counters, handed over between two frames (asked by `link::TELEMETRY_WANTED`).
@@ -169,6 +174,25 @@ impl ControlLink {
         }
     }
 
+    /// Before the acquisition starts: the boot scene's hand-over(s) from the link task
+    /// (`boot_scene`), each compiled and installed here when `arm2d` raises `FULL`, until the
+    /// link task says the boot is done. The plates are not switched yet: the compile's log lines
+    /// (interrupts held off while defmt encodes them) and the edge pulse's table build delay no
+    /// plate event (with the acquisition running, the boot scene's compile made the F446's Z1
+    /// switch 100 µs late and cost a frame: board-model tests/touch2d.rs,
+    /// `plate_switching_at_its_designed_times`). `pet` feeds the watchdog meanwhile.
+    pub async fn boot(&mut self, ctrl: &mut Controller2d, burst: &mut BurstGate, mut pet: impl FnMut()) {
+        use embassy_futures::select::{select, Either};
+        loop {
+            let done = matches!(select(ARMED.wait(), BOOTED.wait()).await, Either::Second(()));
+            self.service(ctrl, burst);
+            pet();
+            if done {
+                return;
+            }
+        }
+    }
+
     /// Between two frames: a scene compiled by the link (installed, its edge pulse's table built,
     /// its first frame a record), a counters request, a save's hold of RF.
     pub fn service(&mut self, ctrl: &mut Controller2d, burst: &mut BurstGate) {
@@ -210,6 +234,12 @@ pub struct Board2d {
     sent: u32,
     /// The scene store; None when the board has none (then `save` says so).
     store: Option<Store2d>,
+    /// Who the board is (a session made again at boot, `boot_scene`).
+    identity: Identity,
+    /// The built-in scene's encoding (`SAW_SCENE_2D`) and file: booted when the saved one is
+    /// refused.
+    builtin: &'static [u8],
+    builtin_file: &'static str,
 }
 
 impl Board for Board2d {
@@ -252,18 +282,10 @@ impl Board for Board2d {
         Err(StoreFault::NotFor2d)
     }
 
-    /// Compiled here, in the link task (thread mode, below the frames); the control loop only
-    /// moves it in between two frames (`ControlLink::service`). Refused: nothing changes.
     /// Compiled and installed by the control loop between two frames (see `SCENE`); refused:
     /// nothing changes.
     async fn apply_2d(&mut self, scene: &PlaneScene, stamp: Stamp) -> Result<(), Apply2dError> {
-        STAMP_SCENE.store(stamp.scene_id, Ordering::Relaxed);
-        STAMP_CHANGE.store(stamp.change, Ordering::Relaxed);
-        APPLIED.reset();
-        SCENE.store(scene as *const PlaneScene as *mut PlaneScene, Ordering::Relaxed);
-        // `FULL` is set by `arm2d`, after this task's poll has returned (see `ARM`).
-        ARM.signal(());
-        APPLIED.wait().await.map_err(Apply2dError::Config)
+        hand_over(scene, stamp).await.map_err(Apply2dError::Config)
     }
 
     async fn telemetry_2d(&mut self) -> Telemetry2d {
@@ -315,122 +337,151 @@ fn install(ctrl: &mut Controller2d, burst: &mut BurstGate, scene: &PlaneScene) -
     Ok(())
 }
 
-/// `scene` loaded into the controller (`Controller2d::load`: compiled in its own frame, moved in)
-/// if its plate fits the overlay, and its edge pulse's table built; false if refused.
-#[inline(never)]
-fn load(
-    ctrl: &mut Controller2d,
-    timer: &BurstTimer,
-    burst: &mut BurstGate,
-    scene: &PlaneScene,
-) -> bool {
-    if scene.plate_um.0 > PLATE_UM.0
-        || scene.plate_um.1 > PLATE_UM.1
-        || ctrl.load(&scene.config).is_err()
-    {
-        return false;
+/// `scene` to the control loop, which compiles and installs it between two frames (see `SCENE`),
+/// records then stamped with `stamp`; its answer. The link task's: a push, and the boot scene
+/// (`boot_scene`).
+async fn hand_over(scene: &PlaneScene, stamp: Stamp) -> Result<(), Config2dError> {
+    STAMP_SCENE.store(stamp.scene_id, Ordering::Relaxed);
+    STAMP_CHANGE.store(stamp.change, Ordering::Relaxed);
+    APPLIED.reset();
+    SCENE.store(scene as *const PlaneScene as *mut PlaneScene, Ordering::Relaxed);
+    // `FULL` is set by `arm2d`, after this task's poll has returned (see `ARM`).
+    ARM.signal(());
+    APPLIED.wait().await
+}
+
+/// The built-in scene (`SAW_SCENE_2D`, checked by build.rs on the host) on the overlay's plate;
+/// an empty configuration, which the controller refuses (no scene, RF off), if it does not
+/// decode.
+fn builtin_scene(builtin: &[u8]) -> PlaneScene {
+    let config = match postcard::from_bytes::<Config2d>(builtin) {
+        Ok(c) => c,
+        Err(_) => {
+            warn!("boot: the 2D scene does not decode; no scene, RF stays off");
+            Config2d::default()
+        }
+    };
+    PlaneScene {
+        plate_um: PLATE_UM,
+        config,
     }
-    prebuild(burst, timer, &scene.config.scene.edge_pulse);
-    true
+}
+
+/// The session's scene (from `boot`) compiled and installed by the control loop, as a push is
+/// (`hand_over`): the link task's first step, so the compile (~36 KB of stack with the largest
+/// scene) stacks on an idle thread mode, not on main's poll frame (there the G474 kept 1 568 B
+/// of stack headroom with the largest 2D scene; board-model tests/touch2d.rs's stack check).
+/// A saved scene the controller refuses gives way to the built-in one (the session made again
+/// over it); a refused built-in scene leaves no scene, RF off. Logs which.
+pub async fn boot_scene(session: &mut Session, board: &mut Board2d) {
+    let saved = session.source() == SceneSource::Saved;
+    let result = match session.active() {
+        Active::Plane(scene) => hand_over(scene, session.stamp()).await,
+    };
+    match result {
+        Ok(()) if saved => info!(
+            "boot: the 2D scene saved in flash (id {=u32:08x})",
+            session.scene_id()
+        ),
+        Ok(()) => info!("boot: the 2D scene built in ({})", board.builtin_file),
+        Err(_) if saved => {
+            warn!("boot: the saved 2D scene {=u32:08x} is refused", session.scene_id());
+            *session = Session::new_2d(
+                board.identity,
+                PLATE_UM,
+                builtin_scene(board.builtin),
+                SceneSource::BuildTime,
+            );
+            let result = match session.active() {
+                Active::Plane(scene) => hand_over(scene, session.stamp()).await,
+            };
+            match result {
+                Ok(()) => info!("boot: the 2D scene built in ({})", board.builtin_file),
+                Err(_) => warn!("boot: the 2D scene is refused; no scene, RF stays off"),
+            }
+        }
+        Err(_) => warn!("boot: the 2D scene is refused; no scene, RF stays off"),
+    }
+    BOOTED.signal(());
 }
 
 /// The session and the board glue, from the boot.
 pub struct Booted {
     pub session: Session,
-    pub board: Board2d,
+    pub board: &'static mut Board2d,
 }
 
-/// The scene to boot into, loaded into `ctrl`, and the link's session over it: the 2D scene saved
-/// in flash if it reads back and compiles, else the one built in (`SAW_SCENE_2D`, checked by
-/// build.rs on the host). Logs which.
+/// The scene to boot into and the link's session over it: the 2D scene saved in flash if it
+/// reads back and fits the overlay, else the one built in (`SAW_SCENE_2D`, checked by build.rs on
+/// the host). Not compiled here: the link task has the control loop compile it first thing
+/// (`boot_scene`), and falls back to the built-in one if the controller refuses the saved one.
 pub async fn boot(
-    ctrl: &mut Controller2d,
-    timer: &BurstTimer,
-    burst: &mut BurstGate,
     flash: Option<StoreFlash>,
-    builtin: &[u8],
-    builtin_file: &str,
+    builtin: &'static [u8],
+    builtin_file: &'static str,
     frame_us: u32,
 ) -> Booted {
-    let mut store: Option<Store2d> = crate::store::open(flash);
-    let mut booted: Option<(PlaneScene, SceneSource)> = None;
-    match store.as_mut() {
-        Some(s) => match crate::store::load_2d_at_boot(s).await {
-            Ok(Some(saved)) => {
-                if load(ctrl, timer, burst, &saved.scene) {
-                    info!(
-                        "boot: the 2D scene saved in flash (id {=u32:08x})",
-                        saved.scene_id
-                    );
-                    booted = Some((saved.scene, SceneSource::Saved));
-                } else {
-                    warn!(
-                        "boot: the saved 2D scene {=u32:08x} is refused",
-                        saved.scene_id
-                    );
-                }
-            }
-            Ok(None) => info!("boot: no scene saved in flash"),
-            Err(e) => warn!("boot: the saved scene cannot be read ({})", e),
-        },
-        None => info!("boot: no scene store on this board"),
-    }
-    let (scene, source) = match booted {
-        Some(b) => b,
-        None => {
-            let config = match postcard::from_bytes::<Config2d>(builtin) {
-                Ok(c) => c,
-                Err(_) => {
-                    warn!("boot: the 2D scene does not decode; no scene, RF stays off");
-                    Config2d::default()
-                }
-            };
-            let scene = PlaneScene {
-                plate_um: PLATE_UM,
-                config,
-            };
-            if load(ctrl, timer, burst, &scene) {
-                info!("boot: the 2D scene built in ({})", builtin_file);
+    let identity = Identity {
+        firmware: concat!("saw-firmware ", env!("CARGO_PKG_VERSION")),
+        board: BOARD.name,
+        sample_rate_hz: 1_000_000 / frame_us.max(1),
+    };
+    // The glue (with the store's 2 KB item buffer) in its static before the load, and nothing of
+    // the scene held across the load's await: main's future (a static of its own for good) holds
+    // a reference and the load's state only. Holding the store and the scene, it was 4 880 B,
+    // which the G474's stack lacked (board-model tests/link2d.rs's stack checks).
+    static BOARD2D: static_cell::StaticCell<Board2d> = static_cell::StaticCell::new();
+    let board = BOARD2D.init(Board2d {
+        sent: 0,
+        store: crate::store::open(flash),
+        identity,
+        builtin,
+        builtin_file,
+    });
+    let loaded = match board.store.as_mut() {
+        Some(s) => Some(crate::store::load_2d_at_boot(s).await),
+        None => None,
+    };
+    let saved = match loaded {
+        Some(Ok(Some(saved))) => {
+            if saved.scene.plate_um.0 <= PLATE_UM.0 && saved.scene.plate_um.1 <= PLATE_UM.1 {
+                Some(saved.scene)
             } else {
-                warn!("boot: the 2D scene is refused; no scene, RF stays off");
+                warn!(
+                    "boot: the saved 2D scene {=u32:08x} does not fit the overlay",
+                    saved.scene_id
+                );
+                None
             }
-            (scene, SceneSource::BuildTime)
+        }
+        Some(Ok(None)) => {
+            info!("boot: no scene saved in flash");
+            None
+        }
+        Some(Err(e)) => {
+            warn!("boot: the saved scene cannot be read ({})", e);
+            None
+        }
+        None => {
+            info!("boot: no scene store on this board");
+            None
         }
     };
-    let session = Session::new_2d(
-        Identity {
-            firmware: concat!("saw-firmware ", env!("CARGO_PKG_VERSION")),
-            board: BOARD.name,
-            sample_rate_hz: 1_000_000 / frame_us.max(1),
-        },
-        PLATE_UM,
-        scene,
-        source,
-    );
-    Booted {
-        session,
-        board: Board2d { sent: 0, store },
-    }
+    let session = match saved {
+        Some(scene) => Session::new_2d(identity, PLATE_UM, scene, SceneSource::Saved),
+        None => Session::new_2d(identity, PLATE_UM, builtin_scene(builtin), SceneSource::BuildTime),
+    };
+    Booted { session, board }
 }
 
-/// Starts the link (and `arm2d`) in the image built with `link-2d` (TOUCH_2D=link), either
-/// board; the default 2D image boots the saved scene but runs no link (at opt-level "s" it does
-/// not fit 128 KiB with it; at "z" the plate schedule misses its timing: firmware/Cargo.toml).
-/// The G474 runs it since the link task's future shrank from 25 016 B to 8 824 B (the session
+/// Starts the link (and `arm2d`), either board; the link task's first step is the boot scene's
+/// compile (`boot_scene`). The G474 runs it since the link task's future shrank from 25 016 B to 8 824 B (the session
 /// holds each request and scene once, `Session::on_frame`; the session and this glue are
 /// statics, `link::spawn`): before, its 96 KiB RAM left too little stack for the boot's scene
 /// compile (the board model found a stack overflow 3.3 ms after reset).
 pub fn start(spawner: embassy_executor::Spawner, tx: UartTx<'static, Async>, rx: RingBufferedUartRx<'static>, booted: Booted) {
-    #[cfg(feature = "link-2d")]
-    {
-        link::spawn(spawner, tx, rx, booted.session, booted.board);
-        spawner.spawn(defmt::unwrap!(arm2d()));
-    }
-    #[cfg(not(feature = "link-2d"))]
-    {
-        let _ = (spawner, tx, rx, booted);
-        warn!("link: not in this 2D image (TOUCH_2D=link builds it: docs/board-model.md)");
-    }
+    link::spawn_on(spawner, tx, rx, booted.session, booted.board);
+    spawner.spawn(defmt::unwrap!(arm2d()));
 }
 
 /// Arms the hand-over (`ARM`): a shallow task, so the control loop's compile stacks on little.
@@ -439,6 +490,7 @@ pub async fn arm2d() {
     loop {
         ARM.wait().await;
         FULL.store(true, Ordering::Release);
+        ARMED.signal(());
     }
 }
 

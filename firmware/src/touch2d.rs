@@ -729,24 +729,6 @@ fn new_controller(timer: BurstTimer) -> &'static mut Controller {
     ctrl
 }
 
-/// The built-in 2D scene decoded, compiled and installed (`Controller2d::load`: compiled in its
-/// frame, moved into the controller), and its edge pulse's triangle table built. Out of main's
-/// frame, so the compile's stack is not stacked on main's.
-#[inline(never)]
-fn load_scene(ctrl: &mut Controller, timer: &BurstTimer, burst: &mut BurstGate) {
-    let Ok(c) = postcard::from_bytes::<Config2d>(SCENE_2D) else {
-        warn!("boot: the 2D scene does not decode; no scene, RF stays off");
-        return;
-    };
-    if ctrl.load(&c).is_err() {
-        warn!("boot: the 2D scene is refused; no scene, RF stays off");
-        return;
-    }
-    info!("boot: the 2D scene built in ({})", SCENE_2D_FILE);
-    // The edge pulse's triangle table now, not on the first edge's sample path.
-    crate::link2d::prebuild(burst, timer, &c.scene.edge_pulse);
-}
-
 /// One frame through the sensor and the controller onto the burst gate. Never inlined: a root
 /// of the panic check.
 #[inline(never)]
@@ -782,6 +764,8 @@ async fn control2d(
     mut link: crate::link2d::ControlLink,
     mut wdg: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
 ) {
+    // The boot scene first (`ControlLink::boot`), then the acquisition.
+    link.boot(ctrl, &mut burst, || wdg.pet()).await;
     let mut watchdog = Ticker::every(WATCHDOG_PERIOD);
     let mut next_log = Instant::now().as_micros() + TELEMETRY_PERIOD_US;
     // The task's state is in place: the acquisition may start.
@@ -878,7 +862,7 @@ async fn main(spawner: embassy_executor::Spawner) {
         parts.dac_pin,
         parts.envelope_dma,
     );
-    let mut burst = BurstGate::new(
+    let burst = BurstGate::new(
         parts.burst_tim,
         parts.burst_pin,
         parts.burst_b_pin,
@@ -899,28 +883,15 @@ async fn main(spawner: embassy_executor::Spawner) {
         counter_bits: BOARD.burst_timer_bits,
         max_burst_hz: BOARD.max_burst_hz,
     };
-    // The controller (~10 KB) is built in its static, and the scene compiled by
-    // `Controller2d::load` in a function of its own: with the controller, the compiled scene and
-    // their copies in main's frame, the boot stack (main's frame + Prepared2d::compile's own
-    // 34 KB) reached 72.9 KB, 696 B short of the G474's stack region with the largest 2D scene
-    // (board model: stack check).
+    // The controller (~10 KB) is built in its static, with no scene (line off). The boot scene
+    // (saved in flash, else built in: `link2d::boot`) is not compiled here: the link task hands
+    // it to the control loop first thing, as a push (`link2d::boot_scene`), so
+    // `Prepared2d::compile`'s ~36 KB frame stacks on an idle thread mode. Compiled under main's
+    // poll frame, it left the G474 1 568 B of stack headroom with the largest 2D scene (board
+    // model, tests/touch2d.rs's stack check).
     let ctrl = new_controller(timer);
-    // The image that runs the link (`link-2d`) boots the scene saved in flash, else the
-    // built-in one, behind the link's session (`link2d::boot`). An image without the link has
-    // nothing that could save a 2D scene: it boots the built-in scene in a frame of its own
-    // (`load_scene`), as before the link. With `link2d::boot` there, its session and scene
-    // copies in main's frame under the compile left the G474 704 B of stack with the largest 2D
-    // scene (board model, tests/touch2d.rs's stack check; 33 488 B on the F446).
-    #[cfg(feature = "link-2d")]
-    let booted = crate::link2d::boot(ctrl, &timer, &mut burst, parts.store, SCENE_2D, SCENE_2D_FILE, FRAME_US).await;
-    #[cfg(feature = "link-2d")]
+    let booted = crate::link2d::boot(parts.store, SCENE_2D, SCENE_2D_FILE, FRAME_US).await;
     let stamp = booted.session.stamp();
-    #[cfg(not(feature = "link-2d"))]
-    let stamp = {
-        load_scene(ctrl, &timer, &mut burst);
-        // No stream without the link: the records' stamp is never read.
-        saw_link::session::Stamp { scene_id: 0, change: 0 }
-    };
     let Ok(map) = Affine::from_points(CAL, &RailBands::default()) else {
         defmt::panic!("touch: the built-in calibration is refused")
     };
@@ -946,11 +917,5 @@ async fn main(spawner: embassy_executor::Spawner) {
     let high = EXECUTOR_HIGH.start(interrupt::UART4);
     let link = crate::link2d::ControlLink::new(rf_arm, stamp);
     high.spawn(unwrap!(control2d(ctrl, sensor, burst, link, wdg)));
-    #[cfg(feature = "link-2d")]
     crate::link2d::start(spawner, parts.link_tx, parts.link_rx, booted);
-    #[cfg(not(feature = "link-2d"))]
-    {
-        let _ = (spawner, parts.link_tx, parts.link_rx, parts.store);
-        warn!("link: not in this 2D image (TOUCH_2D=link builds it: docs/board-model.md)");
-    }
 }

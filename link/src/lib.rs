@@ -11,6 +11,10 @@
 
 #![cfg_attr(not(feature = "std"), no_std)]
 
+// `plane-only` takes the 1D scenes out (a 2D board's firmware); the host needs both kinds.
+#[cfg(all(feature = "plane-only", feature = "std"))]
+compile_error!("saw-link: `plane-only` is for a 2D board's firmware, not with `std` (the host reads 1D and 2D scenes)");
+
 #[cfg(feature = "std")]
 pub mod client;
 #[cfg(feature = "std")]

@@ -9,6 +9,7 @@ use saw_core::gate::DriveMode;
 use saw_core::plane::{Config2d, Config2dError, Place, PointUm, Telemetry2d};
 use saw_core::position::SensorFault;
 use saw_core::scene::Config;
+#[cfg(not(feature = "plane-only"))]
 use saw_core::texture::Texture;
 use serde::{Deserialize, Serialize};
 
@@ -49,7 +50,7 @@ pub enum Request {
     GetScene,
     /// Replace the whole scene: compiled on the board (the same step a scene file goes
     /// through on the host) and swapped in at the next sample, or refused with nothing changed.
-    LoadScene(Config),
+    LoadScene(LineScene),
     /// Move boundary `index` (where region `index` ends) to `at_um`.
     MoveBoundary {
         /// Boundary index, 0 = the end of the first region.
@@ -62,7 +63,7 @@ pub enum Request {
         /// Region index, left to right from 0.
         region: u8,
         /// Its new texture.
-        texture: Texture,
+        texture: LineTexture,
     },
     /// Standing (both IDTs) or progressive (one IDT) drive.
     SetDrive(DriveMode),
@@ -110,6 +111,128 @@ pub enum Request {
         /// Upper-right corner, µm on the plate.
         hi: PointUm,
     },
+}
+
+// ---- 1D scene bodies, and a 2D board's build without them (`plane-only`) ----------------------
+//
+// A board that reads the overlay refuses every 1D scene and edit before looking at the scene
+// (`Refused2d::WrongSensor`), and never sends a 1D scene, refusal, counters or stream. Built for
+// such a board (feature `plane-only`: the firmware's 2D image), the 1D bodies are types that cost
+// no code: a request's 1D scene or texture is left unread (the request is the frame's last field,
+// so nothing after it is misread) and the replies' 1D variants hold an uninhabited type, so their
+// serializers are never instantiated. The variants stay where they are: the wire format (the
+// variant numbers) is the same, and the host speaks to both builds alike. On the F446 2D image
+// with the link this left out ~12.6 KB of flash: 129 592 B against the ~142.2 KB the linker
+// reports without it (issue #36, 2026-11-30).
+
+/// A 1D scene in a request: the scene (every build but `plane-only`).
+#[cfg(not(feature = "plane-only"))]
+pub type LineScene = Config;
+/// A 1D scene in a request: not read on a 2D board's build (`plane-only`), which refuses it.
+#[cfg(feature = "plane-only")]
+pub type LineScene = Unread;
+/// A 1D texture in a request (see [`LineScene`]).
+#[cfg(not(feature = "plane-only"))]
+pub type LineTexture = Texture;
+/// A 1D texture in a request: not read on a 2D board's build (see [`LineScene`]).
+#[cfg(feature = "plane-only")]
+pub type LineTexture = Unread;
+/// A 1D reply's body: itself (every build but `plane-only`).
+#[cfg(not(feature = "plane-only"))]
+pub type LineReply<T> = T;
+/// A 1D reply's body on a 2D board's build (`plane-only`): never sent.
+#[cfg(feature = "plane-only")]
+pub type LineReply<T> = Never<T>;
+
+/// A request field a 2D board's build leaves unread: it decodes from nothing (postcard's empty
+/// tuple) and encodes to nothing. Only the request's last field may be one.
+#[cfg(feature = "plane-only")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Unread;
+
+#[cfg(feature = "plane-only")]
+impl Serialize for Unread {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeTuple;
+        s.serialize_tuple(0)?.end()
+    }
+}
+
+#[cfg(feature = "plane-only")]
+impl<'de> Deserialize<'de> for Unread {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Nothing;
+        impl<'de> serde::de::Visitor<'de> for Nothing {
+            type Value = Unread;
+            fn expecting(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+                f.write_str("nothing")
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, _: A) -> Result<Unread, A::Error> {
+                Ok(Unread)
+            }
+        }
+        d.deserialize_tuple(0, Nothing)
+    }
+}
+
+/// A reply a 2D board's build never sends (a 1D scene, refusal, counters or stream): no value
+/// of it exists, so nothing encodes or decodes one.
+#[cfg(feature = "plane-only")]
+pub enum Never<T> {
+    #[doc(hidden)]
+    _Of(core::convert::Infallible, core::marker::PhantomData<T>),
+}
+
+#[cfg(feature = "plane-only")]
+impl<T> Never<T> {
+    fn absurd<U>(&self) -> U {
+        match *self {
+            Never::_Of(never, _) => match never {},
+        }
+    }
+}
+
+#[cfg(feature = "plane-only")]
+impl<T> Clone for Never<T> {
+    fn clone(&self) -> Self {
+        self.absurd()
+    }
+}
+
+#[cfg(feature = "plane-only")]
+impl<T> PartialEq for Never<T> {
+    fn eq(&self, _: &Self) -> bool {
+        self.absurd()
+    }
+}
+
+#[cfg(feature = "plane-only")]
+impl<T> core::fmt::Debug for Never<T> {
+    fn fmt(&self, _: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        self.absurd()
+    }
+}
+
+#[cfg(all(feature = "plane-only", feature = "defmt"))]
+impl<T> defmt::Format for Never<T> {
+    fn format(&self, _: defmt::Formatter<'_>) {
+        self.absurd()
+    }
+}
+
+#[cfg(feature = "plane-only")]
+impl<T> Serialize for Never<T> {
+    fn serialize<S: serde::Serializer>(&self, _: S) -> Result<S::Ok, S::Error> {
+        self.absurd()
+    }
+}
+
+#[cfg(feature = "plane-only")]
+impl<'de, T> Deserialize<'de> for Never<T> {
+    fn deserialize<D: serde::Deserializer<'de>>(_: D) -> Result<Self, D::Error> {
+        Err(serde::de::Error::custom("a 1D reply, which this build never reads"))
+    }
 }
 
 /// Where the active scene came from.
@@ -227,7 +350,7 @@ pub enum Reply {
         /// Where it came from.
         source: SceneSource,
         /// The scene.
-        config: Config,
+        config: LineReply<Config>,
     },
     /// A scene, boundary, texture or drive change is running from the next sample.
     Applied {
@@ -236,9 +359,9 @@ pub enum Reply {
     },
     /// The change was refused and nothing changed: the same error (and sentence) a scene file
     /// with these values gets on the host.
-    Refused(ConfigError),
+    Refused(LineReply<ConfigError>),
     /// To [`Request::Counters`].
-    Counters(Counters),
+    Counters(LineReply<Counters>),
     /// To [`Request::Stream`]: the decimation in force and the sample rate it divides.
     Streaming {
         /// Records every this many samples (0: stopped).
@@ -258,7 +381,7 @@ pub enum Reply {
     /// The save failed; the scene saved before (if any) is still there.
     SaveFailed(StoreFault),
     /// A stream frame (unsolicited; its header's `seq` counts stream frames).
-    Stream(Stream),
+    Stream(LineReply<Stream>),
     /// The request's frame was refused.
     Error(LinkError),
     /// To [`Request::Ping`].

@@ -17,6 +17,7 @@ use crate::msg::{
 use crate::msg::{Counters2d, PlaneScene, Refused2d, SceneKind, Sensor};
 #[cfg(feature = "plane")]
 use crate::plane_scene_id;
+#[cfg(not(feature = "plane-only"))]
 use crate::scene_id;
 
 /// Why a board did not run a 2D scene ([`Board::apply_2d`]).
@@ -81,7 +82,8 @@ pub trait Board {
 #[derive(Clone, Debug, PartialEq)]
 #[allow(clippy::large_enum_variant)] // no allocator to box into; one session per board
 pub enum Active {
-    /// A 1D scene.
+    /// A 1D scene (not in a 2D board's build, `plane-only`).
+    #[cfg(not(feature = "plane-only"))]
     Line(Config),
     /// A 2D scene and its plate.
     #[cfg(feature = "plane")]
@@ -92,6 +94,7 @@ impl Active {
     /// Its id ([`scene_id`], [`plane_scene_id`]).
     pub fn id(&self) -> u32 {
         match self {
+            #[cfg(not(feature = "plane-only"))]
             Active::Line(c) => scene_id(c),
             #[cfg(feature = "plane")]
             Active::Plane(p) => plane_scene_id(p),
@@ -146,6 +149,7 @@ pub struct Session {
 impl Session {
     /// A session of a board with the slide rheostat, over the 1D scene it booted into (already
     /// applied).
+    #[cfg(not(feature = "plane-only"))]
     pub fn new(identity: Identity, active: Config, source: SceneSource) -> Self {
         Self::with(
             identity,
@@ -269,6 +273,7 @@ impl Session {
             #[cfg(feature = "plane")]
             Request::Sensor => Reply::Sensor(self.sensor),
             Request::GetScene => match &self.active {
+                #[cfg(not(feature = "plane-only"))]
                 Active::Line(config) => Reply::Scene {
                     scene_id: self.scene_id,
                     source: self.source,
@@ -283,12 +288,19 @@ impl Session {
             },
             // Each refusal returns before the await: a `Result<_, Reply>` matched around an
             // await would keep a Reply's 2 KB in the future (see `on_frame`).
+            // A 2D board's build reads no 1D scene or texture (`msg::LineScene`): refused.
+            #[cfg(feature = "plane-only")]
+            Request::LoadScene(_) | Request::MoveBoundary { .. } | Request::SetTexture { .. } => {
+                self.not_line()
+            }
+            #[cfg(not(feature = "plane-only"))]
             Request::LoadScene(config) => {
                 if let Err(r) = self.line() {
                     return r;
                 }
                 self.apply(board, config).await
             }
+            #[cfg(not(feature = "plane-only"))]
             Request::MoveBoundary { index, at_um } => {
                 let next = match self.line().map(|a| a.with_boundary(*index, *at_um)) {
                     Ok(Ok(next)) => next,
@@ -297,6 +309,7 @@ impl Session {
                 };
                 self.apply(board, &next).await
             }
+            #[cfg(not(feature = "plane-only"))]
             Request::SetTexture { region, texture } => {
                 let next = match self.line().map(|a| a.with_texture(*region, *texture)) {
                     Ok(Ok(next)) => next,
@@ -306,6 +319,7 @@ impl Session {
                 self.apply(board, &next).await
             }
             Request::SetDrive(drive) => match &self.active {
+                #[cfg(not(feature = "plane-only"))]
                 Active::Line(c) => {
                     let next = c.with_drive(*drive);
                     self.apply(board, &next).await
@@ -350,6 +364,7 @@ impl Session {
                     self.base = now;
                 }
                 match self.active {
+                    #[cfg(not(feature = "plane-only"))]
                     Active::Line(_) => Reply::Counters(since),
                     #[cfg(feature = "plane")]
                     Active::Plane(_) => {
@@ -383,6 +398,7 @@ impl Session {
             },
             Request::Save => {
                 let saved = match &self.active {
+                    #[cfg(not(feature = "plane-only"))]
                     Active::Line(c) => board.save(self.scene_id, c).await,
                     #[cfg(feature = "plane")]
                     Active::Plane(p) => board.save_2d(self.scene_id, p).await,
@@ -403,6 +419,7 @@ impl Session {
 
     /// The active 1D scene, or the refusal a 1D request gets on a board that reads the
     /// overlay (the board's sensor decides, not the scene).
+    #[cfg(not(feature = "plane-only"))]
     fn line(&self) -> Result<&Config, Reply> {
         #[cfg(feature = "plane")]
         match (&self.sensor, &self.active) {
@@ -430,7 +447,17 @@ impl Session {
         }
     }
 
+    /// What a 1D request gets on a 2D board's build (`plane-only`): the board reads the overlay.
+    #[cfg(feature = "plane-only")]
+    fn not_line(&self) -> Reply {
+        Reply::Refused2d(Refused2d::WrongSensor {
+            asked: SceneKind::Line,
+            board: self.sensor,
+        })
+    }
+
     /// By reference, as `apply_2d`: the copy the session keeps is made once the board took it.
+    #[cfg(not(feature = "plane-only"))]
     async fn apply<B: Board>(&mut self, board: &mut B, next: &Config) -> Reply {
         let stamp = Stamp {
             scene_id: scene_id(next),
@@ -483,6 +510,7 @@ impl Session {
         Counters {
             // A 2D board's 1D core counts nothing: it is not asked (its glue may have none).
             core: match self.active {
+                #[cfg(not(feature = "plane-only"))]
                 Active::Line(_) => board.telemetry().await,
                 #[cfg(feature = "plane")]
                 Active::Plane(_) => Telemetry::default(),

@@ -10,7 +10,9 @@ use heapless::Vec;
 /// and one that does not drops (and counts) instead of stalling anything.
 pub const QUEUE_RECORDS: usize = 64;
 
-use crate::msg::{Header, Record, Reply, Stream, PROTOCOL_VERSION, RECORDS_PER_FRAME};
+use crate::msg::{Header, Record, Reply, PROTOCOL_VERSION, RECORDS_PER_FRAME};
+#[cfg(not(feature = "plane-only"))]
+use crate::msg::Stream;
 #[cfg(feature = "plane")]
 use crate::msg::{Record2d, Stream2d};
 
@@ -97,6 +99,7 @@ pub trait Streamed: Sized {
     fn frame(dropped: u32, records: Vec<Self, RECORDS_PER_FRAME>) -> Reply;
 }
 
+#[cfg(not(feature = "plane-only"))]
 impl Streamed for Record {
     fn frame(dropped: u32, records: Vec<Self, RECORDS_PER_FRAME>) -> Reply {
         Reply::Stream(Stream { dropped, records })
