@@ -727,6 +727,18 @@ fn the_stream_carries_the_fingers_x_and_y() {
             (gmin - want).abs() <= 1 && (gmax - want).abs() <= 1,
             "{board:?}: records {gmin}..{gmax} µs apart, want {want}"
         );
+        // The one edge crossed, window 0's right side (x = 30 mm: edge 1, fig. 12's outlines
+        // numbered from each first vertex), reported by one record, whichever of the two frames
+        // it fired on (the tap's `EdgeLatch`; the stream skips every other frame).
+        let edges: Vec<(f64, u8)> = recs
+            .iter()
+            .filter_map(|r| r.edge.map(|e| (r.time_us as f64 * 1e-6, e)))
+            .collect();
+        eprintln!("{board:?}: edges in the records {edges:?}");
+        assert!(
+            edges.len() == 1 && edges[0].1 == 1 && (0.70..0.80).contains(&edges[0].0),
+            "{board:?}: edges in the records {edges:?}"
+        );
         // And the time axis is the board's: the fit puts the finger's start (x = 10 mm) at 0.35
         // s of board time less the time driver's start after reset (a few ms).
         let t10 = mt + (10.0 - mx) / slope;

@@ -27,7 +27,7 @@ use saw_core::plane::{
 use saw_core::touch::frame::Reading;
 use saw_link::msg::{Fault2d, PlaneScene, Record2d, SceneSource, StoreFault};
 use saw_link::session::{Active, Apply2dError, Board, Identity, Session, Stamp};
-use saw_link::stream::{Decimator, QUEUE_RECORDS};
+use saw_link::stream::{Decimator, EdgeLatch, QUEUE_RECORDS};
 use saw_store::{SceneStore, ITEM_BYTES_2D};
 
 use crate::board::{StoreFlash, BOARD};
@@ -93,6 +93,9 @@ pub struct Tap2d {
     last_us: Option<(u32, u64)>,
     /// The f_b of the periodic burst last started or updated, mHz (0 after an off or a pulse).
     burst_millihz: u32,
+    /// The edge the next record reports: the last crossed since the record before, so a
+    /// decimated stream reports every pulse (saw-link's `EdgeLatch`; one store per crossing).
+    edge: EdgeLatch,
 }
 
 impl Tap2d {
@@ -103,6 +106,7 @@ impl Tap2d {
             stamp,
             last_us: None,
             burst_millihz: 0,
+            edge: EdgeLatch::new(),
         }
     }
 
@@ -121,7 +125,10 @@ impl Tap2d {
             self.decimator.set(word as u16);
             // A new stream's first record is widened against the clock again.
             self.last_us = None;
+            // ... and reports no crossing from before it.
+            self.edge.clear();
         }
+        self.edge.note(out.edge);
         if !self.decimator.take() {
             return;
         }
@@ -133,7 +140,7 @@ impl Tap2d {
             position: out.position,
             velocity_um_s: out.velocity.map(|v| (v.vx_um_s, v.vy_um_s)),
             place: out.place,
-            edge: out.edge,
+            edge: self.edge.take(),
             burst_millihz: if line == Line::Running {
                 self.burst_millihz
             } else {
@@ -216,6 +223,8 @@ impl ControlLink {
                     };
                 }
                 self.tap.decimator.force_next();
+                // The old scene's edge numbers mean nothing in the new one.
+                self.tap.edge.clear();
             }
             FULL.store(false, Ordering::Release);
             APPLIED.signal(result);
