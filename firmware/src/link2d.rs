@@ -163,8 +163,8 @@ fn push(record: Record2d) {
     }
 }
 
-/// What the 2D control loop owns of the link: the stream tap, the RF arm (low only while a save
-/// holds RF off) and the watchdog timeout a save replaced.
+/// What the 2D control loop owns of the link: the stream tap, the RF arm (low until a scene is
+/// installed, and while a save holds RF off) and the watchdog timeout a save replaced.
 pub struct ControlLink {
     pub tap: Tap2d,
     rf_arm: Output<'static>,
@@ -172,7 +172,9 @@ pub struct ControlLink {
 }
 
 impl ControlLink {
-    /// Records stamped with `stamp` (the scene booted into); `rf_arm` already high.
+    /// Records stamped with `stamp` (the scene booted into); `rf_arm` low: raised when the first
+    /// scene is installed (`service`), so the amplifier is not armed through the boot, nor at
+    /// all when both boot scenes are refused (pre-flash review, 2026-11-30).
     pub fn new(rf_arm: Output<'static>, stamp: Stamp) -> Self {
         Self {
             tap: Tap2d::new(stamp),
@@ -225,6 +227,11 @@ impl ControlLink {
                 self.tap.decimator.force_next();
                 // The old scene's edge numbers mean nothing in the new one.
                 self.tap.edge.clear();
+                // A scene runs: the amplifier may be armed (not while a save holds RF off; the
+                // link answers no push during a save, so this is the boot's or a push's).
+                if self.held.is_none() {
+                    self.rf_arm.set_high();
+                }
             }
             FULL.store(false, Ordering::Release);
             APPLIED.signal(result);
@@ -488,7 +495,12 @@ pub async fn boot(
 /// holds each request and scene once, `Session::on_frame`; the session and this glue are
 /// statics, `link::spawn`): before, its 96 KiB RAM left too little stack for the boot's scene
 /// compile (the board model found a stack overflow 3.3 ms after reset).
-pub fn start(spawner: embassy_executor::Spawner, tx: UartTx<'static, Async>, rx: RingBufferedUartRx<'static>, booted: Booted) {
+pub fn start(spawner: embassy_executor::Spawner, tx: UartTx<'static, Async>, mut rx: RingBufferedUartRx<'static>, booted: Booted) {
+    // The receive ring runs from now, not from the link task's first read, which comes after
+    // the boot scene's compile: a request a host sends just after a reset waits in the ring
+    // (1 KiB, ~11 ms at 921 600 baud) instead of overrunning the USART (pre-flash review,
+    // 2026-11-30).
+    rx.start_uart();
     link::spawn_on(spawner, tx, rx, booted.session, booted.board);
     spawner.spawn(defmt::unwrap!(arm2d()));
 }
@@ -500,6 +512,17 @@ pub async fn arm2d() {
         ARM.wait().await;
         FULL.store(true, Ordering::Release);
         ARMED.signal(());
+        // Thread mode stays here, shallow, until the control loop has answered. Returning would
+        // let the executor poll the link task again on a stale waker of its dropped `select`
+        // (the record queue, RX, the flush timer) while it waits for `APPLIED`, and a frame or
+        // tick starting the compile then would stack it (~36 KB with the largest scene) on the
+        // link task's ~16 KB poll frame instead of this one (pre-flash review, 2026-11-30: the
+        // G474's push headroom would fall from ~19 KB to ~3.5 KB). The link task waits for the
+        // answer anyway; the control loop preempts this from its interrupt executor, and it,
+        // not thread mode, feeds the watchdog. At most a frame plus the compile (~4 ms).
+        // A plain load loop: `spin_loop`'s YIELD hint buys nothing on one core without an
+        // OS, and the board model (Unicorn) stops on it.
+        while FULL.load(Ordering::Acquire) {}
     }
 }
 

@@ -358,6 +358,10 @@ mod chip {
         pac::ADC1.cr2().modify(|w| w.set_swstart(true));
     }
 
+    /// Nothing before the acquisition: the F446 has no late-conversion erratum (ES0430 is the
+    /// G474's).
+    pub fn before_acquisition() {}
+
     /// Words the stream has still to move this frame (NDTR, RM0390 §9.5.6).
     pub fn remaining() -> u32 {
         pac::DMA2.st(STREAM).ndtr().read().ndt() as u32
@@ -549,6 +553,21 @@ mod chip {
         cr_set(ADSTART);
     }
 
+    /// Right before the acquisition starts: ES0430's dummy conversion again, then DMA requests
+    /// back on and the first phase's sequence. The one at `init` can be more than 1 ms old by
+    /// now: the boot scene is compiled between the two (~0.5 ms for fig. 12 on the board model,
+    /// several ms for the largest scene from flash with its wait states), and the erratum's
+    /// clock runs from the last conversion. ADSTART = 0 here (nothing converts before TIM3).
+    pub fn before_acquisition() {
+        dummy_conversion();
+        let r = pac::ADC1;
+        r.cfgr().modify(|w| {
+            w.set_dmaen(vals::Dmaen::ENABLE);
+            w.set_dmacfg(vals::Dmacfg::CIRCULAR);
+        });
+        set_channel(CHANNELS[0], RANKS[0]);
+    }
+
     /// Words the channel has still to move this frame (CNDTR, RM0440 §12.6.4).
     pub fn remaining() -> u32 {
         pac::DMA1.ch(CH).ndtr().read().ndt() as u32
@@ -620,6 +639,7 @@ impl Acquisition {
 }
 
 fn start_timer() {
+    chip::before_acquisition();
     // Above the sample path's executor, beside embassy's DMA and timer interrupts.
     interrupt::TIM3.set_priority(Priority::P0);
     // SAFETY: its handler is `TIM3` below.
@@ -855,7 +875,7 @@ async fn main(spawner: embassy_executor::Spawner) {
         warn!("boot: the previous run ended in the fault path ({}, exception {}): RF was turned off, then the chip reset", cause, irqn);
     }
     let parts = board::split(p);
-    let mut rf_arm: Output<'static> = parts.rf_arm;
+    let rf_arm: Output<'static> = parts.rf_arm;
     let level = level::RfLevel::new(
         parts.envelope_tim,
         parts.dac,
@@ -910,7 +930,7 @@ async fn main(spawner: embassy_executor::Spawner) {
         CHANNELS[3],
         MARGIN_NS
     );
-    rf_arm.set_high();
+    // `rf_arm` stays low until the boot scene is installed (`ControlLink::service`).
     let mut wdg = IndependentWatchdog::new(parts.iwdg, IWDG_TIMEOUT_US);
     wdg.unleash();
     interrupt::UART4.set_priority(SAMPLE_PATH_PRIORITY);
