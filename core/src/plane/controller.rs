@@ -552,8 +552,15 @@ impl<V: PlaneEstimator> Controller2d<V> {
             }
             Some(PlaneCompiled::Plain(c)) => {
                 // The kinds a plain texture may be read only the speed (material, velocity
-                // synthesis) or nothing (off, constant, random); never a position.
-                let speed = velocity.map(|v| super::geometry::round_to_i32(v.speed_um_s()));
+                // synthesis) or nothing (off, constant, random); never a position. The speed
+                // (a root and a rounding) is made only for a kind that reads it: near an edge
+                // the velocity is there for the lead, over windows that ignore it.
+                let speed = match c.need() {
+                    Need::Velocity => {
+                        velocity.map(|v| super::geometry::round_to_i32(v.speed_um_s()))
+                    }
+                    Need::Position | Need::OwnFit => None,
+                };
                 c.request(&Moment {
                     position_um: 0,
                     velocity_um_s: speed,
