@@ -435,6 +435,12 @@ impl<V: PlaneEstimator> Controller2d<V> {
         t_us: u32,
         out: &mut Output2d,
     ) -> bool {
+        // Most readings: no edge within reach, no pulse window, no crossing pending. Nothing
+        // below would act (no crossing to fire, none to carry): answered before the scene's
+        // edges are looked up.
+        if !lead_read && self.edge_pulse_us.is_none() && self.edge_pending.is_none() {
+            return false;
+        }
         let Some(active) = self.active.as_ref() else {
             return false;
         };
