@@ -427,6 +427,7 @@ impl<V: PlaneEstimator> Controller2d<V> {
     ///
     /// `lead_read`: [`EdgeTracker::locate`] found an armed edge within the longest lead of its
     /// line on this reading; only then is the lead made and the crossing tested.
+    #[inline(always)]
     fn edges_step(
         &mut self,
         p: PointUm,
@@ -441,6 +442,19 @@ impl<V: PlaneEstimator> Controller2d<V> {
         if !lead_read && self.edge_pulse_us.is_none() && self.edge_pending.is_none() {
             return false;
         }
+        self.edges_act(p, velocity, lead_read, t_us, out)
+    }
+
+    /// [`Self::edges_step`] on a reading where an edge may act: out of line.
+    #[inline(never)]
+    fn edges_act(
+        &mut self,
+        p: PointUm,
+        velocity: Option<VelocityUmS>,
+        lead_read: bool,
+        t_us: u32,
+        out: &mut Output2d,
+    ) -> bool {
         let Some(active) = self.active.as_ref() else {
             return false;
         };
