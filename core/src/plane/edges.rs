@@ -669,8 +669,7 @@ impl EdgeTracker {
             }
             let fires = self.update_edge(i, g, p, lead_um);
             // The single pass re-armed every edge it visited, armed or not.
-            if let (Some(armed), Some(fired_s)) = (self.armed.get_mut(i), self.fired_s.get_mut(i))
-            {
+            if let (Some(armed), Some(fired_s)) = (self.armed.get_mut(i), self.fired_s.get_mut(i)) {
                 rearm(armed, fired_s, g.across(p), edges.rearm_um);
             }
             if let Some(t_um) = fires {
@@ -780,7 +779,9 @@ impl EdgeTracker {
         *fired_s = s;
         // The visit's slack assumed this edge armed.
         self.quiet = None;
-        (g.t_lo_um..=g.t_hi_um).contains(&t_cross).then_some(t_cross)
+        (g.t_lo_um..=g.t_hi_um)
+            .contains(&t_cross)
+            .then_some(t_cross)
     }
 }
 
