@@ -143,6 +143,9 @@ pub struct Controller2d<V: PlaneEstimator = PlaneLsq<DEFAULT_WINDOW>> {
     edges: EdgeTracker,
     /// The place rendered on the last reading (None: lifted, landing, faulty or new scene).
     place: Option<Place>,
+    /// The texture index of `place`, looked up once when the place changes (the texture step
+    /// reads it on every reading the window's texture renders).
+    texture_index: u8,
     /// Place, arming and textures were forgotten and nothing has rendered since.
     forgotten: bool,
     fault: Option<TouchFault>,
@@ -191,6 +194,7 @@ impl<V: PlaneEstimator> Controller2d<V> {
             screen: ScreenTracker::default(),
             edges: EdgeTracker::default(),
             place: None,
+            texture_index: 0,
             forgotten: true,
             fault: None,
             good_run: 0,
@@ -378,7 +382,7 @@ impl<V: PlaneEstimator> Controller2d<V> {
             ..Output2d::default()
         };
         if !self.edges_step(p, velocity, lead_read, t_us, &mut out) {
-            self.texture_step(place, p, velocity, t_us, &mut out);
+            self.texture_step(p, velocity, t_us, &mut out);
         }
         out
     }
@@ -393,6 +397,7 @@ impl<V: PlaneEstimator> Controller2d<V> {
             return;
         };
         let index = active.scene.screen.texture(place);
+        self.texture_index = index;
         if let Some(t) = active.scene.textures.get_mut(index as usize) {
             t.reset();
         }
@@ -422,7 +427,27 @@ impl<V: PlaneEstimator> Controller2d<V> {
     ///
     /// `lead_read`: [`EdgeTracker::locate`] found an armed edge within the longest lead of its
     /// line on this reading; only then is the lead made and the crossing tested.
+    #[inline(always)]
     fn edges_step(
+        &mut self,
+        p: PointUm,
+        velocity: Option<VelocityUmS>,
+        lead_read: bool,
+        t_us: u32,
+        out: &mut Output2d,
+    ) -> bool {
+        // Most readings: no edge within reach, no pulse window, no crossing pending. Nothing
+        // below would act (no crossing to fire, none to carry): answered before the scene's
+        // edges are looked up.
+        if !lead_read && self.edge_pulse_us.is_none() && self.edge_pending.is_none() {
+            return false;
+        }
+        self.edges_act(p, velocity, lead_read, t_us, out)
+    }
+
+    /// [`Self::edges_step`] on a reading where an edge may act: out of line.
+    #[inline(never)]
+    fn edges_act(
         &mut self,
         p: PointUm,
         velocity: Option<VelocityUmS>,
@@ -532,10 +557,10 @@ impl<V: PlaneEstimator> Controller2d<V> {
         self.telemetry.edges_skipped = self.telemetry.edges_skipped.wrapping_add(1);
     }
 
-    /// The window's texture asks; the gate answers within the caps.
+    /// The window's texture asks; the gate answers within the caps. The window is the last
+    /// place noted ([`Self::note_place_change`] keeps its texture index).
     fn texture_step(
         &mut self,
-        place: Place,
         p: PointUm,
         velocity: Option<VelocityUmS>,
         t_us: u32,
@@ -545,15 +570,21 @@ impl<V: PlaneEstimator> Controller2d<V> {
             return;
         };
         let limits = active.limits;
-        let index = active.scene.screen.texture(place);
-        let request = match active.scene.textures.get_mut(index as usize) {
+        let request = match active.scene.textures.get_mut(self.texture_index as usize) {
             Some(PlaneCompiled::Oriented(o)) => {
                 o.request(p, velocity, t_us, &self.gate, &self.timer)
             }
             Some(PlaneCompiled::Plain(c)) => {
                 // The kinds a plain texture may be read only the speed (material, velocity
-                // synthesis) or nothing (off, constant, random); never a position.
-                let speed = velocity.map(|v| super::geometry::round_to_i32(v.speed_um_s()));
+                // synthesis) or nothing (off, constant, random); never a position. The speed
+                // (a root and a rounding) is made only for a kind that reads it: near an edge
+                // the velocity is there for the lead, over windows that ignore it.
+                let speed = match c.need() {
+                    Need::Velocity => {
+                        velocity.map(|v| super::geometry::round_to_i32(v.speed_um_s()))
+                    }
+                    Need::Position | Need::OwnFit => None,
+                };
                 c.request(&Moment {
                     position_um: 0,
                     velocity_um_s: speed,

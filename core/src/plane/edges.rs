@@ -605,7 +605,7 @@ impl EdgeTracker {
             let Some(g) = edges.geoms.get(i) else {
                 continue;
             };
-            if let Some(t_um) = self.update_edge(i, g, p, lead_um, edges.rearm_um) {
+            if let Some(t_um) = self.update_edge(i, g, p, lead_um) {
                 if fired.is_none() {
                     fired = Some(i as u8);
                 }
@@ -667,7 +667,12 @@ impl EdgeTracker {
                 self.settled = None;
                 continue;
             }
-            if let Some(t_um) = self.update_edge(i, g, p, lead_um, edges.rearm_um) {
+            let fires = self.update_edge(i, g, p, lead_um);
+            // The single pass re-armed every edge it visited, armed or not.
+            if let (Some(armed), Some(fired_s)) = (self.armed.get_mut(i), self.fired_s.get_mut(i)) {
+                rearm(armed, fired_s, g.across(p), edges.rearm_um);
+            }
+            if let Some(t_um) = fires {
                 if fired.is_none() {
                     fired = Some(i as u8);
                 }
@@ -731,24 +736,18 @@ impl EdgeTracker {
         }
     }
 
-    /// One edge's update; Some(where along it it was crossed, µm) when it fires.
+    /// One armed edge's crossing test with the lead; Some(where along it it was crossed, µm)
+    /// when it fires. No re-arming: from [`Self::fire`] the edge is armed (fired_s = 0) and,
+    /// crossed or not, `rearm` would leave it as it is (not crossed, s is on its armed side of
+    /// the line, within reach; crossed, fired_s = s) — or a corner disarmed it on this very
+    /// sample at this s, which `rearm` leaves too. The test reference re-arms after it.
     #[inline(always)]
-    fn update_edge(
-        &mut self,
-        i: usize,
-        g: &Geom,
-        p: PointUm,
-        lead_um: (f32, f32),
-        rearm_um: f32,
-    ) -> Option<f32> {
+    fn update_edge(&mut self, i: usize, g: &Geom, p: PointUm, lead_um: (f32, f32)) -> Option<f32> {
         let prev = self.prev;
         let (Some(armed), Some(fired_s)) = (self.armed.get_mut(i), self.fired_s.get_mut(i)) else {
             return None;
         };
-        let (s, t) = {
-            let (s, t) = g.coords(p);
-            (s, t)
-        };
+        let s = g.across(p);
         // The lead across the edge; only a lead towards the line counts.
         let lead_s = lead_um.1 * g.ux - lead_um.0 * g.uy;
         let crossed = match *armed {
@@ -756,33 +755,33 @@ impl EdgeTracker {
             Some(Side::Left) => s + lead_s.min(0.0) <= 0.0,
             None => false,
         };
-        let mut fire = None;
-        if crossed {
-            let before = match *armed {
-                Some(Side::Right) => s < 0.0,
-                _ => s > 0.0,
-            };
-            // Where the crossing is along the edge: ahead on the lead, or behind, between the
-            // last sample and this one.
-            let t_cross = if before && lead_s != 0.0 {
-                let lead_t = lead_um.0 * g.ux + lead_um.1 * g.uy;
-                t + lead_t * (-s / lead_s)
-            } else {
-                match prev.map(|q| g.coords(q)) {
-                    Some((sq, tq)) if sq != s => tq + (t - tq) * (sq / (sq - s)),
-                    _ => t,
-                }
-            };
-            *armed = None;
-            *fired_s = s;
-            // The visit's slack assumed this edge armed.
-            self.quiet = None;
-            if (g.t_lo_um..=g.t_hi_um).contains(&t_cross) {
-                fire = Some(t_cross);
-            }
+        if !crossed {
+            return None;
         }
-        rearm(armed, fired_s, s, rearm_um);
-        fire
+        // Along the edge only for a crossing (the same operations as `coords`, so its bits).
+        let t = g.coords(p).1;
+        let before = match *armed {
+            Some(Side::Right) => s < 0.0,
+            _ => s > 0.0,
+        };
+        // Where the crossing is along the edge: ahead on the lead, or behind, between the
+        // last sample and this one.
+        let t_cross = if before && lead_s != 0.0 {
+            let lead_t = lead_um.0 * g.ux + lead_um.1 * g.uy;
+            t + lead_t * (-s / lead_s)
+        } else {
+            match prev.map(|q| g.coords(q)) {
+                Some((sq, tq)) if sq != s => tq + (t - tq) * (sq / (sq - s)),
+                _ => t,
+            }
+        };
+        *armed = None;
+        *fired_s = s;
+        // The visit's slack assumed this edge armed.
+        self.quiet = None;
+        (g.t_lo_um..=g.t_hi_um)
+            .contains(&t_cross)
+            .then_some(t_cross)
     }
 }
 
