@@ -1091,6 +1091,41 @@ mod tests {
         assert!(fires[0].0.y_um <= 0 && fires[0].0.y_um > -70);
     }
 
+    /// A crossing found behind the finger (no lead) is placed where the path between the last
+    /// sample and this one meets the line, not at the finger: a free segment (0,0)–(10,0) mm
+    /// armed from below at x = 8.5 mm, then one step to (10.5, 1) mm, past the segment's end,
+    /// whose path crosses the line at x = 9.5 mm, on the segment: it fires. (Placed at the
+    /// finger, or with the path's fraction wrong, the crossing falls off the segment and
+    /// nothing fires.) And with the sample before at the finger's own distance from the line
+    /// (it slid along it), the crossing is at the finger: it fires there, not at 0/0.
+    #[test]
+    fn a_crossing_behind_the_finger_is_placed_on_its_path() {
+        let mut e = Edges::default();
+        e.segments.push(seg(0, 0, 10_000, 0)).unwrap();
+        let c = e.compile(50_000, PERIOD_US).unwrap();
+        let mut t = EdgeTracker::default();
+        for k in 0..=20 {
+            assert_eq!(t.update(&c, pt(8_500, -3_000 + 100 * k), (0.0, 0.0)), None);
+        }
+        assert_eq!(t.update(&c, pt(10_500, 1_000), (0.0, 0.0)), Some(0));
+        // Past its end at the finger: nothing, as for a finger that never met the segment.
+        let mut t = EdgeTracker::default();
+        for k in 0..=20 {
+            assert_eq!(t.update(&c, pt(8_500, -3_000 + 100 * k), (0.0, 0.0)), None);
+        }
+        assert_eq!(t.update(&c, pt(10_500, -1_000), (0.0, 0.0)), None);
+        assert_eq!(t.update(&c, pt(10_500, 1_000), (0.0, 0.0)), None);
+
+        // The sample before on the line at x = 4 mm, the finger on it at x = 5 mm: armed from
+        // below, it fires at the finger.
+        let mut t = EdgeTracker::default();
+        for k in 0..=20 {
+            assert_eq!(t.update(&c, pt(5_000, -3_000 + 100 * k), (0.0, 0.0)), None);
+        }
+        t.prev = Some(pt(4_000, 0));
+        assert_eq!(t.update(&c, pt(5_000, 0), (0.0, 0.0)), Some(0));
+    }
+
     #[test]
     fn the_zone_skip_changes_nothing_and_visits_only_near_edges() {
         // Random walks over the scene: the tracker that skips the zone scan and visits only the
