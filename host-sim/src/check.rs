@@ -47,13 +47,9 @@ pub fn check(file: &str, text: &str, board: &'static BoardDef) -> Result<String,
         SensorKind::FourWire => {
             let frame_us = crate::sim2d::board_frame_period_us(board)
                 .ok_or_else(|| format!("{file}: {} reads no 4-wire overlay", board.name))?;
-            let c = scene_file::load_2d_for_board(
-                file,
-                text,
-                crate::sim::burst_timer(board),
-                frame_us,
-            )
-            .map_err(|e| e.to_string())?;
+            let c =
+                scene_file::load_2d_for_board(file, text, crate::sim::burst_timer(board), frame_us)
+                    .map_err(|e| e.to_string())?;
             let (w, h) = scene_file::plate_um_of(file, text).map_err(|e| e.to_string())?;
             let n = c.scene.windows.len();
             let sides: usize = c

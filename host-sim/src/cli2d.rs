@@ -212,11 +212,9 @@ pub fn plan(args: &Args, m: &ArgMatches) -> Result<Option<Plan2d>, Refusal> {
                 _ => return Ok(None),
             }
         }
-        None if args.trajectory.is_2d() => (
-            sim2d::demo_config(),
-            "the 2D demo screen".into(),
-            screen_um,
-        ),
+        None if args.trajectory.is_2d() => {
+            (sim2d::demo_config(), "the 2D demo screen".into(), screen_um)
+        }
         None => return Ok(None),
     };
     if let Some(f) = FLAGS_1D.iter().find_map(|id| given(m, id)) {

@@ -554,10 +554,7 @@ pub fn run(params: &Params2d) -> Result<Run2d, Sim2dError> {
         let (t0_us, t_us) = (k * frame_us as u64, (k + 1) * frame_us as u64);
         let t_s = t_us as f64 * 1e-6;
         let start = params.trajectory.state(t0_us as f64 * 1e-6);
-        let (fx, fy) = (
-            start.x_um / 1e3 / plate_mm.0,
-            start.y_um / 1e3 / plate_mm.1,
-        );
+        let (fx, fy) = (start.x_um / 1e3 / plate_mm.0, start.y_um / 1e3 / plate_mm.1);
         let lifted = params.lift_at_s.is_some_and(|l| t0_us as f64 * 1e-6 >= l);
         let on_plate = (0.0..=1.0).contains(&fx) && (0.0..=1.0).contains(&fy);
         if !on_plate && !lifted {

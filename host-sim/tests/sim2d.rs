@@ -368,23 +368,44 @@ fn runs_use_the_scenes_plate_and_warn_when_the_finger_is_not_on_it() {
             .args(["--speed", "100", "--json"])
             .output()
             .unwrap();
-        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         (v, String::from_utf8_lossy(&out.stderr).into_owned())
     };
     let concave = "../scenes/2d-concave.toml";
     let (v, err) = run(&[
-        "--scene", concave, "--trajectory", "line", "--from-xy", "20,40", "--to-xy", "20,59",
+        "--scene",
+        concave,
+        "--trajectory",
+        "line",
+        "--from-xy",
+        "20,40",
+        "--to-xy",
+        "20,59",
     ]);
     assert_eq!(v["plate_mm"], serde_json::json!([80.0, 60.0]), "{v}");
     assert_eq!(v["lifts"].as_array().unwrap().len(), 0, "{v}");
     assert_eq!(v["off_plate_frames"], 0, "{v}");
-    assert!(v["warnings"].as_array().unwrap().is_empty() && err.is_empty(), "{v} {err}");
+    assert!(
+        v["warnings"].as_array().unwrap().is_empty() && err.is_empty(),
+        "{v} {err}"
+    );
 
     // From 5 mm left of the plate at 100 mm/s: 50 ms off it, from the start.
     let fig12 = "../scenes/2d-fig12.toml";
     let (v, err) = run(&[
-        "--scene", fig12, "--trajectory", "line", "--from-xy", "-5,20", "--to-xy", "40,20",
+        "--scene",
+        fig12,
+        "--trajectory",
+        "line",
+        "--from-xy",
+        "-5,20",
+        "--to-xy",
+        "40,20",
     ]);
     let frames = v["off_plate_frames"].as_u64().unwrap() as f64;
     let off_s = frames * v["frame_period_us"].as_f64().unwrap() * 1e-6;
@@ -397,15 +418,34 @@ fn runs_use_the_scenes_plate_and_warn_when_the_finger_is_not_on_it() {
     assert_eq!(v["warnings"].as_array().unwrap().len(), 1, "{v}");
 
     let (v, err) = run(&[
-        "--scene", fig12, "--trajectory", "line", "--from-xy", "5,20", "--to-xy", "40,20",
-        "--force", "0.1",
+        "--scene",
+        fig12,
+        "--trajectory",
+        "line",
+        "--from-xy",
+        "5,20",
+        "--to-xy",
+        "40,20",
+        "--force",
+        "0.1",
     ]);
     assert_eq!(v["pressed_frames"], 0, "{v}");
-    assert!(err.contains("warning: the finger never pressed the overlay"), "{err}");
+    assert!(
+        err.contains("warning: the finger never pressed the overlay"),
+        "{err}"
+    );
 
     let (_, err) = run(&[
-        "--scene", fig12, "--trajectory", "line", "--from-xy", "5,20", "--to-xy", "75,20",
-        "--duration", "0.2",
+        "--scene",
+        fig12,
+        "--trajectory",
+        "line",
+        "--from-xy",
+        "5,20",
+        "--to-xy",
+        "75,20",
+        "--duration",
+        "0.2",
     ]);
     assert!(
         err.contains("warning: the run ends at 0.2 s (--duration), before the path does (0.700 s)"),
@@ -420,7 +460,15 @@ fn runs_use_the_scenes_plate_and_warn_when_the_finger_is_not_on_it() {
 fn a_closed_pipe_and_a_refused_scene_end_without_noise() {
     use std::os::unix::process::ExitStatusExt;
     let mut child = Command::new(EXE)
-        .args(["--trajectory", "line", "--from-xy", "44,12", "--to-xy", "72,20", "-o"])
+        .args([
+            "--trajectory",
+            "line",
+            "--from-xy",
+            "44,12",
+            "--to-xy",
+            "72,20",
+            "-o",
+        ])
         .arg(std::env::temp_dir().join("host-sim-sim2d-pipe.png"))
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
@@ -444,14 +492,24 @@ fn a_closed_pipe_and_a_refused_scene_end_without_noise() {
     let out = Command::new(EXE)
         .arg("--scene")
         .arg(&bad)
-        .args(["--trajectory", "line", "--from-xy", "5,20", "--to-xy", "40,20"])
+        .args([
+            "--trajectory",
+            "line",
+            "--from-xy",
+            "5,20",
+            "--to-xy",
+            "40,20",
+        ])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{err}");
     let lines: Vec<&str> = err.lines().filter(|l| !l.is_empty()).collect();
     assert_eq!(lines.len(), 1, "{err}");
-    assert!(lines[0].starts_with("error: ") && lines[0].contains("window[0]"), "{err}");
+    assert!(
+        lines[0].starts_with("error: ") && lines[0].contains("window[0]"),
+        "{err}"
+    );
 }
 
 /// A file that cannot be read is named by its flag.
@@ -464,15 +522,24 @@ fn an_unreadable_file_is_named_by_its_flag() {
         ),
         (
             vec![
-                "--scene", "/nonexistent/s.toml", "--trajectory", "line", "--from-xy", "5,20",
-                "--to-xy", "40,20",
+                "--scene",
+                "/nonexistent/s.toml",
+                "--trajectory",
+                "line",
+                "--from-xy",
+                "5,20",
+                "--to-xy",
+                "40,20",
             ],
             "error: --scene /nonexistent/s.toml: No such file",
         ),
     ] {
         let out = Command::new(EXE).args(&args).output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success() && err.starts_with(want), "{args:?}: {err}");
+        assert!(
+            !out.status.success() && err.starts_with(want),
+            "{args:?}: {err}"
+        );
     }
 }
 

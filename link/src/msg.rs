@@ -231,7 +231,9 @@ impl<T> Serialize for Never<T> {
 #[cfg(feature = "plane-only")]
 impl<'de, T> Deserialize<'de> for Never<T> {
     fn deserialize<D: serde::Deserializer<'de>>(_: D) -> Result<Self, D::Error> {
-        Err(serde::de::Error::custom("a 1D reply, which this build never reads"))
+        Err(serde::de::Error::custom(
+            "a 1D reply, which this build never reads",
+        ))
     }
 }
 

@@ -10,9 +10,9 @@ use heapless::Vec;
 /// and one that does not drops (and counts) instead of stalling anything.
 pub const QUEUE_RECORDS: usize = 64;
 
-use crate::msg::{Header, Record, Reply, PROTOCOL_VERSION, RECORDS_PER_FRAME};
 #[cfg(not(feature = "plane-only"))]
 use crate::msg::Stream;
+use crate::msg::{Header, Record, Reply, PROTOCOL_VERSION, RECORDS_PER_FRAME};
 #[cfg(feature = "plane")]
 use crate::msg::{Record2d, Stream2d};
 

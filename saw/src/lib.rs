@@ -1583,7 +1583,10 @@ mod tests {
         let plate_um = saw_core::scene_file::plate_um_of(path, &text).unwrap();
         let scene = saw_link::msg::PlaneScene { plate_um, config };
         let text = super::scene_2d_text(1, saw_link::msg::SceneSource::Link, &scene);
-        assert!(text.contains("outline felt as edges 0–5 (edge 0 from the first vertex)"), "{text}");
+        assert!(
+            text.contains("outline felt as edges 0–5 (edge 0 from the first vertex)"),
+            "{text}"
+        );
         assert!(text.contains("edge 6: (50, 40) to (75, 40) mm"), "{text}");
         assert!(text.contains("edge 7: (50, 45) to (75, 55) mm"), "{text}");
         assert!(!text.contains("edge 0:"), "{text}");

@@ -129,7 +129,13 @@ fn a_2d_scene_is_pushed_read_back_edited_and_a_1d_one_refused() {
     // `get --toml` is a scene file of what runs: the moved window, kept and pushed again.
     let tuned = saw(&vb.port, &["get", "--toml"]);
     assert_eq!(tuned.code, 0, "{}", tuned.stderr);
-    assert!(tuned.stdout.starts_with("# Read back with `saw get --toml`: scene 0x"), "{}", tuned.stdout);
+    assert!(
+        tuned
+            .stdout
+            .starts_with("# Read back with `saw get --toml`: scene 0x"),
+        "{}",
+        tuned.stdout
+    );
     let dir = std::env::temp_dir().join(format!("saw-e2e2d-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let tuned_file = dir.join("tuned.toml");
