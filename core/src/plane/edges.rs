@@ -1103,25 +1103,24 @@ mod tests {
         let mut e = Edges::default();
         e.segments.push(seg(0, 0, 10_000, 0)).unwrap();
         let c = e.compile(50_000, PERIOD_US).unwrap();
-        let mut t = EdgeTracker::default();
-        for k in 0..=20 {
-            assert_eq!(t.update(&c, pt(8_500, -3_000 + 100 * k), (0.0, 0.0)), None);
-        }
+        // A tracker armed from below: the finger up from y = −3 mm to −1 mm at `x_um`, no fire.
+        let armed_below = |x_um: i32| {
+            let mut t = EdgeTracker::default();
+            for k in 0..=20 {
+                assert_eq!(t.update(&c, pt(x_um, -3_000 + 100 * k), (0.0, 0.0)), None);
+            }
+            t
+        };
+        let mut t = armed_below(8_500);
         assert_eq!(t.update(&c, pt(10_500, 1_000), (0.0, 0.0)), Some(0));
         // Past its end at the finger: nothing, as for a finger that never met the segment.
-        let mut t = EdgeTracker::default();
-        for k in 0..=20 {
-            assert_eq!(t.update(&c, pt(8_500, -3_000 + 100 * k), (0.0, 0.0)), None);
-        }
+        let mut t = armed_below(8_500);
         assert_eq!(t.update(&c, pt(10_500, -1_000), (0.0, 0.0)), None);
         assert_eq!(t.update(&c, pt(10_500, 1_000), (0.0, 0.0)), None);
 
         // The sample before on the line at x = 4 mm, the finger on it at x = 5 mm: armed from
         // below, it fires at the finger.
-        let mut t = EdgeTracker::default();
-        for k in 0..=20 {
-            assert_eq!(t.update(&c, pt(5_000, -3_000 + 100 * k), (0.0, 0.0)), None);
-        }
+        let mut t = armed_below(5_000);
         t.prev = Some(pt(4_000, 0));
         assert_eq!(t.update(&c, pt(5_000, 0), (0.0, 0.0)), Some(0));
     }
