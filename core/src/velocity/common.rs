@@ -241,6 +241,20 @@ impl SlotClock {
         self.grid_us = None;
         self.grid_frac = 0;
     }
+
+    /// True when a sample at `t_us` is exactly one period past the grid: [`Self::tick`] would
+    /// take its fast path there (one slot, the grid moved to `t_us`, the fraction untouched).
+    #[inline(always)]
+    pub(crate) fn one_period_on(&self, t_us: u32) -> bool {
+        matches!(self.grid_us, Some(grid) if t_us.wrapping_sub(grid) == self.step_us.get())
+    }
+
+    /// [`Self::tick`]'s fast path at `t_us`, for a caller that tested [`Self::one_period_on`]
+    /// (a deferred rest: the grid moves as the tick would move it).
+    #[inline(always)]
+    pub(crate) fn step_on_grid(&mut self, t_us: u32) {
+        self.grid_us = Some(t_us);
+    }
 }
 
 /// What a sample is to an estimator once [`Sampler::step`] has placed it on the grid.
