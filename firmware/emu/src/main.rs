@@ -862,7 +862,23 @@ fn profile2d(traj: &str) -> ! {
         let (name, n, _, _) = read_vector2d(&mut r);
         if name == traj {
             let mut ctl = new_controller2d(&g, &cfg);
-            let cost = replay_readings(&mut ctl, n);
+            // Called through a pointer: with one caller `on_reading` would be inlined into
+            // this loop and compiled unlike the measuring image's (where three loops call it),
+            // so the profile would count other code than `scripts/emu.sh` does.
+            let on_reading: fn(&mut Controller2d, u32, Reading) -> Output2d =
+                black_box(Controller2d::on_reading);
+            let frames = unsafe { &*core::ptr::addr_of!(FRAMES) };
+            let readings = unsafe { &*core::ptr::addr_of!(READINGS) };
+            let outputs = unsafe { &mut *core::ptr::addr_of_mut!(OUTPUTS2D) };
+            let cost = measure(|| {
+                for ((f, rd), o) in frames[..n]
+                    .iter()
+                    .zip(&readings[..n])
+                    .zip(outputs[..n].iter_mut())
+                {
+                    *o = on_reading(&mut ctl, black_box(f).t_us, *black_box(rd));
+                }
+            });
             report("PROFILE", name, n, per_sample_x10(cost, 0, n));
             debug::exit(debug::EXIT_SUCCESS);
         }
