@@ -733,6 +733,68 @@ mod tests {
         }
     }
 
+    /// The parking itself (the proptests above show it changes no answer; this, that it
+    /// happens): rests on the grid wait in their slots with the sums untouched and the clock
+    /// moved; a rest off the grid takes them in first; a wake takes them in and answers as an
+    /// estimator updated all along.
+    #[test]
+    fn a_rest_on_the_grid_is_parked_and_taken_in() {
+        let at = |k: u32| PointUm::new(1_000 + 7 * k as i32, 5_000 - 3 * k as i32);
+        let mut fed = PlaneLsq::<32>::new(PERIOD_US).unwrap();
+        let mut e = PlaneLsq::<32>::new(PERIOD_US).unwrap();
+        for k in 0..40 {
+            fed.update(at(k), k * PERIOD_US);
+            e.update(at(k), k * PERIOD_US);
+        }
+        let sums = (e.sum_x, e.centred_x, e.sum_y, e.centred_y);
+        for k in 40..45 {
+            fed.update(at(k), k * PERIOD_US);
+            e.rest(at(k), k * PERIOD_US);
+            assert_eq!(e.owed, k - 39, "reading {k} parked");
+            assert_eq!(e.t_mid_us, k * PERIOD_US);
+            // The median of reading k is placed at reading k − 1's time: the grid is there.
+            assert!(
+                e.clock.one_period_on(k * PERIOD_US),
+                "the grid moved with it"
+            );
+        }
+        assert_eq!((e.sum_x, e.centred_x, e.sum_y, e.centred_y), sums);
+        // Past the window's length on the grid, then the wake: the same answer.
+        for k in 45..130 {
+            let want = fed.update(at(k), k * PERIOD_US);
+            e.rest(at(k), k * PERIOD_US);
+            if k == 129 {
+                assert_eq!(e.owed, 90);
+                e.wake();
+                assert_eq!(e.owed, 0);
+                assert_eq!(e.last, want);
+                assert!(want.is_some());
+            }
+        }
+        // Three more parked, then a reading 30 µs late: off the grid, so what is owed goes in
+        // first, then the reading in full.
+        for k in 130..133 {
+            fed.update(at(k), k * PERIOD_US);
+            e.rest(at(k), k * PERIOD_US);
+        }
+        assert_eq!(e.owed, 3);
+        let late = 133 * PERIOD_US + 30;
+        fed.update(at(133), late);
+        e.rest(at(133), late);
+        assert_eq!(e.owed, 0);
+        assert_eq!(
+            (e.sum_x, e.centred_x, e.sum_y, e.centred_y, e.old, e.mid),
+            (
+                fed.sum_x,
+                fed.centred_x,
+                fed.sum_y,
+                fed.centred_y,
+                fed.old,
+                fed.mid
+            )
+        );
+    }
+
     /// The one-compare range test gives the exact rounded, saturated product (worked in
     /// i128) at and around both ends of the range and across i32, for a window whose range
     /// lies inside i32 (N = 2 at 10 µs) and the controller's (N = 32 at 100 µs).
