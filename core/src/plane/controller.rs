@@ -360,7 +360,8 @@ impl<V: PlaneEstimator> Controller2d<V> {
         }
         // The edges' position half first: the lead (the velocity) is read only when an armed
         // edge is within the longest lead of its line, where it could fire on this reading.
-        let lead_read = match self.active.as_ref().and_then(|a| a.scene.edges.as_ref()) {
+        let edges = self.active.as_ref().and_then(|a| a.scene.edges.as_ref());
+        let lead_read = match edges {
             Some((edges, _)) => self.edges.locate(edges, p),
             None => false,
         };
@@ -373,6 +374,12 @@ impl<V: PlaneEstimator> Controller2d<V> {
             self.velocity.rest(p, t_us);
             self.resting = true;
             None
+        };
+        // With the velocity known, the lead and the crossing test only where a lead of that
+        // speed reaches an edge's line: most readings within the 2 mm cap are farther out.
+        let lead_read = match edges {
+            Some((edges, _)) if lead_read => self.edges.may_fire(edges, p, velocity),
+            _ => false,
         };
         let mut out = Output2d {
             position: Some(p),
