@@ -357,13 +357,7 @@ impl CompiledEdges {
     /// capped or not. 0 without a velocity (the lead is none).
     #[inline(always)]
     pub fn lead_bound_um(&self, v: Option<VelocityUmS>) -> f32 {
-        match v {
-            Some(v) => {
-                (v.vx_um_s.unsigned_abs() as f32 + v.vy_um_s.unsigned_abs() as f32)
-                    * self.lead_bound_s
-            }
-            None => 0.0,
-        }
+        lead_bound_um(self.lead_bound_s, v)
     }
 
     /// Number of edges.
@@ -441,6 +435,10 @@ pub struct EdgeTracker {
     room_um: f32,
     /// `room_um` at the last full visit's point.
     quiet_room_um: f32,
+    /// The edges' [`CompiledEdges::lead_bound_um`] factor, s, kept by [`Self::locate`] when it
+    /// returns true (so [`Self::may_fire`] needs no edges: the caller holds none across the
+    /// estimator).
+    lead_bound_s: f32,
     /// Edges visited (tests: only a count tells the skipped visits from visits that change
     /// nothing).
     #[cfg(test)]
@@ -469,6 +467,7 @@ impl Default for EdgeTracker {
             quiet_reach: 0,
             room_um: 0.0,
             quiet_room_um: 0.0,
+            lead_bound_s: 0.0,
             #[cfg(test)]
             visits: 0,
             #[cfg(test)]
@@ -532,6 +531,7 @@ impl EdgeTracker {
                 // s, with 0.5 µm to spare for this line's).
                 self.room_um =
                     self.quiet_room_um - moved_um as f32 * ROOM_PER_MOVED - QUIET_MARGIN_UM;
+                self.lead_bound_s = edges.lead_bound_s;
                 return true;
             }
         }
@@ -643,6 +643,7 @@ impl EdgeTracker {
         self.reach = reach;
         self.room_um = room_um;
         self.quiet_room_um = room_um;
+        self.lead_bound_s = edges.lead_bound_s;
         if reach == 0 {
             self.prev = Some(p);
         }
@@ -661,17 +662,12 @@ impl EdgeTracker {
     /// line on its armed side, which `room_um` bounds from below for every edge in reach.
     /// |λ| ≤ the lead's L1 length ≤ (|v_x| + |v_y|) × `lead_bound_s`.
     #[inline(always)]
-    pub fn may_fire(
-        &mut self,
-        edges: &CompiledEdges,
-        p: PointUm,
-        velocity: Option<VelocityUmS>,
-    ) -> bool {
+    pub fn may_fire(&mut self, p: PointUm, velocity: Option<VelocityUmS>) -> bool {
         #[cfg(test)]
         if self.no_bound {
             return true;
         }
-        if edges.lead_bound_um(velocity) < self.room_um {
+        if lead_bound_um(self.lead_bound_s, velocity) < self.room_um {
             self.reach = 0;
             self.prev = Some(p);
             return false;
@@ -887,6 +883,17 @@ fn rearm(armed: &mut Option<Side>, fired_s: &mut f32, s: f32, rearm_um: f32) {
         (*armed, *fired_s) = (Some(Side::Right), 0.0);
     } else if s > fired_s.max(0.0) + rearm_um {
         (*armed, *fired_s) = (Some(Side::Left), 0.0);
+    }
+}
+
+/// (|v_x| + |v_y|) × `lead_bound_s`, µm; 0 without a velocity ([`CompiledEdges::lead_bound_um`]).
+#[inline(always)]
+fn lead_bound_um(lead_bound_s: f32, v: Option<VelocityUmS>) -> f32 {
+    match v {
+        Some(v) => {
+            (v.vx_um_s.unsigned_abs() as f32 + v.vy_um_s.unsigned_abs() as f32) * lead_bound_s
+        }
+        None => 0.0,
     }
 }
 
@@ -1509,16 +1516,21 @@ mod tests {
                 if ra {
                     asked += 1;
                     // b visited in full: its room is exact; a's may be the quiet one's.
-                    assert!(a.room_um <= b.room_um, "{p:?}: {} > {}", a.room_um, b.room_um);
+                    assert!(
+                        a.room_um <= b.room_um,
+                        "{p:?}: {} > {}",
+                        a.room_um,
+                        b.room_um
+                    );
                     quiet_rooms += (a.visits == visits) as u32;
                 }
-                let fa = if ra && a.may_fire(&c, p, v) {
+                let fa = if ra && a.may_fire(p, v) {
                     a.fire(&c, p, lead)
                 } else {
                     skipped += ra as u32;
                     None
                 };
-                let fb = if rb && b.may_fire(&c, p, v) {
+                let fb = if rb && b.may_fire(p, v) {
                     b.fire(&c, p, lead)
                 } else {
                     None
@@ -1531,7 +1543,10 @@ mod tests {
             }
         }
         assert!(fires > 50, "the walks crossed too few edges: {fires}");
-        assert!(skipped > asked / 4 && skipped < asked, "{skipped} of {asked}");
+        assert!(
+            skipped > asked / 4 && skipped < asked,
+            "{skipped} of {asked}"
+        );
         assert!(quiet_rooms > asked / 10, "{quiet_rooms} of {asked}");
         std::println!(
             "{fires} fires; of {asked} samples with an edge in reach, {skipped} skipped by the \
