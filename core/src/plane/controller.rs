@@ -360,7 +360,8 @@ impl<V: PlaneEstimator> Controller2d<V> {
         }
         // The edges' position half first: the lead (the velocity) is read only when an armed
         // edge is within the longest lead of its line, where it could fire on this reading.
-        let lead_read = match self.active.as_ref().and_then(|a| a.scene.edges.as_ref()) {
+        let edges = self.active.as_ref().and_then(|a| a.scene.edges.as_ref());
+        let lead_read = match edges {
             Some((edges, _)) => self.edges.locate(edges, p),
             None => false,
         };
@@ -376,11 +377,10 @@ impl<V: PlaneEstimator> Controller2d<V> {
         };
         // With the velocity known, the lead and the crossing test only where a lead of that
         // speed reaches an edge's line: most readings within the 2 mm cap are farther out.
-        let lead_read = lead_read
-            && match self.active.as_ref().and_then(|a| a.scene.edges.as_ref()) {
-                Some((edges, _)) => self.edges.may_fire(edges, p, velocity),
-                None => false,
-            };
+        let lead_read = match edges {
+            Some((edges, _)) if lead_read => self.edges.may_fire(edges, p, velocity),
+            _ => false,
+        };
         let mut out = Output2d {
             position: Some(p),
             velocity,
@@ -1701,8 +1701,7 @@ mod tests {
     /// one period longer, is the one tested) and off ground, on strokes across the window's
     /// sides along the axes, noiseless (the lead across a side is then all of its L1 length,
     /// and the bound's margin least) and at 2 LSB, and along random lines at 2 LSB, 20–400
-    /// mm/s. Seen failing (2026-11-30) with the bound planted without the preempt lead's
-    /// period (a pulse a reading late).
+    /// mm/s.
     #[test]
     fn the_lead_bound_changes_no_output() {
         let mut cfg = textured_edge_scene();
