@@ -792,13 +792,6 @@ impl EdgeTracker {
         self.no_bound = true;
     }
 
-    /// [`Self::may_fire`] always true: the reference the lead's bound is checked against
-    /// (tests).
-    #[cfg(test)]
-    pub(crate) fn set_no_bound(&mut self) {
-        self.no_bound = true;
-    }
-
     /// Edges visited so far (tests).
     #[cfg(test)]
     pub(crate) fn visits(&self) -> u32 {
