@@ -1021,6 +1021,23 @@ mod tests {
     }
 
     /// s of a true point across segment `s` (f64, left of a → b positive).
+    /// One step of the random walks over a 60 × 40 mm field: a jump anywhere now and then
+    /// (and back in from the border), else the drift's half and a Gaussian step.
+    fn walk_step(
+        noise: &mut Noise,
+        (x, y): (&mut f64, &mut f64),
+        drift: (f64, f64),
+        step_um: f64,
+    ) -> PointUm {
+        if noise.uniform() < 0.001 || !(0.0..60_000.0).contains(x) || !(0.0..40_000.0).contains(y) {
+            (*x, *y) = (noise.uniform() * 60_000.0, noise.uniform() * 40_000.0);
+        } else {
+            *x += drift.0 * 0.5 + noise.gauss() * step_um;
+            *y += drift.1 * 0.5 + noise.gauss() * step_um;
+        }
+        pt(*x as i32, *y as i32)
+    }
+
     fn s_of(s: &SegmentUm, x: f64, y: f64) -> f64 {
         let (dx, dy) = ((s.b.x_um - s.a.x_um) as f64, (s.b.y_um - s.a.y_um) as f64);
         let len = (dx * dx + dy * dy).sqrt();
@@ -1335,16 +1352,7 @@ mod tests {
             b.no_skip = true;
             let (mut x, mut y) = (noise.uniform() * 60_000.0, noise.uniform() * 40_000.0);
             for _ in 0..20_000 {
-                if noise.uniform() < 0.001
-                    || !(0.0..60_000.0).contains(&x)
-                    || !(0.0..40_000.0).contains(&y)
-                {
-                    (x, y) = (noise.uniform() * 60_000.0, noise.uniform() * 40_000.0);
-                } else {
-                    x += drift.0 * 0.5 + noise.gauss() * step_um;
-                    y += drift.1 * 0.5 + noise.gauss() * step_um;
-                }
-                let p = pt(x as i32, y as i32);
+                let p = walk_step(&mut noise, (&mut x, &mut y), drift, step_um);
                 let angle = noise.uniform() * 2.0 * core::f64::consts::PI;
                 let v_um_s = noise.uniform() * 500_000.0;
                 let lead = c.lead_um(Some(VelocityUmS {
@@ -1488,16 +1496,7 @@ mod tests {
             b.no_bound = true;
             let (mut x, mut y) = (noise.uniform() * 60_000.0, noise.uniform() * 40_000.0);
             for _ in 0..20_000 {
-                if noise.uniform() < 0.001
-                    || !(0.0..60_000.0).contains(&x)
-                    || !(0.0..40_000.0).contains(&y)
-                {
-                    (x, y) = (noise.uniform() * 60_000.0, noise.uniform() * 40_000.0);
-                } else {
-                    x += drift.0 * 0.5 + noise.gauss() * step_um;
-                    y += drift.1 * 0.5 + noise.gauss() * step_um;
-                }
-                let p = pt(x as i32, y as i32);
+                let p = walk_step(&mut noise, (&mut x, &mut y), drift, step_um);
                 let v = any_velocity(&mut noise);
                 let mut lead = c.lead_um(v);
                 if let (Some(v), true) = (v, noise.uniform() < 0.5) {

@@ -596,6 +596,33 @@ mod tests {
         use super::*;
         use proptest::prelude::*;
 
+        /// Each rest/update choice stretched over `run_len` readings, so rests span windows
+        /// (resets stay single).
+        pub(super) fn stretch(
+            steps: &[(i32, i32, u32, u8)],
+            run_len: usize,
+        ) -> std::vec::Vec<(i32, i32, u32, u8)> {
+            steps
+                .iter()
+                .enumerate()
+                .map(|(i, &(dx, dy, dt, w))| {
+                    let run = steps[i / run_len * run_len].3;
+                    (
+                        dx,
+                        dy,
+                        dt,
+                        if w == 0 {
+                            0
+                        } else if run == 0 {
+                            41
+                        } else {
+                            run
+                        },
+                    )
+                })
+                .collect()
+        }
+
         pub(super) fn check<const N: usize>(
             steps: &[(i32, i32, u32, u8)],
         ) -> Result<(), TestCaseError> {
@@ -667,16 +694,7 @@ mod tests {
                 ),
                 run_len in 1usize..60,
             ) {
-                // Stretch each rest/update choice over `run_len` readings so rests span
-                // windows (resets stay single).
-                let steps: std::vec::Vec<_> = steps
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &(dx, dy, dt, w))| {
-                        let run = steps[i / run_len * run_len].3;
-                        (dx, dy, dt, if w == 0 { 0 } else if run == 0 { 41 } else { run })
-                    })
-                    .collect();
+                let steps = stretch(&steps, run_len);
                 check::<32>(&steps)?;
                 check::<2>(&steps)?;
                 check::<5>(&steps)?;
@@ -693,7 +711,7 @@ mod tests {
     /// before the kept ones left unmoved past N parked readings, the sums' weights taken from
     /// the newest end, or the catch-up skipped before a rest off the grid.
     mod parked_rests {
-        use super::fused_is_two_axes::check;
+        use super::fused_is_two_axes::{check, stretch};
         use super::*;
         use proptest::prelude::*;
 
@@ -718,14 +736,7 @@ mod tests {
                 ),
                 run_len in 1usize..120,
             ) {
-                let steps: std::vec::Vec<_> = steps
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &(dx, dy, dt, w))| {
-                        let run = steps[i / run_len * run_len].3;
-                        (dx, dy, dt, if w == 0 { 0 } else if run == 0 { 41 } else { run })
-                    })
-                    .collect();
+                let steps = stretch(&steps, run_len);
                 check::<32>(&steps)?;
                 check::<2>(&steps)?;
                 check::<5>(&steps)?;
