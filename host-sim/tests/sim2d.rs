@@ -214,6 +214,17 @@ fn a_lift_off_mid_run_turns_the_carrier_off_within_one_frame() {
     }
 }
 
+/// The demo screen's stroke the binary tests share: 44,12 → 72,20 mm through its windows and
+/// lines.
+const DEMO_STROKE: [&str; 6] = [
+    "--trajectory",
+    "line",
+    "--from-xy",
+    "44,12",
+    "--to-xy",
+    "72,20",
+];
+
 /// The interface of issue #36 through the binary: `--trajectory line --from-xy --to-xy --speed
 /// --json` prints one JSON object whose events lie on the stroke at their times, whose distances
 /// are the geometry's, and whose summary counts its arrays. Seen failing with the sides'
@@ -221,17 +232,8 @@ fn a_lift_off_mid_run_turns_the_carrier_off_within_one_frame() {
 #[test]
 fn the_json_parses_and_its_distances_agree_with_the_geometry() {
     let out = Command::new(EXE)
-        .args([
-            "--trajectory",
-            "line",
-            "--from-xy",
-            "44,12",
-            "--to-xy",
-            "72,20",
-            "--speed",
-            "100",
-            "--json",
-        ])
+        .args(DEMO_STROKE)
+        .args(["--speed", "100", "--json"])
         .output()
         .unwrap();
     assert!(
@@ -280,14 +282,7 @@ fn the_json_parses_and_its_distances_agree_with_the_geometry() {
 /// Refused at the door, exit code 2, one sentence naming the flag and the value.
 #[test]
 fn bad_flags_are_refused_with_one_line_naming_the_flag() {
-    let line = [
-        "--trajectory",
-        "line",
-        "--from-xy",
-        "44,12",
-        "--to-xy",
-        "72,20",
-    ];
+    let line = DEMO_STROKE;
     let cases: [(Vec<&str>, &str); 11] = [
         (
             [&line[..], &["--speed", "NaN"]].concat(),
@@ -362,9 +357,24 @@ fn bad_flags_are_refused_with_one_line_naming_the_flag() {
 /// says so in one `warning:` line each (stderr, and the JSON's `warnings`).
 #[test]
 fn runs_use_the_scenes_plate_and_warn_when_the_finger_is_not_on_it() {
-    let run = |args: &[&str]| {
+    // A straight stroke at 100 mm/s on `scene` from `from` to `to` (mm), with `extra` flags.
+    let run = |scene: &str, from: &str, to: &str, extra: &[&str]| {
+        let args = [
+            &[
+                "--scene",
+                scene,
+                "--trajectory",
+                "line",
+                "--from-xy",
+                from,
+                "--to-xy",
+                to,
+            ][..],
+            extra,
+        ]
+        .concat();
         let out = Command::new(EXE)
-            .args(args)
+            .args(&args)
             .args(["--speed", "100", "--json"])
             .output()
             .unwrap();
@@ -377,16 +387,7 @@ fn runs_use_the_scenes_plate_and_warn_when_the_finger_is_not_on_it() {
         (v, String::from_utf8_lossy(&out.stderr).into_owned())
     };
     let concave = "../scenes/2d-concave.toml";
-    let (v, err) = run(&[
-        "--scene",
-        concave,
-        "--trajectory",
-        "line",
-        "--from-xy",
-        "20,40",
-        "--to-xy",
-        "20,59",
-    ]);
+    let (v, err) = run(concave, "20,40", "20,59", &[]);
     assert_eq!(v["plate_mm"], serde_json::json!([80.0, 60.0]), "{v}");
     assert_eq!(v["lifts"].as_array().unwrap().len(), 0, "{v}");
     assert_eq!(v["off_plate_frames"], 0, "{v}");
@@ -397,16 +398,7 @@ fn runs_use_the_scenes_plate_and_warn_when_the_finger_is_not_on_it() {
 
     // From 5 mm left of the plate at 100 mm/s: 50 ms off it, from the start.
     let fig12 = "../scenes/2d-fig12.toml";
-    let (v, err) = run(&[
-        "--scene",
-        fig12,
-        "--trajectory",
-        "line",
-        "--from-xy",
-        "-5,20",
-        "--to-xy",
-        "40,20",
-    ]);
+    let (v, err) = run(fig12, "-5,20", "40,20", &[]);
     let frames = v["off_plate_frames"].as_u64().unwrap() as f64;
     let off_s = frames * v["frame_period_us"].as_f64().unwrap() * 1e-6;
     assert!((off_s - 0.05).abs() <= 0.001, "{off_s} {v}");
@@ -417,36 +409,14 @@ fn runs_use_the_scenes_plate_and_warn_when_the_finger_is_not_on_it() {
     );
     assert_eq!(v["warnings"].as_array().unwrap().len(), 1, "{v}");
 
-    let (v, err) = run(&[
-        "--scene",
-        fig12,
-        "--trajectory",
-        "line",
-        "--from-xy",
-        "5,20",
-        "--to-xy",
-        "40,20",
-        "--force",
-        "0.1",
-    ]);
+    let (v, err) = run(fig12, "5,20", "40,20", &["--force", "0.1"]);
     assert_eq!(v["pressed_frames"], 0, "{v}");
     assert!(
         err.contains("warning: the finger never pressed the overlay"),
         "{err}"
     );
 
-    let (_, err) = run(&[
-        "--scene",
-        fig12,
-        "--trajectory",
-        "line",
-        "--from-xy",
-        "5,20",
-        "--to-xy",
-        "75,20",
-        "--duration",
-        "0.2",
-    ]);
+    let (_, err) = run(fig12, "5,20", "75,20", &["--duration", "0.2"]);
     assert!(
         err.contains("warning: the run ends at 0.2 s (--duration), before the path does (0.700 s)"),
         "{err}"
@@ -460,15 +430,8 @@ fn runs_use_the_scenes_plate_and_warn_when_the_finger_is_not_on_it() {
 fn a_closed_pipe_and_a_refused_scene_end_without_noise() {
     use std::os::unix::process::ExitStatusExt;
     let mut child = Command::new(EXE)
-        .args([
-            "--trajectory",
-            "line",
-            "--from-xy",
-            "44,12",
-            "--to-xy",
-            "72,20",
-            "-o",
-        ])
+        .args(DEMO_STROKE)
+        .arg("-o")
         .arg(std::env::temp_dir().join("host-sim-sim2d-pipe.png"))
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
