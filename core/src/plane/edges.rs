@@ -358,9 +358,33 @@ impl CompiledEdges {
     #[inline(always)]
     pub fn lead_bound_um(&self, v: Option<VelocityUmS>) -> f32 {
         match v {
+            // |x as f32| is |x| as f32 (rounding to nearest is symmetric); the velocity's
+            // conversions are shared with the directional bound.
+            Some(v) => ((v.vx_um_s as f32).abs() + (v.vy_um_s as f32).abs()) * self.lead_bound_s,
+            None => 0.0,
+        }
+    }
+
+    /// At least the part towards an edge's line of every lead the controller makes at `v`,
+    /// µm, for `toward` the unit vector from the finger's side to the line (±(−u_y, u_x)),
+    /// given `bound_um` = [`Self::lead_bound_um`]`(v)`. Every lead is v scaled by some
+    /// κ ∈ [0, lead_s + T] (the cap and the preempt period scale both axes alike), so its
+    /// part towards the line is κ·(v · toward), none when v points along or away; the f32
+    /// roundings of the lead and of λ (a dozen, each 2⁻²⁴ of |v_x| or |v_y| times κ) are
+    /// covered by 2⁻¹² of the L1 bound, 300 times over.
+    #[inline(always)]
+    pub fn lead_toward_bound_um(
+        &self,
+        v: Option<VelocityUmS>,
+        toward: (f32, f32),
+        bound_um: f32,
+    ) -> f32 {
+        match v {
             Some(v) => {
-                (v.vx_um_s.unsigned_abs() as f32 + v.vy_um_s.unsigned_abs() as f32)
-                    * self.lead_bound_s
+                let dot = v.vx_um_s as f32 * toward.0 + v.vy_um_s as f32 * toward.1;
+                // Finite: the velocity and the unit vector are.
+                let dot = if dot > 0.0 { dot } else { 0.0 };
+                dot * self.lead_bound_s + bound_um * TOWARD_SLACK
             }
             None => 0.0,
         }
@@ -434,13 +458,17 @@ pub struct EdgeTracker {
     quiet: Option<(PointUm, u32)>,
     /// The reach mask of the last full visit.
     quiet_reach: u32,
-    /// Of the edges within reach on this sample, the least distance the lead must reach
-    /// across its line (from the armed side) to fire one, µm, or less ([`Self::may_fire`]):
-    /// exact after a full visit, after a quiet answer the visit's less the most s can have
-    /// moved since.
-    room_um: f32,
-    /// `room_um` at the last full visit's point.
+    /// On the last full visit (at `quiet`'s point), of the edges in reach: the least distance
+    /// a lead must reach across its line from its armed side to fire it, µm (the nearest
+    /// edge's room), the unit vector from that side towards its line, and the least room of
+    /// the others (∞ with one edge in reach); both rooms less [`QUIET_MARGIN_UM`].
+    /// [`Self::may_fire`] moves them to the sample's point.
     quiet_room_um: f32,
+    toward: (f32, f32),
+    quiet_others_um: f32,
+    /// The nearest edge's index (tests).
+    #[cfg(test)]
+    nearest: usize,
     /// Edges visited (tests: only a count tells the skipped visits from visits that change
     /// nothing).
     #[cfg(test)]
@@ -467,8 +495,11 @@ impl Default for EdgeTracker {
             reach: 0,
             quiet: None,
             quiet_reach: 0,
-            room_um: 0.0,
             quiet_room_um: 0.0,
+            toward: (0.0, 0.0),
+            quiet_others_um: 0.0,
+            #[cfg(test)]
+            nearest: 0,
             #[cfg(test)]
             visits: 0,
             #[cfg(test)]
@@ -526,12 +557,8 @@ impl EdgeTracker {
                     return false;
                 }
                 // No edge was crossed since the visit (a crossing drops the quiet), so the
-                // edges in reach are the visit's, armed on the same sides, and each one's s
-                // has moved by at most √2 × the Chebyshev travel (rounded up: 1.4143 covers
-                // the two conversions' roundings) and the margin (both visits' rounding of
-                // s, with 0.5 µm to spare for this line's).
-                self.room_um =
-                    self.quiet_room_um - moved_um as f32 * ROOM_PER_MOVED - QUIET_MARGIN_UM;
+                // edges in reach are the visit's, armed on the same sides: `may_fire` bounds
+                // their rooms from the visit's.
                 return true;
             }
         }
@@ -577,8 +604,11 @@ impl EdgeTracker {
         // The least distance across any visited edge's line, µm, before its answer below
         // changes (re-armed, into or out of reach).
         let mut slack_um = f32::INFINITY;
-        // The least distance of an edge in reach to its line, from its armed side.
-        let mut room_um = f32::INFINITY;
+        // The least distance of an edge in reach to its line, from its armed side, the way
+        // towards that line, and the next least distance.
+        let (mut room_um, mut toward, mut room2_um) = (f32::INFINITY, (0.0, 0.0), f32::INFINITY);
+        #[cfg(test)]
+        let mut nearest_i = 0;
         let (mut reach, mut todo) = (0u32, self.in_zone);
         while todo != 0 {
             let i = todo.trailing_zeros() as usize;
@@ -606,7 +636,13 @@ impl EdgeTracker {
                     if s >= -LEAD_REACH_UM {
                         reach |= 1 << i;
                         slack_um = slack_um.min(s + LEAD_REACH_UM);
-                        room_um = room_um.min(-s);
+                        // s grows towards the line: along n = (−u_y, u_x).
+                        if nearest(-s, (-g.uy, g.ux), &mut room_um, &mut toward, &mut room2_um) {
+                            #[cfg(test)]
+                            {
+                                nearest_i = i;
+                            }
+                        }
                     } else {
                         slack_um = slack_um.min(-LEAD_REACH_UM - s);
                     }
@@ -615,7 +651,12 @@ impl EdgeTracker {
                     if s <= LEAD_REACH_UM {
                         reach |= 1 << i;
                         slack_um = slack_um.min(LEAD_REACH_UM - s);
-                        room_um = room_um.min(s);
+                        if nearest(s, (g.uy, -g.ux), &mut room_um, &mut toward, &mut room2_um) {
+                            #[cfg(test)]
+                            {
+                                nearest_i = i;
+                            }
+                        }
                     } else {
                         slack_um = slack_um.min(s - LEAD_REACH_UM);
                     }
@@ -641,8 +682,13 @@ impl EdgeTracker {
         self.quiet = Some((p, zone_left_um.min(edge_quiet_um)));
         self.quiet_reach = reach;
         self.reach = reach;
-        self.room_um = room_um;
-        self.quiet_room_um = room_um;
+        self.quiet_room_um = room_um - QUIET_MARGIN_UM;
+        self.toward = toward;
+        self.quiet_others_um = room2_um - QUIET_MARGIN_UM;
+        #[cfg(test)]
+        {
+            self.nearest = nearest_i;
+        }
         if reach == 0 {
             self.prev = Some(p);
         }
@@ -657,9 +703,18 @@ impl EdgeTracker {
     ///
     /// The bound: an edge armed on its right fires when s + max(λ, 0) ≥ 0 (λ the lead's part
     /// across it; the f32 sum has the sign of the exact one), on its left when
-    /// s + min(λ, 0) ≤ 0, so neither fires while |λ| is less than its distance from the
-    /// line on its armed side, which `room_um` bounds from below for every edge in reach.
-    /// |λ| ≤ the lead's L1 length ≤ (|v_x| + |v_y|) × `lead_bound_s`.
+    /// s + min(λ, 0) ≤ 0, so it does not fire while λ's part towards its line is less than
+    /// its room, its distance from the line on its armed side. Two bounds on that part:
+    /// |λ| ≤ the lead's L1 length ≤ (|v_x| + |v_y|) × `lead_bound_s` for every edge, and for
+    /// one edge, towards its line, [`CompiledEdges::lead_toward_bound_um`], which is about
+    /// nothing for a finger moving along the edge or away from it.
+    ///
+    /// The rooms are the last full visit's, moved to `p`: the nearest edge's by the travel's
+    /// part across its line (so it grows as the finger moves away), the others' by the
+    /// travel's length. Nothing fires when the L1 bound is below the others' room and either
+    /// bound is below the nearest's. Past a crossing the edge re-arms behind the finger, well
+    /// within the L1 bound; those are most of a stroke's samples with an edge in reach, and
+    /// the directional bound skips them.
     #[inline(always)]
     pub fn may_fire(
         &mut self,
@@ -671,12 +726,37 @@ impl EdgeTracker {
         if self.no_bound {
             return true;
         }
-        if edges.lead_bound_um(velocity) < self.room_um {
+        let Some((at, _)) = self.quiet else {
+            return true;
+        };
+        let bound_um = edges.lead_bound_um(velocity);
+        let travel = travel_um(p, at);
+        if bound_um < self.others_room_um(travel)
+            && edges.lead_toward_bound_um(velocity, self.toward, bound_um)
+                < self.nearest_room_um(travel)
+        {
             self.reach = 0;
             self.prev = Some(p);
             return false;
         }
         true
+    }
+
+    /// The nearest edge in reach's room, µm, after `travel` from the last full visit, less the
+    /// margin: its s moved by exactly the travel's part across its line (the same f32 normal
+    /// in both). The margin covers both visits' rounding of s (0.75 µm each), with 0.5 µm to
+    /// spare for the few roundings here (each under 0.001 µm for a travel within the quiet
+    /// distance).
+    #[inline(always)]
+    fn nearest_room_um(&self, travel: (f32, f32)) -> f32 {
+        self.quiet_room_um - (travel.0 * self.toward.0 + travel.1 * self.toward.1)
+    }
+
+    /// The other edges' least room, µm, after `travel`, less the margin: each s moved by at
+    /// most the travel's length, ≤ its L1 length.
+    #[inline(always)]
+    fn others_room_um(&self, travel: (f32, f32)) -> f32 {
+        self.quiet_others_um - (travel.0.abs() + travel.1.abs())
     }
 
     /// The lead's half of the sample [`Self::locate`] began at `p` (it returned true): the
@@ -890,6 +970,41 @@ fn rearm(armed: &mut Option<Side>, fired_s: &mut f32, s: f32, rearm_um: f32) {
     }
 }
 
+/// A visit's edge in reach with `room_um` to its line, the unit vector `toward` it: kept
+/// when it is the nearest so far (true), the runner-up's room kept too.
+#[inline(always)]
+fn nearest(
+    room_um: f32,
+    toward: (f32, f32),
+    least_um: &mut f32,
+    least_toward: &mut (f32, f32),
+    second_um: &mut f32,
+) -> bool {
+    if room_um < *least_um {
+        *second_um = *least_um;
+        *least_um = room_um;
+        *least_toward = toward;
+        true
+    } else {
+        if room_um < *second_um {
+            *second_um = room_um;
+        }
+        false
+    }
+}
+
+/// The travel from the last full visit's point `at` to `p`, µm per axis. Within the quiet
+/// distance (under 1.5 mm while an edge is in reach: its slack is at most the reach) or 0 on
+/// the visit's own sample, so exact in f32; wrapping only keeps a contract breach from
+/// panicking.
+#[inline(always)]
+fn travel_um(p: PointUm, at: PointUm) -> (f32, f32) {
+    (
+        p.x_um.wrapping_sub(at.x_um) as f32,
+        p.y_um.wrapping_sub(at.y_um) as f32,
+    )
+}
+
 /// The Chebyshev distance between two points, µm (saturating at the i32 ends).
 #[inline(always)]
 fn chebyshev_um(p: PointUm, q: PointUm) -> u32 {
@@ -901,9 +1016,9 @@ fn chebyshev_um(p: PointUm, q: PointUm) -> u32 {
 /// visits are compared.
 const QUIET_MARGIN_UM: f32 = 2.0;
 
-/// √2 rounded up, so that a Chebyshev travel's f32 product with it is never below the
-/// Euclidean travel's bound √2 × it.
-const ROOM_PER_MOVED: f32 = 1.4143;
+/// The directional bound's allowance for rounding, a share of the L1 bound
+/// ([`CompiledEdges::lead_toward_bound_um`]).
+const TOWARD_SLACK: f32 = 1.0 / 4096.0;
 
 /// How far across its line an armed edge may be and still fire, µm: the lead's part across an
 /// edge is at most the lead's length, [`MAX_LINE_LEAD_UM`] (every lead is capped so), and 1 µm
@@ -1420,10 +1535,13 @@ mod tests {
     }
 
     /// The bound on the lead's part across an edge holds for every lead made at a velocity
-    /// (plain and preempt, capped or not, both signs of each axis, the i32 ends), across
-    /// edges of every direction, f32 as the crossing test computes it; and it is tight
-    /// within a few per mil. Seen failing (2026-11-30) with the bound planted short
-    /// (0.9 × `lead_bound_s`) and without the preempt lead's period.
+    /// (plain and preempt, capped or not, both signs of each axis, the i32 ends, and along
+    /// the edge to the µm/s, where the part is rounding alone), across edges of every
+    /// direction, f32 as the crossing test computes it; so does the directional bound on its
+    /// part towards the line from either side. Both are tight within a few per mil. Seen
+    /// failing (2026-11-30) with the bound planted short (0.9 × `lead_bound_s`), without the
+    /// preempt lead's period, and (2026-11-30) the directional bound without its rounding
+    /// allowance or with a velocity pointing away left negative.
     #[test]
     fn the_lead_bound_is_never_below_the_lead_across_an_edge() {
         let mut noise = Noise::new(2030);
@@ -1447,23 +1565,44 @@ mod tests {
         for (i, (dx, dy)) in [(1, 0), (0, 1), (1, 1), (1, -1)].into_iter().enumerate() {
             e.segments[i] = seg(0, 0, 7_000 * dx, 7_000 * dy);
         }
-        let (mut worst, mut checked) = (0.0f64, 0u32);
+        let (mut worst, mut worst_dir, mut checked) = (0.0f64, 0.0f64, 0u32);
         for envelope in [Envelope::Triangular, Envelope::Rectangular] {
             e.pulse.envelope = envelope;
             let c = e.compile(50_000, PERIOD_US).unwrap();
             for _ in 0..20_000 {
                 let v = any_velocity(&mut noise);
-                let bound = c.lead_bound_um(v);
-                let lead = c.lead_um(v);
-                let leads = [lead, v.map_or(lead, |v| preempt_lead(lead, v))];
                 for g in &c.geoms {
-                    for l in leads {
-                        let across = l.1 * g.ux - l.0 * g.uy;
-                        assert!(across.abs() <= bound, "{v:?} {l:?}: {across} > {bound}");
-                        if bound > 0.0 {
-                            worst = worst.max(across.abs() as f64 / bound as f64);
+                    // The velocity along the edge too, rounded to µm/s: the part across it is
+                    // rounding alone, of either sign.
+                    let along = v.map(|v| {
+                        let speed = (v.vx_um_s as f64).hypot(v.vy_um_s as f64).min(2e9);
+                        VelocityUmS {
+                            vx_um_s: (speed * g.ux as f64) as i32,
+                            vy_um_s: (speed * g.uy as f64) as i32,
                         }
-                        checked += 1;
+                    });
+                    for v in [v, along] {
+                        let bound = c.lead_bound_um(v);
+                        let lead = c.lead_um(v);
+                        let leads = [lead, v.map_or(lead, |v| preempt_lead(lead, v))];
+                        // From either side, towards the line: λ's part that a crossing reads.
+                        let sides = [((-g.uy, g.ux), 1.0f32), ((g.uy, -g.ux), -1.0)];
+                        for l in leads {
+                            let across = l.1 * g.ux - l.0 * g.uy;
+                            assert!(across.abs() <= bound, "{v:?} {l:?}: {across} > {bound}");
+                            if bound > 0.0 {
+                                worst = worst.max(across.abs() as f64 / bound as f64);
+                            }
+                            for (toward, sign) in sides {
+                                let dir = c.lead_toward_bound_um(v, toward, bound);
+                                let part = across * sign;
+                                assert!(part <= dir, "{v:?} {l:?} {toward:?}: {part} > {dir}");
+                                if part > bound * 1e-3 {
+                                    worst_dir = worst_dir.max(part as f64 / dir as f64);
+                                }
+                            }
+                            checked += 1;
+                        }
                     }
                 }
             }
@@ -1471,23 +1610,31 @@ mod tests {
         // Tight: an edge across the velocity's direction, a component near zero and the
         // preempt lead come within a few per mil of it.
         assert!(worst > 0.99, "{worst}");
-        std::println!("{checked} leads across edges: at most {worst:.4} of the bound");
+        assert!(worst_dir > 0.99, "{worst_dir}");
+        std::println!(
+            "{checked} leads across edges: at most {worst:.4} of the L1 bound, {worst_dir:.4} of \
+             the directional one"
+        );
     }
 
     /// Skipping the crossing test where the lead's bound says no edge in reach can fire
     /// ([`EdgeTracker::may_fire`]) answers as a tracker that visits every edge in its zone and
     /// tests every edge in reach on every sample: the same fires, arming and last position,
     /// on random walks (steps of 10 µm to 2 mm, drifts, jumps) with velocities of every scale
-    /// and the plain or the preempt lead. And the room the quiet answer carries is never more
-    /// than the full visit's exact one. Seen failing (2026-11-30) with the bound planted short
-    /// (0.9 × `lead_bound_s`: a fire missed) and with the quiet room's √2 planted out (the room
-    /// above the full visit's). The bound without the preempt lead's period passes here (a
-    /// 10–40 µm band the walks seldom meet): the test above catches that one.
+    /// and the plain or the preempt lead. And the rooms `may_fire` moves from the last full
+    /// visit are never above the exact ones (the nearest edge's for it, the others' for
+    /// them), the nearest's within its margin of exact. Seen failing (2026-11-30) with the
+    /// bound planted short (0.9 × `lead_bound_s`: a fire missed), and (2026-11-30) with the
+    /// nearest's margin, the others' travel or the travel's sign planted out, and with the
+    /// way towards a left-armed edge's line flipped. The bound without the preempt lead's
+    /// period passes here (a 10–40 µm band the walks seldom meet): the test above catches
+    /// that one.
     #[test]
     fn the_lead_bound_skips_only_samples_where_nothing_fires() {
         let (_, c) = scene();
         let mut noise = Noise::new(77);
         let (mut skipped, mut asked, mut quiet_rooms, mut fires) = (0u32, 0u32, 0u32, 0u32);
+        let mut worst_nearest = f32::INFINITY;
         for walk in 0..16 {
             let step_um = [10.0, 40.0, 300.0, 2_000.0][walk % 4];
             let drift = (noise.gauss() * step_um, noise.gauss() * step_um);
@@ -1507,13 +1654,26 @@ mod tests {
                 assert_eq!(ra, rb, "{p:?}");
                 if ra {
                     asked += 1;
-                    // b visited in full: its room is exact; a's may be the quiet one's.
-                    assert!(
-                        a.room_um <= b.room_um,
-                        "{p:?}: {} > {}",
-                        a.room_um,
-                        b.room_um
-                    );
+                    // a's rooms, moved from its last full visit (maybe this sample's), are
+                    // never above the exact ones of the edges in reach: the nearest's for it,
+                    // the least of the others' for them.
+                    let travel = travel_um(p, a.quiet.unwrap().0);
+                    let (nearest, others) = (a.nearest_room_um(travel), a.others_room_um(travel));
+                    let mut todo = a.reach;
+                    while todo != 0 {
+                        let i = todo.trailing_zeros() as usize;
+                        todo &= todo - 1;
+                        let room = match a.armed[i] {
+                            Some(Side::Right) => -c.geoms[i].across(p),
+                            Some(Side::Left) => c.geoms[i].across(p),
+                            None => panic!("{p:?}: edge {i} in reach, unarmed"),
+                        };
+                        let bound = if i == a.nearest { nearest } else { others };
+                        assert!(room >= bound, "{p:?} edge {i}: room {room} < {bound}");
+                        if i == a.nearest {
+                            worst_nearest = worst_nearest.min(room - nearest);
+                        }
+                    }
                     quiet_rooms += (a.visits == visits) as u32;
                 }
                 let fa = if ra && a.may_fire(&c, p, v) {
@@ -1540,9 +1700,12 @@ mod tests {
             "{skipped} of {asked}"
         );
         assert!(quiet_rooms > asked / 10, "{quiet_rooms} of {asked}");
+        // The nearest's room is tight: the margin and no more (its s moves exactly).
+        assert!(worst_nearest < QUIET_MARGIN_UM + 0.01, "{worst_nearest}");
         std::println!(
             "{fires} fires; of {asked} samples with an edge in reach ({quiet_rooms} answered \
-             quietly), {skipped} skipped by the bound"
+             quietly), {skipped} skipped by the bounds; the nearest's room at least \
+             {worst_nearest} µm under the exact"
         );
     }
 
