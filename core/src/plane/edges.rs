@@ -466,6 +466,8 @@ pub struct EdgeTracker {
     quiet_room_um: f32,
     toward: (f32, f32),
     quiet_others_um: f32,
+    /// No other edge was in reach on that visit (`quiet_others_um` is ∞).
+    alone: bool,
     /// The nearest edge's index (tests).
     #[cfg(test)]
     nearest: usize,
@@ -498,6 +500,7 @@ impl Default for EdgeTracker {
             quiet_room_um: 0.0,
             toward: (0.0, 0.0),
             quiet_others_um: 0.0,
+            alone: false,
             #[cfg(test)]
             nearest: 0,
             #[cfg(test)]
@@ -685,6 +688,7 @@ impl EdgeTracker {
         self.quiet_room_um = room_um - QUIET_MARGIN_UM;
         self.toward = toward;
         self.quiet_others_um = room2_um - QUIET_MARGIN_UM;
+        self.alone = room2_um == f32::INFINITY;
         #[cfg(test)]
         {
             self.nearest = nearest_i;
@@ -731,9 +735,9 @@ impl EdgeTracker {
         };
         let bound_um = edges.lead_bound_um(velocity);
         let travel = travel_um(p, at);
-        if bound_um < self.others_room_um(travel)
-            && edges.lead_toward_bound_um(velocity, self.toward, bound_um)
-                < self.nearest_room_um(travel)
+        if edges.lead_toward_bound_um(velocity, self.toward, bound_um)
+            < self.nearest_room_um(travel)
+            && (self.alone || bound_um < self.others_room_um(travel))
         {
             self.reach = 0;
             self.prev = Some(p);
