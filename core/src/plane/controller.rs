@@ -17,6 +17,7 @@ use crate::controller::{DEFAULT_WINDOW, RECOVERY_SAMPLES};
 use crate::gate::{BurstOutput, DriveMode, Envelope, Gate, GateAction};
 use crate::texture::compiled::{Moment, Need, Render, Request, Want};
 use crate::texture::lines::MAX_LINE_LEAD_UM;
+use crate::texture::FULL_AMPLITUDE;
 use crate::touch::fault::AxisFault;
 use crate::touch::frame::Reading;
 
@@ -146,6 +147,13 @@ pub struct Controller2d<V: PlaneEstimator = PlaneLsq<DEFAULT_WINDOW>> {
     /// The texture index of `place`, looked up once when the place changes (the texture step
     /// reads it on every reading the window's texture renders).
     texture_index: u8,
+    /// The settings the window's texture asks on every reading, when they never vary (off,
+    /// constant; also a window without a texture): its texture step is then the gate's
+    /// answer alone while the line already does them ([`Self::texture_step`]).
+    fixed_settings: Option<Option<TimerSettings>>,
+    /// Never take the fixed texture's short way (tests: the reference for it).
+    #[cfg(test)]
+    no_fixed: bool,
     /// Place, arming and textures were forgotten and nothing has rendered since.
     forgotten: bool,
     fault: Option<TouchFault>,
@@ -195,6 +203,9 @@ impl<V: PlaneEstimator> Controller2d<V> {
             edges: EdgeTracker::default(),
             place: None,
             texture_index: 0,
+            fixed_settings: None,
+            #[cfg(test)]
+            no_fixed: false,
             forgotten: true,
             fault: None,
             good_run: 0,
@@ -405,6 +416,11 @@ impl<V: PlaneEstimator> Controller2d<V> {
         };
         let index = active.scene.screen.texture(place);
         self.texture_index = index;
+        self.fixed_settings = match active.scene.textures.get(index as usize) {
+            Some(t) => t.fixed_settings(),
+            // `texture_step` asks nothing of a missing texture: off.
+            None => Some(None),
+        };
         if let Some(t) = active.scene.textures.get_mut(index as usize) {
             t.reset();
         }
@@ -573,6 +589,20 @@ impl<V: PlaneEstimator> Controller2d<V> {
         t_us: u32,
         out: &mut Output2d,
     ) {
+        // An off or constant window asks the same on every reading (`Request::OFF` with its
+        // settings): no clamp, nothing skipped, the full amplitude. Once that amplitude is
+        // asked and the line does those settings (or a one-pulse is still on), the steps
+        // below change nothing and send nothing (issue #36: most of a reading over such a
+        // window).
+        #[cfg(not(test))]
+        let fixed = self.fixed_settings;
+        #[cfg(test)]
+        let fixed = self.fixed_settings.filter(|_| !self.no_fixed);
+        if let Some(settings) = fixed {
+            if self.amplitude_asked == FULL_AMPLITUDE && self.gate.quiet(settings, t_us) {
+                return;
+            }
+        }
         let Some(active) = self.active.as_mut() else {
             return;
         };
@@ -1769,6 +1799,101 @@ mod tests {
             "{pulses} pulses, {stops} after a stop"
         );
         std::println!("{readings} readings: {pulses} edge pulses, {stops} of them after a stop");
+    }
+
+    /// The fixed texture's short way (an off or constant window's step answered by the gate
+    /// alone while the line already does its settings) changes no output and no counter: a
+    /// controller with it answers every reading as one that always asks the texture, on random
+    /// strokes at 20–400 mm/s and 2 LSB over off, constant, grating and random windows and a
+    /// constant background, every outline an edge (so pulses stop bursts and the line comes
+    /// back), under a 40 % duty cap (bursts at its edge) and a 600 ‰ level cap (the
+    /// amplitude asked anew), broken by lifts, landings, rail faults and scene reloads (the
+    /// amplitude forgotten). Seen failing (2026-11-30) with the amplitude test planted out,
+    /// with a constant window's settings planted as off, and with every kind planted fixed.
+    #[test]
+    fn the_fixed_texture_step_changes_no_output() {
+        let grating = PlaneTexture::Plain(Texture::Grating(Grating {
+            render: GratingRender::VelocitySynthesis,
+            amplitude_permille: 500,
+            ..Grating::new(1_000)
+        }));
+        let random = PlaneTexture::Plain(Texture::Random(crate::texture::RandomBurst {
+            center_millihz: 40_000,
+            spread_permille: 300,
+            amplitude_permille: 500,
+            amplitude_spread_permille: 200,
+            duty_permille: 400,
+            seed: 3,
+        }));
+        let mut cfg = config(&[
+            window(rect(5_000, 5_000, 25_000, 25_000), OFF, true),
+            window(rect(30_000, 5_000, 50_000, 25_000), hz(80), true),
+            window(rect(5_000, 30_000, 25_000, 50_000), grating, true),
+            window(rect(30_000, 30_000, 50_000, 50_000), random, true),
+            window(rect(52_000, 5_000, 60_000, 50_000), hz(2_000), false),
+        ]);
+        cfg.scene.background = hz(1_000);
+        cfg.limits.max_duty_permille = 400;
+        cfg.limits.max_level_permille = 600;
+        cfg.scene.edge_pulse.amplitude_permille = 600;
+        let mut noise = Noise::new(47);
+        let (mut readings, mut actions) = (0usize, 0usize);
+        let (mut c, mut r) = (loaded(&cfg), loaded(&cfg));
+        r.no_fixed = true;
+        let (mut tc, mut tr) = (0u32, 0u32);
+        for i in 0..60 {
+            let mut q = || (noise.uniform() * 70.0 - 5.0, noise.uniform() * 60.0 - 5.0);
+            let (a, b) = (q(), q());
+            let v = [20.0, 100.0, 200.0, 400.0][i % 4];
+            let mut s = stroke(
+                (a.0 * 1e3, a.1 * 1e3),
+                (b.0 * 1e3, b.1 * 1e3),
+                v,
+                sigma_um(2.0),
+                &mut noise,
+            );
+            match i % 6 {
+                1 => s.splice(0..0, [Reading::Lifted; 12]).for_each(drop),
+                2 => {
+                    let p = PointUm::new((a.0 * 1e3) as i32, (a.1 * 1e3) as i32);
+                    s.splice(
+                        0..0,
+                        [Reading::Landing {
+                            x_um: p.x_um,
+                            y_um: p.y_um,
+                        }; 8],
+                    )
+                    .for_each(drop);
+                }
+                3 => {
+                    let at = s.len() / 2;
+                    let f = Reading::Fault(AxisFault {
+                        axis: Axis::Y,
+                        fault: SensorFault::RailHigh,
+                    });
+                    s.splice(at..at, [f; 3]).for_each(drop);
+                }
+                4 => {
+                    c.load(&cfg).unwrap();
+                    r.load(&cfg).unwrap();
+                }
+                _ => {}
+            }
+            let oc = feed(&mut c, &mut tc, s.iter().copied());
+            let or = feed(&mut r, &mut tr, s.iter().copied());
+            for k in 0..oc.len() {
+                assert_eq!(oc[k], or[k], "stroke {i} at {v} mm/s, reading {k}");
+            }
+            assert_eq!(c.telemetry(), r.telemetry(), "stroke {i} at {v} mm/s");
+            readings += oc.len();
+            actions += oc.iter().filter(|o| o.action.is_some()).count();
+        }
+        let t = c.telemetry();
+        assert!(
+            t.edge_pulses > 50 && t.clamped > 0 && t.faults > 0 && actions > 500,
+            "{t:?}, {actions} actions"
+        );
+        std::println!("{readings} readings, {actions} gate actions: {t:?}");
     }
 
     /// With no room in the duty window (bursts at 40 % under a 40 % cap for over a window),

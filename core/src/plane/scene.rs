@@ -261,6 +261,15 @@ pub(crate) enum PlaneCompiled {
 }
 
 impl PlaneCompiled {
+    /// The settings it asks on every sample when its request never varies (a plain off or
+    /// constant texture), else None ([`Compiled::fixed_settings`]).
+    pub(crate) fn fixed_settings(&self) -> Option<Option<TimerSettings>> {
+        match self {
+            PlaneCompiled::Plain(c) => c.fixed_settings(),
+            PlaneCompiled::Oriented(_) => None,
+        }
+    }
+
     /// What it reads per sample (the sample path's contract).
     pub(crate) fn need(&self) -> Need {
         match self {

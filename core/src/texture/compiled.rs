@@ -187,6 +187,16 @@ impl Compiled {
 }
 
 impl Compiled {
+    /// The settings a kind whose request never varies asks on every sample ([`Request::OFF`]
+    /// with these settings): off, constant. None for the kinds that read the sample or draw.
+    pub fn fixed_settings(&self) -> Option<Option<TimerSettings>> {
+        match self {
+            Compiled::Off => Some(None),
+            Compiled::Fixed(s) => Some(Some(*s)),
+            _ => None,
+        }
+    }
+
     /// What this texture reads per sample.
     pub fn need(&self) -> Need {
         match self {
@@ -245,6 +255,81 @@ impl Render for Compiled {
             Compiled::Synthesis(s) => s.request(now),
             Compiled::StickSlip(m) => m.request(now),
             Compiled::Random(r) => r.request(now),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::burst::TEST_TIMER;
+    use crate::texture::{Grating, GratingRender, Material, RandomBurst};
+
+    /// A kind that names fixed settings asks exactly `Request::OFF` with them on every sample
+    /// (any position, velocity, time, gate state); the kinds that read the sample or draw
+    /// name none, and do vary. (The controller's short way for a fixed texture rests on this:
+    /// `plane::controller::tests::the_fixed_texture_step_changes_no_output`.)
+    #[test]
+    fn only_off_and_constant_ask_fixed_settings_and_they_never_vary() {
+        let limits = SafetyLimits::default();
+        let kinds = [
+            Texture::Off,
+            Texture::constant_hz(80),
+            Texture::constant_hz(5_000),
+            Texture::Grating(Grating {
+                render: GratingRender::VelocitySynthesis,
+                ..Grating::new(1_000)
+            }),
+            Texture::Grating(Grating::new(1_000)),
+            Texture::Material(Material::fig5(0.3)),
+            Texture::Random(RandomBurst {
+                center_millihz: 40_000,
+                spread_permille: 300,
+                amplitude_permille: 800,
+                amplitude_spread_permille: 200,
+                duty_permille: 400,
+                seed: 5,
+            }),
+        ];
+        let gate = Gate::default();
+        for (k, texture) in kinds.iter().enumerate() {
+            let (mut c, _) =
+                Compiled::compile(texture, &TEST_TIMER, &limits, 100_000, 100).unwrap();
+            let fixed = c.fixed_settings();
+            let mut seen = std::vec::Vec::new();
+            let mut x = 1u32;
+            for i in 0..4_000u32 {
+                // A small LCG: positions over the substrate, speeds ±400 mm/s, times 0.1 ms apart.
+                x = x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let now = Moment {
+                    position_um: (x >> 15) as i32 % 100_000,
+                    velocity_um_s: (i % 7 != 0).then_some((x >> 8) as i32 % 400_000 - 200_000),
+                    t_us: i * 100,
+                    gate: &gate,
+                    timer: &TEST_TIMER,
+                };
+                let r = c.request(&now);
+                if let Some(settings) = fixed {
+                    assert_eq!(
+                        r,
+                        Request {
+                            settings,
+                            ..Request::OFF
+                        },
+                        "kind {k}"
+                    );
+                }
+                if !seen.contains(&r) {
+                    seen.push(r);
+                }
+            }
+            match texture {
+                Texture::Off | Texture::Constant(_) => assert!(fixed.is_some(), "kind {k}"),
+                _ => {
+                    assert_eq!(fixed, None, "kind {k}");
+                    assert!(seen.len() > 1, "kind {k} never varied");
+                }
+            }
         }
     }
 }
