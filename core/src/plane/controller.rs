@@ -886,6 +886,23 @@ mod tests {
         }
     }
 
+    /// Feeds the same readings to a controller and its reference (each with its clock) and
+    /// asserts they answer alike, reading by reading, and count alike; the outputs.
+    fn feed_alike(
+        (c, tc): (&mut Controller2d, &mut u32),
+        (r, tr): (&mut Controller2d, &mut u32),
+        readings: &[Reading],
+        what: &str,
+    ) -> StdVec<Output2d> {
+        let oc = feed(c, tc, readings.iter().copied());
+        let or = feed(r, tr, readings.iter().copied());
+        for k in 0..oc.len() {
+            assert_eq!(oc[k], or[k], "{what}, reading {k}");
+        }
+        assert_eq!(c.telemetry(), r.telemetry(), "{what}");
+        oc
+    }
+
     /// Feeds readings one period apart from `*t`; returns every output.
     fn feed(
         c: &mut Controller2d,
@@ -1801,12 +1818,8 @@ mod tests {
                 let mut r = loaded(&cfg);
                 r.edges.set_no_bound();
                 let (mut tc, mut tr) = (0, 0);
-                let oc = feed(&mut c, &mut tc, s.iter().copied());
-                let or = feed(&mut r, &mut tr, s.iter().copied());
-                for k in 0..oc.len() {
-                    assert_eq!(oc[k], or[k], "stroke {i} at {v} mm/s, reading {k}");
-                }
-                assert_eq!(c.telemetry(), r.telemetry(), "stroke {i} at {v} mm/s");
+                let what = std::format!("stroke {i} at {v} mm/s");
+                let oc = feed_alike((&mut c, &mut tc), (&mut r, &mut tr), &s, &what);
                 readings += oc.len();
                 pulses += oc.iter().filter(|o| o.edge.is_some()).count();
                 stops += (1..oc.len())
@@ -1926,12 +1939,8 @@ mod tests {
                 }
                 _ => {}
             }
-            let oc = feed(&mut c, &mut tc, s.iter().copied());
-            let or = feed(&mut r, &mut tr, s.iter().copied());
-            for k in 0..oc.len() {
-                assert_eq!(oc[k], or[k], "stroke {i} at {v} mm/s, reading {k}");
-            }
-            assert_eq!(c.telemetry(), r.telemetry(), "stroke {i} at {v} mm/s");
+            let what = std::format!("stroke {i} at {v} mm/s");
+            let oc = feed_alike((&mut c, &mut tc), (&mut r, &mut tr), &s, &what);
             readings += oc.len();
             actions += oc.iter().filter(|o| o.action.is_some()).count();
         }
